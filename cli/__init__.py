@@ -1,0 +1,1 @@
+"""The ``recon`` command: a thin shell over formats, sim, metrics and recon."""

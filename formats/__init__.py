@@ -1,0 +1,32 @@
+"""The strike-log format (SPEC.md) and mesh and point-cloud IO.
+
+The bottom layer of recon: it imports none of the other packages.
+"""
+
+from formats.errors import MeshFormatError, ReconError, StrikeLogError
+from formats.strike_log import (
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    SensorErrors,
+    SensorInfo,
+    Shots,
+    StrikeChunk,
+    StrikeLog,
+    StrikeLogWriter,
+    TruthStrikes,
+)
+
+__all__ = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "MeshFormatError",
+    "ReconError",
+    "SensorErrors",
+    "SensorInfo",
+    "Shots",
+    "StrikeChunk",
+    "StrikeLog",
+    "StrikeLogError",
+    "StrikeLogWriter",
+    "TruthStrikes",
+]

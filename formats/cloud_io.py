@@ -1,0 +1,287 @@
+"""Point clouds with per-point attributes: binary PLY, LAS/LAZ and HDF5, streamed and read back.
+
+Attribute names recon uses (any others are kept as they are):
+
+=====================  =========  ==============================================================
+name                   dtype      meaning
+=====================  =========  ==============================================================
+``time``               float64    shot time [s] (LAS: stored as ``gps_time``)
+``shot``, ``beam``     uint32     shot and beam index in the source strike log
+``range``              float64    measured range [m]
+``view_x/y/z``         float64    sensor position in the cloud's frame [m] (orients normals)
+``nx``, ``ny``, ``nz`` float64    unit normal
+=====================  =========  ==============================================================
+
+Formats
+-------
+``.ply``  binary little-endian, every attribute a vertex property (int64 as double).
+``.las``/``.laz``  LAS 1.4 point format 6, coordinates quantised to ``LAS_SCALE_M`` with zero
+    offset; ``time`` as ``gps_time``, every other attribute as an extra-bytes dimension.
+``.h5``   HDF5 with root attributes ``format = "recon-point-cloud"``, ``format_version = 1``,
+    dataset ``points`` (n, 3) float64 and one (n,) dataset per attribute under ``attributes/``,
+    chunked and resizable.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from formats.errors import MeshFormatError
+from formats.ply import PlyWriter, read_ply_columns
+
+CLOUD_SUFFIXES = (".ply", ".las", ".laz", ".h5")
+CLOUD_FORMAT_NAME = "recon-point-cloud"
+CLOUD_FORMAT_VERSION = 1
+# LAS stores int32 coordinates: 0.1 mm steps reach +-214 km, beyond any target we image.
+LAS_SCALE_M = 1e-4
+_CHUNK_ROWS = 65_536
+
+
+@dataclass
+class PointCloud:
+    """Points with named per-point attributes.
+
+    Attributes
+    ----------
+    points : (n, 3) float64, metres, in the frame the producer states (body frame for ingest)
+    attributes : dict of str to (n,) arrays
+    """
+
+    points: np.ndarray
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.points = np.asarray(self.points, dtype=np.float64)
+        if self.points.ndim != 2 or self.points.shape[1] != 3:
+            raise MeshFormatError(f"points must be (n, 3), got {self.points.shape}")
+        for name, values in self.attributes.items():
+            if len(values) != len(self.points):
+                raise MeshFormatError(f"attribute {name!r} has {len(values)} values for "
+                                      f"{len(self.points)} points")
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def _triple(self, names: tuple[str, str, str]) -> np.ndarray | None:
+        if not all(n in self.attributes for n in names):
+            return None
+        return np.stack([np.asarray(self.attributes[n], dtype=np.float64) for n in names], axis=1)
+
+    @property
+    def normals(self) -> np.ndarray | None:
+        """(n, 3) float64 unit normals, or None."""
+        return self._triple(("nx", "ny", "nz"))
+
+    @property
+    def view_points(self) -> np.ndarray | None:
+        """(n, 3) float64 sensor positions [m] each point was seen from, or None."""
+        return self._triple(("view_x", "view_y", "view_z"))
+
+
+def _suffix(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in CLOUD_SUFFIXES:
+        raise MeshFormatError(f"{path}: unknown point-cloud suffix {path.suffix!r} (expected one "
+                              f"of {', '.join(CLOUD_SUFFIXES)})")
+    return suffix
+
+
+# --------------------------------------------------------------------------- writers
+
+
+class CloudWriter:
+    """Stream a point cloud to PLY, LAS/LAZ or HDF5, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination; the suffix picks the format.
+    n_points : int
+        Total number of points that will be written (PLY and LAS headers need it).
+    dtypes : dict of str to numpy dtype
+        The attribute columns, in order.
+    """
+
+    def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype]):
+        self.path = Path(path)
+        self._kind = _suffix(self.path)
+        if not self.path.parent.is_dir():
+            raise MeshFormatError(f"{self.path}: directory {self.path.parent} does not exist")
+        self.n_points = int(n_points)
+        self.dtypes = {k: np.dtype(v) for k, v in dtypes.items()}
+        self._written = 0
+        if self._kind == ".ply":
+            cols = {"x": np.float64, "y": np.float64, "z": np.float64} | self.dtypes
+            self._ply = PlyWriter(self.path, self.n_points, cols)
+            return
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.partial-", dir=self.path.parent,
+                                   suffix=self._kind)
+        os.close(fd)
+        self._tmp = Path(tmp)
+        if self._kind == ".h5":
+            self._open_h5()
+        else:
+            self._open_las()
+
+    def _open_h5(self) -> None:
+        import h5py
+
+        self._h5 = h5py.File(self._tmp, "w")
+        self._h5.attrs.update({"format": CLOUD_FORMAT_NAME,
+                               "format_version": np.int64(CLOUD_FORMAT_VERSION)})
+        rows = max(1, min(_CHUNK_ROWS, self.n_points))
+        self._h5.create_dataset("points", shape=(0, 3), maxshape=(None, 3), dtype=np.float64,
+                                chunks=(rows, 3))
+        g = self._h5.create_group("attributes")
+        for name, dtype in self.dtypes.items():
+            g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(rows,))
+
+    def _open_las(self) -> None:
+        import laspy
+
+        header = laspy.LasHeader(point_format=6, version="1.4")
+        header.scales = np.full(3, LAS_SCALE_M)
+        header.offsets = np.zeros(3)
+        extra = [laspy.ExtraBytesParams(name=k, type=v) for k, v in self.dtypes.items()
+                 if k != "time"]
+        if extra:
+            header.add_extra_dims(extra)
+        self._las = laspy.open(self._tmp, mode="w", header=header,
+                               do_compress=self._kind == ".laz")
+
+    def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
+        """Append points (n, 3) float64 [m] with their attribute values (n,)."""
+        points = np.asarray(points, dtype=np.float64)
+        n = len(points)
+        if self._kind == ".ply":
+            self._ply.write({"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
+                            | attributes)
+        elif self._kind == ".h5":
+            ds = self._h5["points"]
+            ds.resize(self._written + n, axis=0)
+            ds[self._written:] = points
+            for name in self.dtypes:
+                a = self._h5["attributes"][name]
+                a.resize(self._written + n, axis=0)
+                a[self._written:] = attributes[name]
+        else:
+            self._write_las(points, attributes)
+        self._written += n
+
+    def _write_las(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
+        import laspy
+
+        if len(points) and np.abs(points).max() > np.iinfo(np.int32).max * LAS_SCALE_M:
+            raise MeshFormatError(f"{self.path}: coordinates beyond +-214 km do not fit LAS at "
+                                  f"{LAS_SCALE_M} m resolution")
+        record = laspy.ScaleAwarePointRecord.zeros(len(points), header=self._las.header)
+        record.x, record.y, record.z = points[:, 0], points[:, 1], points[:, 2]
+        for name, values in attributes.items():
+            record["gps_time" if name == "time" else name] = values
+        self._las.write_points(record)
+
+    def close(self) -> None:
+        if self._kind == ".ply":
+            self._ply.close()
+            return
+        try:
+            if self._written != self.n_points:
+                raise MeshFormatError(f"{self.path}: wrote {self._written} points, expected "
+                                      f"{self.n_points}")
+            (self._h5 if self._kind == ".h5" else self._las).close()
+            os.replace(self._tmp, self.path)
+        except BaseException:
+            self.abort()
+            raise
+
+    def abort(self) -> None:
+        if self._kind == ".ply":
+            self._ply.abort()
+            return
+        with contextlib.suppress(Exception):
+            (self._h5 if self._kind == ".h5" else self._las).close()
+        self._tmp.unlink(missing_ok=True)
+
+    def __enter__(self) -> CloudWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+def write_cloud(path, cloud: PointCloud) -> Path:
+    """Write a whole point cloud; the suffix of ``path`` picks PLY, LAS, LAZ or HDF5."""
+    dtypes = {k: np.asarray(v).dtype for k, v in cloud.attributes.items()}
+    with CloudWriter(path, len(cloud), dtypes) as writer:
+        writer.write(cloud.points, cloud.attributes)
+    return Path(path)
+
+
+# --------------------------------------------------------------------------- readers
+
+
+def read_cloud(path) -> PointCloud:
+    """Read a point cloud with its attributes (PLY, LAS/LAZ, or recon's HDF5 cloud).
+
+    A PLY mesh is read as the cloud of its vertices.
+    """
+    path = Path(path)
+    kind = _suffix(path)
+    if not path.is_file():
+        raise MeshFormatError(f"{path}: no such file")
+    if kind == ".ply":
+        columns, _ = read_ply_columns(path)
+        missing = [k for k in "xyz" if k not in columns]
+        if missing:
+            raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
+        points = np.stack([columns.pop(k).astype(np.float64) for k in "xyz"], axis=1)
+        return PointCloud(points, columns)
+    if kind == ".h5":
+        return _read_h5(path)
+    return _read_las(path)
+
+
+def _read_h5(path: Path) -> PointCloud:
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("format") != CLOUD_FORMAT_NAME:
+                raise MeshFormatError(f"{path}: not a recon point cloud (root attribute "
+                                      f"'format' is {f.attrs.get('format')!r})")
+            if int(f.attrs.get("format_version", -1)) != CLOUD_FORMAT_VERSION:
+                raise MeshFormatError(f"{path}: point-cloud format version "
+                                      f"{f.attrs.get('format_version')} is not supported")
+            points = np.asarray(f["points"][()], dtype=np.float64)
+            attributes = {k: np.asarray(v[()]) for k, v in f["attributes"].items()}
+    except MeshFormatError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise MeshFormatError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
+    return PointCloud(points, attributes)
+
+
+def _read_las(path: Path) -> PointCloud:
+    import laspy
+
+    try:
+        las = laspy.read(path)
+    except Exception as exc:  # laspy raises its own and OS errors on bad files
+        raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
+    points = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
+    attributes = {}
+    gps_time = np.asarray(las.gps_time, dtype=np.float64)
+    if np.any(gps_time != 0):  # format 6 always has gps_time; all zeros means none was written
+        attributes["time"] = gps_time
+    for name in las.point_format.extra_dimension_names:
+        attributes[name] = np.asarray(las[name])
+    return PointCloud(points, attributes)

@@ -1,0 +1,91 @@
+"""Read triangle meshes (OBJ, PLY, STL, OFF, GLB) and write them as binary PLY.
+
+A mesh is a pair ``(vertices, faces)``: ``(n, 3) float64`` coordinates and ``(m, 3) int64``
+vertex indices, counter-clockwise seen from outside.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from formats.errors import MeshFormatError
+from formats.ply import write_ply
+
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+
+def read_mesh(path, *, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Read a triangle mesh, multiplying its coordinates by ``scale``.
+
+    Parameters
+    ----------
+    path : str or Path
+        OBJ, PLY, STL, OFF or glTF file. Polygons are triangulated; several bodies are merged.
+    scale : float
+        Factor applied to the coordinates, e.g. 1000 for a shape model in km.
+
+    Returns
+    -------
+    vertices : (n, 3) float64, file units times ``scale``
+    faces : (m, 3) int64
+
+    Raises
+    ------
+    MeshFormatError
+        Missing file, unknown suffix, unreadable content, no triangles, or non-finite vertices.
+    """
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshFormatError(f"{path}: no such file")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise MeshFormatError(f"{path}: unknown mesh suffix {path.suffix!r} (expected one of "
+                              f"{', '.join(MESH_SUFFIXES)})")
+    if not (np.isfinite(scale) and scale > 0):
+        raise MeshFormatError(f"{path}: scale must be a positive number, got {scale}")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types on bad files; all mean "unreadable"
+        raise MeshFormatError(f"{path}: not a readable mesh ({type(exc).__name__}: "
+                              f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
+    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise MeshFormatError(f"{path}: has no triangles (a point cloud, not a mesh?)")
+    if not np.all(np.isfinite(vertices)):
+        raise MeshFormatError(f"{path}: vertices contain NaN or Inf")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise MeshFormatError(f"{path}: faces index vertices that do not exist")
+    return vertices * scale, faces
+
+
+def write_mesh(path, vertices: np.ndarray, faces: np.ndarray, *,
+               vertex_normals: np.ndarray | None = None) -> Path:
+    """Write a triangle mesh as binary little-endian PLY (atomically).
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination; must end in ``.ply``.
+    vertices : (n, 3) float64
+    faces : (m, 3) int
+    vertex_normals : (n, 3) float64, optional
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".ply":
+        raise MeshFormatError(f"{path}: meshes are written as .ply")
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise MeshFormatError(f"{path}: vertices must be (n, 3), got {vertices.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise MeshFormatError(f"{path}: faces must be (m, 3), got {faces.shape}")
+    columns = {"x": vertices[:, 0], "y": vertices[:, 1], "z": vertices[:, 2]}
+    if vertex_normals is not None:
+        n = np.asarray(vertex_normals, dtype=np.float64)
+        columns |= {"nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2]}
+    write_ply(path, columns, faces=faces)
+    return path

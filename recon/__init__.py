@@ -1,0 +1,1 @@
+"""Registration of strike logs into the target body frame, surface reconstruction, comparisons."""

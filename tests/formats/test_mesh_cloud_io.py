@@ -1,0 +1,116 @@
+"""Mesh reading (OBJ/PLY/STL) and point-cloud round trips (PLY, LAS, LAZ, HDF5)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from formats.cloud_io import LAS_SCALE_M, CloudWriter, PointCloud, read_cloud, write_cloud
+from formats.errors import MeshFormatError
+from formats.mesh_io import read_mesh, write_mesh
+
+MESHES = Path(__file__).resolve().parents[3] / "shared" / "meshes"
+
+
+@pytest.fixture
+def cloud():
+    rng = np.random.default_rng(3)
+    n = 2000
+    return PointCloud(rng.normal(0, 300, (n, 3)), {
+        "time": np.sort(rng.uniform(0, 1e5, n)), "shot": np.arange(n, dtype=np.uint32),
+        "beam": rng.integers(0, 5, n).astype(np.uint32), "range": rng.uniform(100, 900, n),
+        "view_x": rng.normal(0, 700, n), "view_y": rng.normal(0, 700, n),
+        "view_z": rng.normal(0, 700, n)})
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".h5", ".las", ".laz"])
+def test_cloud_round_trip_keeps_attributes(tmp_path, cloud, suffix):
+    path = write_cloud(tmp_path / f"cloud{suffix}", cloud)
+    back = read_cloud(path)
+    tolerance = 0.5 * LAS_SCALE_M if suffix in (".las", ".laz") else 0.0
+    np.testing.assert_allclose(back.points, cloud.points, rtol=0, atol=tolerance * 1.0001)
+    assert set(back.attributes) == set(cloud.attributes)
+    for name, values in cloud.attributes.items():
+        np.testing.assert_array_equal(back.attributes[name], values)
+    np.testing.assert_array_equal(back.view_points, cloud.view_points)
+
+
+def test_streamed_cloud_matches_whole_write(tmp_path, cloud):
+    dtypes = {k: v.dtype for k, v in cloud.attributes.items()}
+    with CloudWriter(tmp_path / "s.ply", len(cloud), dtypes) as w:
+        for lo in range(0, len(cloud), 700):
+            w.write(cloud.points[lo:lo + 700], {k: v[lo:lo + 700]
+                                                for k, v in cloud.attributes.items()})
+    write_cloud(tmp_path / "w.ply", cloud)
+    assert (tmp_path / "s.ply").read_bytes() == (tmp_path / "w.ply").read_bytes()
+
+
+def test_short_stream_leaves_no_file(tmp_path, cloud):
+    with pytest.raises(MeshFormatError, match="wrote 10 rows"), \
+            CloudWriter(tmp_path / "s.ply", len(cloud), {}) as w:
+        w.write(cloud.points[:10], {})
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_reads_a_cloud_written_by_open3d(tmp_path):
+    import open3d as o3d
+
+    pts = np.random.default_rng(0).normal(size=(500, 3))
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    pcd.normals = o3d.utility.Vector3dVector(np.tile([0.0, 0.0, 1.0], (500, 1)))
+    o3d.io.write_point_cloud(str(tmp_path / "o3d.ply"), pcd)
+    back = read_cloud(tmp_path / "o3d.ply")
+    np.testing.assert_allclose(back.points, pts)
+    np.testing.assert_allclose(back.normals, np.tile([0.0, 0.0, 1.0], (500, 1)))
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl"])
+def test_read_mesh_formats_agree(tmp_path, suffix):
+    import trimesh
+
+    vertices, faces = read_mesh(MESHES / "spot.obj")
+    path = tmp_path / f"spot{suffix}"
+    trimesh.Trimesh(vertices, faces, process=False).export(path)
+    v2, f2 = read_mesh(path, scale=2.0)
+    # STL has no shared vertices and stores float32: compare the triangles' corners.
+    np.testing.assert_allclose(v2[f2], 2.0 * vertices[faces], rtol=1e-6, atol=1e-6)
+
+
+def test_write_mesh_round_trip(tmp_path):
+    vertices, faces = read_mesh(MESHES / "fandisk.obj")
+    write_mesh(tmp_path / "f.ply", vertices, faces)
+    v2, f2 = read_mesh(tmp_path / "f.ply")
+    np.testing.assert_array_equal(v2, vertices)
+    np.testing.assert_array_equal(f2, faces)
+
+
+def test_bad_mesh_inputs(tmp_path):
+    with pytest.raises(MeshFormatError, match=r"missing\.obj: no such file"):
+        read_mesh(tmp_path / "missing.obj")
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(MeshFormatError, match=r"unknown mesh suffix '\.txt'"):
+        read_mesh(tmp_path / "notes.txt")
+    (tmp_path / "garbage.ply").write_bytes(b"\x00\x01garbage")
+    with pytest.raises(MeshFormatError, match=r"garbage\.ply: "):
+        read_mesh(tmp_path / "garbage.ply")
+    write_cloud(tmp_path / "pts.ply", PointCloud(np.zeros((3, 3))))
+    with pytest.raises(MeshFormatError, match=r"pts\.ply: has no triangles"):
+        read_mesh(tmp_path / "pts.ply")
+    with pytest.raises(MeshFormatError, match="scale must be a positive number"):
+        read_mesh(MESHES / "spot.obj", scale=-1.0)
+
+
+def test_bad_cloud_inputs(tmp_path):
+    with pytest.raises(MeshFormatError, match=r"unknown point-cloud suffix '\.xyz'"):
+        read_cloud(tmp_path / "a.xyz")
+    with pytest.raises(MeshFormatError, match=r"a\.las: no such file"):
+        read_cloud(tmp_path / "a.las")
+    (tmp_path / "bad.las").write_bytes(b"LASF" + b"\x00" * 50)
+    with pytest.raises(MeshFormatError, match=r"bad\.las: not a readable LAS"):
+        read_cloud(tmp_path / "bad.las")
+    with pytest.raises(MeshFormatError, match=r"points must be \(n, 3\)"):
+        PointCloud(np.zeros((4, 2)))
+    with pytest.raises(MeshFormatError, match="beyond"):
+        write_cloud(tmp_path / "far.las", PointCloud(np.array([[1e6, 0, 0]])))
