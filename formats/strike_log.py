@@ -32,8 +32,10 @@ SHOT_CHUNK_ROWS = 16_384
 QUATERNION_NORM_TOLERANCE = 1e-6
 # Rows handed out per chunk by StrikeLog.iter_chunks: 2**20 strikes is ~100 MB of derived arrays.
 READ_CHUNK_ROWS = 1 << 20
-# Storage filters (SPEC.md, Storage; measured in benchmarks/bench_log_compression.py).
-_FILTERS = {"fletcher32": True}
+# Storage filters (SPEC.md, Storage; measured in benchmarks/bench_log_compression.py): no
+# compression by default, Fletcher-32 checksums always.
+COMPRESSIONS = {"none": {}, "lzf": {"compression": "lzf", "shuffle": True},
+                "gzip": {"compression": "gzip", "compression_opts": 4, "shuffle": True}}
 
 _PATTERNS = ("single", "cross", "zigzag", "grid", "custom")
 _ROOT_ATTRS = ("format", "format_version", "producer", "producer_version", "created_utc", "scene",
@@ -309,6 +311,8 @@ class StrikeLogWriter:
         Truth mesh in metres, body frame. When given, the log has a ``/truth`` group and every
         ``write_shots`` and ``write_strikes`` call must carry the truth arrays too.
     producer, producer_version : str, optional
+    compression : {"none", "lzf", "gzip"}, optional
+        Filter for the chunked datasets (default none; see SPEC.md, Storage, for the trade-off).
 
     Examples
     --------
@@ -319,10 +323,14 @@ class StrikeLogWriter:
 
     def __init__(self, path, *, sensor: SensorInfo, target: str, scene: str = "", seed: int = -1,
                  truth_mesh: tuple[np.ndarray, np.ndarray] | None = None,
-                 producer: str = "recon", producer_version: str = __version__):
+                 producer: str = "recon", producer_version: str = __version__,
+                 compression: str = "none"):
         self.path = Path(path)
         where = str(self.path)
         _check_sensor(sensor, where)
+        if compression not in COMPRESSIONS:
+            raise StrikeLogError(f"{where}: compression must be one of "
+                                 f"{', '.join(COMPRESSIONS)}, got {compression!r}")
         self.sensor = sensor
         self.has_truth = truth_mesh is not None
         if not self.path.parent.is_dir():
@@ -339,7 +347,8 @@ class StrikeLogWriter:
         try:
             self._create_layout(sensor, target=target, scene=scene, seed=seed,
                                 truth_mesh=truth_mesh, producer=producer,
-                                producer_version=producer_version)
+                                producer_version=producer_version,
+                                filters={"fletcher32": True} | COMPRESSIONS[compression])
         except BaseException:
             self._abort()
             raise
@@ -371,7 +380,7 @@ class StrikeLogWriter:
         return self
 
     def _create_layout(self, sensor, *, target, scene, seed, truth_mesh, producer,
-                       producer_version):
+                       producer_version, filters):
         f = self._file
         f.attrs.update({
             "format": FORMAT_NAME, "format_version": np.int64(FORMAT_VERSION),
@@ -394,7 +403,7 @@ class StrikeLogWriter:
         def columns(group, spec, rows):
             for name, (tail, dtype) in spec.items():
                 group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
-                                     chunks=(rows, *tail), **_FILTERS)
+                                     chunks=(rows, *tail), **filters)
 
         shots = {k: (tail, np.float64) for k, tail in _SHOT_FIELDS.items()}
         columns(f.create_group("shots"), shots, SHOT_CHUNK_ROWS)

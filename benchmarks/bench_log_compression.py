@@ -1,0 +1,100 @@
+"""Strike-log storage: write time, read time and size with no compression, lzf and gzip.
+
+A 10-million-strike log shaped like a scanning-LIDAR campaign (10 strikes per shot, a smooth
+orbit and attitude, noisy ranges), with its truth group, written by the real StrikeLogWriter in
+1-million-strike blocks and read back through StrikeLog.iter_chunks. The baseline is "none".
+
+    .venv/bin/python benchmarks/bench_log_compression.py            # 10 M strikes, 3 repeats
+    .venv/bin/python benchmarks/bench_log_compression.py --quick    # 200 k strikes, 1 repeat
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from formats import SensorInfo, Shots, StrikeLog, StrikeLogWriter, TruthStrikes
+from formats.strike_log import COMPRESSIONS, angles_to_directions
+
+STRIKES_PER_SHOT = 10
+BLOCK = 1_000_000
+
+
+def synthetic_blocks(n_strikes: int, seed: int = 0):
+    """Yield (shots, truth shots, strike columns, truth strikes) blocks of a plausible campaign."""
+    rng = np.random.default_rng(seed)
+    for lo in range(0, n_strikes, BLOCK):
+        n = min(BLOCK, n_strikes - lo)
+        n_shots = n // STRIKES_PER_SHOT
+        s0 = lo // STRIKES_PER_SHOT
+        t = (s0 + np.arange(n_shots)) * 10.0
+        phase = 2 * np.pi * t / 20_000.0
+        pos = 750.0 * np.stack([np.cos(phase), np.sin(phase), 0.1 * np.sin(phase)], 1)
+        att = Rotation.from_rotvec(np.outer(phase, [0, 0, 1.0])).as_quat()
+        tgt = Rotation.from_rotvec(np.outer(2 * np.pi * t / 15480.0, [0, 0, 1.0])).as_quat()
+        shot = np.repeat(s0 + np.arange(n_shots), STRIKES_PER_SHOT)
+        beam = np.tile(np.arange(STRIKES_PER_SHOT), n_shots)
+        true_range = 600.0 + 50.0 * rng.random(n)
+        point = rng.normal(0, 150.0, (n, 3))
+        yield ((t, pos, att, tgt), Shots(t, pos, att, tgt),
+               (shot, beam, true_range + rng.normal(0, 0.1, n)),
+               TruthStrikes(point, rng.integers(0, 20_480, n), true_range))
+
+
+def write_log(path: Path, n_strikes: int, compression: str) -> float:
+    beams = angles_to_directions(np.linspace(-0.1, 0.1, STRIKES_PER_SHOT),
+                                 np.zeros(STRIKES_PER_SHOT))
+    sensor = SensorInfo("grid", beams, range_min=1.0, range_max=5000.0,
+                        field_of_view=(-0.1, 0.1, 0.0, 0.0))
+    blocks = list(synthetic_blocks(n_strikes))  # generate outside the timed region
+    mesh = (np.zeros((3, 3)), np.array([[0, 1, 2]]))
+    start = time.perf_counter()
+    with StrikeLogWriter(path, sensor=sensor, target="bench", truth_mesh=mesh,
+                         compression=compression) as log:
+        for shots, truth_shots, strikes, truth in blocks:
+            log.write_shots(*shots, truth=truth_shots)
+            log.write_strikes(*strikes, truth=truth)
+    return time.perf_counter() - start
+
+
+def read_log(path: Path) -> float:
+    start = time.perf_counter()
+    with StrikeLog(path) as log:
+        n = sum(len(chunk) for chunk in log.iter_chunks())
+        log.truth_strikes()
+    assert n > 0
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="200 k strikes, one repeat")
+    args = parser.parse_args()
+    n_strikes, repeats = (200_000, 1) if args.quick else (10_000_000, 3)
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for compression in COMPRESSIONS:
+            path = Path(tmp) / f"{compression}.h5"
+            w = [write_log(path, n_strikes, compression) for _ in range(repeats)]
+            r = [read_log(path) for _ in range(repeats)]
+            rows[compression] = (statistics.median(w), statistics.median(r),
+                                 path.stat().st_size / 1e6)
+            path.unlink()
+    base_w, base_r, base_s = rows["none"]
+    print(f"strike log, {n_strikes:,} strikes ({n_strikes // STRIKES_PER_SHOT:,} shots) with "
+          f"truth; median of {repeats}; ratios against 'none' measured in this run")
+    print(f"{'compression':<12}{'write s':>9}{'read s':>9}{'size MB':>9}{'write x':>9}"
+          f"{'read x':>8}{'size x':>8}{'Mstrikes/s write':>18}")
+    for name, (w, r, s) in rows.items():
+        print(f"{name:<12}{w:9.2f}{r:9.2f}{s:9.0f}{w / base_w:9.2f}{r / base_r:8.2f}"
+              f"{s / base_s:8.2f}{n_strikes / w / 1e6:18.2f}")
+
+
+if __name__ == "__main__":
+    main()
