@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "cli.logs",
     "cli.ingest",
     "cli.score",
+    "cli.reconstruct",
 )
 
 

@@ -2,8 +2,8 @@
 
 Written files hold one ``vertex`` element with any number of scalar properties (float64 for
 coordinates and floats, uint32 for indices) and, for meshes, a ``face`` element of uint8-counted
-int32 index lists. Reading accepts ASCII and binary PLY from any tool (Open3D, MeshLab, CloudCompare)
-through trimesh's parser and keeps every vertex property.
+int32 index lists. Reading accepts ASCII and binary PLY from any tool (Open3D, MeshLab,
+CloudCompare) through trimesh's parser and keeps every vertex property.
 """
 
 from __future__ import annotations

@@ -248,7 +248,8 @@ def _as_array(name: str, values, shape_tail: tuple, dtype, where: str) -> np.nda
     try:
         arr = np.asarray(values, dtype=dtype)
     except (TypeError, ValueError) as exc:
-        raise StrikeLogError(f"{where}: {name} cannot be read as {np.dtype(dtype)}: {exc}") from None
+        raise StrikeLogError(f"{where}: {name} cannot be read as {np.dtype(dtype)}: "
+                             f"{exc}") from None
     if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
         want = "(n" + "".join(f", {k}" for k in shape_tail) + ")"
         raise StrikeLogError(f"{where}: {name} must have shape {want}, got {arr.shape}")

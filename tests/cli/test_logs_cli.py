@@ -1,4 +1,4 @@
-"""`recon validate`, `recon info`, `recon ingest`, `recon truth`: in-process and one real subprocess."""
+"""`recon validate`, `info`, `ingest` and `truth`: in-process, and once through a real process."""
 
 from __future__ import annotations
 
@@ -71,7 +71,7 @@ def test_ingest_refuses_unknown_suffix_without_output(sphere_log, tmp_path, caps
 
 def test_truth_export(sphere_log, tmp_path):
     assert main(["truth", str(sphere_log), "-o", str(tmp_path / "t.ply")]) == 0
-    vertices, faces = read_mesh(tmp_path / "t.ply")
+    vertices, _ = read_mesh(tmp_path / "t.ply")
     np.testing.assert_allclose(np.linalg.norm(vertices, axis=1), 50.0)
 
 

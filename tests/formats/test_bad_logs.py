@@ -46,7 +46,8 @@ def _set(name, index, value):
 
 
 CASES = {
-    "missing dataset": (lambda f: f.__delitem__("strikes/range"), r"missing dataset /strikes/range"),
+    "missing dataset": (lambda f: f.__delitem__("strikes/range"),
+                        r"missing dataset /strikes/range"),
     "misshaped dataset": (_replace("shots/sensor_position", np.zeros((40, 2))),
                           r"/shots/sensor_position has shape \(40, 2\), expected \(40, 3\)"),
     "short dataset": (_replace("shots/time", np.arange(39.0)),
@@ -116,7 +117,8 @@ def valid_log_bytes(tmp_path_factory):
     return path.read_bytes()
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_truncated_or_flipped_bytes_raise_only_our_error(data, valid_log_bytes, tmp_path):
     """Property: whatever damage, reading raises StrikeLogError or nothing, never anything else."""

@@ -152,3 +152,20 @@ def test_chunked_storage_is_resizable_and_checksummed(sphere_log):
         for name in ("shots/time", "strikes/range", "truth/point"):
             assert f[name].maxshape[0] is None and f[name].chunks is not None
             assert f[name].fletcher32
+
+
+@pytest.mark.parametrize("compression", ["lzf", "gzip"])
+def test_compressed_logs_read_the_same(tmp_path, compression):
+    rng = np.random.default_rng(4)
+    t, pos, sq, tq, shot, beam, rho = _random_rows(rng, 100, 5)
+    path = tmp_path / "c.h5"
+    with StrikeLogWriter(path, sensor=_sensor(), target="t", compression=compression) as w:
+        w.write_shots(t, pos, sq, tq)
+        w.write_strikes(shot, beam, rho)
+    with h5py.File(path) as f:
+        assert f["strikes/range"].compression == compression
+    with StrikeLog(path) as log:
+        log.validate()
+        np.testing.assert_array_equal(log.strikes()[2], rho)
+    with pytest.raises(StrikeLogError, match="compression must be one of none, lzf, gzip"):
+        StrikeLogWriter(tmp_path / "d.h5", sensor=_sensor(), target="t", compression="zstd")

@@ -1,0 +1,95 @@
+"""Open what a user hands a command: a point cloud, a mesh, or a strike log.
+
+``.h5`` files are told apart by their root ``format`` attribute (a strike log or a recon point
+cloud); a ``.ply`` with faces is a mesh, without faces a cloud; ``.obj``, ``.stl``, ``.off`` and
+glTF are meshes; ``.las``/``.laz`` are clouds. A strike log given as a cloud is registered into
+the body frame on the fly (``recon.ingest``); given as a truth, its embedded truth mesh is used.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from formats import StrikeLog
+from formats.cloud_io import CLOUD_SUFFIXES, PointCloud, read_cloud
+from formats.errors import MeshFormatError
+from formats.mesh_io import MESH_SUFFIXES, read_mesh
+from formats.ply import read_ply_columns
+from formats.strike_log import FORMAT_NAME
+from recon.ingest import ingest
+
+Mesh = tuple[np.ndarray, np.ndarray]
+
+
+def is_strike_log(path) -> bool:
+    """True when ``path`` is an HDF5 file whose root ``format`` names a strike log."""
+    import h5py
+
+    path = Path(path)
+    if path.suffix.lower() != ".h5" or not path.is_file() or not h5py.is_hdf5(path):
+        return False
+    try:
+        with h5py.File(path, "r") as f:
+            fmt = f.attrs.get("format")
+    except OSError:
+        return False
+    return (fmt.decode() if isinstance(fmt, bytes) else fmt) == FORMAT_NAME
+
+
+def load_geometry(path) -> PointCloud | Mesh:
+    """A cloud (``PointCloud``) or a mesh (``(vertices, faces)``) from any supported file.
+
+    Strike logs are ingested into a body-frame cloud.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise MeshFormatError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if is_strike_log(path):
+        return ingest(path)
+    if suffix == ".ply":
+        columns, faces = read_ply_columns(path)
+        if faces is None:
+            return read_cloud(path)
+        if any(k not in columns for k in "xyz"):
+            raise MeshFormatError(f"{path}: PLY vertices lack x, y, z")
+        return np.stack([columns[k].astype(np.float64) for k in "xyz"], axis=1), faces
+    if suffix in MESH_SUFFIXES:
+        return read_mesh(path)
+    if suffix in CLOUD_SUFFIXES:
+        return read_cloud(path)
+    raise MeshFormatError(f"{path}: unknown suffix {path.suffix!r}: expected a point cloud "
+                          f"({', '.join(CLOUD_SUFFIXES)}), a mesh ({', '.join(MESH_SUFFIXES)}) "
+                          "or a strike log (.h5)")
+
+
+def load_cloud(path) -> PointCloud:
+    """A point cloud from a cloud file or a strike log (ingested); a mesh is refused."""
+    geometry = load_geometry(path)
+    if not isinstance(geometry, PointCloud):
+        raise MeshFormatError(f"{path}: is a mesh, expected a point cloud or a strike log")
+    return geometry
+
+
+def load_truth(path, *, scale: float = 1.0) -> Mesh:
+    """The truth mesh from a mesh file or from a strike log's ``/truth/mesh``.
+
+    Parameters
+    ----------
+    path : str or Path
+    scale : float
+        Factor applied to a mesh file's coordinates (e.g. 1000 for km); logs are in metres.
+    """
+    path = Path(path)
+    if is_strike_log(path):
+        with StrikeLog(path) as log:
+            if not log.has_truth:
+                raise MeshFormatError(f"{path}: strike log has no truth mesh; pass the truth "
+                                      "mesh file with --truth")
+            return log.truth_mesh()
+    if path.suffix.lower() in CLOUD_SUFFIXES and path.suffix.lower() != ".ply":
+        raise MeshFormatError(f"{path}: is not a mesh (truth must be a mesh file or a strike "
+                              "log with truth)")
+    return read_mesh(path, scale=scale)
