@@ -1,0 +1,91 @@
+"""``recon score``: score a cloud, mesh or strike log against a truth mesh."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import warnings
+from pathlib import Path
+
+# Rows of the readable table: (key in ScoreReport.to_dict(), label, unit).
+_TABLE = (
+    ("n_points", "points scored", ""),
+    ("tau_m", "tau", "m"),
+    ("accuracy_mean_m", "accuracy mean (test to truth)", "m"),
+    ("accuracy_median_m", "accuracy median", "m"),
+    ("accuracy_p95_m", "accuracy 95th percentile", "m"),
+    ("completeness_mean_m", "completeness mean (truth to test)", "m"),
+    ("completeness_p95_m", "completeness 95th percentile", "m"),
+    ("chamfer_m", "Chamfer", "m"),
+    ("hausdorff_m", "Hausdorff", "m"),
+    ("precision", "precision at tau", ""),
+    ("recall", "recall at tau", ""),
+    ("fscore", "F-score at tau", ""),
+    ("coverage", "coverage (area within tau)", ""),
+    ("normal_consistency", "normal consistency", ""),
+    ("edge_score", "edge score (0 best, 1 worst)", ""),
+)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("score", help="score a cloud, mesh or log against the truth mesh",
+                       description="Accuracy, completeness, Chamfer, Hausdorff, precision, recall "
+                                   "and F-score at tau, coverage and the edge metric of TEST "
+                                   "against TRUTH (definitions: metrics/score.py).")
+    p.add_argument("test", type=Path,
+                   help="point cloud (.ply .las .laz .h5), mesh (.ply .obj .stl .off) or strike "
+                        "log (.h5, registered on the fly)")
+    p.add_argument("--truth", type=Path,
+                   help="truth mesh file, or a strike log with an embedded truth mesh (default: "
+                        "TEST itself when it is a log with truth)")
+    p.add_argument("--truth-scale", type=float, default=1.0,
+                   help="factor applied to a truth mesh file's coordinates, e.g. 1000 for a "
+                        "model in km (default: %(default)s)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--tau", type=float, help="threshold of precision/recall/coverage [m]")
+    group.add_argument("--tau-fraction", type=float,
+                       help="threshold as a fraction of the truth's bounding-box diagonal "
+                            "(default 0.01)")
+    p.add_argument("--no-edges", action="store_true", help="skip the edge metric")
+    p.add_argument("--seed", type=int, default=0, help="seed of the surface sampling")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import sys
+
+    from formats.errors import ReconError
+    from metrics.score import score
+    from recon.inputs import is_strike_log, load_geometry, load_truth
+
+    truth_path = args.truth
+    if truth_path is None:
+        if not is_strike_log(args.test):
+            raise ReconError(f"{args.test}: is not a strike log with truth; give --truth")
+        truth_path = args.test
+    truth = load_truth(truth_path, scale=args.truth_scale)
+    test = load_geometry(args.test)
+    if not isinstance(test, tuple):  # a PointCloud: pass its normals, if any
+        from metrics.inputs import Cloud
+
+        test = Cloud(test.points, test.normals)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        report = score(test, truth, tau=args.tau, tau_fraction=args.tau_fraction,
+                       seed=args.seed, edges=not args.no_edges)
+    for w in caught:
+        print(f"recon score: warning: {w.message}", file=sys.stderr)
+    result = report.to_dict()
+    result |= {"test": str(args.test), "truth": str(truth_path)}
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"{args.test} ({result['test_kind']}) against {truth_path}")
+    width = max(len(label) for _, label, _ in _TABLE)
+    for key, label, unit in _TABLE:
+        value = result.get(key)
+        text = "n/a" if value is None else (f"{value:d}" if isinstance(value, int)
+                                            else f"{value:.4g}")
+        print(f"  {label:<{width}}  {text} {unit}".rstrip())
+    return 0
