@@ -1,0 +1,159 @@
+"""Every default of a simulated scene, in one place, with where each number comes from.
+
+A scene file (TOML) states only what differs from this table. Units: lengths in metres, times in
+seconds, masses in kilograms; **angles in degrees, and every angle key says so in its name**
+(``inclination_deg``), except the pulse-dilation cone, which the paper gives in milliradians
+(``dilation_half_angle_mrad``). The strike log itself is SI throughout (radians).
+
+"Paper" is Nayak, Udrea, Marsella & Beck, *Application of a laser rangefinder for space object
+imaging and shape reconstruction* (/work/shared/paper/lrf-space-object-imaging.txt).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+# Newton's gravitational constant [m^3 kg^-1 s^-2], CODATA 2018.
+GRAVITATIONAL_CONSTANT = 6.67430e-11
+
+
+@dataclass(frozen=True)
+class Key:
+    """One scene key: its default (``None``: no default, the key is optional), kind and unit.
+
+    ``kind`` is one of ``number``, ``int``, ``str``, ``bool``, ``vec<N>`` (N numbers),
+    ``ivec<N>`` (N integers) or ``fov`` (2 or 4 numbers).
+    """
+
+    default: Any
+    kind: str
+    unit: str
+    help: str
+
+
+# fmt: off
+SCHEMA: dict[str, dict[str, Key]] = {
+    "target": {
+        # "ellipsoid" (the paper's asteroid), "rso-a", "rso-b" or "mesh" (a user file).
+        "kind": Key("ellipsoid", "str", "", "ellipsoid, rso-a, rso-b or mesh"),
+        # Paper, "Model: Tri-Axial Ellipsoid": 143.75, 86.25 and 287.50 m along x, y and z.
+        "semi_axes": Key([143.75, 86.25, 287.5], "vec3", "m", "ellipsoid semi-axes along x, y, z"),
+        # Icosphere subdivisions: 20 * 4**5 = 20,480 faces, the mesh size measured in
+        # /work/shared/dependency-facts.md (its facets are ~0.02 m off the exact ellipsoid).
+        "subdivisions": Key(5, "int", "", "ellipsoid resolution: 20 * 4**n faces"),
+        "path": Key(None, "str", "", "mesh file (OBJ, PLY, STL) for kind = mesh"),
+        # Shape models are often in km (/work/shared/meshes/README.md): then scale = 1000.
+        "scale": Key(1.0, "number", "m per file unit", "mesh coordinates times scale = metres"),
+        "center": Key(False, "bool", "", "move the mesh's volume centroid to the origin"),
+        # Paper: "a period of rotation of 15480 seconds, or 4.3 hours"; inf: not spinning.
+        "spin_period": Key(15480.0, "number", "s", "spin period (inf: no spin)"),
+        # Paper: rotation "mainly about the z-axis"; body frame.
+        "spin_axis": Key([0.0, 0.0, 1.0], "vec3", "", "spin axis in the body frame B"),
+        # Identity: B and I coincide at t = 0 (formats/SPEC.md, frame I).
+        "attitude": Key([0.0, 0.0, 0.0, 1.0], "vec4", "", "B->I quaternion (x, y, z, w) at t = 0"),
+    },
+    "orbit": {
+        # Paper: 750 m around the asteroid (the RSO presets set 250 m).
+        "radius": Key(750.0, "number", "m", "circular orbit radius about the target centre"),
+        # Paper: 85 deg to the target's equatorial plane is "near-optimal".
+        "inclination_deg": Key(85.0, "number", "deg", "inclination to the equatorial plane"),
+        "node_deg": Key(0.0, "number", "deg", "longitude of the ascending node"),
+        "phase_deg": Key(0.0, "number", "deg", "argument of latitude at t = 0"),
+        # The period comes from mu = G * density * volume unless mu or period is given. The paper
+        # gives no mass; 2000 kg/m^3 is a rubble-pile asteroid's bulk density (Itokawa 1900,
+        # Eros 2670). For the paper's ellipsoid: mu = 1.99 m^3/s^2, period 25.4 h at 750 m.
+        "density": Key(2000.0, "number", "kg/m^3", "bulk density of the target"),
+        "mu": Key(None, "number", "m^3/s^2", "gravitational parameter (replaces density)"),
+        "period": Key(None, "number", "s", "orbit period (replaces density and mu)"),
+        # Paper (RSO inclination test): 43 h at 85 deg, then 43 h at 76 to 94 deg.
+        "change_time": Key(None, "number", "s", "time of the inclination change (at next node)"),
+        "change_inclination_deg": Key(None, "number", "deg", "inclination after the change"),
+    },
+    "time": {
+        # Paper: "moved along the orbit path in time steps of 10 seconds".
+        "step": Key(10.0, "number", "s", "time between shots"),
+        # Paper: "50 rotations are used in further trials that require a fixed time".
+        "rotations": Key(50.0, "number", "target rotations", "duration in spin periods"),
+        "duration": Key(None, "number", "s", "duration (replaces rotations)"),
+    },
+    "slew": {
+        # Paper: 2 deg at 85 deg inclination, 5 deg at 60 deg; 3 deg is "no better" than 2.
+        "amplitude_deg": Key(0.0, "number", "deg", "sinusoidal slew amplitude (0: nadir)"),
+        # Not in the paper: 12.5 steps per cycle, so the 10 s step samples 25 distinct angles.
+        "period": Key(125.0, "number", "s", "slew period"),
+        # Paper: slew "in a plane normal to the orbital plane", i.e. about the along-track axis,
+        # which is +x of the nominal sensor frame (sim/motion.py).
+        "axis": Key([1.0, 0.0, 0.0], "vec3", "", "slew axis in the nominal sensor frame"),
+        "phase_deg": Key(0.0, "number", "deg", "slew phase at t = 0"),
+    },
+    "sensor": {
+        "pattern": Key("single", "str", "", "single, cross, zigzag or grid"),
+        # Paper: "The cross configuration field of view is set to 10 x 10 deg" (asteroid); an
+        # "A x B" field of view spans A in azimuth and B in elevation, centred on the boresight.
+        # Four numbers give [az_min, az_max, el_min, el_max] per side (paper, Figures 2 and 3).
+        "field_of_view_deg": Key([10.0, 10.0], "fov", "deg",
+                                 "[az, el] extents or [az_min, az_max, el_min, el_max]"),
+        # Paper, Figure 5(b): a zigzag of 5 beams.
+        "beams": Key(5, "int", "", "zigzag: number of beams"),
+        # Paper, Figure 3: 5 x 5 grids.
+        "resolution": Key([5, 5], "ivec2", "", "grid: beams in azimuth x elevation"),
+        # Jenoptik LIDAR (paper, Table 3): minimum operational range <= 1 m.
+        "range_min": Key(1.0, "number", "m", "shortest range reported"),
+        # Paper: "5km for the scanning LIDAR and 3km for the LRF".
+        "range_max": Key(3000.0, "number", "m", "longest range reported"),
+    },
+    "errors": {
+        # Off by default (the paper's error-free runs). Paper values: LIDAR 1 m range and 0.2 deg
+        # angles; fixed LRFs 0.3 m range and no angle error; pose knowledge 2 m; pulse dilation
+        # alpha 0.0002 with a 0.6 mrad cone of 30 sub-rays. All 3-sigma.
+        "range_sigma3": Key(0.0, "number", "m", "3-sigma Gaussian range error"),
+        "azimuth_sigma3_deg": Key(0.0, "number", "deg", "3-sigma Gaussian azimuth error"),
+        "elevation_sigma3_deg": Key(0.0, "number", "deg", "3-sigma Gaussian elevation error"),
+        "position_sigma3": Key(0.0, "number", "m", "3-sigma per-axis error of recorded position"),
+        "dilation_alpha": Key(0.0, "number", "1", "pulse dilation alpha, paper Eq. (1) (0: off)"),
+        "dilation_half_angle_mrad": Key(0.6, "number", "mrad", "beam-spread cone half-angle"),
+        "dilation_subrays": Key(30, "int", "", "sub-rays m in the beam-spread cone"),
+    },
+}
+# fmt: on
+
+# Keys of which a layer (defaults, scene file, --set overrides) gives at most one; the last layer
+# that gives one wins, so `--set time.duration=600` replaces the default `rotations`.
+ALTERNATIVES: dict[str, tuple[str, ...]] = {
+    "time": ("rotations", "duration"),
+    "orbit": ("density", "mu", "period"),
+}
+
+# Keys that only mean something for some values of another key: (section, key) -> (section,
+# key, allowed values). Giving one of these in a scene where it means nothing is an error.
+ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
+    ("target", "semi_axes"): ("target", "kind", ("ellipsoid",)),
+    ("target", "subdivisions"): ("target", "kind", ("ellipsoid",)),
+    ("target", "path"): ("target", "kind", ("mesh",)),
+    ("target", "scale"): ("target", "kind", ("mesh",)),
+    ("target", "center"): ("target", "kind", ("mesh",)),
+    ("sensor", "field_of_view_deg"): ("sensor", "pattern", ("cross", "zigzag", "grid")),
+    ("sensor", "beams"): ("sensor", "pattern", ("zigzag",)),
+    ("sensor", "resolution"): ("sensor", "pattern", ("grid",)),
+}
+
+TARGET_KINDS = ("ellipsoid", "rso-a", "rso-b", "mesh")
+PATTERNS = ("single", "cross", "zigzag", "grid")
+
+# Limits on values (beyond sign checks) and why.
+MAX_SUBDIVISIONS = 8          # 1.3 M faces; subdivision 9 would need ~1 GB of mesh
+MAX_FIELD_OF_VIEW_DEG = 180.0  # a pattern spanning 180 deg or more is not a forward-looking sensor
+
+# Streaming: rays cast per chunk of shots. 2**19 rays keep a chunk's working set near 100 MB, so
+# two chunks in flight and the writer's buffers stay far below the 2 GB budget of the issue, while
+# per-chunk Python overhead stays below 1% of the casting time (benchmarks/bench_simulate.py).
+RAYS_PER_CHUNK = 1 << 19
+# The most shots in one chunk (single-beam runs): the 77,400-shot paper run is two chunks.
+MAX_SHOTS_PER_CHUNK = 1 << 16
+# Chunks computed ahead of the writer; each worker thread holds at most one.
+CHUNKS_IN_FLIGHT = 3
+
+# Progress bar: shown only on runs still going after this many seconds (issue: "a progress bar on
+# runs longer than a couple of seconds").
+PROGRESS_DELAY_S = 2.0

@@ -1,0 +1,384 @@
+"""Simulate a scene and stream its strike log (formats/SPEC.md).
+
+The campaign is cut into chunks of shots holding about ``RAYS_PER_CHUNK`` rays. Worker threads
+(one per core) each take a chunk through the whole pipeline, all of it batched over the chunk's
+shots and beams:
+
+1. times; target attitude, chaser orbit and sensor attitude (sim/motion.py);
+2. every ray of the chunk in the body frame B (the mesh never moves): origins ``R_BI^T r_I``,
+   directions ``R_BI^T R_SI d_S``;
+3. one first-hit query for all of them (the backend releases the GIL, so the workers cast in
+   parallel), then the exact float64 hit on the reported triangle (sim/raycast.py);
+4. the error models on the recorded values (sim/noise.py), then the range limits.
+
+The main thread writes finished chunks in order while the workers compute the next ones, so at
+most ``CHUNKS_IN_FLIGHT`` chunks exist at a time and memory does not grow with the run.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections import deque
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from tqdm import tqdm
+
+from formats.strike_log import (
+    SensorInfo,
+    Shots,
+    StrikeLogWriter,
+    TruthStrikes,
+    angles_to_directions,
+    directions_to_angles,
+)
+from sim import noise
+from sim.defaults import (
+    CHUNKS_IN_FLIGHT,
+    MAX_SHOTS_PER_CHUNK,
+    PROGRESS_DELAY_S,
+    RAYS_PER_CHUNK,
+)
+from sim.motion import (
+    Orbit,
+    equatorial_frame,
+    nominal_sensor_attitude,
+    slew_rotation,
+    target_attitude,
+)
+from sim.raycast import BACKENDS, DEFAULT_BACKEND, EmbreeBackend, ExactHits, Open3DBackend
+from sim.scene import Scene, SceneError
+from sim.sensors import BeamPattern, beam_pattern, cone_pattern
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Everything fixed for a run, shared read-only by the worker threads."""
+
+    scene: Scene
+    seed: int
+    step: float
+    spin: dict
+    orbit: Orbit
+    slew: dict | None
+    pattern: BeamPattern
+    errors: noise.ErrorModel
+    cone: tuple[np.ndarray, np.ndarray] | None
+    caster: EmbreeBackend | Open3DBackend
+    exact: ExactHits
+    range_min: float
+    range_max: float
+    scale: float   # largest coordinate of any ray [m]: the sensor's distance from the centre
+
+
+@dataclass
+class Chunk:
+    """One chunk's shots and strikes, ready to write."""
+
+    time: np.ndarray
+    position: np.ndarray            # true sensor position, I
+    recorded_position: np.ndarray   # with pose-knowledge error
+    sensor_attitude: np.ndarray     # quaternion S->I
+    target_attitude: np.ndarray     # quaternion B->I
+    shot: np.ndarray
+    beam: np.ndarray
+    range: np.ndarray
+    azimuth_offset: np.ndarray | None
+    elevation_offset: np.ndarray | None
+    point: np.ndarray
+    facet: np.ndarray
+    true_range: np.ndarray
+    rays: int
+
+
+def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Plan:
+    """Turn a scene into the fixed parts of a run (builds the ray-casting structures)."""
+    if backend not in BACKENDS:
+        raise SceneError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    target, orbit, slew, sensor = (scene.values[s] for s in ("target", "orbit", "slew", "sensor"))
+    spin = {"spin_period": target["spin_period"], "spin_axis": target["spin_axis"],
+            "attitude": target["attitude"]}
+    spin_axis_inertial = Rotation.from_quat(target["attitude"]).apply(target["spin_axis"])
+    change = orbit.get("change_inclination_deg")
+    the_orbit = Orbit(radius=orbit["radius"], mu=scene.mu,
+                      inclination=math.radians(orbit["inclination_deg"]),
+                      node=math.radians(orbit["node_deg"]),
+                      phase=math.radians(orbit["phase_deg"]),
+                      frame=equatorial_frame(spin_axis_inertial),
+                      change_time=orbit.get("change_time"),
+                      change_inclination=None if change is None else math.radians(change))
+    the_slew = None
+    if slew["amplitude_deg"] > 0:
+        the_slew = {"amplitude": math.radians(slew["amplitude_deg"]), "period": slew["period"],
+                    "axis": slew["axis"], "phase": math.radians(slew["phase_deg"])}
+    pattern = beam_pattern(sensor["pattern"], fov_deg=sensor.get("field_of_view_deg"),
+                           beams=sensor.get("beams"), resolution=sensor.get("resolution"))
+    errors = noise.ErrorModel.from_scene(scene.values["errors"])
+    cone = (cone_pattern(errors.dilation_subrays, errors.dilation_half_angle)
+            if errors.dilation else None)
+    return Plan(scene=scene, seed=seed, step=scene.values["time"]["step"], spin=spin,
+                orbit=the_orbit, slew=the_slew, pattern=pattern, errors=errors, cone=cone,
+                caster=BACKENDS[backend](scene.vertices, scene.faces),
+                exact=ExactHits(scene.vertices, scene.faces),
+                range_min=sensor["range_min"], range_max=sensor["range_max"],
+                scale=orbit["radius"])
+
+
+def shots_per_chunk(plan: Plan) -> int:
+    """Shots per chunk: about RAYS_PER_CHUNK rays, counting every sub-ray a pulse may cast."""
+    rays_per_shot = plan.pattern.n_beams * (1 + (plan.errors.dilation_subrays
+                                                 if plan.errors.dilation else 0))
+    return int(min(max(RAYS_PER_CHUNK // rays_per_shot, 1), MAX_SHOTS_PER_CHUNK))
+
+
+def poses(plan: Plan, t: np.ndarray) -> tuple[np.ndarray, Rotation, np.ndarray]:
+    """True poses at times ``t`` (n,) [s].
+
+    Returns
+    -------
+    position : (n, 3) float64, metres, I
+    target : Rotation, B->I
+    sensor : (n, 3, 3) float64, matrices sending S vectors to I
+    """
+    rot_bi = target_attitude(t, **plan.spin)
+    position, along_track = plan.orbit.state(t)
+    m_si = nominal_sensor_attitude(position, along_track)
+    if plan.slew is not None:
+        m_si = m_si @ slew_rotation(t, **plan.slew).as_matrix()
+    return position, rot_bi, m_si
+
+
+def _dilation(plan: Plan, index: int, origins: np.ndarray, directions: np.ndarray,
+              true_range: np.ndarray) -> tuple[np.ndarray, int]:
+    """Pulse-dilation displacement (h, 3) [m, B] of each strike, and the sub-rays cast."""
+    polar, azimuth = plan.cone
+    h, m = len(directions), len(polar)
+    d = directions
+    helper = np.where((np.abs(d[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    u = np.cross(d, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = np.cross(d, u)
+    lateral = (np.cos(azimuth)[None, :, None] * u[:, None, :]
+               + np.sin(azimuth)[None, :, None] * w[:, None, :])
+    sub = np.cos(polar)[None, :, None] * d[:, None, :] + np.sin(polar)[None, :, None] * lateral
+    face = plan.caster.first_hit(np.repeat(origins.astype(np.float32), m, axis=0),
+                                 sub.reshape(-1, 3).astype(np.float32)).reshape(h, m)
+    hit = face >= 0
+    normal = plan.exact.normals[np.where(hit, face, 0)]
+    cos_incidence = np.abs(np.einsum("hmi,hmi->hm", sub, normal))
+    sigma = noise.dilation_sigma(plan.errors.dilation_alpha, true_range, cos_incidence, hit)
+    rng = noise.stream(plan.seed, noise.STREAM_DILATION, index)
+    return sigma[:, None] * rng.standard_normal((h, 3)), h * m
+
+
+@dataclass
+class Rays:
+    """A chunk's shots and the rays of all their pulses, in the body frame B."""
+
+    time: np.ndarray          # (n,) s
+    position: np.ndarray      # (n, 3) m, I: true sensor position
+    target: Rotation          # B->I
+    sensor: np.ndarray        # (n, 3, 3): sends S vectors to I
+    to_body: np.ndarray       # (n, 3, 3): sends S vectors to B
+    origin: np.ndarray        # (n, 3) m, B: sensor position
+    direction: np.ndarray     # (n * b, 3) unit vectors, B: true firing direction of each pulse
+
+    def float32(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-ray origins and directions (n * b, 3) float32, as the backends take them."""
+        b = len(self.direction) // len(self.time)
+        return (np.repeat(self.origin.astype(np.float32), b, axis=0),
+                self.direction.astype(np.float32))
+
+
+def chunk_rays(plan: Plan, index: int, first: int, stop: int) -> Rays:
+    """Poses of shots ``first .. stop - 1`` and every pulse's ray (chunk number ``index``)."""
+    errors, pattern = plan.errors, plan.pattern
+    t = np.arange(first, stop, dtype=np.float64) * plan.step
+    n, b = len(t), pattern.n_beams
+    position, rot_bi, m_si = poses(plan, t)
+    m_ib = rot_bi.as_matrix().transpose(0, 2, 1)
+    origin = np.einsum("nij,nj->ni", m_ib, position)          # sensor in B
+    m_sb = m_ib @ m_si                                         # sends S vectors to B
+    # The true firing direction of every pulse, in S, then in B.
+    if errors.angles and not pattern.reports_angles:          # pointing error of a fixed LRF
+        rng = noise.stream(plan.seed, noise.STREAM_POINTING, index)
+        d_az, d_el = errors.angle_errors(rng, n * b)
+        fired = angles_to_directions(np.tile(pattern.azimuth, n) - d_az,
+                                     np.tile(pattern.elevation, n) - d_el).reshape(n, b, 3)
+    else:
+        fired = pattern.directions[None]
+    direction = np.matmul(fired, m_sb.transpose(0, 2, 1)).reshape(-1, 3)
+    return Rays(time=t, position=position, target=rot_bi, sensor=m_si, to_body=m_sb,
+                origin=origin, direction=direction)
+
+
+def compute_chunk(plan: Plan, index: int, first: int, stop: int) -> Chunk:
+    """Simulate shots ``first .. stop - 1`` (chunk number ``index``)."""
+    errors, pattern = plan.errors, plan.pattern
+    rays = chunk_rays(plan, index, first, stop)
+    t, position, origin, direction, m_sb = (rays.time, rays.position, rays.origin,
+                                            rays.direction, rays.to_body)
+    n, b = len(t), pattern.n_beams
+    origins32, directions32 = rays.float32()
+    face, u, v = plan.caster.first_hit_uv(origins32, directions32)
+    pulse = np.flatnonzero(face >= 0)
+    shot = pulse // b if b > 1 else pulse
+    # np.take: row gathers several times faster than fancy indexing.
+    o, d = np.take(origin, shot, axis=0), np.take(direction, pulse, axis=0)
+    true_range, facet, hit = plan.exact.refine(o, d, face[pulse], u[pulse], v[pulse],
+                                               scale=plan.scale)
+    if not hit.all():
+        pulse, shot, o, d = pulse[hit], shot[hit], o[hit], d[hit]
+        true_range, facet = true_range[hit], facet[hit]
+    beam = pulse - shot * b
+    point = o + true_range[:, None] * d
+    h, cast = len(pulse), n * b
+
+    # What the sensor records.
+    recorded = true_range
+    az_off = el_off = None
+    if pattern.reports_angles:
+        az_off, el_off = np.zeros(h), np.zeros(h)
+    if errors.dilation:
+        shift, sub_rays = _dilation(plan, index, o, d, true_range)
+        cast += sub_rays
+        if pattern.reports_angles:
+            seen = np.einsum("hji,hj->hi", m_sb[shot], point + shift - o)   # R_SB (p' - o)
+            recorded = np.linalg.norm(seen, axis=1)
+            az, el = directions_to_angles(seen / recorded[:, None])
+            az_off, el_off = az - pattern.azimuth[beam], el - pattern.elevation[beam]
+        else:
+            recorded = true_range + np.einsum("ij,ij->i", shift, d)
+    if errors.angles and pattern.reports_angles:
+        d_az, d_el = errors.angle_errors(noise.stream(plan.seed, noise.STREAM_ANGLES, index), h)
+        az_off, el_off = az_off + d_az, el_off + d_el
+    if errors.range_sigma > 0:
+        rng = noise.stream(plan.seed, noise.STREAM_RANGE, index)
+        recorded = recorded + rng.normal(0.0, errors.range_sigma, h)
+    in_range = (recorded >= plan.range_min) & (recorded <= plan.range_max) & (recorded > 0)
+    if not in_range.all():
+        keep = np.flatnonzero(in_range)
+        shot, beam, recorded, point, facet, true_range = (
+            a[keep] for a in (shot, beam, recorded, point, facet, true_range))
+        if az_off is not None:
+            az_off, el_off = az_off[keep], el_off[keep]
+
+    recorded_position = position
+    if errors.position_sigma > 0:
+        rng = noise.stream(plan.seed, noise.STREAM_POSITION, index)
+        recorded_position = position + rng.normal(0.0, errors.position_sigma, (n, 3))
+    return Chunk(time=t, position=position, recorded_position=recorded_position,
+                 sensor_attitude=Rotation.from_matrix(rays.sensor).as_quat(),
+                 target_attitude=rays.target.as_quat(), shot=shot + first, beam=beam,
+                 range=recorded, azimuth_offset=az_off, elevation_offset=el_off, point=point,
+                 facet=facet.astype(np.uint32), true_range=true_range, rays=cast)
+
+
+def chunk_bounds(plan: Plan) -> list[tuple[int, int, int]]:
+    """``(index, first shot, stop shot)`` of every chunk of the campaign."""
+    n_shots, size = plan.scene.n_shots, shots_per_chunk(plan)
+    return [(i, k, min(k + size, n_shots)) for i, k in enumerate(range(0, n_shots, size))]
+
+
+def iter_chunks(plan: Plan, *, workers: int | None = None) -> Iterator[Chunk]:
+    """Compute the campaign's chunks in order, ``workers`` at a time (default: one per core)."""
+    bounds = chunk_bounds(plan)
+    workers = min(workers or os.cpu_count() or 1, len(bounds))
+    if workers <= 1:
+        for bound in bounds:
+            yield compute_chunk(plan, *bound)
+        return
+    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="recon-sim")
+    pending: deque = deque()
+    todo = iter(bounds)
+    try:
+        for bound in todo:
+            pending.append(pool.submit(compute_chunk, plan, *bound))
+            if len(pending) >= max(CHUNKS_IN_FLIGHT, workers):
+                break
+        while pending:
+            chunk = pending.popleft().result()
+            bound = next(todo, None)
+            if bound is not None:
+                pending.append(pool.submit(compute_chunk, plan, *bound))
+            yield chunk
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def sensor_info(plan: Plan) -> SensorInfo:
+    """The log's description of the sensor."""
+    p = plan.pattern
+    return SensorInfo(pattern=p.pattern, beam_directions=p.directions, range_min=plan.range_min,
+                      range_max=plan.range_max, field_of_view=tuple(float(a) for a in
+                                                                     p.field_of_view),
+                      reports_angles=p.reports_angles, errors=plan.errors.record())
+
+
+def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
+             backend: str = DEFAULT_BACKEND, workers: int | None = None) -> dict:
+    """Simulate ``scene`` and write its strike log to ``path``.
+
+    Parameters
+    ----------
+    scene : Scene
+        From :func:`sim.load_scene`.
+    path : str or Path
+        Destination ``.h5``; written under a temporary name and moved into place when complete.
+    seed : int, >= 0
+        Seed of every error model; the same seed gives the same datasets.
+    progress : bool or None
+        Show a progress bar (None: only on a terminal, and only once the run has lasted
+        ``PROGRESS_DELAY_S``).
+    backend : {"embree", "open3d"}
+        Ray-casting backend (sim/raycast.py).
+    workers : int, optional
+        Worker threads (default: one per core).
+
+    Returns
+    -------
+    dict
+        ``path``, ``scene``, ``target``, ``pattern``, ``beams``, ``shots``, ``pulses``,
+        ``strikes``, ``rays_cast``, ``duration_s``, ``orbit_period_s``, ``mu``,
+        ``inclination_change_s`` (None when no change happens during the run), ``seed``,
+        ``backend``,
+        ``wall_time_s``, ``rays_per_s``.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise SceneError(f"seed must be a non-negative integer, got {seed!r}")
+    seed = int(seed)
+    start = time.perf_counter()
+    plan = make_plan(scene, seed=seed, backend=backend)
+    strikes = rays = 0
+    bar = tqdm(total=scene.n_shots, unit="shot", desc=f"simulate {scene.name}",
+               delay=PROGRESS_DELAY_S, disable=None if progress is None else not progress)
+    with bar, StrikeLogWriter(path, sensor=sensor_info(plan), target=scene.target,
+                              scene=scene.to_toml(), seed=seed,
+                              truth_mesh=(scene.vertices, scene.faces)) as log:
+        for chunk in iter_chunks(plan, workers=workers):
+            log.write_shots(chunk.time, chunk.recorded_position, chunk.sensor_attitude,
+                            chunk.target_attitude,
+                            truth=Shots(chunk.time, chunk.position, chunk.sensor_attitude,
+                                        chunk.target_attitude))
+            log.write_strikes(chunk.shot, chunk.beam, chunk.range,
+                              azimuth_offset=chunk.azimuth_offset,
+                              elevation_offset=chunk.elevation_offset,
+                              truth=TruthStrikes(chunk.point, chunk.facet, chunk.true_range))
+            strikes += len(chunk.shot)
+            rays += chunk.rays
+            bar.update(len(chunk.time))
+    wall = time.perf_counter() - start
+    change = plan.orbit.maneuver_time
+    return {"path": str(path), "scene": scene.name, "target": scene.target,
+            "pattern": plan.pattern.pattern, "beams": plan.pattern.n_beams,
+            "shots": scene.n_shots, "pulses": scene.n_shots * plan.pattern.n_beams,
+            "strikes": strikes, "rays_cast": rays, "duration_s": scene.duration,
+            "orbit_period_s": scene.orbit_period, "mu": scene.mu,
+            "inclination_change_s": change if change is not None and change < scene.duration
+            else None, "seed": seed,
+            "backend": backend, "wall_time_s": wall, "rays_per_s": rays / wall if wall else 0.0}
