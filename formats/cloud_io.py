@@ -24,14 +24,12 @@ Formats
 
 from __future__ import annotations
 
-import contextlib
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
 from formats.ply import PlyWriter, read_ply_columns
 
@@ -95,88 +93,81 @@ def _suffix(path: Path) -> str:
 # --------------------------------------------------------------------------- writers
 
 
-class CloudWriter:
-    """Stream a point cloud to PLY, LAS/LAZ or HDF5, atomically.
-
-    Parameters
-    ----------
-    path : str or Path
-        Destination; the suffix picks the format.
-    n_points : int
-        Total number of points that will be written (PLY and LAS headers need it).
-    dtypes : dict of str to numpy dtype
-        The attribute columns, in order.
-    """
+class _PlyCloud(PlyWriter):
+    """Binary PLY: x, y, z then every attribute as a vertex property."""
 
     def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype]):
-        self.path = Path(path)
-        self._kind = _suffix(self.path)
-        if not self.path.parent.is_dir():
-            raise MeshFormatError(f"{self.path}: directory {self.path.parent} does not exist")
-        self.n_points = int(n_points)
-        self.dtypes = {k: np.dtype(v) for k, v in dtypes.items()}
-        self._written = 0
-        if self._kind == ".ply":
-            cols = {"x": np.float64, "y": np.float64, "z": np.float64} | self.dtypes
-            self._ply = PlyWriter(self.path, self.n_points, cols)
-            return
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.partial-", dir=self.path.parent,
-                                   suffix=self._kind)
-        os.close(fd)
-        self._tmp = Path(tmp)
-        if self._kind == ".h5":
-            self._open_h5()
-        else:
-            self._open_las()
+        xyz = {"x": np.float64, "y": np.float64, "z": np.float64}
+        super().__init__(path, n_points, xyz | dtypes)
 
-    def _open_h5(self) -> None:
+    def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
+        points = np.asarray(points, dtype=np.float64)
+        super().write({"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]} | attributes)
+
+
+class _H5Cloud(AtomicWriter):
+    """recon's HDF5 cloud: ``points`` and one dataset per attribute, chunked and resizable."""
+
+    missing_dir_error = MeshFormatError
+
+    def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype]):
         import h5py
 
-        self._h5 = h5py.File(self._tmp, "w")
+        super().__init__(path, suffix=".h5")
+        self.n_points, self.dtypes, self._written = int(n_points), dtypes, 0
+        self._h5 = h5py.File(self.temporary, "w")
         self._h5.attrs.update({"format": CLOUD_FORMAT_NAME,
                                "format_version": np.int64(CLOUD_FORMAT_VERSION)})
         rows = max(1, min(_CHUNK_ROWS, self.n_points))
         self._h5.create_dataset("points", shape=(0, 3), maxshape=(None, 3), dtype=np.float64,
                                 chunks=(rows, 3))
         g = self._h5.create_group("attributes")
-        for name, dtype in self.dtypes.items():
+        for name, dtype in dtypes.items():
             g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(rows,))
 
-    def _open_las(self) -> None:
+    def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
+        n = len(points)
+        for ds, values in [(self._h5["points"], points)] + [
+                (self._h5["attributes"][k], attributes[k]) for k in self.dtypes]:
+            ds.resize(self._written + n, axis=0)
+            ds[self._written:] = values
+        self._written += n
+
+    def _finish(self) -> None:
+        self._h5.close()
+        if self._written != self.n_points:
+            raise MeshFormatError(f"{self.path}: wrote {self._written} points, expected "
+                                  f"{self.n_points}")
+
+    def _release(self) -> None:
+        self._h5.close()
+
+
+class _LasCloud(AtomicWriter):
+    """LAS 1.4 point format 6 (LAZ when the suffix says so); attributes as extra bytes."""
+
+    missing_dir_error = MeshFormatError
+
+    def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype]):
         import laspy
 
+        suffix = Path(path).suffix.lower()
+        super().__init__(path, suffix=suffix)
+        self.n_points, self._written = int(n_points), 0
         header = laspy.LasHeader(point_format=6, version="1.4")
         header.scales = np.full(3, LAS_SCALE_M)
         header.offsets = np.zeros(3)
-        extra = [laspy.ExtraBytesParams(name=k, type=v) for k, v in self.dtypes.items()
+        extra = [laspy.ExtraBytesParams(name=k, type=v) for k, v in dtypes.items()
                  if k != "time"]
         if extra:
             header.add_extra_dims(extra)
-        self._las = laspy.open(self._tmp, mode="w", header=header,
-                               do_compress=self._kind == ".laz")
+        self._las = laspy.open(self.temporary, mode="w", header=header,
+                               do_compress=suffix == ".laz")
 
     def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
-        """Append points (n, 3) float64 [m] with their attribute values (n,)."""
-        points = np.asarray(points, dtype=np.float64)
-        n = len(points)
-        if self._kind == ".ply":
-            self._ply.write({"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
-                            | attributes)
-        elif self._kind == ".h5":
-            ds = self._h5["points"]
-            ds.resize(self._written + n, axis=0)
-            ds[self._written:] = points
-            for name in self.dtypes:
-                a = self._h5["attributes"][name]
-                a.resize(self._written + n, axis=0)
-                a[self._written:] = attributes[name]
-        else:
-            self._write_las(points, attributes)
-        self._written += n
-
-    def _write_las(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
         import laspy
 
+        points = np.asarray(points, dtype=np.float64)
         if len(points) and np.abs(points).max() > np.iinfo(np.int32).max * LAS_SCALE_M:
             raise MeshFormatError(f"{self.path}: coordinates beyond +-214 km do not fit LAS at "
                                   f"{LAS_SCALE_M} m resolution")
@@ -185,43 +176,44 @@ class CloudWriter:
         for name, values in attributes.items():
             record["gps_time" if name == "time" else name] = values
         self._las.write_points(record)
+        self._written += len(points)
 
-    def close(self) -> None:
-        if self._kind == ".ply":
-            self._ply.close()
-            return
-        try:
-            if self._written != self.n_points:
-                raise MeshFormatError(f"{self.path}: wrote {self._written} points, expected "
-                                      f"{self.n_points}")
-            (self._h5 if self._kind == ".h5" else self._las).close()
-            os.replace(self._tmp, self.path)
-        except BaseException:
-            self.abort()
-            raise
+    def _finish(self) -> None:
+        self._las.close()
+        if self._written != self.n_points:
+            raise MeshFormatError(f"{self.path}: wrote {self._written} points, expected "
+                                  f"{self.n_points}")
 
-    def abort(self) -> None:
-        if self._kind == ".ply":
-            self._ply.abort()
-            return
-        with contextlib.suppress(Exception):
-            (self._h5 if self._kind == ".h5" else self._las).close()
-        self._tmp.unlink(missing_ok=True)
+    def _release(self) -> None:
+        self._las.close()
 
-    def __enter__(self) -> CloudWriter:
-        return self
 
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
+_WRITERS = {".ply": _PlyCloud, ".h5": _H5Cloud, ".las": _LasCloud, ".laz": _LasCloud}
+
+
+def open_cloud_writer(path, n_points: int, dtypes: dict[str, np.dtype]) -> AtomicWriter:
+    """A streaming point-cloud writer; the suffix of ``path`` picks PLY, LAS, LAZ or HDF5.
+
+    Use it as a context manager and call ``write(points, attributes)`` with blocks of
+    ``(n, 3)`` float64 points [m] and their ``(n,)`` attribute values. The file appears, under
+    ``path``, only when exactly ``n_points`` were written and the writer closed cleanly.
+
+    Parameters
+    ----------
+    path : str or Path
+    n_points : int
+        Total number of points that will be written (PLY and LAS headers need it).
+    dtypes : dict of str to numpy dtype
+        The attribute columns, in order.
+    """
+    path = Path(path)
+    return _WRITERS[_suffix(path)](path, n_points, {k: np.dtype(v) for k, v in dtypes.items()})
 
 
 def write_cloud(path, cloud: PointCloud) -> Path:
     """Write a whole point cloud; the suffix of ``path`` picks PLY, LAS, LAZ or HDF5."""
     dtypes = {k: np.asarray(v).dtype for k, v in cloud.attributes.items()}
-    with CloudWriter(path, len(cloud), dtypes) as writer:
+    with open_cloud_writer(path, len(cloud), dtypes) as writer:
         writer.write(cloud.points, cloud.attributes)
     return Path(path)
 

@@ -8,13 +8,11 @@ CloudCompare) through trimesh's parser and keeps every vertex property.
 
 from __future__ import annotations
 
-import contextlib
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
 
 _PLY_TYPES = {"f8": "double", "f4": "float", "u4": "uint", "i4": "int", "u2": "ushort",
@@ -31,11 +29,11 @@ def _ply_dtype(arr: np.ndarray) -> np.dtype:
     return arr.dtype.newbyteorder("<")
 
 
-class PlyWriter:
-    """Stream rows of named columns into a binary PLY point cloud.
+class PlyWriter(AtomicWriter):
+    """Stream rows of named columns into a binary PLY file, atomically.
 
-    The vertex count goes in the header, so it is given up front; the file is written under a
-    temporary name and renamed into place on a clean close once exactly ``n_rows`` were written.
+    The vertex count goes in the header, so it is given up front; the file is renamed into place
+    on a clean close once exactly ``n_rows`` rows (and ``n_faces`` faces) were written.
 
     Parameters
     ----------
@@ -47,8 +45,10 @@ class PlyWriter:
         Number of triangles ``write_faces`` will write after the vertices (meshes).
     """
 
+    missing_dir_error = MeshFormatError
+
     def __init__(self, path, n_rows: int, dtypes: dict[str, np.dtype], *, n_faces: int = 0):
-        self.path = Path(path)
+        super().__init__(path)
         self.n_rows = int(n_rows)
         self.n_faces = int(n_faces)
         self._disk = np.dtype([(k, _ply_dtype(np.zeros(0, dtype=v))) for k, v in dtypes.items()])
@@ -58,9 +58,7 @@ class PlyWriter:
         if self.n_faces:
             header += [f"element face {self.n_faces}", "property list uchar int vertex_indices"]
         header += ["end_header", ""]
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.partial-", dir=self.path.parent)
-        self._tmp = Path(tmp)
-        self._fh = os.fdopen(fd, "wb")
+        self._fh = open(self.temporary, "wb")  # closed by _finish or _release
         self._fh.write("\n".join(header).encode("ascii"))
         self._written = 0
         self._faces_written = 0
@@ -77,34 +75,21 @@ class PlyWriter:
     def write_faces(self, faces: np.ndarray) -> None:
         """Append the face element (for meshes; call once, after all vertices)."""
         faces = np.asarray(faces)
-        self._faces_written = len(faces)
         rows = np.empty(len(faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
         rows["n"] = 3
         rows["v"] = faces
         self._fh.write(rows.tobytes())
+        self._faces_written = len(faces)
 
-    def close(self) -> None:
+    def _finish(self) -> None:
         self._fh.close()
         if (self._written, self._faces_written) != (self.n_rows, self.n_faces):
-            self._tmp.unlink(missing_ok=True)
             raise MeshFormatError(f"{self.path}: wrote {self._written} rows and "
                                   f"{self._faces_written} faces, header says {self.n_rows} and "
                                   f"{self.n_faces}")
-        os.replace(self._tmp, self.path)
 
-    def abort(self) -> None:
-        with contextlib.suppress(Exception):
-            self._fh.close()
-        self._tmp.unlink(missing_ok=True)
-
-    def __enter__(self) -> PlyWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
+    def _release(self) -> None:
+        self._fh.close()
 
 
 def write_ply(path, columns: dict[str, np.ndarray], *, faces: np.ndarray | None = None) -> None:

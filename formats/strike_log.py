@@ -8,9 +8,7 @@ out, so a corrupt log raises ``StrikeLogError`` instead of yielding numbers that
 from __future__ import annotations
 
 import contextlib
-import os
 import shutil
-import tempfile
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, fields
 from datetime import UTC, datetime
@@ -19,6 +17,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from formats.atomic import AtomicWriter
 from formats.errors import StrikeLogError
 from formats.version import __version__
 
@@ -290,7 +289,7 @@ def _hdf5_errors(where: str):
 # --------------------------------------------------------------------------- writer
 
 
-class StrikeLogWriter:
+class StrikeLogWriter(AtomicWriter):
     """Write a strike log, streaming shots and strikes in chunks.
 
     The file is written under a temporary name beside ``path`` and renamed into place only when
@@ -322,36 +321,31 @@ class StrikeLogWriter:
     ...     log.write_strikes(shot, beam, rng)
     """
 
+    missing_dir_error = StrikeLogError
+
     def __init__(self, path, *, sensor: SensorInfo, target: str, scene: str = "", seed: int = -1,
                  truth_mesh: tuple[np.ndarray, np.ndarray] | None = None,
                  producer: str = "recon", producer_version: str = __version__,
                  compression: str = "none"):
-        self.path = Path(path)
-        where = str(self.path)
+        where = str(path)
         _check_sensor(sensor, where)
         if compression not in COMPRESSIONS:
             raise StrikeLogError(f"{where}: compression must be one of "
                                  f"{', '.join(COMPRESSIONS)}, got {compression!r}")
+        super().__init__(path)
         self.sensor = sensor
         self.has_truth = truth_mesh is not None
-        if not self.path.parent.is_dir():
-            raise StrikeLogError(f"{where}: directory {self.path.parent} does not exist")
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.partial-", dir=self.path.parent)
-        os.close(fd)
-        self._tmp = Path(tmp)
-        self._file = h5py.File(self._tmp, "w")
-        self._n_shots = 0
-        self._n_strikes = 0
+        self._n_shots = self._n_strikes = 0
         self._last_time: float | None = None
         self._last_shot: int | None = None
-        self._closed = False
         try:
+            self._file = h5py.File(self.temporary, "w")
             self._create_layout(sensor, target=target, scene=scene, seed=seed,
                                 truth_mesh=truth_mesh, producer=producer,
                                 producer_version=producer_version,
                                 filters={"fletcher32": True} | COMPRESSIONS[compression])
         except BaseException:
-            self._abort()
+            self.abort()
             raise
 
     @classmethod
@@ -367,17 +361,14 @@ class StrikeLogWriter:
             sensor, has_truth = log.sensor, log.has_truth
             n_shots, n_strikes = log.n_shots, log.n_strikes
         self = cls.__new__(cls)
-        self.path, self.sensor, self.has_truth = path, sensor, has_truth
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", dir=path.parent)
-        os.close(fd)
-        self._tmp = Path(tmp)
-        shutil.copyfile(path, self._tmp)
-        self._file = h5py.File(self._tmp, "r+")
+        AtomicWriter.__init__(self, path)
+        self.sensor, self.has_truth = sensor, has_truth
+        shutil.copyfile(path, self.temporary)
+        self._file = h5py.File(self.temporary, "r+")
         for name in ("n_shots", "n_strikes"):  # the file is incomplete until close
             del self._file.attrs[name]
         self._n_shots, self._n_strikes = n_shots, n_strikes
         self._last_time, self._last_shot = last_time, last_shot
-        self._closed = False
         return self
 
     def _create_layout(self, sensor, *, target, scene, seed, truth_mesh, producer,
@@ -425,7 +416,7 @@ class StrikeLogWriter:
     # ------------------------------------------------------------------ appending rows
 
     def _require_open(self) -> None:
-        if self._closed:
+        if self.closed:
             raise StrikeLogError(f"{self.path}: the writer is closed")
 
     @staticmethod
@@ -527,40 +518,14 @@ class StrikeLogWriter:
 
     # ------------------------------------------------------------------ closing
 
-    def close(self) -> None:
-        """Write the row counts and move the file into place."""
-        if self._closed:
-            return
-        try:
-            self._file.attrs["n_shots"] = np.int64(self._n_shots)
-            self._file.attrs["n_strikes"] = np.int64(self._n_strikes)
-            self._file.close()
-            os.replace(self._tmp, self.path)
-        except BaseException:
-            self._abort()
-            raise
-        self._closed = True
+    def _finish(self) -> None:
+        """Write the row counts that mark the log complete (SPEC.md, root attributes)."""
+        self._file.attrs["n_shots"] = np.int64(self._n_shots)
+        self._file.attrs["n_strikes"] = np.int64(self._n_strikes)
+        self._file.close()
 
-    def _abort(self) -> None:
-        """Drop the temporary file; the destination is left as it was."""
-        self._closed = True
-        with contextlib.suppress(Exception):
-            self._file.close()
-        with contextlib.suppress(FileNotFoundError):
-            self._tmp.unlink()
-
-    def __enter__(self) -> StrikeLogWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self._abort()
-
-    def __del__(self):  # a writer dropped without close() is an interrupted run
-        if not getattr(self, "_closed", True):
-            self._abort()
+    def _release(self) -> None:
+        self._file.close()
 
 
 # --------------------------------------------------------------------------- reader

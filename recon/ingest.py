@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from formats import StrikeChunk, StrikeLog
-from formats.cloud_io import CloudWriter, PointCloud
+from formats.cloud_io import PointCloud, open_cloud_writer
 
 Frame = Literal["body", "inertial"]
 FRAMES = ("body", "inertial")
@@ -97,7 +97,7 @@ def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int
         ``n_points``, ``frame``, ``output``.
     """
     with StrikeLog(log_path) as log:
-        with CloudWriter(out_path, log.n_strikes, ATTRIBUTE_DTYPES) as writer:
+        with open_cloud_writer(out_path, log.n_strikes, ATTRIBUTE_DTYPES) as writer:
             for points, attributes in iter_registered(log, frame=frame, chunk_rows=chunk_rows,
                                                       progress=progress):
                 writer.write(points, attributes)

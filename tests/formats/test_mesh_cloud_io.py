@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from formats.cloud_io import LAS_SCALE_M, CloudWriter, PointCloud, read_cloud, write_cloud
+from formats.cloud_io import LAS_SCALE_M, PointCloud, open_cloud_writer, read_cloud, write_cloud
 from formats.errors import MeshFormatError
 from formats.mesh_io import read_mesh, write_mesh
 
@@ -39,7 +39,7 @@ def test_cloud_round_trip_keeps_attributes(tmp_path, cloud, suffix):
 
 def test_streamed_cloud_matches_whole_write(tmp_path, cloud):
     dtypes = {k: v.dtype for k, v in cloud.attributes.items()}
-    with CloudWriter(tmp_path / "s.ply", len(cloud), dtypes) as w:
+    with open_cloud_writer(tmp_path / "s.ply", len(cloud), dtypes) as w:
         for lo in range(0, len(cloud), 700):
             w.write(cloud.points[lo:lo + 700], {k: v[lo:lo + 700]
                                                 for k, v in cloud.attributes.items()})
@@ -49,7 +49,7 @@ def test_streamed_cloud_matches_whole_write(tmp_path, cloud):
 
 def test_short_stream_leaves_no_file(tmp_path, cloud):
     with pytest.raises(MeshFormatError, match="wrote 10 rows"), \
-            CloudWriter(tmp_path / "s.ply", len(cloud), {}) as w:
+            open_cloud_writer(tmp_path / "s.ply", len(cloud), {}) as w:
         w.write(cloud.points[:10], {})
     assert list(tmp_path.iterdir()) == []
 

@@ -169,3 +169,12 @@ def test_compressed_logs_read_the_same(tmp_path, compression):
         np.testing.assert_array_equal(log.strikes()[2], rho)
     with pytest.raises(StrikeLogError, match="compression must be one of none, lzf, gzip"):
         StrikeLogWriter(tmp_path / "d.h5", sensor=_sensor(), target="t", compression="zstd")
+
+
+def test_missing_directory_and_dropped_writer(tmp_path):
+    with pytest.raises(StrikeLogError, match=r"directory .*nowhere does not exist"):
+        StrikeLogWriter(tmp_path / "nowhere" / "x.h5", sensor=_sensor(), target="t")
+    w = StrikeLogWriter(tmp_path / "x.h5", sensor=_sensor(), target="t")
+    w.write_shots([0.0], [[1.0, 0, 0]], [[0, 0, 0, 1.0]], [[0, 0, 0, 1.0]])
+    del w  # dropped without close: an interrupted run
+    assert list(tmp_path.iterdir()) == []
