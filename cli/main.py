@@ -22,6 +22,7 @@ COMMAND_MODULES = (
     "cli.ingest",
     "cli.score",
     "cli.reconstruct",
+    "cli.study",
 )
 
 

@@ -1,0 +1,106 @@
+"""``recon study`` and ``recon report``: the paper's studies, and HTML reports of their results."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+# Repeated from recon/studies/__init__.py (STUDIES) so that ``recon --help`` imports nothing.
+STUDY_NAMES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``study`` and ``report`` subcommands to ``recon``."""
+    p = sub.add_parser(
+        "study", help="reproduce one of the paper's studies (or all) with charts",
+        description="Run one of the paper's studies on Dask: simulate every case, register and "
+                    "score it against the truth, then write the data (results.csv, "
+                    "summary.json with each claim of the paper, our numbers and a verdict) and "
+                    "the charts (PNG) to DIR. 'all' runs every study into DIR/NAME/. "
+                    "'--list' names the studies.",
+        epilog="examples:\n"
+               "  recon study --list\n"
+               "  recon study inclination -o out/inclination --quick\n"
+               "  recon study all -o out/studies --resume\n"
+               "  recon report out/studies -o report.html",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("name", nargs="?", metavar="NAME",
+                   help=f"study: {', '.join(STUDY_NAMES)}, or all")
+    p.add_argument("-o", "--output", type=Path, metavar="DIR", help="output directory")
+    p.add_argument("--quick", action="store_true",
+                   help="reduced version (minutes, for CI); verdicts of claims the reduced "
+                        "runs cannot test say 'not tested'")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="Dask scheduler address of an existing cluster (default: a local "
+                        "cluster); 'threads' or 'serial' run without Dask")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="local workers (default: one per core)")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the finished cases in DIR and run only the others")
+    p.add_argument("--list", action="store_true", help="list the studies and exit")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--size", choices=("tiny",), help=argparse.SUPPRESS)  # tests only
+    p.set_defaults(func=run_study)
+
+    p = sub.add_parser(
+        "report", help="one self-contained HTML page of a study, all studies or a comparison",
+        description="Write one HTML page, readable offline (charts embedded), with the claims, "
+                    "tables and charts of a 'recon study' directory (one study or 'all') or a "
+                    "'recon compare' directory.")
+    p.add_argument("input", type=Path, metavar="DIR", help="study or comparison directory")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="REPORT.html",
+                   help="HTML file to write")
+    p.set_defaults(func=run_report)
+
+
+def run_study(args) -> int:
+    from recon import studies
+
+    if args.list:
+        for name, title in studies.describe():
+            print(f"{name:<12} {title}")
+        print(f"{'all':<12} every study above, into DIR/NAME/")
+        return 0
+    if args.name is None or args.output is None:
+        raise studies.StudyError("NAME and -o DIR are required (or --list)")
+    if args.workers is not None and args.workers < 1:
+        raise studies.StudyError(f"--workers must be >= 1, got {args.workers}")
+    size = args.size or ("quick" if args.quick else "full")
+    options = {"size": size, "scheduler": args.scheduler, "resume": args.resume,
+               "n_workers": args.workers}
+    if args.name == "all":
+        index = studies.run_all(args.output, **options)
+        if args.json:
+            print(json.dumps(index, indent=2))
+            return 0
+        for name, entry in index["studies"].items():
+            verdicts = ", ".join(f"{n} {v}" for v, n in sorted(entry["verdicts"].items()))
+            print(f"{name:<12} {entry['wall_time_s']:7.1f} s  {verdicts}"
+                  + (f"  ({entry['n_failed']} cases failed)" if entry["n_failed"] else ""))
+        print(f"all studies: {index['wall_time_s']:.1f} s; wrote {args.output}/NAME/ and "
+              f"{args.output / studies.INDEX_JSON}")
+        return 0
+    summary = studies.run(args.name, args.output, **options)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    print(f"{summary['title']} ({size}, {summary['wall_time_s']:.1f} s)")
+    for c in summary["claims"]:
+        print(f"  [{c['verdict']}] {c['figure']}: {c['claim']}")
+        print(f"      ours: {c['ours']}")
+    if summary["n_failed"]:
+        print(f"  {summary['n_failed']} of {summary['n_cases']} cases failed:", file=sys.stderr)
+        for f in summary["failures"]:
+            print(f"    {f['key']}: {f['reason']}", file=sys.stderr)
+    print(f"wrote {args.output}: " + ", ".join(summary["files"]))
+    return 0
+
+
+def run_report(args) -> int:
+    from recon.report import write_report
+
+    path = write_report(args.input, args.output)
+    print(f"wrote {path}")
+    return 0

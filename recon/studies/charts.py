@@ -1,0 +1,379 @@
+"""Charts of the studies (matplotlib, Agg): score panels, grouped bars, coverage maps, clouds.
+
+Every chart shows the paper's edge score beside the standard scores (F-score, Chamfer distance,
+coverage), each panel saying which way is better, so no conclusion rests on one metric.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+# (key, axis label, lower is better). The edge score is our formalisation of the paper's metric
+# (metrics/edges.py); tau is 1 % of the truth's bounding-box diagonal (metrics/defaults.py).
+METRICS = (
+    ("edge_score", "edge score (paper's metric)", True),
+    ("fscore", "F-score at τ", False),
+    ("chamfer_m", "Chamfer distance [m]", True),
+    ("coverage", "coverage (area within τ)", False),
+)
+# Chamfer axes are logarithmic when the values span more than this factor (else linear: a log
+# axis within one decade has no labelled ticks).
+LOG_SPAN = 5.0
+# Resolution of every PNG: readable on screen, small enough to embed in reports and docs.
+DPI = 100
+# Equal-area bins of the coverage maps: longitude steps and latitude bands (uniform in sin).
+MAP_LON_BINS, MAP_LAT_BINS = 72, 36
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    fig.savefig(path, dpi=DPI)
+    _pyplot().close(fig)
+    return path
+
+
+def _plain_log_ticks(axis) -> None:
+    """Tick labels of a log axis as plain numbers (20, not 2 x 10^1)."""
+    from matplotlib.ticker import FuncFormatter
+
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:.0e}"[0] in "235"
+                                           else ""))
+
+
+def _spans(lines, factor: float) -> bool:
+    """True when the positive y data of ``lines`` span more than ``factor`` (max / min)."""
+    y = np.concatenate([np.asarray(line.get_ydata(), dtype=float) for line in lines] or [[]])
+    y = y[np.isfinite(y) & (y > 0)]
+    return bool(y.size) and y.max() > factor * y.min()
+
+
+def _title(fig, title: str, note: str = "") -> None:
+    """The figure's title, with an optional second line of small print (assumptions)."""
+    fig.suptitle(title + (f"\n{note}" if note else ""), fontsize=11.5 if note else 12)
+
+
+def _better(lower: bool) -> str:
+    return "lower is better" if lower else "higher is better"
+
+
+def metric_panels(curves: Sequence[Mapping], path, *, title: str, x_label: str,
+                  logx: bool = False, references: Sequence[Mapping] = (),
+                  metrics=METRICS, note: str = "") -> Path:
+    """One panel per metric, a line per curve.
+
+    Parameters
+    ----------
+    curves : sequence of dict
+        ``label``, ``x`` (n,), ``y`` (dict of metric key to (n,) values) and optionally
+        ``style`` (matplotlib keyword arguments).
+    path : str or Path
+        PNG to write.
+    title, x_label : str
+    logx : bool
+        Logarithmic x axis.
+    references : sequence of dict
+        Horizontal reference lines: ``label``, ``y`` (dict of metric key to value), ``style``.
+    metrics : sequence of (key, label, lower_is_better)
+    note : str
+        Small print under the panels (what was assumed, score options).
+    """
+    plt = _pyplot()
+    n = len(metrics)
+    cols = 2 if n > 1 else 1
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(11, 3.6 * rows + 0.9), squeeze=False,
+                             constrained_layout=True)
+    for ax, (key, label, lower) in zip(axes.flat, metrics, strict=False):
+        for curve in curves:
+            y = np.asarray(curve["y"].get(key, []), dtype=float)
+            if y.size == 0 or np.all(np.isnan(y)):
+                continue
+            style = {"marker": "o", "ms": 3.5, "lw": 1.6} | dict(curve.get("style", {}))
+            ax.plot(curve["x"], y, label=curve["label"], **style)
+        for ref in references:
+            value = ref["y"].get(key)
+            if value is not None and np.isfinite(value):
+                style = {"color": "0.35", "ls": ":", "lw": 1.4} | dict(ref.get("style", {}))
+                ax.axhline(value, label=ref["label"], **style)
+        if logx:
+            ax.set_xscale("log")
+            _plain_log_ticks(ax.xaxis)
+        if key.startswith("chamfer") and _spans(ax.get_lines(), LOG_SPAN):
+            ax.set_yscale("log")
+            _plain_log_ticks(ax.yaxis)
+        ax.set_title(f"{label} ({_better(lower)})", fontsize=10)
+        ax.set_xlabel(x_label)
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.3)
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    for ax in list(axes.flat)[1:n]:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 4),
+               fontsize=8.5, frameon=False)
+    _title(fig, title, note)
+    return _save(fig, path)
+
+
+def grouped_bars(groups: Sequence[str], scenarios: Sequence[str], values: Mapping, path, *,
+                 title: str, errors: Mapping | None = None, paper: Mapping | None = None,
+                 metrics=METRICS, note: str = "") -> Path:
+    """Grouped bars: one group per configuration, one bar per scenario, one panel per metric.
+
+    Parameters
+    ----------
+    groups : sequence of str
+        Configurations (x axis), e.g. LIDAR, cross, zigzag.
+    scenarios : sequence of str
+        Bars within a group, e.g. no error, stochastic, pulse dilation.
+    values : dict of (metric, group, scenario) to float
+        Missing keys draw no bar ("n/a").
+    errors : dict of (metric, group, scenario) to float, optional
+        Error bars (standard deviation over seeds).
+    paper : dict of (group, scenario) to float, optional
+        The paper's edge scores, drawn as black diamonds on the edge-score panel.
+    """
+    plt = _pyplot()
+    colours = plt.get_cmap("tab10")
+    n = len(metrics)
+    fig, axes = plt.subplots((n + 1) // 2, 2, figsize=(11, 3.6 * ((n + 1) // 2) + 0.9),
+                             squeeze=False, constrained_layout=True)
+    width = 0.8 / max(len(scenarios), 1)
+    x = np.arange(len(groups))
+    for ax, (key, label, lower) in zip(axes.flat, metrics, strict=False):
+        for j, scenario in enumerate(scenarios):
+            heights = np.array([values.get((key, g, scenario), np.nan) for g in groups], float)
+            err = None
+            if errors:
+                err = np.array([errors.get((key, g, scenario), 0.0) or 0.0 for g in groups])
+            offset = (j - (len(scenarios) - 1) / 2) * width
+            ax.bar(x + offset, np.nan_to_num(heights), width, yerr=err, capsize=3,
+                   color=colours(j), label=scenario, edgecolor="black", linewidth=0.4)
+            for xi, h in zip(x + offset, heights, strict=True):
+                if np.isnan(h):
+                    ax.text(xi, 0, "n/a", ha="center", va="bottom", fontsize=7, rotation=90)
+            if paper and key == "edge_score":
+                p = np.array([paper.get((g, scenario), np.nan) for g in groups], float)
+                ax.scatter(x + offset, p, marker="D", color="black", s=22, zorder=4,
+                           label="paper's value" if j == 0 else None)
+        ax.set_xticks(x, groups)
+        ax.set_title(f"{label} ({_better(lower)})", fontsize=10)
+        ax.set_ylabel(label)
+        if key.startswith("chamfer"):
+            ax.set_yscale("log")
+            _plain_log_ticks(ax.yaxis)
+        ax.grid(True, axis="y", alpha=0.3)
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    handles, labels = [], []
+    for ax in list(axes.flat)[:n]:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=8.5,
+               frameon=False)
+    _title(fig, title, note)
+    return _save(fig, path)
+
+
+def face_lonlat(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                   np.ndarray]:
+    """Longitude and latitude of each face centroid in the body frame, and face areas.
+
+    The centroids are first scaled by the half-extents of the mesh's bounding box, so an
+    ellipsoid maps onto the unit sphere: its faces (an icosphere scaled onto it) then spread
+    evenly over equal-area bins, and the latitude is the ellipsoid's parametric latitude.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float64, metres, body frame (spin axis +z)
+    faces : (f, 3) int
+
+    Returns
+    -------
+    lon, lat : (f,) float64, degrees (latitude from the x-y plane, positive towards +z)
+    area : (f,) float64, m^2
+    """
+    tri = vertices[faces]
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    half = np.where(hi > lo, (hi - lo) / 2, 1.0)
+    centre = (tri.mean(axis=1) - (hi + lo) / 2) / half
+    lon = np.degrees(np.arctan2(centre[:, 1], centre[:, 0]))
+    lat = np.degrees(np.arctan2(centre[:, 2], np.hypot(centre[:, 0], centre[:, 1])))
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    return lon, lat, area
+
+
+def binned_map(lon, lat, area, coverage) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Area-weighted mean coverage on equal-area longitude-latitude bins.
+
+    Returns
+    -------
+    lon_edges : (MAP_LON_BINS + 1,) degrees
+    lat_edges : (MAP_LAT_BINS + 1,) degrees, uniform in sin(latitude)
+    grid : (MAP_LAT_BINS, MAP_LON_BINS) float64, NaN where no face centroid falls
+    """
+    lon_edges = np.linspace(-180.0, 180.0, MAP_LON_BINS + 1)
+    lat_edges = np.degrees(np.arcsin(np.linspace(-1.0, 1.0, MAP_LAT_BINS + 1)))
+    weight, _, _ = np.histogram2d(lat, lon, bins=[lat_edges, lon_edges], weights=area)
+    covered, _, _ = np.histogram2d(lat, lon, bins=[lat_edges, lon_edges],
+                                   weights=area * np.asarray(coverage, dtype=float))
+    grid = np.divide(covered, weight, out=np.full_like(weight, np.nan), where=weight > 0)
+    return lon_edges, lat_edges, grid
+
+
+def coverage_maps(panels: Sequence[Mapping], path, *, title: str, cols: int = 2,
+                  note: str = "") -> Path:
+    """Maps of per-face coverage over body-frame longitude and latitude.
+
+    Parameters
+    ----------
+    panels : sequence of dict
+        ``title``, ``lon``, ``lat``, ``area`` (per face, from ``face_lonlat``) and
+        ``coverage`` (per face, in [0, 1]).
+    """
+    plt = _pyplot()
+    rows = (len(panels) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(5.6 * cols, 3.3 * rows + 0.8), squeeze=False,
+                             constrained_layout=True)
+    cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")
+    image = None
+    for ax, panel in zip(axes.flat, panels, strict=False):
+        lon_edges, lat_edges, grid = binned_map(panel["lon"], panel["lat"], panel["area"],
+                                                panel["coverage"])
+        image = ax.pcolormesh(lon_edges, lat_edges, np.ma.masked_invalid(grid), cmap=cmap,
+                              vmin=0.0, vmax=1.0, shading="flat")
+        ax.set_title(panel["title"], fontsize=10)
+        ax.set_xlabel("body-frame longitude [deg]")
+        ax.set_ylabel("parametric latitude [deg]")
+        ax.set_xticks(np.arange(-180, 181, 60))
+        ax.set_yticks(np.arange(-90, 91, 30))
+    for ax in list(axes.flat)[len(panels):]:
+        ax.set_visible(False)
+    if image is not None:
+        fig.colorbar(image, ax=axes, shrink=0.8,
+                     label="fraction of the area within τ of a strike")
+    _title(fig, title, note)
+    return _save(fig, path)
+
+
+def clouds(panels: Sequence[Mapping], path, *, title: str) -> Path:
+    """3D scatter pictures of point clouds, one panel each (``title``, ``points`` (n, 3) m)."""
+    plt = _pyplot()
+    fig = plt.figure(figsize=(5.2 * len(panels), 5.4), constrained_layout=True)
+    for i, panel in enumerate(panels):
+        ax = fig.add_subplot(1, len(panels), i + 1, projection="3d")
+        p = np.asarray(panel["points"], dtype=float).reshape(-1, 3)
+        if len(p):
+            ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=0.6, c=p[:, 2], cmap="viridis",
+                       depthshade=False)
+            span = (p.max(axis=0) - p.min(axis=0)).max() / 2
+            mid = (p.max(axis=0) + p.min(axis=0)) / 2
+            for setter, m in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid, strict=True):
+                setter(m - span, m + span)
+        ax.set_box_aspect(None, zoom=0.88)  # room for the z label
+        ax.set_title(panel["title"], fontsize=10)
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_zlabel("z [m]")
+    fig.suptitle(title, fontsize=12)
+    return _save(fig, path)
+
+
+def bars(labels: Sequence[str], values: Mapping[str, Sequence[float]], path, *, title: str,
+         ylabel: str, annotate: bool = True) -> Path:
+    """Side-by-side bars: one group per label, one bar per series (NaN draws no bar).
+
+    Parameters
+    ----------
+    labels : sequence of str
+        Groups on the x axis.
+    values : dict of series name to values (one per label)
+    """
+    plt = _pyplot()
+    colours = plt.get_cmap("tab10")
+    fig, ax = plt.subplots(figsize=(9, 4.8), constrained_layout=True)
+    x = np.arange(len(labels))
+    width = 0.8 / max(len(values), 1)
+    for j, (name, ys) in enumerate(values.items()):
+        ys = np.asarray(ys, dtype=float)
+        offset = (j - (len(values) - 1) / 2) * width
+        shown = ~np.isnan(ys)
+        rects = ax.bar((x + offset)[shown], ys[shown], width, label=name, color=colours(j),
+                       edgecolor="black", linewidth=0.4)
+        if annotate:
+            ax.bar_label(rects, labels=[f"{v:,.0f}" for v in ys[shown]], fontsize=8, padding=2)
+    ax.set_xticks(x, labels)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=11)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=9)
+    ax.margins(y=0.12)
+    return _save(fig, path)
+
+
+def heatmaps(rows: Sequence[str], cols: Sequence[str], panels: Sequence[Mapping], path, *,
+             title: str, note: str = "") -> Path:
+    """Annotated heatmaps one above the other, e.g. methods x conditions.
+
+    Parameters
+    ----------
+    rows, cols : sequence of str
+        Row and column labels.
+    panels : sequence of dict
+        ``title``, ``values`` ((rows, cols) float, NaN: failed or not run, drawn grey and
+        marked "x"), ``label`` (colour-bar label), ``lower_better`` (bool), ``log`` (bool),
+        ``fmt`` (format of the annotations, e.g. "{:.3f}"), and optionally ``colour``
+        ((rows, cols) float: what the colours show, when not the annotated values).
+    """
+    from matplotlib.colors import LogNorm, Normalize
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(panels), 1, figsize=(3.5 + 1.25 * len(cols),
+                                                      (1.6 + 0.4 * len(rows)) * len(panels)),
+                             squeeze=False, constrained_layout=True)
+    for ax, panel in zip(axes.flat, panels, strict=True):
+        values = np.asarray(panel["values"], dtype=float)
+        shown = np.asarray(panel.get("colour", values), dtype=float)
+        finite = shown[np.isfinite(shown)]
+        cmap = plt.get_cmap("viridis_r" if panel.get("lower_better") else "viridis")
+        cmap = cmap.with_extremes(bad="0.8")
+        if panel.get("log") and finite.size and finite.min() > 0:
+            norm = LogNorm(vmin=finite.min(), vmax=max(finite.max(), finite.min() * 1.01))
+        else:
+            norm = Normalize(vmin=finite.min() if finite.size else 0,
+                             vmax=finite.max() if finite.size else 1)
+        image = ax.imshow(np.ma.masked_invalid(shown), cmap=cmap, norm=norm, aspect="auto")
+        for (i, j), v in np.ndenumerate(values):
+            text = "x" if not np.isfinite(v) else panel.get("fmt", "{:.3g}").format(v)
+            shade = 0.0 if not np.isfinite(shown[i, j]) else norm(shown[i, j])
+            dark = shade > 0.6 if panel.get("lower_better") else shade < 0.4
+            ax.text(j, i, text, ha="center", va="center", fontsize=7.5,
+                    color="white" if dark and np.isfinite(v) else "black")
+        ax.set_xticks(np.arange(len(cols)), cols, rotation=30, ha="right", fontsize=8)
+        ax.set_yticks(np.arange(len(rows)), rows, fontsize=8)
+        better = _better(bool(panel.get("lower_better")))
+        ax.set_title(f"{panel['title']} ({better})", fontsize=10)
+        bar = fig.colorbar(image, ax=ax, shrink=0.85, label=panel.get("label", ""))
+        if isinstance(norm, LogNorm):
+            _plain_log_ticks(bar.ax.yaxis)
+    _title(fig, title, note)
+    return _save(fig, path)
