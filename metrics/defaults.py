@@ -1,0 +1,94 @@
+"""Tolerances and defaults of the metrics package, each with where its number comes from.
+
+Lengths are never absolute: every length default is a fraction of the truth mesh's bounding-box
+diagonal, so a 300 m asteroid and a 20 m satellite are scored on the same footing.
+"""
+
+# --------------------------------------------------------------------------- score()
+
+# Distance threshold tau of precision, recall, F-score and coverage, as a fraction of the truth
+# bounding-box diagonal. 1 % is the usual "F-score@1%" of mesh-reconstruction benchmarks. For the
+# paper's targets it is 0.2 m on the 20 m satellite (about 2 sigma of the LRF's 0.3 m 3-sigma
+# range noise, so a noisy but complete cloud still scores high recall and F measures holes and
+# gross errors rather than sensor noise) and 6.6 m on the 665 m-diagonal ellipsoid. At 0.5 % the
+# threshold would sit at 1 sigma of that noise and F would mostly measure the noise.
+TAU_FRACTION = 0.01
+
+# Points sampled on the truth surface (uniformly by area) for completeness and recall. Recall is a
+# proportion estimated from these samples: its standard error is at most 0.5 / sqrt(n) = 0.0011,
+# so F-scores are good to the third decimal; a KD-tree query of 2e5 points takes ~0.2 s here.
+TRUTH_SAMPLES = 200_000
+
+# Points sampled on a test *mesh* (uniformly by area) to measure its accuracy. Same count as the
+# truth side, for the same reason (accuracy mean and precision to ~1e-3 relative).
+TEST_MESH_SAMPLES = 200_000
+
+# Coverage quadrature: each truth face is split into s**2 congruent sub-triangles whose centroids
+# are tested against tau; s is chosen per face so the sub-triangles have about total_area /
+# COVERAGE_POINTS of area each (and s >= 1, so every face is tested at least once). 4e5 points
+# keep the query under ~0.5 s and give ~9 points per face on a 49k-face asteroid model.
+COVERAGE_POINTS = 400_000
+# Cap on s, so one face that holds most of the area cannot ask for an unbounded lattice.
+COVERAGE_MAX_SUBDIVISION = 512
+
+# Seed used when the caller gives none: scores are reproducible by default.
+SEED = 0
+
+# Warn (ScaleMismatchWarning) when the bounding-box diagonals of test and truth differ by more
+# than this factor: 100x is beyond any plausible reconstruction error and catches km against m
+# (a factor of 1000) with margin.
+SCALE_MISMATCH_RATIO = 100.0
+
+# --------------------------------------------------------------------------- distances
+
+# Points handled per block in the exact-distance post-processing: 2**16 points keep the per-block
+# temporaries (~30 arrays of 512 KB) to ~15 MB and give the 2 threads 16 blocks per million points.
+DISTANCE_BLOCK = 1 << 16
+# A face whose doubled area is below this fraction of (mesh diagonal)**2 is treated as degenerate
+# (a segment or a point): ~50 float64 epsilons of the squared scale, far below any real facet.
+DEGENERATE_AREA_FRACTION = 1e-14
+# A neighbouring triangle whose vertices rise less than this fraction of the mesh diagonal above a
+# face's plane is treated as lying behind it (coplanar neighbours). A neighbour ignored this way
+# can be closer than the candidate by at most this much, an absolute error of 1e-12 of the
+# diagonal: the absolute tolerance of the brute-force tests, 1000x below their 1e-9 relative one
+# for distances of the order of the diagonal.
+COPLANAR_FRACTION = 1e-12
+
+# --------------------------------------------------------------------------- edge metric
+
+# Neighbourhood size k (the point itself included) of the surface variation. Pauly, Gross and
+# Kobbelt (2002) use k of 10..30. k counts points, so the neighbourhood radius follows the local
+# density and the edge test has no length scale. `benchmarks/bench_edge_metric.py --calibrate`
+# measures, on 60,000 uniform points, the fraction of points flagged by the leave-one-out rule
+# with the default threshold (below) on a crease and on a plane with Gaussian noise:
+#       k    30-deg crease   90-deg crease   plane + noise of 5 % / 10 % of the point spacing
+#       8        0.55            0.76              0.10 / 0.36
+#      16        0.64            0.88              0.013 / 0.18
+#      32        0.68            0.99              0.000 / 0.05
+# and a noise-free sphere of radius ~10 neighbourhood radii flags no point at any k. 16 sees the
+# default feature angle (30 degrees) and flags few points of a plane whose noise is 5 % of the
+# spacing, with half the neighbourhood radius (finer detail, thinner plates) and half the k-NN
+# cost of k = 32.
+EDGE_K = 16
+# Leave-one-out rule (the paper's): a point is an edge point when removing it from its own
+# neighbourhood lowers sigma = l0 / (l0 + l1 + l2) by more than this, at k = EDGE_K. A crease
+# point's drop scales as about 1 / k (median 0.0081, 0.0043, 0.0023 at k = 8, 16, 32 on a
+# 90-degree crease), so for another k the default threshold is this times EDGE_K / k.
+EDGE_DROP_THRESHOLD = 0.0005
+# Plain Pauly rule: a point is an edge point when its sigma exceeds this. A flat disc has 0, a
+# 90-degree crease through the centre ~0.1, the upper bound (isotropic) is 1/3; 0.03 flags the
+# central points of creases of 60 degrees and more.
+EDGE_SIGMA_THRESHOLD = 0.03
+# Truth feature edges: interior mesh edges whose faces' normals differ by more than this angle.
+# 30 degrees is the classic "sharp edge" / auto-smooth threshold (Blender, MeshLab); it keeps the
+# box and fandisk creases and drops the ~2-5 degree facet edges of a triangulated ellipsoid.
+FEATURE_ANGLE_DEG = 30.0
+# Edge tolerance as a fraction of the truth bounding-box diagonal: a detected edge point within
+# it of a truth feature edge is a true edge point, and a truth edge with a detected edge point
+# within it is found. Same 1 % as tau, for the same reason.
+EDGE_TOLERANCE_FRACTION = 0.01
+# Truth feature edges are sampled every tolerance / 8 for the two tests above, so "within the
+# tolerance" is decided to within tolerance / 16.
+EDGE_SAMPLES_PER_TOLERANCE = 8
+# Points per block in the neighbourhood computations (k * 3 float64 per point, ~100 MB at 2**18).
+EDGE_BLOCK = 1 << 17

@@ -1,0 +1,204 @@
+"""The two kinds of geometry the metrics take, and their validation.
+
+A test reconstruction is a point cloud (``Cloud``, or a bare ``(n, 3)`` array) or a triangle mesh
+(``Mesh``, a ``(vertices, faces)`` tuple, or any object with ``vertices`` and ``faces`` attributes
+such as ``trimesh.Trimesh``). A truth is always a triangle mesh. Everything is in metres, in one
+frame (for recon, the target body frame B).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from metrics.errors import MetricsInputError
+
+
+@dataclass(frozen=True)
+class Cloud:
+    """A point cloud with optional per-point normals.
+
+    Attributes
+    ----------
+    points : (n, 3) float64, metres
+    normals : (n, 3) float64 or None
+        Unit or non-unit normals (only their direction is used); their sign is ignored.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """A triangle mesh.
+
+    Attributes
+    ----------
+    vertices : (n_vertices, 3) float64, metres
+    faces : (n_faces, 3) int64, rows of ``vertices``, counter-clockwise seen from outside
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.faces)
+
+
+def _finite_xyz(array, what: str) -> np.ndarray:
+    """``array`` as a C-contiguous (n, 3) float64 array of finite values, n >= 1."""
+    try:
+        arr = np.asarray(array, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise MetricsInputError(f"{what} must be an (n, 3) array of numbers ({exc})") from None
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise MetricsInputError(f"{what} must be (n, 3), got shape {arr.shape}")
+    if len(arr) == 0:
+        raise MetricsInputError(f"{what} is empty (0 rows)")
+    if not np.isfinite(arr).all():  # one flat reduction; rows only when something is wrong
+        bad = ~np.isfinite(arr).all(axis=1)
+        raise MetricsInputError(f"{what} has {int(bad.sum())} row(s) with NaN or Inf, first at "
+                                f"row {int(np.argmax(bad))}")
+    return np.ascontiguousarray(arr)
+
+
+def as_points(points, name: str = "points") -> np.ndarray:
+    """Validate a point array.
+
+    Parameters
+    ----------
+    points : array-like (n, 3), metres
+    name : str
+        Argument name used in error messages.
+
+    Returns
+    -------
+    (n, 3) float64, C-contiguous
+
+    Raises
+    ------
+    MetricsInputError
+        Wrong shape, no points, or NaN/Inf coordinates.
+    """
+    return _finite_xyz(points, name)
+
+
+def as_cloud(cloud, name: str = "cloud") -> Cloud:
+    """Validate a ``Cloud`` or an (n, 3) array; normals are checked and scaled to unit length."""
+    if isinstance(cloud, Cloud):
+        points = _finite_xyz(cloud.points, f"{name} points")
+        normals = cloud.normals
+    else:
+        points = _finite_xyz(cloud, name)
+        normals = None
+    if normals is not None:
+        normals = _finite_xyz(normals, f"{name} normals")
+        if normals.shape != points.shape:
+            raise MetricsInputError(
+                f"{name} normals must match its points, got {normals.shape} for {points.shape}")
+        length = np.linalg.norm(normals, axis=1)
+        if (length == 0).any():
+            raise MetricsInputError(f"{name} normals has {int((length == 0).sum())} zero vector(s)")
+        normals = normals / length[:, None]
+    return Cloud(points, normals)
+
+
+def as_mesh(mesh, name: str = "mesh") -> Mesh:
+    """Validate a triangle mesh.
+
+    Parameters
+    ----------
+    mesh : Mesh, (vertices, faces) tuple, or object with ``vertices`` and ``faces`` attributes
+        vertices (n, 3) metres; faces (m, 3) integer rows of vertices.
+    name : str
+        Argument name used in error messages.
+
+    Returns
+    -------
+    Mesh
+        vertices (n, 3) float64 and faces (m, 3) int64, both C-contiguous.
+
+    Raises
+    ------
+    MetricsInputError
+        Wrong shapes, no faces, NaN/Inf vertices, non-integer or out-of-range face indices, or zero
+        total area.
+    """
+    if isinstance(mesh, tuple | list) and len(mesh) == 2:
+        vertices, faces = mesh
+    elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        vertices, faces = mesh.vertices, mesh.faces
+    else:
+        raise MetricsInputError(
+            f"{name} must be a Mesh, a (vertices, faces) tuple or an object with vertices and "
+            f"faces, got {type(mesh).__name__}")
+    vertices = _finite_xyz(vertices, f"{name} vertices")
+    faces_arr = np.asarray(faces)
+    if faces_arr.size == 0:
+        raise MetricsInputError(f"{name} has no faces")
+    if faces_arr.ndim != 2 or faces_arr.shape[1] != 3:
+        raise MetricsInputError(f"{name} faces must be (m, 3), got shape {faces_arr.shape}")
+    if not np.issubdtype(faces_arr.dtype, np.integer):
+        raise MetricsInputError(f"{name} faces must be integers, got dtype {faces_arr.dtype}")
+    lo, hi = int(faces_arr.min()), int(faces_arr.max())
+    if lo < 0 or hi >= len(vertices):
+        raise MetricsInputError(
+            f"{name} faces index vertices {lo}..{hi}, outside 0..{len(vertices) - 1}")
+    faces_arr = np.ascontiguousarray(faces_arr, dtype=np.int64)
+    if not face_areas(vertices, faces_arr).sum() > 0:
+        raise MetricsInputError(f"{name} has zero total area (all faces degenerate)")
+    return Mesh(vertices, faces_arr)
+
+
+def as_test(test, name: str = "test") -> Cloud | Mesh:
+    """Validate a test reconstruction: a ``Cloud``, an (n, 3) array, or a mesh (see ``as_mesh``).
+
+    A tuple is read as ``(vertices, faces)``; pass a cloud with normals as
+    ``Cloud(points, normals)``.
+    """
+    if isinstance(test, Cloud):
+        return as_cloud(test, name)
+    if isinstance(test, Mesh | tuple) or (
+            hasattr(test, "vertices") and hasattr(test, "faces")):
+        return as_mesh(test, name)
+    return as_cloud(test, name)
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Areas of the faces.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64, metres
+    faces : (m, 3) int
+
+    Returns
+    -------
+    (m,) float64, square metres
+    """
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit normals of the faces (right-hand rule on the vertex order); zero for degenerate faces.
+
+    Returns
+    -------
+    (m, 3) float64
+    """
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    n = np.cross(b - a, c - a)
+    length = np.linalg.norm(n, axis=1)
+    out = np.zeros_like(n)
+    ok = length > 0
+    out[ok] = n[ok] / length[ok, None]
+    return out
+
+
+def bbox_diagonal(points: np.ndarray) -> float:
+    """Length of the diagonal of the axis-aligned bounding box of ``points`` (n, 3), metres."""
+    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))

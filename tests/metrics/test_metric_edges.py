@@ -1,0 +1,251 @@
+"""The edge metric: surface variation, truth feature edges, and the orderings the paper reports."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from metrics_reference import MESHES, area, box, ellipsoid, load, satellite
+from scipy.spatial import cKDTree
+
+from metrics import (
+    Mesh,
+    MetricsInputError,
+    defaults,
+    detect_edges,
+    edge_score,
+    feature_edges,
+    sample_surface,
+    surface_variation,
+)
+
+needs_meshes = pytest.mark.skipif(not (MESHES / "fandisk.obj").exists(),
+                                  reason="shared meshes not present")
+
+
+def cloud(mesh: Mesh, n: int, seed: int = 1, noise_fraction: float = 0.0) -> np.ndarray:
+    """n points sampled uniformly on a mesh, with Gaussian noise of a fraction of its diagonal."""
+    points, _ = sample_surface(mesh, n, seed=seed)
+    sigma = noise_fraction * np.linalg.norm(np.ptp(mesh.vertices, axis=0))
+    return points + np.random.default_rng(seed + 1000).normal(scale=sigma, size=points.shape)
+
+
+@pytest.fixture(scope="module")
+def fandisk() -> Mesh:
+    if not (MESHES / "fandisk.obj").exists():
+        pytest.skip("shared meshes not present")
+    return load("fandisk.obj")
+
+
+# --------------------------------------------------------------------------- building blocks
+
+
+def test_surface_variation_matches_recomputed_neighbourhoods():
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(-1, 1, (300, 2))
+    points = np.column_stack([xy, 0.3 * np.abs(xy[:, 0]) + 0.02 * rng.normal(size=300)])
+    k = 10
+    result = surface_variation(points, k=k)
+    _, index = cKDTree(points).query(points, k=k)
+    for i in range(len(points)):
+        hood = points[index[i]]
+        eig = np.linalg.eigvalsh(np.cov(hood.T))
+        rest = np.linalg.eigvalsh(np.cov(hood[hood_without(index[i], i)].T))
+        assert result.sigma[i] == pytest.approx(eig[0] / eig.sum(), abs=1e-12)
+        assert result.drop[i] == pytest.approx(eig[0] / eig.sum() - rest[0] / rest.sum(),
+                                               abs=1e-12)
+    assert result.radius == pytest.approx(cKDTree(points).query(points, k=k)[0][:, -1])
+
+
+def hood_without(index: np.ndarray, i: int) -> np.ndarray:
+    keep = np.ones(len(index), dtype=bool)
+    keep[np.flatnonzero(index == i)[0]] = False
+    return keep
+
+
+def test_plane_has_no_variation_and_no_edges():
+    rng = np.random.default_rng(2)
+    points = np.column_stack([rng.uniform(0, 5, (5000, 2)), np.full(5000, 3.0)])
+    is_edge, variation = detect_edges(points)
+    assert variation.sigma.max() < 1e-12 and np.abs(variation.drop).max() < 1e-12
+    assert not is_edge.any()
+
+
+def test_default_threshold_sees_the_feature_angle_and_not_curvature():
+    """The calibration behind defaults.EDGE_K and EDGE_DROP_THRESHOLD (see defaults.py)."""
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-1, 1, (2, 20_000))
+    for angle, least in ((30.0, 0.5), (90.0, 0.8)):
+        crease = np.column_stack([x, y, -np.abs(x) * np.tan(np.radians(angle) / 2)])
+        is_edge, v = detect_edges(crease)
+        on = (np.abs(x) < 0.3 * np.median(v.radius)) & (np.abs(y) < 0.8)
+        assert is_edge[on].mean() > least
+        assert not is_edge[(np.abs(x) > 1.5 * np.median(v.radius)) & (np.abs(x) < 0.8)].any()
+    sphere = rng.normal(size=(6_000, 3))
+    assert not detect_edges(sphere / np.linalg.norm(sphere, axis=1, keepdims=True))[0].any()
+    plane = np.column_stack([rng.uniform(0, 1, (20_000, 2)),
+                             rng.normal(scale=0.05 * np.sqrt(1 / 20_000), size=20_000)])
+    assert detect_edges(plane)[0].mean() < 0.03
+    # Another k scales the default threshold as 1 / k.
+    assert edge_score(cloud(box(), 500), box(), k=32).threshold == pytest.approx(
+        defaults.EDGE_DROP_THRESHOLD / 2)
+
+
+def test_feature_edges_of_a_box_are_its_twelve_edges():
+    mesh = box((10.0, 6.0, 4.0))
+    edges = feature_edges(mesh)
+    assert len(edges) == 12
+    lengths = sorted(np.linalg.norm(mesh.vertices[edges[:, 0]] - mesh.vertices[edges[:, 1]],
+                                    axis=1))
+    assert lengths == pytest.approx([4.0] * 4 + [6.0] * 4 + [10.0] * 4)
+    assert len(feature_edges(ellipsoid(3))) == 0  # facets meet at a few degrees
+
+
+@needs_meshes
+def test_feature_edges_match_trimesh_adjacency_angles(fandisk):
+    tm = trimesh.Trimesh(fandisk.vertices, fandisk.faces, process=False)
+    for angle in (10.0, 30.0, 60.0):
+        sharp = tm.face_adjacency_edges[tm.face_adjacency_angles > np.radians(angle)]
+        expected = {tuple(e) for e in np.sort(sharp, axis=1)}
+        assert {tuple(e) for e in feature_edges(fandisk, angle_deg=angle)} == expected
+        assert len(expected) > 100
+
+
+def test_score_formula_from_the_report_arrays():
+    mesh = box()
+    points = cloud(mesh, 20_000, noise_fraction=0.0005)
+    report = edge_score(points, mesh)
+    far = ~report.near_edge
+    assert report.false_edge_rate == pytest.approx((report.is_edge & far).sum() / far.sum())
+    assert report.score == pytest.approx(0.5 * (report.false_edge_rate
+                                                + report.missed_edge_rate))
+    # Missed length, independently: 2000 points along each box edge, found when an edge point
+    # lies within the tolerance.
+    ends = mesh.vertices[feature_edges(mesh)]
+    t = np.linspace(0, 1, 2000)[None, :, None]
+    along = (ends[:, 0, None] + t * (ends[:, 1] - ends[:, 0])[:, None]).reshape(-1, 3)
+    lengths = np.repeat(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1), 2000)
+    found = cKDTree(points[report.is_edge]).query(along)[0] <= report.tolerance_m
+    assert report.missed_edge_rate == pytest.approx(lengths[~found].sum() / lengths.sum(),
+                                                    abs=0.01)
+    assert report.tolerance_m == pytest.approx(
+        defaults.EDGE_TOLERANCE_FRACTION * np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+
+
+def test_smooth_body_scores_false_edges_only():
+    report = edge_score(cloud(ellipsoid(4), 2_000), ellipsoid(4))
+    assert report.missed_edge_rate is None and report.n_feature_edges == 0
+    assert report.score == report.false_edge_rate > 0
+
+
+# --------------------------------------------------------------------------- the paper's orderings
+
+
+def scores(mesh, sizes, **kw):
+    return [edge_score(cloud(mesh, n, **kw), mesh).score for n in sizes]
+
+
+def test_dense_noise_free_sampling_scores_near_zero():
+    assert edge_score(cloud(box(), 100_000), box()).score < 0.01
+    assert edge_score(cloud(ellipsoid(4), 100_000), ellipsoid(4)).score < 0.01
+
+
+@needs_meshes
+def test_dense_noise_free_real_cad_part_scores_near_zero(fandisk):
+    assert edge_score(cloud(fandisk, 100_000), fandisk).score < 0.02
+
+
+@pytest.mark.parametrize("shape", ["box", "ellipsoid", "fandisk"])
+def test_denser_scores_below_sparser(shape, request):
+    mesh = {"box": box, "ellipsoid": lambda: ellipsoid(4)}.get(
+        shape, lambda: request.getfixturevalue("fandisk"))()
+    dense, medium, sparse = scores(mesh, (50_000, 8_000, 1_500))
+    assert dense <= medium < sparse
+    assert dense < sparse - 0.02
+
+
+@pytest.mark.parametrize("shape", ["box", "ellipsoid", "fandisk"])
+def test_noise_free_scores_below_noisy(shape, request):
+    mesh = {"box": box, "ellipsoid": lambda: ellipsoid(4)}.get(
+        shape, lambda: request.getfixturevalue("fandisk"))()
+    clean, noisy, noisier = (edge_score(cloud(mesh, 30_000, noise_fraction=f), mesh).score
+                             for f in (0.0, 0.001, 0.003))
+    assert clean < noisy < noisier
+    assert noisier > clean + 0.1
+
+
+@pytest.mark.parametrize("shape", ["box", "fandisk"])
+def test_full_coverage_scores_below_a_cloud_with_holes(shape, request):
+    mesh = box() if shape == "box" else request.getfixturevalue("fandisk")
+    points = cloud(mesh, 40_000)
+    full = edge_score(points, mesh)
+    # Blind spots: balls around three feature-edge midpoints, a tenth of the diagonal across.
+    edges = feature_edges(mesh)
+    centres = mesh.vertices[edges[[0, len(edges) // 2, -1]]].mean(axis=1)
+    radius = 0.1 * np.linalg.norm(np.ptp(mesh.vertices, axis=0))
+    seen = cKDTree(centres).query(points)[0] > radius
+    holed = edge_score(points[seen], mesh)
+    assert full.score < holed.score
+    assert full.missed_edge_rate < holed.missed_edge_rate
+
+
+def test_thin_solar_panels_raise_false_edges():
+    """Paper: neighbourhoods on thin panels straddle both faces, marking panel points as edges."""
+    density = 400.0  # points per square metre, the same on every body
+    result, points = {}, {}
+    for name, thickness in (("bus", None), ("thick", 1.0), ("thin", 0.05)):
+        mesh = satellite(thickness)
+        points[name] = cloud(mesh, int(density * area(mesh)))
+        result[name] = edge_score(points[name], mesh)
+    thin = result["thin"]
+    assert thin.false_edge_rate > 5 * max(result["bus"].false_edge_rate,
+                                          result["thick"].false_edge_rate, 0.01)
+    assert thin.score > result["thick"].score and thin.score > result["bus"].score
+    # The false edges are on the panels (|x| > 2.5 m), not on the bus.
+    false = thin.is_edge & ~thin.near_edge
+    on_panel = np.abs(points["thin"][:, 0]) > 2.5
+    assert false[on_panel].mean() > 10 * max(false[~on_panel].mean(), 1e-3)
+
+
+def test_denser_lidar_cloud_sees_fewer_false_edges_on_thin_panels():
+    """Paper, Figure 19: the LIDAR cloud is dense enough that few panel points are false edges."""
+    mesh = satellite(0.1)
+    lrf, lidar = (edge_score(cloud(mesh, int(d * area(mesh))), mesh) for d in (75.0, 400.0))
+    assert lidar.false_edge_rate < 0.5 * lrf.false_edge_rate
+
+
+def test_scale_invariant_asteroid_against_satellite_size():
+    """The same shape and sampling at 300 m and at 20 m (and moved) scores the same."""
+    shape = box((1.0, 0.6, 0.4))
+    points = cloud(shape, 5_000, noise_fraction=0.001)
+    scores_ = []
+    for size, shift in ((300.0, 0.0), (20.0, 7.0e3)):
+        mesh = Mesh(shape.vertices * size + shift, shape.faces)
+        scores_.append(edge_score(points * size + shift, mesh).score)
+    assert scores_[0] > 0.01
+    assert scores_[0] == pytest.approx(scores_[1], rel=1e-6)
+
+
+def test_pauly_rule_variant():
+    mesh = box()
+    clean = edge_score(cloud(mesh, 30_000), mesh, rule="pauly")
+    noisy = edge_score(cloud(mesh, 30_000, noise_fraction=0.003), mesh, rule="pauly")
+    assert clean.rule == "pauly" and clean.threshold == defaults.EDGE_SIGMA_THRESHOLD
+    assert clean.score < 0.05 < noisy.score
+    is_edge, variation = detect_edges(cloud(mesh, 30_000), rule="pauly", threshold=0.05)
+    assert np.array_equal(is_edge, variation.sigma > 0.05)
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"k": 3}, "k must be an integer >= 4"),
+    ({"k": 2.5}, "k must be an integer >= 4"),
+    ({"k": 500}, "points has 200 rows, fewer than k = 500"),
+    ({"rule": "sobel"}, "rule must be one of"),
+    ({"threshold": -0.1}, "threshold must be a finite number >= 0"),
+    ({"tolerance": 0.1, "tolerance_fraction": 0.01}, "give tolerance or tolerance_fraction"),
+    ({"tolerance": 0.0}, "tolerance must be a finite length > 0"),
+    ({"feature_angle_deg": 190.0}, r"angle_deg must be in \[0, 180\)"),
+])
+def test_bad_edge_options_raise(kwargs, match):
+    with pytest.raises(MetricsInputError, match=match):
+        edge_score(cloud(box(), 200), box(), **kwargs)
