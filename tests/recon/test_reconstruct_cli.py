@@ -1,0 +1,146 @@
+"""`recon reconstruct`, `compare` and `stability`: in-process, and once through a real process."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import box_mesh, box_points
+
+from cli.main import main
+from formats.cloud_io import PointCloud, write_cloud
+from formats.mesh_io import read_mesh, write_mesh
+
+
+@pytest.fixture(scope="module")
+def box_files(tmp_path_factory):
+    """A noisy box cloud with view points (.ply) and its truth mesh (.ply)."""
+    folder = tmp_path_factory.mktemp("box")
+    points, view, _ = box_points(4000, noise=0.003, seed=5)
+    cloud = folder / "box.ply"
+    write_cloud(cloud, PointCloud(points, {"view_x": view[:, 0], "view_y": view[:, 1],
+                                           "view_z": view[:, 2]}))
+    truth = folder / "truth.ply"
+    write_mesh(truth, *box_mesh())
+    return cloud, truth
+
+
+def test_reconstruct_from_a_log(rso_log, tmp_path, capsys):
+    out = tmp_path / "rso.ply"
+    assert main(["reconstruct", str(rso_log), "-m", "plane", "--param", "cell=2",
+                 "-o", str(out)]) == 0
+    assert f"wrote {out}" in capsys.readouterr().out
+    vertices, faces = read_mesh(out)
+    assert len(faces) > 1000
+    # RSO-A is 20 m wide across its 5 cm thin solar panels; plane keeps them (normals oriented
+    # by view point keep the two faces of a panel apart), where Poisson loses them.
+    assert np.ptp(vertices, axis=0).max() == pytest.approx(20.0, rel=0.05)
+
+
+def test_reconstruct_json_and_preprocessing(box_files, tmp_path, capsys):
+    out = tmp_path / "box.ply"
+    assert main(["reconstruct", str(box_files[0]), "-m", "planes", "--remove-outliers",
+                 "--voxel", "0.02", "-o", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["method"] == "planes" and summary["watertight"]
+    assert summary["view_points"] and summary["n_points"] < 4000
+    assert summary["peak_memory_mb"] > 0
+
+
+def test_reconstruct_auto_says_what_it_chose_and_why(box_files, tmp_path, capsys):
+    out = tmp_path / "auto.ply"
+    assert main(["reconstruct", str(box_files[0]), "-m", "auto", "--auto-methods", "planes",
+                 "convex-hull", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "chose planes" in text and "* planes" in text
+    assert len(read_mesh(out)[1]) < 50
+
+
+def test_list_methods(capsys):
+    assert main(["reconstruct", "--list-methods"]) == 0
+    text = capsys.readouterr().out
+    assert "poisson [smooth]" in text and "depth = 8" in text and "test-" not in text
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["-m", "marching"], "unknown method 'marching'"),
+    (["-m", "poisson", "--param", "depth=deep"], "parameter depth='deep' is not a int"),
+    (["-m", "poisson", "--param", "deep"], "--param must be key=value"),
+    (["-m", "auto", "--param", "depth=6"], "--param cannot be combined with -m auto"),
+    (["-m", "poisson", "--timeout", "0"], "--timeout must be positive"),
+    (["-m", "poisson", "--voxel", "-1"], "--voxel must be a positive size"),
+])
+def test_bad_arguments_exit_1_with_one_line(box_files, tmp_path, capsys, argv, message):
+    assert main(["reconstruct", str(box_files[0]), *argv, "-o", str(tmp_path / "x.ply")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and message in err
+
+
+def test_output_must_be_ply(box_files, tmp_path, capsys):
+    assert main(["reconstruct", str(box_files[0]), "-o", str(tmp_path / "x.obj")]) == 1
+    assert "-o must name a .ply file" in capsys.readouterr().err
+
+
+def test_a_crash_is_an_error_not_a_traceback(box_files, tmp_path, capsys, monkeypatch):
+    import recon_fake_methods  # noqa: F401  (registers test-abort in this process)
+
+    assert main(["reconstruct", str(box_files[0]), "-m", "test-abort",
+                 "-o", str(tmp_path / "x.ply")]) == 1
+    assert "test-abort failed (crash): crashed with SIGABRT" in capsys.readouterr().err
+
+
+def test_compare_through_a_real_process(box_files, tmp_path):
+    out = tmp_path / "cmp"
+    proc = subprocess.run(
+        [sys.executable, "-m", "cli.main", "compare", str(box_files[0]), "--truth",
+         str(box_files[1]), "-o", str(out), "--methods", "convex-hull", "planes",
+         "--no-grid", "--scheduler", "threads", "--samples", "4000", "--auto"],
+        capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "Pareto front (time vs Chamfer)" in proc.stdout
+    assert "auto vs truth: auto's choice ranks 1 of 2" in proc.stdout
+    for name in ("results.csv", "results.json", "speed_accuracy.png", "auto.json",
+                 "results.jsonl"):
+        assert (out / name).is_file()
+    saved = json.loads((out / "results.json").read_text())
+    assert saved["runs"][0]["method"] == "planes"
+    # --resume finds everything done and rewrites the same results.
+    again = subprocess.run(
+        [sys.executable, "-m", "cli.main", "compare", str(box_files[0]), "--truth",
+         str(box_files[1]), "-o", str(out), "--methods", "convex-hull", "planes",
+         "--no-grid", "--scheduler", "threads", "--samples", "4000", "--resume", "--json"],
+        capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    rerun = json.loads(again.stdout)
+    assert [r["wall_time_s"] for r in rerun["records"]] == \
+        [r["wall_time_s"] for r in saved["runs"]]
+
+
+def test_stability_on_a_cloud(box_files, tmp_path, capsys):
+    out = tmp_path / "stab"
+    assert main(["stability", str(box_files[0]), "--truth", str(box_files[1]), "-o", str(out),
+                 "--methods", "convex-hull", "--noise", "0,0.03", "--density", "1",
+                 "--outliers", "0", "--scheduler", "threads", "--samples", "2000"]) == 0
+    assert "convex-hull" in capsys.readouterr().out
+    assert (out / "convex-hull_failures.png").is_file()
+    assert (out / "convex-hull_accuracy.png").is_file()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--noise", "a,b"], "--noise must be comma-separated numbers"),
+    (["--density", "2"], "density level 2 is out of range"),
+    (["--set", "x=1"], "--set applies to scenes only"),
+])
+def test_stability_bad_arguments(box_files, tmp_path, capsys, argv, message):
+    assert main(["stability", str(box_files[0]), "--truth", str(box_files[1]),
+                 "-o", str(tmp_path / "s"), "--methods", "convex-hull", *argv]) == 1
+    assert message in capsys.readouterr().err
+
+
+def test_compare_needs_a_truth_with_faces(box_files, tmp_path, capsys):
+    assert main(["compare", str(box_files[0]), "--truth", str(box_files[0]),
+                 "-o", str(tmp_path / "c")]) == 1
+    assert "error" in capsys.readouterr().err
