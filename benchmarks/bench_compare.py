@@ -33,7 +33,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-MESHES = Path("/work/shared/meshes")
+MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 # The paper's LRF range error: "only a 0.3m 3-sigma distance error" (Table 1 scenario 2).
 NOISE_KEY = "errors.range_sigma3=0.3"
 CLOUDS = {

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from formats import SensorInfo, Shots, StrikeLogWriter, TruthStrikes
 
+# The real shape models beside the checkout (../shared/meshes; README there).
+SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 SPHERE_RADIUS_M = 50.0
 ORBIT_RADIUS_M = 250.0
 

@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from formats.cloud_io import LAS_SCALE_M, PointCloud, open_cloud_writer, read_cloud, write_cloud
 from formats.errors import MeshFormatError
 from formats.mesh_io import read_mesh, write_mesh
-
-MESHES = Path(__file__).resolve().parents[3] / "shared" / "meshes"
+from tests.conftest import SHARED_MESHES as MESHES
 
 
 @pytest.fixture

@@ -7,14 +7,11 @@ and plain shapes built with trimesh.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import trimesh
 
 from metrics.inputs import Mesh
-
-MESHES = Path(__file__).resolve().parents[3] / "shared" / "meshes"
+from tests.conftest import SHARED_MESHES as MESHES
 
 
 def brute_force_distance(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,

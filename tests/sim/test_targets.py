@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import trimesh
 
 from formats.errors import MeshFormatError
 from sim import targets
+from tests.conftest import SHARED_MESHES
 from tests.sim.conftest import write_obj
-
-SHARED_MESHES = Path("/work/shared/meshes")
 
 
 def _outward_and_closed(vertices, faces):
