@@ -181,7 +181,7 @@ def run_all(out_dir, *, size: str = "full", scheduler: str | None = None,
 
             cluster = LocalCluster(n_workers=n_workers or default_workers(),
                                    threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
             address = cluster.scheduler_address
         else:
             address = scheduler
