@@ -41,6 +41,10 @@ BUILTIN_MODULES = (
 )
 
 
+# How a parameter's type reads in an error message: (one value, several values).
+_TYPE_NAMES = {int: ("an integer", "integers"), float: ("a number", "numbers"),
+               bool: ("a boolean", "booleans"), str: ("a string", "strings")}
+
 class UnknownMethod(ReconError, ValueError):
     """A method name that is not registered."""
 
@@ -104,8 +108,9 @@ class Param:
         try:
             values = tuple(_convert(item.strip(), self.type) for item in items)
         except ValueError:
-            kind = f"comma-separated {self.type.__name__}s" if self.sequence else self.type.__name__
-            raise ParameterError(f"method {method!r}: parameter {name}={text!r} is not a "
+            single, plural = _TYPE_NAMES.get(self.type, (self.type.__name__,) * 2)
+            kind = f"a comma-separated list of {plural}" if self.sequence else single
+            raise ParameterError(f"method {method!r}: parameter {name}={text!r} is not "
                                  f"{kind}") from None
         return self.check(values if self.sequence else values[0], name=name, method=method)
 

@@ -149,11 +149,11 @@ def test_parameters_parse_check_and_default():
 @pytest.mark.parametrize("method, pairs, match", [
     ("poisson", ["depth"], "--param must be key=value"),
     ("poisson", ["colour=red"], "method 'poisson' has no parameter 'colour'"),
-    ("poisson", ["depth=deep"], r"parameter depth='deep' is not a int"),
+    ("poisson", ["depth=deep"], r"parameter depth='deep' is not an integer"),
     ("poisson", ["depth=0"], "depth must be >= 1"),
     ("poisson", ["linear_fit=maybe"], "is not a bool"),
     ("planes", ["closure=ajar"], "closure must be one of"),
-    ("ball-pivoting", ["radii=1,x"], "comma-separated floats"),
+    ("ball-pivoting", ["radii=1,x"], "comma-separated list of numbers"),
 ])
 def test_bad_parameters_are_named(method, pairs, match):
     with pytest.raises(ParameterError, match=match):

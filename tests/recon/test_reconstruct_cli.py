@@ -67,7 +67,7 @@ def test_list_methods(capsys):
 
 @pytest.mark.parametrize("argv, message", [
     (["-m", "marching"], "unknown method 'marching'"),
-    (["-m", "poisson", "--param", "depth=deep"], "parameter depth='deep' is not a int"),
+    (["-m", "poisson", "--param", "depth=deep"], "parameter depth='deep' is not an integer"),
     (["-m", "poisson", "--param", "deep"], "--param must be key=value"),
     (["-m", "auto", "--param", "depth=6"], "--param cannot be combined with -m auto"),
     (["-m", "poisson", "--timeout", "0"], "--timeout must be positive"),
