@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import box_points, ellipsoid_points
 
 from recon.auto import AutoError, choose, format_choice, select
 from recon.methods import MethodFailed
+from tests.recon.conftest import box_points, ellipsoid_points
 
 # Candidates of the tests: one of each kind, two resolutions of Poisson (a full default run of
 # every method and grid takes minutes; the rule does not depend on how many there are).

@@ -12,12 +12,12 @@ import json
 import numpy as np
 import pytest
 import recon_fake_methods  # noqa: F401  (registers the test-only methods)
-from conftest import FAST_SCORE, sphere_mesh, sphere_points
 
 from recon.compare import compare
 from recon.isolation import run_isolated, watertight
 from recon.methods import MethodFailed
 from recon.reconstruct import prepare, reconstruct
+from tests.recon.conftest import FAST_SCORE, sphere_mesh, sphere_points
 
 # A hang must end at the limit, not after its hour-long sleep.
 HANG_LIMIT_S = 4.0
@@ -95,7 +95,7 @@ def test_comparison_survives_crashes_and_hangs(cloud, cluster, tmp_path):
 
 
 def test_watertight_detects_holes_and_flips():
-    from conftest import box_mesh
+    from tests.recon.conftest import box_mesh
 
     _, faces = box_mesh()
     assert watertight(faces)

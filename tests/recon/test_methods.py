@@ -17,7 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import (
+
+from metrics import Mesh, point_mesh_distance, sample_surface
+from recon import methods
+from recon.methods import MethodFailed, ParameterError, UnknownMethod
+from recon.methods._contour import node_keys, surface_nets
+from recon.reconstruct import InputError, prepare, preprocess, reconstruct
+from tests.recon.conftest import (
     BOX_HALF,
     box_distance,
     box_mesh,
@@ -26,12 +32,6 @@ from conftest import (
     sphere_mesh,
     sphere_points,
 )
-
-from metrics import Mesh, point_mesh_distance, sample_surface
-from recon import methods
-from recon.methods import MethodFailed, ParameterError, UnknownMethod
-from recon.methods._contour import node_keys, surface_nets
-from recon.reconstruct import InputError, prepare, preprocess, reconstruct
 
 CHAMFER_FRACTION = 0.002
 PLANES_ON_SPHERE = 0.01

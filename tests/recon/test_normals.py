@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import box_points, ellipsoid_points, sphere_points
 
 from formats import StrikeLog
 from recon.ingest import ingest
@@ -16,6 +15,7 @@ from recon.normals import (
     orient_toward,
     point_spacing,
 )
+from tests.recon.conftest import box_points, ellipsoid_points, sphere_points
 
 
 def _truth_normals(log_path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

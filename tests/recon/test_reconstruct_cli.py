@@ -8,11 +8,11 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import box_mesh, box_points
 
 from cli.main import main
 from formats.cloud_io import PointCloud, write_cloud
 from formats.mesh_io import read_mesh, write_mesh
+from tests.recon.conftest import box_mesh, box_points
 
 
 @pytest.fixture(scope="module")

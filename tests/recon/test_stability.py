@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 import recon_fake_methods  # noqa: F401  (registers the test-only methods)
-from conftest import FAST_SCORE, sphere_mesh, sphere_points
 
 from recon.stability import StabilityError, degrade, simulate_levels, stability
+from tests.recon.conftest import FAST_SCORE, sphere_mesh, sphere_points
 
 
 def test_degrade_adds_noise_along_the_line_of_sight_subsamples_and_adds_outliers():
