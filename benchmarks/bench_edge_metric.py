@@ -17,26 +17,16 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
+from timing import median_time  # benchmarks/timing.py, beside this script
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without relying on the installed package
 MESH = ROOT.parent / "shared" / "meshes" / "eros_gaskell_49k.obj"
 TARGET_SECONDS = 10.0
-
-
-def median_time(fn, repeats: int):
-    times, result = [], None
-    for _ in range(repeats):
-        start = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), result
 
 
 def calibrate() -> None:

@@ -28,21 +28,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from timing import median_time  # benchmarks/timing.py, beside this script
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without relying on the installed package
 MESH = ROOT.parent / "shared" / "meshes" / "eros_gaskell_49k.obj"
 TARGET_VS_OPEN3D = 1.5
 TARGET_VS_TRIMESH = 20.0
-
-
-def median_time(fn, repeats: int) -> tuple[float, object]:
-    times, result = [], None
-    for _ in range(repeats):
-        start = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), result
 
 
 def interleaved(fns: dict, repeats: int) -> tuple[dict, dict]:

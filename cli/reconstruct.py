@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from cli.options import add_sweep_options
+
 # The CLI's defaults are the library's (recon/isolation.py says where each comes from); they are
 # repeated here only as help text, so that ``recon --help`` need not import numpy.
 TIMEOUT_HELP = "wall-clock limit of each method run, seconds (default: 600)"
@@ -36,13 +38,7 @@ def _add_run_options(p: argparse.ArgumentParser, *, sweep: bool) -> None:
         g.add_argument("--samples", type=int, metavar="N",
                        help="points sampled per side when scoring (default: metrics' 200000; "
                             "fewer is faster and noisier)")
-        g.add_argument("--scheduler", metavar="ADDRESS",
-                       help="Dask scheduler address of an existing cluster (default: a local "
-                            "cluster); 'threads' runs without Dask")
-        g.add_argument("--workers", type=int, metavar="N",
-                       help="local workers (default: one per core)")
-        g.add_argument("--resume", action="store_true",
-                       help="keep DIR/results.jsonl and skip the runs it holds")
+        add_sweep_options(g, resume_help="keep DIR/results.jsonl and skip the runs it holds")
 
 
 def _methods_arg(text: list[str] | None) -> list[str] | None:

@@ -7,6 +7,8 @@ import json
 import sys
 from pathlib import Path
 
+from cli.options import add_sweep_options
+
 # Repeated from recon/studies/__init__.py (STUDIES) so that ``recon --help`` imports nothing.
 STUDY_NAMES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods")
 
@@ -32,13 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true",
                    help="reduced version (minutes, for CI); verdicts of claims the reduced "
                         "runs cannot test say 'not tested'")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="Dask scheduler address of an existing cluster (default: a local "
-                        "cluster); 'threads' or 'serial' run without Dask")
-    p.add_argument("--workers", type=int, metavar="N",
-                   help="local workers (default: one per core)")
-    p.add_argument("--resume", action="store_true",
-                   help="keep the finished cases in DIR and run only the others")
+    add_sweep_options(p, resume_help="keep the finished cases in DIR and run only the others")
     p.add_argument("--list", action="store_true", help="list the studies and exit")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--size", choices=("tiny",), help=argparse.SUPPRESS)  # tests only
