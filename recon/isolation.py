@@ -133,7 +133,19 @@ def check_surface(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, *
 
 
 def _maxrss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kilobytes
+    """This process's peak resident memory [MB].
+
+    Linux keeps ``ru_maxrss`` across fork and exec, so a child started by a large parent would
+    report the parent's peak; the ``VmHWM`` line of /proc/self/status is this image's own.
+    """
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0  # kB
+    except OSError:  # not Linux
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _die_with_parent(parent: int) -> None:

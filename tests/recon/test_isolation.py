@@ -104,3 +104,18 @@ def test_watertight_detects_holes_and_flips():
     flipped[0] = flipped[0, ::-1]
     assert not watertight(flipped)
     assert not watertight(np.zeros((0, 3), dtype=np.int64))
+
+
+def test_peak_memory_is_the_childs_own_not_the_parents():
+    """ru_maxrss survives fork and exec on Linux; a large parent must not inflate the figure."""
+    import subprocess
+    import sys
+
+    script = ("import numpy as np, subprocess, sys\n"
+              "big = np.ones(300_000_000 // 8)\n"
+              "print(subprocess.run([sys.executable, '-c', 'from recon.isolation import "
+              "_maxrss_mb; print(_maxrss_mb())'], capture_output=True, text=True, "
+              "check=True).stdout)")
+    child_mb = float(subprocess.run([sys.executable, "-c", script], capture_output=True,
+                                    text=True, check=True).stdout)
+    assert child_mb < 250  # the child imports numpy and scipy, far below the parent's 300 MB
