@@ -70,10 +70,16 @@ def run(args) -> int:
         from metrics.inputs import Cloud
 
         test = Cloud(test.points, test.normals)
-    with warnings.catch_warnings(record=True) as caught:
+    from tqdm import tqdm
+
+    stages = 2 if args.no_edges else 3
+    with warnings.catch_warnings(record=True) as caught, \
+            tqdm(total=stages, desc="score", unit="stage", disable=None, leave=False,
+                 delay=1.0) as bar:
         warnings.simplefilter("always")
         report = score(test, truth, tau=args.tau, tau_fraction=args.tau_fraction,
-                       seed=args.seed, edges=not args.no_edges)
+                       seed=args.seed, edges=not args.no_edges,
+                       progress=lambda stage: bar.update(1))
     for w in caught:
         print(f"recon score: warning: {w.message}", file=sys.stderr)
     result = report.to_dict()

@@ -151,7 +151,7 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
           n_test_samples: int = defaults.TEST_MESH_SAMPLES,
           coverage_points: int = defaults.COVERAGE_POINTS,
           seed: int | None = defaults.SEED, edges: bool = True,
-          edge_options: dict | None = None) -> ScoreReport:
+          edge_options: dict | None = None, progress=None) -> ScoreReport:
     """Score a test cloud or mesh against a truth mesh.
 
     Parameters
@@ -180,6 +180,9 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     edge_options : dict, optional
         Keyword arguments for ``edges.edge_score`` (``k``, ``rule``, ``threshold``,
         ``feature_angle_deg``, ``tolerance``, ``tolerance_fraction``).
+    progress : callable, optional
+        Called with the name of each stage as it finishes (``accuracy``, ``completeness``,
+        then ``edges`` when computed), e.g. to drive a progress bar.
 
     Returns
     -------
@@ -232,9 +235,11 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
             f"x (bounding-box diagonals {test_size:.4g} and {diagonal:.4g}): probably km "
             "against m", ScaleMismatchWarning, stacklevel=2)
 
+    report_stage = progress or (lambda stage: None)
     # Accuracy: test -> truth surface, exact.
     truth_distance = MeshDistance(truth)
     accuracy, accuracy_faces, _ = truth_distance.query(test_points)
+    report_stage("accuracy")
 
     # Completeness: truth samples -> test; coverage lattice -> test.
     truth_points, truth_faces = sample_surface(truth, n_truth_samples,
@@ -248,6 +253,7 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     else:
         both = nearest_distance(test_points, np.concatenate([truth_points, lattice]))
         completeness, lattice_distance = both[:n_truth_samples], both[n_truth_samples:]
+    report_stage("completeness")
 
     acc, comp = _summary(accuracy), _summary(completeness)
     precision = float(np.mean(accuracy < tau))
@@ -267,6 +273,7 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     edge = None
     if edges:
         edge = edge_score(test_points, truth, **edge_options)
+        report_stage("edges")
 
     return ScoreReport(
         n_points=len(test_points), n_truth_samples=n_truth_samples, tau_m=tau,

@@ -241,3 +241,16 @@ def test_bad_input_raises_one_clear_error(sphere, test, kwargs, match):
 def test_bad_truth_raises(truth, match):
     with pytest.raises(MetricsInputError, match=match):
         score(np.zeros((5, 3)), truth)
+
+
+def test_progress_reports_each_stage_once_in_order():
+    solid = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    points = trimesh.sample.sample_surface(solid, 2000, seed=0)[0]
+    stages = []
+    score(points, (solid.vertices, solid.faces), progress=stages.append, n_truth_samples=5000,
+          coverage_points=5000)
+    assert stages == ["accuracy", "completeness", "edges"]
+    stages.clear()
+    score(points, (solid.vertices, solid.faces), progress=stages.append, edges=False,
+          n_truth_samples=5000, coverage_points=5000)
+    assert stages == ["accuracy", "completeness"]
