@@ -212,11 +212,17 @@ def run_reconstruct(args) -> int:
         method, overrides = choice.method, choice.params
     else:
         method = args.method
+    from tqdm import tqdm
+
     from formats.mesh_io import write_mesh
     from recon.reconstruct import reconstruct
 
-    surface = reconstruct(prepared, method=method, params=overrides,
-                          isolate=not args.in_process, **limits)
+    # One opaque library call: show the elapsed time and the child's stage, not a fraction.
+    with tqdm(desc=method, bar_format="{desc} {elapsed}{postfix}", disable=None, leave=False,
+              delay=2.0) as bar:
+        surface = reconstruct(prepared, method=method, params=overrides,
+                              isolate=not args.in_process, **limits,
+                              on_wait=lambda stage: bar.set_postfix_str(stage))
     write_mesh(args.output, surface.vertices, surface.faces)
     summary.update(method=method, params=surface.params, output=str(args.output),
                    n_vertices=len(surface.vertices), n_faces=len(surface.faces),

@@ -33,6 +33,7 @@ import tempfile
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -255,7 +256,8 @@ def run_isolated(method: str, cloud: MethodInput, params: dict | None = None, *,
                  truth: tuple[np.ndarray, np.ndarray] | None = None,
                  score_options: dict | None = None, timeout_s: float = DEFAULT_TIMEOUT_S,
                  memory_mb: int | None = DEFAULT_MEMORY_MB, threads: int | None = None,
-                 score_timeout_s: float = DEFAULT_SCORE_TIMEOUT_S) -> dict[str, Any]:
+                 score_timeout_s: float = DEFAULT_SCORE_TIMEOUT_S,
+                 on_wait: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Run one method on one cloud in a fresh, limited process and report what happened.
 
     Parameters
@@ -279,6 +281,9 @@ def run_isolated(method: str, cloud: MethodInput, params: dict | None = None, *,
         compete for the cores).
     score_timeout_s : float
         Further limit for checking and scoring the mesh, counted from the method's end.
+    on_wait : callable, optional
+        Called with the child's current stage (e.g. "running") each time the parent polls it,
+        at least every ``POLL_MAX_S``: drives a progress display.
 
     Returns
     -------
@@ -315,7 +320,8 @@ def run_isolated(method: str, cloud: MethodInput, params: dict | None = None, *,
         with _RUNNING_LOCK:
             _RUNNING.add(proc.pid)
         try:
-            status, usage, timed_out = _wait(proc, timeout_s, jobdir / "stage", score_timeout_s)
+            status, usage, timed_out = _wait(proc, timeout_s, jobdir / "stage", score_timeout_s,
+                                             on_wait)
         finally:
             with _RUNNING_LOCK:
                 _RUNNING.discard(proc.pid)
@@ -353,11 +359,13 @@ def run_isolated(method: str, cloud: MethodInput, params: dict | None = None, *,
                        "process_time_s": elapsed, "peak_memory_mb": peak}
 
 
-def _wait(proc: subprocess.Popen, timeout_s: float, stage: Path, score_timeout_s: float):
+def _wait(proc: subprocess.Popen, timeout_s: float, stage: Path, score_timeout_s: float,
+          on_wait: Callable[[str], None] | None = None):
     """Wait for ``proc`` with ``os.wait4``; kill its process group at the limit.
 
     The limit is ``timeout_s`` from the start until the child reports (in the ``stage`` file)
-    that the method has returned, then ``score_timeout_s`` from that moment.
+    that the method has returned, then ``score_timeout_s`` from that moment. ``on_wait`` gets
+    the child's stage at every poll.
 
     Returns ``(status, rusage, timed_out)``.
     """
@@ -369,7 +377,10 @@ def _wait(proc: subprocess.Popen, timeout_s: float, stage: Path, score_timeout_s
             pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
             if pid:
                 break
-            if not scoring and stage.exists() and stage.read_text() in ("checking", "scoring"):
+            current = stage.read_text() if stage.exists() else "starting"
+            if on_wait is not None:
+                on_wait(current)
+            if not scoring and current in ("checking", "scoring"):
                 scoring = True
                 deadline = time.monotonic() + score_timeout_s
             if time.monotonic() >= deadline:

@@ -197,7 +197,7 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
 
 def reconstruct(cloud: MethodInput, *, method: str = "poisson", params: dict | None = None,
                 isolate: bool = False, timeout_s: float = DEFAULT_TIMEOUT_S,
-                memory_mb: int | None = DEFAULT_MEMORY_MB) -> Surface:
+                memory_mb: int | None = DEFAULT_MEMORY_MB, on_wait=None) -> Surface:
     """Run one registered method on a prepared cloud.
 
     Parameters
@@ -213,6 +213,8 @@ def reconstruct(cloud: MethodInput, *, method: str = "poisson", params: dict | N
         become ``MethodFailed``) instead of in this process.
     timeout_s, memory_mb
         Limits of the isolated run.
+    on_wait : callable, optional
+        For an isolated run, called with the child's stage while waiting (``run_isolated``).
 
     Returns
     -------
@@ -228,7 +230,8 @@ def reconstruct(cloud: MethodInput, *, method: str = "poisson", params: dict | N
     spec = methods.get(method)
     resolved = spec.resolve(params)
     if isolate:
-        result = run_isolated(method, cloud, resolved, timeout_s=timeout_s, memory_mb=memory_mb)
+        result = run_isolated(method, cloud, resolved, timeout_s=timeout_s, memory_mb=memory_mb,
+                              on_wait=on_wait)
         if result["status"] != "ok":
             raise MethodFailed(f"{method} failed ({result['failure']}): {result['reason']}")
         info = {k: result[k] for k in ("wall_time_s", "peak_memory_mb", "watertight")}
