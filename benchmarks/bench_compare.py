@@ -11,9 +11,11 @@ Clouds (each simulated with seed 0, then ingested; noise is the paper's LRF rang
 - ``itokawa``: the same scene with Gaskell's Itokawa model (/work/shared/meshes, km -> m,
   centred on its centroid) as the target.
 
-For each cloud ``recon.compare.compare`` runs every method at its defaults and its parameter
+For each cloud ``recon.experiments.compare.compare`` runs every method at its defaults and its
+parameter
 grid, isolated and on a local Dask cluster, scored against the simulator's truth mesh; then
-``recon.auto.choose`` picks a run without the truth, and its place in the truth ranking is
+``recon.experiments.auto.choose`` picks a run without the truth, and its place in the truth ranking
+is
 recorded (how often ``-m auto`` agrees with the truth). Written to ``--out`` (default
 ``benchmarks/out/compare``): per cloud the comparison's files, and ``summary.json`` /
 ``summary.md`` with the Pareto fronts (method, time, Chamfer, F-score), the agreement, and each
@@ -59,10 +61,10 @@ def simulate(name: str, out: Path) -> Path:
 
 def run_cloud(name: str, args) -> dict:
     from formats import StrikeLog
-    from recon.auto import choose, format_choice
-    from recon.compare import agreement, case_key, compare, variants
-    from recon.ingest import ingest
-    from recon.reconstruct import prepare
+    from recon.experiments.auto import choose, format_choice
+    from recon.experiments.compare import agreement, case_key, compare, variants
+    from recon.registration.ingest import ingest
+    from recon.surfaces.reconstruct import prepare
 
     log = simulate(name, args.out)
     cloud = ingest(log)
@@ -120,7 +122,7 @@ def run_cloud(name: str, args) -> dict:
 
 
 def _resolved(method: str, params: dict):
-    from recon.methods import get
+    from recon.surfaces.methods import get
 
     return method, get(method).resolve(params)
 

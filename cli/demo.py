@@ -43,8 +43,8 @@ def run(args) -> int:
     from formats.mesh_io import write_mesh
     from metrics.inputs import Cloud
     from metrics.score import score
-    from recon.ingest import ingest, ingest_to_file
-    from recon.reconstruct import prepare, reconstruct
+    from recon.registration.ingest import ingest, ingest_to_file
+    from recon.surfaces.reconstruct import prepare, reconstruct
 
     out: Path = args.output
     out.mkdir(parents=True, exist_ok=True)

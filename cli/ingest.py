@@ -29,7 +29,7 @@ def run_ingest(args) -> int:
     from tqdm import tqdm
 
     from formats import StrikeLog
-    from recon.ingest import ingest_to_file
+    from recon.registration.ingest import ingest_to_file
 
     with StrikeLog(args.log) as log:
         total = log.n_strikes

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 def add_sweep_options(parser, *, resume_help: str) -> None:
-    """``--scheduler``, ``--workers`` and ``--resume`` (recon.sweep's schedulers).
+    """``--scheduler``, ``--workers`` and ``--resume`` (recon.experiments.sweep's schedulers).
 
     Parameters
     ----------

@@ -8,7 +8,8 @@ from pathlib import Path
 
 from cli.options import add_sweep_options
 
-# The CLI's defaults are the library's (recon/isolation.py says where each comes from); they are
+# The CLI's defaults are the library's (recon/surfaces/isolation.py says where each comes from);
+# they are
 # repeated here only as help text, so that ``recon --help`` need not import numpy.
 TIMEOUT_HELP = "wall-clock limit of each method run, seconds (default: 600)"
 MEMORY_HELP = "address-space limit of each method run, MiB (default: 8192; 0: none)"
@@ -123,8 +124,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _limits(args) -> dict:
-    from recon.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S
-    from recon.reconstruct import InputError
+    from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S
+    from recon.surfaces.reconstruct import InputError
 
     timeout = DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout
     if not timeout > 0:
@@ -136,7 +137,7 @@ def _limits(args) -> dict:
 
 
 def _score_options(args) -> dict | None:
-    from recon.reconstruct import InputError
+    from recon.surfaces.reconstruct import InputError
 
     if args.samples is None:
         return None
@@ -152,7 +153,7 @@ def _load(args):
     Returns the preprocessed ``PointCloud`` (points and view points) and its ``MethodInput``.
     """
     from recon.inputs import load_cloud
-    from recon.reconstruct import InputError, prepare, preprocess
+    from recon.surfaces.reconstruct import InputError, prepare, preprocess
 
     cloud = load_cloud(args.input)
     if args.voxel is not None and not args.voxel > 0:
@@ -164,7 +165,7 @@ def _load(args):
 
 
 def _list_methods() -> int:
-    from recon import methods
+    from recon.surfaces import methods
 
     for name in methods.available():
         spec = methods.get(name)
@@ -178,7 +179,7 @@ def _list_methods() -> int:
 
 
 def run_reconstruct(args) -> int:
-    from recon.reconstruct import InputError
+    from recon.surfaces.reconstruct import InputError
 
     if args.list_methods:
         return _list_methods()
@@ -186,7 +187,7 @@ def run_reconstruct(args) -> int:
         raise InputError("reconstruct needs INPUT and -o MESH.ply (or --list-methods)")
     if args.output.suffix.lower() != ".ply":
         raise InputError(f"-o must name a .ply file, got {args.output}")
-    from recon import methods
+    from recon.surfaces import methods
 
     auto = args.method == "auto"
     if auto and args.param:
@@ -199,8 +200,8 @@ def run_reconstruct(args) -> int:
                      "spacing_m": prepared.spacing, "noise_m": prepared.noise,
                      "view_points": cloud.view_points is not None}
     if auto:
-        from recon.auto import choose, format_choice
-        from recon.compare import variants
+        from recon.experiments.auto import choose, format_choice
+        from recon.experiments.compare import variants
 
         candidates = variants(_methods_arg(args.auto_methods)) if args.auto_methods else None
         choice = choose(cloud.points, view_points=cloud.view_points, candidates=candidates,
@@ -215,7 +216,7 @@ def run_reconstruct(args) -> int:
     from tqdm import tqdm
 
     from formats.mesh_io import write_mesh
-    from recon.reconstruct import reconstruct
+    from recon.surfaces.reconstruct import reconstruct
 
     # One opaque library call: show the elapsed time and the child's stage, not a fraction.
     with tqdm(desc=method, bar_format="{desc} {elapsed}{postfix}", disable=None, leave=False,
@@ -228,7 +229,7 @@ def run_reconstruct(args) -> int:
                    n_vertices=len(surface.vertices), n_faces=len(surface.faces),
                    **surface.info)
     if args.json:
-        from recon.sweep import to_jsonable
+        from recon.experiments.sweep import to_jsonable
 
         print(json.dumps(to_jsonable(summary), indent=2))
     else:
@@ -239,7 +240,7 @@ def run_reconstruct(args) -> int:
 
 
 def _check_methods(names):
-    from recon import methods
+    from recon.surfaces import methods
 
     for name in names or []:
         methods.get(name)
@@ -247,7 +248,7 @@ def _check_methods(names):
 
 
 def run_compare(args) -> int:
-    from recon.compare import compare
+    from recon.experiments.compare import compare
     from recon.inputs import load_truth
 
     names = _check_methods(_methods_arg(args.methods))
@@ -266,9 +267,9 @@ def run_compare(args) -> int:
                                   "normals_k": args.normals_k, "grid": not args.no_grid},
                      **limits)
     if args.auto:
-        from recon.auto import choose, format_choice
-        from recon.compare import agreement, case_key, variants
-        from recon.sweep import to_jsonable
+        from recon.experiments.auto import choose, format_choice
+        from recon.experiments.compare import agreement, case_key, variants
+        from recon.experiments.sweep import to_jsonable
 
         candidates = variants(names, grid=not args.no_grid)
         choice = choose(cloud.points, view_points=cloud.view_points, candidates=candidates,
@@ -278,7 +279,7 @@ def run_compare(args) -> int:
         (args.output / "auto.json").write_text(
             json.dumps(to_jsonable(report["auto"]), indent=2) + "\n")
     if args.json:
-        from recon.sweep import to_jsonable
+        from recon.experiments.sweep import to_jsonable
 
         print(json.dumps(to_jsonable({k: v for k, v in report.items() if k != "table"}),
                          indent=2, default=str))
@@ -300,7 +301,7 @@ def run_compare(args) -> int:
 
 
 def _levels(text: str, name: str) -> list[float]:
-    from recon.stability import StabilityError
+    from recon.experiments.stability import StabilityError
 
     try:
         return [float(v) for v in text.split(",") if v.strip()]
@@ -309,8 +310,8 @@ def _levels(text: str, name: str) -> list[float]:
 
 
 def run_stability(args) -> int:
+    from recon.experiments.stability import StabilityError, simulate_levels, stability
     from recon.inputs import is_strike_log, load_cloud, load_truth
-    from recon.stability import StabilityError, simulate_levels, stability
 
     names = _check_methods(_methods_arg(args.methods))
     limits = _limits(args)
@@ -332,7 +333,7 @@ def run_stability(args) -> int:
         clouds = {"base": (cloud.points, cloud.view_points, False)}
     else:
         # Validate levels before simulating anything.
-        from recon.stability import _check_levels
+        from recon.experiments.stability import _check_levels
 
         _check_levels("noise", noise, 0.0, None)
         clouds, truth = simulate_levels(args.source, noise, args.output,
@@ -346,7 +347,7 @@ def run_stability(args) -> int:
                        fingerprint={"source": str(args.source), "overrides": args.overrides,
                                     "truth": str(args.truth)}, **limits)
     if args.json:
-        from recon.sweep import to_jsonable
+        from recon.experiments.sweep import to_jsonable
 
         print(json.dumps(to_jsonable({"csv": str(report["csv"]), "json": str(report["json"]),
                                       "pngs": [str(p) for p in report["pngs"]],

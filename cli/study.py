@@ -9,7 +9,8 @@ from pathlib import Path
 
 from cli.options import add_sweep_options
 
-# Repeated from recon/studies/__init__.py (STUDIES) so that ``recon --help`` imports nothing.
+# Repeated from recon/experiments/studies/__init__.py (STUDIES) so that ``recon --help`` imports
+# nothing.
 STUDY_NAMES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods")
 
 
@@ -52,7 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_study(args) -> int:
-    from recon import studies
+    from recon.experiments import studies
 
     if args.list:
         for name, title in studies.describe():
@@ -95,7 +96,7 @@ def run_study(args) -> int:
 
 
 def run_report(args) -> int:
-    from recon.report import write_report
+    from recon.experiments.report import write_report
 
     path = write_report(args.input, args.output)
     print(f"wrote {path}")

@@ -3,7 +3,8 @@
 ``.h5`` files are told apart by their root ``format`` attribute (a strike log or a recon point
 cloud); a ``.ply`` with faces is a mesh, without faces a cloud; ``.obj``, ``.stl``, ``.off`` and
 glTF are meshes; ``.las``/``.laz`` are clouds. A strike log given as a cloud is registered into
-the body frame on the fly (``recon.ingest``); given as a truth, its embedded truth mesh is used.
+the body frame on the fly (``recon.registration.ingest``); given as a truth, its embedded truth
+mesh is used.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from formats.errors import MeshFormatError
 from formats.mesh_io import MESH_SUFFIXES, read_mesh
 from formats.ply import read_ply_columns
 from formats.strike_log import FORMAT_NAME
-from recon.ingest import ingest
+from recon.registration.ingest import ingest
 
 Mesh = tuple[np.ndarray, np.ndarray]
 

@@ -32,7 +32,7 @@ def test_list_names_every_study(capsys):
 
 def test_cli_names_match_the_registry():
     from cli.study import STUDY_NAMES
-    from recon.studies import STUDIES as REGISTRY
+    from recon.experiments.studies import STUDIES as REGISTRY
 
     assert STUDY_NAMES == REGISTRY == STUDIES
 

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from recon.methods import Method, MethodFailed, MethodInput, Param, register
+from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
 
 
 def _abort(cloud: MethodInput) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,282 @@
+"""``recon report``: one self-contained HTML page of a study, of all studies, or of a comparison.
+
+The page needs nothing but itself: charts are embedded as base64 ``data:`` URIs, the style is
+inline, links point only inside the page. It shows, per study directory (``recon study``), the
+paper's claims with our numbers and verdicts, the charts, the CSV tables and the rest of
+``summary.json``; for ``recon study all`` the index of studies first; for a ``recon compare``
+directory the ranked runs, the Pareto fronts and the speed-against-accuracy chart.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import json
+from pathlib import Path
+
+from formats.errors import ReconError
+
+# Rows of a CSV table shown in the page (the file keeps them all).
+MAX_TABLE_ROWS = 300
+# Columns of a ``recon compare`` results.csv shown, when present (the file has every score).
+COMPARE_COLUMNS = ("label", "status", "failure", "wall_time_s", "peak_memory_mb", "n_faces",
+                   "watertight", "chamfer_m", "fscore", "coverage", "edge_score", "reason")
+# summary.json keys shown elsewhere in a study's section (not repeated in "more data").
+_SHOWN = {"study", "title", "size", "claims", "files", "failures", "n_cases", "n_failed",
+          "wall_time_s"}
+VERDICT_COLOURS = {"reproduced": "#d9f2d9", "partly": "#fff2cc", "not reproduced": "#f8d7d7",
+                   "not tested": "#e8e8e8"}
+STYLE = """
+body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto;
+       max-width: 1250px; color: #222; line-height: 1.4; padding: 0 1em; }
+h1 { font-size: 1.6em; } h2 { border-bottom: 2px solid #ccc; padding-top: 1em; }
+h3 { margin-top: 1.4em; }
+table { border-collapse: collapse; font-size: 0.82em; margin: 0.5em 0 1em; }
+th, td { border: 1px solid #ccc; padding: 3px 6px; vertical-align: top; text-align: left; }
+th { background: #f0f0f0; position: sticky; top: 0; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+.scroll { overflow: auto; max-height: 32em; border: 1px solid #eee; }
+img { max-width: 100%; border: 1px solid #ddd; margin: 0.5em 0; }
+.meta { color: #555; font-size: 0.9em; }
+pre { background: #f7f7f7; padding: 0.6em; overflow: auto; font-size: 0.8em; max-height: 30em; }
+nav ul { columns: 2; }
+"""
+
+
+class ReportError(ReconError, ValueError):
+    """The input is not a study or comparison directory, or the report cannot be written."""
+
+
+def _e(value) -> str:
+    return html.escape("" if value is None else str(value))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def image(path: Path, alt: str) -> str:
+    """An ``<img>`` with the PNG embedded as a data URI."""
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return f'<img alt="{_e(alt)}" src="data:image/png;base64,{data}">'
+
+
+def csv_table(path: Path, *, columns: tuple[str, ...] | None = None,
+              max_rows: int = MAX_TABLE_ROWS) -> str:
+    """A CSV file as an HTML table (at most ``max_rows`` rows; ``columns``: a subset)."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        return f"<p class=meta>{_e(path.name)} is empty.</p>"
+    header, body = rows[0], rows[1:]
+    keep = list(range(len(header)))
+    if columns:
+        keep = [i for i, name in enumerate(header) if name in columns] or keep
+    parts = ["<div class=scroll><table><tr>"
+             + "".join(f"<th>{_e(header[i])}</th>" for i in keep) + "</tr>"]
+    for row in body[:max_rows]:
+        cells = []
+        for i in keep:
+            value = row[i] if i < len(row) else ""
+            cls = " class=num" if value and _is_number(value) else ""
+            cells.append(f"<td{cls}>{_e(value)}</td>")
+        parts.append("<tr>" + "".join(cells) + "</tr>")
+    parts.append("</table></div>")
+    if len(body) > max_rows:
+        parts.append(f"<p class=meta>First {max_rows} of {len(body)} rows; all of them are in "
+                     f"{_e(path.name)}.</p>")
+    return "".join(parts)
+
+
+def claims_table(claims: list[dict]) -> str:
+    """The paper's claims with our numbers and the verdict, coloured by verdict."""
+    if not claims:
+        return "<p class=meta>No claims checked.</p>"
+    parts = ["<table><tr><th>figure</th><th>claim of the paper</th><th>paper</th>"
+             "<th>ours</th><th>verdict</th><th>rule</th></tr>"]
+    for c in claims:
+        colour = VERDICT_COLOURS.get(c.get("verdict"), "#fff")
+        parts.append(f"<tr><td>{_e(c.get('figure'))}</td><td>{_e(c.get('claim'))}</td>"
+                     f"<td>{_e(c.get('paper'))}</td><td>{_e(c.get('ours'))}</td>"
+                     f"<td style=\"background:{colour}\"><b>{_e(c.get('verdict'))}</b></td>"
+                     f"<td class=meta>{_e(c.get('rule'))}</td></tr>")
+    parts.append("</table>")
+    return "".join(parts)
+
+
+def _anchor(text: str) -> str:
+    return "".join(ch if ch.isalnum() else "-" for ch in text.lower())
+
+
+def study_section(directory: Path, *, level: int = 2) -> str:
+    """The section of one study directory (``summary.json`` and the files it lists)."""
+    summary = json.loads((directory / "summary.json").read_text())
+    name = summary.get("study", directory.name)
+    parts = [f'<h{level} id="{_anchor(name)}">{_e(summary.get("title", name))}</h{level}>']
+    wall, work = summary.get("wall_time_s"), summary.get("case_wall_time_s")
+    parts.append(f"<p class=meta>study <b>{_e(name)}</b>, size <b>{_e(summary.get('size'))}</b>"
+                 f", {_e(summary.get('n_cases'))} cases ({_e(summary.get('n_failed'))} failed)"
+                 + (f"; last run {wall:.0f} s" if isinstance(wall, (int, float)) else "")
+                 + (f" (cases: {work:.0f} s of worker time, resumed ones included)"
+                    if isinstance(work, (int, float)) else "")
+                 + f"; directory {_e(directory)}</p>")
+    if summary.get("size") != "full":
+        parts.append("<p class=meta>A reduced run: claims it cannot test say 'not tested'; "
+                     "see the full run for the verdicts.</p>")
+    parts.append(f"<h{level + 1}>Claims</h{level + 1}>" + claims_table(summary.get("claims", [])))
+    if summary.get("failures"):
+        parts.append(f"<h{level + 1}>Failed cases</h{level + 1}><ul>" + "".join(
+            f"<li>{_e(f.get('key'))}: {_e(f.get('reason'))}</li>" for f in summary["failures"])
+            + "</ul>")
+    files = [directory / f for f in summary.get("files", [])]
+    pngs = [f for f in files if f.suffix == ".png" and f.is_file()]
+    pngs += sorted(p for p in directory.glob("*.png") if p not in pngs)
+    if pngs:
+        parts.append(f"<h{level + 1}>Charts</h{level + 1}>")
+        for png in pngs:
+            parts.append(f"<p class=meta>{_e(png.relative_to(directory))}</p>"
+                         + image(png, png.stem))
+    for table in (f for f in files if f.suffix == ".csv" and f.is_file()):
+        parts.append(f"<h{level + 1}>{_e(table.name)}</h{level + 1}>" + csv_table(table))
+    more = {k: v for k, v in summary.items() if k not in _SHOWN}
+    if more:
+        parts.append(f"<details><summary>more data (summary.json)</summary><pre>"
+                     f"{_e(json.dumps(more, indent=1))}</pre></details>")
+    return "\n".join(parts)
+
+
+def compare_section(directory: Path, *, level: int = 2) -> str:
+    """The section of a ``recon compare`` directory."""
+    parts = [f'<h{level} id="{_anchor(directory.name)}">Method comparison: '
+             f"{_e(directory.name)}</h{level}>"]
+    results = json.loads((directory / "results.json").read_text())
+    for metric in ("chamfer", "fscore"):
+        front = results.get(f"pareto_{metric}") or []
+        if front:
+            parts.append(f"<p><b>Pareto front (time against {metric}):</b> " + ", ".join(
+                f"{_e(r.get('label'))} ({r.get('wall_time_s', 0):.2g} s)" for r in front)
+                + "</p>")
+    for png in sorted(directory.glob("*.png")):
+        parts.append(image(png, png.stem))
+    if (directory / "results.csv").is_file():
+        parts.append(f"<h{level + 1}>Runs, ranked by Chamfer</h{level + 1}>"
+                     + csv_table(directory / "results.csv", columns=COMPARE_COLUMNS))
+    extra = {k: v for k, v in results.items() if k not in ("runs", "pareto_chamfer",
+                                                           "pareto_fscore")}
+    if extra:
+        parts.append(f"<details><summary>input</summary><pre>{_e(json.dumps(extra, indent=1))}"
+                     "</pre></details>")
+    return "\n".join(parts)
+
+
+def index_section(directory: Path, studies: list[Path]) -> str:
+    """The index of a ``recon study all`` directory: wall times and verdicts per study."""
+    index_file = directory / "index.json"
+    index = json.loads(index_file.read_text()) if index_file.is_file() else {}
+    entries = index.get("studies", {})
+    parts = ["<h2 id=index>Studies</h2><table><tr><th>study</th><th>title</th>"
+             "<th>last run [s]</th><th>worker time [s]</th><th>cases (failed)</th>"
+             "<th>verdicts</th></tr>"]
+    for study in studies:
+        summary = json.loads((study / "summary.json").read_text())
+        entry = entries.get(study.name, {})
+        counts: dict[str, int] = {}
+        for c in summary.get("claims", []):
+            counts[c["verdict"]] = counts.get(c["verdict"], 0) + 1
+        wall = summary.get("wall_time_s", entry.get("wall_time_s"))
+        work = summary.get("case_wall_time_s")
+        parts.append(f"<tr><td><a href=\"#{_anchor(summary.get('study', study.name))}\">"
+                     f"{_e(study.name)}</a></td><td>{_e(summary.get('title'))}</td>"
+                     f"<td class=num>{'' if wall is None else f'{wall:.0f}'}</td>"
+                     f"<td class=num>{'' if work is None else f'{work:.0f}'}</td>"
+                     f"<td class=num>{_e(summary.get('n_cases'))} "
+                     f"({_e(summary.get('n_failed'))})</td><td>"
+                     + ", ".join(f"{n} {_e(v)}" for v, n in sorted(counts.items()))
+                     + "</td></tr>")
+    parts.append("</table><p class=meta>Last run: wall time of the latest invocation (a resumed "
+                 "run skips finished cases). Worker time: the cases' own time, summed over "
+                 "workers, resumed cases included.</p>")
+    if index.get("wall_time_s") is not None:
+        parts.append(f"<p class=meta>All studies ({_e(index.get('size'))}): "
+                     f"{index['wall_time_s']:.0f} s in total.</p>")
+    return "\n".join(parts)
+
+
+def kind(directory: Path) -> str:
+    """``study``, ``all`` or ``compare``.
+
+    Raises
+    ------
+    ReportError
+        The directory holds none of them.
+    """
+    if not directory.is_dir():
+        raise ReportError(f"{directory}: no such directory")
+    if (directory / "summary.json").is_file():
+        return "study"
+    if (directory / "index.json").is_file() or _study_dirs(directory):
+        return "all"
+    if (directory / "results.json").is_file():
+        return "compare"
+    raise ReportError(f"{directory}: not a study or comparison directory (no summary.json, "
+                      "index.json or results.json)")
+
+
+def _study_dirs(directory: Path) -> list[Path]:
+    from recon.experiments.studies import STUDIES
+
+    found = [directory / n for n in STUDIES if (directory / n / "summary.json").is_file()]
+    others = sorted(p.parent for p in directory.glob("*/summary.json")
+                    if p.parent not in found)
+    return found + others
+
+
+def render(directory) -> str:
+    """The whole HTML page of ``directory`` as text."""
+    directory = Path(directory)
+    what = kind(directory)
+    body = []
+    if what == "study":
+        title = json.loads((directory / "summary.json").read_text()).get("title", "study")
+        body.append(study_section(directory))
+    elif what == "compare":
+        title = f"Method comparison: {directory.name}"
+        body.append(compare_section(directory))
+    else:
+        title = "Reproducing the paper's studies"
+        studies = _study_dirs(directory)
+        body.append(index_section(directory, studies))
+        body.extend(study_section(s) for s in studies)
+    return ("<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8>"
+            f"<meta name=viewport content=\"width=device-width, initial-scale=1\">"
+            f"<title>{_e(title)}</title><style>{STYLE}</style></head><body>"
+            f"<h1>{_e(title)}</h1><p class=meta>recon report of {_e(directory.resolve())}. "
+            "Scores: edge score (our formalisation of the paper's edge metric, "
+            "metrics/edges.py; lower is better), F-score and coverage at τ = 1 % of the "
+            "truth's bounding-box diagonal (higher is better), Chamfer distance in metres "
+            "(lower is better).</p>\n" + "\n".join(body) + "\n</body></html>\n")
+
+
+def write_report(directory, output) -> Path:
+    """Write the report of ``directory`` to ``output`` (an .html file); return its path.
+
+    Raises
+    ------
+    ReportError
+        Bad input directory, or an output that is a directory or cannot be written.
+    """
+    output = Path(output)
+    if output.is_dir():
+        raise ReportError(f"-o {output}: is a directory; give an .html file")
+    text = render(directory)
+    try:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        output.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise ReportError(f"-o {output}: cannot write ({exc.strerror})") from None
+    return output

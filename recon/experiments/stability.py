@@ -1,0 +1,411 @@
+"""``recon stability``: where each method fails, over noise x point density x outlier fraction.
+
+Every cell of the grid is a degraded copy of one cloud (or one simulated scene); every method
+runs on it isolated (``recon.surfaces.isolation``), so a crash, a timeout, an empty or degenerate
+mesh is
+recorded as that cell's failure and the sweep goes on. Results stream to ``DIR/results.jsonl``
+on Dask (``recon.experiments.sweep``; ``resume`` skips finished cells). Finishing writes
+
+- ``DIR/stability.csv`` and ``DIR/stability.json``: one row per (method, cell) with the status,
+  failure kind and reason, time, memory, faces and scores;
+- ``DIR/<method>_failures.png``: the failure map (a panel per outlier fraction, noise against
+  density, each cell coloured by its outcome);
+- ``DIR/<method>_accuracy.png``: the Chamfer heatmap on the same grid (failed cells hatched).
+
+How a cell is made (each from its own seed, ``SeedSequence((seed, i_noise, i_density,
+i_outlier))``, so every method sees the same points):
+
+noise
+    The 3-sigma range error in metres, the paper's unit (0.3 m for its LRF, 1 m for the
+    Jenoptik LIDAR). For a scene, each level is a fresh simulation with ``errors.range_sigma3``
+    set to it (a real range error along each beam). For a cloud, Gaussian noise of sigma =
+    level / 3 is added along each point's line of sight (from its view point), or isotropically
+    when the cloud has no view points.
+density
+    The fraction of the points kept (a seeded subsample without replacement).
+outliers
+    Extra points, as a fraction of the kept ones, uniform in the cloud's bounding box; each
+    takes the view point of a random real point (a spurious return along a real shot).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from formats.errors import ReconError
+from recon.experiments.compare import CHAMFER, FSCORE, case_label, variants
+from recon.experiments.sweep import run_sweep, to_jsonable
+from recon.surfaces import methods
+from recon.surfaces.isolation import (
+    DEFAULT_MEMORY_MB,
+    DEFAULT_TIMEOUT_S,
+    FAILURE_KINDS,
+    run_isolated,
+)
+
+# Default grid. Noise: none, the paper's LRF (0.3 m 3-sigma) and its LIDAR (1 m 3-sigma).
+# Density: all points, 30% and 10%. Outliers: none and 2% (a few percent of spurious returns is
+# typical of space LIDAR data in sunlight; a stress level, not a measured one).
+DEFAULT_NOISE = (0.0, 0.3, 1.0)
+DEFAULT_DENSITY = (1.0, 0.3, 0.1)
+DEFAULT_OUTLIERS = (0.0, 0.02)
+# The range-error key of sim scenes (sim/defaults.py, [errors] range_sigma3).
+SCENE_NOISE_KEY = "errors.range_sigma3"
+# Fewest points a degraded cell may keep.
+MIN_CELL_POINTS = 32
+# Colours of the failure map, per outcome.
+OUTCOME_COLOURS = {"ok": "#4daf4a", "timeout": "#984ea3", "crash": "#e41a1c",
+                   "memory": "#ff7f00", "error": "#377eb8", "empty": "#a65628",
+                   "degenerate": "#f781bf", "score": "#999999", "task": "#333333"}
+
+
+class StabilityError(ReconError, ValueError):
+    """A bad grid level or source for the stability sweep."""
+
+
+def _check_levels(name: str, levels: Sequence[float], low: float, high: float | None
+                  ) -> tuple[float, ...]:
+    levels = tuple(float(v) for v in levels)
+    if not levels:
+        raise StabilityError(f"{name} needs at least one level")
+    for v in levels:
+        if not np.isfinite(v) or v < low or (high is not None and v > high):
+            limit = f"[{low:g}, {high:g}]" if high is not None else f">= {low:g}"
+            raise StabilityError(f"{name} level {v:g} is out of range (must be {limit})")
+    if len(set(levels)) != len(levels):
+        raise StabilityError(f"{name} levels repeat: {levels}")
+    return levels
+
+
+def degrade(points: np.ndarray, view_points: np.ndarray | None, *, noise_sigma3: float,
+            density: float, outliers: float, seed_sequence: np.random.SeedSequence
+            ) -> tuple[np.ndarray, np.ndarray | None]:
+    """One cell's cloud: noise (if ``noise_sigma3`` > 0), subsampling, then outliers.
+
+    Parameters
+    ----------
+    points : (n, 3) float64, metres, body frame
+    view_points : (n, 3) float64, metres, optional
+    noise_sigma3 : float, metres
+        3-sigma of Gaussian noise along each line of sight (isotropic without view points).
+    density : float
+        Fraction of the points kept, in (0, 1].
+    outliers : float
+        Uniform points added, as a fraction of the kept points.
+    seed_sequence : numpy.random.SeedSequence
+
+    Returns
+    -------
+    points : (m, 3) float64
+    view_points : (m, 3) float64 or None
+    """
+    rng = np.random.default_rng(seed_sequence)
+    n = len(points)
+    if noise_sigma3 > 0:
+        if view_points is not None:
+            ray = points - view_points
+            ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-300)
+            points = points + ray * rng.normal(0.0, noise_sigma3 / 3.0, (n, 1))
+        else:
+            points = points + rng.normal(0.0, noise_sigma3 / 3.0, (n, 3))
+    keep = np.sort(rng.choice(n, size=max(1, round(density * n)), replace=False))
+    points = points[keep]
+    view_points = None if view_points is None else view_points[keep]
+    extra = round(outliers * len(points))
+    if extra:
+        low, high = points.min(axis=0), points.max(axis=0)
+        fake = rng.uniform(low, high, (extra, 3))
+        points = np.concatenate([points, fake])
+        if view_points is not None:
+            view_points = np.concatenate([view_points,
+                                          view_points[rng.integers(0, len(view_points), extra)]])
+    return points, view_points
+
+
+def run_cell(*, clouds: dict, truth, method: str, params: dict, module: str, noise_key: str,
+             noise_sigma3: float, density: float, outliers: float, cell: tuple[int, int, int],
+             seed: int, timeout_s: float, memory_mb: int | None, score_options: dict | None
+             ) -> dict:
+    """Build one cell's cloud, prepare it and run one method on it, isolated and scored.
+
+    ``module`` registers the method (imported first, as in ``recon.experiments.compare.run_case``).
+    """
+    import importlib
+
+    from recon.surfaces.reconstruct import prepare
+
+    importlib.import_module(module)
+    points, view_points, noisy = clouds[noise_key]
+    sequence = np.random.SeedSequence((seed, *cell))
+    points, view_points = degrade(points, view_points,
+                                  noise_sigma3=0.0 if noisy else noise_sigma3,
+                                  density=density, outliers=outliers, seed_sequence=sequence)
+    if len(points) < MIN_CELL_POINTS:
+        return {"method": method, "params": params, "status": "failed", "failure": "empty",
+                "reason": f"only {len(points)} points left in this cell", "n_points": len(points)}
+    try:
+        cloud = prepare(points, view_points=view_points, seed=seed)
+    except ReconError as exc:
+        return {"method": method, "params": params, "status": "failed", "failure": "error",
+                "reason": f"preparing the cloud failed: {exc}", "n_points": len(points)}
+    result = run_isolated(method, cloud, params, truth=truth, score_options=score_options,
+                          timeout_s=timeout_s, memory_mb=memory_mb, threads=1)
+    result.pop("vertices", None)
+    result.pop("faces", None)
+    result["n_points"] = len(points)
+    return result
+
+
+def simulate_levels(scene: str, noise: Sequence[float], out_dir, *, overrides=(), seed: int = 0
+                    ) -> tuple[dict, tuple[np.ndarray, np.ndarray]]:
+    """Simulate ``scene`` once per noise level and ingest each log.
+
+    Returns
+    -------
+    clouds : dict
+        ``{noise_key: (points, view_points, True)}``.
+    truth : (vertices, faces)
+        The scene's truth mesh, metres, body frame.
+    """
+    import sim
+    from formats import StrikeLog
+    from recon.registration.ingest import ingest
+
+    logs = Path(out_dir) / "logs"
+    logs.mkdir(parents=True, exist_ok=True)
+    clouds, truth = {}, None
+    for level in noise:
+        scene_obj = sim.load_scene(scene, [*overrides, f"{SCENE_NOISE_KEY}={level:g}"])
+        path = logs / f"noise-{level:g}.h5"
+        if not path.exists():
+            sim.simulate(scene_obj, path, seed=seed)
+        cloud = ingest(path)
+        clouds[_noise_key(level)] = (cloud.points, cloud.view_points, True)
+        if truth is None:
+            with StrikeLog(path) as log:
+                truth = log.truth_mesh()
+    return clouds, truth
+
+
+def _noise_key(level: float) -> str:
+    return f"{level:g}"
+
+
+def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = None,
+              noise: Sequence[float] = DEFAULT_NOISE, density: Sequence[float] = DEFAULT_DENSITY,
+              outliers: Sequence[float] = DEFAULT_OUTLIERS, seed: int = 0,
+              timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
+              scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
+              score_options: dict | None = None, fingerprint: dict | None = None) -> dict:
+    """Run every method at its defaults on every cell of the grid; write maps and data.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+    clouds : dict
+        ``{noise_key: (points, view_points or None, already_noisy)}``: one entry ``"base"``
+        (a cloud; noise is added per level) or one per noise level (``simulate_levels``).
+    truth : (vertices, faces)
+        Truth mesh, metres, body frame.
+    names : sequence of str, optional
+        Methods (default: all listed), each at its defaults.
+    noise, density, outliers : sequence of float
+        Grid levels (module docstring).
+    seed : int
+    timeout_s, memory_mb, scheduler, n_workers, resume, score_options
+        As in ``recon.experiments.compare.compare``.
+    fingerprint : dict, optional
+        Extra identity of the source for ``--resume`` checks.
+
+    Returns
+    -------
+    dict
+        ``records`` and the paths written.
+    """
+    noise = _check_levels("noise", noise, 0.0, None)
+    density = _check_levels("density", density, 1e-9, 1.0)
+    outliers = _check_levels("outliers", outliers, 0.0, None)
+    runs = variants(names, grid=False)
+    cases = {}
+    for (method, params) in runs:
+        for i, nz in enumerate(noise):
+            for j, dn in enumerate(density):
+                for k, ol in enumerate(outliers):
+                    key = f"{method} noise={nz:g} density={dn:g} outliers={ol:g}"
+                    cases[key] = {"method": method, "params": params,
+                                  "module": methods.get(method).module,
+                                  "noise_key": "base" if "base" in clouds else _noise_key(nz),
+                                  "noise_sigma3": nz, "density": dn, "outliers": ol,
+                                  "cell": (i, j, k)}
+    digest = hashlib.sha1()
+    for name in sorted(clouds):
+        digest.update(np.ascontiguousarray(clouds[name][0]).tobytes())
+    ident = {"points_sha1": digest.hexdigest(), "seed": seed, "timeout_s": timeout_s,
+             "memory_mb": memory_mb, "score_options": score_options or {}} | dict(
+        fingerprint or {})
+
+    def keep(key, result):
+        case = cases[key]
+        record = {"label": case_label(case["method"], case["params"]), "method": case["method"],
+                  "noise_sigma3_m": case["noise_sigma3"], "density": case["density"],
+                  "outliers": case["outliers"]}
+        for column in ("status", "failure", "reason", "wall_time_s", "peak_memory_mb",
+                       "n_points", "n_faces", "watertight"):
+            record[column] = result.get(column)
+        record.update(result.get("scores") or {})
+        return record
+
+    done = run_sweep(run_cell, cases, out_dir,
+                     shared={"clouds": clouds, "truth": truth, "seed": seed,
+                             "timeout_s": timeout_s, "memory_mb": memory_mb,
+                             "score_options": score_options},
+                     fingerprint=ident, scheduler=scheduler, n_workers=n_workers,
+                     resume=resume, on_result=keep, desc="stability")
+    records = []
+    for key, case in cases.items():
+        record = dict(done[key])
+        record.setdefault("method", case["method"])
+        record.setdefault("noise_sigma3_m", case["noise_sigma3"])
+        record.setdefault("density", case["density"])
+        record.setdefault("outliers", case["outliers"])
+        records.append(record)
+    return finish(records, out_dir, noise=noise, density=density, outliers=outliers)
+
+
+def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
+    """Write stability.csv, stability.json and each method's two PNGs."""
+    from recon.experiments.compare import write_csv
+
+    out_dir = Path(out_dir)
+    csv_path = write_csv(records, out_dir / "stability.csv")
+    summary = {"noise_sigma3_m": list(noise), "density": list(density),
+               "outliers": list(outliers), "records": records,
+               "failure_rate": {m: float(np.mean([r["status"] != "ok" for r in records
+                                                  if r["method"] == m]))
+                                for m in dict.fromkeys(r["method"] for r in records)}}
+    json_path = out_dir / "stability.json"
+    json_path.write_text(json.dumps(to_jsonable(summary), indent=2) + "\n")
+    pngs = []
+    for method in dict.fromkeys(r["method"] for r in records):
+        mine = [r for r in records if r["method"] == method]
+        pngs.append(plot_failure_map(mine, out_dir / f"{method}_failures.png", method=method,
+                                     noise=noise, density=density, outliers=outliers))
+        pngs.append(plot_accuracy(mine, out_dir / f"{method}_accuracy.png", method=method,
+                                  noise=noise, density=density, outliers=outliers))
+    return {"records": records, "csv": csv_path, "json": json_path, "pngs": pngs,
+            "failure_rate": summary["failure_rate"]}
+
+
+def _grid(records, noise, density, outliers, value):
+    """(outliers, noise, density) array of ``value(record)`` (None where no record)."""
+    out = np.empty((len(outliers), len(noise), len(density)), dtype=object)
+    for r in records:
+        i = noise.index(r["noise_sigma3_m"])
+        j = density.index(r["density"])
+        k = outliers.index(r["outliers"])
+        out[k, i, j] = value(r)
+    return out
+
+
+def _axes(n_panels: int):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, n_panels, figsize=(4.2 * n_panels + 1.2, 4.2), squeeze=False,
+                             constrained_layout=True)
+    return plt, fig, axes[0]
+
+
+def _label_axes(ax, noise, density, outlier):
+    ax.set_xticks(range(len(density)), [f"{d:g}" for d in density])
+    ax.set_yticks(range(len(noise)), [f"{n:g}" for n in noise])
+    ax.set_xlabel("density (fraction of points kept)")
+    ax.set_ylabel("range noise, 3 sigma [m]")
+    ax.set_title(f"outliers {outlier:g}", fontsize=10)
+
+
+def plot_failure_map(records, path, *, method, noise, density, outliers) -> Path:
+    """Per cell: green when the method succeeded, else the colour and name of its failure."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    kinds = ["ok", *FAILURE_KINDS, "task"]
+    code = _grid(records, noise, density, outliers,
+                 lambda r: "ok" if r["status"] == "ok" else (r.get("failure") or "error"))
+    plt, fig, axes = _axes(len(outliers))
+    cmap = ListedColormap([OUTCOME_COLOURS[k] for k in kinds])
+    for k, ax in enumerate(axes):
+        index = np.array([[kinds.index(c) if c in kinds else kinds.index("error")
+                           for c in row] for row in code[k]], dtype=float)
+        ax.imshow(index, cmap=cmap, vmin=-0.5, vmax=len(kinds) - 0.5, origin="lower",
+                  aspect="auto")
+        for i in range(len(noise)):
+            for j in range(len(density)):
+                ax.text(j, i, code[k][i, j], ha="center", va="center", fontsize=9,
+                        color="white" if code[k][i, j] != "ok" else "black")
+        _label_axes(ax, noise, density, outliers[k])
+    seen = sorted({c for c in code.ravel() if c}, key=kinds.index)
+    fig.legend(handles=[Patch(color=OUTCOME_COLOURS[c], label=c) for c in seen],
+               loc="outside right center", fontsize=8)
+    failed = sum(c != "ok" for c in code.ravel())
+    fig.suptitle(f"{method}: failure map ({failed} of {code.size} cells failed)", fontsize=11)
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_accuracy(records, path, *, method, noise, density, outliers) -> Path:
+    """Per cell the Chamfer distance (log colour scale, shared by the panels); failed cells
+    hatched grey with their failure kind."""
+    from matplotlib.colors import LogNorm
+
+    chamfer = _grid(records, noise, density, outliers,
+                    lambda r: r.get(CHAMFER) if r["status"] == "ok" else None)
+    fscore = _grid(records, noise, density, outliers,
+                   lambda r: r.get(FSCORE) if r["status"] == "ok" else None)
+    kind = _grid(records, noise, density, outliers, lambda r: r.get("failure"))
+    values = np.array([[np.nan if v is None else float(v) for v in row]
+                       for panel in chamfer for row in panel]).reshape(chamfer.shape)
+    finite = values[np.isfinite(values) & (values > 0)]
+    norm = LogNorm(vmin=finite.min(), vmax=max(finite.max(), finite.min() * 1.01)) \
+        if len(finite) else None
+    plt, fig, axes = _axes(len(outliers))
+    image = None
+    for k, ax in enumerate(axes):
+        ax.set_facecolor("0.85")
+        masked = np.ma.masked_invalid(values[k])
+        image = ax.imshow(masked, cmap="viridis_r", norm=norm, origin="lower", aspect="auto")
+        for i in range(len(noise)):
+            for j in range(len(density)):
+                if np.isfinite(values[k, i, j]):
+                    f = fscore[k][i, j]
+                    text = f"{values[k, i, j]:.3g} m" + ("" if f is None else f"\nF {f:.2f}")
+                    ax.text(j, i, text, ha="center", va="center", fontsize=8, color="white",
+                            path_effects=_outline())
+                else:
+                    ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False,
+                                               hatch="//", edgecolor="0.55", lw=0))
+                    ax.text(j, i, f"failed\n{kind[k][i, j] or ''}", ha="center", va="center",
+                            fontsize=8, color="firebrick")
+        _label_axes(ax, noise, density, outliers[k])
+    if image is not None and norm is not None:
+        fig.colorbar(image, ax=list(axes), label="Chamfer distance [m] (lower is better)")
+    fig.suptitle(f"{method}: accuracy (Chamfer distance to the truth)", fontsize=11)
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _outline():
+    import matplotlib.patheffects as pe
+
+    return [pe.withStroke(linewidth=1.5, foreground="black")]

@@ -1,0 +1,206 @@
+"""The paper's studies, each one command: ``recon study NAME -o DIR [--quick] [--resume]``.
+
+Every study is a module here exposing ``NAME``, ``TITLE`` and either
+
+- ``cases(size) -> {key: run_case keyword arguments}`` and ``finish(records, out_dir, size) ->
+  {"claims", "files", "extra"}`` (the scene studies: ``recon.experiments.studies.runner``
+  simulates, ingests
+  and scores every case on Dask, then ``finish`` draws the charts and checks the paper's
+  claims), or
+- ``run(out_dir, *, size, scheduler, resume, n_workers) -> summary`` (``methods``, which runs
+  ``recon.experiments.compare`` per condition).
+
+Every study writes ``DIR/summary.json`` (claims with our numbers and a verdict, files, failures,
+score options), ``DIR/results.csv`` (one row per case and time prefix), ``DIR/results.jsonl``
+(the raw records, what ``--resume`` reads) and its charts (PNG).
+
+>>> from recon.experiments import studies
+>>> studies.names()[:3]
+['inclination', 'duration', 'slew']
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import re
+import time
+from pathlib import Path
+from types import ModuleType
+
+from recon.experiments.studies.runner import SIZES, StudyError, check_size
+
+# Study modules, in the order of the paper (and of ``recon study --list``).
+STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods")
+# ``recon study all`` writes this beside the study directories.
+INDEX_JSON = "index.json"
+# A Dask scheduler address: ``protocol://host:port`` or ``host:port``.
+_ADDRESS = re.compile(r"^([a-z][a-z0-9+]*://)?[A-Za-z0-9_.\-\[\]:]+:\d+$")
+# Seconds allowed to reach an existing scheduler before the study starts.
+CONNECT_TIMEOUT_S = 10
+
+__all__ = ["SIZES", "STUDIES", "StudyError", "describe", "get", "names", "run", "run_all"]
+
+
+def names() -> list[str]:
+    """The study names, in the paper's order."""
+    return list(STUDIES)
+
+
+def get(name: str) -> ModuleType:
+    """The module of study ``name``.
+
+    Raises
+    ------
+    StudyError
+        No such study; the message lists them.
+    """
+    if name not in STUDIES:
+        raise StudyError(f"unknown study {name!r} (studies: {', '.join(STUDIES)}, or all)")
+    return importlib.import_module(f"recon.experiments.studies.{name}")
+
+
+def describe() -> list[tuple[str, str]]:
+    """``(name, title)`` of every study."""
+    return [(name, get(name).TITLE) for name in STUDIES]
+
+
+def check_scheduler(scheduler: str | None, *, connect: bool = True) -> str | None:
+    """Validate a ``--scheduler`` value; for an address, check that a scheduler answers there.
+
+    Raises
+    ------
+    StudyError
+        Not ``threads``, ``serial`` or an address, or nothing answers at the address.
+    """
+    if scheduler is None or scheduler in ("threads", "serial"):
+        return scheduler
+    if not isinstance(scheduler, str) or not _ADDRESS.match(scheduler):
+        raise StudyError(f"--scheduler must be a Dask scheduler address (tcp://host:port), "
+                         f"'threads' or 'serial', got {scheduler!r}")
+    if connect:
+        from distributed import Client
+
+        try:
+            with Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s"):
+                pass
+        except (OSError, TimeoutError) as exc:
+            raise StudyError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+    return scheduler
+
+
+def check_output(out_dir) -> Path:
+    """The output directory, created; refuses a path that is a file."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise StudyError(f"-o {out_dir}: is a file, not a directory")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise StudyError(f"-o {out_dir}: cannot create the directory ({exc.strerror})") from None
+    return out_dir
+
+
+def run(name: str, out_dir, *, size: str = "full", scheduler: str | None = None,
+        resume: bool = False, n_workers: int | None = None, checked: bool = False) -> dict:
+    """Run one study into ``out_dir``; return its summary (also in ``DIR/summary.json``).
+
+    Parameters
+    ----------
+    name : str
+        One of ``names()``.
+    out_dir : str or Path
+        Created if needed.
+    size : {"full", "quick", "tiny"}
+        ``full`` as in the paper, ``quick`` for CI, ``tiny`` for the tests.
+    scheduler : str, optional
+        Dask scheduler address, ``threads`` or ``serial`` (default: a local cluster);
+        ``recon.experiments.sweep``.
+    resume : bool
+        Keep finished cases of an interrupted run (failed ones run again).
+    n_workers : int, optional
+        Local workers (default: one per core).
+    checked : bool
+        The scheduler was already checked (``run_all``).
+    """
+    from recon.experiments.studies import runner
+
+    module = get(name)
+    check_size(size)
+    out_dir = check_output(out_dir)
+    if not checked:
+        check_scheduler(scheduler)
+    start = time.perf_counter()
+    if hasattr(module, "run"):
+        summary = module.run(out_dir, size=size, scheduler=scheduler, resume=resume,
+                             n_workers=n_workers)
+    else:
+        cases = module.cases(size)
+        records = runner.execute(name, cases, out_dir, size=size, scheduler=scheduler,
+                                 resume=resume, n_workers=n_workers)
+        runner.write_csv(runner.rows(records), out_dir / runner.RESULTS_CSV)
+        done = module.finish(runner.ok(records), out_dir, size)
+        runner.write_summary(out_dir, study=name, title=module.TITLE, size=size,
+                             records=records, claims=done["claims"],
+                             files=[runner.RESULTS_CSV, *done["files"]],
+                             extra=done.get("extra"))
+        summary = json.loads((out_dir / runner.SUMMARY_JSON).read_text())
+    summary["wall_time_s"] = time.perf_counter() - start
+    (out_dir / runner.SUMMARY_JSON).write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def run_all(out_dir, *, size: str = "full", scheduler: str | None = None,
+            resume: bool = False, n_workers: int | None = None,
+            only: list[str] | None = None) -> dict:
+    """Run every study (or ``only`` these) into ``out_dir/NAME/``; write ``out_dir/index.json``.
+
+    Without a scheduler, one local Dask cluster serves all the studies (started once).
+
+    Returns
+    -------
+    dict
+        ``size``, ``studies`` (per study: ``wall_time_s``, ``n_cases``, ``n_failed``,
+        ``verdicts``), ``wall_time_s``.
+    """
+    check_size(size)
+    chosen = list(only) if only else names()
+    for name in chosen:
+        get(name)
+    out_dir = check_output(out_dir)
+    check_scheduler(scheduler)
+    start = time.perf_counter()
+    index = {"size": size, "studies": {}, "wall_time_s": None}
+    cluster = None
+    try:
+        if scheduler is None:
+            import logging
+
+            from distributed import LocalCluster
+
+            from recon.experiments.sweep import default_workers
+
+            cluster = LocalCluster(n_workers=n_workers or default_workers(),
+                                   threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
+            address = cluster.scheduler_address
+        else:
+            address = scheduler
+        for name in chosen:
+            summary = run(name, out_dir / name, size=size, scheduler=address, resume=resume,
+                          n_workers=n_workers, checked=True)
+            verdicts = {}
+            for c in summary.get("claims", []):
+                verdicts[c["verdict"]] = verdicts.get(c["verdict"], 0) + 1
+            index["studies"][name] = {"title": summary["title"],
+                                      "wall_time_s": summary["wall_time_s"],
+                                      "n_cases": summary["n_cases"],
+                                      "n_failed": summary["n_failed"], "verdicts": verdicts}
+            index["wall_time_s"] = time.perf_counter() - start
+            (out_dir / INDEX_JSON).write_text(json.dumps(index, indent=2) + "\n")
+    finally:
+        if cluster is not None:
+            cluster.close()
+    index["wall_time_s"] = time.perf_counter() - start
+    (out_dir / INDEX_JSON).write_text(json.dumps(index, indent=2) + "\n")
+    return index

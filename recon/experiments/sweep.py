@@ -1,0 +1,265 @@
+"""Run many independent cases on Dask, streaming each result to disk as it finishes.
+
+A sweep is one function applied to many cases (``{key: keyword arguments}``) plus shared inputs
+(a cloud, a truth mesh) sent to the workers once. Results stream to ``results.jsonl``, one JSON
+object per line, appended and flushed as each case finishes, so an interrupted sweep keeps what it
+finished; ``resume=True`` skips the keys already there. A ``sweep.json`` beside it records the
+sweep's fingerprint (input and settings); resuming with a different one is refused, so results
+of different inputs never mix.
+
+Schedulers
+----------
+``None``
+    A ``dask.distributed.LocalCluster`` of single-threaded worker processes, started for the
+    sweep and closed after it.
+``"tcp://host:port"`` (any address)
+    An existing Dask cluster (``dask scheduler`` + ``dask worker`` on several machines). The
+    workers must be able to import recon; inputs travel through Dask, outputs come back to this
+    process, so no shared filesystem is needed.
+``"threads"``
+    A local thread pool, no Dask: for cases that spend their time waiting on a child process
+    (every ``recon.surfaces.isolation`` run does), it is as parallel as processes and starts
+    instantly.
+``"serial"``
+    One case after another in this process (debugging).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from formats.errors import ReconError
+
+RESULTS_NAME = "results.jsonl"
+FINGERPRINT_NAME = "sweep.json"
+LOCAL_SCHEDULERS = ("threads", "serial")
+# Seconds to wait for an existing Dask scheduler before giving up.
+CONNECT_TIMEOUT_S = 10.0
+
+
+class SweepError(ReconError, ValueError):
+    """A sweep cannot start: bad scheduler, unreachable cluster, or a mismatched resume."""
+
+
+def default_workers() -> int:
+    """Worker count of a local sweep: the usable cores (2 on the development machine)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def to_jsonable(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays, tuples and non-finite floats made JSON-safe."""
+    if isinstance(value, dict):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        return to_jsonable(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def read_results(path) -> dict[str, dict]:
+    """The finished results of a ``results.jsonl``, by key (a torn last line is ignored)."""
+    path = Path(path)
+    done: dict[str, dict] = {}
+    if not path.exists():
+        return done
+    for line in path.read_text().splitlines():
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if isinstance(record, dict) and "key" in record:
+            done[record["key"]] = record
+    return done
+
+
+def _rewrite(path: Path, records: list[dict]) -> None:
+    """Atomically replace ``path`` with ``records`` (drops a torn line before appending)."""
+    tmp = path.with_name(path.name + ".partial")
+    with open(tmp, "w") as out:
+        for record in records:
+            out.write(json.dumps(record) + "\n")
+    tmp.replace(path)
+
+
+def _check_fingerprint(out_dir: Path, fingerprint: Mapping | None, resume: bool) -> None:
+    file = out_dir / FINGERPRINT_NAME
+    current = to_jsonable(dict(fingerprint or {}))
+    if resume and file.exists():
+        previous = json.loads(file.read_text())
+        if previous != current:
+            changed = sorted(k for k in set(previous) | set(current)
+                             if previous.get(k) != current.get(k))
+            raise SweepError(f"--resume: {out_dir} holds a sweep with different "
+                             f"{', '.join(changed)}; use a new output directory or drop --resume")
+    file.write_text(json.dumps(current, indent=2) + "\n")
+
+
+def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]], out_dir, *,
+              shared: Mapping[str, Any] | None = None, fingerprint: Mapping | None = None,
+              scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
+              on_result: Callable[[str, dict], dict] | None = None, desc: str = "runs"
+              ) -> dict[str, dict]:
+    """Run ``func(**shared, **case)`` for every case, streaming results to ``out_dir``.
+
+    Parameters
+    ----------
+    func : callable
+        Importable (module-level) function returning a dict. It should not raise: a raised
+        exception (or a lost worker) is recorded as ``{"status": "failed", "failure": "task"}``.
+    cases : dict of str to dict
+        Keyword arguments per case, by unique key (the key is what ``resume`` matches).
+    out_dir : str or Path
+        Created if needed; receives ``results.jsonl`` and ``sweep.json``.
+    shared : dict, optional
+        Keyword arguments common to all cases (sent to each Dask worker once).
+    fingerprint : dict, optional
+        What makes results comparable (input, settings); checked on resume.
+    scheduler : str, optional
+        See the module docstring.
+    n_workers : int, optional
+        Local workers or threads (default: ``default_workers()``).
+    resume : bool
+        Keep the results already in ``results.jsonl`` and skip their keys; otherwise start
+        the file afresh.
+    on_result : callable, optional
+        ``on_result(key, result) -> record`` runs in this process on each result before it is
+        written (e.g. to save a mesh and drop its arrays); the record must be JSON-able.
+    desc : str
+        Progress-bar label.
+
+    Returns
+    -------
+    dict of str to dict
+        Every case's record, in ``cases`` order (resumed ones included).
+    """
+    from tqdm import tqdm
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if n_workers is not None and n_workers < 1:
+        raise SweepError(f"workers must be >= 1, got {n_workers}")
+    _check_fingerprint(out_dir, fingerprint, resume)
+    path = out_dir / RESULTS_NAME
+    done = {k: v for k, v in read_results(path).items() if k in cases} if resume else {}
+    _rewrite(path, list(done.values()))
+    pending = [key for key in cases if key not in done]
+    shared = dict(shared or {})
+    with open(path, "a") as stream, tqdm(total=len(cases), initial=len(done), desc=desc,
+                                          unit="run", disable=None, leave=False) as bar:
+
+        def record(key: str, result: dict) -> None:
+            result = dict(result)
+            if on_result is not None:
+                result = on_result(key, result)
+            result = to_jsonable({"key": key, **result})
+            stream.write(json.dumps(result) + "\n")
+            stream.flush()
+            os.fsync(stream.fileno())
+            done[key] = result
+            bar.update(1)
+
+        if pending:
+            for key, result in iterate(func, cases, pending, shared=shared, scheduler=scheduler,
+                                       n_workers=n_workers):
+                record(key, result)
+    return {key: done[key] for key in cases if key in done}
+
+
+def _failed_task(exc: BaseException) -> dict:
+    return {"status": "failed", "failure": "task",
+            "reason": f"task failed: {type(exc).__name__}: {exc}"}
+
+
+def _call(func, shared, case) -> dict:
+    try:
+        return func(**shared, **case)
+    except Exception as exc:  # the sweep goes on; the record says what went wrong
+        return _failed_task(exc)
+
+
+def iterate(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
+            keys: list[str] | None = None, *, shared: Mapping[str, Any] | None = None,
+            scheduler: str | None = None, n_workers: int | None = None):
+    """Yield ``(key, func(**shared, **cases[key]))`` as cases finish, nothing written to disk.
+
+    ``keys`` selects the cases (default: all); the other arguments are ``run_sweep``'s.
+    """
+    pending = list(cases) if keys is None else list(keys)
+    shared = dict(shared or {})
+    workers = n_workers or default_workers()
+    if scheduler == "serial":
+        for key in pending:
+            yield key, _call(func, shared, cases[key])
+        return
+    if scheduler == "threads":
+        from concurrent.futures import ThreadPoolExecutor, as_completed
+
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(_call, func, shared, cases[key]): key for key in pending}
+            try:
+                for future in as_completed(futures):
+                    yield futures[future], future.result()
+            except BaseException:  # Ctrl-C or a closed generator: stop the running children
+                from recon.surfaces.isolation import kill_running
+
+                for future in futures:
+                    future.cancel()
+                kill_running()
+                raise
+        return
+    yield from _execute_dask(func, cases, pending, shared, scheduler, workers)
+
+
+def _execute_dask(func, cases, pending, shared, scheduler, workers):
+    import logging
+
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    try:
+        if scheduler is None:
+            # ":0": the scheduler's HTTP server on a free port (the default 8787 may be taken
+            # by another cluster, which only warns, but warnings are errors in our tests).
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+            except (OSError, TimeoutError) as exc:
+                raise SweepError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+        with client:
+            # A one-element list scatters the value whole (a tuple would be split).
+            remote = {name: client.scatter([value], broadcast=True)[0]
+                      for name, value in shared.items()}
+            futures = {client.submit(_call, func, remote, cases[key], pure=False): key
+                       for key in pending}
+            try:
+                for future in as_completed(futures):
+                    key = futures[future]
+                    try:
+                        result = future.result()
+                    except Exception as exc:  # a worker lost (KilledWorker) or a task error
+                        result = _failed_task(exc)
+                    yield key, result
+            except BaseException:
+                client.cancel(list(futures))
+                raise
+    finally:
+        if cluster is not None:
+            cluster.close()

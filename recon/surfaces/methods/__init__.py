@@ -1,0 +1,299 @@
+"""Surface reconstruction methods, one module each, registered here by name.
+
+A method is a function ``run(cloud, **params) -> (vertices, faces)`` taking a ``MethodInput``
+(points with oriented normals, spacing and noise scale, all in the body frame) and returning a
+triangle mesh: ``(v, 3) float64`` metres and ``(f, 3) int64`` indices, counter-clockwise seen
+from outside. Its module wraps it in a ``Method`` (parameters with defaults, a small grid for
+``recon compare``, a kind) and calls ``register``. Adding a method touches one file: its module
+plus its name in ``BUILTIN_MODULES``.
+
+Methods marked ``hidden`` (test-only ones) run when asked for by name but never appear in
+``available()``, ``recon compare``'s default list or ``--help``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from formats.errors import ReconError
+
+Kind = Literal["planar", "smooth", "interpolating", "baseline", "test"]
+KINDS = ("planar", "smooth", "interpolating", "baseline", "test")
+
+# Built-in method modules, imported (cheaply: heavy libraries load inside each ``run``) the first
+# time the registry is used.
+BUILTIN_MODULES = (
+    "recon.surfaces.methods.convex_hull",
+    "recon.surfaces.methods.planes",
+    "recon.surfaces.methods.plane",
+    "recon.surfaces.methods.poisson",
+    "recon.surfaces.methods.screened_poisson",
+    "recon.surfaces.methods.ball_pivoting",
+    "recon.surfaces.methods.ball_pivoting_meshlab",
+    "recon.surfaces.methods.alpha_shape",
+    "recon.surfaces.methods.rimls",
+    "recon.surfaces.methods.apss",
+)
+
+
+# How a parameter's type reads in an error message: (one value, several values).
+_TYPE_NAMES = {int: ("an integer", "integers"), float: ("a number", "numbers"),
+               bool: ("a boolean", "booleans"), str: ("a string", "strings")}
+
+class UnknownMethod(ReconError, ValueError):
+    """A method name that is not registered."""
+
+
+class ParameterError(ReconError, ValueError):
+    """A method parameter that does not exist or has a bad value."""
+
+
+class MethodFailed(ReconError, RuntimeError):
+    """A method ran but could not produce a usable surface (the message says why)."""
+
+
+@dataclass(frozen=True)
+class MethodInput:
+    """What every method receives.
+
+    Attributes
+    ----------
+    points : (n, 3) float64, metres, body frame
+    normals : (n, 3) float64
+        Unit normals oriented out of the surface (``recon.surfaces.normals.estimate_normals``).
+    spacing : float, metres
+        Median ``sqrt(area per point)`` (``recon.surfaces.normals.point_spacing``); radii, cells and
+        thresholds scale with it.
+    noise : float, metres
+        Robust out-of-surface scatter (``recon.surfaces.normals.noise_scale``).
+    seed : int
+        Seed of every random choice a method makes.
+    neighbours : (n,) int64, optional
+        Size of each point's normal neighbourhood (``recon.surfaces.normals.local_planes``: grown
+        until
+        it spans a plane, e.g. across LRF tracks); methods fitting local planes start there.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    spacing: float
+    noise: float
+    seed: int = 0
+    neighbours: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Param:
+    """One method parameter: its default, type, a one-line meaning and its allowed values."""
+
+    default: Any
+    type: type
+    doc: str
+    choices: tuple | None = None
+    minimum: float | None = None
+    sequence: bool = False  # a comma-separated list of ``type`` (e.g. ball radii)
+
+    def parse(self, text: str, *, name: str, method: str) -> Any:
+        """Convert ``text`` from the command line (``--param name=text``) and check it.
+
+        ``auto`` or ``none`` give None for parameters whose default is None (automatic).
+        """
+        if self.default is None and text.strip().lower() in ("auto", "none"):
+            return None
+        items = text.split(",") if self.sequence else [text]
+        try:
+            values = tuple(_convert(item.strip(), self.type) for item in items)
+        except ValueError:
+            single, plural = _TYPE_NAMES.get(self.type, (self.type.__name__,) * 2)
+            kind = f"a comma-separated list of {plural}" if self.sequence else single
+            raise ParameterError(f"method {method!r}: parameter {name}={text!r} is not "
+                                 f"{kind}") from None
+        return self.check(values if self.sequence else values[0], name=name, method=method)
+
+    def check(self, value: Any, *, name: str, method: str) -> Any:
+        """Return ``value`` coerced to this parameter's type, or raise ``ParameterError``."""
+        if value is None and self.default is None:
+            return None
+        values = tuple(value) if self.sequence and not isinstance(value, str) else (value,)
+        if self.sequence and not values:
+            raise ParameterError(f"method {method!r}: parameter {name} needs at least one value")
+        coerced = []
+        for item in values:
+            if self.type is bool and not isinstance(item, (bool, np.bool_)):
+                raise ParameterError(f"method {method!r}: parameter {name} must be true or "
+                                     f"false, got {item!r}")
+            try:
+                item = self.type(item)
+            except (TypeError, ValueError):
+                raise ParameterError(f"method {method!r}: parameter {name} must be a "
+                                     f"{self.type.__name__}, got {item!r}") from None
+            if self.choices is not None and item not in self.choices:
+                raise ParameterError(f"method {method!r}: parameter {name} must be one of "
+                                     f"{self.choices}, got {item!r}")
+            if self.minimum is not None and not item >= self.minimum:
+                raise ParameterError(f"method {method!r}: parameter {name} must be >= "
+                                     f"{self.minimum}, got {item!r}")
+            coerced.append(item)
+        return tuple(coerced) if self.sequence else coerced[0]
+
+
+def _convert(text: str, kind: type) -> Any:
+    if kind is bool:
+        lowered = text.lower()
+        if lowered in ("1", "true", "yes", "on"):
+            return True
+        if lowered in ("0", "false", "no", "off"):
+            return False
+        raise ValueError(text)
+    return kind(text)
+
+
+@dataclass(frozen=True)
+class Method:
+    """A registered reconstruction method.
+
+    Attributes
+    ----------
+    name : str
+        Registry name (``recon reconstruct -m NAME``).
+    run : callable
+        ``run(cloud: MethodInput, **params) -> (vertices, faces)``; raises ``MethodFailed``.
+    params : dict of str to Param
+    grid : tuple of dict
+        Parameter overrides ``recon compare`` runs besides the defaults.
+    kind : {"planar", "smooth", "interpolating", "baseline", "test"}
+        ``planar``: a few planar polygons; ``smooth``: an implicit surface fitted to the points;
+        ``interpolating``: triangles through the points themselves; ``baseline``: a floor.
+    summary : str
+        One line for listings.
+    preload : tuple of str
+        Modules imported before the clock starts, so timings exclude import cost.
+    hidden : bool
+        Test-only: runnable by name, never listed.
+    """
+
+    name: str
+    run: Callable[..., tuple[np.ndarray, np.ndarray]]
+    params: Mapping[str, Param]
+    grid: tuple[Mapping[str, Any], ...] = ()
+    kind: Kind = "smooth"
+    summary: str = ""
+    preload: tuple[str, ...] = ()
+    hidden: bool = False
+    defaults: Mapping[str, Any] = field(init=False, repr=False)
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
+        object.__setattr__(self, "defaults", {k: p.default for k, p in self.params.items()})
+
+    @property
+    def module(self) -> str:
+        """Module that registers this method (an isolated child imports it to find the method)."""
+        return self.run.__module__
+
+    def resolve(self, params: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """The full parameter set: defaults overridden by ``params``, each checked.
+
+        Raises
+        ------
+        ParameterError
+            An unknown name or a bad value.
+        """
+        params = dict(params or {})
+        unknown = sorted(set(params) - set(self.params))
+        if unknown:
+            known = ", ".join(self.params) or "none"
+            raise ParameterError(f"method {self.name!r} has no parameter {unknown[0]!r} "
+                                 f"(its parameters: {known})")
+        resolved = dict(self.defaults)
+        for name, value in params.items():
+            resolved[name] = self.params[name].check(value, name=name, method=self.name)
+        return resolved
+
+    def parse(self, pairs: list[str] | tuple[str, ...]) -> dict[str, Any]:
+        """Parse ``key=value`` strings from the command line into checked overrides."""
+        overrides: dict[str, Any] = {}
+        for pair in pairs:
+            key, sep, text = pair.partition("=")
+            key = key.strip()
+            if not sep or not key:
+                raise ParameterError(f"--param must be key=value, got {pair!r}")
+            if key not in self.params:
+                known = ", ".join(self.params) or "none"
+                raise ParameterError(f"method {self.name!r} has no parameter {key!r} "
+                                     f"(its parameters: {known})")
+            overrides[key] = self.params[key].parse(text, name=key, method=self.name)
+        return overrides
+
+    def variants(self) -> list[dict[str, Any]]:
+        """Resolved parameter sets ``recon compare`` runs: the defaults, then the grid, unique."""
+        out: list[dict[str, Any]] = []
+        for overrides in ({}, *self.grid):
+            resolved = self.resolve(overrides)
+            if resolved not in out:
+                out.append(resolved)
+        return out
+
+
+_REGISTRY: dict[str, Method] = {}
+_LOADED = False
+
+
+def register(method: Method) -> Method:
+    """Add ``method`` to the registry (replacing one of the same name) and return it."""
+    _REGISTRY[method.name] = method
+    return method
+
+
+def _load_builtins() -> None:
+    global _LOADED
+    if not _LOADED:
+        _LOADED = True
+        for name in BUILTIN_MODULES:
+            importlib.import_module(name)
+
+
+def available(*, include_hidden: bool = False) -> list[str]:
+    """Names of the registered methods, in ``BUILTIN_MODULES`` order (hidden ones excluded)."""
+    _load_builtins()
+    return [name for name, m in _REGISTRY.items() if include_hidden or not m.hidden]
+
+
+def get(name: str) -> Method:
+    """The registered method called ``name``.
+
+    Raises
+    ------
+    UnknownMethod
+        No such method; the message lists the available ones.
+    """
+    _load_builtins()
+    if name not in _REGISTRY:
+        raise UnknownMethod(f"unknown method {name!r} (available: {', '.join(available())})")
+    return _REGISTRY[name]
+
+
+def check_mesh_arrays(vertices, faces, *, method: str) -> tuple[np.ndarray, np.ndarray]:
+    """Coerce a method's output to ``(float64 (v, 3), int64 (f, 3))`` and drop unused vertices.
+
+    Raises
+    ------
+    MethodFailed
+        Wrong shapes, non-finite vertices or out-of-range indices.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if not np.all(np.isfinite(vertices)):
+        raise MethodFailed(f"{method}: mesh has non-finite vertices")
+    if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
+        raise MethodFailed(f"{method}: faces index vertices that do not exist")
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    remap = np.cumsum(used) - 1
+    return vertices[used], remap[faces].astype(np.int64)

@@ -1,0 +1,103 @@
+"""The comparison's ranking, Pareto fronts, files and the auto-versus-truth agreement."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from recon.experiments.compare import (
+    agreement,
+    case_key,
+    case_label,
+    finish,
+    pareto_front,
+    rank,
+    variants,
+)
+
+
+def _brute_front(time, value):
+    """Runs no other run beats on both time and value (ties kept by the earliest)."""
+    keep = []
+    for i in range(len(time)):
+        dominated = any((time[j] <= time[i] and value[j] <= value[i])
+                        and (time[j] < time[i] or value[j] < value[i]) for j in range(len(time)))
+        if not dominated:
+            keep.append(i)
+    return sorted(keep, key=lambda i: time[i])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_pareto_front_matches_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    time, value = rng.uniform(0.1, 10, 40), rng.uniform(0.01, 1, 40)
+    assert list(pareto_front(time, value)) == _brute_front(time, value)
+    assert list(pareto_front(time, -value, minimize=False)) == _brute_front(time, value)
+
+
+def _record(label, method, time, chamfer, fscore, status="ok", params=None):
+    params = params or {}
+    return {"key": case_key(method, params), "label": label, "method": method, "params": params,
+            "kind": "smooth", "status": status, "failure": None if status == "ok" else "crash",
+            "reason": "" if status == "ok" else "crashed with SIGSEGV while running",
+            "wall_time_s": time, "process_time_s": 1.0, "peak_memory_mb": 100.0,
+            "n_vertices": 10, "n_faces": 20, "watertight": True, "mesh": None,
+            "chamfer_m": chamfer, "fscore": fscore}
+
+
+RECORDS = [
+    _record("slow-good", "poisson", 10.0, 0.01, 0.99),
+    _record("fast-bad", "convex-hull", 0.1, 0.5, 0.40),
+    _record("dominated", "plane", 20.0, 0.2, 0.50),
+    _record("crashed", "alpha-shape", None, None, None, status="failed"),
+    _record("middle", "planes", 1.0, 0.05, 0.95),
+]
+
+
+def test_rank_orders_by_chamfer_with_failures_last():
+    assert [r["label"] for r in rank(RECORDS)] == ["slow-good", "middle", "dominated",
+                                                   "fast-bad", "crashed"]
+
+
+def test_finish_writes_csv_json_png_and_fronts(tmp_path):
+    report = finish(RECORDS, tmp_path, title="test")
+    assert [r["label"] for r in report["pareto_chamfer"]] == ["fast-bad", "middle", "slow-good"]
+    assert [r["label"] for r in report["pareto_fscore"]] == ["fast-bad", "middle", "slow-good"]
+    with open(tmp_path / "results.csv") as text:
+        rows = list(csv.DictReader(text))
+    assert rows[0]["label"] == "slow-good" and len(rows) == 5
+    assert {"wall_time_s", "peak_memory_mb", "chamfer_m", "fscore", "n_faces", "watertight",
+            "reason"} <= set(rows[0])
+    saved = json.loads((tmp_path / "results.json").read_text())
+    assert saved["pareto_chamfer"][0]["label"] == "fast-bad"
+    assert (tmp_path / "speed_accuracy.png").stat().st_size > 20_000
+    assert "FAILED (crash)" in report["table"] and "slow-good" in report["table"]
+
+
+def test_agreement_reports_rank_and_ratio():
+    verdict = agreement(RECORDS, case_key("planes", {}))
+    assert verdict["rank"] == 2 and verdict["n_ranked"] == 4
+    assert verdict["best_label"] == "slow-good" and not verdict["same_run"]
+    assert verdict["chamfer_ratio"] == pytest.approx(5.0)
+    assert agreement(RECORDS, case_key("poisson", {}))["same_run"]
+    assert agreement(RECORDS, case_key("alpha-shape", {}))["rank"] is None
+
+
+def test_variants_and_labels():
+    runs = variants(["poisson", "convex-hull"])
+    assert runs[0] == ("poisson", runs[0][1]) and runs[-1][0] == "convex-hull"
+    assert len(runs) == 1 + 4 + 1
+    assert case_label("poisson", runs[1][1]) == "poisson depth=6"
+    assert case_label("poisson", runs[0][1]) == "poisson"
+    assert len(variants(["poisson"], grid=False)) == 1
+
+
+def test_agreement_on_another_truth_metric():
+    records = [dict(r, accuracy_mean_m=a) for r, a in zip(RECORDS, (0.3, 0.2, 0.1, None, 0.4),
+                                                           strict=True)]
+    verdict = agreement(records, case_key("plane", {}), metric="accuracy_mean_m")
+    assert verdict["rank"] == 1 and verdict["same_run"] and verdict["ratio"] == 1.0
+    assert "chamfer_ratio" not in verdict

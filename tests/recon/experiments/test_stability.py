@@ -1,0 +1,90 @@
+"""Stability sweeps: degraded cells, failure maps and accuracy heatmaps per method."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import recon_fake_methods  # noqa: F401  (registers the test-only methods)
+
+from recon.experiments.stability import StabilityError, degrade, simulate_levels, stability
+from tests.recon.conftest import FAST_SCORE, sphere_mesh, sphere_points
+
+
+def test_degrade_adds_noise_along_the_line_of_sight_subsamples_and_adds_outliers():
+    points, view, _ = sphere_points(4000)
+    seq = np.random.SeedSequence((7, 1, 1, 1))
+    noisy, noisy_view = degrade(points, view, noise_sigma3=0.03, density=0.5, outliers=0.1,
+                                seed_sequence=seq)
+    again, _ = degrade(points, view, noise_sigma3=0.03, density=0.5, outliers=0.1,
+                       seed_sequence=np.random.SeedSequence((7, 1, 1, 1)))
+    assert noisy.tobytes() == again.tobytes()  # same seed, same bytes
+    assert len(noisy) == 2000 + 200 and noisy_view.shape == noisy.shape
+    # View points sit on the normal, so range noise is radial: sigma 0.01 along the radius.
+    radial = np.linalg.norm(noisy[:2000], axis=1) - 1
+    assert np.std(radial) == pytest.approx(0.01, rel=0.1)
+    low, high = noisy[:2000].min(axis=0), noisy[:2000].max(axis=0)  # the kept points' box
+    assert np.all((noisy[2000:] >= low) & (noisy[2000:] <= high))
+
+
+def test_stability_maps_failures_and_accuracy_per_method(tmp_path):
+    points, view, _ = sphere_points(3000)
+    report = stability(tmp_path, clouds={"base": (points, view, False)}, truth=sphere_mesh(4),
+                       names=["convex-hull", "test-abort"], noise=(0.0, 0.03),
+                       density=(1.0,), outliers=(0.0, 0.05), seed=1, timeout_s=60,
+                       scheduler="threads", score_options=FAST_SCORE)
+    records = report["records"]
+    assert len(records) == 2 * 2 * 1 * 2
+    abort = [r for r in records if r["method"] == "test-abort"]
+    hull = [r for r in records if r["method"] == "convex-hull"]
+    assert all(r["failure"] == "crash" for r in abort)
+    assert all(r["status"] == "ok" for r in hull)
+    # The hull wraps outliers and noise: its error grows with both.
+    clean = next(r for r in hull if r["noise_sigma3_m"] == 0 and r["outliers"] == 0
+                 and r["density"] == 1)
+    dirty = next(r for r in hull if r["noise_sigma3_m"] == 0.03 and r["outliers"] == 0.05
+                 and r["density"] == 1)
+    assert dirty["chamfer_m"] > 3 * clean["chamfer_m"]
+    summary = json.loads((tmp_path / "stability.json").read_text())
+    assert summary["failure_rate"] == {"convex-hull": 0.0, "test-abort": 1.0}
+    assert len((tmp_path / "stability.csv").read_text().splitlines()) == 9
+    for method in ("convex-hull", "test-abort"):
+        for kind in ("failures", "accuracy"):
+            assert (tmp_path / f"{method}_{kind}.png").stat().st_size > 10_000
+
+
+def test_stability_resumes_without_rerunning(tmp_path):
+    points, view, _ = sphere_points(1000)
+    common = {"clouds": {"base": (points, view, False)}, "truth": sphere_mesh(3),
+              "names": ["convex-hull"], "noise": (0.0,), "density": (1.0, 0.5),
+              "outliers": (0.0,), "scheduler": "serial", "score_options": FAST_SCORE}
+    first = stability(tmp_path, **common)["records"]
+    second = stability(tmp_path, resume=True, **common)["records"]
+    assert [r["wall_time_s"] for r in first] == [r["wall_time_s"] for r in second]
+
+
+def test_scene_levels_are_fresh_simulations_with_range_noise(tmp_path):
+    clouds, truth = simulate_levels("asteroid-lidar", [0.0, 3.0], tmp_path,
+                                    overrides=["time.duration=30"], seed=0)
+    (p0, _, noisy0), (p1, _, noisy1) = clouds["0"], clouds["3"]
+    assert noisy0 and noisy1 and len(truth[1]) > 1000
+    assert (tmp_path / "logs" / "noise-3.h5").is_file()
+    from metrics import point_mesh_distance
+
+    assert point_mesh_distance(p0, truth)[0].max() < 1e-3
+    assert np.std(point_mesh_distance(p1, truth)[0]) > 0.3
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"noise": ()}, "noise needs at least one level"),
+    ({"density": (0.0,)}, r"density level 0 is out of range \(must be \[1e-09, 1\]\)"),
+    ({"density": (1.5,)}, "density level 1.5 is out of range"),
+    ({"outliers": (-0.1,)}, "outliers level -0.1 is out of range"),
+    ({"noise": (0.1, 0.1)}, "noise levels repeat"),
+])
+def test_bad_levels_are_named(tmp_path, kwargs, match):
+    points, view, _ = sphere_points(200)
+    with pytest.raises(StabilityError, match=match):
+        stability(tmp_path, clouds={"base": (points, view, False)}, truth=sphere_mesh(2),
+                  names=["convex-hull"], **kwargs)

@@ -1,0 +1,324 @@
+"""The studies: case construction, prefix exactness, claims, end-to-end runs, resume, report.
+
+Every study runs end to end at its ``tiny`` size (smaller than ``--quick``; serial scheduler) once
+for the module; the tests then check what each wrote. The prefix test is the basis of every
+curve against time: a prefix of a long run must be exactly the shorter run.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+import sim
+from recon.experiments import charts, studies
+from recon.experiments.report import ReportError, render, write_report
+from recon.experiments.studies import duration, errors, inclination, rso, runner, slew
+from recon.experiments.sweep import SweepError
+
+SCENE_STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors")
+VERDICTS = {"reproduced", "partly", "not reproduced", "not tested"}
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """Every study at its tiny size, run once into one ``all`` directory (serial, no Dask)."""
+    out = tmp_path_factory.mktemp("studies")
+    index = studies.run_all(out, size="tiny", scheduler="serial")
+    return out, index
+
+
+# --------------------------------------------------------------------------- cases
+
+
+@pytest.mark.parametrize("name", SCENE_STUDIES)
+@pytest.mark.parametrize("size", ["quick", "full"])  # tiny: run end to end below
+def test_cases_load_and_last_long_enough(name, size):
+    cases = studies.get(name).cases(size)
+    assert cases, "a study without cases"
+    for key, case in cases.items():
+        scene = sim.load_scene(case["scene"], case["overrides"])
+        assert case["prefixes_s"] == sorted(case["prefixes_s"]), key
+        assert max(case["prefixes_s"]) <= scene.duration + 1e-6, key
+        assert isinstance(case["score_options"], dict), key
+
+
+@pytest.mark.parametrize("name", SCENE_STUDIES)
+def test_quick_is_smaller_than_full(name):
+    def simulated_time(size):  # every case simulates up to its last prefix
+        return sum(max(c["prefixes_s"]) for c in studies.get(name).cases(size).values())
+
+    assert simulated_time("tiny") < simulated_time("quick") < simulated_time("full")
+
+
+def test_inclination_cases_follow_the_paper():
+    cases = inclination.cases("full")
+    incs = {c["tags"]["inclination_deg"] for c in cases.values()}
+    assert {85.0, 90.0, 60.0} <= incs and min(incs) <= 30.0
+    for inc in (85.0, 90.0):
+        case = cases[f"inc={inc:g}"]
+        assert case["keep_coverage"]
+        assert max(case["prefixes_s"]) == runner.rotations(200)  # "100, 150 and 200 rotations"
+        assert runner.rotations(50) in case["prefixes_s"]       # Fig. 8 after 50 rotations
+    assert max(cases["inc=60"]["prefixes_s"]) == runner.rotations(100)  # Fig. 7a: 100 rotations
+
+
+def test_errors_cases_use_the_paper_error_values():
+    cases = errors.cases("full")
+    cross = [c for c in cases.values() if c["tags"] == {
+        "target": "ellipsoid", "configuration": "cross LRF", "scenario": "stochastic"}]
+    assert len(cross) == 3 and {c["seed"] for c in cross} == {0, 1, 2}
+    assert {"errors.range_sigma3=0.3", "errors.position_sigma3=2.0"} <= set(cross[0]["overrides"])
+    lidar = next(c for c in cases.values() if c["tags"]["configuration"] == "LIDAR"
+                 and c["tags"]["scenario"] == "stochastic")
+    assert {"errors.range_sigma3=1.0", "errors.azimuth_sigma3_deg=0.2"} <= set(lidar["overrides"])
+    assert not any(c["tags"]["configuration"] == "LIDAR"
+                   and c["tags"]["scenario"] == "pulse dilation" for c in cases.values())
+    dilation = next(c for c in cases.values() if c["tags"]["scenario"] == "pulse dilation")
+    assert "errors.dilation_alpha=0.0002" in dilation["overrides"]
+    rso_stochastic = next(c for c in cases.values() if c["tags"]["target"] == "rso-a"
+                          and c["tags"]["scenario"] == "stochastic"
+                          and c["tags"]["configuration"] == "cross LRF")
+    assert not any("position_sigma3" in o for o in rso_stochastic["overrides"])
+
+
+def test_rso_inclination_change_spans_76_to_94():
+    cases = rso.cases("full")
+    second = sorted(c["tags"]["second_inclination_deg"] for c in cases.values()
+                    if "second_inclination_deg" in c["tags"])
+    assert second[0] == 76.0 and second[-1] == 94.0 and 85.0 in second
+    scene = sim.load_scene(cases["rso-a change to 80"]["scene"],
+                           cases["rso-a change to 80"]["overrides"])
+    assert scene["orbit.change_time"] == 43 * 3600 and scene.duration == 86 * 3600
+
+
+def test_unknown_study_and_size_are_refused(tmp_path):
+    with pytest.raises(studies.StudyError, match=r"unknown study 'orbits' \(studies: incl"):
+        studies.get("orbits")
+    with pytest.raises(studies.StudyError, match="size must be one of tiny, quick, full"):
+        studies.run("duration", tmp_path, size="huge")
+
+
+# --------------------------------------------------------------------------- runner
+
+
+def test_a_prefix_of_a_long_run_is_the_short_run():
+    """With every error model on, across chunk boundaries: the same strikes and points.
+
+    Pulse dilation casts 31 rays per beam, so the 5-beam cross runs 3,382 shots per chunk
+    (sim/pipeline.py): the long run spans two chunks, the short one ends inside the second.
+    """
+    noisy = ["errors.range_sigma3=0.3", "errors.position_sigma3=1.0",
+             "errors.dilation_alpha=0.0002"]
+    long_cloud, _, _ = runner.simulate_cloud("rso-a-cross", ["time.duration=50000", *noisy],
+                                             seed=3)
+    short, _, _ = runner.simulate_cloud("rso-a-cross", ["time.duration=37000", *noisy], seed=3)
+    prefix = long_cloud.attributes["time"] < 37000
+    assert prefix.sum() == len(short) > 100
+    np.testing.assert_array_equal(long_cloud.points[prefix], short.points)
+    # and a prefix at <= would take one shot more than the short run has
+    assert (long_cloud.attributes["time"] <= 37000).sum() > len(short)
+
+
+def test_run_case_scores_each_prefix():
+    case = runner.scene_case("rso-a-lrf", ["time.duration=9000"], prefixes_s=[50, 4000, 9000],
+                             score_options={"n_truth_samples": 2000, "coverage_points": 4000},
+                             keep_points=100, points_at=[4000], tags={"what": "test"})
+    record = runner.run_case(**case)
+    first, mid, last = record["prefixes"]
+    assert record["tags"] == {"what": "test"} and record["sim"]["shots"] == 900
+    assert first["n_points"] == 5 and not first["scored"]     # t = 0..40 s: too few to score
+    assert mid["n_points"] == 400 and mid["scored"] and last["n_points"] == 900
+    assert len(mid["points"]) == 100 and "points" not in last
+    assert 0 < mid["coverage"] < last["coverage"] < 1
+    assert last["chamfer_m"] < mid["chamfer_m"]
+
+
+def test_levels_out_finds_the_first_flat_stretch():
+    xs = np.arange(10.0, 101.0, 10.0)
+    ys = np.array([0.2, 0.4, 0.55, 0.65, 0.7, 0.715, 0.72, 0.73, 0.735, 0.74])
+    assert duration.levels_out(xs, ys, gain=0.02) == 50.0
+    assert duration.levels_out(xs, xs / 100, gain=0.02) is None
+
+
+def test_first_time_reaching():
+    xs = np.array([1.0, 2.0, 3.0])
+    assert runner.first_time_reaching(xs, np.array([0.1, 0.5, 0.9]), 0.5) == 2.0
+    assert runner.first_time_reaching(xs, np.array([0.9, 0.5, 0.1]), 0.4,
+                                      higher_better=False) == 3.0
+    assert runner.first_time_reaching(xs, np.array([0.1, 0.2, 0.3]), 0.5) is None
+
+
+def test_gap_claim_verdicts():
+    def gaps(u85, u90):
+        return {inc: [{"rotations": r, "uncovered_fraction": u, "cap_coverage": 1 - u}
+                      for r, u in zip((50, 100, 200), us, strict=True)]
+                for inc, us in ((85.0, u85), (90.0, u90))}
+
+    # the paper's picture: 90 deg leaves persistent gaps, 85 deg closes them
+    assert inclination._claim_gaps(gaps((0.05, 0.01, 0.0), (0.2, 0.18, 0.17)), 50, 200)[
+        "verdict"] == "reproduced"
+    # the opposite
+    assert inclination._claim_gaps(gaps((0.2, 0.1, 0.05), (0.1, 0.05, 0.02)), 50, 200)[
+        "verdict"] == "not reproduced"
+
+
+def test_slew_steady_claim():
+    rows = [{"slew_deg": a, "coverage": c, "fscore": c} for a, c in
+            ((0, 0.3), (2, 0.5), (5, 0.7))]
+    assert slew._claim_steady({60.0: rows})["verdict"] == "reproduced"
+    rows[2]["coverage"] = rows[2]["fscore"] = 0.4
+    assert slew._claim_steady({60.0: rows})["verdict"] == "not reproduced"
+
+
+def test_claim_rejects_an_unknown_verdict():
+    with pytest.raises(ValueError, match="verdict must be"):
+        runner.claim("x", "Fig. 1", "text", "p", "o", "confirmed")
+
+
+def test_coverage_map_bins_a_half_covered_sphere():
+    from sim.targets import icosphere
+
+    vertices, faces = icosphere(4)
+    lon, lat, area = charts.face_lonlat(vertices * [100.0, 100.0, 300.0], faces)
+    edges = np.degrees(np.arcsin(np.linspace(-1.0, 1.0, charts.MAP_LAT_BINS + 1)))
+    band = 24  # covered: every face in the latitude bands from this one up
+    coverage = (lat >= edges[band]).astype(float)
+    _, lat_edges, grid = charts.binned_map(lon, lat, area, coverage)
+    np.testing.assert_array_equal(lat_edges, edges)
+    assert np.nanmin(grid[band:]) == 1.0 and np.nanmax(grid[:band]) == 0.0
+    assert np.isnan(grid).mean() < 0.05  # the scaled icosphere fills nearly every bin
+    e = np.sqrt(1 - (100 / 300) ** 2)  # prolate spheroid: 2 pi a^2 (1 + c arcsin(e) / (a e))
+    assert np.isclose(area.sum(), 2 * np.pi * 100**2 * (1 + 3 * np.arcsin(e) / e), rtol=0.01)
+
+
+# --------------------------------------------------------------------------- end to end
+
+
+@pytest.mark.parametrize("name", studies.STUDIES)
+def test_tiny_run_writes_data_charts_and_claims(tiny, name):
+    out, index = tiny
+    directory = out / name
+    summary = json.loads((directory / "summary.json").read_text())
+    assert summary["study"] == name and summary["size"] == "tiny"
+    assert summary["n_failed"] == 0, summary["failures"]
+    assert summary["claims"] and {c["verdict"] for c in summary["claims"]} <= VERDICTS
+    for c in summary["claims"]:
+        assert c["claim"] and c["ours"] and c["figure"]
+    for file in summary["files"]:
+        path = directory / file
+        assert path.is_file(), file
+        if path.suffix == ".png":
+            assert path.read_bytes()[:4] == b"\x89PNG" and path.stat().st_size > 10_000
+    assert len((directory / "results.csv").read_text().splitlines()) > 1
+    assert index["studies"][name]["n_failed"] == 0
+
+
+def test_tiny_run_index(tiny):
+    out, index = tiny
+    assert list(index["studies"]) == list(studies.STUDIES)
+    assert json.loads((out / "index.json").read_text())["wall_time_s"] == index["wall_time_s"]
+
+
+def test_resume_keeps_finished_cases_and_reruns_missing_and_failed(tmp_path):
+    first = studies.run("duration", tmp_path, size="tiny", scheduler="serial")
+    path = tmp_path / "results.jsonl"
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    kept = next(r for r in lines if r["key"] == "lrf")
+    # drop the LIDAR case and record a failed LRF case on top of the good one
+    failed = {"key": "lrf", "status": "failed", "failure": "task", "reason": "killed"}
+    path.write_text(json.dumps(kept) + "\n" + json.dumps(failed) + "\n")
+    second = studies.run("duration", tmp_path, size="tiny", scheduler="serial", resume=True)
+    after = {r["key"]: r for r in map(json.loads, path.read_text().splitlines())}
+    assert set(after) == {"lrf", "lidar"}
+    assert all(r["status"] == "ok" for r in after.values())
+    assert after["lrf"]["wall_time_s"] != kept["wall_time_s"]  # the failed case ran again
+    assert second["claims"] == first["claims"]
+
+
+def test_resume_keeps_a_finished_case_untouched(tmp_path):
+    studies.run("duration", tmp_path, size="tiny", scheduler="serial")
+    path = tmp_path / "results.jsonl"
+    lines = path.read_text().splitlines()
+    path.write_text(lines[0] + "\n")
+    studies.run("duration", tmp_path, size="tiny", scheduler="serial", resume=True)
+    again = path.read_text().splitlines()
+    assert again[0] == lines[0] and len(again) == 2
+
+
+def test_resume_with_other_cases_is_refused(tmp_path):
+    studies.run("duration", tmp_path, size="tiny", scheduler="serial")
+    with pytest.raises(SweepError, match=r"--resume: .* holds a sweep with different "
+                                         r"cases_sha1"):
+        studies.run("duration", tmp_path, size="quick", scheduler="serial", resume=True)
+
+
+def test_bad_scheduler_and_output(tmp_path):
+    with pytest.raises(studies.StudyError, match="--scheduler must be a Dask scheduler address"):
+        studies.run("duration", tmp_path, size="tiny", scheduler="my cluster")
+    file = tmp_path / "file"
+    file.write_text("x")
+    with pytest.raises(studies.StudyError, match=r"-o .*file: is a file, not a directory"):
+        studies.run("duration", file, size="tiny", scheduler="serial")
+
+
+def test_unreachable_scheduler(monkeypatch, tmp_path):
+    monkeypatch.setattr(studies, "CONNECT_TIMEOUT_S", 1)
+    with pytest.raises(studies.StudyError, match=r"--scheduler tcp://127.0.0.1:9: cannot "
+                                                 "connect"):
+        studies.run("duration", tmp_path, size="tiny", scheduler="tcp://127.0.0.1:9")
+
+
+# --------------------------------------------------------------------------- report
+
+
+def _self_contained(page: str) -> None:
+    for src in re.findall(r'src="([^"]*)"', page):
+        assert src.startswith("data:image/png;base64,"), src[:60]
+    for href in re.findall(r'href="([^"]*)"', page):
+        assert href.startswith("#"), href
+    assert "<link" not in page and "<script" not in page and "url(" not in page
+
+
+def test_report_of_all_studies_is_self_contained(tiny, tmp_path):
+    out, _ = tiny
+    path = write_report(out, tmp_path / "sub" / "report.html")
+    page = path.read_text()
+    _self_contained(page)
+    assert page.count("<img") >= 10
+    for name in studies.STUDIES:
+        assert f'href="#{name}"' in page and f'id="{name}"' in page
+    assert "table1.csv" in page and "reproduced" in page
+
+
+def test_report_of_one_study_and_of_a_comparison(tiny):
+    out, _ = tiny
+    page = render(out / "errors")
+    _self_contained(page)
+    assert "Table 1" in page and "<td class=num>" in page
+    compare_dir = next(p for p in (out / "methods").iterdir() if (p / "results.json").exists())
+    page = render(compare_dir)
+    _self_contained(page)
+    assert "Method comparison" in page and "convex-hull" in page and "<img" in page
+
+
+def test_report_escapes_text(tmp_path):
+    (tmp_path / "summary.json").write_text(json.dumps({
+        "study": "x", "title": "<script>alert(1)</script>", "size": "full", "claims": [],
+        "files": [], "n_cases": 0, "n_failed": 0}))
+    page = render(tmp_path)
+    assert "<script>" not in page and "&lt;script&gt;" in page
+
+
+def test_report_bad_inputs(tmp_path):
+    with pytest.raises(ReportError, match="not a study or comparison directory"):
+        render(tmp_path)
+    with pytest.raises(ReportError, match="no such directory"):
+        render(tmp_path / "missing")
+    (tmp_path / "summary.json").write_text(json.dumps({"study": "x", "claims": [],
+                                                       "files": []}))
+    with pytest.raises(ReportError, match=r"is a directory; give an \.html file"):
+        write_report(tmp_path, tmp_path)

@@ -1,0 +1,121 @@
+"""Isolation: crashes, hangs, memory blow-ups and bad meshes are recorded, never fatal.
+
+``recon_fake_methods`` registers hidden methods that abort the process (``os.abort``), hang,
+allocate past the memory limit, return nothing, return a zero-area mesh, or refuse. The
+comparison runs them beside real methods on a Dask cluster and must keep everyone's results.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import recon_fake_methods  # noqa: F401  (registers the test-only methods)
+
+from recon.experiments.compare import compare
+from recon.surfaces.isolation import run_isolated, watertight
+from recon.surfaces.methods import MethodFailed
+from recon.surfaces.reconstruct import prepare, reconstruct
+from tests.recon.conftest import FAST_SCORE, sphere_mesh, sphere_points
+
+# A hang must end at the limit, not after its hour-long sleep.
+HANG_LIMIT_S = 4.0
+
+
+@pytest.fixture(scope="module")
+def cloud():
+    points, view, _ = sphere_points(3000)
+    return prepare(points, view_points=view)
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """One local Dask cluster for the module (start-up costs a few seconds)."""
+    import logging
+
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=":0", silence_logs=logging.ERROR) as local:
+        yield local.scheduler_address
+
+
+@pytest.mark.parametrize("method, params, kind, reason", [
+    ("test-abort", {}, "crash", "crashed with SIGABRT while running"),
+    ("test-hang", {}, "timeout", f"timed out after {HANG_LIMIT_S:g} s while running"),
+    ("test-hog", {"megabytes": 3000}, "memory", "out of memory"),
+    ("test-empty", {}, "empty", "empty mesh"),
+    ("test-flat", {}, "degenerate", "degenerate mesh"),
+    ("test-refuse", {}, "error", "refused on purpose"),
+])
+def test_each_failure_is_recorded_with_its_kind(cloud, method, params, kind, reason):
+    result = run_isolated(method, cloud, params, timeout_s=HANG_LIMIT_S, memory_mb=1536)
+    assert result["status"] == "failed"
+    assert result["failure"] == kind
+    assert reason in result["reason"]
+    assert result["process_time_s"] < HANG_LIMIT_S + 5
+
+
+def test_a_good_run_returns_its_mesh_time_and_memory(cloud):
+    result = run_isolated("convex-hull", cloud, truth=sphere_mesh(3), score_options=FAST_SCORE)
+    assert result["status"] == "ok" and result["failure"] is None
+    assert result["n_faces"] == len(result["faces"]) > 1000
+    assert result["watertight"]
+    assert 0 < result["wall_time_s"] < result["process_time_s"]
+    assert result["peak_memory_mb"] > 10
+    assert result["scores"]["chamfer_m"] < 0.01
+    assert 0.9 < result["scores"]["fscore"] <= 1.0
+
+
+def test_reconstruct_isolated_raises_method_failed(cloud):
+    with pytest.raises(MethodFailed, match=r"test-abort failed \(crash\)"):
+        reconstruct(cloud, method="test-abort", isolate=True)
+    surface = reconstruct(cloud, method="convex-hull", isolate=True)
+    assert surface.info["peak_memory_mb"] > 0 and len(surface.faces) > 1000
+
+
+def test_comparison_survives_crashes_and_hangs(cloud, cluster, tmp_path):
+    names = ["convex-hull", "test-abort", "planes", "test-hang", "ball-pivoting"]
+    report = compare(cloud, sphere_mesh(4), tmp_path, names=names, grid=False,
+                     timeout_s=HANG_LIMIT_S, scheduler=cluster, score_options=FAST_SCORE)
+    by_method = {r["method"]: r for r in report["records"]}
+    assert set(by_method) == set(names)
+    assert by_method["test-abort"]["failure"] == "crash"
+    assert by_method["test-hang"]["failure"] == "timeout"
+    for name in ("convex-hull", "planes", "ball-pivoting"):
+        record = by_method[name]
+        assert record["status"] == "ok", record["reason"]
+        assert record["chamfer_m"] > 0 and record["n_faces"] > 0
+        assert (tmp_path / record["mesh"]).is_file()
+    saved = json.loads((tmp_path / "results.json").read_text())
+    assert {r["method"] for r in saved["runs"]} == set(names)
+    assert "crashed with SIGABRT" in (tmp_path / "results.csv").read_text()
+    assert (tmp_path / "speed_accuracy.png").stat().st_size > 10_000
+
+
+def test_watertight_detects_holes_and_flips():
+    from tests.recon.conftest import box_mesh
+
+    _, faces = box_mesh()
+    assert watertight(faces)
+    assert not watertight(faces[1:])
+    flipped = faces.copy()
+    flipped[0] = flipped[0, ::-1]
+    assert not watertight(flipped)
+    assert not watertight(np.zeros((0, 3), dtype=np.int64))
+
+
+def test_peak_memory_is_the_childs_own_not_the_parents():
+    """ru_maxrss survives fork and exec on Linux; a large parent must not inflate the figure."""
+    import subprocess
+    import sys
+
+    script = ("import numpy as np, subprocess, sys\n"
+              "big = np.ones(300_000_000 // 8)\n"
+              "print(subprocess.run([sys.executable, '-c', 'from recon.surfaces.isolation import "
+              "_maxrss_mb; print(_maxrss_mb())'], capture_output=True, text=True, "
+              "check=True).stdout)")
+    child_mb = float(subprocess.run([sys.executable, "-c", script], capture_output=True,
+                                    text=True, check=True).stdout)
+    assert child_mb < 250  # the child imports numpy and scipy, far below the parent's 300 MB
