@@ -28,14 +28,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_ingest(args) -> int:
     from tqdm import tqdm
 
-    from formats import StrikeLog
     from recon.registration.ingest import ingest_to_file
 
-    with StrikeLog(args.log) as log:
-        total = log.n_strikes
-    with tqdm(total=total, unit="strike", unit_scale=True, disable=None, leave=False,
-              desc="ingest") as bar:
-        summary = ingest_to_file(args.log, args.output, frame=args.frame, progress=bar.update)
+    with tqdm(unit="strike", unit_scale=True, disable=None, leave=False, desc="ingest") as bar:
+        def advance(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done)
+
+        summary = ingest_to_file(args.log, args.output, frame=args.frame, progress=advance)
     print(f"wrote {summary['n_points']} points ({args.frame} frame) to {args.output}")
     return 0
 
@@ -45,7 +45,8 @@ def run_truth(args) -> int:
     from formats.mesh_io import write_mesh
 
     with StrikeLog(args.log) as log:
-        vertices, faces = log.truth_mesh()
-    write_mesh(args.output, vertices, faces)
-    print(f"wrote truth mesh ({len(vertices)} vertices, {len(faces)} faces) to {args.output}")
+        truth = log.truth_mesh()
+    write_mesh(args.output, truth)
+    print(f"wrote truth mesh ({truth.n_vertices} vertices, {truth.n_faces} faces) to "
+          f"{args.output}")
     return 0

@@ -150,7 +150,7 @@ def _score_options(args) -> dict | None:
 def _load(args):
     """Read, preprocess and prepare the input cloud.
 
-    Returns the preprocessed ``PointCloud`` (points and view points) and its ``MethodInput``.
+    Returns the preprocessed ``Cloud`` (points and view points) and its ``MethodInput``.
     """
     from recon.inputs import load_cloud
     from recon.surfaces.reconstruct import InputError, prepare, preprocess

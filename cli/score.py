@@ -55,39 +55,27 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args) -> int:
     import sys
 
-    from formats.errors import ReconError
-    from metrics.score import score
-    from recon.inputs import is_strike_log, load_geometry, load_truth
-
-    truth_path = args.truth
-    if truth_path is None:
-        if not is_strike_log(args.test):
-            raise ReconError(f"{args.test}: is not a strike log with truth; give --truth")
-        truth_path = args.test
-    truth = load_truth(truth_path, scale=args.truth_scale)
-    test = load_geometry(args.test)
-    if not isinstance(test, tuple):  # a PointCloud: pass its normals, if any
-        from metrics.inputs import Cloud
-
-        test = Cloud(test.points, test.normals)
     from tqdm import tqdm
 
+    from recon import api
+
+    truth = api.default_truth(args.test) if args.truth is None else args.truth
     stages = 2 if args.no_edges else 3
     with warnings.catch_warnings(record=True) as caught, \
             tqdm(total=stages, desc="score", unit="stage", disable=None, leave=False,
                  delay=1.0) as bar:
         warnings.simplefilter("always")
-        report = score(test, truth, tau=args.tau, tau_fraction=args.tau_fraction,
-                       seed=args.seed, edges=not args.no_edges,
-                       progress=lambda stage: bar.update(1))
+        report = api.score(args.test, truth=truth, truth_scale=args.truth_scale, tau=args.tau,
+                           tau_fraction=args.tau_fraction, seed=args.seed,
+                           edges=not args.no_edges, progress=lambda stage: bar.update(1))
     for w in caught:
         print(f"recon score: warning: {w.message}", file=sys.stderr)
     result = report.to_dict()
-    result |= {"test": str(args.test), "truth": str(truth_path)}
+    result |= {"test": str(args.test), "truth": str(truth)}
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    print(f"{args.test} ({result['test_kind']}) against {truth_path}")
+    print(f"{args.test} ({result['test_kind']}) against {truth}")
     width = max(len(label) for _, label, _ in _TABLE)
     for key, label, unit in _TABLE:
         value = result.get(key)

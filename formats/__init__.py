@@ -4,6 +4,7 @@ The bottom layer of recon: it imports none of the other packages.
 """
 
 from formats.errors import MeshFormatError, ReconError, StrikeLogError
+from formats.geometry import Cloud, Mesh
 from formats.strike_log import (
     FORMAT_NAME,
     FORMAT_VERSION,
@@ -19,6 +20,8 @@ from formats.strike_log import (
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "Cloud",
+    "Mesh",
     "MeshFormatError",
     "ReconError",
     "SensorErrors",

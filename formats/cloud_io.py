@@ -24,13 +24,13 @@ Formats
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
+from formats.geometry import Cloud
 from formats.ply import PlyWriter, read_ply_columns
 
 CLOUD_SUFFIXES = (".ply", ".las", ".laz", ".h5")
@@ -39,47 +39,6 @@ CLOUD_FORMAT_VERSION = 1
 # LAS stores int32 coordinates: 0.1 mm steps reach +-214 km, beyond any target we image.
 LAS_SCALE_M = 1e-4
 _CHUNK_ROWS = 65_536
-
-
-@dataclass
-class PointCloud:
-    """Points with named per-point attributes.
-
-    Attributes
-    ----------
-    points : (n, 3) float64, metres, in the frame the producer states (body frame for ingest)
-    attributes : dict of str to (n,) arrays
-    """
-
-    points: np.ndarray
-    attributes: dict[str, np.ndarray] = field(default_factory=dict)
-
-    def __post_init__(self):
-        self.points = np.asarray(self.points, dtype=np.float64)
-        if self.points.ndim != 2 or self.points.shape[1] != 3:
-            raise MeshFormatError(f"points must be (n, 3), got {self.points.shape}")
-        for name, values in self.attributes.items():
-            if len(values) != len(self.points):
-                raise MeshFormatError(f"attribute {name!r} has {len(values)} values for "
-                                      f"{len(self.points)} points")
-
-    def __len__(self) -> int:
-        return len(self.points)
-
-    def _triple(self, names: tuple[str, str, str]) -> np.ndarray | None:
-        if not all(n in self.attributes for n in names):
-            return None
-        return np.stack([np.asarray(self.attributes[n], dtype=np.float64) for n in names], axis=1)
-
-    @property
-    def normals(self) -> np.ndarray | None:
-        """(n, 3) float64 unit normals, or None."""
-        return self._triple(("nx", "ny", "nz"))
-
-    @property
-    def view_points(self) -> np.ndarray | None:
-        """(n, 3) float64 sensor positions [m] each point was seen from, or None."""
-        return self._triple(("view_x", "view_y", "view_z"))
 
 
 def _suffix(path: Path) -> str:
@@ -210,7 +169,7 @@ def open_cloud_writer(path, n_points: int, dtypes: dict[str, np.dtype]) -> Atomi
     return _WRITERS[_suffix(path)](path, n_points, {k: np.dtype(v) for k, v in dtypes.items()})
 
 
-def write_cloud(path, cloud: PointCloud) -> Path:
+def write_cloud(path, cloud: Cloud) -> Path:
     """Write a whole point cloud; the suffix of ``path`` picks PLY, LAS, LAZ or HDF5."""
     dtypes = {k: np.asarray(v).dtype for k, v in cloud.attributes.items()}
     with open_cloud_writer(path, len(cloud), dtypes) as writer:
@@ -221,7 +180,7 @@ def write_cloud(path, cloud: PointCloud) -> Path:
 # --------------------------------------------------------------------------- readers
 
 
-def read_cloud(path) -> PointCloud:
+def read_cloud(path) -> Cloud:
     """Read a point cloud with its attributes (PLY, LAS/LAZ, or recon's HDF5 cloud).
 
     A PLY mesh is read as the cloud of its vertices.
@@ -231,18 +190,24 @@ def read_cloud(path) -> PointCloud:
     if not path.is_file():
         raise MeshFormatError(f"{path}: no such file")
     if kind == ".ply":
-        columns, _ = read_ply_columns(path)
-        missing = [k for k in "xyz" if k not in columns]
-        if missing:
-            raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
-        points = np.stack([columns.pop(k).astype(np.float64) for k in "xyz"], axis=1)
-        return PointCloud(points, columns)
+        return cloud_from_ply_columns(path, read_ply_columns(path)[0])
     if kind == ".h5":
         return _read_h5(path)
     return _read_las(path)
 
 
-def _read_h5(path: Path) -> PointCloud:
+def cloud_from_ply_columns(path, columns: dict[str, np.ndarray]) -> Cloud:
+    """The cloud of a PLY file's vertex columns (``formats.ply.read_ply_columns``): x, y, z as
+    points, every other column an attribute. ``path`` only names the file in errors."""
+    missing = [k for k in "xyz" if k not in columns]
+    if missing:
+        raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
+    columns = dict(columns)
+    points = np.stack([columns.pop(k).astype(np.float64) for k in "xyz"], axis=1)
+    return Cloud(points, columns)
+
+
+def _read_h5(path: Path) -> Cloud:
     import h5py
 
     try:
@@ -259,10 +224,10 @@ def _read_h5(path: Path) -> PointCloud:
         raise
     except (OSError, KeyError, ValueError, TypeError) as exc:
         raise MeshFormatError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
-    return PointCloud(points, attributes)
+    return Cloud(points, attributes)
 
 
-def _read_las(path: Path) -> PointCloud:
+def _read_las(path: Path) -> Cloud:
     import laspy
 
     try:
@@ -276,4 +241,4 @@ def _read_las(path: Path) -> PointCloud:
         attributes["time"] = gps_time
     for name in las.point_format.extra_dimension_names:
         attributes[name] = np.asarray(las[name])
-    return PointCloud(points, attributes)
+    return Cloud(points, attributes)

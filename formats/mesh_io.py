@@ -11,12 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from formats.errors import MeshFormatError
+from formats.geometry import Mesh
 from formats.ply import write_ply
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
 
-def read_mesh(path, *, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def read_mesh(path, *, scale: float = 1.0) -> Mesh:
     """Read a triangle mesh, multiplying its coordinates by ``scale``.
 
     Parameters
@@ -28,8 +29,8 @@ def read_mesh(path, *, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
 
     Returns
     -------
-    vertices : (n, 3) float64, file units times ``scale``
-    faces : (m, 3) int64
+    Mesh
+        vertices (n, 3) float64, file units times ``scale``; faces (m, 3) int64; body frame.
 
     Raises
     ------
@@ -59,10 +60,10 @@ def read_mesh(path, *, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         raise MeshFormatError(f"{path}: vertices contain NaN or Inf")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshFormatError(f"{path}: faces index vertices that do not exist")
-    return vertices * scale, faces
+    return Mesh(vertices * scale, faces)
 
 
-def write_mesh(path, vertices: np.ndarray, faces: np.ndarray, *,
+def write_mesh(path, vertices, faces: np.ndarray | None = None, *,
                vertex_normals: np.ndarray | None = None) -> Path:
     """Write a triangle mesh as binary little-endian PLY (atomically).
 
@@ -70,11 +71,13 @@ def write_mesh(path, vertices: np.ndarray, faces: np.ndarray, *,
     ----------
     path : str or Path
         Destination; must end in ``.ply``.
-    vertices : (n, 3) float64
+    vertices : (n, 3) float64, or a ``Mesh`` (then ``faces`` is not given)
     faces : (m, 3) int
     vertex_normals : (n, 3) float64, optional
     """
     path = Path(path)
+    if faces is None:
+        vertices, faces = Mesh.of(vertices, "mesh")
     if path.suffix.lower() != ".ply":
         raise MeshFormatError(f"{path}: meshes are written as .ply")
     vertices = np.asarray(vertices, dtype=np.float64)

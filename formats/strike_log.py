@@ -19,6 +19,7 @@ import numpy as np
 
 from formats.atomic import AtomicWriter
 from formats.errors import StrikeLogError
+from formats.geometry import Mesh
 from formats.version import __version__
 
 FORMAT_NAME = "recon-strike-log"
@@ -736,7 +737,7 @@ class StrikeLog:
         if not self.has_truth:
             raise StrikeLogError(f"{self._where}: log has no /truth group")
 
-    def truth_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+    def truth_mesh(self) -> Mesh:
         """The truth mesh: vertices (n, 3) float64 [m, body frame] and faces (m, 3) int64."""
         self._require_truth()
         with _hdf5_errors(self._where):
@@ -747,7 +748,7 @@ class StrikeLog:
             raise StrikeLogError(f"{self._where}: truth mesh has no faces")
         if faces.min() < 0 or faces.max() >= len(vertices):
             raise StrikeLogError(f"{self._where}: truth mesh faces index missing vertices")
-        return vertices, faces
+        return Mesh(vertices, faces)
 
     def truth_shots(self, start: int = 0, stop: int | None = None) -> Shots:
         """True poses of shots ``start:stop`` (time is the recorded time)."""

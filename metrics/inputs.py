@@ -1,4 +1,4 @@
-"""The two kinds of geometry the metrics take, and their validation.
+"""Validation of the geometry the metrics take: ``formats.geometry``'s ``Cloud`` and ``Mesh``.
 
 A test reconstruction is a point cloud (``Cloud``, or a bare ``(n, 3)`` array) or a triangle mesh
 (``Mesh``, a ``(vertices, faces)`` tuple, or any object with ``vertices`` and ``faces`` attributes
@@ -8,44 +8,10 @@ frame (for recon, the target body frame B).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from formats.geometry import Cloud, Mesh
 from metrics.errors import MetricsInputError
-
-
-@dataclass(frozen=True)
-class Cloud:
-    """A point cloud with optional per-point normals.
-
-    Attributes
-    ----------
-    points : (n, 3) float64, metres
-    normals : (n, 3) float64 or None
-        Unit or non-unit normals (only their direction is used); their sign is ignored.
-    """
-
-    points: np.ndarray
-    normals: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class Mesh:
-    """A triangle mesh.
-
-    Attributes
-    ----------
-    vertices : (n_vertices, 3) float64, metres
-    faces : (n_faces, 3) int64, rows of ``vertices``, counter-clockwise seen from outside
-    """
-
-    vertices: np.ndarray
-    faces: np.ndarray
-
-    @property
-    def n_faces(self) -> int:
-        return len(self.faces)
 
 
 def _finite_xyz(array, what: str) -> np.ndarray:
@@ -103,7 +69,7 @@ def as_cloud(cloud, name: str = "cloud") -> Cloud:
         if (length == 0).any():
             raise MetricsInputError(f"{name} normals has {int((length == 0).sum())} zero vector(s)")
         normals = normals / length[:, None]
-    return Cloud(points, normals)
+    return Cloud(points, normals=normals, frame=getattr(cloud, "frame", "body"))
 
 
 def as_mesh(mesh, name: str = "mesh") -> Mesh:
@@ -150,14 +116,14 @@ def as_mesh(mesh, name: str = "mesh") -> Mesh:
     faces_arr = np.ascontiguousarray(faces_arr, dtype=np.int64)
     if not face_areas(vertices, faces_arr).sum() > 0:
         raise MetricsInputError(f"{name} has zero total area (all faces degenerate)")
-    return Mesh(vertices, faces_arr)
+    return Mesh(vertices, faces_arr, frame=getattr(mesh, "frame", "body"))
 
 
 def as_test(test, name: str = "test") -> Cloud | Mesh:
     """Validate a test reconstruction: a ``Cloud``, an (n, 3) array, or a mesh (see ``as_mesh``).
 
     A tuple is read as ``(vertices, faces)``; pass a cloud with normals as
-    ``Cloud(points, normals)``.
+    ``Cloud(points, normals=normals)``.
     """
     if isinstance(test, Cloud):
         return as_cloud(test, name)

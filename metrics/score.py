@@ -200,6 +200,9 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     """
     truth = as_mesh(truth, "truth")
     test = as_test(test, "test")
+    if test.frame != truth.frame:
+        raise MetricsInputError(f"test is in the {test.frame} frame but truth in the "
+                                f"{truth.frame} frame: register both in one frame")
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int | np.integer)
                              or seed < 0):
         raise MetricsInputError(f"seed must be a non-negative integer or None, got {seed!r}")

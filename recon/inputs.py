@@ -11,17 +11,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from formats import StrikeLog
-from formats.cloud_io import CLOUD_SUFFIXES, PointCloud, read_cloud
+from formats.cloud_io import CLOUD_SUFFIXES, cloud_from_ply_columns, read_cloud
 from formats.errors import MeshFormatError
+from formats.geometry import Cloud, Mesh
 from formats.mesh_io import MESH_SUFFIXES, read_mesh
 from formats.ply import read_ply_columns
 from formats.strike_log import FORMAT_NAME
 from recon.registration.ingest import ingest
-
-Mesh = tuple[np.ndarray, np.ndarray]
 
 
 def is_strike_log(path) -> bool:
@@ -39,8 +36,8 @@ def is_strike_log(path) -> bool:
     return (fmt.decode() if isinstance(fmt, bytes) else fmt) == FORMAT_NAME
 
 
-def load_geometry(path) -> PointCloud | Mesh:
-    """A cloud (``PointCloud``) or a mesh (``(vertices, faces)``) from any supported file.
+def load_geometry(path) -> Cloud | Mesh:
+    """A ``Cloud`` or a ``Mesh`` from any supported file, each file read once.
 
     Strike logs are ingested into a body-frame cloud.
     """
@@ -52,11 +49,8 @@ def load_geometry(path) -> PointCloud | Mesh:
         return ingest(path)
     if suffix == ".ply":
         columns, faces = read_ply_columns(path)
-        if faces is None:
-            return read_cloud(path)
-        if any(k not in columns for k in "xyz"):
-            raise MeshFormatError(f"{path}: PLY vertices lack x, y, z")
-        return np.stack([columns[k].astype(np.float64) for k in "xyz"], axis=1), faces
+        cloud = cloud_from_ply_columns(path, columns)
+        return cloud if faces is None else Mesh(cloud.points, faces)
     if suffix in MESH_SUFFIXES:
         return read_mesh(path)
     if suffix in CLOUD_SUFFIXES:
@@ -66,10 +60,10 @@ def load_geometry(path) -> PointCloud | Mesh:
                           "or a strike log (.h5)")
 
 
-def load_cloud(path) -> PointCloud:
+def load_cloud(path) -> Cloud:
     """A point cloud from a cloud file or a strike log (ingested); a mesh is refused."""
     geometry = load_geometry(path)
-    if not isinstance(geometry, PointCloud):
+    if not isinstance(geometry, Cloud):
         raise MeshFormatError(f"{path}: is a mesh, expected a point cloud or a strike log")
     return geometry
 
@@ -89,7 +83,7 @@ def load_truth(path, *, scale: float = 1.0) -> Mesh:
             if not log.has_truth:
                 raise MeshFormatError(f"{path}: strike log has no truth mesh; pass the truth "
                                       "mesh file with --truth")
-            return log.truth_mesh()
+            return Mesh.of(log.truth_mesh(), f"{path} truth mesh")
     if path.suffix.lower() in CLOUD_SUFFIXES and path.suffix.lower() != ".ply":
         raise MeshFormatError(f"{path}: is not a mesh (truth must be a mesh file or a strike "
                               "log with truth)")

@@ -1,7 +1,8 @@
 """Truth meshes of the simulated targets, in metres, in the target body frame B.
 
-Every builder returns ``(vertices, faces)``: ``(n, 3) float64`` metres in B, centred on the body,
-and ``(m, 3) int64`` triangles, counter-clockwise seen from outside (outward normals).
+Every builder returns a ``formats.geometry.Mesh`` (it unpacks as ``vertices, faces``):
+``(n, 3) float64`` metres in B, centred on the body, and ``(m, 3) int64`` triangles,
+counter-clockwise seen from outside (outward normals).
 
 - :func:`ellipsoid`: the paper's tri-axial asteroid, an icosphere scaled onto the ellipsoid, so
   every vertex lies exactly on the surface;
@@ -16,9 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from formats.geometry import Mesh
 from formats.mesh_io import read_mesh
-
-Mesh = tuple[np.ndarray, np.ndarray]
 
 # Paper, "Model: Tri-Axial Ellipsoid": semi-axes along x, y and z [m].
 ASTEROID_SEMI_AXES = (143.75, 86.25, 287.5)
@@ -68,7 +68,7 @@ def icosphere(subdivisions: int) -> Mesh:
         ab, bc, ca = m.T
         f = np.concatenate([np.stack(x, axis=1) for x in
                             ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
-    return v, f
+    return Mesh(v, f)
 
 
 def ellipsoid(semi_axes=ASTEROID_SEMI_AXES, subdivisions: int = 5) -> Mesh:
@@ -90,7 +90,7 @@ def ellipsoid(semi_axes=ASTEROID_SEMI_AXES, subdivisions: int = 5) -> Mesh:
     if axes.shape != (3,) or not np.all(np.isfinite(axes) & (axes > 0)):
         raise ValueError(f"semi_axes must be 3 positive lengths, got {semi_axes!r}")
     v, f = icosphere(subdivisions)
-    return v * axes, f   # scaling by positive factors keeps the faces outward
+    return Mesh(v * axes, f)   # scaling by positive factors keeps the faces outward
 
 
 # --------------------------------------------------------------------------- primitives
@@ -114,7 +114,7 @@ def box(lo, hi) -> Mesh:
     # Corner index = 4 i + 2 j + k; two triangles per side.
     f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], np.int64)
-    return v, _orient_outward(v, f, (lo + hi) / 2.0)
+    return Mesh(v, _orient_outward(v, f, (lo + hi) / 2.0))
 
 
 def _frame(axis) -> np.ndarray:
@@ -144,7 +144,7 @@ def sphere(centre, radius: float, segments: int = RSO_SEGMENTS) -> Mesh:
         faces += [np.stack([a, c, d], axis=1), np.stack([a, d, b], axis=1)]
     last = (n_lat - 2) * segments
     faces.append(np.stack([np.full(segments, south), last + j, last + i], axis=1))
-    return v, _orient_outward(v, np.concatenate(faces).astype(np.int64), centre)
+    return Mesh(v, _orient_outward(v, np.concatenate(faces).astype(np.int64), centre))
 
 
 def cylinder(base, axis, radius: float, length: float, segments: int = RSO_SEGMENTS) -> Mesh:
@@ -163,7 +163,7 @@ def cylinder(base, axis, radius: float, length: float, segments: int = RSO_SEGME
                         np.stack([np.full(segments, nb), j, i], axis=1),
                         np.stack([np.full(segments, nt), i + segments, j + segments], axis=1)])
     centre = np.asarray(base, np.float64) + frame[:, 2] * length / 2.0
-    return v, _orient_outward(v, f.astype(np.int64), centre)
+    return Mesh(v, _orient_outward(v, f.astype(np.int64), centre))
 
 
 def combine(*parts: Mesh) -> Mesh:
@@ -173,7 +173,7 @@ def combine(*parts: Mesh) -> Mesh:
         vertices.append(v)
         faces.append(f + offset)
         offset += len(v)
-    return np.vstack(vertices), np.vstack(faces).astype(np.int64)
+    return Mesh(np.vstack(vertices), np.vstack(faces).astype(np.int64))
 
 
 # --------------------------------------------------------------------------- the RSOs
@@ -269,7 +269,7 @@ def load_mesh(path, scale: float = 1.0, *, center: bool = False) -> Mesh:
     faces = np.asarray(faces, np.int64)
     if center:
         vertices = vertices - centroid(vertices, faces)
-    return vertices, faces
+    return Mesh(vertices, faces)
 
 
 # --------------------------------------------------------------------------- properties

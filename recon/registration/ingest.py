@@ -21,7 +21,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from formats import StrikeChunk, StrikeLog
-from formats.cloud_io import PointCloud, open_cloud_writer
+from formats.cloud_io import open_cloud_writer
+from formats.geometry import Cloud
 
 Frame = Literal["body", "inertial"]
 FRAMES = ("body", "inertial")
@@ -74,7 +75,7 @@ def iter_registered(log: StrikeLog, *, frame: Frame = "body", chunk_rows: int | 
     chunk_rows : int, optional
         Strikes per block (default: the reader's block size).
     progress : callable, optional
-        Called with the number of strikes done after each block.
+        Called as ``progress(strikes_in_block, total_strikes)`` after each block.
     """
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
@@ -82,7 +83,7 @@ def iter_registered(log: StrikeLog, *, frame: Frame = "body", chunk_rows: int | 
     for chunk in chunks:
         yield register_chunk(chunk, frame=frame)
         if progress:
-            progress(len(chunk))
+            progress(len(chunk), log.n_strikes)
 
 
 def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int | None = None,
@@ -104,13 +105,43 @@ def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int
         return {"n_points": log.n_strikes, "frame": frame, "output": str(Path(out_path))}
 
 
-def ingest(log_path, *, frame: Frame = "body") -> PointCloud:
-    """Register a whole log in memory and return it as a point cloud with its attributes."""
+def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | None = None,
+           progress=None) -> Cloud:
+    """Register a whole log in memory and return it as a point cloud with its attributes.
+
+    Parameters
+    ----------
+    log_path : str or os.PathLike
+    frame : {"body", "inertial"}
+    output : str or Path, optional
+        Also stream the cloud to this file (.ply, .las, .laz, .h5) from the same pass; it
+        appears only when every block was written.
+    chunk_rows : int, optional
+        Strikes per block (default: the reader's block size).
+    progress : callable, optional
+        Called as ``progress(strikes_in_block, total_strikes)`` after each block.
+
+    Returns
+    -------
+    Cloud
+        (n, 3) float64 metres in ``frame``; attributes ``time``, ``shot``, ``beam``, ``range``,
+        ``view_x/y/z``.
+    """
+    blocks = []
     with StrikeLog(log_path) as log:
-        blocks = list(iter_registered(log, frame=frame))
+        if output is None:
+            blocks = list(iter_registered(log, frame=frame, chunk_rows=chunk_rows,
+                                          progress=progress))
+        else:
+            with open_cloud_writer(output, log.n_strikes, ATTRIBUTE_DTYPES) as writer:
+                for points, attributes in iter_registered(log, frame=frame,
+                                                          chunk_rows=chunk_rows,
+                                                          progress=progress):
+                    writer.write(points, attributes)
+                    blocks.append((points, attributes))
     if not blocks:
-        return PointCloud(np.zeros((0, 3)), {k: np.zeros(0, dtype=v)
-                                             for k, v in ATTRIBUTE_DTYPES.items()})
+        return Cloud(np.zeros((0, 3)), {k: np.zeros(0, dtype=v)
+                                        for k, v in ATTRIBUTE_DTYPES.items()}, frame=frame)
     points = np.concatenate([b[0] for b in blocks])
     attributes = {k: np.concatenate([b[1][k] for b in blocks]) for k in ATTRIBUTE_DTYPES}
-    return PointCloud(points, attributes)
+    return Cloud(points, attributes, frame=frame)

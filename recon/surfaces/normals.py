@@ -228,7 +228,7 @@ def estimate_normals(points: np.ndarray, *, view_points: np.ndarray | None = Non
     ----------
     points : (n, 3) float64, metres, body frame
     view_points : (n, 3) float64, metres, body frame, optional
-        Sensor position of each strike (``PointCloud.view_points``). Without it the
+        Sensor position of each strike (``Cloud.view_points``). Without it the
         ``fallback`` heuristic orients the normals (see the module docstring).
     k : int
         Neighbours per PCA fit.

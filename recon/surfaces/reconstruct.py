@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from formats.cloud_io import PointCloud
 from formats.errors import ReconError
+from formats.geometry import Cloud
 from recon.surfaces import methods
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
@@ -123,13 +123,13 @@ def voxel_downsample(points: np.ndarray, voxel: float, *, view_points: np.ndarra
     return mean(points), (None if view_points is None else mean(view_points))
 
 
-def preprocess(cloud: PointCloud, *, remove_outliers: bool = False, outlier_k: int = OUTLIER_K,
-               outlier_std: float = OUTLIER_STD, voxel: float | None = None) -> PointCloud:
+def preprocess(cloud: Cloud, *, remove_outliers: bool = False, outlier_k: int = OUTLIER_K,
+               outlier_std: float = OUTLIER_STD, voxel: float | None = None) -> Cloud:
     """Statistical outlier removal, then voxel downsampling (each optional).
 
     Parameters
     ----------
-    cloud : PointCloud
+    cloud : Cloud
         Points in metres; ``view_x/y/z`` attributes, when present, follow their points.
     remove_outliers : bool
     outlier_k, outlier_std
@@ -139,7 +139,7 @@ def preprocess(cloud: PointCloud, *, remove_outliers: bool = False, outlier_k: i
 
     Returns
     -------
-    PointCloud
+    Cloud
         Points and (when the input had them) view points; other attributes are dropped.
     """
     points = cloud.points
@@ -152,7 +152,7 @@ def preprocess(cloud: PointCloud, *, remove_outliers: bool = False, outlier_k: i
         points, view = voxel_downsample(points, voxel, view_points=view)
     attributes = {} if view is None else {"view_x": view[:, 0], "view_y": view[:, 1],
                                           "view_z": view[:, 2]}
-    return PointCloud(points, attributes)
+    return Cloud(points, attributes)
 
 
 def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,

@@ -9,7 +9,8 @@ import pytest
 
 import sim
 from cli.main import main
-from formats.cloud_io import PointCloud, write_cloud
+from formats.cloud_io import write_cloud
+from formats.geometry import Cloud
 from formats.mesh_io import write_mesh
 
 KEYS = ("n_points", "tau_m", "accuracy_mean_m", "completeness_mean_m", "chamfer_m",
@@ -78,21 +79,21 @@ def test_log_without_truth_and_no_truth_argument(tmp_path, capsys):
 
 
 def test_cloud_without_truth_argument(tmp_path, capsys):
-    write_cloud(tmp_path / "c.ply", PointCloud(np.ones((5, 3))))
+    write_cloud(tmp_path / "c.ply", Cloud(np.ones((5, 3))))
     assert "give --truth" in _error(capsys, ["score", str(tmp_path / "c.ply")])
 
 
 def test_truth_that_is_not_a_mesh(rso_log, tmp_path, capsys):
-    write_cloud(tmp_path / "c.ply", PointCloud(np.ones((5, 3))))
+    write_cloud(tmp_path / "c.ply", Cloud(np.ones((5, 3))))
     assert "has no triangles" in _error(
         capsys, ["score", str(rso_log), "--truth", str(tmp_path / "c.ply")])
-    write_cloud(tmp_path / "c.las", PointCloud(np.ones((5, 3))))
+    write_cloud(tmp_path / "c.las", Cloud(np.ones((5, 3))))
     assert "is not a mesh" in _error(
         capsys, ["score", str(rso_log), "--truth", str(tmp_path / "c.las")])
 
 
 def test_empty_cloud(rso_log, tmp_path, capsys):
-    write_cloud(tmp_path / "empty.ply", PointCloud(np.zeros((0, 3))))
+    write_cloud(tmp_path / "empty.ply", Cloud(np.zeros((0, 3))))
     assert "empty" in _error(capsys, ["score", str(tmp_path / "empty.ply"), "--truth",
                                       str(rso_log)])
 
@@ -100,7 +101,7 @@ def test_empty_cloud(rso_log, tmp_path, capsys):
 def test_nan_coordinates(rso_log, tmp_path, capsys):
     points = np.ones((10, 3))
     points[3, 1] = np.nan
-    write_cloud(tmp_path / "nan.ply", PointCloud(points))
+    write_cloud(tmp_path / "nan.ply", Cloud(points))
     assert "NaN or Inf" in _error(capsys, ["score", str(tmp_path / "nan.ply"), "--truth",
                                            str(rso_log)])
 

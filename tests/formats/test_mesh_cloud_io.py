@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from formats.cloud_io import LAS_SCALE_M, PointCloud, open_cloud_writer, read_cloud, write_cloud
+from formats.cloud_io import LAS_SCALE_M, open_cloud_writer, read_cloud, write_cloud
 from formats.errors import MeshFormatError
+from formats.geometry import Cloud
 from formats.mesh_io import read_mesh, write_mesh
 from tests.conftest import SHARED_MESHES as MESHES
 
@@ -15,7 +16,7 @@ from tests.conftest import SHARED_MESHES as MESHES
 def cloud():
     rng = np.random.default_rng(3)
     n = 2000
-    return PointCloud(rng.normal(0, 300, (n, 3)), {
+    return Cloud(rng.normal(0, 300, (n, 3)), {
         "time": np.sort(rng.uniform(0, 1e5, n)), "shot": np.arange(n, dtype=np.uint32),
         "beam": rng.integers(0, 5, n).astype(np.uint32), "range": rng.uniform(100, 900, n),
         "view_x": rng.normal(0, 700, n), "view_y": rng.normal(0, 700, n),
@@ -92,7 +93,7 @@ def test_bad_mesh_inputs(tmp_path):
     (tmp_path / "garbage.ply").write_bytes(b"\x00\x01garbage")
     with pytest.raises(MeshFormatError, match=r"garbage\.ply: "):
         read_mesh(tmp_path / "garbage.ply")
-    write_cloud(tmp_path / "pts.ply", PointCloud(np.zeros((3, 3))))
+    write_cloud(tmp_path / "pts.ply", Cloud(np.zeros((3, 3))))
     with pytest.raises(MeshFormatError, match=r"pts\.ply: has no triangles"):
         read_mesh(tmp_path / "pts.ply")
     with pytest.raises(MeshFormatError, match="scale must be a positive number"):
@@ -108,6 +109,6 @@ def test_bad_cloud_inputs(tmp_path):
     with pytest.raises(MeshFormatError, match=r"bad\.las: not a readable LAS"):
         read_cloud(tmp_path / "bad.las")
     with pytest.raises(MeshFormatError, match=r"points must be \(n, 3\)"):
-        PointCloud(np.zeros((4, 2)))
+        Cloud(np.zeros((4, 2)))
     with pytest.raises(MeshFormatError, match="beyond"):
-        write_cloud(tmp_path / "far.las", PointCloud(np.array([[1e6, 0, 0]])))
+        write_cloud(tmp_path / "far.las", Cloud(np.array([[1e6, 0, 0]])))

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from cli.main import main
-from formats.cloud_io import PointCloud, write_cloud
+from formats.cloud_io import write_cloud
+from formats.geometry import Cloud
 from formats.mesh_io import read_mesh, write_mesh
 from tests.recon.conftest import box_mesh, box_points
 
@@ -21,7 +22,7 @@ def box_files(tmp_path_factory):
     folder = tmp_path_factory.mktemp("box")
     points, view, _ = box_points(4000, noise=0.003, seed=5)
     cloud = folder / "box.ply"
-    write_cloud(cloud, PointCloud(points, {"view_x": view[:, 0], "view_y": view[:, 1],
+    write_cloud(cloud, Cloud(points, {"view_x": view[:, 0], "view_y": view[:, 1],
                                            "view_z": view[:, 2]}))
     truth = folder / "truth.ply"
     write_mesh(truth, *box_mesh())

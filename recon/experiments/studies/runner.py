@@ -111,7 +111,7 @@ def simulate_cloud(scene: str, overrides: Sequence[str] = (), *, seed: int = 0,
 
     Returns
     -------
-    cloud : formats.cloud_io.PointCloud
+    cloud : formats.cloud_io.Cloud
         Body frame, with ``time`` and the view points.
     truth : (vertices (v, 3) float64 metres, faces (f, 3) int64)
     summary : dict

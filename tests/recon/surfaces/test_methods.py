@@ -166,13 +166,13 @@ def test_resolve_rejects_unknown_names():
 
 
 def test_preprocess_removes_outliers_and_downsamples():
-    from formats.cloud_io import PointCloud
+    from formats.geometry import Cloud
 
     points, view, _ = sphere_points(5000)
     rng = np.random.default_rng(4)
     far = rng.uniform(-3, 3, (50, 3))
     far = far[np.linalg.norm(far, axis=1) > 1.5]
-    cloud = PointCloud(np.concatenate([points, far]),
+    cloud = Cloud(np.concatenate([points, far]),
                        {"view_x": np.r_[view[:, 0], far[:, 0]],
                         "view_y": np.r_[view[:, 1], far[:, 1]],
                         "view_z": np.r_[view[:, 2], far[:, 2]]})
@@ -195,10 +195,10 @@ def test_prepare_rejects_unusable_clouds(points, match):
 
 
 def test_voxel_must_be_positive():
-    from formats.cloud_io import PointCloud
+    from formats.geometry import Cloud
 
     with pytest.raises(InputError, match="voxel must be a positive size"):
-        preprocess(PointCloud(np.zeros((20, 3))), voxel=0.0)
+        preprocess(Cloud(np.zeros((20, 3))), voxel=0.0)
 
 
 class _FakeMeshSet:

@@ -1,0 +1,230 @@
+"""recon's public API: the whole pipeline in a handful of verbs.
+
+>>> from recon import api
+>>> log = api.simulate("asteroid-lrf", "run.h5", seed=0)        # sim/: write a strike log
+>>> cloud = api.ingest(log)                                      # body-frame Cloud
+>>> surface = api.reconstruct(cloud, method="auto")              # Surface (a Mesh)
+>>> report = api.score(surface, truth=log)                       # metrics.ScoreReport
+>>> table = api.compare(cloud, truth=log, output="cmp")          # every method, speed x accuracy
+
+Every verb takes recon's own types (``formats.geometry.Cloud`` and ``Mesh``, a strike log path)
+or the plain data they wrap, and returns recon's types. Files are read once per call. The policy
+the command line applies (which truth a log implies, what ``auto`` decides, what a comparison
+writes) lives here and in the modules these verbs call, so a script gets what ``recon`` prints.
+Bad input raises a ``formats.errors.ReconError`` subclass with a one-line message.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from formats.errors import ReconError
+from formats.geometry import Cloud, Frame, Mesh
+
+__all__ = ["SimulatedLog", "compare", "ingest", "reconstruct", "score", "simulate"]
+
+
+class ApiError(ReconError, ValueError):
+    """A public API call got an argument it cannot use."""
+
+
+@dataclass(frozen=True)
+class SimulatedLog(os.PathLike):
+    """A strike log the simulator wrote: usable wherever a log path is (``os.PathLike``).
+
+    Attributes
+    ----------
+    path : Path
+    summary : dict
+        What ``sim.simulate`` reports: shots, strikes, pulses, duration_s, wall_time_s, ...
+    """
+
+    path: Path
+    summary: dict = field(repr=False)
+
+    def __fspath__(self) -> str:
+        return str(self.path)
+
+
+def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
+             progress: bool | None = None) -> SimulatedLog:
+    """Simulate a campaign and write its strike log.
+
+    Parameters
+    ----------
+    scene : str or Path
+        A preset name (``recon simulate --list``) or a scene TOML file.
+    output : str or Path
+        The ``.h5`` strike log to write (atomically: it appears only when complete).
+    seed : int, >= 0
+        Seed of every error model; the same seed gives the same bytes.
+    overrides : sequence of str
+        ``section.key=value`` scene overrides, as ``recon simulate --set``.
+    progress : bool or None
+        Progress bar (None: on a terminal only).
+
+    Returns
+    -------
+    SimulatedLog
+    """
+    import sim
+
+    summary = sim.simulate(sim.load_scene(str(scene), list(overrides)), output, seed=seed,
+                           progress=progress)
+    return SimulatedLog(Path(summary["path"]), summary)
+
+
+def ingest(log, *, frame: Frame = "body", output=None,
+           progress: Callable[[int], None] | None = None) -> Cloud:
+    """Register a strike log's strikes into the target body frame (or the inertial frame).
+
+    Registration uses only the recorded poses; it never reads the log's truth group.
+
+    Parameters
+    ----------
+    log : str, Path or SimulatedLog
+    frame : {"body", "inertial"}
+    output : str or Path, optional
+        Also write the cloud there (.ply, .las, .laz or .h5), from the same single pass.
+    progress : callable, optional
+        Called with the number of strikes registered after each block.
+
+    Returns
+    -------
+    Cloud
+        (n, 3) metres in ``frame`` with ``time``, ``shot``, ``beam``, ``range`` and the view
+        points (sensor positions) as attributes.
+    """
+    from recon.registration.ingest import ingest as register_log
+
+    return register_log(log, frame=frame, output=output, progress=progress)
+
+
+def load(value, *, name: str = "input") -> Cloud | Mesh:
+    """A ``Cloud`` or ``Mesh`` from recon's types, plain arrays or a file (cloud, mesh or log).
+
+    A strike log is ingested into a body-frame cloud.
+    """
+    if isinstance(value, Cloud | Mesh):
+        return value
+    if isinstance(value, str | os.PathLike):
+        from recon.inputs import load_geometry
+
+        return load_geometry(value)
+    if isinstance(value, tuple | list) or hasattr(value, "faces"):
+        return Mesh.of(value, name)
+    return Cloud.of(value, name)
+
+
+def truth_of(value, *, scale: float = 1.0) -> Mesh:
+    """The truth mesh named by ``value``: a ``Mesh`` or ``(vertices, faces)``, a mesh file (its
+    coordinates times ``scale``), or a strike log with its embedded truth mesh."""
+    if isinstance(value, str | os.PathLike):
+        from recon.inputs import load_truth
+
+        return load_truth(value, scale=scale)
+    return Mesh.of(value, "truth")
+
+
+def default_truth(test):
+    """The truth a test input implies on its own: a strike log's embedded truth mesh.
+
+    Raises
+    ------
+    ApiError
+        ``test`` is not a strike log, so the truth must be given.
+    """
+    from recon.inputs import is_strike_log
+
+    if not is_strike_log(test):
+        raise ApiError(f"{test}: is not a strike log with truth; give --truth")
+    return test
+
+
+def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
+          tau_fraction: float | None = None, edges: bool = True, seed: int | None = 0,
+          progress=None, **options):
+    """Score a cloud or a mesh against the truth mesh (``metrics.score``).
+
+    Parameters
+    ----------
+    test : Cloud, Mesh, Surface, (n, 3) array, (vertices, faces), or a file (cloud, mesh or log)
+    truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
+    truth_scale : float
+        Factor on a truth mesh file's coordinates (e.g. 1000 for km).
+    tau, tau_fraction, edges, seed, progress, **options
+        As ``metrics.score``.
+
+    Returns
+    -------
+    metrics.ScoreReport
+    """
+    from metrics.score import score as score_against
+
+    truth = truth_of(truth, scale=truth_scale)
+    return score_against(load(test, name="test"), truth, tau=tau,
+                         tau_fraction=tau_fraction, edges=edges, seed=seed, progress=progress,
+                         **options)
+
+
+def _cloud_input(cloud):
+    if isinstance(cloud, str | os.PathLike):
+        from recon.inputs import load_cloud
+
+        return load_cloud(cloud)
+    return cloud
+
+
+def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None = None,
+                **options):
+    """Reconstruct a surface mesh from a point cloud with one method, or ``method="auto"``.
+
+    Parameters
+    ----------
+    cloud : Cloud, (n, 3) array, prepared ``MethodInput``, or a cloud file or strike log
+    method : str
+        A registered method (``recon reconstruct --list-methods``) or ``"auto"`` (chosen without
+        the truth; the choice and its reason are in ``surface.info["auto"]``).
+    params : dict, optional
+        Overrides of the method's defaults.
+    **options
+        Preparation (``remove_outliers``, ``voxel``, ``normals_k``, ``orient``, ``seed``) and
+        run limits (``isolate``, ``timeout_s``, ``memory_mb``) as ``recon.surfaces.run_method``.
+
+    Returns
+    -------
+    recon.surfaces.reconstruct.Surface
+        A ``Mesh`` with the method, its resolved parameters and run information.
+    """
+    from recon.surfaces.reconstruct import reconstruct_cloud
+
+    return reconstruct_cloud(_cloud_input(cloud), method=method, params=params, **options)
+
+
+def compare(cloud, *, truth, output, methods: Sequence[str] | None = None, **options) -> dict:
+    """Run every method (defaults and a parameter grid) on one cloud, each isolated, and score
+    each surface against the truth: the speed against accuracy comparison of ``recon compare``.
+
+    Parameters
+    ----------
+    cloud : Cloud, (n, 3) array, or a cloud file or strike log
+    truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
+    output : str or Path
+        Directory for results.csv, results.json, speed_accuracy.png and the meshes.
+    methods : sequence of str, optional
+        Methods to run (default: all).
+    **options
+        As ``recon.experiments.compare.compare_cloud`` (``grid``, ``auto``, limits, scheduler).
+
+    Returns
+    -------
+    dict
+        ``records`` (ranked), ``table``, the Pareto fronts and the paths written.
+    """
+    from recon.experiments.compare import compare_cloud
+
+    return compare_cloud(_cloud_input(cloud), truth_of(truth), output, names=methods, **options)
