@@ -155,10 +155,14 @@ def surface_variation(points, *, k: int = defaults.EDGE_K) -> SurfaceVariation:
     matrices by one einsum, eigenvalues by ``np.linalg.eigvalsh`` on the (b, 3, 3) stack, and the
     scatter without the point by a rank-one downdate.
     """
+    points = as_points(points, "points")
+    return _surface_variation(points, _check_k(k, len(points)))
+
+
+def _surface_variation(points: np.ndarray, k: int) -> SurfaceVariation:
+    """``surface_variation`` of points and k already validated."""
     from scipy.spatial import cKDTree
 
-    points = as_points(points, "points")
-    k = _check_k(k, len(points))
     order = morton_order(points)
     ordered = points[order]
     tree = cKDTree(ordered)
@@ -216,7 +220,13 @@ def detect_edges(points, *, k: int = defaults.EDGE_K, rule: EdgeRule = "leave_on
     points = as_points(points, "points")
     k = _check_k(k, len(points))
     rule, threshold = _check_rule(rule, threshold, k)
-    variation = surface_variation(points, k=k)
+    return _detect_edges(points, k, rule, threshold)
+
+
+def _detect_edges(points: np.ndarray, k: int, rule: str, threshold: float
+                  ) -> tuple[np.ndarray, SurfaceVariation]:
+    """``detect_edges`` of arguments already validated."""
+    variation = _surface_variation(points, k)
     value = variation.drop if rule == "leave_one_out" else variation.sigma
     return value > threshold, variation
 
@@ -261,7 +271,11 @@ def feature_edges(truth, *, angle_deg: float = defaults.FEATURE_ANGLE_DEG) -> np
     (e, 2) int64
         Vertex index pairs (lower index first), sorted, unique.
     """
-    mesh = as_mesh(truth, "truth")
+    return _feature_edges(as_mesh(truth, "truth"), angle_deg)
+
+
+def _feature_edges(mesh: Mesh, angle_deg: float) -> np.ndarray:
+    """``feature_edges`` of a mesh already validated; the angle is checked."""
     if not (0.0 <= angle_deg < 180.0):
         raise MetricsInputError(f"angle_deg must be in [0, 180), got {angle_deg!r}")
     normals = face_normals(mesh.vertices, mesh.faces)
@@ -335,14 +349,25 @@ def edge_score(points, truth, *, k: int = defaults.EDGE_K, rule: EdgeRule = "lea
     -------
     EdgeReport
     """
-    points = as_points(points, "points")
-    mesh = as_mesh(truth, "truth")
+    return edge_report(as_points(points, "points"), as_mesh(truth, "truth"), k=k, rule=rule,
+                       threshold=threshold, feature_angle_deg=feature_angle_deg,
+                       tolerance=tolerance, tolerance_fraction=tolerance_fraction)
+
+
+def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
+                rule: EdgeRule = "leave_one_out", threshold: float | None = None,
+                feature_angle_deg: float = defaults.FEATURE_ANGLE_DEG,
+                tolerance: float | None = None,
+                tolerance_fraction: float | None = None) -> EdgeReport:
+    """``edge_score`` of points and a mesh already validated (``inputs.as_points`` and
+    ``inputs.as_mesh``), as ``metrics.score`` passes them; the options are still checked."""
     diagonal = bbox_diagonal(mesh.vertices)
     t = resolve_length(tolerance, tolerance_fraction, defaults.EDGE_TOLERANCE_FRACTION,
                        diagonal, "tolerance")
-    rule, threshold = _check_rule(rule, threshold, _check_k(k, len(points)))
-    is_edge, variation = detect_edges(points, k=k, rule=rule, threshold=threshold)
-    edges = feature_edges(mesh, angle_deg=feature_angle_deg)
+    k = _check_k(k, len(points))
+    rule, threshold = _check_rule(rule, threshold, k)
+    is_edge, variation = _detect_edges(points, k, rule, threshold)
+    edges = _feature_edges(mesh, feature_angle_deg)
     length = float(np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]],
                                   axis=1).sum())
     if len(edges):

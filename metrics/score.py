@@ -30,7 +30,7 @@ import numpy as np
 
 from metrics import defaults
 from metrics.distance import MeshDistance
-from metrics.edges import EdgeReport, check_options, edge_score, resolve_length
+from metrics.edges import EdgeReport, check_options, edge_report, resolve_length
 from metrics.errors import MetricsInputError, ScaleMismatchWarning
 from metrics.inputs import (
     Cloud,
@@ -275,7 +275,7 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
 
     edge = None
     if edges:
-        edge = edge_score(test_points, truth, **edge_options)
+        edge = edge_report(test_points, truth, **edge_options)
         report_stage("edges")
 
     return ScoreReport(
