@@ -56,8 +56,10 @@ def run(args) -> int:
         args.parser.error("SCENE and -o LOG.h5 are required (or --list, --keys)")
     if args.seed < 0:
         args.parser.error(f"--seed must be >= 0, got {args.seed}")
-    scene = sim.load_scene(args.scene, args.overrides)
-    summary = sim.simulate(scene, args.output, seed=args.seed, progress=args.progress)
+    from recon import api
+
+    summary = api.simulate(args.scene, args.output, seed=args.seed, overrides=args.overrides,
+                           progress=args.progress).summary
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

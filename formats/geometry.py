@@ -30,14 +30,14 @@ NORMAL_ATTRIBUTES = ("nx", "ny", "nz")
 VIEW_ATTRIBUTES = ("view_x", "view_y", "view_z")
 
 
-def _xyz(values, what: str) -> np.ndarray:
-    """``values`` as an (n, 3) float64 array, or ``MeshFormatError`` naming ``what``."""
+def xyz_array(values, what: str, *, error: type[Exception] = MeshFormatError) -> np.ndarray:
+    """``values`` as an (n, 3) float64 array, or ``error`` with a message naming ``what``."""
     try:
         array = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise MeshFormatError(f"{what} must be an (n, 3) array of numbers ({exc})") from None
+        raise error(f"{what} must be an (n, 3) array of numbers ({exc})") from None
     if array.ndim != 2 or array.shape[1] != 3:
-        raise MeshFormatError(f"{what} must be (n, 3), got {array.shape}")
+        raise error(f"{what} must be (n, 3), got shape {array.shape}")
     return array
 
 
@@ -73,10 +73,10 @@ class Cloud:
 
     def __init__(self, points, attributes: Mapping[str, np.ndarray] | None = None, *,
                  normals=None, frame: Frame = "body", units: str = UNITS):
-        self.points = _xyz(points, "cloud points")
+        self.points = xyz_array(points, "cloud points")
         self.attributes = dict(attributes or {})
         if normals is not None:
-            normals = _xyz(normals, "cloud normals")
+            normals = xyz_array(normals, "cloud normals")
             if normals.shape != self.points.shape:
                 raise MeshFormatError(f"cloud normals must match its points, got "
                                       f"{normals.shape} for {self.points.shape}")
@@ -159,7 +159,7 @@ class Mesh:
     __slots__ = ("faces", "frame", "units", "vertices")
 
     def __init__(self, vertices, faces, *, frame: Frame = "body", units: str = UNITS):
-        self.vertices = _xyz(vertices, "mesh vertices")
+        self.vertices = xyz_array(vertices, "mesh vertices")
         faces = np.asarray(faces)
         if faces.size == 0:
             faces = faces.reshape(0, 3)

@@ -10,18 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from formats.geometry import Cloud, Mesh
+from formats.geometry import Cloud, Mesh, xyz_array
 from metrics.errors import MetricsInputError
 
 
 def _finite_xyz(array, what: str) -> np.ndarray:
     """``array`` as a C-contiguous (n, 3) float64 array of finite values, n >= 1."""
-    try:
-        arr = np.asarray(array, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise MetricsInputError(f"{what} must be an (n, 3) array of numbers ({exc})") from None
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise MetricsInputError(f"{what} must be (n, 3), got shape {arr.shape}")
+    arr = xyz_array(array, what, error=MetricsInputError)
     if len(arr) == 0:
         raise MetricsInputError(f"{what} is empty (0 rows)")
     if not np.isfinite(arr).all():  # one flat reduction; rows only when something is wrong
