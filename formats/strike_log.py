@@ -672,19 +672,36 @@ class StrikeLog:
             raise StrikeLogError(f"{self._where}: rows {start}:{stop} out of range (0:{n})")
         return start, stop
 
+    def _blocks(self, n: int, chunk_rows: int) -> Iterator[tuple[int, int]]:
+        """``(start, stop)`` of consecutive blocks of at most ``chunk_rows`` of ``n`` rows."""
+        if chunk_rows < 1:
+            raise StrikeLogError(f"{self._where}: chunk_rows must be positive")
+        for start in range(0, n, chunk_rows):
+            yield start, min(start + chunk_rows, n)
+
     def shots(self, start: int = 0, stop: int | None = None) -> Shots:
         """Recorded shots ``start:stop``, checked."""
         start, stop = self._slice(start, stop, self.n_shots)
+        return self._checked_shots(start, stop, previous_time=None)
+
+    def _checked_shots(self, start: int, stop: int, previous_time: float | None) -> Shots:
+        """Read shots ``start:stop`` and check them once, time also against ``previous_time``."""
         with _hdf5_errors(self._where):
             rows = Shots(*(np.asarray(self._shots[k][start:stop], dtype=np.float64)
                            for k in _SHOT_FIELDS))
-        _check_shot_rows(rows, self._where, start, None)
+        _check_shot_rows(rows, self._where, start, previous_time)
         return rows
 
     def strikes(self, start: int = 0, stop: int | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Shot index, beam index and measured range of strikes ``start:stop``, checked."""
         start, stop = self._slice(start, stop, self.n_strikes)
+        return self._checked_strikes(start, stop, previous_shot=None)
+
+    def _checked_strikes(self, start: int, stop: int, previous_shot: int | None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Read strikes ``start:stop`` and check them once, ordering also against the shot
+        index ``previous_shot`` of the strike before ``start``."""
         with _hdf5_errors(self._where):
             shot = np.asarray(self._strikes["shot"][start:stop])
             beam = np.asarray(self._strikes["beam"][start:stop])
@@ -694,19 +711,24 @@ class StrikeLog:
         if beam.dtype.kind == "i" and len(beam) and beam.min() < 0:
             raise StrikeLogError(f"{self._where}: negative beam index")
         _check_strike_rows(shot, beam, rng, n_shots=self.n_shots, n_beams=self.sensor.n_beams,
-                           where=self._where, row0=start, previous_shot=None)
+                           where=self._where, row0=start, previous_shot=previous_shot)
         return shot.astype(np.int64), beam.astype(np.int64), rng
+
+    def _angle_offsets(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """Reported azimuth and elevation offsets (n,) [rad] of strikes ``start:stop``, checked."""
+        with _hdf5_errors(self._where):
+            d_az = np.asarray(self._strikes["azimuth_offset"][start:stop], dtype=np.float64)
+            d_el = np.asarray(self._strikes["elevation_offset"][start:stop], dtype=np.float64)
+        _check_finite("azimuth_offset", d_az, self._where)
+        _check_finite("elevation_offset", d_el, self._where)
+        return d_az, d_el
 
     def directions(self, beam: np.ndarray, start: int, stop: int) -> np.ndarray:
         """Measured directions (n, 3) in S of strikes ``start:stop`` with beams ``beam``."""
         nominal = np.asarray(self.sensor.beam_directions)[beam]
         if not self.sensor.reports_angles:
             return nominal
-        with _hdf5_errors(self._where):
-            d_az = np.asarray(self._strikes["azimuth_offset"][start:stop], dtype=np.float64)
-            d_el = np.asarray(self._strikes["elevation_offset"][start:stop], dtype=np.float64)
-        _check_finite("azimuth_offset", d_az, self._where)
-        _check_finite("elevation_offset", d_el, self._where)
+        d_az, d_el = self._angle_offsets(start, stop)
         az, el = directions_to_angles(nominal)
         return angles_to_directions(az + d_az, el + d_el)
 
@@ -715,15 +737,9 @@ class StrikeLog:
 
         Ordering across block boundaries is checked too, so a full pass validates the strikes.
         """
-        if chunk_rows < 1:
-            raise StrikeLogError(f"{self._where}: chunk_rows must be positive")
         previous_shot = None
-        for start in range(0, self.n_strikes, chunk_rows):
-            stop = min(start + chunk_rows, self.n_strikes)
-            shot, beam, rng = self.strikes(start, stop)
-            if previous_shot is not None and shot[0] < previous_shot:
-                raise StrikeLogError(f"{self._where}: strikes are not ordered by shot at strike "
-                                     f"{start}")
+        for start, stop in self._blocks(self.n_strikes, chunk_rows):
+            shot, beam, rng = self._checked_strikes(start, stop, previous_shot)
             previous_shot = int(shot[-1])
             lo, hi = int(shot[0]), int(shot[-1]) + 1
             yield StrikeChunk(start=start, shot=shot, beam=beam, range=rng,
@@ -778,23 +794,29 @@ class StrikeLog:
         progress : callable, optional
             Called with the number of rows checked after each block.
         """
+        # Each block is read and checked once: shots, then strikes (with their angle offsets),
+        # each against the last row of the block before it.
         previous_time = None
-        for start in range(0, self.n_shots, chunk_rows):
-            stop = min(start + chunk_rows, self.n_shots)
-            rows = self.shots(start, stop)
-            _check_shot_rows(rows, self._where, start, previous_time)
+        for start, stop in self._blocks(self.n_shots, chunk_rows):
+            rows = self._checked_shots(start, stop, previous_time)
             previous_time = float(rows.time[-1])
             if progress:
                 progress(stop - start)
+        previous_shot = None
         carried = np.zeros(0, dtype=np.int64)  # pairs of the shot that may continue
-        for chunk in self.iter_chunks(chunk_rows):
-            pairs = np.concatenate([carried, chunk.shot * self.sensor.n_beams + chunk.beam])
+        n_beams = self.sensor.n_beams
+        for start, stop in self._blocks(self.n_strikes, chunk_rows):
+            shot, beam, _ = self._checked_strikes(start, stop, previous_shot)
+            if self.sensor.reports_angles:
+                self._angle_offsets(start, stop)
+            previous_shot = int(shot[-1])
+            pairs = np.concatenate([carried, shot * n_beams + beam])
             if len(np.unique(pairs)) != len(pairs):
                 raise StrikeLogError(f"{self._where}: a (shot, beam) pair appears twice near "
-                                     f"strike {chunk.start}")
-            carried = pairs[pairs // self.sensor.n_beams == chunk.shot[-1]]
+                                     f"strike {start}")
+            carried = pairs[pairs // n_beams == previous_shot]
             if progress:
-                progress(len(chunk))
+                progress(stop - start)
         if self.has_truth:
             self.truth_mesh()
 
