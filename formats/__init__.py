@@ -7,6 +7,7 @@ from formats.errors import MeshFormatError, ReconError, StrikeLogError
 from formats.strike_log import (
     FORMAT_NAME,
     FORMAT_VERSION,
+    SIGMA3_PER_SIGMA,
     SensorErrors,
     SensorInfo,
     Shots,
@@ -14,11 +15,13 @@ from formats.strike_log import (
     StrikeLog,
     StrikeLogWriter,
     TruthStrikes,
+    sigma_from_sigma3,
 )
 
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "SIGMA3_PER_SIGMA",
     "MeshFormatError",
     "ReconError",
     "SensorErrors",
@@ -29,4 +32,5 @@ __all__ = [
     "StrikeLogError",
     "StrikeLogWriter",
     "TruthStrikes",
+    "sigma_from_sigma3",
 ]

@@ -51,11 +51,41 @@ _TRUTH_STRIKE_FIELDS = {"point": ((3,), np.float64), "facet": ((), np.uint32),
 # --------------------------------------------------------------------------- records
 
 
+# The paper states every error as a 3-sigma bound and the log records those (SPEC.md,
+# /sensor/errors); a Gaussian error model draws with the 1-sigma value, a third of it.
+SIGMA3_PER_SIGMA = 3.0
+
+
+def sigma_from_sigma3(sigma3):
+    """The 1-sigma value of a Gaussian error stated as its 3-sigma bound.
+
+    Parameters
+    ----------
+    sigma3 : float or ndarray, any unit
+
+    Returns
+    -------
+    float or ndarray, same unit and shape: ``sigma3 / 3``.
+    """
+    return sigma3 / SIGMA3_PER_SIGMA
+
+
 @dataclass(frozen=True)
 class SensorErrors:
-    """Error-model parameters a producer applied to the recorded values (SPEC.md, /sensor/errors).
+    """Error models a producer applied to the recorded values (SPEC.md, /sensor/errors).
 
-    All are 3-sigma values in SI units; zero means the model is off.
+    The one definition of the error-model parameters. Fields are what the log records: 3-sigma
+    values in SI units (metres, radians), zero when a model is off. Properties give the 1-sigma
+    values a Gaussian model draws with.
+
+    Attributes
+    ----------
+    range_sigma3 : float, metres, along the beam
+    azimuth_sigma3, elevation_sigma3 : float, radians
+    position_sigma3 : float, metres per axis of the recorded sensor position, frame I
+    pulse_dilation_alpha : float, dimensionless, paper Eq. (1) (0: off)
+    pulse_dilation_half_angle : float, radians, half-angle of the beam-spread cone
+    pulse_dilation_subrays : float, a whole number, sub-rays in the cone
     """
 
     range_sigma3: float = 0.0
@@ -65,6 +95,36 @@ class SensorErrors:
     pulse_dilation_alpha: float = 0.0
     pulse_dilation_half_angle: float = 0.0
     pulse_dilation_subrays: float = 0.0
+
+    @property
+    def range_sigma(self) -> float:
+        """1-sigma range error [m]."""
+        return sigma_from_sigma3(self.range_sigma3)
+
+    @property
+    def azimuth_sigma(self) -> float:
+        """1-sigma azimuth error [rad]."""
+        return sigma_from_sigma3(self.azimuth_sigma3)
+
+    @property
+    def elevation_sigma(self) -> float:
+        """1-sigma elevation error [rad]."""
+        return sigma_from_sigma3(self.elevation_sigma3)
+
+    @property
+    def position_sigma(self) -> float:
+        """1-sigma per-axis error of the recorded sensor position [m]."""
+        return sigma_from_sigma3(self.position_sigma3)
+
+    @property
+    def angles(self) -> bool:
+        """True when an azimuth or elevation error is on."""
+        return self.azimuth_sigma3 > 0 or self.elevation_sigma3 > 0
+
+    @property
+    def dilation(self) -> bool:
+        """True when pulse dilation is on."""
+        return self.pulse_dilation_alpha > 0
 
 
 @dataclass(frozen=True)

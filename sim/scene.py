@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from formats.errors import MeshFormatError, ReconError
+from formats.strike_log import SensorErrors
 from sim import targets
 from sim.defaults import (
     ALTERNATIVES,
@@ -113,6 +114,8 @@ class Scene:
         Length of the campaign [s].
     n_shots : int
         Number of shots, at ``t = k * step`` for ``k = 0 .. n_shots - 1``.
+    errors : SensorErrors
+        The ``[errors]`` section converted once to what the log records: 3-sigma, SI units.
     """
 
     name: str
@@ -126,6 +129,7 @@ class Scene:
     orbit_period: float
     duration: float
     n_shots: int
+    errors: SensorErrors
 
     def __getitem__(self, key: str):
         """``scene["orbit.radius"]``: the value of one key (KeyError when it is not used)."""
@@ -505,7 +509,24 @@ def _validate(name: str, text: str, overrides: tuple[str, ...], values: dict,
     ordered = {s: {k: values[s][k] for k in SCHEMA[s] if k in values[s]} for s in SCHEMA}
     return Scene(name=name, values=ordered, source=text, overrides=overrides, vertices=vertices,
                  faces=faces, target=label, mu=mu, orbit_period=period, duration=duration,
-                 n_shots=n_shots)
+                 n_shots=n_shots, errors=sensor_errors(ordered["errors"]))
+
+
+def sensor_errors(errors: dict) -> SensorErrors:
+    """A scene's ``[errors]`` section as the log records it: 3-sigma, SI units.
+
+    The one conversion from scene units (degrees, milliradians); the pulse-dilation cone is
+    recorded only when dilation is on.
+    """
+    on = errors["dilation_alpha"] > 0
+    return SensorErrors(
+        range_sigma3=errors["range_sigma3"],
+        azimuth_sigma3=math.radians(errors["azimuth_sigma3_deg"]),
+        elevation_sigma3=math.radians(errors["elevation_sigma3_deg"]),
+        position_sigma3=errors["position_sigma3"],
+        pulse_dilation_alpha=errors["dilation_alpha"],
+        pulse_dilation_half_angle=errors["dilation_half_angle_mrad"] * 1e-3 if on else 0.0,
+        pulse_dilation_subrays=float(errors["dilation_subrays"]) if on else 0.0)
 
 
 def _check_field_of_view(fov: list[float]) -> None:
