@@ -8,6 +8,7 @@ from formats.geometry import Cloud, Mesh
 from formats.strike_log import (
     FORMAT_NAME,
     FORMAT_VERSION,
+    SIGMA3_PER_SIGMA,
     SensorErrors,
     SensorInfo,
     Shots,
@@ -15,11 +16,13 @@ from formats.strike_log import (
     StrikeLog,
     StrikeLogWriter,
     TruthStrikes,
+    sigma_from_sigma3,
 )
 
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "SIGMA3_PER_SIGMA",
     "Cloud",
     "Mesh",
     "MeshFormatError",
@@ -32,4 +35,5 @@ __all__ = [
     "StrikeLogError",
     "StrikeLogWriter",
     "TruthStrikes",
+    "sigma_from_sigma3",
 ]

@@ -52,11 +52,41 @@ _TRUTH_STRIKE_FIELDS = {"point": ((3,), np.float64), "facet": ((), np.uint32),
 # --------------------------------------------------------------------------- records
 
 
+# The paper states every error as a 3-sigma bound and the log records those (SPEC.md,
+# /sensor/errors); a Gaussian error model draws with the 1-sigma value, a third of it.
+SIGMA3_PER_SIGMA = 3.0
+
+
+def sigma_from_sigma3(sigma3):
+    """The 1-sigma value of a Gaussian error stated as its 3-sigma bound.
+
+    Parameters
+    ----------
+    sigma3 : float or ndarray, any unit
+
+    Returns
+    -------
+    float or ndarray, same unit and shape: ``sigma3 / 3``.
+    """
+    return sigma3 / SIGMA3_PER_SIGMA
+
+
 @dataclass(frozen=True)
 class SensorErrors:
-    """Error-model parameters a producer applied to the recorded values (SPEC.md, /sensor/errors).
+    """Error models a producer applied to the recorded values (SPEC.md, /sensor/errors).
 
-    All are 3-sigma values in SI units; zero means the model is off.
+    The one definition of the error-model parameters. Fields are what the log records: 3-sigma
+    values in SI units (metres, radians), zero when a model is off. Properties give the 1-sigma
+    values a Gaussian model draws with.
+
+    Attributes
+    ----------
+    range_sigma3 : float, metres, along the beam
+    azimuth_sigma3, elevation_sigma3 : float, radians
+    position_sigma3 : float, metres per axis of the recorded sensor position, frame I
+    pulse_dilation_alpha : float, dimensionless, paper Eq. (1) (0: off)
+    pulse_dilation_half_angle : float, radians, half-angle of the beam-spread cone
+    pulse_dilation_subrays : float, a whole number, sub-rays in the cone
     """
 
     range_sigma3: float = 0.0
@@ -66,6 +96,36 @@ class SensorErrors:
     pulse_dilation_alpha: float = 0.0
     pulse_dilation_half_angle: float = 0.0
     pulse_dilation_subrays: float = 0.0
+
+    @property
+    def range_sigma(self) -> float:
+        """1-sigma range error [m]."""
+        return sigma_from_sigma3(self.range_sigma3)
+
+    @property
+    def azimuth_sigma(self) -> float:
+        """1-sigma azimuth error [rad]."""
+        return sigma_from_sigma3(self.azimuth_sigma3)
+
+    @property
+    def elevation_sigma(self) -> float:
+        """1-sigma elevation error [rad]."""
+        return sigma_from_sigma3(self.elevation_sigma3)
+
+    @property
+    def position_sigma(self) -> float:
+        """1-sigma per-axis error of the recorded sensor position [m]."""
+        return sigma_from_sigma3(self.position_sigma3)
+
+    @property
+    def angles(self) -> bool:
+        """True when an azimuth or elevation error is on."""
+        return self.azimuth_sigma3 > 0 or self.elevation_sigma3 > 0
+
+    @property
+    def dilation(self) -> bool:
+        """True when pulse dilation is on."""
+        return self.pulse_dilation_alpha > 0
 
 
 @dataclass(frozen=True)
@@ -673,19 +733,36 @@ class StrikeLog:
             raise StrikeLogError(f"{self._where}: rows {start}:{stop} out of range (0:{n})")
         return start, stop
 
+    def _blocks(self, n: int, chunk_rows: int) -> Iterator[tuple[int, int]]:
+        """``(start, stop)`` of consecutive blocks of at most ``chunk_rows`` of ``n`` rows."""
+        if chunk_rows < 1:
+            raise StrikeLogError(f"{self._where}: chunk_rows must be positive")
+        for start in range(0, n, chunk_rows):
+            yield start, min(start + chunk_rows, n)
+
     def shots(self, start: int = 0, stop: int | None = None) -> Shots:
         """Recorded shots ``start:stop``, checked."""
         start, stop = self._slice(start, stop, self.n_shots)
+        return self._checked_shots(start, stop, previous_time=None)
+
+    def _checked_shots(self, start: int, stop: int, previous_time: float | None) -> Shots:
+        """Read shots ``start:stop`` and check them once, time also against ``previous_time``."""
         with _hdf5_errors(self._where):
             rows = Shots(*(np.asarray(self._shots[k][start:stop], dtype=np.float64)
                            for k in _SHOT_FIELDS))
-        _check_shot_rows(rows, self._where, start, None)
+        _check_shot_rows(rows, self._where, start, previous_time)
         return rows
 
     def strikes(self, start: int = 0, stop: int | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Shot index, beam index and measured range of strikes ``start:stop``, checked."""
         start, stop = self._slice(start, stop, self.n_strikes)
+        return self._checked_strikes(start, stop, previous_shot=None)
+
+    def _checked_strikes(self, start: int, stop: int, previous_shot: int | None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Read strikes ``start:stop`` and check them once, ordering also against the shot
+        index ``previous_shot`` of the strike before ``start``."""
         with _hdf5_errors(self._where):
             shot = np.asarray(self._strikes["shot"][start:stop])
             beam = np.asarray(self._strikes["beam"][start:stop])
@@ -695,19 +772,24 @@ class StrikeLog:
         if beam.dtype.kind == "i" and len(beam) and beam.min() < 0:
             raise StrikeLogError(f"{self._where}: negative beam index")
         _check_strike_rows(shot, beam, rng, n_shots=self.n_shots, n_beams=self.sensor.n_beams,
-                           where=self._where, row0=start, previous_shot=None)
+                           where=self._where, row0=start, previous_shot=previous_shot)
         return shot.astype(np.int64), beam.astype(np.int64), rng
+
+    def _angle_offsets(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """Reported azimuth and elevation offsets (n,) [rad] of strikes ``start:stop``, checked."""
+        with _hdf5_errors(self._where):
+            d_az = np.asarray(self._strikes["azimuth_offset"][start:stop], dtype=np.float64)
+            d_el = np.asarray(self._strikes["elevation_offset"][start:stop], dtype=np.float64)
+        _check_finite("azimuth_offset", d_az, self._where)
+        _check_finite("elevation_offset", d_el, self._where)
+        return d_az, d_el
 
     def directions(self, beam: np.ndarray, start: int, stop: int) -> np.ndarray:
         """Measured directions (n, 3) in S of strikes ``start:stop`` with beams ``beam``."""
         nominal = np.asarray(self.sensor.beam_directions)[beam]
         if not self.sensor.reports_angles:
             return nominal
-        with _hdf5_errors(self._where):
-            d_az = np.asarray(self._strikes["azimuth_offset"][start:stop], dtype=np.float64)
-            d_el = np.asarray(self._strikes["elevation_offset"][start:stop], dtype=np.float64)
-        _check_finite("azimuth_offset", d_az, self._where)
-        _check_finite("elevation_offset", d_el, self._where)
+        d_az, d_el = self._angle_offsets(start, stop)
         az, el = directions_to_angles(nominal)
         return angles_to_directions(az + d_az, el + d_el)
 
@@ -716,15 +798,9 @@ class StrikeLog:
 
         Ordering across block boundaries is checked too, so a full pass validates the strikes.
         """
-        if chunk_rows < 1:
-            raise StrikeLogError(f"{self._where}: chunk_rows must be positive")
         previous_shot = None
-        for start in range(0, self.n_strikes, chunk_rows):
-            stop = min(start + chunk_rows, self.n_strikes)
-            shot, beam, rng = self.strikes(start, stop)
-            if previous_shot is not None and shot[0] < previous_shot:
-                raise StrikeLogError(f"{self._where}: strikes are not ordered by shot at strike "
-                                     f"{start}")
+        for start, stop in self._blocks(self.n_strikes, chunk_rows):
+            shot, beam, rng = self._checked_strikes(start, stop, previous_shot)
             previous_shot = int(shot[-1])
             lo, hi = int(shot[0]), int(shot[-1]) + 1
             yield StrikeChunk(start=start, shot=shot, beam=beam, range=rng,
@@ -779,23 +855,29 @@ class StrikeLog:
         progress : callable, optional
             Called with the number of rows checked after each block.
         """
+        # Each block is read and checked once: shots, then strikes (with their angle offsets),
+        # each against the last row of the block before it.
         previous_time = None
-        for start in range(0, self.n_shots, chunk_rows):
-            stop = min(start + chunk_rows, self.n_shots)
-            rows = self.shots(start, stop)
-            _check_shot_rows(rows, self._where, start, previous_time)
+        for start, stop in self._blocks(self.n_shots, chunk_rows):
+            rows = self._checked_shots(start, stop, previous_time)
             previous_time = float(rows.time[-1])
             if progress:
                 progress(stop - start)
+        previous_shot = None
         carried = np.zeros(0, dtype=np.int64)  # pairs of the shot that may continue
-        for chunk in self.iter_chunks(chunk_rows):
-            pairs = np.concatenate([carried, chunk.shot * self.sensor.n_beams + chunk.beam])
+        n_beams = self.sensor.n_beams
+        for start, stop in self._blocks(self.n_strikes, chunk_rows):
+            shot, beam, _ = self._checked_strikes(start, stop, previous_shot)
+            if self.sensor.reports_angles:
+                self._angle_offsets(start, stop)
+            previous_shot = int(shot[-1])
+            pairs = np.concatenate([carried, shot * n_beams + beam])
             if len(np.unique(pairs)) != len(pairs):
                 raise StrikeLogError(f"{self._where}: a (shot, beam) pair appears twice near "
-                                     f"strike {chunk.start}")
-            carried = pairs[pairs // self.sensor.n_beams == chunk.shot[-1]]
+                                     f"strike {start}")
+            carried = pairs[pairs // n_beams == previous_shot]
             if progress:
-                progress(len(chunk))
+                progress(stop - start)
         if self.has_truth:
             self.truth_mesh()
 

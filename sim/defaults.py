@@ -6,11 +6,12 @@ seconds, masses in kilograms; **angles in degrees, and every angle key says so i
 (``dilation_half_angle_mrad``). The strike log itself is SI throughout (radians).
 
 "Paper" is Nayak, Udrea, Marsella & Beck, *Application of a laser rangefinder for space object
-imaging and shape reconstruction* (/work/shared/paper/lrf-space-object-imaging.txt).
+imaging and shape reconstruction*.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,102 +19,167 @@ from typing import Any
 GRAVITATIONAL_CONSTANT = 6.67430e-11
 
 
+TARGET_KINDS = ("ellipsoid", "rso-a", "rso-b", "mesh")
+PATTERNS = ("single", "cross", "zigzag", "grid")
+
+# Limits on values (beyond sign checks) and why.
+MAX_SUBDIVISIONS = 8          # 1.3 M faces; subdivision 9 would need ~1 GB of mesh
+MAX_FIELD_OF_VIEW_DEG = 180.0  # a pattern spanning 180 deg or more is not a forward-looking sensor
+# A beam-spread cone must open less than a right angle: 90 deg is 1000 * pi / 2 mrad.
+MAX_HALF_ANGLE_MRAD = 1000.0 * math.pi / 2
+
+
 @dataclass(frozen=True)
 class Key:
-    """One scene key: its default (``None``: no default, the key is optional), kind and unit.
+    """One scene key: its default, kind, unit and meaning, and the values it accepts.
 
-    ``kind`` is one of ``number``, ``int``, ``str``, ``bool``, ``vec<N>`` (N numbers),
-    ``ivec<N>`` (N integers) or ``fov`` (2 or 4 numbers).
+    Attributes
+    ----------
+    default : object or None
+        ``None``: no default, the key is optional.
+    kind : str
+        ``number``, ``int``, ``str``, ``bool``, ``vec<N>`` (N numbers), ``ivec<N>`` (N
+        integers) or ``fov`` (2 or 4 numbers).
+    unit : str
+        Unit of the value as the scene gives it (``""``: none). Angles are in ``deg`` (or
+        ``mrad``); sim/derive.py converts them to radians once, at load.
+    help : str
+        One line for ``recon simulate --keys``.
+    minimum, maximum : float or None
+        Bounds of the value (of each element, for arrays); ``None``: unbounded.
+    exclusive_minimum, exclusive_maximum : bool
+        The bound itself is refused (``minimum=0, exclusive_minimum=True``: positive).
+    finite : bool
+        Refuse infinities (NaN is always refused). ``False`` only where ``inf`` means something.
+    choices : tuple of str
+        The allowed values of a ``str`` key (empty: any string).
+    nonzero : bool
+        An array must not be all zeros (a direction or a quaternion).
     """
 
     default: Any
     kind: str
     unit: str
     help: str
+    minimum: float | None = None
+    maximum: float | None = None
+    exclusive_minimum: bool = False
+    exclusive_maximum: bool = False
+    finite: bool = True
+    choices: tuple[str, ...] = ()
+    nonzero: bool = False
+
+
+# Shorthands for the bounds most keys declare.
+POSITIVE = {"minimum": 0.0, "exclusive_minimum": True}
+NON_NEGATIVE = {"minimum": 0.0}
+DIRECTION = {"nonzero": True}
 
 
 # fmt: off
 SCHEMA: dict[str, dict[str, Key]] = {
     "target": {
         # "ellipsoid" (the paper's asteroid), "rso-a", "rso-b" or "mesh" (a user file).
-        "kind": Key("ellipsoid", "str", "", "ellipsoid, rso-a, rso-b or mesh"),
+        "kind": Key("ellipsoid", "str", "", "ellipsoid, rso-a, rso-b or mesh",
+                    choices=TARGET_KINDS),
         # Paper, "Model: Tri-Axial Ellipsoid": 143.75, 86.25 and 287.50 m along x, y and z.
-        "semi_axes": Key([143.75, 86.25, 287.5], "vec3", "m", "ellipsoid semi-axes along x, y, z"),
-        # Icosphere subdivisions: 20 * 4**5 = 20,480 faces, the mesh size measured in
-        # /work/shared/dependency-facts.md (its facets are ~0.02 m off the exact ellipsoid).
-        "subdivisions": Key(5, "int", "", "ellipsoid resolution: 20 * 4**n faces"),
+        "semi_axes": Key([143.75, 86.25, 287.5], "vec3", "m", "ellipsoid semi-axes along x, y, z",
+                         **POSITIVE),
+        # Icosphere subdivisions: 20 * 4**5 = 20,480 faces, the mesh size at which ray casting
+        # was measured at 6.5 M rays/s with embreex 4.4 (9.9 M with open3d 0.20) on a 2-core
+        # machine; its facets are ~0.023 m off the exact ellipsoid.
+        "subdivisions": Key(5, "int", "", "ellipsoid resolution: 20 * 4**n faces",
+                            minimum=0, maximum=MAX_SUBDIVISIONS),
         "path": Key(None, "str", "", "mesh file (OBJ, PLY, STL) for kind = mesh"),
-        # Shape models are often in km (/work/shared/meshes/README.md): then scale = 1000.
-        "scale": Key(1.0, "number", "m per file unit", "mesh coordinates times scale = metres"),
+        # Public asteroid shape models (Gaskell's Itokawa and Eros, radar Bennu) are in km:
+        # then scale = 1000.
+        "scale": Key(1.0, "number", "m per file unit", "mesh coordinates times scale = metres",
+                     **POSITIVE),
         "center": Key(False, "bool", "", "move the mesh's volume centroid to the origin"),
         # Paper: "a period of rotation of 15480 seconds, or 4.3 hours"; inf: not spinning.
-        "spin_period": Key(15480.0, "number", "s", "spin period (inf: no spin)"),
+        "spin_period": Key(15480.0, "number", "s", "spin period (inf: no spin)", **POSITIVE,
+                           finite=False),
         # Paper: rotation "mainly about the z-axis"; body frame.
-        "spin_axis": Key([0.0, 0.0, 1.0], "vec3", "", "spin axis in the body frame B"),
+        "spin_axis": Key([0.0, 0.0, 1.0], "vec3", "", "spin axis in the body frame B", **DIRECTION),
         # Identity: B and I coincide at t = 0 (formats/SPEC.md, frame I).
-        "attitude": Key([0.0, 0.0, 0.0, 1.0], "vec4", "", "B->I quaternion (x, y, z, w) at t = 0"),
+        "attitude": Key([0.0, 0.0, 0.0, 1.0], "vec4", "", "B->I quaternion (x, y, z, w) at t = 0",
+                        **DIRECTION),
     },
     "orbit": {
         # Paper: 750 m around the asteroid (the RSO presets set 250 m).
-        "radius": Key(750.0, "number", "m", "circular orbit radius about the target centre"),
+        "radius": Key(750.0, "number", "m", "circular orbit radius about the target centre",
+                      **POSITIVE),
         # Paper: 85 deg to the target's equatorial plane is "near-optimal".
-        "inclination_deg": Key(85.0, "number", "deg", "inclination to the equatorial plane"),
+        "inclination_deg": Key(85.0, "number", "deg", "inclination to the equatorial plane",
+                               minimum=0.0, maximum=180.0),
         "node_deg": Key(0.0, "number", "deg", "longitude of the ascending node"),
         "phase_deg": Key(0.0, "number", "deg", "argument of latitude at t = 0"),
         # The period comes from mu = G * density * volume unless mu or period is given. The paper
         # gives no mass; 2000 kg/m^3 is a rubble-pile asteroid's bulk density (Itokawa 1900,
         # Eros 2670). For the paper's ellipsoid: mu = 1.99 m^3/s^2, period 25.4 h at 750 m.
-        "density": Key(2000.0, "number", "kg/m^3", "bulk density of the target"),
-        "mu": Key(None, "number", "m^3/s^2", "gravitational parameter (replaces density)"),
-        "period": Key(None, "number", "s", "orbit period (replaces density and mu)"),
+        "density": Key(2000.0, "number", "kg/m^3", "bulk density of the target", **POSITIVE),
+        "mu": Key(None, "number", "m^3/s^2", "gravitational parameter (replaces density)",
+                  **POSITIVE),
+        "period": Key(None, "number", "s", "orbit period (replaces density and mu)", **POSITIVE),
         # Paper (RSO inclination test): 43 h at 85 deg, then 43 h at 76 to 94 deg.
-        "change_time": Key(None, "number", "s", "time of the inclination change (at next node)"),
-        "change_inclination_deg": Key(None, "number", "deg", "inclination after the change"),
+        "change_time": Key(None, "number", "s", "time of the inclination change (at next node)",
+                           **NON_NEGATIVE),
+        "change_inclination_deg": Key(None, "number", "deg", "inclination after the change",
+                                      minimum=0.0, maximum=180.0),
     },
     "time": {
         # Paper: "moved along the orbit path in time steps of 10 seconds".
-        "step": Key(10.0, "number", "s", "time between shots"),
+        "step": Key(10.0, "number", "s", "time between shots", **POSITIVE),
         # Paper: "50 rotations are used in further trials that require a fixed time".
-        "rotations": Key(50.0, "number", "target rotations", "duration in spin periods"),
-        "duration": Key(None, "number", "s", "duration (replaces rotations)"),
+        "rotations": Key(50.0, "number", "target rotations", "duration in spin periods",
+                         **POSITIVE),
+        "duration": Key(None, "number", "s", "duration (replaces rotations)", **POSITIVE),
     },
     "slew": {
         # Paper: 2 deg at 85 deg inclination, 5 deg at 60 deg; 3 deg is "no better" than 2.
-        "amplitude_deg": Key(0.0, "number", "deg", "sinusoidal slew amplitude (0: nadir)"),
+        "amplitude_deg": Key(0.0, "number", "deg", "sinusoidal slew amplitude (0: nadir)",
+                             minimum=0.0, maximum=90.0, exclusive_maximum=True),
         # Not in the paper: 12.5 steps per cycle, so the 10 s step samples 25 distinct angles.
-        "period": Key(125.0, "number", "s", "slew period"),
+        "period": Key(125.0, "number", "s", "slew period", **POSITIVE),
         # Paper: slew "in a plane normal to the orbital plane", i.e. about the along-track axis,
         # which is +x of the nominal sensor frame (sim/motion.py).
-        "axis": Key([1.0, 0.0, 0.0], "vec3", "", "slew axis in the nominal sensor frame"),
+        "axis": Key([1.0, 0.0, 0.0], "vec3", "", "slew axis in the nominal sensor frame",
+                    **DIRECTION),
         "phase_deg": Key(0.0, "number", "deg", "slew phase at t = 0"),
     },
     "sensor": {
-        "pattern": Key("single", "str", "", "single, cross, zigzag or grid"),
+        "pattern": Key("single", "str", "", "single, cross, zigzag or grid", choices=PATTERNS),
         # Paper: "The cross configuration field of view is set to 10 x 10 deg" (asteroid); an
         # "A x B" field of view spans A in azimuth and B in elevation, centred on the boresight.
         # Four numbers give [az_min, az_max, el_min, el_max] per side (paper, Figures 2 and 3).
         "field_of_view_deg": Key([10.0, 10.0], "fov", "deg",
                                  "[az, el] extents or [az_min, az_max, el_min, el_max]"),
         # Paper, Figure 5(b): a zigzag of 5 beams.
-        "beams": Key(5, "int", "", "zigzag: number of beams"),
+        "beams": Key(5, "int", "", "zigzag: number of beams", minimum=2),
         # Paper, Figure 3: 5 x 5 grids.
-        "resolution": Key([5, 5], "ivec2", "", "grid: beams in azimuth x elevation"),
+        "resolution": Key([5, 5], "ivec2", "", "grid: beams in azimuth x elevation", minimum=1),
         # Jenoptik LIDAR (paper, Table 3): minimum operational range <= 1 m.
-        "range_min": Key(1.0, "number", "m", "shortest range reported"),
+        "range_min": Key(1.0, "number", "m", "shortest range reported", **NON_NEGATIVE),
         # Paper: "5km for the scanning LIDAR and 3km for the LRF".
-        "range_max": Key(3000.0, "number", "m", "longest range reported"),
+        "range_max": Key(3000.0, "number", "m", "longest range reported", **POSITIVE),
     },
     "errors": {
         # Off by default (the paper's error-free runs). Paper values: LIDAR 1 m range and 0.2 deg
         # angles; fixed LRFs 0.3 m range and no angle error; pose knowledge 2 m; pulse dilation
         # alpha 0.0002 with a 0.6 mrad cone of 30 sub-rays. All 3-sigma.
-        "range_sigma3": Key(0.0, "number", "m", "3-sigma Gaussian range error"),
-        "azimuth_sigma3_deg": Key(0.0, "number", "deg", "3-sigma Gaussian azimuth error"),
-        "elevation_sigma3_deg": Key(0.0, "number", "deg", "3-sigma Gaussian elevation error"),
-        "position_sigma3": Key(0.0, "number", "m", "3-sigma per-axis error of recorded position"),
-        "dilation_alpha": Key(0.0, "number", "1", "pulse dilation alpha, paper Eq. (1) (0: off)"),
-        "dilation_half_angle_mrad": Key(0.6, "number", "mrad", "beam-spread cone half-angle"),
-        "dilation_subrays": Key(30, "int", "", "sub-rays m in the beam-spread cone"),
+        "range_sigma3": Key(0.0, "number", "m", "3-sigma Gaussian range error", **NON_NEGATIVE),
+        "azimuth_sigma3_deg": Key(0.0, "number", "deg", "3-sigma Gaussian azimuth error",
+                                  **NON_NEGATIVE),
+        "elevation_sigma3_deg": Key(0.0, "number", "deg", "3-sigma Gaussian elevation error",
+                                    **NON_NEGATIVE),
+        "position_sigma3": Key(0.0, "number", "m", "3-sigma per-axis error of recorded position",
+                               **NON_NEGATIVE),
+        "dilation_alpha": Key(0.0, "number", "1", "pulse dilation alpha, paper Eq. (1) (0: off)",
+                              **NON_NEGATIVE),
+        "dilation_half_angle_mrad": Key(0.6, "number", "mrad", "beam-spread cone half-angle",
+                                        minimum=0.0, maximum=MAX_HALF_ANGLE_MRAD,
+                                        exclusive_maximum=True),
+        "dilation_subrays": Key(30, "int", "", "sub-rays m in the beam-spread cone", minimum=1),
     },
 }
 # fmt: on
@@ -138,12 +204,19 @@ ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     ("sensor", "resolution"): ("sensor", "pattern", ("grid",)),
 }
 
-TARGET_KINDS = ("ellipsoid", "rso-a", "rso-b", "mesh")
-PATTERNS = ("single", "cross", "zigzag", "grid")
-
-# Limits on values (beyond sign checks) and why.
-MAX_SUBDIVISIONS = 8          # 1.3 M faces; subdivision 9 would need ~1 GB of mesh
-MAX_FIELD_OF_VIEW_DEG = 180.0  # a pattern spanning 180 deg or more is not a forward-looking sensor
+# Cross-key rules, each checked by sim/schema.py with a one-line message naming the key.
+# A key with no default that a scene needs when another key has one of some values.
+NEEDED_WHEN: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
+    ("target", "path"): ("target", "kind", ("mesh",)),
+}
+# Keys given both or neither: the inclination change needs its time and its new inclination.
+TOGETHER: tuple[tuple[tuple[str, str], tuple[str, str]], ...] = (
+    (("orbit", "change_time"), ("orbit", "change_inclination_deg")),
+)
+# (lower, upper): upper must exceed lower.
+ORDERED: tuple[tuple[tuple[str, str], tuple[str, str]], ...] = (
+    (("sensor", "range_min"), ("sensor", "range_max")),
+)
 
 # Streaming: rays cast per chunk of shots. 2**19 rays keep a chunk's working set near 100 MB, so
 # two chunks in flight and the writer's buffers stay far below the 2 GB budget of the issue, while

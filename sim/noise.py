@@ -1,7 +1,9 @@
 """Error models, applied to what a sensor records and never to the truth.
 
-All configured as 3-sigma values (as the paper states them); each costs nothing when zero, and
-each draws from its own random stream, so switching one model on or off leaves the draws of the
+All configured as 3-sigma values (as the paper states them) and held, in SI units, in one
+``formats.SensorErrors`` built once at scene load (``Scene.errors``, sim/derive.py); its
+properties give the 1-sigma values drawn with. Each model costs nothing when zero, and each
+draws from its own random stream, so switching one model on or off leaves the draws of the
 others unchanged. A stream is ``np.random.default_rng((seed, stream, chunk))``: the same seed
 gives the same values whatever else is configured.
 
@@ -33,12 +35,9 @@ Where several apply they add, as in the paper ("summed directly to account for t
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import numpy as np
 
-from formats.strike_log import SensorErrors
+from formats.strike_log import SensorErrors, sigma_from_sigma3
 
 # Random streams, one per error model.
 STREAM_POSITION, STREAM_POINTING, STREAM_ANGLES, STREAM_RANGE, STREAM_DILATION = range(5)
@@ -52,61 +51,22 @@ def stream(seed: int, model: int, chunk: int) -> np.random.Generator:
     return np.random.default_rng((seed, model, chunk))
 
 
-@dataclass(frozen=True)
-class ErrorModel:
-    """Error-model parameters in SI units, as 1-sigma values.
+def angle_errors(errors: SensorErrors, rng: np.random.Generator, n: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian azimuth and elevation errors.
 
-    Attributes
+    Parameters
     ----------
-    range_sigma : float, metres
-    azimuth_sigma, elevation_sigma : float, radians
-    position_sigma : float, metres per axis
-    dilation_alpha : float, dimensionless (0: off)
-    dilation_half_angle : float, radians
-    dilation_subrays : int
+    errors : SensorErrors
+        The scene's error models (1-sigma values from its properties).
+    rng : numpy.random.Generator
+    n : int
+
+    Returns
+    -------
+    (n,) float64 and (n,) float64, radians: azimuth and elevation errors.
     """
-
-    range_sigma: float = 0.0
-    azimuth_sigma: float = 0.0
-    elevation_sigma: float = 0.0
-    position_sigma: float = 0.0
-    dilation_alpha: float = 0.0
-    dilation_half_angle: float = 0.0
-    dilation_subrays: int = 30
-
-    @classmethod
-    def from_scene(cls, errors: dict) -> ErrorModel:
-        """From a scene's ``[errors]`` section (3-sigma values, degrees, milliradians)."""
-        return cls(range_sigma=errors["range_sigma3"] / 3.0,
-                   azimuth_sigma=math.radians(errors["azimuth_sigma3_deg"]) / 3.0,
-                   elevation_sigma=math.radians(errors["elevation_sigma3_deg"]) / 3.0,
-                   position_sigma=errors["position_sigma3"] / 3.0,
-                   dilation_alpha=errors["dilation_alpha"],
-                   dilation_half_angle=errors["dilation_half_angle_mrad"] * 1e-3,
-                   dilation_subrays=errors["dilation_subrays"])
-
-    @property
-    def angles(self) -> bool:
-        return self.azimuth_sigma > 0 or self.elevation_sigma > 0
-
-    @property
-    def dilation(self) -> bool:
-        return self.dilation_alpha > 0
-
-    def record(self) -> SensorErrors:
-        """The 3-sigma values for the log's ``/sensor/errors`` (zero when a model is off)."""
-        on = self.dilation
-        return SensorErrors(range_sigma3=3 * self.range_sigma,
-                            azimuth_sigma3=3 * self.azimuth_sigma,
-                            elevation_sigma3=3 * self.elevation_sigma,
-                            position_sigma3=3 * self.position_sigma,
-                            pulse_dilation_alpha=self.dilation_alpha,
-                            pulse_dilation_half_angle=self.dilation_half_angle if on else 0.0,
-                            pulse_dilation_subrays=float(self.dilation_subrays) if on else 0.0)
-
-    def angle_errors(self, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """Azimuth and elevation errors (n,) [rad]."""
-        return (rng.normal(0.0, self.azimuth_sigma, n), rng.normal(0.0, self.elevation_sigma, n))
+    return (rng.normal(0.0, errors.azimuth_sigma, n), rng.normal(0.0, errors.elevation_sigma, n))
 
 
 def dilation_sigma(alpha: float, true_range: np.ndarray, cos_incidence: np.ndarray,
@@ -129,4 +89,4 @@ def dilation_sigma(alpha: float, true_range: np.ndarray, cos_incidence: np.ndarr
     tan = np.where(hit, np.sqrt(np.maximum(1.0 - c * c, 0.0)) / c, 0.0)
     count = hit.sum(axis=1)
     mean_tan = np.divide(tan.sum(axis=1), count, out=np.zeros(len(count)), where=count > 0)
-    return alpha * true_range * mean_tan / 3.0
+    return sigma_from_sigma3(alpha * true_range * mean_tan)

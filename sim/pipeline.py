@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
 from formats.strike_log import (
+    SensorErrors,
     SensorInfo,
     Shots,
     StrikeLogWriter,
@@ -67,7 +68,7 @@ class Plan:
     orbit: Orbit
     slew: dict | None
     pattern: BeamPattern
-    errors: noise.ErrorModel
+    errors: SensorErrors
     cone: tuple[np.ndarray, np.ndarray] | None
     caster: EmbreeBackend | Open3DBackend
     exact: ExactHits
@@ -118,8 +119,8 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
                     "axis": slew["axis"], "phase": math.radians(slew["phase_deg"])}
     pattern = beam_pattern(sensor["pattern"], fov_deg=sensor.get("field_of_view_deg"),
                            beams=sensor.get("beams"), resolution=sensor.get("resolution"))
-    errors = noise.ErrorModel.from_scene(scene.values["errors"])
-    cone = (cone_pattern(errors.dilation_subrays, errors.dilation_half_angle)
+    errors = scene.errors
+    cone = (cone_pattern(int(errors.pulse_dilation_subrays), errors.pulse_dilation_half_angle)
             if errors.dilation else None)
     return Plan(scene=scene, seed=seed, step=scene.values["time"]["step"], spin=spin,
                 orbit=the_orbit, slew=the_slew, pattern=pattern, errors=errors, cone=cone,
@@ -131,8 +132,8 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
 
 def shots_per_chunk(plan: Plan) -> int:
     """Shots per chunk: about RAYS_PER_CHUNK rays, counting every sub-ray a pulse may cast."""
-    rays_per_shot = plan.pattern.n_beams * (1 + (plan.errors.dilation_subrays
-                                                 if plan.errors.dilation else 0))
+    subrays = int(plan.errors.pulse_dilation_subrays) if plan.errors.dilation else 0
+    rays_per_shot = plan.pattern.n_beams * (1 + subrays)
     return int(min(max(RAYS_PER_CHUNK // rays_per_shot, 1), MAX_SHOTS_PER_CHUNK))
 
 
@@ -171,7 +172,7 @@ def _dilation(plan: Plan, index: int, origins: np.ndarray, directions: np.ndarra
     hit = face >= 0
     normal = plan.exact.normals[np.where(hit, face, 0)]
     cos_incidence = np.abs(np.einsum("hmi,hmi->hm", sub, normal))
-    sigma = noise.dilation_sigma(plan.errors.dilation_alpha, true_range, cos_incidence, hit)
+    sigma = noise.dilation_sigma(plan.errors.pulse_dilation_alpha, true_range, cos_incidence, hit)
     rng = noise.stream(plan.seed, noise.STREAM_DILATION, index)
     return sigma[:, None] * rng.standard_normal((h, 3)), h * m
 
@@ -207,7 +208,7 @@ def chunk_rays(plan: Plan, index: int, first: int, stop: int) -> Rays:
     # The true firing direction of every pulse, in S, then in B.
     if errors.angles and not pattern.reports_angles:          # pointing error of a fixed LRF
         rng = noise.stream(plan.seed, noise.STREAM_POINTING, index)
-        d_az, d_el = errors.angle_errors(rng, n * b)
+        d_az, d_el = noise.angle_errors(errors, rng, n * b)
         fired = angles_to_directions(np.tile(pattern.azimuth, n) - d_az,
                                      np.tile(pattern.elevation, n) - d_el).reshape(n, b, 3)
     else:
@@ -255,7 +256,8 @@ def compute_chunk(plan: Plan, index: int, first: int, stop: int) -> Chunk:
         else:
             recorded = true_range + np.einsum("ij,ij->i", shift, d)
     if errors.angles and pattern.reports_angles:
-        d_az, d_el = errors.angle_errors(noise.stream(plan.seed, noise.STREAM_ANGLES, index), h)
+        d_az, d_el = noise.angle_errors(errors, noise.stream(plan.seed, noise.STREAM_ANGLES,
+                                                             index), h)
         az_off, el_off = az_off + d_az, el_off + d_el
     if errors.range_sigma > 0:
         rng = noise.stream(plan.seed, noise.STREAM_RANGE, index)
@@ -317,7 +319,7 @@ def sensor_info(plan: Plan) -> SensorInfo:
     return SensorInfo(pattern=p.pattern, beam_directions=p.directions, range_min=plan.range_min,
                       range_max=plan.range_max, field_of_view=tuple(float(a) for a in
                                                                      p.field_of_view),
-                      reports_angles=p.reports_angles, errors=plan.errors.record())
+                      reports_angles=p.reports_angles, errors=plan.errors)
 
 
 def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,

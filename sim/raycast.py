@@ -39,7 +39,6 @@ class EmbreeBackend:
     """
 
     name = "embree"
-    threads_per_call = 1
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
         from embreex import mesh_construction, rtcore_scene
@@ -75,7 +74,6 @@ class Open3DBackend:
     """Open3D's ``RaycastingScene`` (Embree inside), multi-threaded within each call."""
 
     name = "open3d"
-    threads_per_call = 0   # all cores
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
         import open3d as o3d

@@ -23,7 +23,8 @@ from formats.mesh_io import read_mesh
 # Paper, "Model: Tri-Axial Ellipsoid": semi-axes along x, y and z [m].
 ASTEROID_SEMI_AXES = (143.75, 86.25, 287.5)
 # Segments around round parts of the RSOs: 32 keeps the chord error of a 1 m radius below 5 mm
-# and the whole RSO near the 1,200-triangle "box-and-panels" of dependency-facts.md.
+# and the whole RSO near 1,200 triangles, the size of the box-and-panels mesh whose ray casting
+# was measured at 11.8 M rays/s with embreex 4.4 on a 2-core machine.
 RSO_SEGMENTS = 32
 
 
@@ -249,7 +250,7 @@ def load_mesh(path, scale: float = 1.0, *, center: bool = False) -> Mesh:
     ----------
     path : str or Path
     scale : float, > 0
-        Metres per file unit (1000 for the km shape models in /work/shared/meshes).
+        Metres per file unit (1000 for shape models in km, as most public asteroid models are).
     center : bool
         Translate the mesh so its volume centroid (vertex mean for an open mesh) is the origin.
 

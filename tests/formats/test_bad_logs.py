@@ -148,3 +148,41 @@ def test_duplicate_shot_beam_pair(sphere_log):
     path = _mutated(sphere_log, _set("strikes/beam", 1, 0))  # shot 0 has beams 0 and 0
     with pytest.raises(StrikeLogError, match=r"\(shot, beam\) pair appears twice"):
         _read_everything(path)
+
+
+@pytest.mark.parametrize(("edit", "pattern"), [
+    (_set("shots/time", 8, 0.0), r"time does not increase at shot 8"),    # first row of block 2
+    (_set("strikes/shot", 8, 0), r"not ordered by shot at strike 8"),      # first row of block 2
+])
+def test_validate_checks_across_block_boundaries(sphere_log, edit, pattern):
+    path = _mutated(sphere_log, edit)
+    with StrikeLog(path) as log, pytest.raises(StrikeLogError, match=pattern):
+        log.validate(chunk_rows=8)
+
+
+def test_validate_checks_each_block_once(sphere_log, monkeypatch):
+    """validate() reads and checks every shot and strike row exactly once."""
+    import formats.strike_log as strike_log
+
+    rows = {"shots": 0, "strikes": 0}
+    check_shots, check_strikes = strike_log._check_shot_rows, strike_log._check_strike_rows
+
+    def count_shots(shots, *args):
+        rows["shots"] += len(shots)
+        check_shots(shots, *args)
+
+    def count_strikes(shot, *args, **kwargs):
+        rows["strikes"] += len(shot)
+        check_strikes(shot, *args, **kwargs)
+
+    monkeypatch.setattr(strike_log, "_check_shot_rows", count_shots)
+    monkeypatch.setattr(strike_log, "_check_strike_rows", count_strikes)
+    with StrikeLog(sphere_log) as log:
+        log.validate(chunk_rows=16)
+        assert rows == {"shots": log.n_shots, "strikes": log.n_strikes}
+
+
+def test_validate_rejects_empty_blocks(sphere_log):
+    with StrikeLog(sphere_log) as log, pytest.raises(StrikeLogError,
+                                                     match="chunk_rows must be positive"):
+        log.validate(chunk_rows=0)

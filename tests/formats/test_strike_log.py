@@ -178,3 +178,14 @@ def test_missing_directory_and_dropped_writer(tmp_path):
     w.write_shots([0.0], [[1.0, 0, 0]], [[0, 0, 0, 1.0]], [[0, 0, 0, 1.0]])
     del w  # dropped without close: an interrupted run
     assert list(tmp_path.iterdir()) == []
+
+
+def test_sensor_errors_give_1_sigma_values_of_the_recorded_3_sigma():
+    from formats import SensorErrors, sigma_from_sigma3
+
+    errors = SensorErrors(range_sigma3=0.3, azimuth_sigma3=0.006, elevation_sigma3=0.003,
+                          position_sigma3=2.0)
+    assert (errors.range_sigma, errors.azimuth_sigma, errors.elevation_sigma,
+            errors.position_sigma) == pytest.approx((0.1, 0.002, 0.001, 2.0 / 3.0), rel=1e-15)
+    assert errors.angles and not errors.dilation
+    assert sigma_from_sigma3(np.array([3.0, 6.0])) == pytest.approx([1.0, 2.0])

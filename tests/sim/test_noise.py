@@ -147,3 +147,21 @@ def test_error_streams_are_independent(tmp_path):
                            seed=9, name="b.h5")[1])
     assert np.array_equal(a["shots/sensor_position"], b["shots/sensor_position"])
     assert not np.array_equal(a["strikes/range"], b["strikes/range"])
+
+
+def test_scene_errors_are_converted_once_to_the_recorded_3_sigma_si_values():
+    import sim
+
+    scene = sim.load_scene("asteroid-lrf", ["errors.range_sigma3=0.3",
+                                            "errors.azimuth_sigma3_deg=0.2",
+                                            "errors.dilation_alpha=0.0002"])
+    errors = scene.errors
+    assert errors.range_sigma3 == 0.3 and errors.range_sigma == pytest.approx(0.1, rel=1e-15)
+    assert errors.azimuth_sigma3 == math.radians(0.2)
+    assert errors.azimuth_sigma == pytest.approx(math.radians(0.2) / 3, rel=1e-15)
+    assert errors.angles and errors.dilation
+    assert errors.pulse_dilation_half_angle == pytest.approx(0.6e-3, rel=1e-15)
+    assert errors.pulse_dilation_subrays == 30.0
+    off = sim.load_scene("asteroid-lrf").errors   # the cone is recorded only when dilation is on
+    assert (off.pulse_dilation_half_angle, off.pulse_dilation_subrays) == (0.0, 0.0)
+    assert not (off.angles or off.dilation)

@@ -1,0 +1,148 @@
+"""What a validated scene implies: the truth mesh, the orbit's mu and period, the campaign's
+duration and shot count, and the error models in the units the log records.
+
+Runs after sim/schema.py has checked every value against its declared bounds, so it only checks
+what needs the derived quantities themselves (an orbit outside the target, a mass from the
+density of a closed mesh, a duration of at least one step). Every problem raises
+:class:`SceneError` with one line naming the key.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from formats.errors import MeshFormatError
+from formats.strike_log import SensorErrors
+from sim import targets
+from sim.defaults import GRAVITATIONAL_CONSTANT
+from sim.errors import SceneError
+
+# Scene units converted to SI where the log needs radians (sim/defaults.py: every angle key
+# says its unit); each conversion happens once, here.
+RADIANS_PER = {"deg": math.pi / 180.0, "mrad": 1e-3}
+# Shots are taken at t = k * step while t <= duration; the slack absorbs the rounding of
+# duration / step (e.g. 0.5 rotations of 15480 s in 10 s steps is 774, not 773.9999999).
+SHOT_COUNT_SLACK = 1e-9
+
+
+@dataclass(frozen=True)
+class Derived:
+    """The quantities a scene implies (see :class:`sim.scene.Scene` for their meaning)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    target: str
+    mu: float
+    orbit_period: float
+    duration: float
+    n_shots: int
+    errors: SensorErrors
+
+
+def derive(values: dict) -> Derived:
+    """Build the mesh and derive the orbit, time line and error models of checked values.
+
+    Parameters
+    ----------
+    values : dict of section -> dict of key -> value
+        Checked by :func:`sim.schema.check_values`. ``target.attitude`` is normalised in place
+        to a unit quaternion.
+
+    Returns
+    -------
+    Derived
+
+    Raises
+    ------
+    SceneError
+        The mesh cannot be read, the orbit is inside the target, a density is given for an open
+        mesh, rotations for a target that does not spin, or the campaign is shorter than a step.
+    """
+    vertices, faces, label = target_mesh(values["target"])
+    q = np.asarray(values["target"]["attitude"])
+    values["target"]["attitude"] = (q / np.linalg.norm(q)).tolist()
+    mu, period = orbit_mu_and_period(values["orbit"], vertices, faces)
+    duration, n_shots = time_line(values["time"], values["target"]["spin_period"])
+    return Derived(vertices=vertices, faces=faces, target=label, mu=mu, orbit_period=period,
+                   duration=duration, n_shots=n_shots, errors=sensor_errors(values["errors"]))
+
+
+def target_mesh(target: dict) -> tuple[np.ndarray, np.ndarray, str]:
+    """The truth mesh of ``[target]``: vertices (n, 3) float64 [m, body frame B], faces (m, 3)
+    int64 and the short target name the log records."""
+    kind = target["kind"]
+    if kind == "ellipsoid":
+        return (*targets.ellipsoid(target["semi_axes"], target["subdivisions"]), "asteroid")
+    if kind == "rso-a":
+        return (*targets.rso_a(), "rso-a")
+    if kind == "rso-b":
+        return (*targets.rso_b(), "rso-b")
+    try:
+        vertices, faces = targets.load_mesh(target["path"], target["scale"],
+                                            center=target["center"])
+    except MeshFormatError as exc:
+        raise SceneError(f"target.path: {exc}") from None
+    return vertices, faces, f"mesh:{Path(target['path']).name}"
+
+
+def orbit_mu_and_period(orbit: dict, vertices: np.ndarray, faces: np.ndarray
+                        ) -> tuple[float, float]:
+    """Gravitational parameter [m^3/s^2] and period [s] of the circular orbit of ``[orbit]``.
+
+    From ``period`` if given, else ``mu``, else ``density`` times the mesh's volume.
+    """
+    radius = orbit["radius"]
+    reach = targets.bounding_radius(vertices)
+    if radius <= reach:
+        raise SceneError(f"orbit.radius = {radius:g} m puts the orbit inside the target (its "
+                         f"farthest point is {reach:.4g} m from the centre)")
+    if "period" in orbit:
+        period = orbit["period"]
+        return 4.0 * math.pi ** 2 * radius ** 3 / period ** 2, period
+    if "mu" in orbit:
+        mu = orbit["mu"]
+    else:
+        volume = targets.signed_volume(vertices, faces)
+        if not targets.is_closed(faces) or volume <= 0:
+            raise SceneError("orbit.density cannot give a mass: the target mesh is not closed; "
+                             "give orbit.mu or orbit.period instead")
+        mu = GRAVITATIONAL_CONSTANT * orbit["density"] * volume
+    return mu, 2.0 * math.pi * math.sqrt(radius ** 3 / mu)
+
+
+def time_line(time: dict, spin_period: float) -> tuple[float, int]:
+    """Duration [s] of ``[time]`` and its number of shots, at ``t = k * step``."""
+    step = time["step"]
+    if "duration" in time:
+        duration, key = time["duration"], "time.duration"
+    else:
+        if math.isinf(spin_period):
+            raise SceneError("time.rotations needs a spinning target (target.spin_period is "
+                             "inf); give time.duration instead")
+        duration, key = time["rotations"] * spin_period, "time.rotations"
+    n_shots = math.floor(duration / step + SHOT_COUNT_SLACK)
+    if n_shots < 1:
+        raise SceneError(f"{key} gives {duration:g} s, shorter than one time.step ({step:g} s)")
+    return duration, n_shots
+
+
+def sensor_errors(errors: dict) -> SensorErrors:
+    """A scene's ``[errors]`` section as the log records it: 3-sigma values in SI units.
+
+    The one conversion from scene units (degrees, milliradians) to radians; the pulse-dilation
+    cone is recorded only when dilation is on (SPEC.md: zero when the model is off).
+    """
+    on = errors["dilation_alpha"] > 0
+    return SensorErrors(
+        range_sigma3=errors["range_sigma3"],
+        azimuth_sigma3=errors["azimuth_sigma3_deg"] * RADIANS_PER["deg"],
+        elevation_sigma3=errors["elevation_sigma3_deg"] * RADIANS_PER["deg"],
+        position_sigma3=errors["position_sigma3"],
+        pulse_dilation_alpha=errors["dilation_alpha"],
+        pulse_dilation_half_angle=(errors["dilation_half_angle_mrad"] * RADIANS_PER["mrad"]
+                                   if on else 0.0),
+        pulse_dilation_subrays=float(errors["dilation_subrays"]) if on else 0.0)
