@@ -8,8 +8,9 @@ Clouds (each simulated with seed 0, then ingested; noise is the paper's LRF rang
 
 - ``rso-a``: the ``rso-a-lrf`` preset (single-beam LRF, 250 m, 50 rotations, 77,400 shots);
 - ``asteroid``: the ``asteroid-lrf`` preset (the paper's ellipsoid, 750 m, 77,400 shots);
-- ``itokawa``: the same scene with Gaskell's Itokawa model (/work/shared/meshes, km -> m,
-  centred on its centroid) as the target.
+- ``itokawa``: the same scene with Gaskell's Itokawa model (``itokawa_gaskell_12k.obj`` in the
+  shared ``meshes`` folder beside the checkout, ``MESHES``; km -> m, centred on its centroid) as
+  the target.
 
 For each cloud ``recon.experiments.compare.compare`` runs every method at its defaults and its
 parameter
@@ -64,7 +65,7 @@ def run_cloud(name: str, args) -> dict:
     from recon.experiments.auto import choose, format_choice
     from recon.experiments.compare import agreement, case_key, compare, variants
     from recon.registration.ingest import ingest
-    from recon.surfaces.reconstruct import prepare
+    from recon.surfaces.prepare import prepare
 
     log = simulate(name, args.out)
     cloud = ingest(log)

@@ -153,7 +153,7 @@ def _load(args):
     Returns the preprocessed ``PointCloud`` (points and view points) and its ``MethodInput``.
     """
     from recon.inputs import load_cloud
-    from recon.surfaces.reconstruct import InputError, prepare, preprocess
+    from recon.surfaces.prepare import InputError, prepare, preprocess
 
     cloud = load_cloud(args.input)
     if args.voxel is not None and not args.voxel > 0:

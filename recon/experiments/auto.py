@@ -232,7 +232,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     from recon.experiments.compare import case_key, case_label, variants
     from recon.experiments.sweep import iterate
     from recon.surfaces.methods import get
-    from recon.surfaces.reconstruct import prepare
+    from recon.surfaces.prepare import prepare
 
     if not 0 < holdout <= 0.5:
         raise AutoError(f"holdout must be in (0, 0.5], got {holdout}")

@@ -137,7 +137,7 @@ def run_cell(*, clouds: dict, truth, method: str, params: dict, module: str, noi
     """
     import importlib
 
-    from recon.surfaces.reconstruct import prepare
+    from recon.surfaces.prepare import prepare
 
     importlib.import_module(module)
     points, view_points, noisy = clouds[noise_key]

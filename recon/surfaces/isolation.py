@@ -1,10 +1,9 @@
 """Run one reconstruction in a fresh process with a time limit and a memory limit.
 
 Surface methods fail in ways a ``try`` cannot catch: Open3D's ball pivoting can run for hours,
-qhull can abort or segfault the process, Poisson can allocate without bound
-(dependency-facts.md). ``run_isolated`` therefore starts ``python -m recon.surfaces.isolation
-JOBDIR``
-for every run and waits for it from outside:
+qhull can abort or segfault the process, Poisson can allocate without bound (failure modes
+reported upstream for each). ``run_isolated`` therefore starts ``python -m
+recon.surfaces.isolation JOBDIR`` for every run and waits for it from outside:
 
 - the child limits its own address space (``RLIMIT_AS``, so allocations fail inside it) and
   writes no core files, then runs the method, checks the mesh and optionally scores it;
@@ -43,12 +42,13 @@ import numpy as np
 from recon.surfaces.methods import MethodFailed, MethodInput, check_mesh_arrays
 
 # Defaults of every isolated run, also the CLI's.
-# 600 s: ten times the slowest method's default run on 2e5 points here (pymeshlab ball pivoting
-# with automatic radius took 155 s; dependency-facts.md), so a limit hit means a runaway.
+# 600 s: several times the slowest method's default run on 2e5 points (pymeshlab ball pivoting
+# with automatic radius took 155 s, measured on a 2-core, 24 GiB machine with pymeshlab 2025.7),
+# so a limit hit means a runaway.
 DEFAULT_TIMEOUT_S = 600.0
 # 8 GiB of address space: the child reserves ~1.8 GB of virtual memory just importing Open3D
-# and pymeshlab and running a small Poisson (measured), and two children must fit the 24 GiB
-# machine with room for the Dask workers.
+# and pymeshlab and running a small Poisson (measured with open3d 0.20), and two children (one
+# per core) must fit a 2-core, 24 GiB machine with room for the Dask workers.
 DEFAULT_MEMORY_MB = 8192
 # Time allowed for checking and scoring a finished mesh, seconds (the method's own limit does
 # not include it): metrics.score of a 2e5-face mesh with its default 2e5 samples per side takes

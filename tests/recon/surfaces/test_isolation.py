@@ -16,7 +16,8 @@ import recon_fake_methods  # noqa: F401  (registers the test-only methods)
 from recon.experiments.compare import compare
 from recon.surfaces.isolation import run_isolated, watertight
 from recon.surfaces.methods import MethodFailed
-from recon.surfaces.reconstruct import prepare, reconstruct
+from recon.surfaces.prepare import prepare
+from recon.surfaces.reconstruct import reconstruct
 from tests.recon.conftest import FAST_SCORE, sphere_mesh, sphere_points
 
 # A hang must end at the limit, not after its hour-long sleep.

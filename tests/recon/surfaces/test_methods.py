@@ -22,7 +22,8 @@ from metrics import Mesh, point_mesh_distance, sample_surface
 from recon.surfaces import methods
 from recon.surfaces.methods import MethodFailed, ParameterError, UnknownMethod
 from recon.surfaces.methods._contour import node_keys, surface_nets
-from recon.surfaces.reconstruct import InputError, prepare, preprocess, reconstruct
+from recon.surfaces.prepare import InputError, prepare, preprocess
+from recon.surfaces.reconstruct import reconstruct
 from tests.recon.conftest import (
     BOX_HALF,
     box_distance,
