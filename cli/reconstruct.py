@@ -201,7 +201,7 @@ def run_reconstruct(args) -> int:
                      "view_points": cloud.view_points is not None}
     if auto:
         from recon.experiments.auto import choose, format_choice
-        from recon.experiments.compare import variants
+        from recon.experiments.cases import variants
 
         candidates = variants(_methods_arg(args.auto_methods)) if args.auto_methods else None
         choice = choose(cloud.points, view_points=cloud.view_points, candidates=candidates,
@@ -210,22 +210,23 @@ def run_reconstruct(args) -> int:
         if not args.json:
             print(format_choice(choice))
         summary["auto"] = choice.to_dict()
-        method, overrides = choice.method, choice.params
+        method, overrides = choice.run, None
     else:
-        method = args.method
+        method = spec.bind(overrides)
+        overrides = None
     from tqdm import tqdm
 
     from formats.mesh_io import write_mesh
     from recon.surfaces.reconstruct import reconstruct
 
     # One opaque library call: show the elapsed time and the child's stage, not a fraction.
-    with tqdm(desc=method, bar_format="{desc} {elapsed}{postfix}", disable=None, leave=False,
+    with tqdm(desc=method.label, bar_format="{desc} {elapsed}{postfix}", disable=None, leave=False,
               delay=2.0) as bar:
         surface = reconstruct(prepared, method=method, params=overrides,
                               isolate=not args.in_process, **limits,
                               on_wait=lambda stage: bar.set_postfix_str(stage))
     write_mesh(args.output, surface.vertices, surface.faces)
-    summary.update(method=method, params=surface.params, output=str(args.output),
+    summary.update(method=method.method, params=surface.params, output=str(args.output),
                    n_vertices=len(surface.vertices), n_faces=len(surface.faces),
                    **surface.info)
     if args.json:
@@ -233,7 +234,7 @@ def run_reconstruct(args) -> int:
 
         print(json.dumps(to_jsonable(summary), indent=2))
     else:
-        print(f"{method}: {len(surface.faces)} faces "
+        print(f"{method.method}: {len(surface.faces)} faces "
               f"({'watertight' if surface.info['watertight'] else 'open'}) in "
               f"{surface.info['wall_time_s']:.2f} s; wrote {args.output}")
     return 0
@@ -268,13 +269,14 @@ def run_compare(args) -> int:
                      **limits)
     if args.auto:
         from recon.experiments.auto import choose, format_choice
-        from recon.experiments.compare import agreement, case_key, variants
+        from recon.experiments.cases import variants
+        from recon.experiments.compare import agreement
         from recon.experiments.sweep import to_jsonable
 
         candidates = variants(names, grid=not args.no_grid)
         choice = choose(cloud.points, view_points=cloud.view_points, candidates=candidates,
                         seed=args.seed, k=args.normals_k, fallback=args.orient, **limits)
-        verdict = agreement(report["records"], case_key(choice.method, choice.params))
+        verdict = agreement(report["records"], choice.run.key)
         report["auto"] = {"choice": choice.to_dict(), "agreement": verdict}
         (args.output / "auto.json").write_text(
             json.dumps(to_jsonable(report["auto"]), indent=2) + "\n")

@@ -38,7 +38,7 @@ import numpy as np
 
 from formats.errors import ReconError
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S
-from recon.surfaces.methods import MethodFailed
+from recon.surfaces.methods import MethodFailed, Run
 from recon.surfaces.normals import DEFAULT_K, Fallback
 
 # Fraction of points held out: 10% leaves the fit 90% of the density (a Poisson depth or a grid
@@ -48,7 +48,7 @@ HOLDOUT_FRACTION = 0.1
 # Fewest held-out points for the standard error to mean anything.
 MIN_HELD_OUT = 30
 # Candidates of the default automatic choice: every listed method at its defaults and its
-# parameter grid (recon.experiments.compare.variants), as in ``recon compare``.
+# parameter grid (recon.experiments.cases.variants), as in ``recon compare``.
 
 
 class AutoError(ReconError, ValueError):
@@ -61,11 +61,9 @@ class AutoChoice:
 
     Attributes
     ----------
-    method : str
-    params : dict
-        Resolved parameters of the choice.
-    label : str
-        ``recon compare``'s label of the choice.
+    run : Run
+        The chosen method and its resolved parameters (``method``, ``params`` and ``label``
+        read from it).
     reason : str
         One paragraph: the best candidate, the band, the choice.
     candidates : list of dict
@@ -77,12 +75,22 @@ class AutoChoice:
         ``e_best + se_best``: the band's upper edge.
     """
 
-    method: str
-    params: dict[str, Any]
-    label: str
+    run: Run
     reason: str
     candidates: list[dict] = field(default_factory=list)
     threshold_m: float = float("nan")
+
+    @property
+    def method(self) -> str:
+        return self.run.method
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return self.run.params
+
+    @property
+    def label(self) -> str:
+        return self.run.label
 
     def to_dict(self) -> dict:
         return {"method": self.method, "params": self.params, "label": self.label,
@@ -185,18 +193,16 @@ def heldout_residuals(points: np.ndarray, view_points: np.ndarray | None, vertic
     return residual, hit
 
 
-def _fit(*, cloud, method, params, module, timeout_s, memory_mb) -> dict:
-    import importlib
-
+def _fit(*, run: Run, cloud, timeout_s, memory_mb) -> dict:
+    from recon.experiments.cases import SWEEP_THREADS
     from recon.surfaces.isolation import run_isolated
 
-    importlib.import_module(module)
-    return run_isolated(method, cloud, params, timeout_s=timeout_s, memory_mb=memory_mb,
-                        threads=1)
+    return run_isolated(run, cloud, timeout_s=timeout_s, memory_mb=memory_mb,
+                        threads=SWEEP_THREADS)
 
 
 def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
-           candidates: Sequence[tuple[str, dict]] | None = None,
+           candidates: Sequence[Run | tuple[str, dict]] | None = None,
            holdout: float = HOLDOUT_FRACTION, seed: int = 0, k: int = DEFAULT_K,
            fallback: Fallback = "centroid", timeout_s: float = DEFAULT_TIMEOUT_S,
            memory_mb: int | None = DEFAULT_MEMORY_MB, scheduler: str | None = "threads",
@@ -208,8 +214,9 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     points : (n, 3) float64, metres, body frame
     view_points : (n, 3) float64, metres, optional
         Sensor positions (orient the normals).
-    candidates : sequence of (method, params), optional
-        Default: ``recon.experiments.compare.variants()`` (every listed method and its grid).
+    candidates : sequence of Run or of (method, params), optional
+        Default: ``recon.experiments.cases.variants()`` (every listed method and its grid).
+        Pairs are resolved once here.
     holdout : float
         Fraction of points held out, in (0, 0.5].
     seed : int
@@ -229,9 +236,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     """
     from tqdm import tqdm
 
-    from recon.experiments.compare import case_key, case_label, variants
+    from recon.experiments.cases import as_runs, variants
     from recon.experiments.sweep import iterate
-    from recon.surfaces.methods import get
     from recon.surfaces.prepare import prepare
 
     if not 0 < holdout <= 0.5:
@@ -241,14 +247,12 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     if n_held < MIN_HELD_OUT:
         raise AutoError(f"auto needs at least {MIN_HELD_OUT} held-out points; {holdout:g} of "
                         f"{len(points)} points is {n_held}")
-    runs = list(candidates) if candidates else variants()
-    runs = [(m, get(m).resolve(p)) for m, p in runs]
+    runs = as_runs(candidates) if candidates else variants()
     order = np.random.default_rng(seed).permutation(len(points))
     held, train = np.sort(order[:n_held]), np.sort(order[n_held:])
     cloud = prepare(points[train], view_points=None if view_points is None else
                     view_points[train], k=k, fallback=fallback, seed=seed)
-    cases = {case_key(m, p): {"method": m, "params": p, "module": get(m).module}
-             for m, p in runs}
+    cases = {run.key: {"run": run} for run in runs}
     results: dict[str, dict] = {}
     with tqdm(total=len(cases), desc="auto", unit="fit", disable=None, leave=False) as bar:
         for key, result in iterate(_fit, cases, shared={"cloud": cloud, "timeout_s": timeout_s,
@@ -259,8 +263,9 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     table = []
     for key, case in cases.items():
         result = results[key]
-        entry = {"label": case_label(case["method"], case["params"]), "method": case["method"],
-                 "params": case["params"], "kind": get(case["method"]).kind,
+        run = case["run"]
+        entry = {"label": run.label, "method": run.method, "params": run.params,
+                 "kind": run.kind, "run": run,
                  "status": result.get("status", "failed"), "reason": result.get("reason", ""),
                  "n_faces": result.get("n_faces"), "distances": None, "beam_hits": None}
         if entry["status"] == "ok":
@@ -270,14 +275,14 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
             entry["beam_hits"] = float(hits.mean())
         table.append(entry)
     chosen, threshold, reason = select(table)
+    runs_of = [entry.pop("run") for entry in table]
     for i, entry in enumerate(table):
         d = entry.pop("distances")
         entry["heldout_mean_m"] = None if d is None else float(np.mean(d))
         entry["heldout_se_m"] = None if d is None else float(np.std(d, ddof=1) / np.sqrt(len(d)))
         entry["eligible"] = d is not None and float(np.mean(d)) <= threshold
         entry["chosen"] = i == chosen
-    pick = table[chosen]
-    return AutoChoice(pick["method"], pick["params"], pick["label"], reason, table, threshold)
+    return AutoChoice(runs_of[chosen], reason, table, threshold)
 
 
 def format_choice(choice: AutoChoice) -> str:

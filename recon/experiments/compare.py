@@ -25,39 +25,20 @@ from typing import Any
 
 import numpy as np
 
+from recon.experiments.cases import (
+    BASE_COLUMNS,
+    CHAMFER,
+    FSCORE,
+    SWEEP_THREADS,
+    as_runs,
+    pareto_front,
+    rank,
+    variants,
+    write_csv,
+)
 from recon.experiments.sweep import run_sweep, to_jsonable
-from recon.surfaces import methods
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_isolated
-from recon.surfaces.methods import MethodInput
-
-# Columns of results.csv, in order; the score columns follow, as metrics.score names them.
-# peak_memory_mb is the run's process at its peak after the method returned (imports and the
-# cloud included); baseline_memory_mb the same process just before the method started.
-BASE_COLUMNS = ("key", "label", "method", "params", "kind", "status", "failure", "reason",
-                "wall_time_s", "process_time_s", "peak_memory_mb", "baseline_memory_mb",
-                "n_vertices", "n_faces", "watertight", "mesh")
-# Scores charted and ranked on (metrics.score's names).
-CHAMFER, FSCORE = "chamfer_m", "fscore"
-# Threads per isolated run in a sweep: parallelism comes from the workers (one run per core).
-SWEEP_THREADS = 1
-
-
-def case_key(method: str, params: dict) -> str:
-    """Stable unique key of a (method, resolved parameters) run."""
-    return f"{method} {json.dumps(to_jsonable(params), sort_keys=True)}"
-
-
-def case_label(method: str, params: dict) -> str:
-    """Short human label: the method and the parameters that differ from its defaults."""
-    defaults = methods.get(method).defaults
-    changed = [f"{k}={_fmt(v)}" for k, v in params.items() if defaults.get(k) != v]
-    return " ".join([method, *changed])
-
-
-def _fmt(value) -> str:
-    if isinstance(value, (tuple, list)):
-        return ",".join(_fmt(v) for v in value)
-    return f"{value:g}" if isinstance(value, float) else str(value)
+from recon.surfaces.methods import MethodInput, Run
 
 
 def _slug(label: str, key: str) -> str:
@@ -65,85 +46,32 @@ def _slug(label: str, key: str) -> str:
     return f"{text}-{hashlib.sha1(key.encode()).hexdigest()[:6]}"
 
 
-def variants(names: Sequence[str] | None = None, *, grid: bool = True
-             ) -> list[tuple[str, dict]]:
-    """The (method, resolved parameters) runs of a comparison.
-
-    Parameters
-    ----------
-    names : sequence of str, optional
-        Methods (default: every listed method).
-    grid : bool
-        Include each method's parameter grid (else defaults only).
-    """
-    names = list(names) if names else methods.available()
-    out = []
-    for name in names:
-        spec = methods.get(name)
-        for params in (spec.variants() if grid else [spec.resolve()]):
-            out.append((name, params))
-    return out
-
-
-def run_case(*, cloud: MethodInput, truth, method: str, params: dict, module: str,
-             timeout_s: float, memory_mb: int | None, score_options: dict | None) -> dict:
+def run_case(*, run: Run, cloud: MethodInput, truth, timeout_s: float, memory_mb: int | None,
+             score_options: dict | None) -> dict:
     """One isolated, scored run (the task each sweep worker executes).
 
-    ``module`` registers the method: a worker process imports it first, so methods registered
-    outside ``recon.surfaces.methods`` (test-only ones) are found there too.
+    ``run`` goes to the isolated child as it is; the worker itself never looks the method up.
     """
-    import importlib
-
-    importlib.import_module(module)
-    return run_isolated(method, cloud, params, truth=truth, score_options=score_options,
+    return run_isolated(run, cloud, truth=truth, score_options=score_options,
                         timeout_s=timeout_s, memory_mb=memory_mb, threads=SWEEP_THREADS)
 
 
-def flatten(key: str, result: dict, case: dict, *, mesh_dir: Path | None) -> dict:
-    """A result of ``run_isolated`` for ``case`` as one flat record (mesh written, arrays
+def flatten(run: Run, result: dict, *, mesh_dir: Path | None) -> dict:
+    """A result of ``run_isolated`` for ``run`` as one flat record (mesh written, arrays
     dropped)."""
     from formats.mesh_io import write_mesh
 
-    method, params = case["method"], case["params"]
-    record: dict[str, Any] = {
-        "label": case_label(method, params), "method": method, "params": params,
-        "kind": methods.get(method).kind}
+    record: dict[str, Any] = {"label": run.label, "method": run.method, "params": run.params,
+                              "kind": run.kind}
     for column in BASE_COLUMNS[5:]:
         record[column] = result.get(column)
     if result.get("status") == "ok" and mesh_dir is not None:
         mesh_dir.mkdir(parents=True, exist_ok=True)
-        path = mesh_dir / f"{_slug(record['label'], key)}.ply"
+        path = mesh_dir / f"{_slug(run.label, run.key)}.ply"
         write_mesh(path, result["vertices"], result["faces"])
         record["mesh"] = str(Path(mesh_dir.name) / path.name)
     record.update(result.get("scores") or {})
     return record
-
-
-def rank(records: list[dict]) -> list[dict]:
-    """Successful runs by Chamfer (ties: higher F-score), then failures in run order."""
-    ok = [r for r in records if r.get("status") == "ok" and r.get(CHAMFER) is not None]
-    ok.sort(key=lambda r: (r[CHAMFER], -(r.get(FSCORE) or 0.0)))
-    return ok + [r for r in records if r not in ok]
-
-
-def pareto_front(time: np.ndarray, value: np.ndarray, *, minimize: bool = True) -> np.ndarray:
-    """Indices of the Pareto-optimal runs (faster, or better than every faster one), by time.
-
-    Parameters
-    ----------
-    time : (n,) float64, seconds
-    value : (n,) float64
-        The accuracy, lower better when ``minimize`` (Chamfer), else higher (F-score).
-    """
-    time = np.asarray(time, dtype=float)
-    score = np.asarray(value, dtype=float) * (1 if minimize else -1)
-    order = np.lexsort((score, time))
-    front, best = [], np.inf
-    for i in order:  # a short sorted scan over runs, not points
-        if score[i] < best:
-            front.append(i)
-            best = score[i]
-    return np.array(front, dtype=int)
 
 
 def plot_speed_accuracy(records: list[dict], path, *, title: str = "") -> Path:
@@ -198,26 +126,6 @@ def plot_speed_accuracy(records: list[dict], path, *, title: str = "") -> Path:
     return path
 
 
-def write_csv(records: list[dict], path) -> Path:
-    """Write records as CSV: BASE_COLUMNS then every score column (params as JSON)."""
-    import csv
-
-    extra = sorted({k for r in records for k in r} - set(BASE_COLUMNS))
-    path = Path(path)
-    with open(path, "w", newline="") as out:
-        writer = csv.writer(out)
-        writer.writerow([*BASE_COLUMNS, *extra])
-        for r in records:
-            row = []
-            for column in (*BASE_COLUMNS, *extra):
-                value = r.get(column)
-                if isinstance(value, (dict, list, tuple)):
-                    value = json.dumps(to_jsonable(value), sort_keys=True)
-                row.append("" if value is None else value)
-            writer.writerow(row)
-    return path
-
-
 def format_table(ranked: list[dict]) -> str:
     """The ranked table ``recon compare`` prints."""
     head = (f"{'#':>3}  {'run':<38} {'time s':>8} {'peak MB':>8} {'faces':>9} {'closed':>6} "
@@ -244,7 +152,7 @@ def agreement(records: list[dict], key: str, *, metric: str = CHAMFER) -> dict:
     ----------
     records : list of dict
     key : str
-        ``case_key`` of the run.
+        ``Run.key`` of the run.
     metric : str
         Truth score ranked on, lower better (default Chamfer; ``accuracy_mean_m`` ranks on the
         test-to-truth distance alone, the half of Chamfer a held-out check can see).
@@ -276,7 +184,8 @@ def agreement(records: list[dict], key: str, *, metric: str = CHAMFER) -> dict:
 
 def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *,
             names: Sequence[str] | None = None, grid: bool = True,
-            timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
+            runs: Sequence[Run] | None = None, timeout_s: float = DEFAULT_TIMEOUT_S,
+            memory_mb: int | None = DEFAULT_MEMORY_MB,
             scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
             keep_meshes: bool = True, score_options: dict | None = None,
             fingerprint: dict | None = None, title: str = "") -> dict:
@@ -293,6 +202,9 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
         Methods to run (default: all listed). Hidden test methods may be named.
     grid : bool
         Run each method's parameter grid besides its defaults.
+    runs : sequence of Run, optional
+        The runs themselves (``recon.experiments.cases.variants``), instead of ``names`` and
+        ``grid``.
     timeout_s, memory_mb
         Limits of each isolated run.
     scheduler, n_workers, resume
@@ -313,9 +225,8 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
         (labels), and the paths written.
     """
     out_dir = Path(out_dir)
-    runs = variants(names, grid=grid)
-    cases = {case_key(m, p): {"method": m, "params": p, "module": methods.get(m).module}
-             for m, p in runs}
+    runs = variants(names, grid=grid) if runs is None else as_runs(runs)
+    cases = {run.key: {"run": run} for run in runs}
     ident = {"n_points": len(cloud.points), "spacing": cloud.spacing, "seed": cloud.seed,
              "points_sha1": hashlib.sha1(np.ascontiguousarray(cloud.points)).hexdigest(),
              "truth_faces": len(truth[1]), "timeout_s": timeout_s, "memory_mb": memory_mb,
@@ -325,7 +236,7 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
                      shared={"cloud": cloud, "truth": truth, "timeout_s": timeout_s,
                              "memory_mb": memory_mb, "score_options": score_options},
                      fingerprint=ident, scheduler=scheduler, n_workers=n_workers, resume=resume,
-                     on_result=lambda key, result: flatten(key, result, cases[key],
+                     on_result=lambda key, result: flatten(cases[key]["run"], result,
                                                            mesh_dir=mesh_dir),
                      desc="compare")
     records = [done[key] for key in cases if key in done]

@@ -38,15 +38,15 @@ from pathlib import Path
 import numpy as np
 
 from formats.errors import ReconError
-from recon.experiments.compare import CHAMFER, FSCORE, case_label, variants
+from recon.experiments.cases import CHAMFER, FSCORE, SWEEP_THREADS, variants, write_csv
 from recon.experiments.sweep import run_sweep, to_jsonable
-from recon.surfaces import methods
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
     FAILURE_KINDS,
     run_isolated,
 )
+from recon.surfaces.methods import Run
 
 # Default grid. Noise: none, the paper's LRF (0.3 m 3-sigma) and its LIDAR (1 m 3-sigma).
 # Density: all points, 30% and 10%. Outliers: none and 2% (a few percent of spurious returns is
@@ -127,19 +127,13 @@ def degrade(points: np.ndarray, view_points: np.ndarray | None, *, noise_sigma3:
     return points, view_points
 
 
-def run_cell(*, clouds: dict, truth, method: str, params: dict, module: str, noise_key: str,
-             noise_sigma3: float, density: float, outliers: float, cell: tuple[int, int, int],
-             seed: int, timeout_s: float, memory_mb: int | None, score_options: dict | None
-             ) -> dict:
-    """Build one cell's cloud, prepare it and run one method on it, isolated and scored.
-
-    ``module`` registers the method (imported first, as in ``recon.experiments.compare.run_case``).
-    """
-    import importlib
-
+def run_cell(*, run: Run, clouds: dict, truth, noise_key: str, noise_sigma3: float,
+             density: float, outliers: float, cell: tuple[int, int, int], seed: int,
+             timeout_s: float, memory_mb: int | None, score_options: dict | None) -> dict:
+    """Build one cell's cloud, prepare it and run ``run`` on it, isolated and scored."""
     from recon.surfaces.prepare import prepare
 
-    importlib.import_module(module)
+    method, params = run.method, run.params
     points, view_points, noisy = clouds[noise_key]
     sequence = np.random.SeedSequence((seed, *cell))
     points, view_points = degrade(points, view_points,
@@ -153,8 +147,8 @@ def run_cell(*, clouds: dict, truth, method: str, params: dict, module: str, noi
     except ReconError as exc:
         return {"method": method, "params": params, "status": "failed", "failure": "error",
                 "reason": f"preparing the cloud failed: {exc}", "n_points": len(points)}
-    result = run_isolated(method, cloud, params, truth=truth, score_options=score_options,
-                          timeout_s=timeout_s, memory_mb=memory_mb, threads=1)
+    result = run_isolated(run, cloud, truth=truth, score_options=score_options,
+                          timeout_s=timeout_s, memory_mb=memory_mb, threads=SWEEP_THREADS)
     result.pop("vertices", None)
     result.pop("faces", None)
     result["n_points"] = len(points)
@@ -232,13 +226,12 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
     outliers = _check_levels("outliers", outliers, 0.0, None)
     runs = variants(names, grid=False)
     cases = {}
-    for (method, params) in runs:
+    for run in runs:
         for i, nz in enumerate(noise):
             for j, dn in enumerate(density):
                 for k, ol in enumerate(outliers):
-                    key = f"{method} noise={nz:g} density={dn:g} outliers={ol:g}"
-                    cases[key] = {"method": method, "params": params,
-                                  "module": methods.get(method).module,
+                    key = f"{run.method} noise={nz:g} density={dn:g} outliers={ol:g}"
+                    cases[key] = {"run": run,
                                   "noise_key": "base" if "base" in clouds else _noise_key(nz),
                                   "noise_sigma3": nz, "density": dn, "outliers": ol,
                                   "cell": (i, j, k)}
@@ -251,7 +244,7 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
 
     def keep(key, result):
         case = cases[key]
-        record = {"label": case_label(case["method"], case["params"]), "method": case["method"],
+        record = {"label": case["run"].label, "method": case["run"].method,
                   "noise_sigma3_m": case["noise_sigma3"], "density": case["density"],
                   "outliers": case["outliers"]}
         for column in ("status", "failure", "reason", "wall_time_s", "peak_memory_mb",
@@ -269,7 +262,7 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
     records = []
     for key, case in cases.items():
         record = dict(done[key])
-        record.setdefault("method", case["method"])
+        record.setdefault("method", case["run"].method)
         record.setdefault("noise_sigma3_m", case["noise_sigma3"])
         record.setdefault("density", case["density"])
         record.setdefault("outliers", case["outliers"])
@@ -279,8 +272,6 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
 
 def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
     """Write stability.csv, stability.json and each method's two PNGs."""
-    from recon.experiments.compare import write_csv
-
     out_dir = Path(out_dir)
     csv_path = write_csv(records, out_dir / "stability.csv")
     summary = {"noise_sigma3_m": list(noise), "density": list(density),

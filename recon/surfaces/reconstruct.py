@@ -16,14 +16,14 @@ from typing import Any
 
 import numpy as np
 
-from recon.surfaces import methods
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
     check_surface,
     run_isolated,
+    watertight,
 )
-from recon.surfaces.methods import MethodFailed, MethodInput
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
 from recon.surfaces.prepare import InputError, prepare, preprocess
 
 # Re-exported: callers written before the preparation got its own module import these from here.
@@ -52,7 +52,7 @@ class Surface:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-def reconstruct(cloud: MethodInput, *, method: str = "poisson", params: dict | None = None,
+def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: dict | None = None,
                 isolate: bool = False, timeout_s: float = DEFAULT_TIMEOUT_S,
                 memory_mb: int | None = DEFAULT_MEMORY_MB, on_wait=None) -> Surface:
     """Run one registered method on a prepared cloud.
@@ -60,11 +60,12 @@ def reconstruct(cloud: MethodInput, *, method: str = "poisson", params: dict | N
     Parameters
     ----------
     cloud : MethodInput
-        From ``prepare``.
-    method : str
-        A name from ``recon.surfaces.methods.available()``.
+        From ``recon.surfaces.prepare.prepare``.
+    method : str or Run
+        A ``Run`` (``recon.surfaces.methods.bind``), or a name from
+        ``recon.surfaces.methods.available()``, resolved here once with ``params``.
     params : dict, optional
-        Overrides of the method's defaults.
+        With a name only: overrides of the method's defaults.
     isolate : bool
         Run in a child process with ``timeout_s`` and ``memory_mb`` limits (crashes and hangs
         become ``MethodFailed``) instead of in this process.
@@ -84,22 +85,19 @@ def reconstruct(cloud: MethodInput, *, method: str = "poisson", params: dict | N
     MethodFailed
         The method failed, crashed, timed out, or returned an empty or degenerate mesh.
     """
-    spec = methods.get(method)
-    resolved = spec.resolve(params)
+    run = bind(method, params)
     if isolate:
-        result = run_isolated(method, cloud, resolved, timeout_s=timeout_s, memory_mb=memory_mb,
+        result = run_isolated(run, cloud, timeout_s=timeout_s, memory_mb=memory_mb,
                               on_wait=on_wait)
         if result["status"] != "ok":
-            raise MethodFailed(f"{method} failed ({result['failure']}): {result['reason']}")
+            raise MethodFailed(f"{run.method} failed ({result['failure']}): {result['reason']}")
         info = {k: result[k] for k in ("wall_time_s", "peak_memory_mb", "watertight")}
-        return Surface(result["vertices"], result["faces"], method, resolved, info)
+        return Surface(result["vertices"], result["faces"], run.method, run.params, info)
     import time
 
-    from recon.surfaces.isolation import watertight
-
     start = time.perf_counter()
-    vertices, faces = spec.run(cloud, **resolved)
+    vertices, faces = run.method_spec().run(cloud, **run.params)
     elapsed = time.perf_counter() - start
-    vertices, faces = check_surface(vertices, faces, cloud.points, method=method)
-    return Surface(vertices, faces, method, resolved,
+    vertices, faces = check_surface(vertices, faces, cloud.points, method=run.method)
+    return Surface(vertices, faces, run.method, run.params,
                    {"wall_time_s": elapsed, "watertight": watertight(faces)})

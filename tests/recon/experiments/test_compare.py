@@ -8,15 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from recon.experiments.compare import (
-    agreement,
-    case_key,
-    case_label,
-    finish,
-    pareto_front,
-    rank,
-    variants,
-)
+from recon.experiments.cases import pareto_front, rank, variants
+from recon.experiments.compare import agreement, finish
+from recon.surfaces.methods import run_key as case_key
 
 
 def _brute_front(time, value):
@@ -88,10 +82,10 @@ def test_agreement_reports_rank_and_ratio():
 
 def test_variants_and_labels():
     runs = variants(["poisson", "convex-hull"])
-    assert runs[0] == ("poisson", runs[0][1]) and runs[-1][0] == "convex-hull"
+    assert runs[0].method == "poisson" and runs[-1].method == "convex-hull"
     assert len(runs) == 1 + 4 + 1
-    assert case_label("poisson", runs[1][1]) == "poisson depth=6"
-    assert case_label("poisson", runs[0][1]) == "poisson"
+    assert runs[1].label == "poisson depth=6"
+    assert runs[0].label == "poisson"
     assert len(variants(["poisson"], grid=False)) == 1
 
 
