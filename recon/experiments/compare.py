@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from recon.experiments import charts
 from recon.experiments.cases import (
     BASE_COLUMNS,
     CHAMFER,
@@ -72,58 +73,6 @@ def flatten(run: Run, result: dict, *, mesh_dir: Path | None) -> dict:
         record["mesh"] = str(Path(mesh_dir.name) / path.name)
     record.update(result.get("scores") or {})
     return record
-
-
-def plot_speed_accuracy(records: list[dict], path, *, title: str = "") -> Path:
-    """Write the speed-accuracy chart: time vs Chamfer and vs F-score, Pareto fronts labelled."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ok = [r for r in records if r.get("status") == "ok" and r.get(CHAMFER) is not None
-          and r.get("wall_time_s")]
-    names = list(dict.fromkeys(r["method"] for r in records))
-    markers = "osD^v<>PX*hp8"
-    colours = plt.get_cmap("tab10")
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.6), constrained_layout=True)
-    for ax, metric, minimize, ylabel in (
-            (axes[0], CHAMFER, True, "Chamfer distance [m] (lower is better)"),
-            (axes[1], FSCORE, False, "F-score (higher is better)")):
-        for i, name in enumerate(names):
-            runs = [r for r in ok if r["method"] == name and r.get(metric) is not None]
-            if runs:
-                ax.scatter([r["wall_time_s"] for r in runs], [r[metric] for r in runs],
-                           marker=markers[i % len(markers)], color=colours(i % 10), s=55,
-                           label=name, edgecolors="black", linewidths=0.5, zorder=3)
-        runs = [r for r in ok if r.get(metric) is not None]
-        if runs:
-            t = np.array([r["wall_time_s"] for r in runs])
-            v = np.array([r[metric] for r in runs], dtype=float)
-            front = pareto_front(t, v, minimize=minimize)
-            ax.step(t[front], v[front], where="post", color="0.3", lw=1.2, ls="--", zorder=2,
-                    label="Pareto front")
-            for j, i in enumerate(front):
-                ax.annotate(runs[i]["label"], (t[i], v[i]), textcoords="offset points",
-                            xytext=(6, 8 if j % 2 == 0 else -12), fontsize=7.5, color="0.15")
-        ax.set_xscale("log")
-        if metric == CHAMFER:
-            ax.set_yscale("log")
-        elif runs:
-            ax.set_ylim(max(0.0, min(r[metric] for r in runs) - 0.05), 1.02)
-        ax.set_xlabel("wall time of the method [s] (log)")
-        ax.set_ylabel(ylabel)
-        ax.grid(True, which="both", alpha=0.3)
-    axes[1].legend(fontsize=8, loc="best", framealpha=0.85)
-    failed = [r for r in records if r.get("status") != "ok"]
-    if failed:
-        text = "failed: " + "; ".join(f"{r['label']} ({r.get('failure')})" for r in failed)
-        fig.text(0.01, 0.005, text[:260], fontsize=7, color="firebrick", va="bottom")
-    fig.suptitle(title or "speed against accuracy", fontsize=11)
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
 
 
 def format_table(ranked: list[dict]) -> str:
@@ -265,7 +214,7 @@ def finish(records: list[dict], out_dir, *, title: str = "", extra: dict | None 
                "pareto_fscore": fronts[FSCORE], **(extra or {})}
     json_path = out_dir / "results.json"
     json_path.write_text(json.dumps(to_jsonable(summary), indent=2) + "\n")
-    png_path = plot_speed_accuracy(ranked, out_dir / "speed_accuracy.png", title=title)
+    png_path = charts.speed_accuracy(ranked, out_dir / "speed_accuracy.png", title=title)
     return {"records": ranked, "table": format_table(ranked),
             "pareto_chamfer": fronts[CHAMFER], "pareto_fscore": fronts[FSCORE],
             "csv": csv_path, "json": json_path, "png": png_path}

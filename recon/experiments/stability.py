@@ -38,12 +38,12 @@ from pathlib import Path
 import numpy as np
 
 from formats.errors import ReconError
-from recon.experiments.cases import CHAMFER, FSCORE, SWEEP_THREADS, variants, write_csv
+from recon.experiments import charts
+from recon.experiments.cases import SWEEP_THREADS, variants, write_csv
 from recon.experiments.sweep import run_sweep, to_jsonable
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
-    FAILURE_KINDS,
     run_isolated,
 )
 from recon.surfaces.methods import Run
@@ -58,10 +58,7 @@ DEFAULT_OUTLIERS = (0.0, 0.02)
 SCENE_NOISE_KEY = "errors.range_sigma3"
 # Fewest points a degraded cell may keep.
 MIN_CELL_POINTS = 32
-# Colours of the failure map, per outcome.
-OUTCOME_COLOURS = {"ok": "#4daf4a", "timeout": "#984ea3", "crash": "#e41a1c",
-                   "memory": "#ff7f00", "error": "#377eb8", "empty": "#a65628",
-                   "degenerate": "#f781bf", "score": "#999999", "task": "#333333"}
+
 
 
 class StabilityError(ReconError, ValueError):
@@ -284,119 +281,9 @@ def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
     pngs = []
     for method in dict.fromkeys(r["method"] for r in records):
         mine = [r for r in records if r["method"] == method]
-        pngs.append(plot_failure_map(mine, out_dir / f"{method}_failures.png", method=method,
-                                     noise=noise, density=density, outliers=outliers))
-        pngs.append(plot_accuracy(mine, out_dir / f"{method}_accuracy.png", method=method,
-                                  noise=noise, density=density, outliers=outliers))
+        pngs.append(charts.failure_map(mine, out_dir / f"{method}_failures.png", method=method,
+                                       noise=noise, density=density, outliers=outliers))
+        pngs.append(charts.accuracy_map(mine, out_dir / f"{method}_accuracy.png", method=method,
+                                        noise=noise, density=density, outliers=outliers))
     return {"records": records, "csv": csv_path, "json": json_path, "pngs": pngs,
             "failure_rate": summary["failure_rate"]}
-
-
-def _grid(records, noise, density, outliers, value):
-    """(outliers, noise, density) array of ``value(record)`` (None where no record)."""
-    out = np.empty((len(outliers), len(noise), len(density)), dtype=object)
-    for r in records:
-        i = noise.index(r["noise_sigma3_m"])
-        j = density.index(r["density"])
-        k = outliers.index(r["outliers"])
-        out[k, i, j] = value(r)
-    return out
-
-
-def _axes(n_panels: int):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, n_panels, figsize=(4.2 * n_panels + 1.2, 4.2), squeeze=False,
-                             constrained_layout=True)
-    return plt, fig, axes[0]
-
-
-def _label_axes(ax, noise, density, outlier):
-    ax.set_xticks(range(len(density)), [f"{d:g}" for d in density])
-    ax.set_yticks(range(len(noise)), [f"{n:g}" for n in noise])
-    ax.set_xlabel("density (fraction of points kept)")
-    ax.set_ylabel("range noise, 3 sigma [m]")
-    ax.set_title(f"outliers {outlier:g}", fontsize=10)
-
-
-def plot_failure_map(records, path, *, method, noise, density, outliers) -> Path:
-    """Per cell: green when the method succeeded, else the colour and name of its failure."""
-    from matplotlib.colors import ListedColormap
-    from matplotlib.patches import Patch
-
-    kinds = ["ok", *FAILURE_KINDS, "task"]
-    code = _grid(records, noise, density, outliers,
-                 lambda r: "ok" if r["status"] == "ok" else (r.get("failure") or "error"))
-    plt, fig, axes = _axes(len(outliers))
-    cmap = ListedColormap([OUTCOME_COLOURS[k] for k in kinds])
-    for k, ax in enumerate(axes):
-        index = np.array([[kinds.index(c) if c in kinds else kinds.index("error")
-                           for c in row] for row in code[k]], dtype=float)
-        ax.imshow(index, cmap=cmap, vmin=-0.5, vmax=len(kinds) - 0.5, origin="lower",
-                  aspect="auto")
-        for i in range(len(noise)):
-            for j in range(len(density)):
-                ax.text(j, i, code[k][i, j], ha="center", va="center", fontsize=9,
-                        color="white" if code[k][i, j] != "ok" else "black")
-        _label_axes(ax, noise, density, outliers[k])
-    seen = sorted({c for c in code.ravel() if c}, key=kinds.index)
-    fig.legend(handles=[Patch(color=OUTCOME_COLOURS[c], label=c) for c in seen],
-               loc="outside right center", fontsize=8)
-    failed = sum(c != "ok" for c in code.ravel())
-    fig.suptitle(f"{method}: failure map ({failed} of {code.size} cells failed)", fontsize=11)
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def plot_accuracy(records, path, *, method, noise, density, outliers) -> Path:
-    """Per cell the Chamfer distance (log colour scale, shared by the panels); failed cells
-    hatched grey with their failure kind."""
-    from matplotlib.colors import LogNorm
-
-    chamfer = _grid(records, noise, density, outliers,
-                    lambda r: r.get(CHAMFER) if r["status"] == "ok" else None)
-    fscore = _grid(records, noise, density, outliers,
-                   lambda r: r.get(FSCORE) if r["status"] == "ok" else None)
-    kind = _grid(records, noise, density, outliers, lambda r: r.get("failure"))
-    values = np.array([[np.nan if v is None else float(v) for v in row]
-                       for panel in chamfer for row in panel]).reshape(chamfer.shape)
-    finite = values[np.isfinite(values) & (values > 0)]
-    norm = LogNorm(vmin=finite.min(), vmax=max(finite.max(), finite.min() * 1.01)) \
-        if len(finite) else None
-    plt, fig, axes = _axes(len(outliers))
-    image = None
-    for k, ax in enumerate(axes):
-        ax.set_facecolor("0.85")
-        masked = np.ma.masked_invalid(values[k])
-        image = ax.imshow(masked, cmap="viridis_r", norm=norm, origin="lower", aspect="auto")
-        for i in range(len(noise)):
-            for j in range(len(density)):
-                if np.isfinite(values[k, i, j]):
-                    f = fscore[k][i, j]
-                    text = f"{values[k, i, j]:.3g} m" + ("" if f is None else f"\nF {f:.2f}")
-                    ax.text(j, i, text, ha="center", va="center", fontsize=8, color="white",
-                            path_effects=_outline())
-                else:
-                    ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False,
-                                               hatch="//", edgecolor="0.55", lw=0))
-                    ax.text(j, i, f"failed\n{kind[k][i, j] or ''}", ha="center", va="center",
-                            fontsize=8, color="firebrick")
-        _label_axes(ax, noise, density, outliers[k])
-    if image is not None and norm is not None:
-        fig.colorbar(image, ax=list(axes), label="Chamfer distance [m] (lower is better)")
-    fig.suptitle(f"{method}: accuracy (Chamfer distance to the truth)", fontsize=11)
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def _outline():
-    import matplotlib.patheffects as pe
-
-    return [pe.withStroke(linewidth=1.5, foreground="black")]
