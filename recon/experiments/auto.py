@@ -30,16 +30,17 @@ The chosen candidate is then refitted on all points by the caller (``recon recon
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from formats.errors import ReconError
-from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S
+from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
 from recon.surfaces.methods import MethodFailed, Run
 from recon.surfaces.normals import DEFAULT_K, Fallback
+from recon.surfaces.prepare import Preparation
 
 # Fraction of points held out: 10% leaves the fit 90% of the density (a Poisson depth or a grid
 # cell chosen on 90% suits 100%) and gives ~1e4 held-out points on a 1e5-point cloud, so the
@@ -302,3 +303,55 @@ def format_choice(choice: AutoChoice) -> str:
     lines.append("(* chosen, ~ within one standard error of the best)")
     lines.append(choice.reason)
     return "\n".join(lines)
+
+
+def choose_and_reconstruct(input, output, *, methods: Sequence[str] | None = None,
+                           holdout: float = HOLDOUT_FRACTION,
+                           preparation: Preparation | None = None, limits: Limits | None = None,
+                           isolate: bool = True, on_wait: Callable[[str], None] | None = None,
+                           say: Callable[[str], None] | None = None) -> dict:
+    """``recon reconstruct -m auto``: read and prepare the input, choose, refit on all points.
+
+    Parameters
+    ----------
+    input : str or Path
+        Point cloud or strike log (``recon.inputs.load_cloud``).
+    output : str or Path
+        Mesh to write (.ply).
+    methods : sequence of str, optional
+        Candidate methods, each with its grid (default: every listed method).
+    holdout : float
+        Fraction of points held out (``choose``).
+    preparation : Preparation, optional
+        Cleaning, thinning and normals; its ``k``, ``fallback`` and ``seed`` serve the choice too.
+    limits : Limits, optional
+        Of every isolated fit.
+    isolate, on_wait
+        Of the final fit (``recon.surfaces.reconstruct.reconstruct_to_file``).
+    say : callable, optional
+        Called with the candidates table and the reason (``format_choice``) once chosen.
+
+    Returns
+    -------
+    dict
+        The summary of ``reconstruct_to_file`` with ``input`` and ``auto``
+        (``AutoChoice.to_dict()``).
+    """
+    from pathlib import Path
+
+    from recon.experiments.cases import variants
+    from recon.surfaces.prepare import load_prepared
+    from recon.surfaces.reconstruct import reconstruct_to_file
+
+    candidates = variants(methods) if methods else None
+    preparation = preparation or Preparation()
+    limits = limits or Limits()
+    cloud, prepared = load_prepared(input, preparation)
+    choice = choose(cloud.points, view_points=cloud.view_points, candidates=candidates,
+                    holdout=holdout, seed=preparation.seed, k=preparation.k,
+                    fallback=preparation.fallback, **limits.kwargs())
+    if say is not None:
+        say(format_choice(choice))
+    summary = reconstruct_to_file(cloud, prepared, Path(output), run=choice.run, limits=limits,
+                                  isolate=isolate, on_wait=on_wait)
+    return {"input": str(input), "auto": choice.to_dict()} | summary

@@ -1,7 +1,7 @@
 """``recon compare``: every method (defaults plus a small grid) on one cloud, scored on truth.
 
-Each run is isolated (``recon.surfaces.isolation``: own process, time and memory limits), runs on
-Dask
+Each run (a ``Run`` from ``recon.experiments.cases.variants``) is isolated
+(``recon.surfaces.isolation``: own process, time and memory limits), runs on Dask
 (``recon.experiments.sweep``) and streams to ``DIR/results.jsonl``. Finishing writes
 
 - ``DIR/results.csv`` and ``DIR/results.json``: per run the method, parameters, status and
@@ -12,6 +12,8 @@ Dask
 - ``DIR/meshes/*.ply``: the meshes (unless ``keep_meshes=False``);
 
 and the ranked table (by Chamfer, failures last with their reasons) is returned as text.
+``compare`` takes a prepared cloud and a truth mesh; ``compare_input`` takes the files, and with
+``auto=True`` also writes ``DIR/auto.json``: where ``-m auto``'s choice ranks on the truth.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,12 +36,14 @@ from recon.experiments.cases import (
     as_runs,
     pareto_front,
     rank,
+    score_options,
     variants,
     write_csv,
 )
 from recon.experiments.sweep import run_sweep, to_jsonable
-from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_isolated
+from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
 from recon.surfaces.methods import MethodInput, Run
+from recon.surfaces.prepare import Preparation
 
 
 def _slug(label: str, key: str) -> str:
@@ -218,3 +222,86 @@ def finish(records: list[dict], out_dir, *, title: str = "", extra: dict | None 
     return {"records": ranked, "table": format_table(ranked),
             "pareto_chamfer": fronts[CHAMFER], "pareto_fscore": fronts[FSCORE],
             "csv": csv_path, "json": json_path, "png": png_path}
+
+
+def format_agreement(verdict: dict) -> str:
+    """One line: where ``-m auto``'s choice ranks on the truth (``agreement``'s result)."""
+    return (f"auto vs truth: auto's choice ranks {verdict['rank']} of {verdict['n_ranked']} on "
+            f"Chamfer (best: {verdict['best_label']}); same run: "
+            f"{'yes' if verdict['same_run'] else 'no'}, same method: "
+            f"{'yes' if verdict['same_method'] else 'no'}, Chamfer ratio to the best: "
+            f"{verdict['chamfer_ratio']:.3g}")
+
+
+def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
+                  grid: bool = True, truth_scale: float = 1.0,
+                  preparation: Preparation | None = None, limits: Limits | None = None,
+                  samples: int | None = None, auto: bool = False,
+                  scheduler: str | None = None, n_workers: int | None = None,
+                  resume: bool = False, keep_meshes: bool = True,
+                  say: Callable[[str], None] | None = None) -> dict:
+    """``recon compare``: read the input and the truth, prepare, compare, optionally check auto.
+
+    Parameters
+    ----------
+    input : str or Path
+        Point cloud or strike log (``recon.inputs.load_cloud``).
+    truth : str or Path
+        Truth mesh file, or a strike log with its truth mesh (``recon.inputs.load_truth``).
+    out_dir : str or Path
+    names, grid
+        The runs (``recon.experiments.cases.variants``), resolved before anything is read.
+    truth_scale : float
+        Factor on a truth mesh file's coordinates (e.g. 1000 for km).
+    preparation : Preparation, optional
+    limits : Limits, optional
+        Of every isolated run.
+    samples : int, optional
+        Surface samples per side when scoring (``recon.experiments.cases.score_options``).
+    auto : bool
+        Also run ``-m auto``'s choice (``recon.experiments.auto.choose``) on the same candidates
+        and record where it ranks on the truth: ``DIR/auto.json``.
+    scheduler, n_workers, resume, keep_meshes
+        See ``compare``.
+    say : callable, optional
+        Called with a one-line description of the inputs before the runs start.
+
+    Returns
+    -------
+    dict
+        ``compare``'s report; with ``auto`` also ``auto`` (``choice`` and ``agreement``, as
+        written to auto.json) and ``auto_text`` (the candidates table and the agreement line).
+    """
+    from recon.inputs import load_truth
+    from recon.surfaces.prepare import load_prepared
+
+    runs = variants(names, grid=grid)
+    options = score_options(samples)
+    preparation = preparation or Preparation()
+    limits = limits or Limits()
+    out_dir = Path(out_dir)
+    truth_mesh = load_truth(truth, scale=truth_scale)
+    cloud, prepared = load_prepared(input, preparation)
+    if say is not None:
+        say(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "
+            f"{prepared.noise:.3g} m), truth {len(truth_mesh[1])} faces -> {out_dir}")
+    report = compare(prepared, truth_mesh, out_dir, runs=runs, scheduler=scheduler,
+                     n_workers=n_workers, resume=resume, keep_meshes=keep_meshes,
+                     title=Path(input).name, score_options=options,
+                     fingerprint={"input": str(input), "truth": str(truth),
+                                  "voxel": preparation.voxel,
+                                  "remove_outliers": preparation.remove_outliers,
+                                  "normals_k": preparation.k, "grid": grid},
+                     **limits.kwargs())
+    if auto:
+        from recon.experiments.auto import choose, format_choice
+
+        choice = choose(cloud.points, view_points=cloud.view_points, candidates=runs,
+                        seed=preparation.seed, k=preparation.k, fallback=preparation.fallback,
+                        **limits.kwargs())
+        verdict = agreement(report["records"], choice.run.key)
+        report["auto"] = {"choice": choice.to_dict(), "agreement": verdict}
+        (out_dir / "auto.json").write_text(json.dumps(to_jsonable(report["auto"]), indent=2)
+                                           + "\n")
+        report["auto_text"] = format_choice(choice) + "\n" + format_agreement(verdict)
+    return report

@@ -11,23 +11,28 @@ The pipeline of ``recon reconstruct``:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from formats.cloud_io import PointCloud
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
+    Limits,
     check_surface,
     run_isolated,
     watertight,
 )
 from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
-from recon.surfaces.prepare import InputError, prepare, preprocess
+from recon.surfaces.prepare import InputError, Preparation, load_prepared, prepare, preprocess
 
 # Re-exported: callers written before the preparation got its own module import these from here.
-__all__ = ["InputError", "Surface", "prepare", "preprocess", "reconstruct"]
+__all__ = ["InputError", "Surface", "prepare", "preprocess", "reconstruct", "reconstruct_input",
+           "reconstruct_to_file"]
 
 
 @dataclass
@@ -101,3 +106,80 @@ def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: di
     vertices, faces = check_surface(vertices, faces, cloud.points, method=run.method)
     return Surface(vertices, faces, run.method, run.params,
                    {"wall_time_s": elapsed, "watertight": watertight(faces)})
+
+
+def reconstruct_to_file(cloud: PointCloud, prepared: MethodInput, output, *, run: Run,
+                        limits: Limits | None = None, isolate: bool = True,
+                        on_wait: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Reconstruct a prepared cloud with ``run``, write the mesh, and summarise.
+
+    Parameters
+    ----------
+    cloud : PointCloud
+        The prepared points before normals (``Preparation.apply``): says whether there were
+        view points.
+    prepared : MethodInput
+    output : str or Path
+        Mesh to write (.ply).
+    run : Run
+    limits : Limits, optional
+        Of the isolated run (default: ``Limits()``).
+    isolate : bool
+        Run in a child process (default) or in this one.
+    on_wait : callable, optional
+        Called with the isolated child's stage while waiting.
+
+    Returns
+    -------
+    dict
+        ``n_points``, ``spacing_m``, ``noise_m``, ``view_points``, ``method``, ``params``,
+        ``label``, ``output``, ``n_vertices``, ``n_faces``, ``wall_time_s``, ``watertight``
+        and, isolated, ``peak_memory_mb``.
+    """
+    from formats.mesh_io import write_mesh
+
+    limits = limits or Limits()
+    surface = reconstruct(prepared, method=run, isolate=isolate, on_wait=on_wait,
+                          **limits.kwargs())
+    write_mesh(output, surface.vertices, surface.faces)
+    return {"n_points": len(prepared.points), "spacing_m": prepared.spacing,
+            "noise_m": prepared.noise, "view_points": cloud.view_points is not None,
+            "method": run.method, "params": surface.params, "label": run.label,
+            "output": str(output), "n_vertices": len(surface.vertices),
+            "n_faces": len(surface.faces), **surface.info}
+
+
+def reconstruct_input(input, output, *, method: str | Run = "poisson",
+                      params: dict | None = None, preparation: Preparation | None = None,
+                      limits: Limits | None = None, isolate: bool = True,
+                      on_wait: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Read a cloud or a strike log, prepare it, reconstruct it with one method, write the mesh.
+
+    What ``recon reconstruct -m METHOD`` does (``-m auto``:
+    ``recon.experiments.auto.choose_and_reconstruct``).
+
+    Parameters
+    ----------
+    input : str or Path
+        Point cloud (.ply, .las, .laz, .h5) or strike log (registered on the fly).
+    output : str or Path
+        Mesh to write (.ply).
+    method : str or Run
+        A ``Run``, or a registered name resolved once here with ``params``.
+    params : dict, optional
+    preparation : Preparation, optional
+    limits : Limits, optional
+    isolate : bool
+    on_wait : callable, optional
+        See ``reconstruct_to_file``.
+
+    Returns
+    -------
+    dict
+        ``input`` and ``reconstruct_to_file``'s summary.
+    """
+    run = bind(method, params)
+    cloud, prepared = load_prepared(input, preparation)
+    return {"input": str(input)} | reconstruct_to_file(cloud, prepared, Path(output), run=run,
+                                                       limits=limits, isolate=isolate,
+                                                       on_wait=on_wait)

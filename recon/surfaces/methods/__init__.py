@@ -352,6 +352,20 @@ def get(name: str) -> Method:
     return _REGISTRY[name]
 
 
+def listing() -> str:
+    """The listed methods, their kinds, summaries, parameters with defaults, and grids."""
+    lines = []
+    for name in available():
+        spec = get(name)
+        lines.append(f"{name} [{spec.kind}]: {spec.summary}")
+        for key, param in spec.params.items():
+            default = "auto" if param.default is None else param.default
+            lines.append(f"    {key} = {default}  ({param.doc})")
+        for overrides in spec.grid:
+            lines.append(f"    grid: {' '.join(f'{k}={v}' for k, v in overrides.items())}")
+    return "\n".join(lines)
+
+
 def bind(method: str | Run, params: Mapping[str, Any] | None = None) -> Run:
     """Resolve a method name and parameter overrides once into a ``Run``.
 

@@ -95,3 +95,14 @@ def test_agreement_on_another_truth_metric():
     verdict = agreement(records, case_key("plane", {}), metric="accuracy_mean_m")
     assert verdict["rank"] == 1 and verdict["same_run"] and verdict["ratio"] == 1.0
     assert "chamfer_ratio" not in verdict
+
+
+def test_score_options_sample_coverage_on_twice_the_samples():
+    from recon.experiments.cases import score_options
+    from recon.experiments.sweep import SweepError
+
+    assert score_options() is None
+    assert score_options(4000) == {"n_truth_samples": 4000, "n_test_samples": 4000,
+                                   "coverage_points": 8000}
+    with pytest.raises(SweepError, match="--samples must be at least 100, got 99"):
+        score_options(99)
