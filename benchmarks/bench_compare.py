@@ -8,8 +8,9 @@ Clouds (each simulated with seed 0, then ingested; noise is the paper's LRF rang
 
 - ``rso-a``: the ``rso-a-lrf`` preset (single-beam LRF, 250 m, 50 rotations, 77,400 shots);
 - ``asteroid``: the ``asteroid-lrf`` preset (the paper's ellipsoid, 750 m, 77,400 shots);
-- ``itokawa``: the same scene with Gaskell's Itokawa model (/work/shared/meshes, km -> m,
-  centred on its centroid) as the target.
+- ``itokawa``: the same scene with Gaskell's Itokawa model (``itokawa_gaskell_12k.obj`` in the
+  shared ``meshes`` folder beside the checkout, ``MESHES``; km -> m, centred on its centroid) as
+  the target.
 
 For each cloud ``recon.experiments.compare.compare`` runs every method at its defaults and its
 parameter
@@ -62,17 +63,18 @@ def simulate(name: str, out: Path) -> Path:
 def run_cloud(name: str, args) -> dict:
     from formats import StrikeLog
     from recon.experiments.auto import choose, format_choice
-    from recon.experiments.compare import agreement, case_key, compare, variants
+    from recon.experiments.cases import score_options, variants
+    from recon.experiments.compare import agreement, compare
     from recon.registration.ingest import ingest
-    from recon.surfaces.reconstruct import prepare
+    from recon.surfaces.methods import bind
+    from recon.surfaces.prepare import prepare
 
     log = simulate(name, args.out)
     cloud = ingest(log)
     with StrikeLog(log) as reader:
         truth = reader.truth_mesh()
     prepared = prepare(cloud.points, view_points=cloud.view_points, seed=0)
-    score = {"n_truth_samples": args.samples, "n_test_samples": args.samples,
-             "coverage_points": 2 * args.samples}
+    score = score_options(args.samples)
     start = time.perf_counter()
     report = compare(prepared, truth, args.out / name, scheduler=args.scheduler,
                      n_workers=args.workers, resume=args.resume, score_options=score,
@@ -81,7 +83,7 @@ def run_cloud(name: str, args) -> dict:
     elapsed = time.perf_counter() - start
     print(report["table"])
     records = report["records"]
-    base = next((r for r in records if r.get("key") == case_key(*_resolved(*BASELINE))
+    base = next((r for r in records if r.get("key") == bind(*BASELINE).key
                  and r.get("status") == "ok"), None)
     ratios = {}
     for method in dict.fromkeys(r["method"] for r in records):
@@ -104,27 +106,20 @@ def run_cloud(name: str, args) -> dict:
         saved = args.out / name / "auto.json"
         if args.resume and saved.exists():  # the choice of an earlier run of this benchmark
             choice = json.loads(saved.read_text())
-            method, params, label, reason = (choice["method"], choice["params"],
-                                             choice["label"], choice["reason"])
-            params = _resolved(method, params)[1]
+            run = bind(choice["method"], choice["params"])
+            label, reason = run.label, choice["reason"]
         else:
             made = choose(cloud.points, view_points=cloud.view_points, candidates=variants(),
                           seed=0, timeout_s=args.timeout)
             print(format_choice(made))
             saved.write_text(json.dumps(made.to_dict(), indent=2, default=str))
-            method, params, label, reason = made.method, made.params, made.label, made.reason
-        key = case_key(method, params)
+            run, label, reason = made.run, made.label, made.reason
+        key = run.key
         summary["auto"] = {"label": label, "reason": reason,
                            "agreement": agreement(records, key),
                            "agreement_accuracy": agreement(records, key,
                                                            metric="accuracy_mean_m")}
     return summary
-
-
-def _resolved(method: str, params: dict):
-    from recon.surfaces.methods import get
-
-    return method, get(method).resolve(params)
 
 
 def markdown(summaries: list[dict]) -> str:

@@ -9,8 +9,7 @@ from pathlib import Path
 from cli.options import add_sweep_options
 
 # The CLI's defaults are the library's (recon/surfaces/isolation.py says where each comes from);
-# they are
-# repeated here only as help text, so that ``recon --help`` need not import numpy.
+# they are repeated here only as help text, so that ``recon --help`` need not import numpy.
 TIMEOUT_HELP = "wall-clock limit of each method run, seconds (default: 600)"
 MEMORY_HELP = "address-space limit of each method run, MiB (default: 8192; 0: none)"
 
@@ -123,166 +122,100 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_stability)
 
 
-def _limits(args) -> dict:
-    from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S
-    from recon.surfaces.reconstruct import InputError
+def _limits(args):
+    from recon.surfaces.isolation import Limits
 
-    timeout = DEFAULT_TIMEOUT_S if args.timeout is None else args.timeout
-    if not timeout > 0:
-        raise InputError(f"--timeout must be positive, got {args.timeout}")
-    memory = DEFAULT_MEMORY_MB if args.memory_limit is None else args.memory_limit
-    if memory < 0:
-        raise InputError(f"--memory-limit must be >= 0, got {args.memory_limit}")
-    return {"timeout_s": timeout, "memory_mb": memory or None}
+    return Limits.from_options(args.timeout, args.memory_limit)
 
 
-def _score_options(args) -> dict | None:
-    from recon.surfaces.reconstruct import InputError
+def _preparation(args):
+    from recon.surfaces.prepare import Preparation
 
-    if args.samples is None:
-        return None
-    if args.samples < 100:
-        raise InputError(f"--samples must be at least 100, got {args.samples}")
-    return {"n_truth_samples": args.samples, "n_test_samples": args.samples,
-            "coverage_points": 2 * args.samples}
+    return Preparation.from_options(remove_outliers=args.remove_outliers, voxel=args.voxel,
+                                    normals_k=args.normals_k, orient=args.orient,
+                                    seed=args.seed)
 
 
-def _load(args):
-    """Read, preprocess and prepare the input cloud.
+class _StageBar:
+    """The elapsed time and the isolated child's stage, shown once a run takes over 2 s (one
+    opaque library call: no fraction to show). Created on the first report, closed on exit."""
 
-    Returns the preprocessed ``Cloud`` (points and view points) and its ``MethodInput``.
-    """
-    from recon.inputs import load_cloud
-    from recon.surfaces.reconstruct import InputError, prepare, preprocess
+    def __init__(self, desc: str):
+        self.desc, self.bar = desc, None
 
-    cloud = load_cloud(args.input)
-    if args.voxel is not None and not args.voxel > 0:
-        raise InputError(f"--voxel must be a positive size in metres, got {args.voxel}")
-    cloud = preprocess(cloud, remove_outliers=args.remove_outliers, voxel=args.voxel)
-    prepared = prepare(cloud.points, view_points=cloud.view_points, k=args.normals_k,
-                       fallback=args.orient, seed=args.seed)
-    return cloud, prepared
+    def __call__(self, stage: str) -> None:
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(desc=self.desc, bar_format="{desc} {elapsed}{postfix}", disable=None,
+                            leave=False, delay=2.0)
+        self.bar.set_postfix_str(stage)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.close()
 
 
-def _list_methods() -> int:
-    from recon.surfaces import methods
+def _print_json(value) -> None:
+    from recon.experiments.sweep import to_jsonable
 
-    for name in methods.available():
-        spec = methods.get(name)
-        print(f"{name} [{spec.kind}]: {spec.summary}")
-        for key, param in spec.params.items():
-            default = "auto" if param.default is None else param.default
-            print(f"    {key} = {default}  ({param.doc})")
-        for overrides in spec.grid:
-            print(f"    grid: {' '.join(f'{k}={v}' for k, v in overrides.items())}")
-    return 0
+    print(json.dumps(to_jsonable(value), indent=2, default=str))
 
 
 def run_reconstruct(args) -> int:
-    from recon.surfaces.reconstruct import InputError
+    from recon.surfaces import methods
+    from recon.surfaces.prepare import InputError
 
     if args.list_methods:
-        return _list_methods()
+        print(methods.listing())
+        return 0
     if not args.input or args.output is None:
         raise InputError("reconstruct needs INPUT and -o MESH.ply (or --list-methods)")
     if args.output.suffix.lower() != ".ply":
         raise InputError(f"-o must name a .ply file, got {args.output}")
-    from recon.surfaces import methods
-
     auto = args.method == "auto"
     if auto and args.param:
         raise InputError("--param cannot be combined with -m auto")
-    spec = None if auto else methods.get(args.method)
-    overrides = {} if auto else spec.parse(args.param)
-    limits = _limits(args)
-    cloud, prepared = _load(args)
-    summary: dict = {"input": str(args.input), "n_points": len(prepared.points),
-                     "spacing_m": prepared.spacing, "noise_m": prepared.noise,
-                     "view_points": cloud.view_points is not None}
-    if auto:
-        from recon.experiments.auto import choose, format_choice
-        from recon.experiments.compare import variants
+    run = None if auto else methods.parse_run(args.method, args.param)
+    options = {"preparation": _preparation(args), "limits": _limits(args),
+               "isolate": not args.in_process}
+    with _StageBar(args.method) as bar:
+        if auto:
+            from recon.experiments.auto import choose_and_reconstruct
 
-        candidates = variants(_methods_arg(args.auto_methods)) if args.auto_methods else None
-        choice = choose(cloud.points, view_points=cloud.view_points, candidates=candidates,
-                        holdout=args.holdout, seed=args.seed, k=args.normals_k,
-                        fallback=args.orient, **limits)
-        if not args.json:
-            print(format_choice(choice))
-        summary["auto"] = choice.to_dict()
-        method, overrides = choice.method, choice.params
-    else:
-        method = args.method
-    from tqdm import tqdm
+            summary = choose_and_reconstruct(args.input, args.output,
+                                             methods=_methods_arg(args.auto_methods),
+                                             holdout=args.holdout, on_wait=bar,
+                                             say=None if args.json else print, **options)
+        else:
+            from recon.surfaces.reconstruct import reconstruct_input
 
-    from formats.mesh_io import write_mesh
-    from recon.surfaces.reconstruct import reconstruct
-
-    # One opaque library call: show the elapsed time and the child's stage, not a fraction.
-    with tqdm(desc=method, bar_format="{desc} {elapsed}{postfix}", disable=None, leave=False,
-              delay=2.0) as bar:
-        surface = reconstruct(prepared, method=method, params=overrides,
-                              isolate=not args.in_process, **limits,
-                              on_wait=lambda stage: bar.set_postfix_str(stage))
-    write_mesh(args.output, surface.vertices, surface.faces)
-    summary.update(method=method, params=surface.params, output=str(args.output),
-                   n_vertices=len(surface.vertices), n_faces=len(surface.faces),
-                   **surface.info)
+            summary = reconstruct_input(args.input, args.output, method=run, on_wait=bar,
+                                        **options)
     if args.json:
-        from recon.experiments.sweep import to_jsonable
-
-        print(json.dumps(to_jsonable(summary), indent=2))
+        _print_json(summary)
     else:
-        print(f"{method}: {len(surface.faces)} faces "
-              f"({'watertight' if surface.info['watertight'] else 'open'}) in "
-              f"{surface.info['wall_time_s']:.2f} s; wrote {args.output}")
+        print(f"{summary['method']}: {summary['n_faces']} faces "
+              f"({'watertight' if summary['watertight'] else 'open'}) in "
+              f"{summary['wall_time_s']:.2f} s; wrote {args.output}")
     return 0
 
 
-def _check_methods(names):
-    from recon.surfaces import methods
-
-    for name in names or []:
-        methods.get(name)
-    return names
-
-
 def run_compare(args) -> int:
-    from recon.experiments.compare import compare
-    from recon.inputs import load_truth
+    from recon.experiments.compare import compare_input
 
-    names = _check_methods(_methods_arg(args.methods))
-    limits = _limits(args)
-    truth = load_truth(args.truth, scale=args.truth_scale)
-    cloud, prepared = _load(args)
-    if not args.json:
-        print(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "
-              f"{prepared.noise:.3g} m), truth {len(truth[1])} faces -> {args.output}")
-    report = compare(prepared, truth, args.output, names=names, grid=not args.no_grid,
-                     scheduler=args.scheduler, n_workers=args.workers, resume=args.resume,
-                     keep_meshes=not args.no_meshes, title=f"{Path(args.input).name}",
-                     score_options=_score_options(args),
-                     fingerprint={"input": str(args.input), "truth": str(args.truth),
-                                  "voxel": args.voxel, "remove_outliers": args.remove_outliers,
-                                  "normals_k": args.normals_k, "grid": not args.no_grid},
-                     **limits)
-    if args.auto:
-        from recon.experiments.auto import choose, format_choice
-        from recon.experiments.compare import agreement, case_key, variants
-        from recon.experiments.sweep import to_jsonable
-
-        candidates = variants(names, grid=not args.no_grid)
-        choice = choose(cloud.points, view_points=cloud.view_points, candidates=candidates,
-                        seed=args.seed, k=args.normals_k, fallback=args.orient, **limits)
-        verdict = agreement(report["records"], case_key(choice.method, choice.params))
-        report["auto"] = {"choice": choice.to_dict(), "agreement": verdict}
-        (args.output / "auto.json").write_text(
-            json.dumps(to_jsonable(report["auto"]), indent=2) + "\n")
+    report = compare_input(args.input, args.truth, args.output,
+                           names=_methods_arg(args.methods), grid=not args.no_grid,
+                           truth_scale=args.truth_scale, preparation=_preparation(args),
+                           limits=_limits(args), samples=args.samples, auto=args.auto,
+                           scheduler=args.scheduler, n_workers=args.workers,
+                           resume=args.resume, keep_meshes=not args.no_meshes,
+                           say=None if args.json else print)
     if args.json:
-        from recon.experiments.sweep import to_jsonable
-
-        print(json.dumps(to_jsonable({k: v for k, v in report.items() if k != "table"}),
-                         indent=2, default=str))
+        _print_json({k: v for k, v in report.items() if k not in ("table", "auto_text")})
         return 0
     print(report["table"])
     for metric, front in (("Chamfer", report["pareto_chamfer"]),
@@ -290,68 +223,25 @@ def run_compare(args) -> int:
         print(f"Pareto front (time vs {metric}): " + ", ".join(
             f"{r['label']} ({r['wall_time_s']:.2g} s)" for r in front))
     if args.auto:
-        print(format_choice(choice))
-        v = report["auto"]["agreement"]
-        print(f"auto vs truth: auto's choice ranks {v['rank']} of {v['n_ranked']} on Chamfer "
-              f"(best: {v['best_label']}); same run: {'yes' if v['same_run'] else 'no'}, same "
-              f"method: {'yes' if v['same_method'] else 'no'}, Chamfer ratio to the best: "
-              f"{v['chamfer_ratio']:.3g}")
+        print(report["auto_text"])
     print(f"wrote {report['csv']}, {report['json']}, {report['png']}")
     return 0
 
 
-def _levels(text: str, name: str) -> list[float]:
-    from recon.experiments.stability import StabilityError
-
-    try:
-        return [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise StabilityError(f"--{name} must be comma-separated numbers, got {text!r}") from None
-
-
 def run_stability(args) -> int:
-    from recon.experiments.stability import StabilityError, simulate_levels, stability
-    from recon.inputs import is_strike_log, load_cloud, load_truth
+    from recon.experiments.stability import stability_input
 
-    names = _check_methods(_methods_arg(args.methods))
-    limits = _limits(args)
-    noise = _levels(args.noise, "noise")
-    density = _levels(args.density, "density")
-    outliers = _levels(args.outliers, "outliers")
-    source = Path(args.source)
-    is_file = source.is_file() and source.suffix.lower() != ".toml"
-    if is_file:
-        if args.overrides:
-            raise StabilityError("--set applies to scenes only, not to a cloud or a log")
-        cloud = load_cloud(source)
-        if args.truth:
-            truth = load_truth(args.truth, scale=args.truth_scale)
-        elif is_strike_log(source):
-            truth = load_truth(source)
-        else:
-            raise StabilityError(f"{source}: a cloud needs --truth")
-        clouds = {"base": (cloud.points, cloud.view_points, False)}
-    else:
-        # Validate levels before simulating anything.
-        from recon.experiments.stability import _check_levels
-
-        _check_levels("noise", noise, 0.0, None)
-        clouds, truth = simulate_levels(args.source, noise, args.output,
-                                        overrides=args.overrides, seed=args.seed)
-        if args.truth:
-            truth = load_truth(args.truth, scale=args.truth_scale)
-    report = stability(args.output, clouds=clouds, truth=truth, names=names, noise=noise,
-                       density=density, outliers=outliers, seed=args.seed,
-                       scheduler=args.scheduler, n_workers=args.workers, resume=args.resume,
-                       score_options=_score_options(args),
-                       fingerprint={"source": str(args.source), "overrides": args.overrides,
-                                    "truth": str(args.truth)}, **limits)
+    report = stability_input(args.source, args.output, truth=args.truth,
+                             truth_scale=args.truth_scale, overrides=args.overrides,
+                             names=_methods_arg(args.methods), noise=args.noise,
+                             density=args.density, outliers=args.outliers, seed=args.seed,
+                             limits=_limits(args), samples=args.samples,
+                             scheduler=args.scheduler, n_workers=args.workers,
+                             resume=args.resume)
     if args.json:
-        from recon.experiments.sweep import to_jsonable
-
-        print(json.dumps(to_jsonable({"csv": str(report["csv"]), "json": str(report["json"]),
-                                      "pngs": [str(p) for p in report["pngs"]],
-                                      "failure_rate": report["failure_rate"]}), indent=2))
+        _print_json({"csv": str(report["csv"]), "json": str(report["json"]),
+                     "pngs": [str(p) for p in report["pngs"]],
+                     "failure_rate": report["failure_rate"]})
         return 0
     for method, rate in report["failure_rate"].items():
         print(f"{method:<24} failed in {rate:6.1%} of the cells")

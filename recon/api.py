@@ -171,38 +171,59 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
                          **options)
 
 
-def _cloud_input(cloud):
-    if isinstance(cloud, str | os.PathLike):
-        from recon.inputs import load_cloud
-
-        return load_cloud(cloud)
-    return cloud
-
-
 def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None = None,
-                **options):
+                remove_outliers: bool = False, voxel: float | None = None, normals_k: int = 16,
+                orient: str = "centroid", seed: int = 0, isolate: bool = True,
+                timeout: float | None = None, memory_limit: int | None = None,
+                auto_methods: Sequence[str] | None = None, holdout: float | None = None):
     """Reconstruct a surface mesh from a point cloud with one method, or ``method="auto"``.
 
     Parameters
     ----------
-    cloud : Cloud, (n, 3) array, prepared ``MethodInput``, or a cloud file or strike log
+    cloud : Cloud, (n, 3) array, or a cloud file or strike log
     method : str
-        A registered method (``recon reconstruct --list-methods``) or ``"auto"`` (chosen without
-        the truth; the choice and its reason are in ``surface.info["auto"]``).
+        A registered method (``recon reconstruct --list-methods``) or ``"auto"``: chosen without
+        the truth, its choice and reason in ``surface.info["auto"]``.
     params : dict, optional
-        Overrides of the method's defaults.
-    **options
-        Preparation (``remove_outliers``, ``voxel``, ``normals_k``, ``orient``, ``seed``) and
-        run limits (``isolate``, ``timeout_s``, ``memory_mb``) as ``recon.surfaces.run_method``.
+        Overrides of the method's defaults (not with ``"auto"``).
+    remove_outliers, voxel, normals_k, orient, seed
+        Preparation: statistical outlier removal, voxel downsampling [m], neighbours of the
+        normals, their orientation without view points, the seed of every random choice.
+    isolate : bool
+        Run the method in its own process with ``timeout`` [s] and ``memory_limit`` [MiB].
+    auto_methods, holdout
+        Candidates and held-out fraction of ``method="auto"``.
 
     Returns
     -------
     recon.surfaces.reconstruct.Surface
-        A ``Mesh`` with the method, its resolved parameters and run information.
+        A ``Mesh`` with ``method``, resolved ``params`` and run ``info``.
     """
-    from recon.surfaces.reconstruct import reconstruct_cloud
+    from recon.experiments.auto import HOLDOUT_FRACTION, choose_for
+    from recon.surfaces.isolation import Limits
+    from recon.surfaces.methods import bind
+    from recon.surfaces.prepare import Preparation, load_prepared
+    from recon.surfaces.reconstruct import reconstruct as run_method
 
-    return reconstruct_cloud(_cloud_input(cloud), method=method, params=params, **options)
+    preparation = Preparation(remove_outliers=remove_outliers, voxel=voxel, k=normals_k,
+                              fallback=orient, seed=seed)
+    limits = Limits.from_options(timeout, memory_limit)
+    choice = None
+    if method == "auto":
+        if params:
+            raise ApiError("params cannot be combined with method='auto'")
+        run = None
+    else:
+        run = bind(method, params)
+    cloud, prepared = load_prepared(cloud, preparation)
+    if run is None:
+        choice = choose_for(cloud, methods=auto_methods, preparation=preparation, limits=limits,
+                            holdout=HOLDOUT_FRACTION if holdout is None else holdout)
+        run = choice.run
+    surface = run_method(prepared, method=run, isolate=isolate, **limits.kwargs())
+    if choice is not None:
+        surface.info["auto"] = choice.to_dict()
+    return surface
 
 
 def compare(cloud, *, truth, output, methods: Sequence[str] | None = None, **options) -> dict:
@@ -218,13 +239,14 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None, **opt
     methods : sequence of str, optional
         Methods to run (default: all).
     **options
-        As ``recon.experiments.compare.compare_cloud`` (``grid``, ``auto``, limits, scheduler).
+        As ``recon.experiments.compare.compare_input``: ``grid``, ``auto``, ``preparation``,
+        ``limits``, ``samples``, ``scheduler``, ``n_workers``, ``resume``, ``keep_meshes``.
 
     Returns
     -------
     dict
         ``records`` (ranked), ``table``, the Pareto fronts and the paths written.
     """
-    from recon.experiments.compare import compare_cloud
+    from recon.experiments.compare import compare_input
 
-    return compare_cloud(_cloud_input(cloud), truth_of(truth), output, names=methods, **options)
+    return compare_input(cloud, truth, output, names=methods, **options)

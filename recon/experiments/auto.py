@@ -30,16 +30,17 @@ The chosen candidate is then refitted on all points by the caller (``recon recon
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from formats.errors import ReconError
-from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S
-from recon.surfaces.methods import MethodFailed
+from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
+from recon.surfaces.methods import MethodFailed, Run
 from recon.surfaces.normals import DEFAULT_K, Fallback
+from recon.surfaces.prepare import Preparation
 
 # Fraction of points held out: 10% leaves the fit 90% of the density (a Poisson depth or a grid
 # cell chosen on 90% suits 100%) and gives ~1e4 held-out points on a 1e5-point cloud, so the
@@ -48,7 +49,7 @@ HOLDOUT_FRACTION = 0.1
 # Fewest held-out points for the standard error to mean anything.
 MIN_HELD_OUT = 30
 # Candidates of the default automatic choice: every listed method at its defaults and its
-# parameter grid (recon.experiments.compare.variants), as in ``recon compare``.
+# parameter grid (recon.experiments.cases.variants), as in ``recon compare``.
 
 
 class AutoError(ReconError, ValueError):
@@ -61,11 +62,9 @@ class AutoChoice:
 
     Attributes
     ----------
-    method : str
-    params : dict
-        Resolved parameters of the choice.
-    label : str
-        ``recon compare``'s label of the choice.
+    run : Run
+        The chosen method and its resolved parameters (``method``, ``params`` and ``label``
+        read from it).
     reason : str
         One paragraph: the best candidate, the band, the choice.
     candidates : list of dict
@@ -77,12 +76,22 @@ class AutoChoice:
         ``e_best + se_best``: the band's upper edge.
     """
 
-    method: str
-    params: dict[str, Any]
-    label: str
+    run: Run
     reason: str
     candidates: list[dict] = field(default_factory=list)
     threshold_m: float = float("nan")
+
+    @property
+    def method(self) -> str:
+        return self.run.method
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return self.run.params
+
+    @property
+    def label(self) -> str:
+        return self.run.label
 
     def to_dict(self) -> dict:
         return {"method": self.method, "params": self.params, "label": self.label,
@@ -185,18 +194,16 @@ def heldout_residuals(points: np.ndarray, view_points: np.ndarray | None, vertic
     return residual, hit
 
 
-def _fit(*, cloud, method, params, module, timeout_s, memory_mb) -> dict:
-    import importlib
-
+def _fit(*, run: Run, cloud, timeout_s, memory_mb) -> dict:
+    from recon.experiments.cases import SWEEP_THREADS
     from recon.surfaces.isolation import run_isolated
 
-    importlib.import_module(module)
-    return run_isolated(method, cloud, params, timeout_s=timeout_s, memory_mb=memory_mb,
-                        threads=1)
+    return run_isolated(run, cloud, timeout_s=timeout_s, memory_mb=memory_mb,
+                        threads=SWEEP_THREADS)
 
 
 def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
-           candidates: Sequence[tuple[str, dict]] | None = None,
+           candidates: Sequence[Run | tuple[str, dict]] | None = None,
            holdout: float = HOLDOUT_FRACTION, seed: int = 0, k: int = DEFAULT_K,
            fallback: Fallback = "centroid", timeout_s: float = DEFAULT_TIMEOUT_S,
            memory_mb: int | None = DEFAULT_MEMORY_MB, scheduler: str | None = "threads",
@@ -208,8 +215,9 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     points : (n, 3) float64, metres, body frame
     view_points : (n, 3) float64, metres, optional
         Sensor positions (orient the normals).
-    candidates : sequence of (method, params), optional
-        Default: ``recon.experiments.compare.variants()`` (every listed method and its grid).
+    candidates : sequence of Run or of (method, params), optional
+        Default: ``recon.experiments.cases.variants()`` (every listed method and its grid).
+        Pairs are resolved once here.
     holdout : float
         Fraction of points held out, in (0, 0.5].
     seed : int
@@ -229,10 +237,9 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     """
     from tqdm import tqdm
 
-    from recon.experiments.compare import case_key, case_label, variants
+    from recon.experiments.cases import as_runs, variants
     from recon.experiments.sweep import iterate
-    from recon.surfaces.methods import get
-    from recon.surfaces.reconstruct import prepare
+    from recon.surfaces.prepare import prepare
 
     if not 0 < holdout <= 0.5:
         raise AutoError(f"holdout must be in (0, 0.5], got {holdout}")
@@ -241,14 +248,12 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     if n_held < MIN_HELD_OUT:
         raise AutoError(f"auto needs at least {MIN_HELD_OUT} held-out points; {holdout:g} of "
                         f"{len(points)} points is {n_held}")
-    runs = list(candidates) if candidates else variants()
-    runs = [(m, get(m).resolve(p)) for m, p in runs]
+    runs = as_runs(candidates) if candidates else variants()
     order = np.random.default_rng(seed).permutation(len(points))
     held, train = np.sort(order[:n_held]), np.sort(order[n_held:])
     cloud = prepare(points[train], view_points=None if view_points is None else
                     view_points[train], k=k, fallback=fallback, seed=seed)
-    cases = {case_key(m, p): {"method": m, "params": p, "module": get(m).module}
-             for m, p in runs}
+    cases = {run.key: {"run": run} for run in runs}
     results: dict[str, dict] = {}
     with tqdm(total=len(cases), desc="auto", unit="fit", disable=None, leave=False) as bar:
         for key, result in iterate(_fit, cases, shared={"cloud": cloud, "timeout_s": timeout_s,
@@ -259,8 +264,9 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     table = []
     for key, case in cases.items():
         result = results[key]
-        entry = {"label": case_label(case["method"], case["params"]), "method": case["method"],
-                 "params": case["params"], "kind": get(case["method"]).kind,
+        run = case["run"]
+        entry = {"label": run.label, "method": run.method, "params": run.params,
+                 "kind": run.kind, "run": run,
                  "status": result.get("status", "failed"), "reason": result.get("reason", ""),
                  "n_faces": result.get("n_faces"), "distances": None, "beam_hits": None}
         if entry["status"] == "ok":
@@ -270,14 +276,14 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
             entry["beam_hits"] = float(hits.mean())
         table.append(entry)
     chosen, threshold, reason = select(table)
+    runs_of = [entry.pop("run") for entry in table]
     for i, entry in enumerate(table):
         d = entry.pop("distances")
         entry["heldout_mean_m"] = None if d is None else float(np.mean(d))
         entry["heldout_se_m"] = None if d is None else float(np.std(d, ddof=1) / np.sqrt(len(d)))
         entry["eligible"] = d is not None and float(np.mean(d)) <= threshold
         entry["chosen"] = i == chosen
-    pick = table[chosen]
-    return AutoChoice(pick["method"], pick["params"], pick["label"], reason, table, threshold)
+    return AutoChoice(runs_of[chosen], reason, table, threshold)
 
 
 def format_choice(choice: AutoChoice) -> str:
@@ -297,3 +303,77 @@ def format_choice(choice: AutoChoice) -> str:
     lines.append("(* chosen, ~ within one standard error of the best)")
     lines.append(choice.reason)
     return "\n".join(lines)
+
+
+def choose_for(cloud, *, methods: Sequence[str] | None = None, holdout: float = HOLDOUT_FRACTION,
+               preparation: Preparation | None = None, limits: Limits | None = None
+               ) -> AutoChoice:
+    """``choose`` on a cleaned ``Cloud`` (``Preparation.apply``) with a preparation's normals
+    options and a run's limits: the choice ``-m auto`` makes.
+
+    Parameters
+    ----------
+    cloud : Cloud
+        Metres, body frame; its view points, when present, aim the held-out beams.
+    methods : sequence of str, optional
+        Candidate methods, each with its grid (default: every listed method).
+    holdout : float
+    preparation : Preparation, optional
+    limits : Limits, optional
+    """
+    from recon.experiments.cases import variants
+
+    preparation = preparation or Preparation()
+    return choose(cloud.points, view_points=cloud.view_points,
+                  candidates=variants(methods) if methods else None, holdout=holdout,
+                  seed=preparation.seed, k=preparation.k, fallback=preparation.fallback,
+                  **(limits or Limits()).kwargs())
+
+
+def choose_and_reconstruct(input, output, *, methods: Sequence[str] | None = None,
+                           holdout: float = HOLDOUT_FRACTION,
+                           preparation: Preparation | None = None, limits: Limits | None = None,
+                           isolate: bool = True, on_wait: Callable[[str], None] | None = None,
+                           say: Callable[[str], None] | None = None) -> dict:
+    """``recon reconstruct -m auto``: read and prepare the input, choose, refit on all points.
+
+    Parameters
+    ----------
+    input : str or Path
+        Point cloud or strike log (``recon.inputs.load_cloud``).
+    output : str or Path
+        Mesh to write (.ply).
+    methods : sequence of str, optional
+        Candidate methods, each with its grid (default: every listed method).
+    holdout : float
+        Fraction of points held out (``choose``).
+    preparation : Preparation, optional
+        Cleaning, thinning and normals; its ``k``, ``fallback`` and ``seed`` serve the choice too.
+    limits : Limits, optional
+        Of every isolated fit.
+    isolate, on_wait
+        Of the final fit (``recon.surfaces.reconstruct.reconstruct_to_file``).
+    say : callable, optional
+        Called with the candidates table and the reason (``format_choice``) once chosen.
+
+    Returns
+    -------
+    dict
+        The summary of ``reconstruct_to_file`` with ``input`` and ``auto``
+        (``AutoChoice.to_dict()``).
+    """
+    from pathlib import Path
+
+    from recon.surfaces.prepare import load_prepared
+    from recon.surfaces.reconstruct import reconstruct_to_file
+
+    preparation = preparation or Preparation()
+    limits = limits or Limits()
+    cloud, prepared = load_prepared(input, preparation)
+    choice = choose_for(cloud, methods=methods, holdout=holdout, preparation=preparation,
+                        limits=limits)
+    if say is not None:
+        say(format_choice(choice))
+    summary = reconstruct_to_file(cloud, prepared, Path(output), run=choice.run, limits=limits,
+                                  isolate=isolate, on_wait=on_wait)
+    return {"input": str(input), "auto": choice.to_dict()} | summary

@@ -1,7 +1,10 @@
-"""Charts of the studies (matplotlib, Agg): score panels, grouped bars, coverage maps, clouds.
+"""Every chart recon draws (matplotlib, Agg, one resolution): the studies' score panels, grouped
+bars, coverage maps and clouds, ``recon compare``'s speed against accuracy, and ``recon
+stability``'s failure and accuracy maps.
 
-Every chart shows the paper's edge score beside the standard scores (F-score, Chamfer distance,
-coverage), each panel saying which way is better, so no conclusion rests on one metric.
+Every chart of a study shows the paper's edge score beside the standard scores (F-score, Chamfer
+distance, coverage), each panel saying which way is better, so no conclusion rests on one metric.
+Log axes carry plain-number tick labels (20, not 2 x 10^1).
 """
 
 from __future__ import annotations
@@ -10,6 +13,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+
+from recon.experiments.cases import CHAMFER, FSCORE, pareto_front
+from recon.surfaces.isolation import FAILURE_KINDS
 
 # (key, axis label, lower is better). The edge score is our formalisation of the paper's metric
 # (metrics/edges.py); tau is 1 % of the truth's bounding-box diagonal (metrics/defaults.py).
@@ -24,6 +30,10 @@ METRICS = (
 LOG_SPAN = 5.0
 # Resolution of every PNG: readable on screen, small enough to embed in reports and docs.
 DPI = 100
+# Colours of the failure map, per outcome.
+OUTCOME_COLOURS = {"ok": "#4daf4a", "timeout": "#984ea3", "crash": "#e41a1c",
+                   "memory": "#ff7f00", "error": "#377eb8", "empty": "#a65628",
+                   "degenerate": "#f781bf", "score": "#999999", "task": "#333333"}
 # Equal-area bins of the coverage maps: longitude steps and latitude bands (uniform in sin).
 MAP_LON_BINS, MAP_LAT_BINS = 72, 36
 
@@ -377,3 +387,153 @@ def heatmaps(rows: Sequence[str], cols: Sequence[str], panels: Sequence[Mapping]
             _plain_log_ticks(bar.ax.yaxis)
     _title(fig, title, note)
     return _save(fig, path)
+
+
+def speed_accuracy(records: list[dict], path, *, title: str = "") -> Path:
+    """Write the speed-accuracy chart: time vs Chamfer and vs F-score, Pareto fronts labelled."""
+    plt = _pyplot()
+    ok = [r for r in records if r.get("status") == "ok" and r.get(CHAMFER) is not None
+          and r.get("wall_time_s")]
+    names = list(dict.fromkeys(r["method"] for r in records))
+    markers = "osD^v<>PX*hp8"
+    colours = plt.get_cmap("tab10")
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.6), constrained_layout=True)
+    for ax, metric, minimize, ylabel in (
+            (axes[0], CHAMFER, True, "Chamfer distance [m] (lower is better)"),
+            (axes[1], FSCORE, False, "F-score (higher is better)")):
+        for i, name in enumerate(names):
+            runs = [r for r in ok if r["method"] == name and r.get(metric) is not None]
+            if runs:
+                ax.scatter([r["wall_time_s"] for r in runs], [r[metric] for r in runs],
+                           marker=markers[i % len(markers)], color=colours(i % 10), s=55,
+                           label=name, edgecolors="black", linewidths=0.5, zorder=3)
+        runs = [r for r in ok if r.get(metric) is not None]
+        if runs:
+            t = np.array([r["wall_time_s"] for r in runs])
+            v = np.array([r[metric] for r in runs], dtype=float)
+            front = pareto_front(t, v, minimize=minimize)
+            ax.step(t[front], v[front], where="post", color="0.3", lw=1.2, ls="--", zorder=2,
+                    label="Pareto front")
+            for j, i in enumerate(front):
+                ax.annotate(runs[i]["label"], (t[i], v[i]), textcoords="offset points",
+                            xytext=(6, 8 if j % 2 == 0 else -12), fontsize=7.5, color="0.15")
+        ax.set_xscale("log")
+        _plain_log_ticks(ax.xaxis)
+        if metric == CHAMFER:
+            ax.set_yscale("log")
+            _plain_log_ticks(ax.yaxis)
+        elif runs:
+            ax.set_ylim(max(0.0, min(r[metric] for r in runs) - 0.05), 1.02)
+        ax.set_xlabel("wall time of the method [s] (log)")
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[1].legend(fontsize=8, loc="best", framealpha=0.85)
+    failed = [r for r in records if r.get("status") != "ok"]
+    if failed:
+        text = "failed: " + "; ".join(f"{r['label']} ({r.get('failure')})" for r in failed)
+        fig.text(0.01, 0.005, text[:260], fontsize=7, color="firebrick", va="bottom")
+    fig.suptitle(title or "speed against accuracy", fontsize=11)
+    return _save(fig, path)
+
+
+def _cells(records, noise, density, outliers, value):
+    """(outliers, noise, density) array of ``value(record)`` (None where no record)."""
+    out = np.empty((len(outliers), len(noise), len(density)), dtype=object)
+    for r in records:
+        i = noise.index(r["noise_sigma3_m"])
+        j = density.index(r["density"])
+        k = outliers.index(r["outliers"])
+        out[k, i, j] = value(r)
+    return out
+
+
+def _cell_axes(n_panels: int):
+    """A row of ``n_panels`` square-ish panels for grid maps: (figure, axes)."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, n_panels, figsize=(4.2 * n_panels + 1.2, 4.2), squeeze=False,
+                             constrained_layout=True)
+    return fig, axes[0]
+
+
+def _label_cells(ax, noise, density, outlier):
+    ax.set_xticks(range(len(density)), [f"{d:g}" for d in density])
+    ax.set_yticks(range(len(noise)), [f"{n:g}" for n in noise])
+    ax.set_xlabel("density (fraction of points kept)")
+    ax.set_ylabel("range noise, 3 sigma [m]")
+    ax.set_title(f"outliers {outlier:g}", fontsize=10)
+
+
+def failure_map(records, path, *, method, noise, density, outliers) -> Path:
+    """Per cell: green when the method succeeded, else the colour and name of its failure."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    kinds = ["ok", *FAILURE_KINDS, "task"]
+    code = _cells(records, noise, density, outliers,
+                 lambda r: "ok" if r["status"] == "ok" else (r.get("failure") or "error"))
+    fig, axes = _cell_axes(len(outliers))
+    cmap = ListedColormap([OUTCOME_COLOURS[k] for k in kinds])
+    for k, ax in enumerate(axes):
+        index = np.array([[kinds.index(c) if c in kinds else kinds.index("error")
+                           for c in row] for row in code[k]], dtype=float)
+        ax.imshow(index, cmap=cmap, vmin=-0.5, vmax=len(kinds) - 0.5, origin="lower",
+                  aspect="auto")
+        for i in range(len(noise)):
+            for j in range(len(density)):
+                ax.text(j, i, code[k][i, j], ha="center", va="center", fontsize=9,
+                        color="white" if code[k][i, j] != "ok" else "black")
+        _label_cells(ax, noise, density, outliers[k])
+    seen = sorted({c for c in code.ravel() if c}, key=kinds.index)
+    fig.legend(handles=[Patch(color=OUTCOME_COLOURS[c], label=c) for c in seen],
+               loc="outside right center", fontsize=8)
+    failed = sum(c != "ok" for c in code.ravel())
+    fig.suptitle(f"{method}: failure map ({failed} of {code.size} cells failed)", fontsize=11)
+    return _save(fig, path)
+
+
+def accuracy_map(records, path, *, method, noise, density, outliers) -> Path:
+    """Per cell the Chamfer distance (log colour scale, shared by the panels); failed cells
+    hatched grey with their failure kind."""
+    from matplotlib.colors import LogNorm
+    from matplotlib.patches import Rectangle
+
+    chamfer = _cells(records, noise, density, outliers,
+                    lambda r: r.get(CHAMFER) if r["status"] == "ok" else None)
+    fscore = _cells(records, noise, density, outliers,
+                   lambda r: r.get(FSCORE) if r["status"] == "ok" else None)
+    kind = _cells(records, noise, density, outliers, lambda r: r.get("failure"))
+    values = np.array([[np.nan if v is None else float(v) for v in row]
+                       for panel in chamfer for row in panel]).reshape(chamfer.shape)
+    finite = values[np.isfinite(values) & (values > 0)]
+    norm = LogNorm(vmin=finite.min(), vmax=max(finite.max(), finite.min() * 1.01)) \
+        if len(finite) else None
+    fig, axes = _cell_axes(len(outliers))
+    image = None
+    for k, ax in enumerate(axes):
+        ax.set_facecolor("0.85")
+        masked = np.ma.masked_invalid(values[k])
+        image = ax.imshow(masked, cmap="viridis_r", norm=norm, origin="lower", aspect="auto")
+        for i in range(len(noise)):
+            for j in range(len(density)):
+                if np.isfinite(values[k, i, j]):
+                    f = fscore[k][i, j]
+                    text = f"{values[k, i, j]:.3g} m" + ("" if f is None else f"\nF {f:.2f}")
+                    ax.text(j, i, text, ha="center", va="center", fontsize=8, color="white",
+                            path_effects=_outline())
+                else:
+                    ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False,
+                                           hatch="//", edgecolor="0.55", lw=0))
+                    ax.text(j, i, f"failed\n{kind[k][i, j] or ''}", ha="center", va="center",
+                            fontsize=8, color="firebrick")
+        _label_cells(ax, noise, density, outliers[k])
+    if image is not None and norm is not None:
+        bar = fig.colorbar(image, ax=list(axes), label="Chamfer distance [m] (lower is better)")
+        _plain_log_ticks(bar.ax.yaxis)
+    fig.suptitle(f"{method}: accuracy (Chamfer distance to the truth)", fontsize=11)
+    return _save(fig, path)
+
+
+def _outline():
+    import matplotlib.patheffects as pe
+
+    return [pe.withStroke(linewidth=1.5, foreground="black")]

@@ -1,7 +1,7 @@
 """``recon compare``: every method (defaults plus a small grid) on one cloud, scored on truth.
 
-Each run is isolated (``recon.surfaces.isolation``: own process, time and memory limits), runs on
-Dask
+Each run (a ``Run`` from ``recon.experiments.cases.variants``) is isolated
+(``recon.surfaces.isolation``: own process, time and memory limits), runs on Dask
 (``recon.experiments.sweep``) and streams to ``DIR/results.jsonl``. Finishing writes
 
 - ``DIR/results.csv`` and ``DIR/results.json``: per run the method, parameters, status and
@@ -12,52 +12,40 @@ Dask
 - ``DIR/meshes/*.ply``: the meshes (unless ``keep_meshes=False``);
 
 and the ranked table (by Chamfer, failures last with their reasons) is returned as text.
+``compare`` takes a prepared cloud and a truth mesh; ``compare_input`` takes the files, and with
+``auto=True`` also writes ``DIR/auto.json``: where ``-m auto``'s choice ranks on the truth.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from formats.geometry import Mesh
+from recon.experiments import charts
+from recon.experiments.cases import (
+    BASE_COLUMNS,
+    CHAMFER,
+    FSCORE,
+    SWEEP_THREADS,
+    as_runs,
+    pareto_front,
+    rank,
+    score_options,
+    variants,
+    write_csv,
+)
 from recon.experiments.sweep import run_sweep, to_jsonable
-from recon.surfaces import methods
-from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_isolated
-from recon.surfaces.methods import MethodInput
-
-# Columns of results.csv, in order; the score columns follow, as metrics.score names them.
-# peak_memory_mb is the run's process at its peak after the method returned (imports and the
-# cloud included); baseline_memory_mb the same process just before the method started.
-BASE_COLUMNS = ("key", "label", "method", "params", "kind", "status", "failure", "reason",
-                "wall_time_s", "process_time_s", "peak_memory_mb", "baseline_memory_mb",
-                "n_vertices", "n_faces", "watertight", "mesh")
-# Scores charted and ranked on (metrics.score's names).
-CHAMFER, FSCORE = "chamfer_m", "fscore"
-# Threads per isolated run in a sweep: parallelism comes from the workers (one run per core).
-SWEEP_THREADS = 1
-
-
-def case_key(method: str, params: dict) -> str:
-    """Stable unique key of a (method, resolved parameters) run."""
-    return f"{method} {json.dumps(to_jsonable(params), sort_keys=True)}"
-
-
-def case_label(method: str, params: dict) -> str:
-    """Short human label: the method and the parameters that differ from its defaults."""
-    defaults = methods.get(method).defaults
-    changed = [f"{k}={_fmt(v)}" for k, v in params.items() if defaults.get(k) != v]
-    return " ".join([method, *changed])
-
-
-def _fmt(value) -> str:
-    if isinstance(value, (tuple, list)):
-        return ",".join(_fmt(v) for v in value)
-    return f"{value:g}" if isinstance(value, float) else str(value)
+from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
+from recon.surfaces.methods import MethodInput, Run
+from recon.surfaces.prepare import Preparation
 
 
 def _slug(label: str, key: str) -> str:
@@ -65,157 +53,32 @@ def _slug(label: str, key: str) -> str:
     return f"{text}-{hashlib.sha1(key.encode()).hexdigest()[:6]}"
 
 
-def variants(names: Sequence[str] | None = None, *, grid: bool = True
-             ) -> list[tuple[str, dict]]:
-    """The (method, resolved parameters) runs of a comparison.
-
-    Parameters
-    ----------
-    names : sequence of str, optional
-        Methods (default: every listed method).
-    grid : bool
-        Include each method's parameter grid (else defaults only).
-    """
-    names = list(names) if names else methods.available()
-    out = []
-    for name in names:
-        spec = methods.get(name)
-        for params in (spec.variants() if grid else [spec.resolve()]):
-            out.append((name, params))
-    return out
-
-
-def run_case(*, cloud: MethodInput, truth, method: str, params: dict, module: str,
-             timeout_s: float, memory_mb: int | None, score_options: dict | None) -> dict:
+def run_case(*, run: Run, cloud: MethodInput, truth, timeout_s: float, memory_mb: int | None,
+             score_options: dict | None) -> dict:
     """One isolated, scored run (the task each sweep worker executes).
 
-    ``module`` registers the method: a worker process imports it first, so methods registered
-    outside ``recon.surfaces.methods`` (test-only ones) are found there too.
+    ``run`` goes to the isolated child as it is; the worker itself never looks the method up.
     """
-    import importlib
-
-    importlib.import_module(module)
-    return run_isolated(method, cloud, params, truth=truth, score_options=score_options,
+    return run_isolated(run, cloud, truth=truth, score_options=score_options,
                         timeout_s=timeout_s, memory_mb=memory_mb, threads=SWEEP_THREADS)
 
 
-def flatten(key: str, result: dict, case: dict, *, mesh_dir: Path | None) -> dict:
-    """A result of ``run_isolated`` for ``case`` as one flat record (mesh written, arrays
+def flatten(run: Run, result: dict, *, mesh_dir: Path | None) -> dict:
+    """A result of ``run_isolated`` for ``run`` as one flat record (mesh written, arrays
     dropped)."""
     from formats.mesh_io import write_mesh
 
-    method, params = case["method"], case["params"]
-    record: dict[str, Any] = {
-        "label": case_label(method, params), "method": method, "params": params,
-        "kind": methods.get(method).kind}
+    record: dict[str, Any] = {"label": run.label, "method": run.method, "params": run.params,
+                              "kind": run.kind}
     for column in BASE_COLUMNS[5:]:
         record[column] = result.get(column)
     if result.get("status") == "ok" and mesh_dir is not None:
         mesh_dir.mkdir(parents=True, exist_ok=True)
-        path = mesh_dir / f"{_slug(record['label'], key)}.ply"
+        path = mesh_dir / f"{_slug(run.label, run.key)}.ply"
         write_mesh(path, result["vertices"], result["faces"])
         record["mesh"] = str(Path(mesh_dir.name) / path.name)
     record.update(result.get("scores") or {})
     return record
-
-
-def rank(records: list[dict]) -> list[dict]:
-    """Successful runs by Chamfer (ties: higher F-score), then failures in run order."""
-    ok = [r for r in records if r.get("status") == "ok" and r.get(CHAMFER) is not None]
-    ok.sort(key=lambda r: (r[CHAMFER], -(r.get(FSCORE) or 0.0)))
-    return ok + [r for r in records if r not in ok]
-
-
-def pareto_front(time: np.ndarray, value: np.ndarray, *, minimize: bool = True) -> np.ndarray:
-    """Indices of the Pareto-optimal runs (faster, or better than every faster one), by time.
-
-    Parameters
-    ----------
-    time : (n,) float64, seconds
-    value : (n,) float64
-        The accuracy, lower better when ``minimize`` (Chamfer), else higher (F-score).
-    """
-    time = np.asarray(time, dtype=float)
-    score = np.asarray(value, dtype=float) * (1 if minimize else -1)
-    order = np.lexsort((score, time))
-    front, best = [], np.inf
-    for i in order:  # a short sorted scan over runs, not points
-        if score[i] < best:
-            front.append(i)
-            best = score[i]
-    return np.array(front, dtype=int)
-
-
-def plot_speed_accuracy(records: list[dict], path, *, title: str = "") -> Path:
-    """Write the speed-accuracy chart: time vs Chamfer and vs F-score, Pareto fronts labelled."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ok = [r for r in records if r.get("status") == "ok" and r.get(CHAMFER) is not None
-          and r.get("wall_time_s")]
-    names = list(dict.fromkeys(r["method"] for r in records))
-    markers = "osD^v<>PX*hp8"
-    colours = plt.get_cmap("tab10")
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.6), constrained_layout=True)
-    for ax, metric, minimize, ylabel in (
-            (axes[0], CHAMFER, True, "Chamfer distance [m] (lower is better)"),
-            (axes[1], FSCORE, False, "F-score (higher is better)")):
-        for i, name in enumerate(names):
-            runs = [r for r in ok if r["method"] == name and r.get(metric) is not None]
-            if runs:
-                ax.scatter([r["wall_time_s"] for r in runs], [r[metric] for r in runs],
-                           marker=markers[i % len(markers)], color=colours(i % 10), s=55,
-                           label=name, edgecolors="black", linewidths=0.5, zorder=3)
-        runs = [r for r in ok if r.get(metric) is not None]
-        if runs:
-            t = np.array([r["wall_time_s"] for r in runs])
-            v = np.array([r[metric] for r in runs], dtype=float)
-            front = pareto_front(t, v, minimize=minimize)
-            ax.step(t[front], v[front], where="post", color="0.3", lw=1.2, ls="--", zorder=2,
-                    label="Pareto front")
-            for j, i in enumerate(front):
-                ax.annotate(runs[i]["label"], (t[i], v[i]), textcoords="offset points",
-                            xytext=(6, 8 if j % 2 == 0 else -12), fontsize=7.5, color="0.15")
-        ax.set_xscale("log")
-        if metric == CHAMFER:
-            ax.set_yscale("log")
-        elif runs:
-            ax.set_ylim(max(0.0, min(r[metric] for r in runs) - 0.05), 1.02)
-        ax.set_xlabel("wall time of the method [s] (log)")
-        ax.set_ylabel(ylabel)
-        ax.grid(True, which="both", alpha=0.3)
-    axes[1].legend(fontsize=8, loc="best", framealpha=0.85)
-    failed = [r for r in records if r.get("status") != "ok"]
-    if failed:
-        text = "failed: " + "; ".join(f"{r['label']} ({r.get('failure')})" for r in failed)
-        fig.text(0.01, 0.005, text[:260], fontsize=7, color="firebrick", va="bottom")
-    fig.suptitle(title or "speed against accuracy", fontsize=11)
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
-
-
-def write_csv(records: list[dict], path) -> Path:
-    """Write records as CSV: BASE_COLUMNS then every score column (params as JSON)."""
-    import csv
-
-    extra = sorted({k for r in records for k in r} - set(BASE_COLUMNS))
-    path = Path(path)
-    with open(path, "w", newline="") as out:
-        writer = csv.writer(out)
-        writer.writerow([*BASE_COLUMNS, *extra])
-        for r in records:
-            row = []
-            for column in (*BASE_COLUMNS, *extra):
-                value = r.get(column)
-                if isinstance(value, (dict, list, tuple)):
-                    value = json.dumps(to_jsonable(value), sort_keys=True)
-                row.append("" if value is None else value)
-            writer.writerow(row)
-    return path
 
 
 def format_table(ranked: list[dict]) -> str:
@@ -244,7 +107,7 @@ def agreement(records: list[dict], key: str, *, metric: str = CHAMFER) -> dict:
     ----------
     records : list of dict
     key : str
-        ``case_key`` of the run.
+        ``Run.key`` of the run.
     metric : str
         Truth score ranked on, lower better (default Chamfer; ``accuracy_mean_m`` ranks on the
         test-to-truth distance alone, the half of Chamfer a held-out check can see).
@@ -276,7 +139,8 @@ def agreement(records: list[dict], key: str, *, metric: str = CHAMFER) -> dict:
 
 def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *,
             names: Sequence[str] | None = None, grid: bool = True,
-            timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
+            runs: Sequence[Run] | None = None, timeout_s: float = DEFAULT_TIMEOUT_S,
+            memory_mb: int | None = DEFAULT_MEMORY_MB,
             scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
             keep_meshes: bool = True, score_options: dict | None = None,
             fingerprint: dict | None = None, title: str = "") -> dict:
@@ -293,6 +157,9 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
         Methods to run (default: all listed). Hidden test methods may be named.
     grid : bool
         Run each method's parameter grid besides its defaults.
+    runs : sequence of Run, optional
+        The runs themselves (``recon.experiments.cases.variants``), instead of ``names`` and
+        ``grid``.
     timeout_s, memory_mb
         Limits of each isolated run.
     scheduler, n_workers, resume
@@ -313,9 +180,8 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
         (labels), and the paths written.
     """
     out_dir = Path(out_dir)
-    runs = variants(names, grid=grid)
-    cases = {case_key(m, p): {"method": m, "params": p, "module": methods.get(m).module}
-             for m, p in runs}
+    runs = variants(names, grid=grid) if runs is None else as_runs(runs)
+    cases = {run.key: {"run": run} for run in runs}
     ident = {"n_points": len(cloud.points), "spacing": cloud.spacing, "seed": cloud.seed,
              "points_sha1": hashlib.sha1(np.ascontiguousarray(cloud.points)).hexdigest(),
              "truth_faces": len(truth[1]), "timeout_s": timeout_s, "memory_mb": memory_mb,
@@ -325,7 +191,7 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
                      shared={"cloud": cloud, "truth": truth, "timeout_s": timeout_s,
                              "memory_mb": memory_mb, "score_options": score_options},
                      fingerprint=ident, scheduler=scheduler, n_workers=n_workers, resume=resume,
-                     on_result=lambda key, result: flatten(key, result, cases[key],
+                     on_result=lambda key, result: flatten(cases[key]["run"], result,
                                                            mesh_dir=mesh_dir),
                      desc="compare")
     records = [done[key] for key in cases if key in done]
@@ -354,7 +220,99 @@ def finish(records: list[dict], out_dir, *, title: str = "", extra: dict | None 
                "pareto_fscore": fronts[FSCORE], **(extra or {})}
     json_path = out_dir / "results.json"
     json_path.write_text(json.dumps(to_jsonable(summary), indent=2) + "\n")
-    png_path = plot_speed_accuracy(ranked, out_dir / "speed_accuracy.png", title=title)
+    png_path = charts.speed_accuracy(ranked, out_dir / "speed_accuracy.png", title=title)
     return {"records": ranked, "table": format_table(ranked),
             "pareto_chamfer": fronts[CHAMFER], "pareto_fscore": fronts[FSCORE],
             "csv": csv_path, "json": json_path, "png": png_path}
+
+
+def format_agreement(verdict: dict) -> str:
+    """One line: where ``-m auto``'s choice ranks on the truth (``agreement``'s result)."""
+    return (f"auto vs truth: auto's choice ranks {verdict['rank']} of {verdict['n_ranked']} on "
+            f"Chamfer (best: {verdict['best_label']}); same run: "
+            f"{'yes' if verdict['same_run'] else 'no'}, same method: "
+            f"{'yes' if verdict['same_method'] else 'no'}, Chamfer ratio to the best: "
+            f"{verdict['chamfer_ratio']:.3g}")
+
+
+def _name(source, *, full: bool = True) -> str:
+    """A file's path (or, not ``full``, its name) for fingerprints and titles; in-memory data is
+    named by its type."""
+    if not isinstance(source, str | os.PathLike):
+        return type(source).__name__
+    return str(source) if full else Path(source).name
+
+
+def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
+                  grid: bool = True, truth_scale: float = 1.0,
+                  preparation: Preparation | None = None, limits: Limits | None = None,
+                  samples: int | None = None, auto: bool = False,
+                  scheduler: str | None = None, n_workers: int | None = None,
+                  resume: bool = False, keep_meshes: bool = True,
+                  say: Callable[[str], None] | None = None) -> dict:
+    """``recon compare``: read the input and the truth, prepare, compare, optionally check auto.
+
+    Parameters
+    ----------
+    input : str or Path
+        Point cloud or strike log (``recon.inputs.load_cloud``).
+    truth : str or Path
+        Truth mesh file, or a strike log with its truth mesh (``recon.inputs.load_truth``).
+    out_dir : str or Path
+    names, grid
+        The runs (``recon.experiments.cases.variants``), resolved before anything is read.
+    truth_scale : float
+        Factor on a truth mesh file's coordinates (e.g. 1000 for km).
+    preparation : Preparation, optional
+    limits : Limits, optional
+        Of every isolated run.
+    samples : int, optional
+        Surface samples per side when scoring (``recon.experiments.cases.score_options``).
+    auto : bool
+        Also run ``-m auto``'s choice (``recon.experiments.auto.choose``) on the same candidates
+        and record where it ranks on the truth: ``DIR/auto.json``.
+    scheduler, n_workers, resume, keep_meshes
+        See ``compare``.
+    say : callable, optional
+        Called with a one-line description of the inputs before the runs start.
+
+    Returns
+    -------
+    dict
+        ``compare``'s report; with ``auto`` also ``auto`` (``choice`` and ``agreement``, as
+        written to auto.json) and ``auto_text`` (the candidates table and the agreement line).
+    """
+    from recon.inputs import load_truth
+    from recon.surfaces.prepare import load_prepared
+
+    runs = variants(names, grid=grid)
+    options = score_options(samples)
+    preparation = preparation or Preparation()
+    limits = limits or Limits()
+    out_dir = Path(out_dir)
+    truth_mesh = (load_truth(truth, scale=truth_scale) if isinstance(truth, str | os.PathLike)
+                  else Mesh.of(truth, "truth"))
+    cloud, prepared = load_prepared(input, preparation)
+    if say is not None:
+        say(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "
+            f"{prepared.noise:.3g} m), truth {len(truth_mesh[1])} faces -> {out_dir}")
+    report = compare(prepared, truth_mesh, out_dir, runs=runs, scheduler=scheduler,
+                     n_workers=n_workers, resume=resume, keep_meshes=keep_meshes,
+                     title=_name(input, full=False), score_options=options,
+                     fingerprint={"input": _name(input), "truth": _name(truth),
+                                  "voxel": preparation.voxel,
+                                  "remove_outliers": preparation.remove_outliers,
+                                  "normals_k": preparation.k, "grid": grid},
+                     **limits.kwargs())
+    if auto:
+        from recon.experiments.auto import choose, format_choice
+
+        choice = choose(cloud.points, view_points=cloud.view_points, candidates=runs,
+                        seed=preparation.seed, k=preparation.k, fallback=preparation.fallback,
+                        **limits.kwargs())
+        verdict = agreement(report["records"], choice.run.key)
+        report["auto"] = {"choice": choice.to_dict(), "agreement": verdict}
+        (out_dir / "auto.json").write_text(json.dumps(to_jsonable(report["auto"]), indent=2)
+                                           + "\n")
+        report["auto_text"] = format_choice(choice) + "\n" + format_agreement(verdict)
+    return report

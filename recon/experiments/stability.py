@@ -2,9 +2,10 @@
 
 Every cell of the grid is a degraded copy of one cloud (or one simulated scene); every method
 runs on it isolated (``recon.surfaces.isolation``), so a crash, a timeout, an empty or degenerate
-mesh is
-recorded as that cell's failure and the sweep goes on. Results stream to ``DIR/results.jsonl``
-on Dask (``recon.experiments.sweep``; ``resume`` skips finished cells). Finishing writes
+mesh is recorded as that cell's failure and the sweep goes on. Results stream to
+``DIR/results.jsonl`` on Dask (``recon.experiments.sweep``; ``resume`` skips finished cells).
+``stability_input`` starts from what a user names (a scene, a cloud or a log) and decides the
+truth; ``stability`` from clouds and a truth mesh. Finishing writes
 
 - ``DIR/stability.csv`` and ``DIR/stability.json``: one row per (method, cell) with the status,
   failure kind and reason, time, memory, faces and scores;
@@ -37,16 +38,18 @@ from pathlib import Path
 
 import numpy as np
 
+from formats import sigma_from_sigma3
 from formats.errors import ReconError
-from recon.experiments.compare import CHAMFER, FSCORE, case_label, variants
+from recon.experiments import charts
+from recon.experiments.cases import SWEEP_THREADS, score_options, variants, write_csv
 from recon.experiments.sweep import run_sweep, to_jsonable
-from recon.surfaces import methods
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
-    FAILURE_KINDS,
+    Limits,
     run_isolated,
 )
+from recon.surfaces.methods import Run
 
 # Default grid. Noise: none, the paper's LRF (0.3 m 3-sigma) and its LIDAR (1 m 3-sigma).
 # Density: all points, 30% and 10%. Outliers: none and 2% (a few percent of spurious returns is
@@ -58,10 +61,7 @@ DEFAULT_OUTLIERS = (0.0, 0.02)
 SCENE_NOISE_KEY = "errors.range_sigma3"
 # Fewest points a degraded cell may keep.
 MIN_CELL_POINTS = 32
-# Colours of the failure map, per outcome.
-OUTCOME_COLOURS = {"ok": "#4daf4a", "timeout": "#984ea3", "crash": "#e41a1c",
-                   "memory": "#ff7f00", "error": "#377eb8", "empty": "#a65628",
-                   "degenerate": "#f781bf", "score": "#999999", "task": "#333333"}
+
 
 
 class StabilityError(ReconError, ValueError):
@@ -110,9 +110,9 @@ def degrade(points: np.ndarray, view_points: np.ndarray | None, *, noise_sigma3:
         if view_points is not None:
             ray = points - view_points
             ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-300)
-            points = points + ray * rng.normal(0.0, noise_sigma3 / 3.0, (n, 1))
+            points = points + ray * rng.normal(0.0, sigma_from_sigma3(noise_sigma3), (n, 1))
         else:
-            points = points + rng.normal(0.0, noise_sigma3 / 3.0, (n, 3))
+            points = points + rng.normal(0.0, sigma_from_sigma3(noise_sigma3), (n, 3))
     keep = np.sort(rng.choice(n, size=max(1, round(density * n)), replace=False))
     points = points[keep]
     view_points = None if view_points is None else view_points[keep]
@@ -127,19 +127,13 @@ def degrade(points: np.ndarray, view_points: np.ndarray | None, *, noise_sigma3:
     return points, view_points
 
 
-def run_cell(*, clouds: dict, truth, method: str, params: dict, module: str, noise_key: str,
-             noise_sigma3: float, density: float, outliers: float, cell: tuple[int, int, int],
-             seed: int, timeout_s: float, memory_mb: int | None, score_options: dict | None
-             ) -> dict:
-    """Build one cell's cloud, prepare it and run one method on it, isolated and scored.
+def run_cell(*, run: Run, clouds: dict, truth, noise_key: str, noise_sigma3: float,
+             density: float, outliers: float, cell: tuple[int, int, int], seed: int,
+             timeout_s: float, memory_mb: int | None, score_options: dict | None) -> dict:
+    """Build one cell's cloud, prepare it and run ``run`` on it, isolated and scored."""
+    from recon.surfaces.prepare import prepare
 
-    ``module`` registers the method (imported first, as in ``recon.experiments.compare.run_case``).
-    """
-    import importlib
-
-    from recon.surfaces.reconstruct import prepare
-
-    importlib.import_module(module)
+    method, params = run.method, run.params
     points, view_points, noisy = clouds[noise_key]
     sequence = np.random.SeedSequence((seed, *cell))
     points, view_points = degrade(points, view_points,
@@ -153,8 +147,8 @@ def run_cell(*, clouds: dict, truth, method: str, params: dict, module: str, noi
     except ReconError as exc:
         return {"method": method, "params": params, "status": "failed", "failure": "error",
                 "reason": f"preparing the cloud failed: {exc}", "n_points": len(points)}
-    result = run_isolated(method, cloud, params, truth=truth, score_options=score_options,
-                          timeout_s=timeout_s, memory_mb=memory_mb, threads=1)
+    result = run_isolated(run, cloud, truth=truth, score_options=score_options,
+                          timeout_s=timeout_s, memory_mb=memory_mb, threads=SWEEP_THREADS)
     result.pop("vertices", None)
     result.pop("faces", None)
     result["n_points"] = len(points)
@@ -232,13 +226,12 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
     outliers = _check_levels("outliers", outliers, 0.0, None)
     runs = variants(names, grid=False)
     cases = {}
-    for (method, params) in runs:
+    for run in runs:
         for i, nz in enumerate(noise):
             for j, dn in enumerate(density):
                 for k, ol in enumerate(outliers):
-                    key = f"{method} noise={nz:g} density={dn:g} outliers={ol:g}"
-                    cases[key] = {"method": method, "params": params,
-                                  "module": methods.get(method).module,
+                    key = f"{run.method} noise={nz:g} density={dn:g} outliers={ol:g}"
+                    cases[key] = {"run": run,
                                   "noise_key": "base" if "base" in clouds else _noise_key(nz),
                                   "noise_sigma3": nz, "density": dn, "outliers": ol,
                                   "cell": (i, j, k)}
@@ -251,7 +244,7 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
 
     def keep(key, result):
         case = cases[key]
-        record = {"label": case_label(case["method"], case["params"]), "method": case["method"],
+        record = {"label": case["run"].label, "method": case["run"].method,
                   "noise_sigma3_m": case["noise_sigma3"], "density": case["density"],
                   "outliers": case["outliers"]}
         for column in ("status", "failure", "reason", "wall_time_s", "peak_memory_mb",
@@ -269,7 +262,7 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
     records = []
     for key, case in cases.items():
         record = dict(done[key])
-        record.setdefault("method", case["method"])
+        record.setdefault("method", case["run"].method)
         record.setdefault("noise_sigma3_m", case["noise_sigma3"])
         record.setdefault("density", case["density"])
         record.setdefault("outliers", case["outliers"])
@@ -279,8 +272,6 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
 
 def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
     """Write stability.csv, stability.json and each method's two PNGs."""
-    from recon.experiments.compare import write_csv
-
     out_dir = Path(out_dir)
     csv_path = write_csv(records, out_dir / "stability.csv")
     summary = {"noise_sigma3_m": list(noise), "density": list(density),
@@ -293,119 +284,92 @@ def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
     pngs = []
     for method in dict.fromkeys(r["method"] for r in records):
         mine = [r for r in records if r["method"] == method]
-        pngs.append(plot_failure_map(mine, out_dir / f"{method}_failures.png", method=method,
-                                     noise=noise, density=density, outliers=outliers))
-        pngs.append(plot_accuracy(mine, out_dir / f"{method}_accuracy.png", method=method,
-                                  noise=noise, density=density, outliers=outliers))
+        pngs.append(charts.failure_map(mine, out_dir / f"{method}_failures.png", method=method,
+                                       noise=noise, density=density, outliers=outliers))
+        pngs.append(charts.accuracy_map(mine, out_dir / f"{method}_accuracy.png", method=method,
+                                        noise=noise, density=density, outliers=outliers))
     return {"records": records, "csv": csv_path, "json": json_path, "pngs": pngs,
             "failure_rate": summary["failure_rate"]}
 
 
-def _grid(records, noise, density, outliers, value):
-    """(outliers, noise, density) array of ``value(record)`` (None where no record)."""
-    out = np.empty((len(outliers), len(noise), len(density)), dtype=object)
-    for r in records:
-        i = noise.index(r["noise_sigma3_m"])
-        j = density.index(r["density"])
-        k = outliers.index(r["outliers"])
-        out[k, i, j] = value(r)
-    return out
+def parse_levels(text: str, name: str) -> tuple[float, ...]:
+    """Grid levels from the command line's comma-separated ``--NAME`` text."""
+    try:
+        return tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise StabilityError(f"--{name} must be comma-separated numbers, got {text!r}") from None
 
 
-def _axes(n_panels: int):
-    import matplotlib
+def stability_input(source, out_dir, *, truth=None, truth_scale: float = 1.0,
+                    overrides: Sequence[str] = (), names: Sequence[str] | None = None,
+                    noise: Sequence[float] | str = DEFAULT_NOISE,
+                    density: Sequence[float] | str = DEFAULT_DENSITY,
+                    outliers: Sequence[float] | str = DEFAULT_OUTLIERS, seed: int = 0,
+                    limits: Limits | None = None, samples: int | None = None,
+                    scheduler: str | None = None, n_workers: int | None = None,
+                    resume: bool = False) -> dict:
+    """``recon stability`` from what a user names: a scene, or a cloud or strike log file.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    A scene (a preset name or a ``.toml`` file) is simulated once per noise level with that
+    range error (``simulate_levels``), and its truth is the scene's target. A cloud or a log is
+    degraded per cell; its truth is ``truth``, else a log's own truth mesh (a plain cloud
+    needs ``truth``).
 
-    fig, axes = plt.subplots(1, n_panels, figsize=(4.2 * n_panels + 1.2, 4.2), squeeze=False,
-                             constrained_layout=True)
-    return plt, fig, axes[0]
+    Parameters
+    ----------
+    source : str or Path
+        Scene preset name, scene ``.toml``, point cloud or strike log.
+    out_dir : str or Path
+    truth : str or Path, optional
+        Truth mesh file or strike log with truth; overrides the source's own.
+    truth_scale : float
+        Factor on a truth mesh file's coordinates.
+    overrides : sequence of str
+        ``KEY=VALUE`` scene overrides (scenes only).
+    names : sequence of str, optional
+        Methods, each at its defaults (default: all listed).
+    noise, density, outliers : sequence of float, or str
+        Grid levels; text is comma-separated (``parse_levels``).
+    seed : int
+    limits : Limits, optional
+    samples : int, optional
+        Surface samples per side when scoring (``recon.experiments.cases.score_options``).
+    scheduler, n_workers, resume
+        See ``recon.experiments.sweep.run_sweep``.
 
+    Returns
+    -------
+    dict
+        ``stability``'s report.
+    """
+    from recon.inputs import is_strike_log, load_cloud, load_truth
 
-def _label_axes(ax, noise, density, outlier):
-    ax.set_xticks(range(len(density)), [f"{d:g}" for d in density])
-    ax.set_yticks(range(len(noise)), [f"{n:g}" for n in noise])
-    ax.set_xlabel("density (fraction of points kept)")
-    ax.set_ylabel("range noise, 3 sigma [m]")
-    ax.set_title(f"outliers {outlier:g}", fontsize=10)
-
-
-def plot_failure_map(records, path, *, method, noise, density, outliers) -> Path:
-    """Per cell: green when the method succeeded, else the colour and name of its failure."""
-    from matplotlib.colors import ListedColormap
-    from matplotlib.patches import Patch
-
-    kinds = ["ok", *FAILURE_KINDS, "task"]
-    code = _grid(records, noise, density, outliers,
-                 lambda r: "ok" if r["status"] == "ok" else (r.get("failure") or "error"))
-    plt, fig, axes = _axes(len(outliers))
-    cmap = ListedColormap([OUTCOME_COLOURS[k] for k in kinds])
-    for k, ax in enumerate(axes):
-        index = np.array([[kinds.index(c) if c in kinds else kinds.index("error")
-                           for c in row] for row in code[k]], dtype=float)
-        ax.imshow(index, cmap=cmap, vmin=-0.5, vmax=len(kinds) - 0.5, origin="lower",
-                  aspect="auto")
-        for i in range(len(noise)):
-            for j in range(len(density)):
-                ax.text(j, i, code[k][i, j], ha="center", va="center", fontsize=9,
-                        color="white" if code[k][i, j] != "ok" else "black")
-        _label_axes(ax, noise, density, outliers[k])
-    seen = sorted({c for c in code.ravel() if c}, key=kinds.index)
-    fig.legend(handles=[Patch(color=OUTCOME_COLOURS[c], label=c) for c in seen],
-               loc="outside right center", fontsize=8)
-    failed = sum(c != "ok" for c in code.ravel())
-    fig.suptitle(f"{method}: failure map ({failed} of {code.size} cells failed)", fontsize=11)
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def plot_accuracy(records, path, *, method, noise, density, outliers) -> Path:
-    """Per cell the Chamfer distance (log colour scale, shared by the panels); failed cells
-    hatched grey with their failure kind."""
-    from matplotlib.colors import LogNorm
-
-    chamfer = _grid(records, noise, density, outliers,
-                    lambda r: r.get(CHAMFER) if r["status"] == "ok" else None)
-    fscore = _grid(records, noise, density, outliers,
-                   lambda r: r.get(FSCORE) if r["status"] == "ok" else None)
-    kind = _grid(records, noise, density, outliers, lambda r: r.get("failure"))
-    values = np.array([[np.nan if v is None else float(v) for v in row]
-                       for panel in chamfer for row in panel]).reshape(chamfer.shape)
-    finite = values[np.isfinite(values) & (values > 0)]
-    norm = LogNorm(vmin=finite.min(), vmax=max(finite.max(), finite.min() * 1.01)) \
-        if len(finite) else None
-    plt, fig, axes = _axes(len(outliers))
-    image = None
-    for k, ax in enumerate(axes):
-        ax.set_facecolor("0.85")
-        masked = np.ma.masked_invalid(values[k])
-        image = ax.imshow(masked, cmap="viridis_r", norm=norm, origin="lower", aspect="auto")
-        for i in range(len(noise)):
-            for j in range(len(density)):
-                if np.isfinite(values[k, i, j]):
-                    f = fscore[k][i, j]
-                    text = f"{values[k, i, j]:.3g} m" + ("" if f is None else f"\nF {f:.2f}")
-                    ax.text(j, i, text, ha="center", va="center", fontsize=8, color="white",
-                            path_effects=_outline())
-                else:
-                    ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False,
-                                               hatch="//", edgecolor="0.55", lw=0))
-                    ax.text(j, i, f"failed\n{kind[k][i, j] or ''}", ha="center", va="center",
-                            fontsize=8, color="firebrick")
-        _label_axes(ax, noise, density, outliers[k])
-    if image is not None and norm is not None:
-        fig.colorbar(image, ax=list(axes), label="Chamfer distance [m] (lower is better)")
-    fig.suptitle(f"{method}: accuracy (Chamfer distance to the truth)", fontsize=11)
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def _outline():
-    import matplotlib.patheffects as pe
-
-    return [pe.withStroke(linewidth=1.5, foreground="black")]
+    variants(names, grid=False)  # unknown names fail before anything is simulated or read
+    limits = limits or Limits()
+    options = score_options(samples)
+    noise, density, outliers = (parse_levels(v, n) if isinstance(v, str) else tuple(v)
+                                for v, n in ((noise, "noise"), (density, "density"),
+                                             (outliers, "outliers")))
+    path = Path(source)
+    if path.is_file() and path.suffix.lower() != ".toml":
+        if overrides:
+            raise StabilityError("--set applies to scenes only, not to a cloud or a log")
+        cloud = load_cloud(path)
+        if truth is not None:
+            truth_mesh = load_truth(truth, scale=truth_scale)
+        elif is_strike_log(path):
+            truth_mesh = load_truth(path)
+        else:
+            raise StabilityError(f"{path}: a cloud needs --truth")
+        clouds = {"base": (cloud.points, cloud.view_points, False)}
+    else:
+        _check_levels("noise", noise, 0.0, None)  # before simulating anything
+        clouds, truth_mesh = simulate_levels(str(source), noise, out_dir, overrides=overrides,
+                                             seed=seed)
+        if truth is not None:
+            truth_mesh = load_truth(truth, scale=truth_scale)
+    return stability(out_dir, clouds=clouds, truth=truth_mesh, names=names, noise=noise,
+                     density=density, outliers=outliers, seed=seed, scheduler=scheduler,
+                     n_workers=n_workers, resume=resume, score_options=options,
+                     fingerprint={"source": str(source), "overrides": list(overrides),
+                                  "truth": str(truth)}, **limits.kwargs())

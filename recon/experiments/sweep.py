@@ -39,7 +39,6 @@ from formats.errors import ReconError
 
 RESULTS_NAME = "results.jsonl"
 FINGERPRINT_NAME = "sweep.json"
-LOCAL_SCHEDULERS = ("threads", "serial")
 # Seconds to wait for an existing Dask scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
 

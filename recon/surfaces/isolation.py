@@ -1,10 +1,9 @@
 """Run one reconstruction in a fresh process with a time limit and a memory limit.
 
 Surface methods fail in ways a ``try`` cannot catch: Open3D's ball pivoting can run for hours,
-qhull can abort or segfault the process, Poisson can allocate without bound
-(dependency-facts.md). ``run_isolated`` therefore starts ``python -m recon.surfaces.isolation
-JOBDIR``
-for every run and waits for it from outside:
+qhull can abort or segfault the process, Poisson can allocate without bound (failure modes
+reported upstream for each). ``run_isolated`` therefore starts ``python -m
+recon.surfaces.isolation JOBDIR`` for every run and waits for it from outside:
 
 - the child limits its own address space (``RLIMIT_AS``, so allocations fail inside it) and
   writes no core files, then runs the method, checks the mesh and optionally scores it;
@@ -18,8 +17,9 @@ under the limit), ``error`` (the method raised, e.g. ``MethodFailed``), ``empty`
 triangles), ``degenerate`` (zero area, collapsed or far larger than the points), ``score``
 (the mesh was fine but scoring it failed).
 
-The child finds the method by importing the module that registered it (``Method.module``) on the
-parent's ``sys.path``, so methods registered by test modules run too.
+The job carries one ``Run`` (``recon.surfaces.methods``: method name, resolved parameters, the
+registering module): the child imports ``Run.module`` on the parent's ``sys.path`` and looks the
+method up by name once, so methods registered by test modules run too.
 """
 
 from __future__ import annotations
@@ -35,20 +35,23 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from recon.surfaces.methods import MethodFailed, MethodInput, check_mesh_arrays
+from formats.errors import ReconError
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, check_mesh_arrays
 
 # Defaults of every isolated run, also the CLI's.
-# 600 s: ten times the slowest method's default run on 2e5 points here (pymeshlab ball pivoting
-# with automatic radius took 155 s; dependency-facts.md), so a limit hit means a runaway.
+# 600 s: several times the slowest method's default run on 2e5 points (pymeshlab ball pivoting
+# with automatic radius took 155 s, measured on a 2-core, 24 GiB machine with pymeshlab 2025.7),
+# so a limit hit means a runaway.
 DEFAULT_TIMEOUT_S = 600.0
 # 8 GiB of address space: the child reserves ~1.8 GB of virtual memory just importing Open3D
-# and pymeshlab and running a small Poisson (measured), and two children must fit the 24 GiB
-# machine with room for the Dask workers.
+# and pymeshlab and running a small Poisson (measured with open3d 0.20), and two children (one
+# per core) must fit a 2-core, 24 GiB machine with room for the Dask workers.
 DEFAULT_MEMORY_MB = 8192
 # Time allowed for checking and scoring a finished mesh, seconds (the method's own limit does
 # not include it): metrics.score of a 2e5-face mesh with its default 2e5 samples per side takes
@@ -72,6 +75,53 @@ _PR_SET_PDEATHSIG = 1
 # Process ids of the children running now (``kill_running`` ends them on an interrupt).
 _RUNNING: set[int] = set()
 _RUNNING_LOCK = threading.Lock()
+
+
+class LimitError(ReconError, ValueError):
+    """A time or memory limit that is not a valid limit."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Time and memory limits of one isolated run.
+
+    Attributes
+    ----------
+    timeout_s : float, seconds
+        Wall-clock limit of the child up to the end of the method; must be positive.
+    memory_mb : int or None, MiB
+        Address-space limit of the child; None: unlimited.
+    """
+
+    timeout_s: float = DEFAULT_TIMEOUT_S
+    memory_mb: int | None = DEFAULT_MEMORY_MB
+
+    def __post_init__(self):
+        _check_limits(self.timeout_s, self.memory_mb, "timeout_s", "memory_mb")
+
+    @classmethod
+    def from_options(cls, timeout: float | None = None, memory_limit: int | None = None
+                     ) -> Limits:
+        """The limits of the command line's ``--timeout`` and ``--memory-limit``.
+
+        None takes the default (``DEFAULT_TIMEOUT_S``, ``DEFAULT_MEMORY_MB``); a memory limit of
+        0 means none. Errors name the options.
+        """
+        timeout = DEFAULT_TIMEOUT_S if timeout is None else timeout
+        memory = DEFAULT_MEMORY_MB if memory_limit is None else memory_limit
+        _check_limits(timeout, memory, "--timeout", "--memory-limit")
+        return cls(timeout, memory or None)
+
+    def kwargs(self) -> dict[str, Any]:
+        """``{"timeout_s": ..., "memory_mb": ...}``, the keyword arguments of ``run_isolated``."""
+        return {"timeout_s": self.timeout_s, "memory_mb": self.memory_mb}
+
+
+def _check_limits(timeout: float, memory: int | None, timeout_name: str, memory_name: str):
+    if not timeout > 0:
+        raise LimitError(f"{timeout_name} must be positive, got {timeout:g}")
+    if memory is not None and memory < 0:
+        raise LimitError(f"{memory_name} must be >= 0, got {memory}")
 
 
 class _Failure(Exception):
@@ -182,10 +232,8 @@ def _child(jobdir: Path) -> int:
         stage.write_text("loading")
         import importlib
 
-        from recon.surfaces import methods
-
-        importlib.import_module(job["module"])
-        method = methods.get(job["method"])
+        run: Run = job["run"]
+        method = run.method_spec()
         for name in method.preload:
             importlib.import_module(name)
         cloud: MethodInput = job["cloud"]
@@ -193,20 +241,20 @@ def _child(jobdir: Path) -> int:
         stage.write_text("running")
         start = time.perf_counter()
         try:
-            vertices, faces = method.run(cloud, **job["params"])
+            vertices, faces = method.run(cloud, **run.params)
         except MemoryError:
-            raise _Failure("memory", f"{job['method']}: out of memory (limit "
+            raise _Failure("memory", f"{run.method}: out of memory (limit "
                                      f"{job['memory_mb']} MB)") from None
         except MethodFailed as exc:
             raise _Failure("error", str(exc)) from None
         except Exception as exc:  # a library error is a recorded failure, with its type
             last = str(exc).strip().splitlines()[-1] if str(exc).strip() else ""
-            raise _Failure("error", f"{job['method']}: {type(exc).__name__}: {last}") from None
+            raise _Failure("error", f"{run.method}: {type(exc).__name__}: {last}") from None
         result["wall_time_s"] = time.perf_counter() - start
         result["peak_memory_mb"] = _maxrss_mb()
         stage.write_text("checking")
         try:
-            vertices, faces = check_surface(vertices, faces, cloud.points, method=job["method"])
+            vertices, faces = check_surface(vertices, faces, cloud.points, method=run.method)
         except SurfaceRejected as exc:
             raise _Failure(exc.kind, str(exc)) from None
         except MethodFailed as exc:
@@ -253,7 +301,7 @@ def _tail(path: Path) -> str:
     return " | ".join(lines[-OUTPUT_TAIL_LINES:])
 
 
-def run_isolated(method: str, cloud: MethodInput, params: dict | None = None, *,
+def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None, *,
                  truth: tuple[np.ndarray, np.ndarray] | None = None,
                  score_options: dict | None = None, timeout_s: float = DEFAULT_TIMEOUT_S,
                  memory_mb: int | None = DEFAULT_MEMORY_MB, threads: int | None = None,
@@ -263,11 +311,12 @@ def run_isolated(method: str, cloud: MethodInput, params: dict | None = None, *,
 
     Parameters
     ----------
-    method : str
-        Registered method name (hidden test methods included).
+    run : Run or str
+        The method and its resolved parameters (``recon.surfaces.methods.bind``), or a
+        registered name (hidden test methods included), then resolved here once with ``params``.
     cloud : MethodInput
     params : dict, optional
-        Overrides of the method's defaults (checked here, before any process starts).
+        With a name only: overrides of the method's defaults (checked before any process starts).
     truth : (vertices, faces), optional
         Truth mesh, metres, same frame: when given, the mesh is scored with ``metrics.score``.
     score_options : dict, optional
@@ -295,20 +344,16 @@ def run_isolated(method: str, cloud: MethodInput, params: dict | None = None, *,
         death), and when ok ``vertices``, ``faces``, ``n_vertices``, ``n_faces``,
         ``watertight`` and (with a truth) ``scores``.
     """
-    from recon.surfaces import methods
-
-    spec = methods.get(method)
-    resolved = spec.resolve(params)
-    if not timeout_s > 0:
-        raise ValueError(f"timeout_s must be positive, got {timeout_s}")
-    job = {"method": method, "module": spec.module, "params": resolved, "cloud": cloud,
-           "truth": truth, "score_options": score_options, "memory_mb": memory_mb,
-           "sys_path": [p for p in sys.path if p], "parent_pid": os.getpid()}
+    run = bind(run, params)
+    limits = Limits(timeout_s, memory_mb)
+    job = {"run": run, "cloud": cloud, "truth": truth, "score_options": score_options,
+           "memory_mb": limits.memory_mb, "sys_path": [p for p in sys.path if p],
+           "parent_pid": os.getpid()}
     env = dict(os.environ)
     if threads:
         for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             env[name] = str(int(threads))
-    base = {"method": method, "params": resolved}
+    base = {"method": run.method, "params": run.params}
     with tempfile.TemporaryDirectory(prefix="recon-run-") as tmp:
         jobdir = Path(tmp)
         (jobdir / "job.pkl").write_bytes(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))

@@ -1,52 +1,39 @@
-"""Reconstruct a surface from a point cloud: preprocessing, normals, one registered method.
+"""Reconstruct a surface from a prepared point cloud with one registered method.
 
 The pipeline of ``recon reconstruct``:
 
 1. read the input (a cloud, or a strike log registered on the fly; ``recon.inputs``);
-2. optionally remove statistical outliers and downsample on a voxel grid (view points are
-   averaged with their points, so normals can still be oriented by them);
-3. estimate PCA normals oriented toward each point's view point (``recon.surfaces.normals``), the
-   median spacing and the noise scale: a ``MethodInput``;
-4. run the method, in this process (``reconstruct``) or isolated in a child process with time
+2. prepare it (``recon.surfaces.prepare``): optional outlier removal and voxel downsampling,
+   then oriented normals, spacing and noise scale: a ``MethodInput``;
+3. run the method, in this process (``reconstruct``) or isolated in a child process with time
    and memory limits (``reconstruct(..., isolate=True)``, what the CLI does), and check the mesh.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-import numpy as np
-from scipy.spatial import cKDTree
-
-from formats.errors import ReconError
-from formats.geometry import Cloud
-from recon.surfaces import methods
+from formats.geometry import Cloud, Mesh
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
+    Limits,
     check_surface,
     run_isolated,
+    watertight,
 )
-from recon.surfaces.methods import MethodFailed, MethodInput
-from recon.surfaces.normals import DEFAULT_K, Fallback, local_planes, orient
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
+from recon.surfaces.prepare import InputError, Preparation, load_prepared, prepare, preprocess
 
-# Statistical outlier removal (Rusu et al. 2008, PCL's StatisticalOutlierRemoval): a point is an
-# outlier when its mean distance to its OUTLIER_K neighbours exceeds the cloud's mean of that
-# distance by OUTLIER_STD standard deviations. 20 and 2.0 are PCL's and Open3D's tutorial values.
-OUTLIER_K = 20
-OUTLIER_STD = 2.0
-# Fewest points any method is given.
-MIN_POINTS = 16
+# Re-exported: callers written before the preparation got its own module import these from here.
+__all__ = ["InputError", "Surface", "prepare", "preprocess", "reconstruct", "reconstruct_input",
+           "reconstruct_to_file"]
 
 
-class InputError(ReconError, ValueError):
-    """A cloud or a preprocessing option that cannot be reconstructed from."""
-
-
-@dataclass
-class Surface:
-    """A reconstructed triangle mesh and how it was made.
+class Surface(Mesh):
+    """A reconstructed triangle mesh and how it was made: a ``formats.geometry.Mesh``.
 
     Attributes
     ----------
@@ -56,151 +43,22 @@ class Surface:
     params : dict
         The resolved parameters.
     info : dict
-        ``wall_time_s``, ``watertight``, and for isolated runs ``peak_memory_mb``.
+        ``wall_time_s``, ``watertight``, for isolated runs ``peak_memory_mb``, and for
+        ``method="auto"`` the choice (``auto``).
     """
 
-    vertices: np.ndarray
-    faces: np.ndarray
-    method: str
-    params: dict[str, Any]
-    info: dict[str, Any] = field(default_factory=dict)
+    __slots__ = ("info", "method", "params")
+
+    def __init__(self, vertices, faces, method: str, params: dict[str, Any],
+                 info: dict[str, Any] | None = None):
+        super().__init__(vertices, faces)
+        self.method, self.params, self.info = method, params, dict(info or {})
+
+    def __repr__(self) -> str:
+        return f"Surface({self.method}, {self.n_vertices} vertices, {self.n_faces} faces)"
 
 
-def remove_statistical_outliers(points: np.ndarray, *, k: int = OUTLIER_K,
-                                std_ratio: float = OUTLIER_STD) -> np.ndarray:
-    """Mask of the points kept by statistical outlier removal.
-
-    Parameters
-    ----------
-    points : (n, 3) float64, metres
-    k : int
-        Neighbours whose mean distance is tested.
-    std_ratio : float
-        Standard deviations above the mean at which a point is dropped.
-
-    Returns
-    -------
-    (n,) bool
-        True for inliers.
-    """
-    if k < 1:
-        raise InputError(f"outlier k must be >= 1, got {k}")
-    if not std_ratio > 0:
-        raise InputError(f"outlier std_ratio must be positive, got {std_ratio}")
-    if len(points) <= k:
-        return np.ones(len(points), dtype=bool)
-    distance, _ = cKDTree(points).query(points, k=k + 1, workers=-1)
-    mean = distance[:, 1:].mean(axis=1)
-    return mean <= mean.mean() + std_ratio * mean.std()
-
-
-def voxel_downsample(points: np.ndarray, voxel: float, *, view_points: np.ndarray | None = None
-                     ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Replace the points of each voxel by their mean (and their view points' mean).
-
-    Parameters
-    ----------
-    points : (n, 3) float64, metres
-    voxel : float, metres
-        Edge of the cubic voxels (grid anchored at the points' minimum corner).
-    view_points : (n, 3) float64, optional
-
-    Returns
-    -------
-    points : (m, 3) float64
-    view_points : (m, 3) float64 or None
-    """
-    if not voxel > 0:
-        raise InputError(f"voxel must be a positive size in metres, got {voxel}")
-    cells = np.floor((points - points.min(axis=0)) / voxel).astype(np.int64)
-    _, inverse, count = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
-
-    def mean(values):
-        return np.stack([np.bincount(inverse, weights=values[:, i]) for i in range(3)],
-                        axis=1) / count[:, None]
-
-    return mean(points), (None if view_points is None else mean(view_points))
-
-
-def preprocess(cloud: Cloud, *, remove_outliers: bool = False, outlier_k: int = OUTLIER_K,
-               outlier_std: float = OUTLIER_STD, voxel: float | None = None) -> Cloud:
-    """Statistical outlier removal, then voxel downsampling (each optional).
-
-    Parameters
-    ----------
-    cloud : Cloud
-        Points in metres; ``view_x/y/z`` attributes, when present, follow their points.
-    remove_outliers : bool
-    outlier_k, outlier_std
-        See ``remove_statistical_outliers``.
-    voxel : float, metres, optional
-        Voxel edge of the downsampling.
-
-    Returns
-    -------
-    Cloud
-        Points and (when the input had them) view points; other attributes are dropped.
-    """
-    points = cloud.points
-    view = cloud.view_points
-    if remove_outliers:
-        keep = remove_statistical_outliers(points, k=outlier_k, std_ratio=outlier_std)
-        points = points[keep]
-        view = None if view is None else view[keep]
-    if voxel is not None:
-        points, view = voxel_downsample(points, voxel, view_points=view)
-    attributes = {} if view is None else {"view_x": view[:, 0], "view_y": view[:, 1],
-                                          "view_z": view[:, 2]}
-    return Cloud(points, attributes)
-
-
-def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
-            normals: np.ndarray | None = None, k: int = DEFAULT_K,
-            fallback: Fallback = "centroid", seed: int = 0) -> MethodInput:
-    """Everything a method needs: oriented normals, spacing and noise scale.
-
-    Parameters
-    ----------
-    points : (n, 3) float64, metres, body frame
-    view_points : (n, 3) float64, metres, optional
-        Sensor position of each point; orients the normals (``recon.surfaces.normals``).
-    normals : (n, 3) float64, optional
-        Oriented normals to use as they are (skips the estimation).
-    k : int
-        Neighbours of the PCA normals and of the noise scale.
-    fallback : {"centroid", "propagate"}
-        Orientation heuristic when there are no view points.
-    seed : int
-
-    Returns
-    -------
-    MethodInput
-    """
-    points = np.asarray(points, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise InputError(f"points must be (n, 3), got {points.shape}")
-    if len(points) < MIN_POINTS:
-        raise InputError(f"need at least {MIN_POINTS} points to reconstruct, got {len(points)}")
-    if not np.all(np.isfinite(points)):
-        raise InputError("points contain NaN or Inf")
-    planes = local_planes(points, k=k)
-    if normals is None:
-        normals = orient(planes.normals, points, view_points=view_points, fallback=fallback, k=k)
-    else:
-        normals = np.asarray(normals, dtype=np.float64)
-        if normals.shape != points.shape:
-            raise InputError(f"normals must match points {points.shape}, got {normals.shape}")
-        normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    spacing = float(np.median(planes.spacing))
-    if not spacing > 0:
-        raise InputError("all points coincide: nothing to reconstruct")
-    return MethodInput(points=points, normals=normals, spacing=spacing,
-                       noise=float(np.median(planes.noise)), seed=int(seed),
-                       neighbours=planes.neighbours)
-
-
-def reconstruct(cloud: MethodInput, *, method: str = "poisson", params: dict | None = None,
+def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: dict | None = None,
                 isolate: bool = False, timeout_s: float = DEFAULT_TIMEOUT_S,
                 memory_mb: int | None = DEFAULT_MEMORY_MB, on_wait=None) -> Surface:
     """Run one registered method on a prepared cloud.
@@ -208,11 +66,12 @@ def reconstruct(cloud: MethodInput, *, method: str = "poisson", params: dict | N
     Parameters
     ----------
     cloud : MethodInput
-        From ``prepare``.
-    method : str
-        A name from ``recon.surfaces.methods.available()``.
+        From ``recon.surfaces.prepare.prepare``.
+    method : str or Run
+        A ``Run`` (``recon.surfaces.methods.bind``), or a name from
+        ``recon.surfaces.methods.available()``, resolved here once with ``params``.
     params : dict, optional
-        Overrides of the method's defaults.
+        With a name only: overrides of the method's defaults.
     isolate : bool
         Run in a child process with ``timeout_s`` and ``memory_mb`` limits (crashes and hangs
         become ``MethodFailed``) instead of in this process.
@@ -232,22 +91,96 @@ def reconstruct(cloud: MethodInput, *, method: str = "poisson", params: dict | N
     MethodFailed
         The method failed, crashed, timed out, or returned an empty or degenerate mesh.
     """
-    spec = methods.get(method)
-    resolved = spec.resolve(params)
+    run = bind(method, params)
     if isolate:
-        result = run_isolated(method, cloud, resolved, timeout_s=timeout_s, memory_mb=memory_mb,
+        result = run_isolated(run, cloud, timeout_s=timeout_s, memory_mb=memory_mb,
                               on_wait=on_wait)
         if result["status"] != "ok":
-            raise MethodFailed(f"{method} failed ({result['failure']}): {result['reason']}")
+            raise MethodFailed(f"{run.method} failed ({result['failure']}): {result['reason']}")
         info = {k: result[k] for k in ("wall_time_s", "peak_memory_mb", "watertight")}
-        return Surface(result["vertices"], result["faces"], method, resolved, info)
+        return Surface(result["vertices"], result["faces"], run.method, run.params, info)
     import time
 
-    from recon.surfaces.isolation import watertight
-
     start = time.perf_counter()
-    vertices, faces = spec.run(cloud, **resolved)
+    vertices, faces = run.method_spec().run(cloud, **run.params)
     elapsed = time.perf_counter() - start
-    vertices, faces = check_surface(vertices, faces, cloud.points, method=method)
-    return Surface(vertices, faces, method, resolved,
+    vertices, faces = check_surface(vertices, faces, cloud.points, method=run.method)
+    return Surface(vertices, faces, run.method, run.params,
                    {"wall_time_s": elapsed, "watertight": watertight(faces)})
+
+
+def reconstruct_to_file(cloud: Cloud, prepared: MethodInput, output, *, run: Run,
+                        limits: Limits | None = None, isolate: bool = True,
+                        on_wait: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Reconstruct a prepared cloud with ``run``, write the mesh, and summarise.
+
+    Parameters
+    ----------
+    cloud : Cloud
+        The prepared points before normals (``Preparation.apply``): says whether there were
+        view points.
+    prepared : MethodInput
+    output : str or Path
+        Mesh to write (.ply).
+    run : Run
+    limits : Limits, optional
+        Of the isolated run (default: ``Limits()``).
+    isolate : bool
+        Run in a child process (default) or in this one.
+    on_wait : callable, optional
+        Called with the isolated child's stage while waiting.
+
+    Returns
+    -------
+    dict
+        ``n_points``, ``spacing_m``, ``noise_m``, ``view_points``, ``method``, ``params``,
+        ``label``, ``output``, ``n_vertices``, ``n_faces``, ``wall_time_s``, ``watertight``
+        and, isolated, ``peak_memory_mb``.
+    """
+    from formats.mesh_io import write_mesh
+
+    limits = limits or Limits()
+    surface = reconstruct(prepared, method=run, isolate=isolate, on_wait=on_wait,
+                          **limits.kwargs())
+    write_mesh(output, surface.vertices, surface.faces)
+    return {"n_points": len(prepared.points), "spacing_m": prepared.spacing,
+            "noise_m": prepared.noise, "view_points": cloud.view_points is not None,
+            "method": run.method, "params": surface.params, "label": run.label,
+            "output": str(output), "n_vertices": len(surface.vertices),
+            "n_faces": len(surface.faces), **surface.info}
+
+
+def reconstruct_input(input, output, *, method: str | Run = "poisson",
+                      params: dict | None = None, preparation: Preparation | None = None,
+                      limits: Limits | None = None, isolate: bool = True,
+                      on_wait: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Read a cloud or a strike log, prepare it, reconstruct it with one method, write the mesh.
+
+    What ``recon reconstruct -m METHOD`` does (``-m auto``:
+    ``recon.experiments.auto.choose_and_reconstruct``).
+
+    Parameters
+    ----------
+    input : str or Path
+        Point cloud (.ply, .las, .laz, .h5) or strike log (registered on the fly).
+    output : str or Path
+        Mesh to write (.ply).
+    method : str or Run
+        A ``Run``, or a registered name resolved once here with ``params``.
+    params : dict, optional
+    preparation : Preparation, optional
+    limits : Limits, optional
+    isolate : bool
+    on_wait : callable, optional
+        See ``reconstruct_to_file``.
+
+    Returns
+    -------
+    dict
+        ``input`` and ``reconstruct_to_file``'s summary.
+    """
+    run = bind(method, params)
+    cloud, prepared = load_prepared(input, preparation)
+    return {"input": str(input)} | reconstruct_to_file(cloud, prepared, Path(output), run=run,
+                                                       limits=limits, isolate=isolate,
+                                                       on_wait=on_wait)

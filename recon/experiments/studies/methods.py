@@ -96,7 +96,7 @@ def prepared_cloud(target: str, scenario: str, size: str, *, seed: int = 0):
     info : dict
         ``strikes`` (before thinning), ``points`` (after), ``scene``, ``overrides``.
     """
-    from recon.surfaces.reconstruct import prepare
+    from recon.surfaces.prepare import prepare
 
     preset, overrides = scene_for(target, scenario, size)
     cloud, truth, summary = runner.simulate_cloud(preset, overrides, seed=seed)

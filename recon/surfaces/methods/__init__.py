@@ -9,12 +9,19 @@ plus its name in ``BUILTIN_MODULES``.
 
 Methods marked ``hidden`` (test-only ones) run when asked for by name but never appear in
 ``available()``, ``recon compare``'s default list or ``--help``.
+
+A method name and its parameters are resolved once, where they enter (``bind(name, params)`` or
+``Method.bind``), into a ``Run``: a small picklable value that travels unchanged through sweeps,
+worker processes and the isolated child (``recon.surfaces.isolation``), which imports
+``Run.module`` and looks the method up by name once to call it.
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -216,6 +223,13 @@ class Method:
             resolved[name] = self.params[name].check(value, name=name, method=self.name)
         return resolved
 
+    def bind(self, params: Mapping[str, Any] | None = None) -> Run:
+        """This method with ``params`` resolved over its defaults (``resolve``), as a ``Run``."""
+        resolved = self.resolve(params)
+        changed = [f"{k}={_fmt(v)}" for k, v in resolved.items() if self.defaults.get(k) != v]
+        return Run(method=self.name, params=resolved, module=self.module, kind=self.kind,
+                   label=" ".join([self.name, *changed]))
+
     def parse(self, pairs: list[str] | tuple[str, ...]) -> dict[str, Any]:
         """Parse ``key=value`` strings from the command line into checked overrides."""
         overrides: dict[str, Any] = {}
@@ -239,6 +253,65 @@ class Method:
             if resolved not in out:
                 out.append(resolved)
         return out
+
+
+@dataclass(frozen=True)
+class Run:
+    """One method with its resolved parameters: what every isolated run, sweep case and auto
+    candidate carries. Make it with ``bind`` (or ``Method.bind``), which checks the parameters.
+
+    Attributes
+    ----------
+    method : str
+        Registry name.
+    params : dict
+        The full, checked parameter set (defaults included). Do not mutate.
+    module : str
+        Module that registers the method: a fresh process imports it to find the method.
+    kind : {"planar", "smooth", "interpolating", "baseline", "test"}
+    label : str
+        The method and the parameters that differ from its defaults, e.g. ``poisson depth=6``.
+    """
+
+    method: str
+    params: dict[str, Any]
+    module: str
+    kind: Kind
+    label: str
+
+    @property
+    def key(self) -> str:
+        """Stable unique key: the method and its parameters as sorted JSON."""
+        return run_key(self.method, self.params)
+
+    def method_spec(self) -> Method:
+        """The registered ``Method`` (imports ``module`` first, so test-only methods resolve)."""
+        importlib.import_module(self.module)
+        return get(self.method)
+
+
+def run_key(method: str, params: Mapping[str, Any]) -> str:
+    """Stable unique key of a (method, parameters) pair: ``Run.key``."""
+    return f"{method} {json.dumps(_plain(params), sort_keys=True)}"
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with tuples as lists, numpy scalars as Python's, non-finite floats as None."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return _plain(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, (tuple, list)):
+        return ",".join(_fmt(v) for v in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 _REGISTRY: dict[str, Method] = {}
@@ -277,6 +350,47 @@ def get(name: str) -> Method:
     if name not in _REGISTRY:
         raise UnknownMethod(f"unknown method {name!r} (available: {', '.join(available())})")
     return _REGISTRY[name]
+
+
+def listing() -> str:
+    """The listed methods, their kinds, summaries, parameters with defaults, and grids."""
+    lines = []
+    for name in available():
+        spec = get(name)
+        lines.append(f"{name} [{spec.kind}]: {spec.summary}")
+        for key, param in spec.params.items():
+            default = "auto" if param.default is None else param.default
+            lines.append(f"    {key} = {default}  ({param.doc})")
+        for overrides in spec.grid:
+            lines.append(f"    grid: {' '.join(f'{k}={v}' for k, v in overrides.items())}")
+    return "\n".join(lines)
+
+
+def bind(method: str | Run, params: Mapping[str, Any] | None = None) -> Run:
+    """Resolve a method name and parameter overrides once into a ``Run``.
+
+    Parameters
+    ----------
+    method : str or Run
+        A registered name (hidden test methods included), or a ``Run`` (returned as it is).
+    params : dict, optional
+        Overrides of the method's defaults; only with a name.
+
+    Raises
+    ------
+    UnknownMethod, ParameterError
+    """
+    if isinstance(method, Run):
+        if params:
+            raise ParameterError(f"run {method.label!r} is already bound; pass no params")
+        return method
+    return get(method).bind(params)
+
+
+def parse_run(method: str, pairs: Sequence[str] = ()) -> Run:
+    """A ``Run`` from a method name and command-line ``key=value`` strings (``--param``)."""
+    spec = get(method)
+    return spec.bind(spec.parse(pairs))
 
 
 def check_mesh_arrays(vertices, faces, *, method: str) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,7 @@ A ball of radius ``r`` rolls over the oriented points; every three points it res
 triangle. The mesh interpolates the points (no smoothing) and leaves holes wherever the gaps are
 wider than the largest ball. Radii are multiples of the cloud's spacing (``MethodInput.spacing``);
 several radii run in turn, small to large, filling what the smaller balls missed. Known failure
-mode: runs lasting hours on millions of points (dependency-facts.md), hence the isolation in
+mode, reported upstream: runs lasting hours on millions of points, hence the isolation in
 ``recon compare``.
 """
 
@@ -45,8 +45,9 @@ METHOD = register(Method(
     name="ball-pivoting", run=run, kind="interpolating", preload=("open3d",),
     summary="Open3D ball pivoting through the points, radii in multiples of the spacing",
     params={
-        # 0.5, 1, 2 x spacing: dependency-facts.md's 1, 2, 4 x nearest-neighbour distance (0.8 s
-        # at 5e4 points); on uniform samples our area spacing is ~2 x that distance.
+        # 0.5, 1, 2 x spacing: 1, 2, 4 x the nearest-neighbour distance, which ran in 0.8 s on 5e4
+        # points (open3d 0.20, 2-core machine); on uniform samples our area spacing is ~2 x that
+        # distance.
         "radii": Param((0.5, 1.0, 2.0), float, "ball radii / spacing", minimum=0.0,
                        sequence=True),
     },

@@ -2,7 +2,8 @@
 
 The algorithm of ``ball-pivoting`` in MeshLab's implementation, with one ball radius (in units
 of the spacing) and MeshLab's clustering of close vertices. With the radius left to
-MeshLab's automatic guess it took 155 s on 2e5 points here (dependency-facts.md), so the default
+MeshLab's automatic guess it took 155 s on 2e5 points (pymeshlab 2025.7 on a 2-core, 24 GiB
+machine; 3.9 s on 5e4 points: 4x the points, 40x the time), so the default
 radius is explicit.
 """
 

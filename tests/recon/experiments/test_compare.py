@@ -8,15 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from recon.experiments.compare import (
-    agreement,
-    case_key,
-    case_label,
-    finish,
-    pareto_front,
-    rank,
-    variants,
-)
+from recon.experiments.cases import pareto_front, rank, variants
+from recon.experiments.compare import agreement, finish
+from recon.surfaces.methods import run_key as case_key
 
 
 def _brute_front(time, value):
@@ -88,10 +82,10 @@ def test_agreement_reports_rank_and_ratio():
 
 def test_variants_and_labels():
     runs = variants(["poisson", "convex-hull"])
-    assert runs[0] == ("poisson", runs[0][1]) and runs[-1][0] == "convex-hull"
+    assert runs[0].method == "poisson" and runs[-1].method == "convex-hull"
     assert len(runs) == 1 + 4 + 1
-    assert case_label("poisson", runs[1][1]) == "poisson depth=6"
-    assert case_label("poisson", runs[0][1]) == "poisson"
+    assert runs[1].label == "poisson depth=6"
+    assert runs[0].label == "poisson"
     assert len(variants(["poisson"], grid=False)) == 1
 
 
@@ -101,3 +95,14 @@ def test_agreement_on_another_truth_metric():
     verdict = agreement(records, case_key("plane", {}), metric="accuracy_mean_m")
     assert verdict["rank"] == 1 and verdict["same_run"] and verdict["ratio"] == 1.0
     assert "chamfer_ratio" not in verdict
+
+
+def test_score_options_sample_coverage_on_twice_the_samples():
+    from recon.experiments.cases import score_options
+    from recon.experiments.sweep import SweepError
+
+    assert score_options() is None
+    assert score_options(4000) == {"n_truth_samples": 4000, "n_test_samples": 4000,
+                                   "coverage_points": 8000}
+    with pytest.raises(SweepError, match="--samples must be at least 100, got 99"):
+        score_options(99)

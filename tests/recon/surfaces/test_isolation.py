@@ -16,7 +16,8 @@ import recon_fake_methods  # noqa: F401  (registers the test-only methods)
 from recon.experiments.compare import compare
 from recon.surfaces.isolation import run_isolated, watertight
 from recon.surfaces.methods import MethodFailed
-from recon.surfaces.reconstruct import prepare, reconstruct
+from recon.surfaces.prepare import prepare
+from recon.surfaces.reconstruct import reconstruct
 from tests.recon.conftest import FAST_SCORE, sphere_mesh, sphere_points
 
 # A hang must end at the limit, not after its hour-long sleep.
@@ -119,3 +120,21 @@ def test_peak_memory_is_the_childs_own_not_the_parents():
     child_mb = float(subprocess.run([sys.executable, "-c", script], capture_output=True,
                                     text=True, check=True).stdout)
     assert child_mb < 250  # the child imports numpy and scipy, far below the parent's 300 MB
+
+
+def test_limits_take_the_defaults_and_name_the_options():
+    from recon.surfaces.isolation import (
+        DEFAULT_MEMORY_MB,
+        DEFAULT_TIMEOUT_S,
+        LimitError,
+        Limits,
+    )
+
+    assert Limits.from_options() == Limits(DEFAULT_TIMEOUT_S, DEFAULT_MEMORY_MB)
+    assert Limits.from_options(5, 0) == Limits(5.0, None)  # 0: no memory limit
+    with pytest.raises(LimitError, match="--timeout must be positive, got 0"):
+        Limits.from_options(0)
+    with pytest.raises(LimitError, match="--memory-limit must be >= 0, got -1"):
+        Limits.from_options(memory_limit=-1)
+    with pytest.raises(LimitError, match="timeout_s must be positive, got -1"):
+        Limits(-1.0)

@@ -22,7 +22,8 @@ from metrics import Mesh, point_mesh_distance, sample_surface
 from recon.surfaces import methods
 from recon.surfaces.methods import MethodFailed, ParameterError, UnknownMethod
 from recon.surfaces.methods._contour import node_keys, surface_nets
-from recon.surfaces.reconstruct import InputError, prepare, preprocess, reconstruct
+from recon.surfaces.prepare import InputError, prepare, preprocess
+from recon.surfaces.reconstruct import reconstruct
 from tests.recon.conftest import (
     BOX_HALF,
     box_distance,
@@ -230,3 +231,19 @@ def test_nan_vertices_of_mls_meshes_are_dropped_with_their_faces():
     with pytest.raises(MethodFailed, match="rimls: 60% of the vertices are NaN"):
         meshlab_arrays(_FakeMeshSet([[np.nan] * 3] * 3 + [[0, 0, 0], [1, 0, 0]],
                                     [[0, 1, 2], [2, 3, 4]]), method="rimls", drop_nan=True)
+
+
+def test_a_run_is_resolved_once_and_travels_as_a_value():
+    import pickle
+
+    run = methods.bind("poisson", {"depth": 6})
+    assert run.params == methods.get("poisson").resolve({"depth": 6})
+    assert run.label == "poisson depth=6" and run.kind == "smooth"
+    assert run.module == "recon.surfaces.methods.poisson"
+    assert pickle.loads(pickle.dumps(run)) == run
+    assert methods.bind(run) is run
+    assert run.key == methods.run_key("poisson", run.params)
+    with pytest.raises(ParameterError, match="already bound"):
+        methods.bind(run, {"depth": 7})
+    with pytest.raises(ParameterError, match="has no parameter 'depht'"):
+        methods.bind("poisson", {"depht": 6})

@@ -1,0 +1,120 @@
+"""The cases of a method sweep: which runs, the metrics they are ranked on, their records as CSV.
+
+``recon compare``, ``recon stability`` and ``-m auto`` all run a list of ``Run`` values
+(``recon.surfaces.methods``: a method with its resolved parameters, keyed by ``Run.key`` and
+named by ``Run.label``) and rank what comes back on the truth scores named here.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from recon.experiments.sweep import SweepError, to_jsonable
+from recon.surfaces import methods
+from recon.surfaces.methods import Run
+
+# Scores charted and ranked on (metrics.score's names).
+CHAMFER, FSCORE = "chamfer_m", "fscore"
+# Leading columns of a results CSV, in order; the score columns follow, as metrics.score names
+# them. peak_memory_mb is the run's process at its peak after the method returned (imports and
+# the cloud included); baseline_memory_mb the same process just before the method started.
+BASE_COLUMNS = ("key", "label", "method", "params", "kind", "status", "failure", "reason",
+                "wall_time_s", "process_time_s", "peak_memory_mb", "baseline_memory_mb",
+                "n_vertices", "n_faces", "watertight", "mesh")
+# Threads per isolated run in a sweep: parallelism comes from the workers (one run per core).
+SWEEP_THREADS = 1
+# Fewest surface samples per side a score may use (--samples): below it the Chamfer distance's
+# sampling error exceeds the differences between methods.
+MIN_SCORE_SAMPLES = 100
+
+
+def variants(names: Sequence[str] | None = None, *, grid: bool = True) -> list[Run]:
+    """The runs of a sweep: each method at its defaults, then (with ``grid``) its grid.
+
+    Parameters
+    ----------
+    names : sequence of str, optional
+        Methods (default: every listed method). Hidden test methods may be named.
+    grid : bool
+        Include each method's parameter grid (else defaults only).
+
+    Raises
+    ------
+    UnknownMethod
+        A name that is not registered (checked before anything runs).
+    """
+    out = []
+    for name in (list(names) if names else methods.available()):
+        spec = methods.get(name)
+        out.extend(spec.bind(params) for params in (spec.variants() if grid else [{}]))
+    return out
+
+
+def as_runs(runs: Sequence[Run | tuple[str, dict]]) -> list[Run]:
+    """``runs`` as ``Run`` values: ``(name, params)`` pairs are resolved once here."""
+    return [methods.bind(*r) if isinstance(r, tuple) else methods.bind(r) for r in runs]
+
+
+def score_options(samples: int | None = None) -> dict | None:
+    """Keyword arguments of ``metrics.score`` for ``samples`` points per side (``--samples``).
+
+    None keeps metrics' defaults. The coverage is estimated on twice as many truth points as
+    each side's samples, as metrics' own defaults do.
+    """
+    if samples is None:
+        return None
+    if samples < MIN_SCORE_SAMPLES:
+        raise SweepError(f"--samples must be at least {MIN_SCORE_SAMPLES}, got {samples}")
+    return {"n_truth_samples": samples, "n_test_samples": samples,
+            "coverage_points": 2 * samples}
+
+
+def rank(records: list[dict]) -> list[dict]:
+    """Successful runs by Chamfer (ties: higher F-score), then failures in run order."""
+    ok = [r for r in records if r.get("status") == "ok" and r.get(CHAMFER) is not None]
+    ok.sort(key=lambda r: (r[CHAMFER], -(r.get(FSCORE) or 0.0)))
+    return ok + [r for r in records if r not in ok]
+
+
+def pareto_front(time: np.ndarray, value: np.ndarray, *, minimize: bool = True) -> np.ndarray:
+    """Indices of the Pareto-optimal runs (faster, or better than every faster one), by time.
+
+    Parameters
+    ----------
+    time : (n,) float64, seconds
+    value : (n,) float64
+        The accuracy, lower better when ``minimize`` (Chamfer), else higher (F-score).
+    """
+    time = np.asarray(time, dtype=float)
+    score = np.asarray(value, dtype=float) * (1 if minimize else -1)
+    order = np.lexsort((score, time))
+    front, best = [], np.inf
+    for i in order:  # a short sorted scan over runs, not points
+        if score[i] < best:
+            front.append(i)
+            best = score[i]
+    return np.array(front, dtype=int)
+
+
+def write_csv(records: list[dict], path) -> Path:
+    """Write records as CSV: BASE_COLUMNS then every other column, sorted (params as JSON)."""
+    import csv
+
+    extra = sorted({k for r in records for k in r} - set(BASE_COLUMNS))
+    path = Path(path)
+    with open(path, "w", newline="") as out:
+        writer = csv.writer(out)
+        writer.writerow([*BASE_COLUMNS, *extra])
+        for r in records:
+            row = []
+            for column in (*BASE_COLUMNS, *extra):
+                value = r.get(column)
+                if isinstance(value, (dict, list, tuple)):
+                    value = json.dumps(to_jsonable(value), sort_keys=True)
+                row.append("" if value is None else value)
+            writer.writerow(row)
+    return path
