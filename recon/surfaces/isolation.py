@@ -42,7 +42,8 @@ from typing import Any
 import numpy as np
 
 from formats.errors import ReconError
-from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, check_mesh_arrays
+from recon.surfaces.checks import SurfaceRejected, check_surface, watertight
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
 
 # Defaults of every isolated run, also the CLI's.
 # 600 s: several times the slowest method's default run on 2e5 points (pymeshlab ball pivoting
@@ -61,12 +62,6 @@ DEFAULT_SCORE_TIMEOUT_S = 600.0
 POLL_START_S, POLL_MAX_S = 0.02, 0.25
 # Lines of the child's output kept in a failure's reason.
 OUTPUT_TAIL_LINES = 3
-# Degenerate-mesh tests, relative to the points' bounding-box diagonal: a mesh whose own
-# diagonal is below the first collapsed to a point or a line; above the second it extends far
-# beyond the data (a Poisson blow-up); total area below the third squared is zero.
-COLLAPSED_FRACTION = 1e-3
-EXPLODED_FACTOR = 10.0
-ZERO_AREA_FRACTION = 1e-9
 
 FAILURE_KINDS = ("timeout", "crash", "memory", "error", "empty", "degenerate", "score")
 # Linux prctl option asking the kernel to signal a process when its parent thread dies.
@@ -130,58 +125,6 @@ class _Failure(Exception):
     def __init__(self, kind: str, reason: str):
         super().__init__(reason)
         self.kind = kind
-
-
-class SurfaceRejected(MethodFailed):
-    """A method returned an empty or degenerate mesh (``kind`` says which)."""
-
-    def __init__(self, kind: str, reason: str):
-        super().__init__(reason)
-        self.kind = kind
-
-
-def watertight(faces: np.ndarray) -> bool:
-    """True when every edge has exactly two faces that traverse it in opposite directions.
-
-    Parameters
-    ----------
-    faces : (f, 3) int64
-    """
-    if len(faces) == 0:
-        return False
-    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    undirected = np.sort(directed, axis=1)
-    _, count = np.unique(undirected, axis=0, return_counts=True)
-    return bool(np.all(count == 2)) and len(np.unique(directed, axis=0)) == len(directed)
-
-
-def check_surface(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, *, method: str
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Reject an empty or degenerate mesh (raises ``SurfaceRejected`` with the reason).
-
-    Parameters
-    ----------
-    vertices : (v, 3) float64, metres
-    faces : (f, 3) int64
-    points : (n, 3) float64, metres
-        The input points: the scale the mesh is judged against.
-    """
-    vertices, faces = check_mesh_arrays(vertices, faces, method=method)
-    if len(faces) == 0:
-        raise SurfaceRejected("empty", f"{method}: empty mesh (no triangles)")
-    scale = float(np.linalg.norm(np.ptp(points, axis=0))) or 1.0
-    a, b, c = (vertices[faces[:, i]] for i in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
-    if not area > ZERO_AREA_FRACTION * scale**2:
-        raise SurfaceRejected("degenerate", f"{method}: degenerate mesh (zero area)")
-    size = float(np.linalg.norm(np.ptp(vertices, axis=0)))
-    if size < COLLAPSED_FRACTION * scale:
-        raise SurfaceRejected("degenerate",
-                              f"{method}: degenerate mesh (collapsed to {size:.3g} m)")
-    if size > EXPLODED_FACTOR * scale:
-        raise SurfaceRejected("degenerate", f"{method}: degenerate mesh ({size:.3g} m across "
-                                            f"for points {scale:.3g} m across)")
-    return vertices, faces
 
 
 def _maxrss_mb() -> float:

@@ -16,14 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from formats.geometry import Cloud, Mesh
-from recon.surfaces.isolation import (
-    DEFAULT_MEMORY_MB,
-    DEFAULT_TIMEOUT_S,
-    Limits,
-    check_surface,
-    run_isolated,
-    watertight,
-)
+from recon.surfaces.checks import check_surface, watertight
+from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
 from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
 from recon.surfaces.prepare import InputError, Preparation, load_prepared, prepare, preprocess
 

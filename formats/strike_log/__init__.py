@@ -1,0 +1,47 @@
+"""Reader and writer of strike logs, format v1 (formats/SPEC.md).
+
+``schema``: names, layout, the records (``SensorInfo``, ``SensorErrors``, ``Shots``, ...) and the
+shared checks; ``writer``: ``StrikeLogWriter``; ``reader``: ``StrikeLog``.
+"""
+
+from formats.strike_log.reader import StrikeLog
+from formats.strike_log.schema import (
+    COMPRESSIONS,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    QUATERNION_NORM_TOLERANCE,
+    READ_CHUNK_ROWS,
+    SHOT_CHUNK_ROWS,
+    SIGMA3_PER_SIGMA,
+    STRIKE_CHUNK_ROWS,
+    SensorErrors,
+    SensorInfo,
+    Shots,
+    StrikeChunk,
+    TruthStrikes,
+    angles_to_directions,
+    directions_to_angles,
+    sigma_from_sigma3,
+)
+from formats.strike_log.writer import StrikeLogWriter
+
+__all__ = [
+    "COMPRESSIONS",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "QUATERNION_NORM_TOLERANCE",
+    "READ_CHUNK_ROWS",
+    "SHOT_CHUNK_ROWS",
+    "SIGMA3_PER_SIGMA",
+    "STRIKE_CHUNK_ROWS",
+    "SensorErrors",
+    "SensorInfo",
+    "Shots",
+    "StrikeChunk",
+    "StrikeLog",
+    "StrikeLogWriter",
+    "TruthStrikes",
+    "angles_to_directions",
+    "directions_to_angles",
+    "sigma_from_sigma3",
+]

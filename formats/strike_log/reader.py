@@ -1,0 +1,358 @@
+"""The strike-log reader: the format, version and schema checked on open, every block checked as
+it is read, so a corrupt log raises ``StrikeLogError`` instead of numbers that look right."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import fields
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from formats.errors import StrikeLogError
+from formats.geometry import Mesh
+from formats.strike_log.schema import (
+    _ANGLE_FIELDS,
+    _ROOT_ATTRS,
+    _SHOT_FIELDS,
+    _TRUTH_SHOT_FIELDS,
+    _TRUTH_STRIKE_FIELDS,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    READ_CHUNK_ROWS,
+    SensorErrors,
+    SensorInfo,
+    Shots,
+    StrikeChunk,
+    TruthStrikes,
+    _check_finite,
+    _check_sensor,
+    _check_shot_rows,
+    _check_strike_rows,
+    _hdf5_errors,
+    angles_to_directions,
+    directions_to_angles,
+)
+
+
+class StrikeLog:
+    """Read a strike log, checking the format, the version and the schema on open.
+
+    Data are read on demand: ``shots(start, stop)``, ``strikes(start, stop)`` and
+    ``iter_chunks()``; nothing holds the whole log in memory. Every block read is checked
+    (finite values, unit quaternions, increasing time, indices in range) and a violation raises
+    ``StrikeLogError``. ``validate()`` streams through everything once.
+
+    Parameters
+    ----------
+    path : str or Path
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        where = self._where = str(self.path)
+        if not self.path.exists():
+            raise StrikeLogError(f"{where}: no such file")
+        if self.path.is_dir():
+            raise StrikeLogError(f"{where}: is a directory, not a strike log")
+        if not h5py.is_hdf5(self.path):
+            raise StrikeLogError(f"{where}: not an HDF5 file")
+        with _hdf5_errors(where):
+            self._file = h5py.File(self.path, "r")
+        try:
+            with _hdf5_errors(where):
+                self._check_schema()
+        except BaseException:
+            self._file.close()
+            raise
+
+    # ------------------------------------------------------------------ schema
+
+    def _attr(self, obj, name: str, kind: type):
+        where = self._where
+        if name not in obj.attrs:
+            place = "root" if obj.name == "/" else obj.name
+            raise StrikeLogError(f"{where}: missing {place} attribute '{name}'")
+        value = obj.attrs[name]
+        if kind is str:
+            if isinstance(value, bytes):
+                value = value.decode("utf-8")
+            if not isinstance(value, str):
+                raise StrikeLogError(f"{where}: attribute '{name}' must be a string")
+            return value
+        arr = np.asarray(value)
+        if kind is int and (arr.shape != () or arr.dtype.kind not in "iu"):
+            raise StrikeLogError(f"{where}: attribute '{name}' must be an integer")
+        if kind is float and (arr.shape != () or arr.dtype.kind not in "iuf"):
+            raise StrikeLogError(f"{where}: attribute '{name}' must be a number")
+        if kind is bool and (arr.shape != () or arr.dtype.kind not in "biu"):
+            raise StrikeLogError(f"{where}: attribute '{name}' must be a boolean")
+        return kind(arr)
+
+    def _dataset(self, path: str, n: int | None, tail: tuple, kinds: str) -> h5py.Dataset:
+        where = self._where
+        if path not in self._file:
+            raise StrikeLogError(f"{where}: missing dataset /{path}")
+        ds = self._file[path]
+        if not isinstance(ds, h5py.Dataset):
+            raise StrikeLogError(f"{where}: /{path} is not a dataset")
+        if ds.ndim != 1 + len(tail) or ds.shape[1:] != tail or (n is not None and
+                                                                ds.shape[0] != n):
+            want = ("n" if n is None else str(n)) + "".join(f", {k}" for k in tail)
+            raise StrikeLogError(f"{where}: /{path} has shape {ds.shape}, expected ({want})")
+        if ds.dtype.kind not in kinds:
+            raise StrikeLogError(f"{where}: /{path} has dtype {ds.dtype}, expected "
+                                 + {"f": "float", "iu": "integer"}.get(kinds, kinds))
+        return ds
+
+    def _check_schema(self) -> None:
+        f, where = self._file, self._where
+        fmt = f.attrs.get("format")
+        if isinstance(fmt, bytes):
+            fmt = fmt.decode("utf-8", "replace")
+        if fmt != FORMAT_NAME:
+            raise StrikeLogError(f"{where}: not a strike log (root attribute 'format' is "
+                                 f"{fmt!r}, expected {FORMAT_NAME!r})")
+        version = self._attr(f, "format_version", int)
+        if version != FORMAT_VERSION:
+            raise StrikeLogError(f"{where}: format version {version} is not supported (this "
+                                 f"recon reads version {FORMAT_VERSION})")
+        self.attrs = {name: self._attr(f, name, str) for name in _ROOT_ATTRS
+                      if name not in ("format_version", "seed")}
+        self.attrs["format_version"] = version
+        self.attrs["seed"] = self._attr(f, "seed", int)
+        for name in ("n_shots", "n_strikes"):
+            if name not in f.attrs:
+                raise StrikeLogError(f"{where}: incomplete log (no '{name}' attribute: the "
+                                     "writer did not close cleanly)")
+        self.n_shots = self._attr(f, "n_shots", int)
+        self.n_strikes = self._attr(f, "n_strikes", int)
+        if self.n_shots < 0 or self.n_strikes < 0:
+            raise StrikeLogError(f"{where}: negative row counts")
+
+        g = f["sensor"] if "sensor" in f else None
+        if g is None:
+            raise StrikeLogError(f"{where}: missing group /sensor")
+        directions = self._dataset("sensor/beam_directions", None, (3,), "f")[()]
+        errors = f["sensor/errors"] if "sensor/errors" in f else None
+        if errors is None:
+            raise StrikeLogError(f"{where}: missing group /sensor/errors")
+        fov = np.asarray(g.attrs.get("field_of_view", np.zeros(0)))
+        if fov.shape != (4,) or fov.dtype.kind != "f":
+            raise StrikeLogError(f"{where}: /sensor attribute 'field_of_view' must be 4 floats")
+        self.sensor = SensorInfo(
+            pattern=self._attr(g, "pattern", str), beam_directions=directions,
+            range_min=self._attr(g, "range_min", float),
+            range_max=self._attr(g, "range_max", float),
+            field_of_view=tuple(float(a) for a in fov),
+            reports_angles=self._attr(g, "reports_angles", bool),
+            errors=SensorErrors(**{k.name: self._attr(errors, k.name, float)
+                                   for k in fields(SensorErrors)}))
+        _check_sensor(self.sensor, where)
+
+        self._shots = {k: self._dataset(f"shots/{k}", self.n_shots, tail, "f")
+                       for k, tail in _SHOT_FIELDS.items()}
+        spec = {k: ((), "iu") for k in ("shot", "beam")} | {"range": ((), "f")}
+        if self.sensor.reports_angles:
+            spec |= {k: ((), "f") for k in _ANGLE_FIELDS}
+        self._strikes = {k: self._dataset(f"strikes/{k}", self.n_strikes, tail, kinds)
+                         for k, (tail, kinds) in spec.items()}
+        self.has_truth = "truth" in f
+        if self.has_truth:
+            self._truth_shots = {k: self._dataset(f"truth/{k}", self.n_shots, tail, "f")
+                                 for k, tail in _TRUTH_SHOT_FIELDS.items()}
+            self._truth_strikes = {
+                k: self._dataset(f"truth/{k}", self.n_strikes, tail,
+                                 "f" if dtype == np.float64 else "iu")
+                for k, (tail, dtype) in _TRUTH_STRIKE_FIELDS.items()}
+            self._dataset("truth/mesh/vertices", None, (3,), "f")
+            self._dataset("truth/mesh/faces", None, (3,), "iu")
+
+    # ------------------------------------------------------------------ reading
+
+    def _slice(self, start: int, stop: int | None, n: int) -> tuple[int, int]:
+        stop = n if stop is None else stop
+        if not (0 <= start <= stop <= n):
+            raise StrikeLogError(f"{self._where}: rows {start}:{stop} out of range (0:{n})")
+        return start, stop
+
+    def _blocks(self, n: int, chunk_rows: int) -> Iterator[tuple[int, int]]:
+        """``(start, stop)`` of consecutive blocks of at most ``chunk_rows`` of ``n`` rows."""
+        if chunk_rows < 1:
+            raise StrikeLogError(f"{self._where}: chunk_rows must be positive")
+        for start in range(0, n, chunk_rows):
+            yield start, min(start + chunk_rows, n)
+
+    def shots(self, start: int = 0, stop: int | None = None) -> Shots:
+        """Recorded shots ``start:stop``, checked."""
+        start, stop = self._slice(start, stop, self.n_shots)
+        return self._checked_shots(start, stop, previous_time=None)
+
+    def _checked_shots(self, start: int, stop: int, previous_time: float | None) -> Shots:
+        """Read shots ``start:stop`` and check them once, time also against ``previous_time``."""
+        with _hdf5_errors(self._where):
+            rows = Shots(*(np.asarray(self._shots[k][start:stop], dtype=np.float64)
+                           for k in _SHOT_FIELDS))
+        _check_shot_rows(rows, self._where, start, previous_time)
+        return rows
+
+    def strikes(self, start: int = 0, stop: int | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Shot index, beam index and measured range of strikes ``start:stop``, checked."""
+        start, stop = self._slice(start, stop, self.n_strikes)
+        return self._checked_strikes(start, stop, previous_shot=None)
+
+    def _checked_strikes(self, start: int, stop: int, previous_shot: int | None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Read strikes ``start:stop`` and check them once, ordering also against the shot
+        index ``previous_shot`` of the strike before ``start``."""
+        with _hdf5_errors(self._where):
+            shot = np.asarray(self._strikes["shot"][start:stop])
+            beam = np.asarray(self._strikes["beam"][start:stop])
+            rng = np.asarray(self._strikes["range"][start:stop], dtype=np.float64)
+        if shot.dtype.kind == "i" and len(shot) and shot.min() < 0:
+            raise StrikeLogError(f"{self._where}: negative shot index")
+        if beam.dtype.kind == "i" and len(beam) and beam.min() < 0:
+            raise StrikeLogError(f"{self._where}: negative beam index")
+        _check_strike_rows(shot, beam, rng, n_shots=self.n_shots, n_beams=self.sensor.n_beams,
+                           where=self._where, row0=start, previous_shot=previous_shot)
+        return shot.astype(np.int64), beam.astype(np.int64), rng
+
+    def _angle_offsets(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """Reported azimuth and elevation offsets (n,) [rad] of strikes ``start:stop``, checked."""
+        with _hdf5_errors(self._where):
+            d_az = np.asarray(self._strikes["azimuth_offset"][start:stop], dtype=np.float64)
+            d_el = np.asarray(self._strikes["elevation_offset"][start:stop], dtype=np.float64)
+        _check_finite("azimuth_offset", d_az, self._where)
+        _check_finite("elevation_offset", d_el, self._where)
+        return d_az, d_el
+
+    def directions(self, beam: np.ndarray, start: int, stop: int) -> np.ndarray:
+        """Measured directions (n, 3) in S of strikes ``start:stop`` with beams ``beam``."""
+        nominal = np.asarray(self.sensor.beam_directions)[beam]
+        if not self.sensor.reports_angles:
+            return nominal
+        d_az, d_el = self._angle_offsets(start, stop)
+        az, el = directions_to_angles(nominal)
+        return angles_to_directions(az + d_az, el + d_el)
+
+    def iter_chunks(self, chunk_rows: int = READ_CHUNK_ROWS) -> Iterator[StrikeChunk]:
+        """Yield consecutive blocks of at most ``chunk_rows`` strikes with their shots.
+
+        Ordering across block boundaries is checked too, so a full pass validates the strikes.
+        """
+        previous_shot = None
+        for start, stop in self._blocks(self.n_strikes, chunk_rows):
+            shot, beam, rng = self._checked_strikes(start, stop, previous_shot)
+            previous_shot = int(shot[-1])
+            lo, hi = int(shot[0]), int(shot[-1]) + 1
+            yield StrikeChunk(start=start, shot=shot, beam=beam, range=rng,
+                              direction=self.directions(beam, start, stop),
+                              shots=self.shots(lo, hi), shot_offset=lo)
+
+    # ------------------------------------------------------------------ truth
+
+    def _require_truth(self) -> None:
+        if not self.has_truth:
+            raise StrikeLogError(f"{self._where}: log has no /truth group")
+
+    def truth_mesh(self) -> Mesh:
+        """The truth mesh: vertices (n, 3) float64 [m, body frame] and faces (m, 3) int64."""
+        self._require_truth()
+        with _hdf5_errors(self._where):
+            vertices = np.asarray(self._file["truth/mesh/vertices"][()], dtype=np.float64)
+            faces = np.asarray(self._file["truth/mesh/faces"][()]).astype(np.int64)
+        _check_finite("truth mesh vertices", vertices, self._where)
+        if len(faces) == 0:
+            raise StrikeLogError(f"{self._where}: truth mesh has no faces")
+        if faces.min() < 0 or faces.max() >= len(vertices):
+            raise StrikeLogError(f"{self._where}: truth mesh faces index missing vertices")
+        return Mesh(vertices, faces)
+
+    def truth_shots(self, start: int = 0, stop: int | None = None) -> Shots:
+        """True poses of shots ``start:stop`` (time is the recorded time)."""
+        self._require_truth()
+        start, stop = self._slice(start, stop, self.n_shots)
+        with _hdf5_errors(self._where):
+            time = np.asarray(self._shots["time"][start:stop], dtype=np.float64)
+            rest = (np.asarray(self._truth_shots[k][start:stop], dtype=np.float64)
+                    for k in _TRUTH_SHOT_FIELDS)
+            return Shots(time, *rest)
+
+    def truth_strikes(self, start: int = 0, stop: int | None = None) -> TruthStrikes:
+        """True hit points [m, body frame], facet ids and ranges of strikes ``start:stop``."""
+        self._require_truth()
+        start, stop = self._slice(start, stop, self.n_strikes)
+        with _hdf5_errors(self._where):
+            return TruthStrikes(*(np.asarray(self._truth_strikes[k][start:stop])
+                                  for k in _TRUTH_STRIKE_FIELDS))
+
+    # ------------------------------------------------------------------ whole-log checks
+
+    def validate(self, chunk_rows: int = READ_CHUNK_ROWS, progress=None) -> None:
+        """Check every row of the log (streaming); raise StrikeLogError at the first problem.
+
+        Parameters
+        ----------
+        chunk_rows : int
+        progress : callable, optional
+            Called with the number of rows checked after each block.
+        """
+        # Each block is read and checked once: shots, then strikes (with their angle offsets),
+        # each against the last row of the block before it.
+        previous_time = None
+        for start, stop in self._blocks(self.n_shots, chunk_rows):
+            rows = self._checked_shots(start, stop, previous_time)
+            previous_time = float(rows.time[-1])
+            if progress:
+                progress(stop - start)
+        previous_shot = None
+        carried = np.zeros(0, dtype=np.int64)  # pairs of the shot that may continue
+        n_beams = self.sensor.n_beams
+        for start, stop in self._blocks(self.n_strikes, chunk_rows):
+            shot, beam, _ = self._checked_strikes(start, stop, previous_shot)
+            if self.sensor.reports_angles:
+                self._angle_offsets(start, stop)
+            previous_shot = int(shot[-1])
+            pairs = np.concatenate([carried, shot * n_beams + beam])
+            if len(np.unique(pairs)) != len(pairs):
+                raise StrikeLogError(f"{self._where}: a (shot, beam) pair appears twice near "
+                                     f"strike {start}")
+            carried = pairs[pairs // n_beams == previous_shot]
+            if progress:
+                progress(stop - start)
+        if self.has_truth:
+            self.truth_mesh()
+
+    def summary(self) -> dict:
+        """Counts, time span, sensor and target, as a JSON-ready dict."""
+        with _hdf5_errors(self._where):
+            t0 = float(self._shots["time"][0]) if self.n_shots else None
+            t1 = float(self._shots["time"][self.n_shots - 1]) if self.n_shots else None
+        return {
+            "path": str(self.path),
+            "format": FORMAT_NAME,
+            "format_version": self.attrs["format_version"],
+            "producer": f"{self.attrs['producer']} {self.attrs['producer_version']}",
+            "created_utc": self.attrs["created_utc"],
+            "seed": self.attrs["seed"],
+            "target": self.attrs["target"],
+            "n_shots": self.n_shots,
+            "n_strikes": self.n_strikes,
+            "n_pulses": self.n_shots * self.sensor.n_beams,
+            "time_start_s": t0,
+            "time_end_s": t1,
+            "duration_s": None if t0 is None else t1 - t0,
+            "sensor": self.sensor.to_dict(),
+            "has_truth": self.has_truth,
+        }
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> StrikeLog:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

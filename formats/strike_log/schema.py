@@ -1,0 +1,335 @@
+"""Strike-log format v1 (formats/SPEC.md): names, layout, the records a log holds, and the
+checks the reader and writer share."""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from formats.errors import StrikeLogError
+
+FORMAT_NAME = "recon-strike-log"
+FORMAT_VERSION = 1
+
+# Chunk rows: 65,536 strike rows of float64 are 512 KiB, inside HDF5's default 1 MiB chunk cache.
+STRIKE_CHUNK_ROWS = 65_536
+SHOT_CHUNK_ROWS = 16_384
+# How far from 1 a stored quaternion's norm may be (SPEC.md, Conventions).
+QUATERNION_NORM_TOLERANCE = 1e-6
+# Rows handed out per chunk by StrikeLog.iter_chunks: 2**20 strikes is ~100 MB of derived arrays.
+READ_CHUNK_ROWS = 1 << 20
+# Storage filters (SPEC.md, Storage; measured in benchmarks/bench_log_compression.py): no
+# compression by default, Fletcher-32 checksums always.
+COMPRESSIONS = {"none": {}, "lzf": {"compression": "lzf", "shuffle": True},
+                "gzip": {"compression": "gzip", "compression_opts": 4, "shuffle": True}}
+
+_PATTERNS = ("single", "cross", "zigzag", "grid", "custom")
+_ROOT_ATTRS = ("format", "format_version", "producer", "producer_version", "created_utc", "scene",
+               "seed", "target")
+_SHOT_FIELDS = {"time": (), "sensor_position": (3,), "sensor_attitude": (4,),
+                "target_attitude": (4,)}
+_STRIKE_FIELDS = {"shot": ((), np.uint32), "beam": ((), np.uint32), "range": ((), np.float64)}
+_ANGLE_FIELDS = ("azimuth_offset", "elevation_offset")
+_TRUTH_SHOT_FIELDS = {"sensor_position": (3,), "sensor_attitude": (4,), "target_attitude": (4,)}
+_TRUTH_STRIKE_FIELDS = {"point": ((3,), np.float64), "facet": ((), np.uint32),
+                        "range": ((), np.float64)}
+
+
+# --------------------------------------------------------------------------- records
+
+
+# The paper states every error as a 3-sigma bound and the log records those (SPEC.md,
+# /sensor/errors); a Gaussian error model draws with the 1-sigma value, a third of it.
+SIGMA3_PER_SIGMA = 3.0
+
+
+def sigma_from_sigma3(sigma3):
+    """The 1-sigma value of a Gaussian error stated as its 3-sigma bound.
+
+    Parameters
+    ----------
+    sigma3 : float or ndarray, any unit
+
+    Returns
+    -------
+    float or ndarray, same unit and shape: ``sigma3 / 3``.
+    """
+    return sigma3 / SIGMA3_PER_SIGMA
+
+
+@dataclass(frozen=True)
+class SensorErrors:
+    """Error models a producer applied to the recorded values (SPEC.md, /sensor/errors).
+
+    The one definition of the error-model parameters. Fields are what the log records: 3-sigma
+    values in SI units (metres, radians), zero when a model is off. Properties give the 1-sigma
+    values a Gaussian model draws with.
+
+    Attributes
+    ----------
+    range_sigma3 : float, metres, along the beam
+    azimuth_sigma3, elevation_sigma3 : float, radians
+    position_sigma3 : float, metres per axis of the recorded sensor position, frame I
+    pulse_dilation_alpha : float, dimensionless, paper Eq. (1) (0: off)
+    pulse_dilation_half_angle : float, radians, half-angle of the beam-spread cone
+    pulse_dilation_subrays : float, a whole number, sub-rays in the cone
+    """
+
+    range_sigma3: float = 0.0
+    azimuth_sigma3: float = 0.0
+    elevation_sigma3: float = 0.0
+    position_sigma3: float = 0.0
+    pulse_dilation_alpha: float = 0.0
+    pulse_dilation_half_angle: float = 0.0
+    pulse_dilation_subrays: float = 0.0
+
+    @property
+    def range_sigma(self) -> float:
+        """1-sigma range error [m]."""
+        return sigma_from_sigma3(self.range_sigma3)
+
+    @property
+    def azimuth_sigma(self) -> float:
+        """1-sigma azimuth error [rad]."""
+        return sigma_from_sigma3(self.azimuth_sigma3)
+
+    @property
+    def elevation_sigma(self) -> float:
+        """1-sigma elevation error [rad]."""
+        return sigma_from_sigma3(self.elevation_sigma3)
+
+    @property
+    def position_sigma(self) -> float:
+        """1-sigma per-axis error of the recorded sensor position [m]."""
+        return sigma_from_sigma3(self.position_sigma3)
+
+    @property
+    def angles(self) -> bool:
+        """True when an azimuth or elevation error is on."""
+        return self.azimuth_sigma3 > 0 or self.elevation_sigma3 > 0
+
+    @property
+    def dilation(self) -> bool:
+        """True when pulse dilation is on."""
+        return self.pulse_dilation_alpha > 0
+
+
+@dataclass(frozen=True)
+class SensorInfo:
+    """What fired: the beam pattern, its field of view and range limits.
+
+    Attributes
+    ----------
+    pattern : str
+        ``single``, ``cross``, ``zigzag``, ``grid`` or ``custom``.
+    beam_directions : (n_beams, 3) float64, unit vectors, sensor frame S (+z boresight)
+    field_of_view : (4,) float64, radians
+        ``[az_min, az_max, el_min, el_max]`` on each side of the boresight.
+    range_min, range_max : float, metres
+    reports_angles : bool
+        True when strikes carry measured azimuth and elevation offsets.
+    errors : SensorErrors
+    """
+
+    pattern: str
+    beam_directions: np.ndarray
+    range_min: float
+    range_max: float
+    field_of_view: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    reports_angles: bool = False
+    errors: SensorErrors = field(default_factory=SensorErrors)
+
+    @property
+    def n_beams(self) -> int:
+        return len(self.beam_directions)
+
+    def to_dict(self) -> dict:
+        """A JSON-ready description (directions as lists, angles in radians)."""
+        out = asdict(self)
+        out["beam_directions"] = np.asarray(self.beam_directions).tolist()
+        out["field_of_view"] = [float(a) for a in self.field_of_view]
+        out["n_beams"] = self.n_beams
+        return out
+
+
+@dataclass(frozen=True)
+class Shots:
+    """Rows of ``/shots`` (or their true values from ``/truth``).
+
+    Attributes
+    ----------
+    time : (n,) float64, seconds
+    sensor_position : (n, 3) float64, metres, inertial frame I
+    sensor_attitude : (n, 4) float64, quaternion (x, y, z, w), sends S vectors to I
+    target_attitude : (n, 4) float64, quaternion (x, y, z, w), sends B vectors to I
+    """
+
+    time: np.ndarray
+    sensor_position: np.ndarray
+    sensor_attitude: np.ndarray
+    target_attitude: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+
+@dataclass(frozen=True)
+class TruthStrikes:
+    """Rows of the per-strike truth: hit points in B, facet ids and true ranges."""
+
+    point: np.ndarray
+    facet: np.ndarray
+    range: np.ndarray
+
+
+@dataclass(frozen=True)
+class StrikeChunk:
+    """A contiguous block of strikes with the shot rows they refer to.
+
+    Attributes
+    ----------
+    start : int
+        Index of the first strike of the block in the whole log.
+    shot, beam : (n,) uint32
+        Global shot and beam indices.
+    range : (n,) float64, metres
+    direction : (n, 3) float64, unit vectors, sensor frame S
+        Measured beam direction of each strike (nominal direction plus reported angle offsets).
+    shots : Shots
+        Rows ``shot_offset .. shot_offset + len(shots)`` of ``/shots``; strike ``i`` was taken at
+        ``shots[shot[i] - shot_offset]``.
+    shot_offset : int
+    """
+
+    start: int
+    shot: np.ndarray
+    beam: np.ndarray
+    range: np.ndarray
+    direction: np.ndarray
+    shots: Shots
+    shot_offset: int
+
+    def __len__(self) -> int:
+        return len(self.shot)
+
+
+# --------------------------------------------------------------------------- shared helpers
+
+
+def angles_to_directions(azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
+    """Unit directions in the sensor frame from azimuth and elevation.
+
+    Parameters
+    ----------
+    azimuth, elevation : (n,) float64, radians, zero on the boresight (+z)
+
+    Returns
+    -------
+    (n, 3) float64 unit vectors, ``(cos el sin az, sin el, cos el cos az)``.
+    """
+    cos_el = np.cos(elevation)
+    return np.stack([cos_el * np.sin(azimuth), np.sin(elevation), cos_el * np.cos(azimuth)],
+                    axis=-1)
+
+
+def directions_to_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Azimuth and elevation [rad] of unit directions in the sensor frame (inverse of above)."""
+    d = np.asarray(directions, dtype=np.float64)
+    return np.arctan2(d[..., 0], d[..., 2]), np.arcsin(np.clip(d[..., 1], -1.0, 1.0))
+
+
+def _check_finite(name: str, values: np.ndarray, where: str) -> None:
+    if not np.all(np.isfinite(values)):
+        bad = int(np.flatnonzero(~np.isfinite(values).reshape(len(values), -1).all(axis=1))[0])
+        raise StrikeLogError(f"{where}: {name} has NaN or Inf (first at row {bad})")
+
+
+def _check_quaternions(name: str, q: np.ndarray, where: str, row0: int = 0) -> None:
+    _check_finite(name, q, where)
+    err = np.abs(np.linalg.norm(q, axis=1) - 1.0)
+    if np.any(err > QUATERNION_NORM_TOLERANCE):
+        bad = int(np.argmax(err > QUATERNION_NORM_TOLERANCE))
+        raise StrikeLogError(
+            f"{where}: {name} row {row0 + bad} is not a unit quaternion "
+            f"(norm {np.linalg.norm(q[bad]):.9g})")
+
+
+def _check_shot_rows(shots: Shots, where: str, row0: int, previous_time: float | None) -> None:
+    """Finite values, unit quaternions and strictly increasing time (SPEC.md, /shots)."""
+    _check_finite("time", shots.time, where)
+    _check_finite("sensor_position", shots.sensor_position, where)
+    _check_quaternions("sensor_attitude", shots.sensor_attitude, where, row0)
+    _check_quaternions("target_attitude", shots.target_attitude, where, row0)
+    t = shots.time if previous_time is None else np.concatenate([[previous_time], shots.time])
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        bad = int(np.argmax(steps <= 0)) + row0 + (0 if previous_time is None else -1) + 1
+        raise StrikeLogError(f"{where}: time does not increase at shot {bad}")
+
+
+def _check_strike_rows(shot: np.ndarray, beam: np.ndarray, rng: np.ndarray, *, n_shots: int,
+                       n_beams: int, where: str, row0: int, previous_shot: int | None) -> None:
+    """Index ranges, ordering and positive finite ranges (SPEC.md, /strikes)."""
+    if len(shot) and int(shot.max()) >= n_shots:
+        bad = int(np.argmax(shot >= n_shots))
+        raise StrikeLogError(f"{where}: strike {row0 + bad} has shot index {int(shot[bad])} out "
+                             f"of range (n_shots = {n_shots})")
+    if len(beam) and int(beam.max()) >= n_beams:
+        bad = int(np.argmax(beam >= n_beams))
+        raise StrikeLogError(f"{where}: strike {row0 + bad} has beam index {int(beam[bad])} out "
+                             f"of range (n_beams = {n_beams})")
+    s = shot.astype(np.int64)
+    if previous_shot is not None:
+        s = np.concatenate([[previous_shot], s])
+    if np.any(np.diff(s) < 0):
+        bad = int(np.argmax(np.diff(s) < 0)) + row0 + (0 if previous_shot is None else -1) + 1
+        raise StrikeLogError(f"{where}: strikes are not ordered by shot at strike {bad}")
+    if not np.all(np.isfinite(rng) & (rng > 0)):
+        bad = int(np.argmax(~(np.isfinite(rng) & (rng > 0))))
+        raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r}, "
+                             "expected a finite positive number of metres")
+
+
+def _as_array(name: str, values, shape_tail: tuple, dtype, where: str) -> np.ndarray:
+    try:
+        arr = np.asarray(values, dtype=dtype)
+    except (TypeError, ValueError) as exc:
+        raise StrikeLogError(f"{where}: {name} cannot be read as {np.dtype(dtype)}: "
+                             f"{exc}") from None
+    if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
+        want = "(n" + "".join(f", {k}" for k in shape_tail) + ")"
+        raise StrikeLogError(f"{where}: {name} must have shape {want}, got {arr.shape}")
+    return arr
+
+
+def _check_sensor(sensor: SensorInfo, where: str) -> None:
+    if sensor.pattern not in _PATTERNS:
+        raise StrikeLogError(f"{where}: sensor pattern {sensor.pattern!r} is not one of "
+                             f"{', '.join(_PATTERNS)}")
+    d = _as_array("sensor beam_directions", sensor.beam_directions, (3,), np.float64, where)
+    if len(d) == 0:
+        raise StrikeLogError(f"{where}: sensor has no beams")
+    _check_finite("sensor beam_directions", d, where)
+    if np.any(np.abs(np.linalg.norm(d, axis=1) - 1.0) > 1e-9):
+        raise StrikeLogError(f"{where}: sensor beam_directions must be unit vectors")
+    if not (np.isfinite(sensor.range_min) and np.isfinite(sensor.range_max)
+            and 0 <= sensor.range_min < sensor.range_max):
+        raise StrikeLogError(f"{where}: sensor range limits must satisfy 0 <= range_min < "
+                             f"range_max, got {sensor.range_min}, {sensor.range_max}")
+    fov = np.asarray(sensor.field_of_view, dtype=np.float64)
+    if fov.shape != (4,) or not np.all(np.isfinite(fov)):
+        raise StrikeLogError(f"{where}: sensor field_of_view must be 4 finite angles [rad]")
+
+
+@contextlib.contextmanager
+def _hdf5_errors(where: str):
+    """Turn what h5py raises on damaged files into one-line StrikeLogErrors."""
+    try:
+        yield
+    except StrikeLogError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError, IndexError) as exc:
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise StrikeLogError(f"{where}: damaged or unreadable HDF5 ({message})") from None

@@ -1,0 +1,278 @@
+"""The strike-log writer: shots and strikes streamed in chunks into a temporary file that is
+renamed into place only on a clean close (formats/SPEC.md)."""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import fields
+from datetime import UTC, datetime
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from formats.atomic import AtomicWriter
+from formats.errors import StrikeLogError
+from formats.strike_log.schema import (
+    _ANGLE_FIELDS,
+    _SHOT_FIELDS,
+    _STRIKE_FIELDS,
+    _TRUTH_SHOT_FIELDS,
+    _TRUTH_STRIKE_FIELDS,
+    COMPRESSIONS,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    SHOT_CHUNK_ROWS,
+    STRIKE_CHUNK_ROWS,
+    SensorErrors,
+    SensorInfo,
+    Shots,
+    TruthStrikes,
+    _as_array,
+    _check_finite,
+    _check_sensor,
+    _check_shot_rows,
+    _check_strike_rows,
+)
+from formats.version import __version__
+
+
+class StrikeLogWriter(AtomicWriter):
+    """Write a strike log, streaming shots and strikes in chunks.
+
+    The file is written under a temporary name beside ``path`` and renamed into place only when
+    the writer closes without an exception, after the row counts are written. An interrupted run
+    leaves no file that looks complete and never replaces an existing ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination, usually ``*.h5``.
+    sensor : SensorInfo
+    target : str
+        Short target name, e.g. ``asteroid``.
+    scene : str, optional
+        Full text of the scene description.
+    seed : int, optional
+        Random seed used; -1 when none.
+    truth_mesh : tuple of (n_vertices, 3) float64 and (n_faces, 3) int, optional
+        Truth mesh in metres, body frame. When given, the log has a ``/truth`` group and every
+        ``write_shots`` and ``write_strikes`` call must carry the truth arrays too.
+    producer, producer_version : str, optional
+    compression : {"none", "lzf", "gzip"}, optional
+        Filter for the chunked datasets (default none; see SPEC.md, Storage, for the trade-off).
+
+    Examples
+    --------
+    >>> with StrikeLogWriter("run.h5", sensor=sensor, target="asteroid") as log:  # doctest: +SKIP
+    ...     log.write_shots(time, position, sensor_q, target_q)
+    ...     log.write_strikes(shot, beam, rng)
+    """
+
+    missing_dir_error = StrikeLogError
+
+    def __init__(self, path, *, sensor: SensorInfo, target: str, scene: str = "", seed: int = -1,
+                 truth_mesh: tuple[np.ndarray, np.ndarray] | None = None,
+                 producer: str = "recon", producer_version: str = __version__,
+                 compression: str = "none"):
+        where = str(path)
+        _check_sensor(sensor, where)
+        if compression not in COMPRESSIONS:
+            raise StrikeLogError(f"{where}: compression must be one of "
+                                 f"{', '.join(COMPRESSIONS)}, got {compression!r}")
+        super().__init__(path)
+        self.sensor = sensor
+        self.has_truth = truth_mesh is not None
+        self._n_shots = self._n_strikes = 0
+        self._last_time: float | None = None
+        self._last_shot: int | None = None
+        try:
+            self._file = h5py.File(self.temporary, "w")
+            self._create_layout(sensor, target=target, scene=scene, seed=seed,
+                                truth_mesh=truth_mesh, producer=producer,
+                                producer_version=producer_version,
+                                filters={"fletcher32": True} | COMPRESSIONS[compression])
+        except BaseException:
+            self.abort()
+            raise
+
+    @classmethod
+    def append(cls, path) -> StrikeLogWriter:
+        """Open an existing complete log to add shots and strikes to its end.
+
+        The log is copied to a temporary file; the original is replaced only on a clean close.
+        """
+        from formats.strike_log.reader import StrikeLog
+
+        path = Path(path)
+        with StrikeLog(path) as log:
+            last_time = float(log.shots(log.n_shots - 1).time[-1]) if log.n_shots else None
+            last_shot = int(log.strikes(log.n_strikes - 1)[0][-1]) if log.n_strikes else None
+            sensor, has_truth = log.sensor, log.has_truth
+            n_shots, n_strikes = log.n_shots, log.n_strikes
+        self = cls.__new__(cls)
+        AtomicWriter.__init__(self, path)
+        self.sensor, self.has_truth = sensor, has_truth
+        shutil.copyfile(path, self.temporary)
+        self._file = h5py.File(self.temporary, "r+")
+        for name in ("n_shots", "n_strikes"):  # the file is incomplete until close
+            del self._file.attrs[name]
+        self._n_shots, self._n_strikes = n_shots, n_strikes
+        self._last_time, self._last_shot = last_time, last_shot
+        return self
+
+    def _create_layout(self, sensor, *, target, scene, seed, truth_mesh, producer,
+                       producer_version, filters):
+        f = self._file
+        f.attrs.update({
+            "format": FORMAT_NAME, "format_version": np.int64(FORMAT_VERSION),
+            "producer": producer, "producer_version": producer_version,
+            "created_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            "scene": scene, "seed": np.int64(seed), "target": target,
+        })
+        g = f.create_group("sensor")
+        g.attrs.update({
+            "pattern": sensor.pattern,
+            "field_of_view": np.asarray(sensor.field_of_view, dtype=np.float64),
+            "range_min": float(sensor.range_min), "range_max": float(sensor.range_max),
+            "reports_angles": bool(sensor.reports_angles),
+        })
+        g.create_dataset("beam_directions",
+                         data=np.asarray(sensor.beam_directions, dtype=np.float64))
+        g.create_group("errors").attrs.update(
+            {k.name: float(getattr(sensor.errors, k.name)) for k in fields(SensorErrors)})
+
+        def columns(group, spec, rows):
+            for name, (tail, dtype) in spec.items():
+                group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
+                                     chunks=(rows, *tail), **filters)
+
+        shots = {k: (tail, np.float64) for k, tail in _SHOT_FIELDS.items()}
+        columns(f.create_group("shots"), shots, SHOT_CHUNK_ROWS)
+        strikes = dict(_STRIKE_FIELDS)
+        if sensor.reports_angles:
+            strikes.update({k: ((), np.float64) for k in _ANGLE_FIELDS})
+        columns(f.create_group("strikes"), strikes, STRIKE_CHUNK_ROWS)
+        if truth_mesh is not None:
+            t = f.create_group("truth")
+            columns(t, {k: (tail, np.float64) for k, tail in _TRUTH_SHOT_FIELDS.items()},
+                    SHOT_CHUNK_ROWS)
+            columns(t, _TRUTH_STRIKE_FIELDS, STRIKE_CHUNK_ROWS)
+            vertices, faces = truth_mesh
+            m = t.create_group("mesh")
+            m.create_dataset("vertices", data=np.asarray(vertices, dtype=np.float64))
+            m.create_dataset("faces", data=np.asarray(faces, dtype=np.uint32))
+
+    # ------------------------------------------------------------------ appending rows
+
+    def _require_open(self) -> None:
+        if self.closed:
+            raise StrikeLogError(f"{self.path}: the writer is closed")
+
+    @staticmethod
+    def _extend(group, values: dict) -> None:
+        for name, arr in values.items():
+            ds = group[name]
+            n = ds.shape[0]
+            ds.resize(n + len(arr), axis=0)
+            ds[n:] = arr
+
+    def write_shots(self, time, sensor_position, sensor_attitude, target_attitude, *,
+                    truth: Shots | None = None) -> None:
+        """Append shots.
+
+        Parameters
+        ----------
+        time : (n,) float64, seconds, strictly increasing (also across calls)
+        sensor_position : (n, 3) float64, metres, inertial frame I, as recorded
+        sensor_attitude : (n, 4) float64, quaternion (x, y, z, w), S->I, as recorded
+        target_attitude : (n, 4) float64, quaternion (x, y, z, w), B->I, as known
+        truth : Shots, optional
+            True poses of the same shots; required when the log has a truth mesh.
+        """
+        self._require_open()
+        where = str(self.path)
+        rows = Shots(*(_as_array(k, v, tail, np.float64, where) for (k, tail), v in zip(
+            _SHOT_FIELDS.items(), (time, sensor_position, sensor_attitude, target_attitude),
+            strict=True)))
+        n = len(rows)
+        if any(len(getattr(rows, k)) != n for k in _SHOT_FIELDS):
+            raise StrikeLogError(f"{where}: write_shots arrays differ in length")
+        _check_shot_rows(rows, where, self._n_shots, self._last_time)
+        if self.has_truth != (truth is not None):
+            raise StrikeLogError(f"{where}: write_shots needs truth= exactly when the log has a "
+                                 "truth mesh")
+        if truth is not None:
+            t = {k: _as_array(f"truth {k}", getattr(truth, k), tail, np.float64, where)
+                 for k, tail in _TRUTH_SHOT_FIELDS.items()}
+            if any(len(v) != n for v in t.values()):
+                raise StrikeLogError(f"{where}: truth shots differ in length from the shots")
+            self._extend(self._file["truth"], t)
+        self._extend(self._file["shots"], {k: getattr(rows, k) for k in _SHOT_FIELDS})
+        self._n_shots += n
+        if n:
+            self._last_time = float(rows.time[-1])
+
+    def write_strikes(self, shot, beam, range, *, azimuth_offset=None, elevation_offset=None,
+                      truth: TruthStrikes | None = None) -> None:
+        """Append strikes (beam returns); misses are not written.
+
+        Parameters
+        ----------
+        shot : (n,) int, index into the shots written so far, non-decreasing (also across calls)
+        beam : (n,) int, index into ``sensor.beam_directions``
+        range : (n,) float64, metres, measured
+        azimuth_offset, elevation_offset : (n,) float64, radians, optional
+            Measured angle offsets from the beam's nominal direction; required exactly when
+            ``sensor.reports_angles``.
+        truth : TruthStrikes, optional
+            True hit points (metres, body frame), facet ids and ranges; required when the log
+            has a truth mesh.
+        """
+        self._require_open()
+        where = str(self.path)
+        shot = _as_array("shot", shot, (), np.int64, where)
+        beam = _as_array("beam", beam, (), np.int64, where)
+        rng = _as_array("range", range, (), np.float64, where)
+        n = len(shot)
+        if len(beam) != n or len(rng) != n:
+            raise StrikeLogError(f"{where}: write_strikes arrays differ in length")
+        if n and (shot.min() < 0 or beam.min() < 0):
+            raise StrikeLogError(f"{where}: shot and beam indices must be non-negative")
+        _check_strike_rows(shot, beam, rng, n_shots=self._n_shots, n_beams=self.sensor.n_beams,
+                           where=where, row0=self._n_strikes, previous_shot=self._last_shot)
+        values = {"shot": shot.astype(np.uint32), "beam": beam.astype(np.uint32), "range": rng}
+        if self.sensor.reports_angles != (azimuth_offset is not None
+                                          and elevation_offset is not None):
+            raise StrikeLogError(f"{where}: write_strikes needs azimuth_offset and "
+                                 "elevation_offset exactly when the sensor reports angles")
+        if self.sensor.reports_angles:
+            for k, v in zip(_ANGLE_FIELDS, (azimuth_offset, elevation_offset), strict=True):
+                values[k] = _as_array(k, v, (), np.float64, where)
+                if len(values[k]) != n:
+                    raise StrikeLogError(f"{where}: {k} differs in length from the strikes")
+                _check_finite(k, values[k], where)
+        if self.has_truth != (truth is not None):
+            raise StrikeLogError(f"{where}: write_strikes needs truth= exactly when the log "
+                                 "has a truth mesh")
+        if truth is not None:
+            t = {k: _as_array(f"truth {k}", getattr(truth, k), tail, dtype, where)
+                 for k, (tail, dtype) in _TRUTH_STRIKE_FIELDS.items()}
+            if any(len(v) != n for v in t.values()):
+                raise StrikeLogError(f"{where}: truth strikes differ in length from the strikes")
+            self._extend(self._file["truth"], t)
+        self._extend(self._file["strikes"], values)
+        self._n_strikes += n
+        if n:
+            self._last_shot = int(shot[-1])
+
+    # ------------------------------------------------------------------ closing
+
+    def _finish(self) -> None:
+        """Write the row counts that mark the log complete (SPEC.md, root attributes)."""
+        self._file.attrs["n_shots"] = np.int64(self._n_shots)
+        self._file.attrs["n_strikes"] = np.int64(self._n_strikes)
+        self._file.close()
+
+    def _release(self) -> None:
+        self._file.close()
