@@ -1,6 +1,8 @@
-"""Command-line options shared by the commands that run sweeps on Dask."""
+"""Command-line options shared by several commands: sweeps on Dask, truth meshes, outputs."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 
 def add_sweep_options(parser, *, resume_help: str) -> None:
@@ -20,3 +22,21 @@ def add_sweep_options(parser, *, resume_help: str) -> None:
     parser.add_argument("--resume", action="store_true", help=resume_help)
 
 
+
+
+def add_truth_and_output_options(parser, *, truth_help: str, truth_required: bool) -> None:
+    """``--truth`` and ``--truth-scale``, the mesh that surfaces are scored against, and ``-o``,
+    the directory the scores are written to.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser or argument group
+    truth_help : str
+        Where the truth may come from, in the command's own words.
+    truth_required : bool
+        Whether the command needs ``--truth`` (it may find the truth in a log or a scene).
+    """
+    parser.add_argument("--truth", required=truth_required, help=truth_help)
+    parser.add_argument("--truth-scale", type=float, default=1.0,
+                        help="factor on a truth mesh file's coordinates (e.g. 1000 for km)")
+    parser.add_argument("-o", "--output", type=Path, required=True, help="output directory")

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from cli.options import add_sweep_options
+from cli.options import add_sweep_options, add_truth_and_output_options
 
 # The CLI's defaults are the library's (recon/surfaces/isolation.py says where each comes from);
 # they are repeated here only as help text, so that ``recon --help`` need not import numpy.
@@ -80,11 +80,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "DIR/results.csv, DIR/results.json, DIR/speed_accuracy.png and the meshes; "
                     "print the ranking.")
     p.add_argument("input", help="point cloud or strike log")
-    p.add_argument("--truth", required=True,
-                   help="truth mesh file, or a strike log with its truth mesh")
-    p.add_argument("--truth-scale", type=float, default=1.0,
-                   help="factor on a truth mesh file's coordinates (e.g. 1000 for km)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output directory")
+    add_truth_and_output_options(
+        p, truth_help="truth mesh file, or a strike log with its truth mesh", truth_required=True)
     p.add_argument("--methods", nargs="+", metavar="METHOD",
                    help="methods to run (default: all)")
     p.add_argument("--no-grid", action="store_true", help="defaults only, no parameter grid")
@@ -103,10 +100,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "write, per method, a failure map and an accuracy heatmap (PNG) with the "
                     "data (DIR/stability.csv, DIR/stability.json).")
     p.add_argument("source", help="scene (preset name or .toml), point cloud, or strike log")
-    p.add_argument("--truth", help="truth mesh (default: the log's or the scene's)")
-    p.add_argument("--truth-scale", type=float, default=1.0,
-                   help="factor on a truth mesh file's coordinates (e.g. 1000 for km)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output directory")
+    add_truth_and_output_options(
+        p, truth_help="truth mesh (default: the log's or the scene's)", truth_required=False)
     p.add_argument("--methods", nargs="+", metavar="METHOD", help="methods (default: all)")
     p.add_argument("--noise", default="0,0.3,1",
                    help="range noise levels, 3 sigma in metres (default: %(default)s)")
