@@ -1,8 +1,30 @@
-"""Command-line options shared by several commands: sweeps on Dask, truth meshes, outputs."""
+"""Subcommand parsers and the command-line options several commands share: sweeps on Dask,
+truth meshes, outputs."""
 
 from __future__ import annotations
 
 from pathlib import Path
+
+
+def add_command(subparsers, name: str, handler, **parser_options):
+    """Add the subcommand ``name``, run by ``handler(args)``, and return its parser.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+    name : str
+    handler : callable
+        Called with the parsed arguments; returns the exit code (``args.func`` in cli/main.py).
+    **parser_options
+        ``help``, ``description``, ``epilog``... as for ``add_parser``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    parser = subparsers.add_parser(name, **parser_options)
+    parser.set_defaults(func=handler)
+    return parser
 
 
 def add_sweep_options(parser, *, resume_help: str) -> None:
