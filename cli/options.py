@@ -1,6 +1,30 @@
-"""Command-line options shared by the commands that run sweeps on Dask."""
+"""Subcommand parsers and the command-line options several commands share: sweeps on Dask,
+truth meshes, outputs."""
 
 from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_command(subparsers, name: str, handler, **parser_options):
+    """Add the subcommand ``name``, run by ``handler(args)``, and return its parser.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+    name : str
+    handler : callable
+        Called with the parsed arguments; returns the exit code (``args.func`` in cli/main.py).
+    **parser_options
+        ``help``, ``description``, ``epilog``... as for ``add_parser``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    parser = subparsers.add_parser(name, **parser_options)
+    parser.set_defaults(func=handler)
+    return parser
 
 
 def add_sweep_options(parser, *, resume_help: str) -> None:
@@ -20,3 +44,21 @@ def add_sweep_options(parser, *, resume_help: str) -> None:
     parser.add_argument("--resume", action="store_true", help=resume_help)
 
 
+
+
+def add_truth_and_output_options(parser, *, truth_help: str, truth_required: bool) -> None:
+    """``--truth`` and ``--truth-scale``, the mesh that surfaces are scored against, and ``-o``,
+    the directory the scores are written to.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser or argument group
+    truth_help : str
+        Where the truth may come from, in the command's own words.
+    truth_required : bool
+        Whether the command needs ``--truth`` (it may find the truth in a log or a scene).
+    """
+    parser.add_argument("--truth", required=truth_required, help=truth_help)
+    parser.add_argument("--truth-scale", type=float, default=1.0,
+                        help="factor on a truth mesh file's coordinates (e.g. 1000 for km)")
+    parser.add_argument("-o", "--output", type=Path, required=True, help="output directory")

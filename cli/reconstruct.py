@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from cli.options import add_sweep_options
+from cli.options import add_command, add_sweep_options, add_truth_and_output_options
 
 # The CLI's defaults are the library's (recon/surfaces/isolation.py says where each comes from);
 # they are repeated here only as help text, so that ``recon --help`` need not import numpy.
@@ -41,6 +41,16 @@ def _add_run_options(p: argparse.ArgumentParser, *, sweep: bool) -> None:
         add_sweep_options(g, resume_help="keep DIR/results.jsonl and skip the runs it holds")
 
 
+def _add_closing_options(p: argparse.ArgumentParser, *, preprocessing: bool, sweep: bool
+                         ) -> None:
+    """The options every command here ends with: ``--json``, the preprocessing and normals of
+    the input cloud (when it takes one as it is), and the run limits (``sweep``: and Dask)."""
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    if preprocessing:
+        _add_input_options(p)
+    _add_run_options(p, sweep=sweep)
+
+
 def _methods_arg(text: list[str] | None) -> list[str] | None:
     if not text:
         return None
@@ -48,8 +58,9 @@ def _methods_arg(text: list[str] | None) -> list[str] | None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "reconstruct", help="reconstruct a surface mesh from a cloud or a log",
+    p = add_command(
+        sub, "reconstruct", run_reconstruct,
+        help="reconstruct a surface mesh from a cloud or a log",
         description="Reconstruct a triangle mesh from a point cloud (or a strike log, ingested "
                     "on the fly) with one method, run in its own process with time and memory "
                     "limits. '-m auto' chooses the method and resolution without the truth and "
@@ -68,45 +79,34 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fraction of points -m auto holds out (default: %(default)s)")
     p.add_argument("--in-process", action="store_true",
                    help="run the method in this process (no isolation; a crash ends recon)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    _add_input_options(p)
-    _add_run_options(p, sweep=False)
-    p.set_defaults(func=run_reconstruct)
+    _add_closing_options(p, preprocessing=True, sweep=False)
 
-    p = sub.add_parser(
-        "compare", help="compare every method on one cloud against the truth",
+    p = add_command(
+        sub, "compare", run_compare, help="compare every method on one cloud against the truth",
         description="Run every method with its defaults and a small parameter grid, each "
                     "isolated, on Dask; score each mesh against the truth; write "
                     "DIR/results.csv, DIR/results.json, DIR/speed_accuracy.png and the meshes; "
                     "print the ranking.")
     p.add_argument("input", help="point cloud or strike log")
-    p.add_argument("--truth", required=True,
-                   help="truth mesh file, or a strike log with its truth mesh")
-    p.add_argument("--truth-scale", type=float, default=1.0,
-                   help="factor on a truth mesh file's coordinates (e.g. 1000 for km)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output directory")
+    add_truth_and_output_options(
+        p, truth_help="truth mesh file, or a strike log with its truth mesh", truth_required=True)
     p.add_argument("--methods", nargs="+", metavar="METHOD",
                    help="methods to run (default: all)")
     p.add_argument("--no-grid", action="store_true", help="defaults only, no parameter grid")
     p.add_argument("--no-meshes", action="store_true", help="do not keep the meshes")
     p.add_argument("--auto", action="store_true",
                    help="also run -m auto and report where its choice ranks on the truth")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    _add_input_options(p)
-    _add_run_options(p, sweep=True)
-    p.set_defaults(func=run_compare)
+    _add_closing_options(p, preprocessing=True, sweep=True)
 
-    p = sub.add_parser(
-        "stability", help="failure maps over noise x density x outliers",
+    p = add_command(
+        sub, "stability", run_stability, help="failure maps over noise x density x outliers",
         description="Degrade a cloud (or re-simulate a scene) over range noise x point density "
                     "x outlier fraction, run every method on every cell (isolated, on Dask) and "
                     "write, per method, a failure map and an accuracy heatmap (PNG) with the "
                     "data (DIR/stability.csv, DIR/stability.json).")
     p.add_argument("source", help="scene (preset name or .toml), point cloud, or strike log")
-    p.add_argument("--truth", help="truth mesh (default: the log's or the scene's)")
-    p.add_argument("--truth-scale", type=float, default=1.0,
-                   help="factor on a truth mesh file's coordinates (e.g. 1000 for km)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output directory")
+    add_truth_and_output_options(
+        p, truth_help="truth mesh (default: the log's or the scene's)", truth_required=False)
     p.add_argument("--methods", nargs="+", metavar="METHOD", help="methods (default: all)")
     p.add_argument("--noise", default="0,0.3,1",
                    help="range noise levels, 3 sigma in metres (default: %(default)s)")
@@ -117,9 +117,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="scene override, as for recon simulate (scenes only)")
     p.add_argument("--seed", type=int, default=0, help="seed (default: %(default)s)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    _add_run_options(p, sweep=True)
-    p.set_defaults(func=run_stability)
+    _add_closing_options(p, preprocessing=False, sweep=True)
 
 
 def _limits(args):

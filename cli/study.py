@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from cli.options import add_sweep_options
+from cli.options import add_command, add_sweep_options
 
 # Repeated from recon/experiments/studies/__init__.py (STUDIES) so that ``recon --help`` imports
 # nothing.
@@ -16,8 +16,8 @@ STUDY_NAMES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``study`` and ``report`` subcommands to ``recon``."""
-    p = sub.add_parser(
-        "study", help="reproduce one of the paper's studies (or all) with charts",
+    p = add_command(
+        sub, "study", run_study, help="reproduce one of the paper's studies (or all) with charts",
         description="Run one of the paper's studies on Dask: simulate every case, register and "
                     "score it against the truth, then write the data (results.csv, "
                     "summary.json with each claim of the paper, our numbers and a verdict) and "
@@ -39,17 +39,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--list", action="store_true", help="list the studies and exit")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--size", choices=("tiny",), help=argparse.SUPPRESS)  # tests only
-    p.set_defaults(func=run_study)
 
-    p = sub.add_parser(
-        "report", help="one self-contained HTML page of a study, all studies or a comparison",
+    p = add_command(
+        sub, "report", run_report,
+        help="one self-contained HTML page of a study, all studies or a comparison",
         description="Write one HTML page, readable offline (charts embedded), with the claims, "
                     "tables and charts of a 'recon study' directory (one study or 'all') or a "
                     "'recon compare' directory.")
     p.add_argument("input", type=Path, metavar="DIR", help="study or comparison directory")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="REPORT.html",
                    help="HTML file to write")
-    p.set_defaults(func=run_report)
 
 
 def run_study(args) -> int:

@@ -10,7 +10,7 @@ density of a closed mesh, a duration of at least one step). Every problem raises
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -29,12 +29,13 @@ RADIANS_PER = {"deg": math.pi / 180.0, "mrad": 1e-3}
 SHOT_COUNT_SLACK = 1e-9
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Derived:
-    """The quantities a scene implies (see :class:`sim.scene.Scene` for their meaning)."""
+    """The quantities a scene implies (see :class:`sim.scene.Scene`, which extends it, for their
+    meaning). Compared by identity: the fields hold arrays."""
 
-    vertices: np.ndarray
-    faces: np.ndarray
+    vertices: np.ndarray = field(repr=False)
+    faces: np.ndarray = field(repr=False)
     target: str
     mu: float
     orbit_period: float

@@ -35,16 +35,13 @@ import difflib
 import json
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from formats.strike_log import SensorErrors
 from sim.defaults import ALTERNATIVES, SCHEMA
-from sim.derive import derive
+from sim.derive import Derived, derive
 from sim.errors import SceneError
 from sim.schema import check_layer, check_values
 
@@ -82,8 +79,8 @@ def list_presets() -> list[tuple[str, str]]:
 
 
 @dataclass(frozen=True, eq=False)
-class Scene:
-    """A resolved, validated scene, ready to simulate.
+class Scene(Derived):
+    """A resolved, validated scene, ready to simulate: its values and what they imply.
 
     Attributes
     ----------
@@ -117,14 +114,6 @@ class Scene:
     values: dict
     source: str
     overrides: tuple[str, ...]
-    vertices: np.ndarray = field(repr=False)
-    faces: np.ndarray = field(repr=False)
-    target: str
-    mu: float
-    orbit_period: float
-    duration: float
-    n_shots: int
-    errors: SensorErrors
 
     def __getitem__(self, key: str):
         """``scene["orbit.radius"]``: the value of one key (KeyError when it is not used)."""
@@ -254,6 +243,4 @@ def load_scene(name_or_path, overrides=()) -> Scene:
     values = check_values(values, user_keys)
     derived = derive(values)
     return Scene(name=name, values=values, source=text, overrides=tuple(overrides),
-                 vertices=derived.vertices, faces=derived.faces, target=derived.target,
-                 mu=derived.mu, orbit_period=derived.orbit_period, duration=derived.duration,
-                 n_shots=derived.n_shots, errors=derived.errors)
+                 **{f.name: getattr(derived, f.name) for f in fields(Derived)})

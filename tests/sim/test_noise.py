@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import itertools
 import math
+from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from formats.strike_log import StrikeLog, directions_to_angles
+from formats.strike_log import SensorInfo, StrikeLog, directions_to_angles
 from tests.sim.conftest import read_all, registered_points, run_scene
 
 
@@ -29,6 +31,27 @@ def _true_directions_in_sensor_frame(log: StrikeLog, shot, point_b) -> np.ndarra
     return v_s / np.linalg.norm(v_s, axis=1, keepdims=True)
 
 
+class SimulatedBeams(NamedTuple):
+    """What the angle-error tests read back from a simulated log."""
+
+    path: Path
+    sensor: SensorInfo
+    beam: np.ndarray          # (s,) beam index of each strike
+    recorded: np.ndarray      # (s,) recorded range, metres
+    true_range: np.ndarray    # (s,) truth range, metres
+    true_direction: np.ndarray  # (s, 3) unit vectors, sensor frame: where each strike truly went
+
+
+def _simulate_beams(tmp_path, preset: str, *overrides: str) -> SimulatedBeams:
+    """Simulate ``preset`` with ``overrides`` and read back its strikes and true directions."""
+    _, path = run_scene(tmp_path, preset, *overrides)
+    with StrikeLog(path) as log:
+        shot, beam, recorded = log.strikes()
+        truth = log.truth_strikes()
+        true_direction = _true_directions_in_sensor_frame(log, shot, truth.point)
+        return SimulatedBeams(path, log.sensor, beam, recorded, truth.range, true_direction)
+
+
 def test_fixed_lrf_range_and_pose_errors(tmp_path):
     summary, path = run_scene(tmp_path, "asteroid-cross-noise")   # 0.3 m range, 2 m pose
     with StrikeLog(path) as log:
@@ -45,39 +68,29 @@ def test_fixed_lrf_range_and_pose_errors(tmp_path):
 
 
 def test_lidar_reports_angles_with_the_configured_error(tmp_path):
-    _, path = run_scene(tmp_path, "asteroid-lidar-noise", "time.duration=300",
-                        "errors.position_sigma3=0")
-    with StrikeLog(path) as log:
-        shot, beam, recorded = log.strikes()
-        truth = log.truth_strikes()
-        offsets = read_all(path)
-        sensor = log.sensor
-        true_dir = _true_directions_in_sensor_frame(log, shot, truth.point)
+    run = _simulate_beams(tmp_path, "asteroid-lidar-noise", "time.duration=300",
+                          "errors.position_sigma3=0")
+    offsets = read_all(run.path)
     az_off, el_off = offsets["strikes/azimuth_offset"], offsets["strikes/elevation_offset"]
     sigma = math.radians(0.2) / 3.0
     _std_matches(az_off, sigma)
     _std_matches(el_off, sigma)
-    _std_matches(recorded - truth.range, 1.0 / 3.0)
+    _std_matches(run.recorded - run.true_range, 1.0 / 3.0)
     assert np.corrcoef(az_off, el_off)[0, 1] == pytest.approx(0.0, abs=0.05)
     # The LIDAR fired along its nominal beams: the truth lies exactly on them.
-    assert np.allclose(true_dir, sensor.beam_directions[beam], atol=1e-9)
-    assert sensor.errors.azimuth_sigma3 == pytest.approx(math.radians(0.2))
+    assert np.allclose(run.true_direction, run.sensor.beam_directions[run.beam], atol=1e-9)
+    assert run.sensor.errors.azimuth_sigma3 == pytest.approx(math.radians(0.2))
 
 
 def test_fixed_lrf_angle_error_is_a_pointing_error(tmp_path):
-    _, path = run_scene(tmp_path, "asteroid-cross", "errors.azimuth_sigma3_deg=0.3",
-                        "errors.elevation_sigma3_deg=0.15")
-    with StrikeLog(path) as log:
-        shot, beam, recorded = log.strikes()
-        truth = log.truth_strikes()
-        nominal = log.sensor.beam_directions
-        true_dir = _true_directions_in_sensor_frame(log, shot, truth.point)
-    az, el = directions_to_angles(true_dir)
-    az0, el0 = directions_to_angles(nominal[beam])
+    run = _simulate_beams(tmp_path, "asteroid-cross", "errors.azimuth_sigma3_deg=0.3",
+                          "errors.elevation_sigma3_deg=0.15")
+    az, el = directions_to_angles(run.true_direction)
+    az0, el0 = directions_to_angles(run.sensor.beam_directions[run.beam])
     _std_matches(az - az0, math.radians(0.3) / 3.0)
     _std_matches(el - el0, math.radians(0.15) / 3.0)
     # The range was measured along the true beam: no range error here.
-    assert np.array_equal(recorded, truth.range)
+    assert np.array_equal(run.recorded, run.true_range)
 
 
 def _incidence(path):

@@ -1,4 +1,5 @@
-"""Conversions between ``MethodInput``/mesh arrays and Open3D or pymeshlab objects."""
+"""Conversions between ``MethodInput``/mesh arrays and Open3D or pymeshlab objects, and the
+check that a method's mesh has triangles."""
 
 from __future__ import annotations
 
@@ -15,6 +16,27 @@ def open3d_cloud(cloud: MethodInput):
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud.points))
     pcd.normals = o3d.utility.Vector3dVector(cloud.normals)
     return pcd
+
+
+def with_triangles(vertices: np.ndarray, faces: np.ndarray, failure: str
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices, faces)`` unchanged, unless there are no faces.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float64, metres, body frame
+    faces : (f, 3) int64
+    failure : str
+        Message of the ``MethodFailed`` raised when ``faces`` is empty, naming the method and
+        the setting that gave nothing (``"ball-pivoting: no triangles with radii [...] m"``).
+
+    Returns
+    -------
+    vertices, faces : as given
+    """
+    if len(faces) == 0:
+        raise MethodFailed(failure)
+    return vertices, faces
 
 
 def open3d_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
-from recon.surfaces.methods._backends import open3d_arrays, open3d_cloud
+from recon.surfaces.methods import Method, MethodInput, Param, register
+from recon.surfaces.methods._backends import open3d_arrays, open3d_cloud, with_triangles
 
 # First automatic alpha, in spacings, doubled each step: 3 x the nearest-neighbour distance (the
 # alpha measured on the paper's ellipsoid with open3d 0.20: 0.29 m Chamfer at 5e4 points), which
@@ -57,9 +57,8 @@ def run(cloud: MethodInput, *, alpha: float | None, min_used: float
         vertices, faces = open3d_arrays(mesh)
         if alpha is not None or len(vertices) >= min_used * len(cloud.points):
             break
-    if len(faces) == 0:
-        raise MethodFailed(f"alpha-shape: no triangles with alpha = {factor:g} x spacing")
-    return vertices, faces
+    return with_triangles(vertices, faces,
+                          f"alpha-shape: no triangles with alpha = {factor:g} x spacing")
 
 
 METHOD = register(Method(

@@ -11,17 +11,12 @@ from __future__ import annotations
 import numpy as np
 
 from recon.surfaces.methods import Method, MethodInput, Param, register
-from recon.surfaces.methods._backends import (
-    auto_resolution,
-    meshlab_arrays,
-    meshlab_call,
-    meshlab_set,
-)
+from recon.surfaces.methods._mls import GRID, mls_params, mls_surface
 
 
 def run(cloud: MethodInput, *, filter_scale: float, spherical: float, resolution: int
         ) -> tuple[np.ndarray, np.ndarray]:
-    """APSS surface of the oriented points.
+    """APSS surface of the oriented points: ``(vertices, faces)`` as ``mls_surface`` returns.
 
     Parameters
     ----------
@@ -31,31 +26,16 @@ def run(cloud: MethodInput, *, filter_scale: float, spherical: float, resolution
     spherical : float
         Blend between plane fit (0) and pure sphere fit (1).
     resolution : int or None
-        Marching-cubes grid cells along the bounding box; None: one cell per spacing
-        (``auto_resolution``).
-
-    Returns
-    -------
-    vertices : (v, 3) float64, metres, body frame
-    faces : (f, 3) int64
+        Marching-cubes cells per side; None: one per spacing (``mls_surface``).
     """
-    ms = meshlab_set(cloud)
-    meshlab_call(ms, "generate_marching_cubes_apss", method="apss",
-                 filterscale=float(filter_scale), sphericalparameter=float(spherical),
-                 resolution=auto_resolution(cloud, resolution))
-    return meshlab_arrays(ms, method="apss", drop_nan=True)
+    return mls_surface(cloud, "generate_marching_cubes_apss", method="apss",
+                       filter_scale=filter_scale, resolution=resolution,
+                       sphericalparameter=spherical)
 
 
 METHOD = register(Method(
     name="apss", run=run, kind="smooth", preload=("pymeshlab",),
     summary="algebraic point set surfaces (pymeshlab), marching cubes",
-    params={
-        # 2, 1 and 200: MeshLab's defaults (print_filter_parameter_list).
-        "filter_scale": Param(2.0, float, "kernel support / local spacing", minimum=0.0),
-        "spherical": Param(1.0, float, "0 = planes, 1 = spheres", minimum=0.0),
-        # None: one cell per spacing; MeshLab's default 200 gave 26x the faces for the same
-        # accuracy on a 6000-point unit sphere (0.028% vs 0.016% of the diagonal, Chamfer).
-        "resolution": Param(None, int, "marching-cubes cells per side (default: automatic)",
-                            minimum=8),
-    },
-    grid=({"resolution": 200}, {"filter_scale": 4.0})))
+    # 1: MeshLab's default (print_filter_parameter_list).
+    params=mls_params("spherical", Param(1.0, float, "0 = planes, 1 = spheres", minimum=0.0)),
+    grid=GRID))

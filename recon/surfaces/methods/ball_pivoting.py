@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
-from recon.surfaces.methods._backends import open3d_arrays, open3d_cloud
+from recon.surfaces.methods import Method, MethodInput, Param, register
+from recon.surfaces.methods._backends import open3d_arrays, open3d_cloud, with_triangles
 
 
 def run(cloud: MethodInput, *, radii: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -36,9 +36,7 @@ def run(cloud: MethodInput, *, radii: tuple[float, ...]) -> tuple[np.ndarray, np
     mesh = o3d.geometry.TriangleMesh.create_from_point_cloud_ball_pivoting(
         open3d_cloud(cloud), o3d.utility.DoubleVector(metres))
     vertices, faces = open3d_arrays(mesh)
-    if len(faces) == 0:
-        raise MethodFailed(f"ball-pivoting: no triangles with radii {metres} m")
-    return vertices, faces
+    return with_triangles(vertices, faces, f"ball-pivoting: no triangles with radii {metres} m")
 
 
 METHOD = register(Method(

@@ -12,17 +12,12 @@ from __future__ import annotations
 import numpy as np
 
 from recon.surfaces.methods import Method, MethodInput, Param, register
-from recon.surfaces.methods._backends import (
-    auto_resolution,
-    meshlab_arrays,
-    meshlab_call,
-    meshlab_set,
-)
+from recon.surfaces.methods._mls import GRID, mls_params, mls_surface
 
 
 def run(cloud: MethodInput, *, filter_scale: float, sigma_n: float, resolution: int
         ) -> tuple[np.ndarray, np.ndarray]:
-    """RIMLS surface of the oriented points.
+    """RIMLS surface of the oriented points: ``(vertices, faces)`` as ``mls_surface`` returns.
 
     Parameters
     ----------
@@ -32,31 +27,15 @@ def run(cloud: MethodInput, *, filter_scale: float, sigma_n: float, resolution: 
     sigma_n : float
         Normal-reweighting width (smaller keeps sharper features).
     resolution : int or None
-        Marching-cubes grid cells along the bounding box; None: one cell per spacing
-        (``auto_resolution``).
-
-    Returns
-    -------
-    vertices : (v, 3) float64, metres, body frame
-    faces : (f, 3) int64
+        Marching-cubes cells per side; None: one per spacing (``mls_surface``).
     """
-    ms = meshlab_set(cloud)
-    meshlab_call(ms, "generate_marching_cubes_rimls", method="rimls",
-                 filterscale=float(filter_scale), sigman=float(sigma_n),
-                 resolution=auto_resolution(cloud, resolution))
-    return meshlab_arrays(ms, method="rimls", drop_nan=True)
+    return mls_surface(cloud, "generate_marching_cubes_rimls", method="rimls",
+                       filter_scale=filter_scale, resolution=resolution, sigman=sigma_n)
 
 
 METHOD = register(Method(
     name="rimls", run=run, kind="smooth", preload=("pymeshlab",),
     summary="robust implicit MLS (pymeshlab), marching cubes",
-    params={
-        # 2, 0.75 and 200: MeshLab's defaults (print_filter_parameter_list).
-        "filter_scale": Param(2.0, float, "kernel support / local spacing", minimum=0.0),
-        "sigma_n": Param(0.75, float, "normal reweighting width", minimum=0.0),
-        # None: one cell per spacing; MeshLab's default 200 gave 26x the faces for the same
-        # accuracy on a 6000-point unit sphere (0.028% vs 0.016% of the diagonal, Chamfer).
-        "resolution": Param(None, int, "marching-cubes cells per side (default: automatic)",
-                            minimum=8),
-    },
-    grid=({"resolution": 200}, {"filter_scale": 4.0})))
+    # 0.75: MeshLab's default (print_filter_parameter_list).
+    params=mls_params("sigma_n", Param(0.75, float, "normal reweighting width", minimum=0.0)),
+    grid=GRID))
