@@ -181,8 +181,8 @@ def signed_distance_mesh(points: np.ndarray, normals: np.ndarray, *, cell: float
 
     Returns
     -------
-    vertices : (v, 3) float64, metres
-    faces : (f, 3) int64
+    (vertices, faces)
+        The zero set of the signed distance to the planes, as ``_contour.surface_nets`` gives it.
     """
     origin = points.min(axis=0) - 3 * cell
     shape = tuple(int(s) for s in np.ceil((points.max(axis=0) - origin) / cell).astype(int) + 4)
