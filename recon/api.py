@@ -172,8 +172,9 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
 
 
 def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None = None,
-                remove_outliers: bool = False, voxel: float | None = None, normals_k: int = 16,
-                orient: str = "centroid", seed: int = 0, isolate: bool = True,
+                remove_outliers: bool = False, voxel: float | None = None,
+                normals_k: int | None = None, orient: str = "centroid", seed: int = 0,
+                isolate: bool = True,
                 timeout: float | None = None, memory_limit: int | None = None,
                 auto_methods: Sequence[str] | None = None, holdout: float | None = None):
     """Reconstruct a surface mesh from a point cloud with one method, or ``method="auto"``.
@@ -188,7 +189,8 @@ def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None
         Overrides of the method's defaults (not with ``"auto"``).
     remove_outliers, voxel, normals_k, orient, seed
         Preparation: statistical outlier removal, voxel downsampling [m], neighbours of the
-        normals, their orientation without view points, the seed of every random choice.
+        normals (default ``recon.surfaces.normals.DEFAULT_K``), their orientation without view
+        points, the seed of every random choice.
     isolate : bool
         Run the method in its own process with ``timeout`` [s] and ``memory_limit`` [MiB].
     auto_methods, holdout
@@ -205,8 +207,8 @@ def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None
     from recon.surfaces.prepare import Preparation, load_prepared
     from recon.surfaces.reconstruct import reconstruct as run_method
 
-    preparation = Preparation(remove_outliers=remove_outliers, voxel=voxel, k=normals_k,
-                              fallback=orient, seed=seed)
+    preparation = Preparation(remove_outliers=remove_outliers, voxel=voxel, fallback=orient,
+                              seed=seed, **({} if normals_k is None else {"k": normals_k}))
     limits = Limits.from_options(timeout, memory_limit)
     choice = None
     if method == "auto":

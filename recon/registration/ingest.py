@@ -13,6 +13,7 @@ which orients normals later. The log's ``/truth`` group is never read here.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Literal
@@ -86,9 +87,28 @@ def iter_registered(log: StrikeLog, *, frame: Frame = "body", chunk_rows: int | 
             progress(len(chunk), log.n_strikes)
 
 
+def _register_and_write(log_path, output, *, frame: Frame, chunk_rows: int | None, progress,
+                        keep: bool) -> tuple[int, list]:
+    """One pass over a log: register every block, write it to ``output`` (if given) and keep it
+    (if ``keep``). Returns the strike count and the kept blocks."""
+    kept = []
+    with StrikeLog(log_path) as log:
+        writer = (open_cloud_writer(output, log.n_strikes, ATTRIBUTE_DTYPES)
+                  if output is not None else contextlib.nullcontext())
+        with writer:
+            for block in iter_registered(log, frame=frame, chunk_rows=chunk_rows,
+                                         progress=progress):
+                if output is not None:
+                    writer.write(*block)
+                if keep:
+                    kept.append(block)
+        return log.n_strikes, kept
+
+
 def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int | None = None,
                    progress=None) -> dict:
-    """Register every strike of a log and stream the cloud to ``out_path`` (.ply, .las, .laz, .h5).
+    """Register every strike of a log and stream the cloud to ``out_path`` (.ply, .las, .laz, .h5),
+    in bounded memory.
 
     The output appears only when every block was read, checked and written.
 
@@ -97,12 +117,9 @@ def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int
     dict
         ``n_points``, ``frame``, ``output``.
     """
-    with StrikeLog(log_path) as log:
-        with open_cloud_writer(out_path, log.n_strikes, ATTRIBUTE_DTYPES) as writer:
-            for points, attributes in iter_registered(log, frame=frame, chunk_rows=chunk_rows,
-                                                      progress=progress):
-                writer.write(points, attributes)
-        return {"n_points": log.n_strikes, "frame": frame, "output": str(Path(out_path))}
+    n_points, _ = _register_and_write(log_path, out_path, frame=frame, chunk_rows=chunk_rows,
+                                      progress=progress, keep=False)
+    return {"n_points": n_points, "frame": frame, "output": str(Path(out_path))}
 
 
 def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | None = None,
@@ -127,18 +144,8 @@ def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | No
         (n, 3) float64 metres in ``frame``; attributes ``time``, ``shot``, ``beam``, ``range``,
         ``view_x/y/z``.
     """
-    blocks = []
-    with StrikeLog(log_path) as log:
-        if output is None:
-            blocks = list(iter_registered(log, frame=frame, chunk_rows=chunk_rows,
-                                          progress=progress))
-        else:
-            with open_cloud_writer(output, log.n_strikes, ATTRIBUTE_DTYPES) as writer:
-                for points, attributes in iter_registered(log, frame=frame,
-                                                          chunk_rows=chunk_rows,
-                                                          progress=progress):
-                    writer.write(points, attributes)
-                    blocks.append((points, attributes))
+    _, blocks = _register_and_write(log_path, output, frame=frame, chunk_rows=chunk_rows,
+                                    progress=progress, keep=True)
     if not blocks:
         return Cloud(np.zeros((0, 3)), {k: np.zeros(0, dtype=v)
                                         for k, v in ATTRIBUTE_DTYPES.items()}, frame=frame)

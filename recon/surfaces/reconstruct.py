@@ -19,11 +19,7 @@ from formats.geometry import Cloud, Mesh
 from recon.surfaces.checks import check_surface, watertight
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
 from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
-from recon.surfaces.prepare import InputError, Preparation, load_prepared, prepare, preprocess
-
-# Re-exported: callers written before the preparation got its own module import these from here.
-__all__ = ["InputError", "Surface", "prepare", "preprocess", "reconstruct", "reconstruct_input",
-           "reconstruct_to_file"]
+from recon.surfaces.prepare import Preparation, load_prepared
 
 
 class Surface(Mesh):
