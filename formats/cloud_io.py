@@ -1,67 +1,131 @@
-"""Point clouds with per-point attributes: binary PLY, LAS/LAZ and HDF5, streamed and read back.
+"""Point clouds with per-point attributes: written as PLY, LAS/LAZ and HDF5, read from those and
+from the files other tools write (ASCII PLY, ``.xyz``/``.asc``/``.txt``, ``.pcd``, ``.e57``).
 
 Attribute names recon uses (any others are kept as they are):
 
 =====================  =========  ==============================================================
 name                   dtype      meaning
 =====================  =========  ==============================================================
-``time``               float64    shot time [s] (LAS: stored as ``gps_time``)
+``time``               float64    shot time [s] since the start of the campaign
 ``shot``, ``beam``     uint32     shot and beam index in the source strike log
 ``range``              float64    measured range [m]
+``azimuth``,           float64    measured beam direction in the sensor frame S [rad]
+``elevation``                     (formats/SPEC.md: zero on the boresight)
 ``view_x/y/z``         float64    sensor position in the cloud's frame [m] (orients normals)
 ``nx``, ``ny``, ``nz`` float64    unit normal
 =====================  =========  ==============================================================
 
-Formats
--------
-``.ply``  binary little-endian, every attribute a vertex property (int64 as double).
-``.las``/``.laz``  LAS 1.4 point format 6, coordinates quantised to ``LAS_SCALE_M`` with zero
-    offset; ``time`` as ``gps_time``, every other attribute as an extra-bytes dimension.
-``.h5``   HDF5 with root attributes ``format = "recon-point-cloud"``, ``format_version = 1``,
-    dataset ``points`` (n, 3) float64 and one (n,) dataset per attribute under ``attributes/``,
-    chunked and resizable.
+Every file written says its frame (``body`` or ``inertial``), units (metres), source log and the
+recon version (``formats.geometry.file_metadata``), and reading gives the cloud that frame back.
+
+Formats written
+---------------
+``.ply``  binary little-endian; x, y, z, then nx, ny, nz, then every other attribute as the
+    property ``scalar_NAME`` (CloudCompare's convention, which it imports as scalar fields; the
+    reader strips the prefix); integers as int32 (formats/ply.py). Metadata in ``comment`` lines.
+``.las``/``.laz``  LAS 1.4 point format 6 (ASPRS R15): coordinates quantised to ``LAS_SCALE_M``
+    with zero offset; every point return 1 of 1; ``time`` in ``gps_time`` (seconds since the start
+    of the campaign, not GPS time); ``beam`` in ``point_source_id``; ``azimuth`` in ``scan_angle``
+    (0.006 degree steps); every attribute but ``time`` and ``beam`` also as a described
+    extra-bytes dimension (lossless). The frame, as a WKT ``LOCAL_CS`` in metres (global encoding
+    WKT bit set), and ``file_metadata`` as JSON in the VLR ``recon``/1. Intensity stays 0: a
+    strike log records no return amplitude.
+``.h5``   HDF5 with root attributes ``format = "recon-point-cloud"``, ``format_version = 1`` and
+    ``file_metadata``; dataset ``points`` (n, 3) float64 and one (n,) dataset per attribute under
+    ``attributes/``, each with a ``units`` attribute (and ``frame`` on coordinates), chunked and
+    resizable.
+
+Formats read as well
+--------------------
+``.xyz``, ``.asc``, ``.txt``  text, one point per line: x y z, optionally nx ny nz (6 columns),
+    separated by spaces, tabs or commas; ``#`` and ``//`` lines are comments, and a comment line
+    naming every column (CloudCompare's ``//X Y Z Nx Ny Nz``) names them. Other columns are kept
+    as ``column_N`` (1-based), e.g. a HELIOS++ ``.xyz``'s intensity and GPS time.
+``.pcd``  through Open3D's tensor reader (positions, normals and every scalar field).
+``.e57``  through pye57 (libE57Format), every scan merged in the file's frame with its pose
+    applied; intensity kept.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
-from formats.geometry import Cloud
-from formats.ply import PlyWriter, read_ply_columns
+from formats.geometry import NORMAL_ATTRIBUTES, Cloud, file_metadata, frame_of
+from formats.ply import PlyWriter, read_ply
 
-CLOUD_SUFFIXES = (".ply", ".las", ".laz", ".h5")
+WRITE_SUFFIXES = (".ply", ".las", ".laz", ".h5")
+TEXT_SUFFIXES = (".xyz", ".asc", ".txt")
+CLOUD_SUFFIXES = (*WRITE_SUFFIXES, *TEXT_SUFFIXES, ".pcd", ".e57")
 CLOUD_FORMAT_NAME = "recon-point-cloud"
 CLOUD_FORMAT_VERSION = 1
 # LAS stores int32 coordinates: 0.1 mm steps reach +-214 km, beyond any target we image.
 LAS_SCALE_M = 1e-4
+# LAS 1.4 scan_angle: int16 in steps of 0.006 degrees, -30000..30000 (ASPRS R15, point format 6).
+LAS_SCAN_ANGLE_STEP_DEG = 0.006
+# Units and a description (LAS extra-bytes descriptions hold 32 characters) of known attributes.
+ATTRIBUTE_INFO = {
+    "time": ("s", "shot time since start [s]"),
+    "shot": ("1", "shot index in the source log"),
+    "beam": ("1", "beam index in the source log"),
+    "range": ("m", "measured range [m]"),
+    "azimuth": ("rad", "measured azimuth in S [rad]"),
+    "elevation": ("rad", "measured elevation in S [rad]"),
+    "view_x": ("m", "sensor x, cloud frame [m]"),
+    "view_y": ("m", "sensor y, cloud frame [m]"),
+    "view_z": ("m", "sensor z, cloud frame [m]"),
+    "nx": ("1", "unit normal x"),
+    "ny": ("1", "unit normal y"),
+    "nz": ("1", "unit normal z"),
+}
+# Attributes that are coordinates in the cloud's frame (HDF5 datasets say the frame too).
+_FRAMED = ("view_x", "view_y", "view_z", *NORMAL_ATTRIBUTES)
+# CloudCompare imports a PLY property as a scalar field when its name has this prefix.
+_PLY_SCALAR_PREFIX = "scalar_"
+# The WKT of a LAS file's frame: a local engineering frame in metres (not a map projection).
+_LAS_WKT = ('LOCAL_CS["recon {frame} frame ({long})",LOCAL_DATUM["{long}",0],'
+            'UNIT["metre",1,AUTHORITY["EPSG","9001"]],AXIS["X",OTHER],AXIS["Y",OTHER],'
+            'AXIS["Z",OTHER]]')
+_FRAME_NAMES = {"body": "target body frame B, origin at the target centre",
+                "inertial": "target-centred inertial frame I"}
+_LAS_VLR_USER, _LAS_VLR_RECORD = "recon", 1
+# Attribute -> the standard LAS dimension that holds it exactly (not repeated as extra bytes).
+_LAS_STANDARD = {"time": "gps_time", "beam": "point_source_id"}
 _CHUNK_ROWS = 65_536
 
 
-def _suffix(path: Path) -> str:
+def _suffix(path: Path, allowed: tuple[str, ...] = CLOUD_SUFFIXES) -> str:
     suffix = path.suffix.lower()
-    if suffix not in CLOUD_SUFFIXES:
+    if suffix not in allowed:
         raise MeshFormatError(f"{path}: unknown point-cloud suffix {path.suffix!r} (expected one "
-                              f"of {', '.join(CLOUD_SUFFIXES)})")
+                              f"of {', '.join(allowed)})")
     return suffix
 
 
 # --------------------------------------------------------------------------- writers
 
 
-class _PlyCloud(PlyWriter):
-    """Binary PLY: x, y, z then every attribute as a vertex property."""
+def _ply_name(name: str) -> str:
+    return name if name in NORMAL_ATTRIBUTES else _PLY_SCALAR_PREFIX + name
 
-    def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype]):
+
+class _PlyCloud(PlyWriter):
+    """Binary PLY: x, y, z then every attribute as a vertex property (``scalar_NAME``)."""
+
+    def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype], metadata: dict):
         xyz = {"x": np.float64, "y": np.float64, "z": np.float64}
-        super().__init__(path, n_points, xyz | dtypes)
+        normals = {k: dtypes[k] for k in NORMAL_ATTRIBUTES if k in dtypes}
+        rest = {_ply_name(k): v for k, v in dtypes.items() if k not in normals}
+        super().__init__(path, n_points, xyz | normals | rest, metadata=metadata)
 
     def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
         points = np.asarray(points, dtype=np.float64)
-        super().write({"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]} | attributes)
+        super().write({"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
+                      | {_ply_name(k): v for k, v in attributes.items()})
 
 
 class _H5Cloud(AtomicWriter):
@@ -69,20 +133,25 @@ class _H5Cloud(AtomicWriter):
 
     missing_dir_error = MeshFormatError
 
-    def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype]):
+    def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype], metadata: dict):
         import h5py
 
         super().__init__(path, suffix=".h5")
         self.n_points, self.dtypes, self._written = int(n_points), dtypes, 0
         self._h5 = h5py.File(self.temporary, "w")
         self._h5.attrs.update({"format": CLOUD_FORMAT_NAME,
-                               "format_version": np.int64(CLOUD_FORMAT_VERSION)})
+                               "format_version": np.int64(CLOUD_FORMAT_VERSION)} | metadata)
         rows = max(1, min(_CHUNK_ROWS, self.n_points))
-        self._h5.create_dataset("points", shape=(0, 3), maxshape=(None, 3), dtype=np.float64,
-                                chunks=(rows, 3))
+        points = self._h5.create_dataset("points", shape=(0, 3), maxshape=(None, 3),
+                                         dtype=np.float64, chunks=(rows, 3))
+        points.attrs.update({"units": metadata["units"], "frame": metadata["frame"]})
         g = self._h5.create_group("attributes")
         for name, dtype in dtypes.items():
-            g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(rows,))
+            ds = g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(rows,))
+            if name in ATTRIBUTE_INFO:
+                ds.attrs["units"] = ATTRIBUTE_INFO[name][0]
+            if name in _FRAMED:
+                ds.attrs["frame"] = metadata["frame"]
 
     def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
         n = len(points)
@@ -103,12 +172,14 @@ class _H5Cloud(AtomicWriter):
 
 
 class _LasCloud(AtomicWriter):
-    """LAS 1.4 point format 6 (LAZ when the suffix says so); attributes as extra bytes."""
+    """LAS 1.4 point format 6 (LAZ when the suffix says so), ASPRS conventions: see the module
+    docstring."""
 
     missing_dir_error = MeshFormatError
 
-    def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype]):
+    def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype], metadata: dict):
         import laspy
+        from laspy.vlrs.known import WktCoordinateSystemVlr
 
         suffix = Path(path).suffix.lower()
         super().__init__(path, suffix=suffix)
@@ -116,10 +187,24 @@ class _LasCloud(AtomicWriter):
         header = laspy.LasHeader(point_format=6, version="1.4")
         header.scales = np.full(3, LAS_SCALE_M)
         header.offsets = np.zeros(3)
-        extra = [laspy.ExtraBytesParams(name=k, type=v) for k, v in dtypes.items()
-                 if k != "time"]
+        header.global_encoding.wkt = True
+        header.system_identifier = "recon strike-log registration"
+        header.generating_software = f"recon {metadata['recon_version']}"[:32]
+        extra = [laspy.ExtraBytesParams(name=k, type=v,
+                                        description=ATTRIBUTE_INFO.get(k, ("", k))[1][:32])
+                 for k, v in dtypes.items() if k not in _LAS_STANDARD]
         if extra:
             header.add_extra_dims(extra)
+        frame = metadata["frame"]
+        header.vlrs.append(WktCoordinateSystemVlr(
+            _LAS_WKT.format(frame=frame, long=_FRAME_NAMES[frame])))
+        described = metadata | {"dimensions": {v: k for k, v in _LAS_STANDARD.items()
+                                               if k in dtypes}}
+        if "azimuth" in dtypes:
+            described["dimensions"]["scan_angle"] = (
+                f"azimuth in steps of {LAS_SCAN_ANGLE_STEP_DEG} deg")
+        header.vlrs.append(laspy.VLR(_LAS_VLR_USER, _LAS_VLR_RECORD, "recon frame and units",
+                                     json.dumps(described).encode()))
         self._las = laspy.open(self.temporary, mode="w", header=header,
                                do_compress=suffix == ".laz")
 
@@ -132,8 +217,16 @@ class _LasCloud(AtomicWriter):
                                   f"{LAS_SCALE_M} m resolution")
         record = laspy.ScaleAwarePointRecord.zeros(len(points), header=self._las.header)
         record.x, record.y, record.z = points[:, 0], points[:, 1], points[:, 2]
+        record.return_number[:] = 1
+        record.number_of_returns[:] = 1
+        if "beam" in attributes and len(points) and np.max(attributes["beam"]) > 65_535:
+            raise MeshFormatError(f"{self.path}: beam indices beyond 65535 do not fit LAS "
+                                  "point_source_id")
+        if "azimuth" in attributes:
+            steps = np.rad2deg(attributes["azimuth"]) / LAS_SCAN_ANGLE_STEP_DEG
+            record.scan_angle = np.clip(np.round(steps), -30_000, 30_000).astype(np.int16)
         for name, values in attributes.items():
-            record["gps_time" if name == "time" else name] = values
+            record[_LAS_STANDARD.get(name, name)] = values
         self._las.write_points(record)
         self._written += len(points)
 
@@ -150,7 +243,8 @@ class _LasCloud(AtomicWriter):
 _WRITERS = {".ply": _PlyCloud, ".h5": _H5Cloud, ".las": _LasCloud, ".laz": _LasCloud}
 
 
-def open_cloud_writer(path, n_points: int, dtypes: dict[str, np.dtype]) -> AtomicWriter:
+def open_cloud_writer(path, n_points: int, dtypes: dict[str, np.dtype], *, frame: str = "body",
+                      source=None) -> AtomicWriter:
     """A streaming point-cloud writer; the suffix of ``path`` picks PLY, LAS, LAZ or HDF5.
 
     Use it as a context manager and call ``write(points, attributes)`` with blocks of
@@ -164,15 +258,22 @@ def open_cloud_writer(path, n_points: int, dtypes: dict[str, np.dtype]) -> Atomi
         Total number of points that will be written (PLY and LAS headers need it).
     dtypes : dict of str to numpy dtype
         The attribute columns, in order.
+    frame : {"body", "inertial"}
+        Frame of the points, recorded in the file.
+    source : str or Path, optional
+        The strike log the points come from, recorded in the file.
     """
     path = Path(path)
-    return _WRITERS[_suffix(path)](path, n_points, {k: np.dtype(v) for k, v in dtypes.items()})
+    writer = _WRITERS[_suffix(path, WRITE_SUFFIXES)]
+    return writer(path, n_points, {k: np.dtype(v) for k, v in dtypes.items()},
+                  file_metadata(frame, source=source))
 
 
-def write_cloud(path, cloud: Cloud) -> Path:
-    """Write a whole point cloud; the suffix of ``path`` picks PLY, LAS, LAZ or HDF5."""
+def write_cloud(path, cloud: Cloud, *, source=None) -> Path:
+    """Write a whole point cloud, recording its frame (and ``source``); the suffix of ``path``
+    picks PLY, LAS, LAZ or HDF5."""
     dtypes = {k: np.asarray(v).dtype for k, v in cloud.attributes.items()}
-    with open_cloud_writer(path, len(cloud), dtypes) as writer:
+    with open_cloud_writer(path, len(cloud), dtypes, frame=cloud.frame, source=source) as writer:
         writer.write(cloud.points, cloud.attributes)
     return Path(path)
 
@@ -181,30 +282,39 @@ def write_cloud(path, cloud: Cloud) -> Path:
 
 
 def read_cloud(path) -> Cloud:
-    """Read a point cloud with its attributes (PLY, LAS/LAZ, or recon's HDF5 cloud).
+    """Read a point cloud with its attributes and recorded frame (PLY, LAS/LAZ, recon's HDF5
+    cloud, ``.xyz``/``.asc``/``.txt``, ``.pcd``, ``.e57``).
 
-    A PLY mesh is read as the cloud of its vertices.
+    A PLY mesh is read as the cloud of its vertices. Files that record no frame (those of other
+    tools) are read as body-frame clouds.
     """
     path = Path(path)
     kind = _suffix(path)
     if not path.is_file():
         raise MeshFormatError(f"{path}: no such file")
     if kind == ".ply":
-        return cloud_from_ply_columns(path, read_ply_columns(path)[0])
-    if kind == ".h5":
-        return _read_h5(path)
-    return _read_las(path)
+        columns, _, metadata = read_ply(path)
+        return cloud_from_ply_columns(path, columns, metadata)
+    readers = {".h5": _read_h5, ".pcd": _read_pcd, ".e57": _read_e57}
+    readers |= dict.fromkeys(TEXT_SUFFIXES, _read_text)
+    return readers.get(kind, _read_las)(path)
 
 
-def cloud_from_ply_columns(path, columns: dict[str, np.ndarray]) -> Cloud:
-    """The cloud of a PLY file's vertex columns (``formats.ply.read_ply_columns``): x, y, z as
-    points, every other column an attribute. ``path`` only names the file in errors."""
+def cloud_from_ply_columns(path, columns: dict[str, np.ndarray],
+                           metadata: dict[str, str] | None = None) -> Cloud:
+    """The cloud of a PLY file's vertex columns and header metadata (``formats.ply.read_ply``):
+    x, y, z as points, every other column an attribute (``scalar_NAME`` as ``NAME``), in the
+    frame the metadata names. ``path`` only names the file in errors."""
     missing = [k for k in "xyz" if k not in columns]
     if missing:
         raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
     columns = dict(columns)
     points = np.stack([columns.pop(k).astype(np.float64) for k in "xyz"], axis=1)
-    return Cloud(points, columns)
+    attributes = {}
+    for name, values in columns.items():
+        short = name.removeprefix(_PLY_SCALAR_PREFIX)
+        attributes[short if short and short not in columns else name] = values
+    return Cloud(points, attributes, frame=frame_of(metadata or {}, path))
 
 
 def _read_h5(path: Path) -> Cloud:
@@ -218,13 +328,14 @@ def _read_h5(path: Path) -> Cloud:
             if int(f.attrs.get("format_version", -1)) != CLOUD_FORMAT_VERSION:
                 raise MeshFormatError(f"{path}: point-cloud format version "
                                       f"{f.attrs.get('format_version')} is not supported")
+            metadata = {k: str(f.attrs[k]) for k in ("frame", "units") if k in f.attrs}
             points = np.asarray(f["points"][()], dtype=np.float64)
             attributes = {k: np.asarray(v[()]) for k, v in f["attributes"].items()}
     except MeshFormatError:
         raise
     except (OSError, KeyError, ValueError, TypeError) as exc:
         raise MeshFormatError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
-    return Cloud(points, attributes)
+    return Cloud(points, attributes, frame=frame_of(metadata, path))
 
 
 def _read_las(path: Path) -> Cloud:
@@ -235,10 +346,101 @@ def _read_las(path: Path) -> Cloud:
     except Exception as exc:  # laspy raises its own and OS errors on bad files
         raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
     points = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
-    attributes = {}
-    gps_time = np.asarray(las.gps_time, dtype=np.float64)
-    if np.any(gps_time != 0):  # format 6 always has gps_time; all zeros means none was written
-        attributes["time"] = gps_time
+    metadata = {}
+    for vlr in las.header.vlrs:
+        if (vlr.user_id, vlr.record_id) == (_LAS_VLR_USER, _LAS_VLR_RECORD):
+            try:
+                metadata = json.loads(vlr.record_data)
+            except (ValueError, UnicodeDecodeError):
+                raise MeshFormatError(f"{path}: the recon VLR is not JSON") from None
+    standard = metadata.get("dimensions", {})
+    if not metadata and np.any(np.asarray(las.gps_time) != 0):  # another tool's LAS with times
+        standard = {"gps_time": "time"}
+    attributes = {name: np.asarray(las[dim]) for dim, name in standard.items()
+                  if dim in ("gps_time", "point_source_id")}
     for name in las.point_format.extra_dimension_names:
         attributes[name] = np.asarray(las[name])
+    return Cloud(points, attributes, frame=frame_of(metadata, path))
+
+
+def _text_columns(path: Path) -> tuple[list[str] | None, str | None]:
+    """The column names a comment line gives (or None) and the delimiter of a text cloud."""
+    names, delimiter = None, None
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            text = line.strip()
+            if not text:
+                continue
+            if text.startswith(("#", "//")):
+                words = text.lstrip("#/").replace(",", " ").split()
+                if words[:3] and [w.lower() for w in words[:3]] == ["x", "y", "z"]:
+                    names = [w.lower() for w in words]
+                continue
+            delimiter = "," if "," in text else None
+            break
+    return names, delimiter
+
+
+def _read_text(path: Path) -> Cloud:
+    names, delimiter = _text_columns(path)
+    try:
+        table = np.loadtxt(path, comments=("#", "//"), delimiter=delimiter, ndmin=2,
+                           dtype=np.float64)
+    except ValueError as exc:
+        raise MeshFormatError(f"{path}: not a text point cloud of numbers "
+                              f"({str(exc).splitlines()[0]})") from None
+    if table.size == 0:
+        raise MeshFormatError(f"{path}: holds no points")
+    n_columns = table.shape[1]
+    if n_columns < 3:
+        raise MeshFormatError(f"{path}: needs at least 3 columns (x y z), found {n_columns}")
+    if names is None or len(names) != n_columns:
+        names = ["x", "y", "z"] + (list(NORMAL_ATTRIBUTES) if n_columns == 6 else
+                                   [f"column_{i + 1}" for i in range(3, n_columns)])
+    columns = dict(zip(names, table.T, strict=True))
+    return Cloud(np.stack([columns.pop(k) for k in "xyz"], axis=1), columns)
+
+
+def _read_pcd(path: Path) -> Cloud:
+    import open3d as o3d
+
+    try:
+        pcd = o3d.t.io.read_point_cloud(str(path))
+    except Exception as exc:  # Open3D raises RuntimeError and others on bad files
+        raise MeshFormatError(f"{path}: not a readable PCD file ({exc})") from None
+    if "positions" not in pcd.point:
+        raise MeshFormatError(f"{path}: not a readable PCD file (no points)")
+    fields = {k: pcd.point[k].numpy() for k in pcd.point}
+    points = fields.pop("positions").astype(np.float64)
+    attributes = {}
+    for name, values in fields.items():
+        values = values.reshape(len(points), -1)
+        if name == "normals":
+            attributes.update(zip(NORMAL_ATTRIBUTES, values.astype(np.float64).T, strict=True))
+        elif values.shape[1] == 1:
+            attributes[name] = values[:, 0]
+        else:
+            attributes.update({f"{name}_{i}": v for i, v in enumerate(values.T)})
     return Cloud(points, attributes)
+
+
+def _read_e57(path: Path) -> Cloud:
+    import pye57
+
+    try:
+        e57 = pye57.E57(str(path))
+        scans = [e57.read_scan(i, ignore_missing_fields=True, intensity=True, transform=True)
+                 for i in range(e57.scan_count)]
+    except Exception as exc:  # libE57Format raises its own exception types on bad files
+        raise MeshFormatError(f"{path}: not a readable E57 file ({exc})") from None
+    if not scans:
+        raise MeshFormatError(f"{path}: E57 file holds no scans")
+    xyz = ("cartesianX", "cartesianY", "cartesianZ")
+    if any(k not in scan for scan in scans for k in xyz):
+        raise MeshFormatError(f"{path}: E57 scans without cartesian coordinates are not "
+                              "supported")
+    points = np.concatenate([np.stack([s[k] for k in xyz], axis=1) for s in scans])
+    attributes = {}
+    if all("intensity" in s for s in scans):
+        attributes["intensity"] = np.concatenate([s["intensity"] for s in scans])
+    return Cloud(points.astype(np.float64), attributes)

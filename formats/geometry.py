@@ -47,6 +47,50 @@ def _frame(frame: str, what: str) -> str:
     return frame
 
 
+def file_metadata(frame: str, *, source=None) -> dict[str, str]:
+    """What every cloud or mesh file recon writes says about its content.
+
+    Written as PLY ``comment`` lines, a LAS VLR and HDF5 root attributes (formats/cloud_io.py).
+
+    Parameters
+    ----------
+    frame : {"body", "inertial"}
+    source : str or Path, optional
+        The strike log (or other file) the geometry was made from.
+
+    Returns
+    -------
+    dict of str to str
+        ``frame``, ``units`` (always ``"m"``), ``source`` (when given) and ``recon_version``.
+    """
+    from formats.version import __version__
+
+    metadata = {"frame": _frame(frame, "file"), "units": UNITS}
+    if source is not None:
+        metadata["source"] = str(source)
+    return metadata | {"recon_version": __version__}
+
+
+def frame_of(metadata: Mapping[str, str], where) -> Frame:
+    """The frame a file's metadata (``file_metadata``) names; ``"body"`` when it names none, as
+    in files of other tools.
+
+    Raises
+    ------
+    MeshFormatError
+        The metadata names units other than metres or an unknown frame; the message names
+        ``where`` (the file).
+    """
+    units = metadata.get("units", UNITS)
+    if units != UNITS:
+        raise MeshFormatError(f"{where}: file says units {units!r}; recon reads metres ({UNITS!r})")
+    frame = metadata.get("frame", "body")
+    if frame not in FRAMES:
+        raise MeshFormatError(f"{where}: file says frame {frame!r}, expected one of "
+                              f"{', '.join(FRAMES)}")
+    return frame
+
+
 class Cloud:
     """Points with named per-point attributes, in one frame.
 
@@ -191,6 +235,18 @@ class Mesh:
     @property
     def n_vertices(self) -> int:
         return len(self.vertices)
+
+    @property
+    def vertex_normals(self) -> np.ndarray:
+        """(n_vertices, 3) float64 unit normals: the area-weighted mean of the adjacent faces'
+        normals (outward for counter-clockwise faces); zero at vertices of no face."""
+        v = self.vertices
+        f = self.faces
+        cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # 2 x area x normal
+        summed = np.stack([np.bincount(f.ravel(), weights=np.repeat(cross[:, i], 3),
+                                       minlength=len(v)) for i in range(3)], axis=1)
+        length = np.linalg.norm(summed, axis=1, keepdims=True)
+        return np.divide(summed, length, out=np.zeros_like(summed), where=length > 0)
 
     @classmethod
     def of(cls, value, name: str = "mesh") -> Mesh:

@@ -1,7 +1,9 @@
 """Read triangle meshes (OBJ, PLY, STL, OFF, GLB) and write them as binary PLY.
 
 A mesh is a pair ``(vertices, faces)``: ``(n, 3) float64`` coordinates and ``(m, 3) int64``
-vertex indices, counter-clockwise seen from outside.
+vertex indices, counter-clockwise seen from outside. Written meshes carry vertex normals and say
+their frame, units, source and the recon version in ``comment`` lines (formats/ply.py), which
+reading gives back as the mesh's frame.
 """
 
 from __future__ import annotations
@@ -11,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from formats.errors import MeshFormatError
-from formats.geometry import Mesh
-from formats.ply import write_ply
+from formats.geometry import Mesh, file_metadata, frame_of
+from formats.ply import read_ply_metadata, write_ply
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
@@ -30,7 +32,8 @@ def read_mesh(path, *, scale: float = 1.0) -> Mesh:
     Returns
     -------
     Mesh
-        vertices (n, 3) float64, file units times ``scale``; faces (m, 3) int64; body frame.
+        vertices (n, 3) float64, file units times ``scale``; faces (m, 3) int64; in the frame a
+        PLY written by recon records, else the body frame.
 
     Raises
     ------
@@ -47,6 +50,7 @@ def read_mesh(path, *, scale: float = 1.0) -> Mesh:
                               f"{', '.join(MESH_SUFFIXES)})")
     if not (np.isfinite(scale) and scale > 0):
         raise MeshFormatError(f"{path}: scale must be a positive number, got {scale}")
+    frame = frame_of(read_ply_metadata(path), path) if path.suffix.lower() == ".ply" else "body"
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types on bad files; all mean "unreadable"
@@ -60,12 +64,12 @@ def read_mesh(path, *, scale: float = 1.0) -> Mesh:
         raise MeshFormatError(f"{path}: vertices contain NaN or Inf")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshFormatError(f"{path}: faces index vertices that do not exist")
-    return Mesh(vertices * scale, faces)
+    return Mesh(vertices * scale, faces, frame=frame)
 
 
 def write_mesh(path, vertices, faces: np.ndarray | None = None, *,
-               vertex_normals: np.ndarray | None = None) -> Path:
-    """Write a triangle mesh as binary little-endian PLY (atomically).
+               vertex_normals: np.ndarray | None = None, source=None) -> Path:
+    """Write a triangle mesh as binary little-endian PLY (atomically), with vertex normals.
 
     Parameters
     ----------
@@ -74,8 +78,12 @@ def write_mesh(path, vertices, faces: np.ndarray | None = None, *,
     vertices : (n, 3) float64, or a ``Mesh`` (then ``faces`` is not given)
     faces : (m, 3) int
     vertex_normals : (n, 3) float64, optional
+        Default: ``Mesh.vertex_normals``, computed from the faces.
+    source : str or Path, optional
+        The file the mesh was made from, recorded in the header with the mesh's frame.
     """
     path = Path(path)
+    frame = getattr(vertices, "frame", "body")
     if faces is None:
         vertices, faces = Mesh.of(vertices, "mesh")
     if path.suffix.lower() != ".ply":
@@ -86,9 +94,12 @@ def write_mesh(path, vertices, faces: np.ndarray | None = None, *,
         raise MeshFormatError(f"{path}: vertices must be (n, 3), got {vertices.shape}")
     if faces.ndim != 2 or faces.shape[1] != 3:
         raise MeshFormatError(f"{path}: faces must be (m, 3), got {faces.shape}")
-    columns = {"x": vertices[:, 0], "y": vertices[:, 1], "z": vertices[:, 2]}
-    if vertex_normals is not None:
-        n = np.asarray(vertex_normals, dtype=np.float64)
-        columns |= {"nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2]}
-    write_ply(path, columns, faces=faces)
+    if vertex_normals is None:
+        vertex_normals = Mesh(vertices, faces).vertex_normals
+    n = np.asarray(vertex_normals, dtype=np.float64)
+    if n.shape != vertices.shape:
+        raise MeshFormatError(f"{path}: vertex_normals must be {vertices.shape}, got {n.shape}")
+    columns = {"x": vertices[:, 0], "y": vertices[:, 1], "z": vertices[:, 2],
+               "nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2]}
+    write_ply(path, columns, faces=faces, metadata=file_metadata(frame, source=source))
     return path

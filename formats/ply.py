@@ -1,9 +1,16 @@
 """Binary little-endian PLY: streaming writer of named per-vertex columns, and a reader.
 
-Written files hold one ``vertex`` element with any number of scalar properties (float64 for
-coordinates and floats, uint32 for indices) and, for meshes, a ``face`` element of uint8-counted
-int32 index lists. Reading accepts ASCII and binary PLY from any tool (Open3D, MeshLab,
-CloudCompare) through trimesh's parser and keeps every vertex property.
+Written files hold one ``vertex`` element with any number of scalar properties and, for meshes, a
+``face`` element of uint8-counted int32 index lists. Property types are the ones every common
+reader takes (Open3D's tensor reader refuses ``uint`` and ``ushort``): ``double`` for float64
+and for 64-bit integers (exact to 2**53), ``float`` for float32, ``uchar`` for bytes and booleans,
+and ``int`` (int32) for every other integer (a value beyond int32 is refused on writing).
+
+The header's ``comment`` lines carry the file's metadata as ``comment KEY VALUE`` (e.g.
+``comment frame body``, ``comment units m``); ``read_ply`` returns them as a dict.
+
+Reading accepts ASCII and binary PLY from any tool (Open3D, MeshLab, CloudCompare, trimesh)
+through trimesh's parser and keeps every vertex property.
 """
 
 from __future__ import annotations
@@ -15,18 +22,33 @@ import numpy as np
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
 
-_PLY_TYPES = {"f8": "double", "f4": "float", "u4": "uint", "i4": "int", "u2": "ushort",
-              "i2": "short", "u1": "uchar", "i1": "char", "i8": "double", "u8": "double"}
+_PLY_TYPES = {"f8": "double", "f4": "float", "i4": "int", "u1": "uchar"}
+_INT32 = np.iinfo(np.int32)
+# A PLY header is a few hundred bytes; a longer one is not a PLY file worth parsing.
+_MAX_HEADER_LINES = 10_000
 
 
-def _ply_dtype(arr: np.ndarray) -> np.dtype:
-    """The on-disk dtype for a column (64-bit integers are stored as double, PLY has no int64)."""
-    code = arr.dtype.str[1:]
-    if code in ("i8", "u8") or arr.dtype.kind == "b":
-        return np.dtype("<f8") if code in ("i8", "u8") else np.dtype("u1")
-    if arr.dtype.kind == "f" and arr.dtype.itemsize not in (4, 8):
+def _ply_dtype(dtype: np.dtype) -> np.dtype:
+    """The on-disk dtype of a column (one of ``_PLY_TYPES``)."""
+    if dtype.kind == "b" or dtype.str[1:] == "u1":
+        return np.dtype("u1")
+    if dtype.kind in "iu":
+        return np.dtype("<f8") if dtype.itemsize == 8 else np.dtype("<i4")
+    if dtype.kind == "f" and dtype.itemsize == 4:
+        return np.dtype("<f4")
+    if dtype.kind == "f":
         return np.dtype("<f8")
-    return arr.dtype.newbyteorder("<")
+    raise MeshFormatError(f"PLY columns must be numbers, got dtype {dtype}")
+
+
+def _comment_lines(metadata: dict[str, str]) -> list[str]:
+    lines = []
+    for key, value in metadata.items():
+        text = f"{key} {value}"
+        if " " in key or "\n" in text or "\r" in text:
+            raise MeshFormatError(f"PLY comment {key!r} must be one line with a one-word key")
+        lines.append(f"comment {text}")
+    return lines
 
 
 class PlyWriter(AtomicWriter):
@@ -43,16 +65,20 @@ class PlyWriter(AtomicWriter):
         Column names in file order and their in-memory dtypes.
     n_faces : int, optional
         Number of triangles ``write_faces`` will write after the vertices (meshes).
+    metadata : dict of str to str, optional
+        Written as ``comment KEY VALUE`` header lines.
     """
 
     missing_dir_error = MeshFormatError
 
-    def __init__(self, path, n_rows: int, dtypes: dict[str, np.dtype], *, n_faces: int = 0):
+    def __init__(self, path, n_rows: int, dtypes: dict[str, np.dtype], *, n_faces: int = 0,
+                 metadata: dict[str, str] | None = None):
+        comments = _comment_lines(metadata or {})
+        self._disk = np.dtype([(k, _ply_dtype(np.dtype(v))) for k, v in dtypes.items()])
         super().__init__(path)
         self.n_rows = int(n_rows)
         self.n_faces = int(n_faces)
-        self._disk = np.dtype([(k, _ply_dtype(np.zeros(0, dtype=v))) for k, v in dtypes.items()])
-        header = ["ply", "format binary_little_endian 1.0", "comment written by recon",
+        header = ["ply", "format binary_little_endian 1.0", *comments,
                   f"element vertex {self.n_rows}"]
         header += [f"property {_PLY_TYPES[self._disk[k].str[1:]]} {k}" for k in dtypes]
         if self.n_faces:
@@ -68,7 +94,12 @@ class PlyWriter(AtomicWriter):
         n = len(next(iter(columns.values())))
         rows = np.empty(n, dtype=self._disk)
         for name in self._disk.names:
-            rows[name] = columns[name]
+            values = np.asarray(columns[name])
+            if (self._disk[name] == np.int32 and len(values)
+                    and (values.min() < _INT32.min or values.max() > _INT32.max)):
+                raise MeshFormatError(f"{self.path}: column {name!r} has values beyond the "
+                                      "int32 range of a PLY 'int' property")
+            rows[name] = values
         self._fh.write(rows.tobytes())
         self._written += n
 
@@ -92,39 +123,77 @@ class PlyWriter(AtomicWriter):
         self._fh.close()
 
 
-def write_ply(path, columns: dict[str, np.ndarray], *, faces: np.ndarray | None = None) -> None:
-    """Write named per-vertex columns (and optional triangles) as one binary PLY."""
+def write_ply(path, columns: dict[str, np.ndarray], *, faces: np.ndarray | None = None,
+              metadata: dict[str, str] | None = None) -> None:
+    """Write named per-vertex columns (and optional triangles) as one binary PLY, with
+    ``metadata`` as ``comment KEY VALUE`` header lines."""
     n_faces = 0 if faces is None else len(faces)
     dtypes = {k: np.asarray(v).dtype for k, v in columns.items()}
-    with PlyWriter(path, len(columns["x"]), dtypes, n_faces=n_faces) as writer:
+    with PlyWriter(path, len(columns["x"]), dtypes, n_faces=n_faces,
+                   metadata=metadata) as writer:
         writer.write(columns)
         if n_faces:
             writer.write_faces(faces)
 
 
-def read_ply_columns(path) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
-    """Read every vertex property of a PLY file and its triangles, if any.
+def _header_metadata(fh) -> dict[str, str]:
+    """``comment KEY VALUE`` lines of a PLY header as ``{KEY: VALUE}`` (other comments, e.g.
+    ``comment Created by CloudCompare``, too: the first word is the key)."""
+    metadata = {}
+    for _ in range(_MAX_HEADER_LINES):
+        line = fh.readline(4096)
+        if not line or line.strip() == b"end_header":
+            break
+        words = line.decode("ascii", errors="replace").split(None, 2)
+        if len(words) == 3 and words[0] == "comment":
+            metadata.setdefault(words[1], words[2].strip())
+    fh.seek(0)
+    return metadata
+
+
+def read_ply_metadata(path) -> dict[str, str]:
+    """The ``comment KEY VALUE`` lines of a PLY file's header, without reading its data."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            return _header_metadata(fh)
+    except FileNotFoundError:
+        raise MeshFormatError(f"{path}: no such file") from None
+
+
+def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, str]]:
+    """Read every vertex property of an ASCII or binary PLY file, its triangles and metadata.
 
     Returns
     -------
     columns : dict of str to (n,) arrays
     faces : (m, 3) int64 or None
+    metadata : dict of str to str
+        The header's ``comment KEY VALUE`` lines.
     """
     from trimesh.exchange.ply import load_ply
 
     path = Path(path)
     try:
         with open(path, "rb") as fh:
+            if fh.readline(16).strip() != b"ply":
+                raise MeshFormatError(f"{path}: not a PLY file (no 'ply' magic line)")
+            fh.seek(0)
+            metadata = _header_metadata(fh)
             loaded = load_ply(fh, prefer_color="vertex")
     except FileNotFoundError:
         raise MeshFormatError(f"{path}: no such file") from None
+    except MeshFormatError:
+        raise
     except Exception as exc:  # trimesh's parser raises many types on malformed input
         raise MeshFormatError(f"{path}: not a readable PLY file ({type(exc).__name__})") from None
     raw = loaded.get("metadata", {}).get("_ply_raw", {})
     vertex = raw.get("vertex", {}).get("data")
     if vertex is None:
         raise MeshFormatError(f"{path}: PLY file has no vertex element")
-    columns = {name: np.asarray(vertex[name]).reshape(-1) for name in vertex.dtype.names}
+    # binary files give a structured array, ASCII files a dict of arrays
+    names = vertex.dtype.names if isinstance(vertex, np.ndarray) else list(vertex)
+    columns = {name: np.asarray(vertex[name]).reshape(-1) for name in names}
     faces = loaded.get("faces")
     faces = None if faces is None or len(faces) == 0 else np.asarray(faces, dtype=np.int64)
-    return columns, faces
+    return columns, faces, metadata

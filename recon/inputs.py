@@ -16,7 +16,7 @@ from formats.cloud_io import CLOUD_SUFFIXES, cloud_from_ply_columns, read_cloud
 from formats.errors import MeshFormatError
 from formats.geometry import Cloud, Mesh
 from formats.mesh_io import MESH_SUFFIXES, read_mesh
-from formats.ply import read_ply_columns
+from formats.ply import read_ply
 from formats.strike_log import FORMAT_NAME
 from recon.registration.ingest import ingest
 
@@ -48,9 +48,9 @@ def load_geometry(path) -> Cloud | Mesh:
     if is_strike_log(path):
         return ingest(path)
     if suffix == ".ply":
-        columns, faces = read_ply_columns(path)
-        cloud = cloud_from_ply_columns(path, columns)
-        return cloud if faces is None else Mesh(cloud.points, faces)
+        columns, faces, metadata = read_ply(path)
+        cloud = cloud_from_ply_columns(path, columns, metadata)
+        return cloud if faces is None else Mesh(cloud.points, faces, frame=cloud.frame)
     if suffix in MESH_SUFFIXES:
         return read_mesh(path)
     if suffix in CLOUD_SUFFIXES:

@@ -24,13 +24,14 @@ from scipy.spatial.transform import Rotation
 from formats import StrikeChunk, StrikeLog
 from formats.cloud_io import open_cloud_writer
 from formats.geometry import Cloud
+from formats.strike_log.schema import directions_to_angles
 
 Frame = Literal["body", "inertial"]
 FRAMES = ("body", "inertial")
 # Per-point attributes written by ingest, with their dtypes (formats/cloud_io.py names them).
 ATTRIBUTE_DTYPES = {"time": np.float64, "shot": np.uint32, "beam": np.uint32,
-                    "range": np.float64, "view_x": np.float64, "view_y": np.float64,
-                    "view_z": np.float64}
+                    "range": np.float64, "azimuth": np.float64, "elevation": np.float64,
+                    "view_x": np.float64, "view_y": np.float64, "view_z": np.float64}
 
 
 def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body"
@@ -48,8 +49,9 @@ def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body"
     -------
     points : (n, 3) float64, metres, in ``frame``
     attributes : dict of (n,) arrays
-        ``time`` [s], ``shot``, ``beam``, ``range`` [m] and the sensor position ``view_x/y/z``
-        [m] in ``frame``.
+        ``time`` [s], ``shot``, ``beam``, ``range`` [m], the measured beam direction's
+        ``azimuth`` and ``elevation`` [rad] in the sensor frame S, and the sensor position
+        ``view_x/y/z`` [m] in ``frame``.
     """
     row = chunk.shot - chunk.shot_offset
     position = chunk.shots.sensor_position[row]
@@ -59,8 +61,10 @@ def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body"
         to_body = Rotation.from_quat(chunk.shots.target_attitude[row]).inv()
         points = to_body.apply(points)
         position = to_body.apply(position)
+    azimuth, elevation = directions_to_angles(chunk.direction)
     attributes = {"time": chunk.shots.time[row], "shot": chunk.shot.astype(np.uint32),
                   "beam": chunk.beam.astype(np.uint32), "range": chunk.range,
+                  "azimuth": azimuth, "elevation": elevation,
                   "view_x": position[:, 0], "view_y": position[:, 1], "view_z": position[:, 2]}
     return points, attributes
 
@@ -93,7 +97,8 @@ def _register_and_write(log_path, output, *, frame: Frame, chunk_rows: int | Non
     (if ``keep``). Returns the strike count and the kept blocks."""
     kept = []
     with StrikeLog(log_path) as log:
-        writer = (open_cloud_writer(output, log.n_strikes, ATTRIBUTE_DTYPES)
+        writer = (open_cloud_writer(output, log.n_strikes, ATTRIBUTE_DTYPES, frame=frame,
+                                    source=Path(log_path).name)
                   if output is not None else contextlib.nullcontext())
         with writer:
             for block in iter_registered(log, frame=frame, chunk_rows=chunk_rows,
@@ -142,7 +147,7 @@ def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | No
     -------
     Cloud
         (n, 3) float64 metres in ``frame``; attributes ``time``, ``shot``, ``beam``, ``range``,
-        ``view_x/y/z``.
+        ``azimuth``, ``elevation``, ``view_x/y/z``.
     """
     _, blocks = _register_and_write(log_path, output, frame=frame, chunk_rows=chunk_rows,
                                     progress=progress, keep=True)

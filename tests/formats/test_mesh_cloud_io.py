@@ -101,8 +101,10 @@ def test_bad_mesh_inputs(tmp_path):
 
 
 def test_bad_cloud_inputs(tmp_path):
+    with pytest.raises(MeshFormatError, match=r"unknown point-cloud suffix '\.vtk'"):
+        read_cloud(tmp_path / "a.vtk")
     with pytest.raises(MeshFormatError, match=r"unknown point-cloud suffix '\.xyz'"):
-        read_cloud(tmp_path / "a.xyz")
+        write_cloud(tmp_path / "a.xyz", Cloud(np.zeros((1, 3))))
     with pytest.raises(MeshFormatError, match=r"a\.las: no such file"):
         read_cloud(tmp_path / "a.las")
     (tmp_path / "bad.las").write_bytes(b"LASF" + b"\x00" * 50)
