@@ -6,6 +6,12 @@ orbit and attitude, noisy ranges), with its truth group, written by the real Str
 
     .venv/bin/python benchmarks/bench_log_compression.py            # 10 M strikes, 3 repeats
     .venv/bin/python benchmarks/bench_log_compression.py --quick    # 200 k strikes, 1 repeat
+
+``--scene PRESET`` measures the real pipeline instead: ``recon simulate PRESET`` (the simulator
+with its Embree ray casting) and ``recon ingest`` of the log, per compression:
+
+    .venv/bin/python benchmarks/bench_log_compression.py --scene asteroid-lidar --repeats 1
+    .venv/bin/python benchmarks/bench_log_compression.py --scene asteroid-lrf-slew
 """
 
 from __future__ import annotations
@@ -72,10 +78,53 @@ def read_log(path: Path) -> float:
     return time.perf_counter() - start
 
 
+def scene_rows(scene: str, repeats: int) -> dict[str, tuple[float, float, float]]:
+    """Median simulate and ingest times [s] and log size [MB] of a preset, per compression."""
+    import functools
+
+    import sim.pipeline
+    from recon import api
+    from recon.registration.ingest import ingest_to_file
+
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for compression in COMPRESSIONS:
+            # the simulator writes with the writer's default; substitute one per compression
+            sim.pipeline.StrikeLogWriter = functools.partial(StrikeLogWriter,
+                                                             compression=compression)
+            path, cloud = Path(tmp) / f"{compression}.h5", Path(tmp) / "cloud.h5"
+            w, r = [], []
+            for _ in range(repeats):
+                start = time.perf_counter()
+                api.simulate(scene, path, seed=0)
+                w.append(time.perf_counter() - start)
+                start = time.perf_counter()
+                ingest_to_file(path, cloud)
+                r.append(time.perf_counter() - start)
+            rows[compression] = (statistics.median(w), statistics.median(r),
+                                 path.stat().st_size / 1e6)
+            path.unlink()
+    sim.pipeline.StrikeLogWriter = StrikeLogWriter
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="200 k strikes, one repeat")
+    parser.add_argument("--scene", help="simulate and ingest this preset instead")
+    parser.add_argument("--repeats", type=int, default=3, help="repeats with --scene")
     args = parser.parse_args()
+    if args.scene:
+        rows = scene_rows(args.scene, args.repeats)
+        base_w, base_r, base_s = rows["none"]
+        print(f"recon simulate {args.scene} and recon ingest; median of {args.repeats}; ratios "
+              "against 'none' measured in this run")
+        print(f"{'compression':<12}{'simulate s':>11}{'ingest s':>10}{'size MB':>9}"
+              f"{'simulate x':>11}{'ingest x':>9}{'size x':>8}")
+        for name, (w, r, s) in rows.items():
+            print(f"{name:<12}{w:11.2f}{r:10.2f}{s:9.1f}{w / base_w:11.2f}{r / base_r:9.2f}"
+                  f"{s / base_s:8.2f}")
+        return
     n_strikes, repeats = (200_000, 1) if args.quick else (10_000_000, 3)
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:

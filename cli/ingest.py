@@ -46,7 +46,7 @@ def run_truth(args) -> int:
 
     with StrikeLog(args.log) as log:
         truth = log.truth_mesh()
-    write_mesh(args.output, truth)
+    write_mesh(args.output, truth, source=Path(args.log).name)
     print(f"wrote truth mesh ({truth.n_vertices} vertices, {truth.n_faces} faces) to "
           f"{args.output}")
     return 0

@@ -361,7 +361,9 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
                delay=PROGRESS_DELAY_S, disable=None if progress is None else not progress)
     with bar, StrikeLogWriter(path, sensor=sensor_info(plan), target=scene.target,
                               scene=scene.to_toml(), seed=seed,
-                              truth_mesh=(scene.vertices, scene.faces)) as log:
+                              truth_mesh=(scene.vertices, scene.faces),
+                              expected_shots=scene.n_shots,
+                              expected_strikes=scene.n_shots * plan.pattern.n_beams) as log:
         for chunk in iter_chunks(plan, workers=workers):
             log.write_shots(chunk.time, chunk.recorded_position, chunk.sensor_attitude,
                             chunk.target_attitude,

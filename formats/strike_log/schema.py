@@ -13,15 +13,19 @@ from formats.errors import StrikeLogError
 FORMAT_NAME = "recon-strike-log"
 FORMAT_VERSION = 1
 
-# Chunk rows: 65,536 strike rows of float64 are 512 KiB, inside HDF5's default 1 MiB chunk cache.
+# Largest chunk rows: 65,536 strike rows of float64 are 512 KiB, inside HDF5's default 1 MiB chunk
+# cache. A writer told the expected row counts uses chunks no longer than those (SPEC.md, Storage),
+# so a small log is not padded to these sizes.
 STRIKE_CHUNK_ROWS = 65_536
 SHOT_CHUNK_ROWS = 16_384
 # How far from 1 a stored quaternion's norm may be (SPEC.md, Conventions).
 QUATERNION_NORM_TOLERANCE = 1e-6
 # Rows handed out per chunk by StrikeLog.iter_chunks: 2**20 strikes is ~100 MB of derived arrays.
 READ_CHUNK_ROWS = 1 << 20
-# Storage filters (SPEC.md, Storage; measured in benchmarks/bench_log_compression.py): no
-# compression by default, Fletcher-32 checksums always.
+# Storage filters (SPEC.md, Storage; measured in benchmarks/bench_log_compression.py --scene):
+# lzf + shuffle by default (half the bytes of a LIDAR log at no measurable simulate or ingest
+# cost; gzip saves a tenth more and doubles the simulate time), Fletcher-32 checksums always.
+DEFAULT_COMPRESSION = "lzf"
 COMPRESSIONS = {"none": {}, "lzf": {"compression": "lzf", "shuffle": True},
                 "gzip": {"compression": "gzip", "compression_opts": 4, "shuffle": True}}
 
@@ -35,6 +39,29 @@ _ANGLE_FIELDS = ("azimuth_offset", "elevation_offset")
 _TRUTH_SHOT_FIELDS = {"sensor_position": (3,), "sensor_attitude": (4,), "target_attitude": (4,)}
 _TRUTH_STRIKE_FIELDS = {"point": ((3,), np.float64), "facet": ((), np.uint32),
                         "range": ((), np.float64)}
+# The ``units`` and ``frame`` attributes of every dataset (SPEC.md): units "1" for indices and
+# other dimensionless values; frame a frame of SPEC.md, "A->B" for a rotation, "none" for values
+# that are in no frame.
+DATASET_UNITS = {
+    "sensor/beam_directions": ("1", "S"),
+    "shots/time": ("s", "none"),
+    "shots/sensor_position": ("m", "I"),
+    "shots/sensor_attitude": ("1", "S->I"),
+    "shots/target_attitude": ("1", "B->I"),
+    "strikes/shot": ("1", "none"),
+    "strikes/beam": ("1", "none"),
+    "strikes/range": ("m", "none"),
+    "strikes/azimuth_offset": ("rad", "S"),
+    "strikes/elevation_offset": ("rad", "S"),
+    "truth/sensor_position": ("m", "I"),
+    "truth/sensor_attitude": ("1", "S->I"),
+    "truth/target_attitude": ("1", "B->I"),
+    "truth/point": ("m", "B"),
+    "truth/facet": ("1", "none"),
+    "truth/range": ("m", "none"),
+    "truth/mesh/vertices": ("m", "B"),
+    "truth/mesh/faces": ("1", "none"),
+}
 
 
 # --------------------------------------------------------------------------- records

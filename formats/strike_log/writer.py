@@ -20,6 +20,8 @@ from formats.strike_log.schema import (
     _TRUTH_SHOT_FIELDS,
     _TRUTH_STRIKE_FIELDS,
     COMPRESSIONS,
+    DATASET_UNITS,
+    DEFAULT_COMPRESSION,
     FORMAT_NAME,
     FORMAT_VERSION,
     SHOT_CHUNK_ROWS,
@@ -35,6 +37,15 @@ from formats.strike_log.schema import (
     _check_strike_rows,
 )
 from formats.version import __version__
+
+
+def _chunk_rows(expected: int | None, largest: int) -> int:
+    """Rows per chunk: ``largest`` when nothing is expected, else the fewest chunks of at most
+    ``largest`` rows that hold ``expected`` rows, split evenly (the last chunk is not padded)."""
+    if expected is None:
+        return largest
+    expected = max(1, int(expected))
+    return -(-expected // -(-expected // largest))
 
 
 class StrikeLogWriter(AtomicWriter):
@@ -60,7 +71,10 @@ class StrikeLogWriter(AtomicWriter):
         ``write_shots`` and ``write_strikes`` call must carry the truth arrays too.
     producer, producer_version : str, optional
     compression : {"none", "lzf", "gzip"}, optional
-        Filter for the chunked datasets (default none; see SPEC.md, Storage, for the trade-off).
+        Filter for the chunked datasets (default lzf with shuffle; SPEC.md, Storage, says why).
+    expected_shots, expected_strikes : int, optional
+        How many rows the log will hold (at most); chunks are no longer than that, so a small log
+        is not padded to the default chunk sizes. Appending beyond it stays possible.
 
     Examples
     --------
@@ -74,7 +88,8 @@ class StrikeLogWriter(AtomicWriter):
     def __init__(self, path, *, sensor: SensorInfo, target: str, scene: str = "", seed: int = -1,
                  truth_mesh: tuple[np.ndarray, np.ndarray] | None = None,
                  producer: str = "recon", producer_version: str = __version__,
-                 compression: str = "none"):
+                 compression: str = DEFAULT_COMPRESSION, expected_shots: int | None = None,
+                 expected_strikes: int | None = None):
         where = str(path)
         _check_sensor(sensor, where)
         if compression not in COMPRESSIONS:
@@ -91,7 +106,9 @@ class StrikeLogWriter(AtomicWriter):
             self._create_layout(sensor, target=target, scene=scene, seed=seed,
                                 truth_mesh=truth_mesh, producer=producer,
                                 producer_version=producer_version,
-                                filters={"fletcher32": True} | COMPRESSIONS[compression])
+                                filters={"fletcher32": True} | COMPRESSIONS[compression],
+                                rows=(_chunk_rows(expected_shots, SHOT_CHUNK_ROWS),
+                                      _chunk_rows(expected_strikes, STRIKE_CHUNK_ROWS)))
         except BaseException:
             self.abort()
             raise
@@ -122,7 +139,7 @@ class StrikeLogWriter(AtomicWriter):
         return self
 
     def _create_layout(self, sensor, *, target, scene, seed, truth_mesh, producer,
-                       producer_version, filters):
+                       producer_version, filters, rows):
         f = self._file
         f.attrs.update({
             "format": FORMAT_NAME, "format_version": np.int64(FORMAT_VERSION),
@@ -147,21 +164,25 @@ class StrikeLogWriter(AtomicWriter):
                 group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
                                      chunks=(rows, *tail), **filters)
 
+        shot_rows, strike_rows = rows
         shots = {k: (tail, np.float64) for k, tail in _SHOT_FIELDS.items()}
-        columns(f.create_group("shots"), shots, SHOT_CHUNK_ROWS)
+        columns(f.create_group("shots"), shots, shot_rows)
         strikes = dict(_STRIKE_FIELDS)
         if sensor.reports_angles:
             strikes.update({k: ((), np.float64) for k in _ANGLE_FIELDS})
-        columns(f.create_group("strikes"), strikes, STRIKE_CHUNK_ROWS)
+        columns(f.create_group("strikes"), strikes, strike_rows)
         if truth_mesh is not None:
             t = f.create_group("truth")
             columns(t, {k: (tail, np.float64) for k, tail in _TRUTH_SHOT_FIELDS.items()},
-                    SHOT_CHUNK_ROWS)
-            columns(t, _TRUTH_STRIKE_FIELDS, STRIKE_CHUNK_ROWS)
+                    shot_rows)
+            columns(t, _TRUTH_STRIKE_FIELDS, strike_rows)
             vertices, faces = truth_mesh
             m = t.create_group("mesh")
             m.create_dataset("vertices", data=np.asarray(vertices, dtype=np.float64))
             m.create_dataset("faces", data=np.asarray(faces, dtype=np.uint32))
+        for name, (units, frame) in DATASET_UNITS.items():
+            if name in f:
+                f[name].attrs.update({"units": units, "frame": frame})
 
     # ------------------------------------------------------------------ appending rows
 

@@ -132,7 +132,7 @@ def reconstruct_to_file(cloud: Cloud, prepared: MethodInput, output, *, run: Run
     limits = limits or Limits()
     surface = reconstruct(prepared, method=run, isolate=isolate, on_wait=on_wait,
                           **limits.kwargs())
-    write_mesh(output, surface.vertices, surface.faces)
+    write_mesh(output, Mesh(surface.vertices, surface.faces, frame=cloud.frame))
     return {"n_points": len(prepared.points), "spacing_m": prepared.spacing,
             "noise_m": prepared.noise, "view_points": cloud.view_points is not None,
             "method": run.method, "params": surface.params, "label": run.label,
