@@ -1,8 +1,10 @@
 """Subcommand parsers and the command-line options several commands share: sweeps on Dask,
-truth meshes, outputs."""
+truth meshes, outputs, lists, and usage lines that show what is required."""
 
 from __future__ import annotations
 
+import argparse
+import re
 from pathlib import Path
 
 
@@ -25,6 +27,63 @@ def add_command(subparsers, name: str, handler, **parser_options):
     parser = subparsers.add_parser(name, **parser_options)
     parser.set_defaults(func=handler)
     return parser
+
+
+class _ListAction(argparse.Action):
+    """Collect a list option's items: ``--methods a,b`` (the one documented syntax), also
+    ``--methods a b`` and ``--methods a --methods b``."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        current = getattr(namespace, self.dest, None)
+        items = [] if current is None or current is self.default else list(current)
+        items += [item for value in values for item in value.split(",") if item]
+        setattr(namespace, self.dest, items)
+
+
+def add_list_option(parser, *flags: str, metavar: str, help: str, **options) -> None:
+    """A list option, written ``--flag a,b`` (space-separated items are accepted too).
+
+    The parsed value is a list of str, or the ``default`` when the option is not given. A path
+    that space-separated items swallowed from the positional argument after them is handed back
+    by ``reclaim_positional``.
+    """
+    parser.add_argument(*flags, nargs="+", action=_ListAction, metavar=f"{metavar}[,...]",
+                        help=f"{help}; comma-separated", **options)
+
+
+def _looks_like_path(text: str) -> bool:
+    return "/" in text or bool(Path(text).suffix) or Path(text).exists()
+
+
+def reclaim_positional(args, list_dest: str, positional_dest: str) -> None:
+    """``--methods a b CLOUD``: give back to the positional argument the path that the list
+    option swallowed (argparse hands every word up to the next option to the list)."""
+    items = getattr(args, list_dest)
+    if getattr(args, positional_dest) is None and items and _looks_like_path(items[-1]):
+        setattr(args, positional_dest, items.pop())
+        setattr(args, list_dest, items or None)
+
+
+def show_required(parser: argparse.ArgumentParser, *shown: str, alternatives: tuple = ()
+                  ) -> None:
+    """Show ``shown`` (as they appear in the usage, e.g. ``SCENE``, ``-o LOG.h5``) as required
+    in the usage line, and add the ``alternatives`` (e.g. ``--list``) as usage lines of their own.
+
+    For arguments that argparse must treat as optional because an alternative such as
+    ``--list`` runs without them; the command checks them itself. Call after every argument is
+    added.
+    """
+    usage = parser.format_usage().removeprefix("usage: ").rstrip()
+    # list options (add_list_option) read "--methods METHOD[,...]", not "X[,...] [X[,...] ...]"
+    usage = re.sub(r"(\S+\[,\.\.\.\])\s+\[\1 \.\.\.\]", r"\1", usage)
+    for text in shown:
+        usage, found = re.subn(r"\[(" + re.escape(text) + r")\]", r"\1", usage)
+        if not found:
+            raise ValueError(f"{text!r} is not an optional item of the usage {usage!r}")
+    prog = parser.prog
+    lines = [usage.replace(prog, "%(prog)s", 1)]
+    lines += [f"%(prog)s {alternative}" for alternative in alternatives]
+    parser.usage = "\n       ".join(lines)
 
 
 def add_sweep_options(parser, *, resume_help: str) -> None:

@@ -6,7 +6,14 @@ import argparse
 import json
 from pathlib import Path
 
-from cli.options import add_command, add_sweep_options, add_truth_and_output_options
+from cli.options import (
+    add_command,
+    add_list_option,
+    add_sweep_options,
+    add_truth_and_output_options,
+    reclaim_positional,
+    show_required,
+)
 
 # The CLI's defaults are the library's (recon/surfaces/isolation.py says where each comes from);
 # they are repeated here only as help text, so that ``recon --help`` need not import numpy.
@@ -51,12 +58,6 @@ def _add_closing_options(p: argparse.ArgumentParser, *, preprocessing: bool, swe
     _add_run_options(p, sweep=sweep)
 
 
-def _methods_arg(text: list[str] | None) -> list[str] | None:
-    if not text:
-        return None
-    return [name for item in text for name in item.split(",") if name]
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(
         sub, "reconstruct", run_reconstruct,
@@ -65,21 +66,23 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "on the fly) with one method, run in its own process with time and memory "
                     "limits. '-m auto' chooses the method and resolution without the truth and "
                     "says why. '--list-methods' lists the methods and their parameters.")
-    p.add_argument("input", nargs="?", help="point cloud (.ply, .las, .laz, .h5) or strike log")
+    p.add_argument("input", nargs="?", metavar="INPUT",
+                   help="point cloud (.ply, .las, .laz, .h5, .xyz, .pcd, .e57...) or strike log")
     p.add_argument("-m", "--method", default="poisson",
                    help="method name or 'auto' (default: %(default)s)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="method parameter (repeatable), e.g. depth=9 or radii=0.5,1,2")
-    p.add_argument("-o", "--output", type=Path, help="mesh to write (.ply)")
+    p.add_argument("-o", "--output", type=Path, metavar="MESH.ply", help="mesh to write (.ply)")
     p.add_argument("--list-methods", action="store_true",
                    help="list the methods, their defaults and grids, and exit")
-    p.add_argument("--auto-methods", nargs="+", metavar="METHOD",
-                   help="candidates of -m auto (default: every method and its grid)")
+    add_list_option(p, "--auto-methods", metavar="METHOD",
+                    help="candidates of -m auto (default: every method and its grid)")
     p.add_argument("--holdout", type=float, default=0.1,
                    help="fraction of points -m auto holds out (default: %(default)s)")
     p.add_argument("--in-process", action="store_true",
                    help="run the method in this process (no isolation; a crash ends recon)")
     _add_closing_options(p, preprocessing=True, sweep=False)
+    show_required(p, "INPUT", "-o MESH.ply", alternatives=("--list-methods",))
 
     p = add_command(
         sub, "compare", run_compare, help="compare every method on one cloud against the truth",
@@ -87,16 +90,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "isolated, on Dask; score each mesh against the truth; write "
                     "DIR/results.csv, DIR/results.json, DIR/speed_accuracy.png and the meshes; "
                     "print the ranking.")
-    p.add_argument("input", help="point cloud or strike log")
+    p.add_argument("input", nargs="?", metavar="INPUT", help="point cloud or strike log")
     add_truth_and_output_options(
         p, truth_help="truth mesh file, or a strike log with its truth mesh", truth_required=True)
-    p.add_argument("--methods", nargs="+", metavar="METHOD",
-                   help="methods to run (default: all)")
+    add_list_option(p, "--methods", metavar="METHOD",
+                    help="methods to run, e.g. --methods poisson,convex-hull (default: all)")
     p.add_argument("--no-grid", action="store_true", help="defaults only, no parameter grid")
     p.add_argument("--no-meshes", action="store_true", help="do not keep the meshes")
     p.add_argument("--auto", action="store_true",
                    help="also run -m auto and report where its choice ranks on the truth")
     _add_closing_options(p, preprocessing=True, sweep=True)
+    show_required(p, "INPUT")
 
     p = add_command(
         sub, "stability", run_stability, help="failure maps over noise x density x outliers",
@@ -104,20 +108,31 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "x outlier fraction, run every method on every cell (isolated, on Dask) and "
                     "write, per method, a failure map and an accuracy heatmap (PNG) with the "
                     "data (DIR/stability.csv, DIR/stability.json).")
-    p.add_argument("source", help="scene (preset name or .toml), point cloud, or strike log")
+    p.add_argument("source", nargs="?", metavar="SOURCE",
+                   help="scene (preset name or .toml), point cloud, or strike log")
     add_truth_and_output_options(
         p, truth_help="truth mesh (default: the log's or the scene's)", truth_required=False)
-    p.add_argument("--methods", nargs="+", metavar="METHOD", help="methods (default: all)")
-    p.add_argument("--noise", default="0,0.3,1",
-                   help="range noise levels, 3 sigma in metres (default: %(default)s)")
-    p.add_argument("--density", default="1,0.3,0.1",
-                   help="fractions of the points kept (default: %(default)s)")
-    p.add_argument("--outliers", default="0,0.02",
-                   help="outlier fractions (default: %(default)s)")
+    add_list_option(p, "--methods", metavar="METHOD", help="methods (default: all)")
+    add_list_option(p, "--noise", metavar="M", default=["0", "0.3", "1"],
+                    help="range noise levels, 3 sigma in metres (default: 0,0.3,1)")
+    add_list_option(p, "--density", metavar="F", default=["1", "0.3", "0.1"],
+                    help="fractions of the points kept (default: 1,0.3,0.1)")
+    add_list_option(p, "--outliers", metavar="F", default=["0", "0.02"],
+                    help="outlier fractions (default: 0,0.02)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="scene override, as for recon simulate (scenes only)")
     p.add_argument("--seed", type=int, default=0, help="seed (default: %(default)s)")
     _add_closing_options(p, preprocessing=False, sweep=True)
+    show_required(p, "SOURCE")
+
+
+def _positional(args, list_dest: str, positional_dest: str, what: str) -> None:
+    """Reclaim the positional from a list option that swallowed it; refuse when it is absent."""
+    from recon.surfaces.prepare import InputError
+
+    reclaim_positional(args, list_dest, positional_dest)
+    if getattr(args, positional_dest) is None:
+        raise InputError(f"{args.command} needs {what}")
 
 
 def _limits(args):
@@ -170,6 +185,7 @@ def run_reconstruct(args) -> int:
     if args.list_methods:
         print(methods.listing())
         return 0
+    reclaim_positional(args, "auto_methods", "input")
     if not args.input or args.output is None:
         raise InputError("reconstruct needs INPUT and -o MESH.ply (or --list-methods)")
     if args.output.suffix.lower() != ".ply":
@@ -185,7 +201,7 @@ def run_reconstruct(args) -> int:
             from recon.experiments.auto import choose_and_reconstruct
 
             summary = choose_and_reconstruct(args.input, args.output,
-                                             methods=_methods_arg(args.auto_methods),
+                                             methods=args.auto_methods,
                                              holdout=args.holdout, on_wait=bar,
                                              say=None if args.json else print, **options)
         else:
@@ -205,8 +221,9 @@ def run_reconstruct(args) -> int:
 def run_compare(args) -> int:
     from recon.experiments.compare import compare_input
 
-    report = compare_input(args.input, args.truth, args.output,
-                           names=_methods_arg(args.methods), grid=not args.no_grid,
+    _positional(args, "methods", "input", "INPUT (a point cloud or strike log)")
+    report = compare_input(args.input, args.truth, args.output, names=args.methods,
+                           grid=not args.no_grid,
                            truth_scale=args.truth_scale, preparation=_preparation(args),
                            limits=_limits(args), samples=args.samples, auto=args.auto,
                            scheduler=args.scheduler, n_workers=args.workers,
@@ -229,10 +246,12 @@ def run_compare(args) -> int:
 def run_stability(args) -> int:
     from recon.experiments.stability import stability_input
 
+    _positional(args, "methods", "source", "SOURCE (a scene, point cloud or strike log)")
     report = stability_input(args.source, args.output, truth=args.truth,
                              truth_scale=args.truth_scale, overrides=args.overrides,
-                             names=_methods_arg(args.methods), noise=args.noise,
-                             density=args.density, outliers=args.outliers, seed=args.seed,
+                             names=args.methods, noise=",".join(args.noise),
+                             density=",".join(args.density), outliers=",".join(args.outliers),
+                             seed=args.seed,
                              limits=_limits(args), samples=args.samples,
                              scheduler=args.scheduler, n_workers=args.workers,
                              resume=args.resume)

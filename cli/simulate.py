@@ -6,6 +6,8 @@ import argparse
 import json
 import sys
 
+from cli.options import show_required
+
 
 def register(subparsers) -> None:
     """Add the ``simulate`` subcommand to ``recon``."""
@@ -35,6 +37,7 @@ def register(subparsers) -> None:
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                         help="show a progress bar (default: on a terminal, after 2 s)")
     parser.set_defaults(func=run, parser=parser)
+    show_required(parser, "SCENE", "-o LOG.h5", alternatives=("--list", "--keys"))
 
 
 def run(args) -> int:

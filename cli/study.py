@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from cli.options import add_command, add_sweep_options
+from cli.options import add_command, add_sweep_options, show_required
 
 # Repeated from recon/experiments/studies/__init__.py (STUDIES) so that ``recon --help`` imports
 # nothing.
@@ -39,6 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--list", action="store_true", help="list the studies and exit")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--size", choices=("tiny",), help=argparse.SUPPRESS)  # tests only
+    show_required(p, "NAME", "-o DIR", alternatives=("--list",))
 
     p = add_command(
         sub, "report", run_report,

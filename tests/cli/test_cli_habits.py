@@ -1,0 +1,91 @@
+"""Command-line habits: one list syntax (commas; spaces and repeats accepted) that never swallows
+the positional argument, required options shown as required, and ``python -m cli``."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from cli.main import build_parser, main
+
+
+@pytest.fixture
+def captured(monkeypatch):
+    """Replace compare_input and stability_input by recorders of the arguments they get."""
+    import recon.experiments.compare
+    import recon.experiments.stability
+
+    calls = {}
+
+    def record(name):
+        def fake(*args, **kwargs):
+            calls[name] = (args, kwargs)
+            raise KeyboardInterrupt  # stop the command here; main() returns 130
+
+        return fake
+
+    monkeypatch.setattr(recon.experiments.compare, "compare_input", record("compare"))
+    monkeypatch.setattr(recon.experiments.stability, "stability_input", record("stability"))
+    return calls
+
+
+@pytest.mark.parametrize("methods", [
+    ["--methods", "convex-hull", "poisson"],           # spaces, positional after the list
+    ["--methods", "convex-hull,poisson"],               # the documented syntax
+    ["--methods=convex-hull,poisson"],
+    ["--methods", "convex-hull", "--methods", "poisson"],
+])
+def test_method_lists_do_not_swallow_the_input(tmp_path, captured, methods):
+    argv = ["compare", *methods, "cloud.ply", "--truth", "t.ply", "-o", str(tmp_path)]
+    assert main(argv) == 130
+    args, kwargs = captured["compare"]
+    assert args[0] == "cloud.ply"
+    assert kwargs["names"] == ["convex-hull", "poisson"]
+
+
+def test_input_before_the_list_and_missing_input(tmp_path, captured, capsys):
+    assert main(["compare", "cloud.ply", "--methods", "poisson", "--truth", "t.ply",
+                 "-o", str(tmp_path)]) == 130
+    assert captured["compare"][0][0] == "cloud.ply"
+    assert main(["compare", "--methods", "poisson", "--truth", "t.ply", "-o", str(tmp_path)]) == 1
+    assert "compare needs INPUT" in capsys.readouterr().err
+
+
+def test_level_lists_take_the_same_syntax(tmp_path, captured):
+    for noise in (["--noise", "0,0.5"], ["--noise", "0", "0.5"], ["--noise=0,0.5"]):
+        assert main(["stability", *noise, "--methods", "poisson", "scene.toml",
+                     "-o", str(tmp_path)]) == 130
+        args, kwargs = captured["stability"]
+        assert args[0] == "scene.toml"
+        assert kwargs["noise"] == "0,0.5" and kwargs["density"] == "1,0.3,0.1"
+
+
+@pytest.mark.parametrize(("command", "required"), [
+    ("simulate", ["-o LOG.h5", "SCENE"]),
+    ("reconstruct", ["-o MESH.ply", "INPUT"]),
+    ("study", ["-o DIR", "NAME"]),
+    ("compare", ["--truth TRUTH", "-o OUTPUT", "INPUT"]),
+    ("stability", ["-o", "SOURCE"]),
+])
+def test_required_arguments_show_as_required(command, required):
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command").choices[command]
+    usage = " ".join(sub.format_usage().split())
+    for text in required:
+        assert text in usage and f"[{text}" not in usage, usage
+
+
+def test_list_syntax_reads_as_one_item_in_usage():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command").choices["compare"]
+    usage = " ".join(sub.format_usage().split())
+    assert "[--methods METHOD[,...]]" in usage
+
+
+def test_python_dash_m_cli_runs_recon():
+    result = subprocess.run([sys.executable, "-m", "cli", "--version"], capture_output=True,
+                            text=True, timeout=60, check=False)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("recon ")
