@@ -55,12 +55,23 @@ def _save(fig, path) -> Path:
 
 
 def _plain_log_ticks(axis) -> None:
-    """Tick labels of a log axis as plain numbers (20, not 2 x 10^1)."""
-    from matplotlib.ticker import FuncFormatter
+    """Readable ticks on a log axis whatever its range: plain numbers (20, not 2 x 10^1) at
+    1, 2 and 5 times the decades over a wide range, and at evenly spaced round numbers within a
+    narrow one (where a log locator would label at most one tick)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter
 
-    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-    axis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:.0e}"[0] in "235"
-                                           else ""))
+    class ReadableLogLocator(LogLocator):
+        def tick_values(self, vmin, vmax):
+            lo, hi = sorted((vmin, vmax))
+            ticks = LogLocator(subs=(1.0, 2.0, 5.0)).tick_values(lo, hi)
+            if np.count_nonzero((ticks >= lo) & (ticks <= hi)) >= 3 or lo <= 0:
+                return ticks
+            linear = MaxNLocator(nbins=4, steps=[1, 2, 2.5, 5, 10]).tick_values(lo, hi)
+            return linear[linear > 0]
+
+    axis.set_major_locator(ReadableLogLocator())
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.4g}"))
+    axis.set_minor_formatter(NullFormatter())
 
 
 def _spans(lines, factor: float) -> bool:
@@ -417,17 +428,24 @@ def speed_accuracy(records: list[dict], path, *, title: str = "") -> Path:
             for j, i in enumerate(front):
                 ax.annotate(runs[i]["label"], (t[i], v[i]), textcoords="offset points",
                             xytext=(6, 8 if j % 2 == 0 else -12), fontsize=7.5, color="0.15")
-        ax.set_xscale("log")
-        _plain_log_ticks(ax.xaxis)
-        if metric == CHAMFER:
+        if ok:
+            ax.set_xscale("log")
+            _plain_log_ticks(ax.xaxis)
+        if metric == CHAMFER and ok:
             ax.set_yscale("log")
             _plain_log_ticks(ax.yaxis)
         elif runs:
             ax.set_ylim(max(0.0, min(r[metric] for r in runs) - 0.05), 1.02)
+        if not ok:
+            ax.text(0.5, 0.5, "every run failed: nothing to place", ha="center", va="center",
+                    transform=ax.transAxes, color="firebrick")
+            ax.set_xticks([])
+            ax.set_yticks([])
         ax.set_xlabel("wall time of the method [s] (log)")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", alpha=0.3)
-    axes[1].legend(fontsize=8, loc="best", framealpha=0.85)
+    if ok:
+        axes[1].legend(fontsize=8, loc="best", framealpha=0.85)
     failed = [r for r in records if r.get("status") != "ok"]
     if failed:
         text = "failed: " + "; ".join(f"{r['label']} ({r.get('failure')})" for r in failed)

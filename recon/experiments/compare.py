@@ -44,7 +44,7 @@ from recon.experiments.cases import (
 )
 from recon.experiments.sweep import run_sweep, to_jsonable
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
-from recon.surfaces.methods import MethodInput, Run
+from recon.surfaces.methods import MethodFailed, MethodInput, Run
 from recon.surfaces.prepare import Preparation
 
 
@@ -281,6 +281,11 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
     dict
         ``compare``'s report; with ``auto`` also ``auto`` (``choice`` and ``agreement``, as
         written to auto.json) and ``auto_text`` (the candidates table and the agreement line).
+
+    Raises
+    ------
+    MethodFailed
+        Every run failed (after results.csv and results.json record how).
     """
     from recon.inputs import load_truth
     from recon.surfaces.prepare import load_prepared
@@ -315,4 +320,8 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
         (out_dir / "auto.json").write_text(json.dumps(to_jsonable(report["auto"]), indent=2)
                                            + "\n")
         report["auto_text"] = format_choice(choice) + "\n" + format_agreement(verdict)
+    if not any(r.get("status") == "ok" for r in report["records"]):
+        kinds = sorted({str(r.get("failure")) for r in report["records"]})
+        raise MethodFailed(f"every run failed ({len(report['records'])} runs: "
+                           f"{', '.join(kinds)}); the failures are in {report['csv']}")
     return report

@@ -13,12 +13,15 @@ import base64
 import csv
 import html
 import json
+import math
 from pathlib import Path
 
 from formats.errors import ReconError
 
 # Rows of a CSV table shown in the page (the file keeps them all).
 MAX_TABLE_ROWS = 300
+# Significant digits of the non-integer numbers shown in tables (the files keep every digit).
+TABLE_DIGITS = 4
 # Columns of a ``recon compare`` results.csv shown, when present (the file has every score).
 COMPARE_COLUMNS = ("label", "status", "failure", "wall_time_s", "peak_memory_mb", "n_faces",
                    "watertight", "chamfer_m", "fscore", "coverage", "edge_score", "reason")
@@ -60,6 +63,14 @@ def _is_number(text: str) -> bool:
     return True
 
 
+def _shown(value: str) -> str:
+    """A table cell's text: non-integer numbers to ``TABLE_DIGITS`` significant digits."""
+    if not _is_number(value) or value.lstrip("+-").isdigit():
+        return value
+    number = float(value)
+    return value if not math.isfinite(number) else f"{number:.{TABLE_DIGITS}g}"
+
+
 def image(path: Path, alt: str) -> str:
     """An ``<img>`` with the PNG embedded as a data URI."""
     data = base64.b64encode(path.read_bytes()).decode("ascii")
@@ -84,7 +95,7 @@ def csv_table(path: Path, *, columns: tuple[str, ...] | None = None,
         for i in keep:
             value = row[i] if i < len(row) else ""
             cls = " class=num" if value and _is_number(value) else ""
-            cells.append(f"<td{cls}>{_e(value)}</td>")
+            cells.append(f"<td{cls}>{_e(_shown(value))}</td>")
         parts.append("<tr>" + "".join(cells) + "</tr>")
     parts.append("</table></div>")
     if len(body) > max_rows:
@@ -113,11 +124,13 @@ def _anchor(text: str) -> str:
     return "".join(ch if ch.isalnum() else "-" for ch in text.lower())
 
 
-def study_section(directory: Path, *, level: int = 2) -> str:
-    """The section of one study directory (``summary.json`` and the files it lists)."""
+def study_section(directory: Path, *, level: int = 2, heading: bool = True) -> str:
+    """The section of one study directory (``summary.json`` and the files it lists); without
+    its ``heading`` when the page's title already says it."""
     summary = json.loads((directory / "summary.json").read_text())
     name = summary.get("study", directory.name)
-    parts = [f'<h{level} id="{_anchor(name)}">{_e(summary.get("title", name))}</h{level}>']
+    parts = [f'<h{level} id="{_anchor(name)}">{_e(summary.get("title", name))}</h{level}>'
+             ][:int(heading)]
     wall, work = summary.get("wall_time_s"), summary.get("case_wall_time_s")
     parts.append(f"<p class=meta>study <b>{_e(name)}</b>, size <b>{_e(summary.get('size'))}</b>"
                  f", {_e(summary.get('n_cases'))} cases ({_e(summary.get('n_failed'))} failed)"
@@ -150,10 +163,10 @@ def study_section(directory: Path, *, level: int = 2) -> str:
     return "\n".join(parts)
 
 
-def compare_section(directory: Path, *, level: int = 2) -> str:
-    """The section of a ``recon compare`` directory."""
+def compare_section(directory: Path, *, level: int = 2, heading: bool = True) -> str:
+    """The section of a ``recon compare`` directory (``heading``: as for ``study_section``)."""
     parts = [f'<h{level} id="{_anchor(directory.name)}">Method comparison: '
-             f"{_e(directory.name)}</h{level}>"]
+             f"{_e(directory.name)}</h{level}>"][:int(heading)]
     results = json.loads((directory / "results.json").read_text())
     for metric in ("chamfer", "fscore"):
         front = results.get(f"pareto_{metric}") or []
@@ -243,10 +256,10 @@ def render(directory) -> str:
     body = []
     if what == "study":
         title = json.loads((directory / "summary.json").read_text()).get("title", "study")
-        body.append(study_section(directory))
+        body.append(study_section(directory, level=1, heading=False))
     elif what == "compare":
         title = f"Method comparison: {directory.name}"
-        body.append(compare_section(directory))
+        body.append(compare_section(directory, level=1, heading=False))
     else:
         title = "Reproducing the paper's studies"
         studies = _study_dirs(directory)

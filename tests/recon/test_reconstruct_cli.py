@@ -145,3 +145,14 @@ def test_compare_needs_a_truth_with_faces(box_files, tmp_path, capsys):
     assert main(["compare", str(box_files[0]), "--truth", str(box_files[0]),
                  "-o", str(tmp_path / "c")]) == 1
     assert "error" in capsys.readouterr().err
+
+
+def test_compare_where_every_run_fails_exits_1_with_one_line(box_files, tmp_path, capsys):
+    import recon_fake_methods  # noqa: F401  (registers test-refuse in this process)
+
+    out = tmp_path / "cmp"
+    assert main(["compare", str(box_files[0]), "--truth", str(box_files[1]), "-o", str(out),
+                 "--methods", "test-refuse", "--scheduler", "serial", "--json"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "every run failed (1 runs: error)" in err
+    assert (out / "results.csv").is_file() and (out / "speed_accuracy.png").is_file()
