@@ -1,4 +1,5 @@
-"""``recon ingest`` (strikes to a body-frame cloud) and ``recon truth`` (the embedded mesh)."""
+"""``recon ingest`` (strikes to a body-frame cloud), ``recon trajectory`` (the sensor's recorded
+poses as text) and ``recon truth`` (the embedded mesh)."""
 
 from __future__ import annotations
 
@@ -17,6 +18,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frame", choices=("body", "inertial"), default="body",
                    help="output frame (default: %(default)s; inertial is for debugging)")
     p.set_defaults(func=run_ingest)
+
+    p = sub.add_parser("trajectory", help="export the recorded sensor trajectory as text",
+                       description="Write one line per shot: time [s], sensor position [m] and "
+                                   "attitude (roll, pitch, yaw [rad] and the quaternion x y z w) "
+                                   "in the body frame (as the ingested cloud) or the inertial "
+                                   "frame, like the trajectory HELIOS++ writes beside its "
+                                   "clouds.")
+    p.add_argument("log", help="strike log (.h5)")
+    p.add_argument("-o", "--output", required=True, type=Path, metavar="TRAJ.txt",
+                   help="trajectory to write: .txt (space-separated) or .csv")
+    p.add_argument("--frame", choices=("body", "inertial"), default="body",
+                   help="frame of positions and attitudes (default: %(default)s)")
+    p.set_defaults(func=run_trajectory)
 
     p = sub.add_parser("truth", help="export the truth mesh embedded in a strike log",
                        description="Write the log's /truth/mesh as a binary PLY.")
@@ -37,6 +51,14 @@ def run_ingest(args) -> int:
 
         summary = ingest_to_file(args.log, args.output, frame=args.frame, progress=advance)
     print(f"wrote {summary['n_points']} points ({args.frame} frame) to {args.output}")
+    return 0
+
+
+def run_trajectory(args) -> int:
+    from recon.registration.trajectory import export_trajectory
+
+    summary = export_trajectory(args.log, args.output, frame=args.frame)
+    print(f"wrote {summary['n_shots']} poses ({args.frame} frame) to {args.output}")
     return 0
 
 
