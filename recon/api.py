@@ -223,6 +223,7 @@ def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None
                             holdout=HOLDOUT_FRACTION if holdout is None else holdout)
         run = choice.run
     surface = run_method(prepared, method=run, isolate=isolate, **limits.kwargs())
+    surface.frame = cloud.frame  # so that scoring against a truth in another frame is refused
     if choice is not None:
         surface.info["auto"] = choice.to_dict()
     return surface

@@ -296,3 +296,17 @@ def test_reads_e57_written_by_pye57(tmp_path):
     (tmp_path / "bad.e57").write_bytes(b"\x00" * 100)
     with pytest.raises(MeshFormatError, match=r"bad\.e57: not a readable E57"):
         read_cloud(tmp_path / "bad.e57")
+
+
+def test_surface_of_an_inertial_cloud_is_refused_by_score():
+    from recon import api
+
+    vertices, faces = icosphere(10.0, 2)
+    rng = np.random.default_rng(0)
+    directions = rng.normal(size=(400, 3))
+    cloud = Cloud(10.0 * directions / np.linalg.norm(directions, axis=1, keepdims=True),
+                  frame="inertial")
+    surface = api.reconstruct(cloud, method="convex-hull", isolate=False)
+    assert surface.frame == "inertial"
+    with pytest.raises(ReconError, match="inertial frame but truth in the body frame"):
+        api.score(surface, truth=Mesh(vertices, faces))
