@@ -85,12 +85,17 @@ class _H5Cloud(AtomicWriter):
             g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(rows,))
 
     def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
+        self._check()
         n = len(points)
         for ds, values in [(self._h5["points"], points)] + [
                 (self._h5["attributes"][k], attributes[k]) for k in self.dtypes]:
             ds.resize(self._written + n, axis=0)
             ds[self._written:] = values
         self._written += n
+        self._wrote(n * (24 + sum(np.dtype(d).itemsize for d in self.dtypes.values())))
+
+    def _flush(self) -> None:
+        self._h5.flush()
 
     def _finish(self) -> None:
         self._h5.close()
@@ -126,6 +131,7 @@ class _LasCloud(AtomicWriter):
     def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
         import laspy
 
+        self._check()
         points = np.asarray(points, dtype=np.float64)
         if len(points) and np.abs(points).max() > np.iinfo(np.int32).max * LAS_SCALE_M:
             raise MeshFormatError(f"{self.path}: coordinates beyond +-214 km do not fit LAS at "

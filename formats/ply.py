@@ -65,6 +65,7 @@ class PlyWriter(AtomicWriter):
 
     def write(self, columns: dict[str, np.ndarray]) -> None:
         """Append rows; ``columns`` maps every column name to an (n,) array."""
+        self._check()
         n = len(next(iter(columns.values())))
         rows = np.empty(n, dtype=self._disk)
         for name in self._disk.names:
@@ -74,6 +75,7 @@ class PlyWriter(AtomicWriter):
 
     def write_faces(self, faces: np.ndarray) -> None:
         """Append the face element (for meshes; call once, after all vertices)."""
+        self._check()
         faces = np.asarray(faces)
         rows = np.empty(len(faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
         rows["n"] = 3

@@ -166,8 +166,10 @@ class StrikeLogWriter(AtomicWriter):
     # ------------------------------------------------------------------ appending rows
 
     def _require_open(self) -> None:
-        if self.closed:
-            raise StrikeLogError(f"{self.path}: the writer is closed")
+        self._check()
+
+    def _flush(self) -> None:
+        self._file.flush()
 
     @staticmethod
     def _extend(group, values: dict) -> None:
@@ -209,6 +211,7 @@ class StrikeLogWriter(AtomicWriter):
                 raise StrikeLogError(f"{where}: truth shots differ in length from the shots")
             self._extend(self._file["truth"], t)
         self._extend(self._file["shots"], {k: getattr(rows, k) for k in _SHOT_FIELDS})
+        self._wrote(n * (96 if truth is None else 184))   # bytes per row: SPEC.md, /shots
         self._n_shots += n
         if n:
             self._last_time = float(rows.time[-1])
@@ -262,6 +265,7 @@ class StrikeLogWriter(AtomicWriter):
                 raise StrikeLogError(f"{where}: truth strikes differ in length from the strikes")
             self._extend(self._file["truth"], t)
         self._extend(self._file["strikes"], values)
+        self._wrote(n * (16 + 8 * len(values) + (44 if truth is not None else 0)))
         self._n_strikes += n
         if n:
             self._last_shot = int(shot[-1])
