@@ -22,13 +22,13 @@ import errno
 import os
 import re
 import shutil
-import stat
 import tempfile
 import weakref
 from pathlib import Path
 
 from formats import interrupt
 from formats.errors import ReconError
+from formats.paths import check_destination
 
 # errno values that mean "the disk (or the user's quota, or the file-size limit) is full".
 _FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
@@ -47,42 +47,6 @@ _OPEN: weakref.WeakSet = weakref.WeakSet()   # writers not yet closed, aborted a
 
 class DiskFull(ReconError, OSError):
     """The destination's file system has no room (or a quota or file-size limit was hit)."""
-
-
-def _kind(mode: int) -> str:
-    for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a FIFO"),
-                       (stat.S_ISSOCK, "a socket")):
-        if test(mode):
-            return name
-    return "not a regular file"
-
-
-def check_destination(path, error: type[Exception] = OSError) -> Path:
-    """Refuse a destination a writer must not replace; call before any work starts.
-
-    Parameters
-    ----------
-    path : str or Path
-    error : exception class
-        Raised (a ReconError subclass in recon) with one line naming ``path``.
-
-    Returns
-    -------
-    Path
-    """
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise error(f"{path}: directory {path.parent} does not exist")
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        return path
-    except OSError as exc:
-        raise error(f"{path}: cannot be written ({exc.strerror})") from None
-    if not stat.S_ISREG(mode):
-        raise error(f"{path}: is {_kind(mode)}; give the name of a file to write")
-    return path
 
 
 def check_space(path, n_bytes: float, error: type[Exception] = DiskFull) -> None:

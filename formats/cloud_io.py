@@ -31,6 +31,8 @@ import numpy as np
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
 from formats.geometry import Cloud
+from formats.hdf5_check import check_hdf5
+from formats.paths import check_source
 from formats.ply import PlyWriter, read_ply_columns
 
 CLOUD_SUFFIXES = (".ply", ".las", ".laz", ".h5")
@@ -193,8 +195,7 @@ def read_cloud(path) -> Cloud:
     """
     path = Path(path)
     kind = _suffix(path)
-    if not path.is_file():
-        raise MeshFormatError(f"{path}: no such file")
+    check_source(path, MeshFormatError)
     if kind == ".ply":
         return cloud_from_ply_columns(path, read_ply_columns(path)[0])
     if kind == ".h5":
@@ -216,6 +217,7 @@ def cloud_from_ply_columns(path, columns: dict[str, np.ndarray]) -> Cloud:
 def _read_h5(path: Path) -> Cloud:
     import h5py
 
+    check_hdf5(path, MeshFormatError)   # no other files, no loops: formats/hdf5_check.py
     try:
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") != CLOUD_FORMAT_NAME:

@@ -8,12 +8,11 @@ CloudCompare) through trimesh's parser and keeps every vertex property.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
+from formats.paths import check_source
 
 _PLY_TYPES = {"f8": "double", "f4": "float", "u4": "uint", "i4": "int", "u2": "ushort",
               "i2": "short", "u1": "uchar", "i1": "char", "i8": "double", "u8": "double"}
@@ -114,7 +113,7 @@ def read_ply_columns(path) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
     """
     from trimesh.exchange.ply import load_ply
 
-    path = Path(path)
+    path = check_source(path, MeshFormatError)
     try:
         with open(path, "rb") as fh:
             loaded = load_ply(fh, prefer_color="vertex")

@@ -33,6 +33,7 @@ from formats.strike_log.schema import (
     _check_sensor,
     _check_shot_rows,
     _check_strike_rows,
+    mesh_checksum,
 )
 from formats.version import __version__
 
@@ -162,6 +163,7 @@ class StrikeLogWriter(AtomicWriter):
             m = t.create_group("mesh")
             m.create_dataset("vertices", data=np.asarray(vertices, dtype=np.float64))
             m.create_dataset("faces", data=np.asarray(faces, dtype=np.uint32))
+            m.attrs["sha256"] = mesh_checksum(vertices, faces)
 
     # ------------------------------------------------------------------ appending rows
 
@@ -243,7 +245,8 @@ class StrikeLogWriter(AtomicWriter):
         if n and (shot.min() < 0 or beam.min() < 0):
             raise StrikeLogError(f"{where}: shot and beam indices must be non-negative")
         _check_strike_rows(shot, beam, rng, n_shots=self._n_shots, n_beams=self.sensor.n_beams,
-                           where=where, row0=self._n_strikes, previous_shot=self._last_shot)
+                           where=where, row0=self._n_strikes, previous_shot=self._last_shot,
+                           range_max=self.sensor.range_max)
         values = {"shot": shot.astype(np.uint32), "beam": beam.astype(np.uint32), "range": rng}
         if self.sensor.reports_angles != (azimuth_offset is not None
                                           and elevation_offset is not None):
