@@ -176,7 +176,7 @@ class AtomicWriter:
             interrupt.check()
             os.replace(self.temporary, self.path)
         except (OSError, RuntimeError) as exc:
-            self.abort()
+            self.abort(disk_full=is_disk_full(exc))
             if isinstance(exc, ReconError):
                 raise
             raise self._error(exc) from None
@@ -185,17 +185,24 @@ class AtomicWriter:
             raise
         self.closed = True
 
-    def abort(self) -> None:
-        """Drop the temporary file; the destination is left as it was."""
+    def abort(self, *, disk_full: bool = False) -> None:
+        """Drop the temporary file; the destination is left as it was.
+
+        The name goes first, so no partial file is left even if closing the handle fails.
+        After a full disk the file is emptied before its handle closes: HDF5 flushes on close,
+        and a flush that fails again leaves it in a state that crashes the process (SIGSEGV,
+        measured with HDF5 2.0); emptied, the flush has room.
+        """
         if getattr(self, "closed", True):
             return
         self.closed = True
-        # Emptied first: a library that flushes on close (HDF5) then has room on a full disk.
+        if disk_full:
+            with contextlib.suppress(OSError):
+                os.truncate(self.temporary, 0)
         with contextlib.suppress(OSError):
-            os.truncate(self.temporary, 0)
+            self.temporary.unlink()
         with contextlib.suppress(Exception):
             self._release()
-        self.temporary.unlink(missing_ok=True)
 
     def __enter__(self):
         return self
@@ -204,9 +211,9 @@ class AtomicWriter:
         if exc_type is None:
             self.close()
             return
-        self.abort()
-        if isinstance(exc, OSError | RuntimeError) and not isinstance(exc, ReconError) \
-                and is_disk_full(exc):
+        full = not isinstance(exc, ReconError) and is_disk_full(exc)
+        self.abort(disk_full=full)
+        if full:
             raise self._error(exc) from None
 
     def __del__(self):  # a writer dropped without close() is an interrupted run
