@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
 
+from formats import interrupt
+from formats.atomic import DiskFull
 from formats.errors import ReconError
 from formats.version import __version__
 
@@ -54,13 +58,36 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 1
     try:
-        return int(args.func(args) or 0)
+        with interrupt.handled():
+            status = int(args.func(args) or 0)
+            interrupt.check()   # a signal whose exception a library swallowed
+        return status
+    except DiskFull as exc:
+        # HDF5 cannot shut down after a failed write (its exit-time flush crashes with SIGSEGV,
+        # measured with HDF5 2.0): the temporary file is gone, so leave without finalisers.
+        print(f"recon {args.command}: error: {_one_line(exc)}", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(1)
     except ReconError as exc:
-        print(f"recon {args.command}: error: {exc}", file=sys.stderr)
+        print(f"recon {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"recon {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print(f"recon {args.command}: interrupted ({signal.Signals(signum).name}); outputs "
+              "left as they were", file=sys.stderr)
+        return interrupt.EXIT_STATUS.get(signum, 130)
+
+
+# Longest error message printed: a hostile value (a 5 MB scene string) is cut, not echoed.
+MAX_MESSAGE_CHARS = 500
+
+
+def _one_line(exc: Exception) -> str:
+    """The message of ``exc`` on one line of at most MAX_MESSAGE_CHARS characters."""
+    text = " ".join(str(exc).split("\n"))
+    if len(text) > MAX_MESSAGE_CHARS:
+        text = text[:MAX_MESSAGE_CHARS - 40] + f"... ({len(text):,} characters cut)"
+    return text
 
 
 if __name__ == "__main__":

@@ -57,8 +57,10 @@ def run(args) -> int:
         return 0
     if args.scene is None or args.output is None:
         args.parser.error("SCENE and -o LOG.h5 are required (or --list, --keys)")
-    if args.seed < 0:
-        args.parser.error(f"--seed must be >= 0, got {args.seed}")
+    from sim.defaults import MAX_SEED
+
+    if not 0 <= args.seed <= MAX_SEED:
+        args.parser.error(f"--seed must be >= 0 and at most {MAX_SEED}, got {args.seed}")
     from recon import api
 
     summary = api.simulate(args.scene, args.output, seed=args.seed, overrides=args.overrides,

@@ -56,6 +56,8 @@ import numpy as np
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
 from formats.geometry import NORMAL_ATTRIBUTES, Cloud, file_metadata, frame_of
+from formats.hdf5_check import check_hdf5
+from formats.paths import check_source
 from formats.ply import PlyWriter, read_ply
 
 WRITE_SUFFIXES = (".ply", ".las", ".laz", ".h5")
@@ -154,12 +156,17 @@ class _H5Cloud(AtomicWriter):
                 ds.attrs["frame"] = metadata["frame"]
 
     def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
+        self._check()
         n = len(points)
         for ds, values in [(self._h5["points"], points)] + [
                 (self._h5["attributes"][k], attributes[k]) for k in self.dtypes]:
             ds.resize(self._written + n, axis=0)
             ds[self._written:] = values
         self._written += n
+        self._wrote(n * (24 + sum(np.dtype(d).itemsize for d in self.dtypes.values())))
+
+    def _flush(self) -> None:
+        self._h5.flush()
 
     def _finish(self) -> None:
         self._h5.close()
@@ -211,6 +218,7 @@ class _LasCloud(AtomicWriter):
     def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
         import laspy
 
+        self._check()
         points = np.asarray(points, dtype=np.float64)
         if len(points) and np.abs(points).max() > np.iinfo(np.int32).max * LAS_SCALE_M:
             raise MeshFormatError(f"{self.path}: coordinates beyond +-214 km do not fit LAS at "
@@ -290,8 +298,7 @@ def read_cloud(path) -> Cloud:
     """
     path = Path(path)
     kind = _suffix(path)
-    if not path.is_file():
-        raise MeshFormatError(f"{path}: no such file")
+    check_source(path, MeshFormatError)
     if kind == ".ply":
         columns, _, metadata = read_ply(path)
         return cloud_from_ply_columns(path, columns, metadata)
@@ -320,6 +327,7 @@ def cloud_from_ply_columns(path, columns: dict[str, np.ndarray],
 def _read_h5(path: Path) -> Cloud:
     import h5py
 
+    check_hdf5(path, MeshFormatError)   # no other files, no loops: formats/hdf5_check.py
     try:
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") != CLOUD_FORMAT_NAME:

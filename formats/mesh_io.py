@@ -14,6 +14,7 @@ import numpy as np
 
 from formats.errors import MeshFormatError
 from formats.geometry import Mesh, file_metadata, frame_of
+from formats.paths import check_source
 from formats.ply import read_ply_metadata, write_ply
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -42,9 +43,7 @@ def read_mesh(path, *, scale: float = 1.0) -> Mesh:
     """
     import trimesh
 
-    path = Path(path)
-    if not path.is_file():
-        raise MeshFormatError(f"{path}: no such file")
+    path = check_source(path, MeshFormatError)
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise MeshFormatError(f"{path}: unknown mesh suffix {path.suffix!r} (expected one of "
                               f"{', '.join(MESH_SUFFIXES)})")

@@ -15,12 +15,11 @@ through trimesh's parser and keeps every vertex property.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
+from formats.paths import check_source
 
 _PLY_TYPES = {"f8": "double", "f4": "float", "i4": "int", "u1": "uchar"}
 _INT32 = np.iinfo(np.int32)
@@ -91,6 +90,7 @@ class PlyWriter(AtomicWriter):
 
     def write(self, columns: dict[str, np.ndarray]) -> None:
         """Append rows; ``columns`` maps every column name to an (n,) array."""
+        self._check()
         n = len(next(iter(columns.values())))
         rows = np.empty(n, dtype=self._disk)
         for name in self._disk.names:
@@ -105,6 +105,7 @@ class PlyWriter(AtomicWriter):
 
     def write_faces(self, faces: np.ndarray) -> None:
         """Append the face element (for meshes; call once, after all vertices)."""
+        self._check()
         faces = np.asarray(faces)
         rows = np.empty(len(faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
         rows["n"] = 3
@@ -173,7 +174,7 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
     """
     from trimesh.exchange.ply import load_ply
 
-    path = Path(path)
+    path = check_source(path, MeshFormatError)
     try:
         with open(path, "rb") as fh:
             if fh.readline(16).strip() != b"ply":

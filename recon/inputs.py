@@ -15,19 +15,28 @@ from formats import StrikeLog
 from formats.cloud_io import CLOUD_SUFFIXES, cloud_from_ply_columns, read_cloud
 from formats.errors import MeshFormatError
 from formats.geometry import Cloud, Mesh
+from formats.hdf5_check import check_hdf5
 from formats.mesh_io import MESH_SUFFIXES, read_mesh
+from formats.paths import check_source
 from formats.ply import read_ply
 from formats.strike_log import FORMAT_NAME
 from recon.registration.ingest import ingest
 
 
 def is_strike_log(path) -> bool:
-    """True when ``path`` is an HDF5 file whose root ``format`` names a strike log."""
+    """True when ``path`` is an HDF5 file whose root ``format`` names a strike log.
+
+    Raises
+    ------
+    MeshFormatError
+        An HDF5 file that is damaged or reads other files (``formats.hdf5_check``).
+    """
     import h5py
 
     path = Path(path)
     if path.suffix.lower() != ".h5" or not path.is_file() or not h5py.is_hdf5(path):
         return False
+    check_hdf5(path, MeshFormatError)
     try:
         with h5py.File(path, "r") as f:
             fmt = f.attrs.get("format")
@@ -41,9 +50,7 @@ def load_geometry(path) -> Cloud | Mesh:
 
     Strike logs are ingested into a body-frame cloud.
     """
-    path = Path(path)
-    if not path.exists():
-        raise MeshFormatError(f"{path}: no such file")
+    path = check_source(path, MeshFormatError)
     suffix = path.suffix.lower()
     if is_strike_log(path):
         return ingest(path)
@@ -77,7 +84,7 @@ def load_truth(path, *, scale: float = 1.0) -> Mesh:
     scale : float
         Factor applied to a mesh file's coordinates (e.g. 1000 for km); logs are in metres.
     """
-    path = Path(path)
+    path = check_source(path, MeshFormatError)
     if is_strike_log(path):
         with StrikeLog(path) as log:
             if not log.has_truth:

@@ -181,7 +181,29 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                         exclusive_maximum=True),
         "dilation_subrays": Key(30, "int", "", "sub-rays m in the beam-spread cone", minimum=1),
     },
+    # A run's cost is estimated before it starts (sim/derive.py, ``cost``) and refused above these;
+    # raise them with --set limits.KEY=VALUE. The largest preset, asteroid-lidar-noise (15
+    # rotations of a 32 x 32 grid), casts 2.4e7 rays, needs ~0.5 GB and writes up to ~1.8 GB.
+    "limits": {
+        # 1e10 rays: about 30 min at the 6.5 M rays/s measured with embreex on 2 cores.
+        "rays": Key(1e10, "number", "rays", "most rays a run may cast", **POSITIVE),
+        # Half of the 24 GiB development machine, and of most workstations' memory.
+        "memory_mb": Key(8192.0, "number", "MiB", "most memory a run may need", **POSITIVE),
+        # 20 GB: ten times the largest preset's log.
+        "disk_mb": Key(20000.0, "number", "MB", "largest log a run may write", **POSITIVE),
+    },
 }
+# Longest string value of a scene (a mesh path): longer is a mistake or an attack, not a path.
+MAX_STRING_CHARS = 4096
+# Largest scene file read, bytes: a scene states a few dozen keys.
+MAX_SCENE_BYTES = 1 << 20
+# Largest seed: logs store it as a signed 64-bit integer.
+MAX_SEED = 2**63 - 1
+# Memory a run needs per ray in flight, bytes: RAYS_PER_CHUNK rays keep a chunk near 100 MB
+# (below), ~190 bytes a ray; and per truth-mesh face, for the ray-casting structures (Embree's
+# BVH and the float64 copies of sim/raycast.py).
+BYTES_PER_RAY = 200
+BYTES_PER_FACE = 300
 # fmt: on
 
 # Keys of which a layer (defaults, scene file, --set overrides) gives at most one; the last layer

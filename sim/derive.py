@@ -16,9 +16,15 @@ from pathlib import Path
 import numpy as np
 
 from formats.errors import MeshFormatError
-from formats.strike_log import SensorErrors
+from formats.strike_log import SensorErrors, estimate_log_bytes
 from sim import targets
-from sim.defaults import GRAVITATIONAL_CONSTANT
+from sim.defaults import (
+    BYTES_PER_FACE,
+    BYTES_PER_RAY,
+    CHUNKS_IN_FLIGHT,
+    GRAVITATIONAL_CONSTANT,
+    RAYS_PER_CHUNK,
+)
 from sim.errors import SceneError
 
 # Scene units converted to SI where the log needs radians (sim/defaults.py: every angle key
@@ -27,6 +33,33 @@ RADIANS_PER = {"deg": math.pi / 180.0, "mrad": 1e-3}
 # Shots are taken at t = k * step while t <= duration; the slack absorbs the rounding of
 # duration / step (e.g. 0.5 rotations of 15480 s in 10 s steps is 774, not 773.9999999).
 SHOT_COUNT_SLACK = 1e-9
+
+
+@dataclass(frozen=True)
+class Cost:
+    """What a run will take, estimated before it starts.
+
+    Attributes
+    ----------
+    shots, beams : int
+    rays : int
+        Rays cast: shots x beams x (1 + sub-rays of pulse dilation, when on).
+    memory_bytes : int
+        Peak memory: the chunks in flight (at least one shot each) and the mesh's structures.
+    disk_bytes : int
+        Size of the log if every pulse returned a strike (an upper bound).
+    """
+
+    shots: int
+    beams: int
+    rays: int
+    memory_bytes: int
+    disk_bytes: int
+
+    def describe(self) -> str:
+        return (f"{self.shots:,} shots x {self.beams:,} beams = {self.rays:.3g} rays, "
+                f"~{self.memory_bytes / 2**20:,.0f} MiB of memory, up to "
+                f"{self.disk_bytes / 1e6:,.0f} MB of log")
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,6 +75,7 @@ class Derived:
     duration: float
     n_shots: int
     errors: SensorErrors
+    cost: Cost
 
 
 def derive(values: dict) -> Derived:
@@ -61,15 +95,52 @@ def derive(values: dict) -> Derived:
     ------
     SceneError
         The mesh cannot be read, the orbit is inside the target, a density is given for an open
-        mesh, rotations for a target that does not spin, or the campaign is shorter than a step.
+        mesh, rotations for a target that does not spin, the campaign is shorter than a step,
+        or its cost is above ``[limits]``.
     """
+    duration, n_shots = time_line(values["time"], values["target"]["spin_period"])
     vertices, faces, label = target_mesh(values["target"])
     q = np.asarray(values["target"]["attitude"])
     values["target"]["attitude"] = (q / np.linalg.norm(q)).tolist()
+    errors = sensor_errors(values["errors"])
+    run_cost = cost(values, n_shots, errors, n_vertices=len(vertices), n_faces=len(faces))
+    check_cost(run_cost, values["limits"])
     mu, period = orbit_mu_and_period(values["orbit"], vertices, faces)
-    duration, n_shots = time_line(values["time"], values["target"]["spin_period"])
     return Derived(vertices=vertices, faces=faces, target=label, mu=mu, orbit_period=period,
-                   duration=duration, n_shots=n_shots, errors=sensor_errors(values["errors"]))
+                   duration=duration, n_shots=n_shots, errors=errors, cost=run_cost)
+
+
+def n_beams(sensor: dict) -> int:
+    """Beams of a ``[sensor]`` pattern, counted without building it (sim/sensors.py)."""
+    pattern = sensor["pattern"]
+    if pattern == "grid":
+        return int(sensor["resolution"][0]) * int(sensor["resolution"][1])
+    return {"single": 1, "cross": 5}.get(pattern) or int(sensor["beams"])
+
+
+def cost(values: dict, n_shots: int, errors: SensorErrors, *, n_vertices: int, n_faces: int
+         ) -> Cost:
+    """Estimate a run's rays, memory and log size from checked values (sim/pipeline.py's
+    chunking: about RAYS_PER_CHUNK rays a chunk, at least one shot, CHUNKS_IN_FLIGHT ahead)."""
+    beams = n_beams(values["sensor"])
+    per_shot = beams * (1 + (int(errors.pulse_dilation_subrays) if errors.dilation else 0))
+    chunk = max(RAYS_PER_CHUNK, per_shot)
+    memory = (CHUNKS_IN_FLIGHT + 1) * chunk * BYTES_PER_RAY + n_faces * BYTES_PER_FACE
+    disk = estimate_log_bytes(n_shots, n_shots * beams, reports_angles=values["sensor"][
+        "pattern"] == "grid", truth=True, n_vertices=n_vertices, n_faces=n_faces)
+    return Cost(shots=n_shots, beams=beams, rays=n_shots * per_shot, memory_bytes=memory,
+                disk_bytes=disk)
+
+
+def check_cost(run: Cost, limits: dict) -> None:
+    """Refuse a run above ``[limits]``, naming the limit and the estimate."""
+    for key, value, limit in (("rays", run.rays, limits["rays"]),
+                              ("memory_mb", run.memory_bytes / 2**20, limits["memory_mb"]),
+                              ("disk_mb", run.disk_bytes / 1e6, limits["disk_mb"])):
+        if value > limit:
+            raise SceneError(f"limits.{key} = {limit:g}: this scene needs {value:.3g} "
+                             f"({run.describe()}); reduce it or raise the limit with --set "
+                             f"limits.{key}=...")
 
 
 def target_mesh(target: dict) -> tuple[np.ndarray, np.ndarray, str]:
@@ -125,7 +196,11 @@ def time_line(time: dict, spin_period: float) -> tuple[float, int]:
             raise SceneError("time.rotations needs a spinning target (target.spin_period is "
                              "inf); give time.duration instead")
         duration, key = time["rotations"] * spin_period, "time.rotations"
-    n_shots = math.floor(duration / step + SHOT_COUNT_SLACK)
+    ratio = duration / step
+    if not math.isfinite(ratio):
+        raise SceneError(f"{key} gives {duration:g} s in steps of {step:g} s: more shots than "
+                         "can be counted")
+    n_shots = math.floor(ratio + SHOT_COUNT_SLACK)
     if n_shots < 1:
         raise SceneError(f"{key} gives {duration:g} s, shorter than one time.step ({step:g} s)")
     return duration, n_shots

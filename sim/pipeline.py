@@ -29,6 +29,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from formats.atomic import check_space
+from formats.paths import check_destination
 from formats.strike_log import (
     SensorErrors,
     SensorInfo,
@@ -41,6 +43,7 @@ from formats.strike_log import (
 from sim import noise
 from sim.defaults import (
     CHUNKS_IN_FLIGHT,
+    MAX_SEED,
     MAX_SHOTS_PER_CHUNK,
     PROGRESS_DELAY_S,
     RAYS_PER_CHUNK,
@@ -351,9 +354,13 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
         ``backend``,
         ``wall_time_s``, ``rays_per_s``.
     """
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise SceneError(f"seed must be a non-negative integer, got {seed!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or \
+            not 0 <= seed <= MAX_SEED:
+        raise SceneError(f"seed must be a non-negative integer of at most {MAX_SEED}, got "
+                         f"{seed!r}")
     seed = int(seed)
+    check_destination(path, SceneError)
+    check_space(path, scene.cost.disk_bytes, SceneError)
     start = time.perf_counter()
     plan = make_plan(scene, seed=seed, backend=backend)
     strikes = rays = 0

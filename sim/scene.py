@@ -40,10 +40,11 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from sim.defaults import ALTERNATIVES, SCHEMA
+from formats.paths import check_source
+from sim.defaults import ALTERNATIVES, MAX_SCENE_BYTES, SCHEMA
 from sim.derive import Derived, derive
 from sim.errors import SceneError
-from sim.schema import check_layer, check_values
+from sim.schema import brief, check_layer, check_values
 
 __all__ = ["Scene", "SceneError", "list_presets", "load_scene", "toml_value"]
 
@@ -128,7 +129,7 @@ class Scene(Derived):
         """The resolved scene as TOML: every key used, defaults included (stored in logs)."""
         lines = [f"# Scene {self.name!r} as simulated by recon: every key, defaults included "
                  "(sim/defaults.py)."]
-        if self.overrides:
+        if self.overrides:   # one line: _parse_override refuses control characters
             lines.append("# Overrides: " + " ".join(self.overrides))
         for section, keys in self.values.items():
             lines.append(f"\n[{section}]")
@@ -159,13 +160,27 @@ def _parse_override(text: str) -> tuple[str, str, Any]:
     name, sep, raw = text.partition("=")
     section, dot, key = name.strip().partition(".")
     if not sep or not dot or not section or not key:
-        raise SceneError(f"--set {text!r}: expected section.key=value, e.g. time.duration=3600")
+        raise SceneError(f"--set {brief(text)}: expected section.key=value, e.g. "
+                         "time.duration=3600")
+    if any(ord(c) < 32 for c in text):   # a newline would start a new TOML line
+        raise SceneError(f"--set {brief(text)}: control characters (newlines, tabs) are not "
+                         "allowed in a value")
     raw = raw.strip()
-    try:
-        value = tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = raw   # a bare word such as cross or ../meshes/eros.obj
+    value = _parse_toml(f"v = {raw}", f"--set {brief(text)}", bare=raw)["v"]
     return section, key.strip(), value
+
+
+def _parse_toml(text: str, where: str, *, bare: str | None = None) -> dict:
+    """``tomllib.loads`` with its failures as SceneErrors; ``bare`` is the value of a ``--set``
+    whose text is not TOML (a bare word such as cross or ../meshes/eros.obj)."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        if bare is not None:
+            return {"v": bare}
+        raise SceneError(f"{where}: invalid TOML ({exc})") from None
+    except RecursionError:   # tomllib recurses once per nesting level
+        raise SceneError(f"{where}: arrays or tables nested too deeply") from None
 
 
 def _read_source(name_or_path) -> tuple[str, str, Path | None]:
@@ -173,8 +188,13 @@ def _read_source(name_or_path) -> tuple[str, str, Path | None]:
     text_name = str(name_or_path)
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
-        if not path.is_file():
-            raise SceneError(f"scene file {text_name}: no such file")
+        try:
+            check_source(path, SceneError)
+        except SceneError as exc:
+            raise SceneError(f"scene file {exc}") from None
+        if path.stat().st_size > MAX_SCENE_BYTES:
+            raise SceneError(f"scene file {text_name}: {path.stat().st_size:,} bytes, larger "
+                             f"than any scene ({MAX_SCENE_BYTES:,} bytes at most)")
         try:
             return text_name, path.read_text(encoding="utf-8"), path.resolve().parent
         except (OSError, UnicodeDecodeError) as exc:
@@ -213,10 +233,7 @@ def load_scene(name_or_path, overrides=()) -> Scene:
         naming the key.
     """
     name, text, base = _read_source(name_or_path)
-    try:
-        file_layer = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"scene {name}: invalid TOML ({exc})") from None
+    file_layer = _parse_toml(text, f"scene {name}")
     file_layer = check_layer(file_layer, f"scene {name}")
     if base is not None and "path" in file_layer.get("target", {}):
         path = Path(file_layer["target"]["path"]).expanduser()

@@ -24,6 +24,7 @@ from collections.abc import Callable
 from sim.defaults import (
     ALTERNATIVES,
     MAX_FIELD_OF_VIEW_DEG,
+    MAX_STRING_CHARS,
     NEEDED_WHEN,
     ONLY_WITH,
     ORDERED,
@@ -41,6 +42,16 @@ def _kind_name(value) -> str:
             dict: "table"}.get(type(value), type(value).__name__)
 
 
+# Characters of a value quoted in a message: a hostile 5 MB value is cut, not echoed.
+SHOWN_CHARS = 80
+
+
+def brief(value) -> str:
+    """``repr(value)``, cut to SHOWN_CHARS characters."""
+    text = repr(value)
+    return text if len(text) <= SHOWN_CHARS else text[:SHOWN_CHARS - 3] + "..."
+
+
 def _is_number(value) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
@@ -50,7 +61,7 @@ def _typed(section: str, key: str, value):
     spec = SCHEMA[section][key]
     name = f"{section}.{key}"
     kind = spec.kind
-    got = f"got {_kind_name(value)} {value!r}"
+    got = f"got {_kind_name(value)} {brief(value)}"
     if kind == "number":
         if not _is_number(value):
             raise SceneError(f"{name} must be a number [{spec.unit}], {got}")
@@ -64,6 +75,9 @@ def _typed(section: str, key: str, value):
     if kind == "str":
         if not isinstance(value, str):
             raise SceneError(f"{name} must be a string, {got}")
+        if len(value) > MAX_STRING_CHARS or any(ord(c) < 32 for c in value):
+            raise SceneError(f"{name} must be a string of at most {MAX_STRING_CHARS} printable "
+                             f"characters, got {len(value):,} characters {brief(value)}")
         return value
     if kind == "bool":
         if not isinstance(value, bool):
@@ -108,19 +122,19 @@ def check_layer(layer: dict, where: str) -> dict:
     out: dict[str, dict] = {}
     for section, keys in layer.items():
         if section not in SCHEMA:
-            hint = difflib.get_close_matches(section, SCHEMA, n=1)
-            raise SceneError(f"{where}: unknown scene section [{section}]"
+            hint = difflib.get_close_matches(section[:SHOWN_CHARS], SCHEMA, n=1)
+            raise SceneError(f"{where}: unknown scene section [{brief(section)[1:-1]}]"
                              + (f" (did you mean [{hint[0]}]?)" if hint else
                                 f"; sections are {', '.join(SCHEMA)}"))
         if not isinstance(keys, dict):
             raise SceneError(f"{where}: {section} must be a table [{section}] of keys, got "
-                             f"{_kind_name(keys)} {keys!r}")
+                             f"{_kind_name(keys)} {brief(keys)}")
         out[section] = {}
         for key, value in keys.items():
             if key not in SCHEMA[section]:
-                hint = difflib.get_close_matches(key, SCHEMA[section], n=1)
+                hint = difflib.get_close_matches(key[:SHOWN_CHARS], SCHEMA[section], n=1)
                 raise SceneError(
-                    f"{where}: unknown scene key {section}.{key}"
+                    f"{where}: unknown scene key {section}.{brief(key)[1:-1]}"
                     + (f" (did you mean {section}.{hint[0]}?)" if hint else
                        f"; keys of [{section}] are {', '.join(SCHEMA[section])}"))
             out[section][key] = _typed(section, key, value)
@@ -184,7 +198,7 @@ def _check_value(name: str, spec: Key, value) -> None:
     """One value (already of the declared type) against its declared bounds."""
     if spec.kind == "str":
         if spec.choices and value not in spec.choices:
-            raise SceneError(f"{name} must be {requirement(spec)}, got {value!r}")
+            raise SceneError(f"{name} must be {requirement(spec)}, got {brief(value)}")
         return
     if spec.kind == "bool":
         return

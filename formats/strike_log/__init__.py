@@ -21,6 +21,7 @@ from formats.strike_log.schema import (
     TruthStrikes,
     angles_to_directions,
     directions_to_angles,
+    estimate_log_bytes,
     sigma_from_sigma3,
 )
 from formats.strike_log.writer import StrikeLogWriter
@@ -43,5 +44,6 @@ __all__ = [
     "TruthStrikes",
     "angles_to_directions",
     "directions_to_angles",
+    "estimate_log_bytes",
     "sigma_from_sigma3",
 ]

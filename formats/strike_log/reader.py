@@ -5,13 +5,14 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import fields
-from pathlib import Path
 
 import h5py
 import numpy as np
 
 from formats.errors import StrikeLogError
 from formats.geometry import Mesh
+from formats.hdf5_check import check_hdf5
+from formats.paths import check_source
 from formats.strike_log.schema import (
     _ANGLE_FIELDS,
     _ROOT_ATTRS,
@@ -27,12 +28,14 @@ from formats.strike_log.schema import (
     StrikeChunk,
     TruthStrikes,
     _check_finite,
+    _check_quaternions,
     _check_sensor,
     _check_shot_rows,
     _check_strike_rows,
     _hdf5_errors,
     angles_to_directions,
     directions_to_angles,
+    mesh_checksum,
 )
 
 
@@ -50,14 +53,11 @@ class StrikeLog:
     """
 
     def __init__(self, path):
-        self.path = Path(path)
+        self.path = check_source(path, StrikeLogError)
         where = self._where = str(self.path)
-        if not self.path.exists():
-            raise StrikeLogError(f"{where}: no such file")
-        if self.path.is_dir():
-            raise StrikeLogError(f"{where}: is a directory, not a strike log")
         if not h5py.is_hdf5(self.path):
             raise StrikeLogError(f"{where}: not an HDF5 file")
+        check_hdf5(self.path, StrikeLogError)   # no other files, no loops: formats/hdf5_check.py
         with _hdf5_errors(where):
             self._file = h5py.File(self.path, "r")
         try:
@@ -216,8 +216,20 @@ class StrikeLog:
         if beam.dtype.kind == "i" and len(beam) and beam.min() < 0:
             raise StrikeLogError(f"{self._where}: negative beam index")
         _check_strike_rows(shot, beam, rng, n_shots=self.n_shots, n_beams=self.sensor.n_beams,
-                           where=self._where, row0=start, previous_shot=previous_shot)
+                           where=self._where, row0=start, previous_shot=previous_shot,
+                           range_max=self.sensor.range_max)
         return shot.astype(np.int64), beam.astype(np.int64), rng
+
+    def _check_unique_pairs(self, shot: np.ndarray, beam: np.ndarray, carried: np.ndarray,
+                            start: int) -> np.ndarray:
+        """Refuse a (shot, beam) pair seen twice in this block or in ``carried`` (the pairs of
+        the previous block's last shot); return the pairs to carry into the next block."""
+        n_beams = self.sensor.n_beams
+        pairs = np.concatenate([carried, shot * n_beams + beam])
+        if len(np.unique(pairs)) != len(pairs):
+            raise StrikeLogError(f"{self._where}: a (shot, beam) pair appears twice near "
+                                 f"strike {start}")
+        return pairs[pairs // n_beams == shot[-1]] if len(shot) else carried
 
     def _angle_offsets(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """Reported azimuth and elevation offsets (n,) [rad] of strikes ``start:stop``, checked."""
@@ -240,16 +252,24 @@ class StrikeLog:
     def iter_chunks(self, chunk_rows: int = READ_CHUNK_ROWS) -> Iterator[StrikeChunk]:
         """Yield consecutive blocks of at most ``chunk_rows`` strikes with their shots.
 
-        Ordering across block boundaries is checked too, so a full pass validates the strikes.
+        Ordering and duplicate (shot, beam) pairs across block boundaries are checked too, and
+        the shots against the shots of the block before, so a full pass makes every check of
+        ``validate`` on the strikes and the shots they use.
         """
-        previous_shot = None
+        previous_shot = previous_time = None
+        carried = np.zeros(0, dtype=np.int64)
         for start, stop in self._blocks(self.n_strikes, chunk_rows):
             shot, beam, rng = self._checked_strikes(start, stop, previous_shot)
-            previous_shot = int(shot[-1])
+            carried = self._check_unique_pairs(shot, beam, carried, start)
             lo, hi = int(shot[0]), int(shot[-1]) + 1
+            if previous_shot == lo:   # the shot shared with the block before: checked there
+                shots = self.shots(lo, hi)
+            else:
+                shots = self._checked_shots(lo, hi, previous_time)
+            previous_shot, previous_time = int(shot[-1]), float(shots.time[-1])
             yield StrikeChunk(start=start, shot=shot, beam=beam, range=rng,
                               direction=self.directions(beam, start, stop),
-                              shots=self.shots(lo, hi), shot_offset=lo)
+                              shots=shots, shot_offset=lo)
 
     # ------------------------------------------------------------------ truth
 
@@ -268,6 +288,13 @@ class StrikeLog:
             raise StrikeLogError(f"{self._where}: truth mesh has no faces")
         if faces.min() < 0 or faces.max() >= len(vertices):
             raise StrikeLogError(f"{self._where}: truth mesh faces index missing vertices")
+        with _hdf5_errors(self._where):
+            stored = self._file["truth/mesh"].attrs.get("sha256")
+        if stored is not None:
+            stored = stored.decode("ascii", "replace") if isinstance(stored, bytes) else stored
+            if stored != mesh_checksum(vertices, faces):
+                raise StrikeLogError(f"{self._where}: truth mesh does not match its sha256 "
+                                     "checksum (the file is damaged)")
         return Mesh(vertices, faces)
 
     def truth_shots(self, start: int = 0, stop: int | None = None) -> Shots:
@@ -309,21 +336,36 @@ class StrikeLog:
                 progress(stop - start)
         previous_shot = None
         carried = np.zeros(0, dtype=np.int64)  # pairs of the shot that may continue
-        n_beams = self.sensor.n_beams
         for start, stop in self._blocks(self.n_strikes, chunk_rows):
             shot, beam, _ = self._checked_strikes(start, stop, previous_shot)
             if self.sensor.reports_angles:
                 self._angle_offsets(start, stop)
             previous_shot = int(shot[-1])
-            pairs = np.concatenate([carried, shot * n_beams + beam])
-            if len(np.unique(pairs)) != len(pairs):
-                raise StrikeLogError(f"{self._where}: a (shot, beam) pair appears twice near "
-                                     f"strike {start}")
-            carried = pairs[pairs // n_beams == previous_shot]
+            carried = self._check_unique_pairs(shot, beam, carried, start)
             if progress:
                 progress(stop - start)
         if self.has_truth:
-            self.truth_mesh()
+            self._validate_truth(chunk_rows, progress)
+
+    def _validate_truth(self, chunk_rows: int, progress) -> None:
+        """Read and check every row of ``/truth``: the mesh (with its checksum), the true poses
+        and the true hits (finite, unit quaternions, facets of the mesh, positive ranges)."""
+        where = self._where
+        n_faces = len(self.truth_mesh().faces)
+        for start, stop in self._blocks(self.n_shots, chunk_rows):
+            rows = self.truth_shots(start, stop)
+            _check_finite("truth sensor_position", rows.sensor_position, where)
+            _check_quaternions("truth sensor_attitude", rows.sensor_attitude, where, start)
+            _check_quaternions("truth target_attitude", rows.target_attitude, where, start)
+        for start, stop in self._blocks(self.n_strikes, chunk_rows):
+            hits = self.truth_strikes(start, stop)
+            _check_finite("truth point", hits.point, where)
+            if len(hits.facet) and (hits.facet.min() < 0 or hits.facet.max() >= n_faces):
+                raise StrikeLogError(f"{where}: truth facet out of range (the mesh has "
+                                     f"{n_faces} faces) near strike {start}")
+            if not np.all(np.isfinite(hits.range) & (hits.range > 0)):
+                raise StrikeLogError(f"{where}: truth range is not a finite positive number "
+                                     f"near strike {start}")
 
     def summary(self) -> dict:
         """Counts, time span, sensor and target, as a JSON-ready dict."""

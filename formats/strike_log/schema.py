@@ -297,8 +297,10 @@ def _check_shot_rows(shots: Shots, where: str, row0: int, previous_time: float |
 
 
 def _check_strike_rows(shot: np.ndarray, beam: np.ndarray, rng: np.ndarray, *, n_shots: int,
-                       n_beams: int, where: str, row0: int, previous_shot: int | None) -> None:
-    """Index ranges, ordering and positive finite ranges (SPEC.md, /strikes)."""
+                       n_beams: int, where: str, row0: int, previous_shot: int | None,
+                       range_max: float = np.inf) -> None:
+    """Index ranges, ordering and positive finite ranges up to ``range_max`` (SPEC.md,
+    /strikes)."""
     if len(shot) and int(shot.max()) >= n_shots:
         bad = int(np.argmax(shot >= n_shots))
         raise StrikeLogError(f"{where}: strike {row0 + bad} has shot index {int(shot[bad])} out "
@@ -317,6 +319,45 @@ def _check_strike_rows(shot: np.ndarray, beam: np.ndarray, rng: np.ndarray, *, n
         bad = int(np.argmax(~(np.isfinite(rng) & (rng > 0))))
         raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r}, "
                              "expected a finite positive number of metres")
+    if len(rng) and rng.max() > range_max:
+        bad = int(np.argmax(rng > range_max))
+        raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
+                             f"beyond the sensor's range_max of {range_max:g} m")
+
+
+def estimate_log_bytes(n_shots: int, n_strikes: int, *, reports_angles: bool, truth: bool,
+                       n_vertices: int = 0, n_faces: int = 0) -> int:
+    """Bytes of a log as ``StrikeLogWriter`` stores it: every chunked dataset takes whole
+    chunks (SHOT_CHUNK_ROWS, STRIKE_CHUNK_ROWS rows), the truth mesh is contiguous.
+
+    Parameters
+    ----------
+    n_shots, n_strikes : int
+    reports_angles : bool
+        Strikes carry the two angle offsets.
+    truth : bool
+        The log has a ``/truth`` group (true poses and hits, the mesh).
+    n_vertices, n_faces : int
+        Size of the truth mesh.
+    """
+    def chunked(rows: int, chunk: int, row_bytes: int) -> int:
+        return -(-rows // chunk) * chunk * row_bytes
+
+    shot_row = 8 * (1 + 3 + 4 + 4) + (8 * (3 + 4 + 4) if truth else 0)
+    strike_row = 4 + 4 + 8 + (16 if reports_angles else 0) + (8 * 3 + 4 + 8 if truth else 0)
+    mesh = 24 * n_vertices + 12 * n_faces if truth else 0
+    return chunked(n_shots, SHOT_CHUNK_ROWS, shot_row) + chunked(
+        n_strikes, STRIKE_CHUNK_ROWS, strike_row) + mesh
+
+
+def mesh_checksum(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """SHA-256 (hex) of a truth mesh as stored: vertices as little-endian float64, then faces
+    as little-endian uint32, row-major (SPEC.md, /truth/mesh attribute ``sha256``)."""
+    import hashlib
+
+    digest = hashlib.sha256(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
+    digest.update(np.ascontiguousarray(faces, dtype="<u4").tobytes())
+    return digest.hexdigest()
 
 
 def _as_array(name: str, values, shape_tail: tuple, dtype, where: str) -> np.ndarray:

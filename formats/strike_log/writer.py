@@ -35,6 +35,7 @@ from formats.strike_log.schema import (
     _check_sensor,
     _check_shot_rows,
     _check_strike_rows,
+    mesh_checksum,
 )
 from formats.version import __version__
 
@@ -180,6 +181,7 @@ class StrikeLogWriter(AtomicWriter):
             m = t.create_group("mesh")
             m.create_dataset("vertices", data=np.asarray(vertices, dtype=np.float64))
             m.create_dataset("faces", data=np.asarray(faces, dtype=np.uint32))
+            m.attrs["sha256"] = mesh_checksum(vertices, faces)
         for name, (units, frame) in DATASET_UNITS.items():
             if name in f:
                 f[name].attrs.update({"units": units, "frame": frame})
@@ -187,8 +189,10 @@ class StrikeLogWriter(AtomicWriter):
     # ------------------------------------------------------------------ appending rows
 
     def _require_open(self) -> None:
-        if self.closed:
-            raise StrikeLogError(f"{self.path}: the writer is closed")
+        self._check()
+
+    def _flush(self) -> None:
+        self._file.flush()
 
     @staticmethod
     def _extend(group, values: dict) -> None:
@@ -230,6 +234,7 @@ class StrikeLogWriter(AtomicWriter):
                 raise StrikeLogError(f"{where}: truth shots differ in length from the shots")
             self._extend(self._file["truth"], t)
         self._extend(self._file["shots"], {k: getattr(rows, k) for k in _SHOT_FIELDS})
+        self._wrote(n * (96 if truth is None else 184))   # bytes per row: SPEC.md, /shots
         self._n_shots += n
         if n:
             self._last_time = float(rows.time[-1])
@@ -261,7 +266,8 @@ class StrikeLogWriter(AtomicWriter):
         if n and (shot.min() < 0 or beam.min() < 0):
             raise StrikeLogError(f"{where}: shot and beam indices must be non-negative")
         _check_strike_rows(shot, beam, rng, n_shots=self._n_shots, n_beams=self.sensor.n_beams,
-                           where=where, row0=self._n_strikes, previous_shot=self._last_shot)
+                           where=where, row0=self._n_strikes, previous_shot=self._last_shot,
+                           range_max=self.sensor.range_max)
         values = {"shot": shot.astype(np.uint32), "beam": beam.astype(np.uint32), "range": rng}
         if self.sensor.reports_angles != (azimuth_offset is not None
                                           and elevation_offset is not None):
@@ -283,6 +289,7 @@ class StrikeLogWriter(AtomicWriter):
                 raise StrikeLogError(f"{where}: truth strikes differ in length from the strikes")
             self._extend(self._file["truth"], t)
         self._extend(self._file["strikes"], values)
+        self._wrote(n * (16 + 8 * len(values) + (44 if truth is not None else 0)))
         self._n_strikes += n
         if n:
             self._last_shot = int(shot[-1])
