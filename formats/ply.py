@@ -15,6 +15,8 @@ through trimesh's parser and keeps every vertex property.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from formats.atomic import AtomicWriter
