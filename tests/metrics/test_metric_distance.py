@@ -8,7 +8,7 @@ import trimesh
 from metrics_reference import MESHES, as_mesh, box, brute_force_distance, load
 
 from metrics import MeshDistance, MetricsInputError, point_mesh_distance
-from metrics.distance import closest_on_faces, vertex_neighbours
+from metrics.distance import closest_on_faces
 from metrics.inputs import Mesh, bbox_diagonal
 
 RTOL = 1e-9  # the brief's agreement
@@ -161,17 +161,6 @@ def test_guard_corrects_float32_near_ties_at_a_shared_vertex():
     expected = brute_force_distance(probes, vertices, faces)
     assert (np.abs(raw - expected) > RTOL * expected).sum() > 10
     np.testing.assert_allclose(md.query(probes)[0], expected, rtol=RTOL, atol=0)
-
-
-def test_vertex_neighbours_table_matches_definition():
-    mesh = as_mesh(trimesh.creation.icosphere(1))
-    table, valid = vertex_neighbours(mesh.faces, len(mesh.vertices))
-    for f in range(len(mesh.faces)):
-        shares = np.isin(mesh.faces, mesh.faces[f]).any(axis=1)
-        shares[f] = False
-        assert set(table[f][valid[f]]) == set(np.flatnonzero(shares))
-        assert np.all(table[f][~valid[f]] == f)
-    assert valid.sum(axis=1).max() == 12  # valence 5 and 6 vertices on an icosphere
 
 
 def test_results_do_not_depend_on_threads_or_blocks():
