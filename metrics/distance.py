@@ -178,57 +178,59 @@ class MeshDistance:
         cuts = np.searchsorted(pairs, np.arange(_PAIR_BLOCK, pairs[-1], _PAIR_BLOCK))
         edges = np.unique(np.concatenate([[0], cuts, [len(faces)]]))
 
+        geometry = np.ascontiguousarray(table[:, :15])
+        bisectors = np.ascontiguousarray(table[:, _BISECT]).reshape(-1, 3)  # row 3 f + corner
+        flat = slope.reshape(-1)  # index (2 f + side) * 6 + line
+
         def run(lo: int, hi: int) -> None:
             block = faces[lo:hi]
             row, corner, ring = self._ring(block)
             own = block[row]
+            q = np.arange(len(row))
             tri = self._f[ring]
-            touch = self._f[own, corner]
+            corners = self._f[own]
+            touch = corners[q, corner]
             # T's two corners other than the touching one, y1 and y2.
-            at = np.argmax(tri == touch[:, None], axis=1)
-            ends = [tri[np.arange(len(row)), (at + turn) % 3] for turn in (1, 2)]
-            frame = table[own]
-            lines = []  # per corner y: rise z and distances beyond the 4 lines (+ outside)
-            for y in ends:
-                rel = self._v[y] - frame[:, _A]
+            at = np.where(tri[:, 0] == touch, 0, np.where(tri[:, 1] == touch, 1, 2))
+            frame = np.take(geometry, own, axis=0)
+            coef = np.take(bisectors, 3 * own + corner, axis=0)
+            rises, beyonds = [], []
+            for turn in (1, 2):
+                y = tri[q, (at + turn) % 3]
+                rel = np.take(self._v, y, axis=0) - frame[:, _A]
                 z = np.einsum("ij,ij->i", rel, frame[:, _N])
                 bv = np.einsum("ij,ij->i", rel, frame[:, _GB])
                 bw = np.einsum("ij,ij->i", rel, frame[:, _GC])
                 # A corner of f (T shares an edge): exact weights and height.
-                for slot in range(3):
-                    hit = y == self._f[own, slot]
-                    z[hit], bv[hit], bw[hit] = 0.0, float(slot == 1), float(slot == 2)
+                is_b, is_c = y == corners[:, 1], y == corners[:, 2]
+                corner_of_f = is_b | is_c | (y == corners[:, 0])
+                z = np.where(corner_of_f, 0.0, z)
+                bv = np.where(corner_of_f, is_b, bv)
+                bw = np.where(corner_of_f, is_c, bw)
                 bu = 1.0 - bv - bw
-                coef = np.take_along_axis(frame[:, _BISECT], 3 * corner[:, None]
-                                          + np.arange(3), axis=1)
-                beyond = np.stack([-bu * frame[:, 12], -bv * frame[:, 13], -bw * frame[:, 14],
-                                   -(bu * coef[:, 0] + bv * coef[:, 1] + bw * coef[:, 2])],
-                                  axis=1)
-                lines.append((z, beyond))
-            (z1, d1), (z2, d2) = lines
-            # The edge line opposite the touching corner leaves that corner (height 0) inside:
-            # a bound there must also hold at it, c <= 0.
-            opposite = np.zeros((len(row), 4), dtype=bool)
-            opposite[np.arange(len(row)), corner] = True
+                rises.append(z)
+                beyonds.append(np.stack([-bu * frame[:, 12], -bv * frame[:, 13],
+                                         -bw * frame[:, 14],
+                                         -(bu * coef[:, 0] + bv * coef[:, 1] + bw * coef[:, 2])],
+                                        axis=1))
+            (z1, z2), (d1, d2) = rises, beyonds
             with np.errstate(divide="ignore", invalid="ignore"):
                 ratio1, ratio2 = z1[:, None] / d1, z2[:, None] / d2
-            best = np.zeros((len(row), 2, 6))
-            q = np.arange(len(row))
             for side, sign in ((0, 1.0), (1, -1.0)):
-                r1, r2 = sign * ratio1, sign * ratio2
+                r1, r2 = (ratio1, ratio2) if side == 0 else (-ratio1, -ratio2)
                 # z <= c d at every corner: c >= z / d where d > 0, c <= z / d where d < 0.
                 low = np.maximum(np.maximum(np.where(d1 > 0, r1, 0.0), np.where(d2 > 0, r2, 0.0)),
                                  0.0)
                 high = np.minimum(np.where(d1 < 0, r1, np.inf), np.where(d2 < 0, r2, np.inf))
-                high[opposite] = np.minimum(high[opposite], 0.0)
-                bad = ((d1 == 0) & (sign * z1 > 0)[:, None]) | ((d2 == 0) & (sign * z2 > 0)[:, None])
+                bad = (d1 == 0) & (sign * z1 > 0)[:, None]
+                bad |= (d2 == 0) & (sign * z2 > 0)[:, None]
                 c = np.where((low <= high) & ~bad, low, np.inf)  # (q, 4 lines)
+                c[q, corner] = np.inf  # the edge line opposite the touching corner: unused
                 pick = np.argmin(c, axis=1)
                 value = c[q, pick]
-                value[np.maximum(sign * z1, sign * z2) <= eta] = 0.0  # T never rises: no threat
-                best[q, side, np.where(pick == 3, corner + 3, pick)] = value
-            first = np.flatnonzero(np.diff(own, prepend=-1))  # pairs come grouped by face
-            slope[own[first]] = np.maximum.reduceat(best, first, axis=0)
+                value[np.maximum(sign * z1, sign * z2) <= eta] = 0.0  # T never rises
+                line = np.where(pick == 3, corner + 3, pick)
+                np.maximum.at(flat, (2 * own + side) * 6 + line, value)
 
         # Blocks on two threads (numpy releases the GIL in its kernels); each writes its faces.
         with ThreadPoolExecutor(max_workers=2) as pool:
