@@ -170,22 +170,24 @@ def main(argv=None) -> int:
             # The same points both sides query: ours draws them inside score (same seeds).
             test_points = sample_surface(test, n_test, seed=defaults.SEED)[0] if is_mesh \
                 else test
-            levels, lattice, _ = prepared.lattice(options.get("coverage_points",
+            _, lattice, _ = prepared.lattice(options.get("coverage_points",
                                                               defaults.COVERAGE_POINTS))
             truth_points = prepared.samples(n_samples, [defaults.SEED, 1])[0]
             queries32 = np.concatenate([truth_points, lattice]).astype(np.float32)
             points32 = test_points.astype(np.float32)
-            run = {"ours": lambda t=test: score(t, prepared, edges=False, **options),
-                   "open3d": lambda t=test: open3d_floor(t, truth_scene, queries32, points32)}
+            queries = np.concatenate([truth_points, lattice])
+            run = {"ours": lambda t=test, p=prepared: score(t, p, edges=False, **options),
+                   "open3d": lambda t=test, s=truth_scene, q=queries32, p=points32:
+                   open3d_floor(t, s, q, p)}
             interleaved(run, 1)  # warm-up: BVHs, thread pools, the Truth's samples
             times, results = interleaved(run, args.repeats)
-            fresh, _ = interleaved({"fresh": lambda t=test: score(t, truth, edges=False,
-                                                                  **options)}, 1)
+            fresh, _ = interleaved({"fresh": lambda t=test, m=truth: score(t, m, edges=False,
+                                                                           **options)}, 1)
             query = "-"
             if is_mesh:
                 distance = MeshDistance(test)
-                query_time, _ = interleaved({"q": lambda d=distance: d.query(
-                    np.concatenate([truth_points, lattice]))}, args.repeats)
+                query_time, _ = interleaved({"q": lambda d=distance, q=queries: d.query(q)},
+                                            args.repeats)
                 query = f"{query_time['q']:.2f}"
             ratio = times["ours"] / times["open3d"]
             ok &= ratio <= TARGET[kind]

@@ -25,15 +25,17 @@ How a query works
    ``defaults.COPLANAR_FRACTION`` of the mesh diagonal are ignored (they can be closer by at
    most that).
 
-   When ``2 r_L > H c_L`` on all six lines (the fast path, most points) the distance is H and the closest point the
-   projection. Otherwise every ring face whose lower bound ``sqrt(h_t**2 + e_t**2)`` (h_t:
-   distance to its plane, e_t: how far the projection falls outside it) is below the distance to
-   ``t0`` is evaluated with the closed-form closest point on a triangle (Ericson, *Real-Time
-   Collision Detection*, 5.1.5) and the minimum taken; ties go to the lowest face index.
+   When ``2 r_L > H c_L`` on all six lines (the fast path, most points) the distance is H and
+   the closest point the projection. Otherwise every ring face whose lower bound
+   ``sqrt(h_t**2 + e_t**2)`` (h_t: distance to its plane, e_t: how far the projection falls
+   outside it) is below the distance to ``t0`` is evaluated with the closed-form closest point
+   on a triangle (Ericson, *Real-Time Collision Detection*, 5.1.5) and the minimum taken; ties
+   go to the lowest face index.
 
-The set-up is a few vectorised passes over (face, ring face) pairs, about the cost of one Open3D
-query of as many points as the mesh has faces; nothing is computed per pair at query time except
-for the points that need the ring check.
+The set-up is a few vectorised passes over (face, ring face) pairs, about 10 us of CPU per face
+(2 s for 2e5 faces here): several times an Open3D query of as many points, half the padded
+per-neighbour analysis it replaced. At query time nothing is computed per pair except for the
+points that need the ring check (about 2 % of points near a noisy surface).
 
 Closest points on an edge or a vertex are computed from the edge's endpoints in a canonical order
 (lower vertex index first), so two faces sharing the edge give the same bits: results do not
@@ -74,9 +76,9 @@ class MeshDistance:
     Notes
     -----
     Faces whose doubled area is below ``defaults.DEGENERATE_AREA_FRACTION`` of the squared
-    diagonal (segments and points) have no surface and are ignored. Building costs about as much
-    as one query of as many points as there are faces (the ring slopes); the Open3D scene is
-    built on the first query. See the module docstring for the method.
+    diagonal (segments and points) have no surface and are ignored. Building costs about 10 us
+    of CPU per face (the ring slopes); the Open3D scene is built on the first query. See the
+    module docstring for the method.
 
     Examples
     --------
