@@ -203,10 +203,11 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
                                                            mesh_dir=mesh_dir),
                      desc="compare")
     records = [done[key] for key in cases if key in done]
-    report = finish(records, out_dir, title=title, extra={"input": ident})
-    methods_run = list(dict.fromkeys(run.method for run in runs))
-    report["full_grid"] = full_grid_estimate(records, methods_run,
-                                             workers=n_workers or default_workers())
+    estimate = full_grid_estimate(records, list(dict.fromkeys(run.method for run in runs)),
+                                  workers=n_workers or default_workers())
+    report = finish(records, out_dir, title=title,
+                    extra={"input": ident, "full_grid": estimate})
+    report["full_grid"] = estimate
     return report
 
 
