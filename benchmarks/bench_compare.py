@@ -1,7 +1,18 @@
 """Every surface method on the paper's noisy clouds and a real shape model: speed vs accuracy.
 
-    python benchmarks/bench_compare.py                      # the issue's benchmark (~1 h here)
+    python benchmarks/bench_compare.py --overhead           # compare's cost over the methods'
+    python benchmarks/bench_compare.py --defaults           # default compare of RSO-A, asteroid
+    python benchmarks/bench_compare.py                      # full grids (~1 h here)
     python benchmarks/bench_compare.py --clouds rso-a --samples 20000 --no-auto   # quick look
+
+``--overhead``: ``recon compare`` of the demo cloud (the ``asteroid-lrf-slew`` preset, seed 0,
+77,400 shots) with ``--methods poisson ball-pivoting convex-hull --grid defaults``, run as a
+user runs it (a fresh ``recon`` process, scoring with metrics' defaults), ``--repeats`` times
+(>= 3): its total wall time divided by the sum of the three methods' own fit times
+(``wall_time_s`` in its results.json) of the same run; the median ratio is quoted (target
+<= 1.5). ``--defaults``: the default ``recon compare`` (every method at its defaults) of the
+``rso-a`` and ``asteroid`` clouds below, total wall time quoted, with how long the full grid
+would take.
 
 Clouds (each simulated with seed 0, then ingested; noise is the paper's LRF range error, 0.3 m
 3-sigma, "errors.range_sigma3"):
@@ -163,8 +174,77 @@ def markdown(summaries: list[dict]) -> str:
     return "\n".join(lines)
 
 
+OVERHEAD_METHODS = ("poisson", "ball-pivoting", "convex-hull")
+DEMO_PRESET = "asteroid-lrf-slew"
+TARGET_OVERHEAD = 1.5
+
+
+def recon_compare(log: Path, out: Path, *extra: str) -> tuple[float, dict]:
+    """Run ``recon compare LOG --truth LOG -o OUT EXTRA`` in a fresh process; (wall s, json)."""
+    import shutil
+    import subprocess
+
+    shutil.rmtree(out, ignore_errors=True)
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "from cli.main import main; main()", "compare",
+                    str(log), "--truth", str(log), "-o", str(out), *extra], check=True,
+                   cwd=ROOT, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - start, json.loads((out / "results.json").read_text())
+
+
+def overhead(args) -> int:
+    import os
+
+    import sim
+
+    log = args.out / "logs" / "demo.h5"
+    if not log.exists():
+        log.parent.mkdir(parents=True, exist_ok=True)
+        sim.simulate(sim.load_scene(DEMO_PRESET), log, seed=0)
+    ratios = []
+    print(f"recon compare of the demo cloud ({DEMO_PRESET}, seed 0), methods "
+          f"{' '.join(OVERHEAD_METHODS)}, defaults; load average {os.getloadavg()[0]:.1f}")
+    for i in range(args.repeats):
+        wall, result = recon_compare(log, args.out / "overhead", "--methods", *OVERHEAD_METHODS,
+                                     "--grid", "defaults")
+        fits = {r["method"]: r["wall_time_s"] for r in result["runs"]}
+        ratio = wall / sum(fits.values())
+        ratios.append(ratio)
+        print(f"  repeat {i + 1}: total {wall:.1f} s, fits " + ", ".join(
+            f"{m} {t:.2f} s" for m, t in fits.items()) + f" (sum {sum(fits.values()):.1f} s); "
+              f"ratio {ratio:.2f}")
+    median = statistics.median(ratios)
+    print(f"median total / sum of fits: {median:.2f} (target <= {TARGET_OVERHEAD}): "
+          f"{'met' if median <= TARGET_OVERHEAD else 'MISSED'}")
+    return 0
+
+
+def defaults_compare(args) -> int:
+    from recon.experiments.compare import format_full_grid
+
+    for name in ("rso-a", "asteroid"):
+        log = simulate(name, args.out)
+        wall, result = recon_compare(log, args.out / f"defaults-{name}", "--grid", "defaults",
+                                     "--json")
+        runs = result["runs"]
+        failed = [f"{r['label']} ({r.get('failure')})" for r in runs if r["status"] != "ok"]
+        print(f"{name}: default recon compare, {len(runs)} runs, total {wall:.0f} s "
+              f"({wall / 60:.1f} min); slowest fit "
+              f"{max((r.get('wall_time_s') or 0) for r in runs):.0f} s"
+              + (f"; failed: {', '.join(failed)}" if failed else ""))
+        estimate = json.loads((args.out / f"defaults-{name}" / "results.json").read_text())
+        if "full_grid" in estimate:
+            print("  " + format_full_grid(estimate["full_grid"]))
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--overhead", action="store_true",
+                        help="compare's total time over the methods' own (demo cloud)")
+    parser.add_argument("--defaults", action="store_true",
+                        help="default compare of the rso-a and asteroid clouds, timed")
+    parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "compare")
     parser.add_argument("--clouds", default=",".join(CLOUDS),
                         help=f"comma-separated subset of {', '.join(CLOUDS)}")
@@ -176,6 +256,11 @@ def main() -> int:
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--no-auto", action="store_true")
     args = parser.parse_args()
+    if args.overhead or args.defaults:
+        if args.repeats < 3:
+            parser.error("--repeats must be >= 3 (medians)")
+        args.out.mkdir(parents=True, exist_ok=True)
+        return overhead(args) if args.overhead else defaults_compare(args)
     names = [n for n in args.clouds.split(",") if n]
     unknown = sorted(set(names) - set(CLOUDS))
     if unknown:

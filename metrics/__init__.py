@@ -2,9 +2,10 @@
 
 ``score(test, truth)`` is the entry point: exact distances to the truth surface, accuracy,
 completeness, Chamfer and Hausdorff distances, precision / recall / F-score at a threshold,
-coverage (total and per truth face), normal consistency and the paper's edge metric. The pieces
-are public too: ``point_mesh_distance`` / ``MeshDistance`` (exact float64 point-to-mesh distance),
-``sample_surface``, and ``edge_score`` / ``detect_edges`` / ``feature_edges``.
+coverage (total and per truth face), normal consistency and the paper's edge metric. ``Truth``
+prepares a truth once for many scores. The pieces are public too: ``point_mesh_distance`` /
+``MeshDistance`` (exact float64 point-to-mesh distance), ``sample_surface``, and
+``edge_score`` / ``detect_edges`` / ``feature_edges``.
 
 Imports only ``formats`` and third-party libraries; Open3D is imported on the first distance
 query.
@@ -22,7 +23,7 @@ from metrics.edges import (
 from metrics.errors import MetricsInputError, ScaleMismatchWarning
 from metrics.inputs import Cloud, Mesh
 from metrics.sampling import sample_surface
-from metrics.score import ScoreReport, score
+from metrics.score import ScoreReport, Truth, score
 
 __all__ = [
     "Cloud",
@@ -33,6 +34,7 @@ __all__ = [
     "ScaleMismatchWarning",
     "ScoreReport",
     "SurfaceVariation",
+    "Truth",
     "detect_edges",
     "edge_score",
     "feature_edges",

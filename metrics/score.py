@@ -19,6 +19,11 @@ Temples, Knapitsch et al. 2017, and Open3D's ``compute_metrics``):
   the truth face holding its closest point (orientation ignored); None when the test has no
   normals (a cloud without them). A test mesh's normals are its sampled faces' normals.
 - edge score: ``edges.edge_score`` on the test points.
+
+Scoring many tests against one truth (a comparison's runs, a study's time prefixes, a stability
+sweep): build ``Truth(mesh)`` once and pass it as ``truth``; its distance structure, its samples
+and its coverage lattice are then made once and reused, and every report is the same as with a
+fresh truth.
 """
 
 from __future__ import annotations
@@ -42,7 +47,7 @@ from metrics.inputs import (
     face_normals,
 )
 from metrics.sampling import coverage_lattice, sample_surface, subdivision_levels
-from metrics.spatial import nearest_distance
+from metrics.spatial import cloud_distance
 
 _STATS = ("mean", "rms", "median", "p95", "max")
 _EDGE_OPTIONS = {"k", "rule", "threshold", "feature_angle_deg", "tolerance", "tolerance_fraction"}
@@ -146,6 +151,86 @@ def _count(value, name: str) -> int:
     return int(value)
 
 
+class Truth:
+    """A truth mesh made ready once for scoring many tests against it.
+
+    Holds what ``score`` derives from the truth alone, built on first use and reused by every
+    later call: the exact-distance structure (``MeshDistance``), the surface samples per
+    ``(n_truth_samples, seed)``, the coverage lattice per ``coverage_points`` and the face areas.
+    A report against a ``Truth`` is identical to one against the bare mesh.
+
+    Parameters
+    ----------
+    mesh : Mesh, (vertices, faces) tuple, or object with vertices/faces
+        vertices (n_v, 3) float64 metres; faces (m, 3) int, m >= 1.
+    name : str
+        Argument name in error messages.
+
+    Examples
+    --------
+    >>> truth = Truth(mesh)                                        # doctest: +SKIP
+    >>> reports = [score(surface, truth) for surface in surfaces]  # doctest: +SKIP
+    """
+
+    def __init__(self, mesh, *, name: str = "truth"):
+        self.mesh = as_mesh(mesh, name)
+        self.diagonal = bbox_diagonal(self.mesh.vertices)
+        self.areas = face_areas(self.mesh.vertices, self.mesh.faces)
+        self._distance: MeshDistance | None = None
+        self._samples: dict = {}
+        self._lattices: dict = {}
+
+    @classmethod
+    def of(cls, truth, name: str = "truth") -> Truth:
+        """``truth`` itself when it is a ``Truth``, else a new one around the mesh."""
+        return truth if isinstance(truth, Truth) else cls(truth, name=name)
+
+    @property
+    def distance(self) -> MeshDistance:
+        """Exact distances to the truth surface (built on first use)."""
+        if self._distance is None:
+            self._distance = MeshDistance(self.mesh)
+        return self._distance
+
+    def samples(self, n: int, seed) -> tuple[np.ndarray, np.ndarray]:
+        """``sampling.sample_surface(mesh, n, seed=seed)``, kept per ``(n, seed)``.
+
+        Returns
+        -------
+        points : (n, 3) float64, metres
+        faces : (n,) int64
+        """
+        key = (n, None if seed is None else tuple(np.atleast_1d(seed).tolist()))
+        if seed is None:  # fresh randomness each time: nothing to keep
+            return sample_surface(self.mesh, n, seed=None)
+        if key not in self._samples:
+            self._samples[key] = _frozen(sample_surface(self.mesh, n, seed=seed))
+        return self._samples[key]
+
+    def lattice(self, coverage_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The coverage lattice of about ``coverage_points`` points, kept per size.
+
+        Returns
+        -------
+        levels : (m,) int64, subdivision level per face
+        points : (sum(levels**2), 3) float64, metres
+        faces : (sum(levels**2),) int64
+        """
+        if coverage_points not in self._lattices:
+            levels = subdivision_levels(self.mesh, coverage_points,
+                                        defaults.COVERAGE_MAX_SUBDIVISION)
+            self._lattices[coverage_points] = _frozen((levels,
+                                                       *coverage_lattice(self.mesh, levels)))
+        return self._lattices[coverage_points]
+
+
+def _frozen(arrays: tuple) -> tuple:
+    """The arrays made read-only: kept by a ``Truth`` and shared by its reports."""
+    for array in arrays:
+        array.setflags(write=False)
+    return arrays
+
+
 def score(test, truth, *, tau: float | None = None, tau_fraction: float | None = None,
           n_truth_samples: int = defaults.TRUTH_SAMPLES,
           n_test_samples: int = defaults.TEST_MESH_SAMPLES,
@@ -158,8 +243,9 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     ----------
     test : (n, 3) array, Cloud, Mesh, (vertices, faces) tuple or object with vertices/faces
         The reconstruction, metres, in the truth's frame. A ``Cloud`` may carry normals (n, 3).
-    truth : Mesh, (vertices, faces) tuple, or object with vertices/faces
-        vertices (n_v, 3) float64 metres; faces (m, 3) int, m >= 1.
+    truth : Truth, Mesh, (vertices, faces) tuple, or object with vertices/faces
+        vertices (n_v, 3) float64 metres; faces (m, 3) int, m >= 1. A ``Truth`` reuses what
+        earlier calls built from the same truth (same report, less work).
     tau : float, optional, metres
         Threshold of precision, recall, F-score and coverage.
     tau_fraction : float, optional
@@ -198,7 +284,8 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     ScaleMismatchWarning
         Test and truth bounding-box diagonals differ by more than ``SCALE_MISMATCH_RATIO`` (100).
     """
-    truth = as_mesh(truth, "truth")
+    prepared = Truth.of(truth)
+    truth = prepared.mesh
     test = as_test(test, "test")
     if test.frame != truth.frame:
         raise MetricsInputError(f"test is in the {test.frame} frame but truth in the "
@@ -209,7 +296,7 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     n_truth_samples = _count(n_truth_samples, "n_truth_samples")
     n_test_samples = _count(n_test_samples, "n_test_samples")
     coverage_points = _count(coverage_points, "coverage_points")
-    diagonal = bbox_diagonal(truth.vertices)
+    diagonal = prepared.diagonal
     tau = resolve_length(tau, tau_fraction, defaults.TAU_FRACTION, diagonal, "tau")
     edge_options = dict(edge_options or {})
     unknown = set(edge_options) - _EDGE_OPTIONS
@@ -240,22 +327,19 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
 
     report_stage = progress or (lambda stage: None)
     # Accuracy: test -> truth surface, exact.
-    truth_distance = MeshDistance(truth)
+    truth_distance = prepared.distance
     accuracy, accuracy_faces, _ = truth_distance.query(test_points)
     report_stage("accuracy")
 
-    # Completeness: truth samples -> test; coverage lattice -> test.
-    truth_points, truth_faces = sample_surface(truth, n_truth_samples,
-                                               seed=_child_seed(seed))
-    levels = subdivision_levels(truth, coverage_points, defaults.COVERAGE_MAX_SUBDIVISION)
-    lattice, lattice_faces = coverage_lattice(truth, levels)
+    # Completeness: truth samples -> test; coverage lattice -> test (one query for both).
+    truth_points, truth_faces = prepared.samples(n_truth_samples, _child_seed(seed))
+    levels, lattice, lattice_faces = prepared.lattice(coverage_points)
+    queries = np.concatenate([truth_points, lattice])
     if isinstance(test, Mesh):
-        test_distance = MeshDistance(test)
-        completeness = test_distance.query(truth_points)[0]
-        lattice_distance = test_distance.query(lattice)[0]
+        both = MeshDistance(test).query(queries)[0]
     else:
-        both = nearest_distance(test_points, np.concatenate([truth_points, lattice]))
-        completeness, lattice_distance = both[:n_truth_samples], both[n_truth_samples:]
+        both = cloud_distance(test_points, queries)
+    completeness, lattice_distance = both[:n_truth_samples], both[n_truth_samples:]
     report_stage("completeness")
 
     acc, comp = _summary(accuracy), _summary(completeness)
@@ -266,7 +350,7 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     covered = np.bincount(lattice_faces, weights=lattice_distance < tau,
                           minlength=truth.n_faces)
     face_coverage = covered / per_face
-    areas = face_areas(truth.vertices, truth.faces)
+    areas = prepared.areas
     coverage = float(np.sum(areas * face_coverage) / areas.sum())
     normal_consistency = None
     if test_normals is not None:
@@ -302,4 +386,4 @@ def _child_seed(seed: int | None):
     return None if seed is None else [seed, 1]
 
 
-__all__ = ["Cloud", "Mesh", "ScoreReport", "score"]
+__all__ = ["Cloud", "Mesh", "ScoreReport", "Truth", "score"]

@@ -230,8 +230,9 @@ def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None
 
 
 def compare(cloud, *, truth, output, methods: Sequence[str] | None = None, **options) -> dict:
-    """Run every method (defaults and a parameter grid) on one cloud, each isolated, and score
-    each surface against the truth: the speed against accuracy comparison of ``recon compare``.
+    """Run every method on one cloud (at its defaults; ``grid="full"`` adds the parameter
+    grids), each isolated, and score each surface against the truth: the speed against
+    accuracy comparison of ``recon compare``.
 
     Parameters
     ----------

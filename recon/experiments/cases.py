@@ -32,26 +32,67 @@ SWEEP_THREADS = 1
 MIN_SCORE_SAMPLES = 100
 
 
-def variants(names: Sequence[str] | None = None, *, grid: bool = True) -> list[Run]:
-    """The runs of a sweep: each method at its defaults, then (with ``grid``) its grid.
+# Grids of ``variants``: every method at its defaults (the Pareto front across methods, in
+# minutes on a paper-scale cloud), or with each method's parameter grid besides.
+GRIDS = ("defaults", "full")
+
+
+def variants(names: Sequence[str] | None = None, *, grid: bool | str = "full") -> list[Run]:
+    """The runs of a sweep: each method at its defaults, then (with the full grid) its grid.
 
     Parameters
     ----------
     names : sequence of str, optional
         Methods (default: every listed method). Hidden test methods may be named.
-    grid : bool
-        Include each method's parameter grid (else defaults only).
+    grid : {"defaults", "full"} or bool
+        ``"full"`` (or True) adds each method's parameter grid; ``"defaults"`` (or False) runs
+        each method at its defaults only.
 
     Raises
     ------
     UnknownMethod
         A name that is not registered (checked before anything runs).
     """
+    full = grid_name(grid) == "full"
     out = []
     for name in (list(names) if names else methods.available()):
         spec = methods.get(name)
-        out.extend(spec.bind(params) for params in (spec.variants() if grid else [{}]))
+        out.extend(spec.bind(params) for params in (spec.variants() if full else [{}]))
     return out
+
+
+def grid_name(grid: bool | str) -> str:
+    """``grid`` as one of ``GRIDS`` (True: "full", False: "defaults")."""
+    if isinstance(grid, bool):
+        return "full" if grid else "defaults"
+    if grid not in GRIDS:
+        raise SweepError(f"grid must be one of {', '.join(GRIDS)}, got {grid!r}")
+    return grid
+
+
+def full_grid_estimate(records: Sequence[dict], names: Sequence[str] | None = None, *,
+                       workers: int = 1) -> dict:
+    """How long the full grid would take, from the defaults' run times.
+
+    Each grid variant is estimated at its method's default run time (a grid varies a
+    resolution both ways around the default, so this is the middle of its range); the runs
+    are shared among ``workers``.
+
+    Returns
+    -------
+    dict
+        ``runs`` (the full grid's runs not yet done), ``estimate_s`` (wall seconds, None when
+        no default run succeeded), ``unknown`` (methods whose defaults failed: not counted).
+    """
+    done = {r["key"] for r in records if "key" in r}
+    time_of = {r["method"]: r["wall_time_s"] for r in records
+               if r.get("status") == "ok" and r.get("wall_time_s")
+               and r["params"] == methods.get(r["method"]).defaults}
+    runs = [run for run in variants(names, grid="full") if run.key not in done]
+    unknown = sorted({run.method for run in runs} - set(time_of))
+    known = [time_of[run.method] for run in runs if run.method in time_of]
+    estimate = sum(known) / max(1, workers) if known or not runs else None
+    return {"runs": len(runs), "estimate_s": estimate, "unknown": unknown}
 
 
 def as_runs(runs: Sequence[Run | tuple[str, dict]]) -> list[Run]:

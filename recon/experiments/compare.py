@@ -1,8 +1,12 @@
-"""``recon compare``: every method (defaults plus a small grid) on one cloud, scored on truth.
+"""``recon compare``: every method on one cloud, scored on the truth.
 
-Each run (a ``Run`` from ``recon.experiments.cases.variants``) is isolated
-(``recon.surfaces.isolation``: own process, time and memory limits), runs on Dask
-(``recon.experiments.sweep``) and streams to ``DIR/results.jsonl``. Finishing writes
+By default every method runs at its defaults (``grid="defaults"``): the Pareto front across
+methods in minutes on a paper-scale cloud, with an estimate of how long the full grid would
+take (``full_grid``); ``grid="full"`` adds each method's parameter grid. Each run (a ``Run``
+from ``recon.experiments.cases.variants``) is isolated (``recon.surfaces.isolation``: a warm
+worker process with time and memory limits, which also scores the mesh), runs on a local
+thread per core or on Dask (``recon.experiments.sweep``) and streams to
+``DIR/results.jsonl``. Finishing writes
 
 - ``DIR/results.csv`` and ``DIR/results.json``: per run the method, parameters, status and
   failure reason, wall time of the method, peak memory of its process, face and vertex counts,
@@ -36,13 +40,14 @@ from recon.experiments.cases import (
     FSCORE,
     SWEEP_THREADS,
     as_runs,
+    full_grid_estimate,
     pareto_front,
     rank,
     score_options,
     variants,
     write_csv,
 )
-from recon.experiments.sweep import run_sweep, to_jsonable
+from recon.experiments.sweep import default_workers, run_sweep, to_jsonable
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
 from recon.surfaces.methods import MethodFailed, MethodInput, Run
 from recon.surfaces.prepare import Preparation
@@ -138,7 +143,7 @@ def agreement(records: list[dict], key: str, *, metric: str = CHAMFER) -> dict:
 
 
 def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *,
-            names: Sequence[str] | None = None, grid: bool = True,
+            names: Sequence[str] | None = None, grid: bool | str = "defaults",
             runs: Sequence[Run] | None = None, timeout_s: float = DEFAULT_TIMEOUT_S,
             memory_mb: int | None = DEFAULT_MEMORY_MB,
             scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
@@ -155,15 +160,16 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
     out_dir : str or Path
     names : sequence of str, optional
         Methods to run (default: all listed). Hidden test methods may be named.
-    grid : bool
-        Run each method's parameter grid besides its defaults.
+    grid : {"defaults", "full"} or bool
+        ``"full"`` (True) runs each method's parameter grid besides its defaults.
     runs : sequence of Run, optional
         The runs themselves (``recon.experiments.cases.variants``), instead of ``names`` and
         ``grid``.
     timeout_s, memory_mb
         Limits of each isolated run.
     scheduler, n_workers, resume
-        See ``recon.experiments.sweep.run_sweep``.
+        See ``recon.experiments.sweep.run_sweep``; no scheduler means ``"threads"`` (one
+        thread per core waiting on its isolated worker: no Dask cluster to start locally).
     keep_meshes : bool
         Write each mesh to ``DIR/meshes``.
     score_options : dict, optional
@@ -177,10 +183,12 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
     -------
     dict
         ``records`` (ranked), ``table`` (text), ``pareto_chamfer`` and ``pareto_fscore``
-        (labels), and the paths written.
+        (labels), ``full_grid`` (``cases.full_grid_estimate``: the full grid's remaining runs
+        and their estimated time), and the paths written.
     """
     out_dir = Path(out_dir)
     runs = variants(names, grid=grid) if runs is None else as_runs(runs)
+    scheduler = scheduler or "threads"
     cases = {run.key: {"run": run} for run in runs}
     ident = {"n_points": len(cloud.points), "spacing": cloud.spacing, "seed": cloud.seed,
              "points_sha1": hashlib.sha1(np.ascontiguousarray(cloud.points)).hexdigest(),
@@ -195,7 +203,12 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
                                                            mesh_dir=mesh_dir),
                      desc="compare")
     records = [done[key] for key in cases if key in done]
-    return finish(records, out_dir, title=title, extra={"input": ident})
+    estimate = full_grid_estimate(records, list(dict.fromkeys(run.method for run in runs)),
+                                  workers=n_workers or default_workers())
+    report = finish(records, out_dir, title=title,
+                    extra={"input": ident, "full_grid": estimate})
+    report["full_grid"] = estimate
+    return report
 
 
 def finish(records: list[dict], out_dir, *, title: str = "", extra: dict | None = None) -> dict:
@@ -226,6 +239,20 @@ def finish(records: list[dict], out_dir, *, title: str = "", extra: dict | None 
             "csv": csv_path, "json": json_path, "png": png_path}
 
 
+def format_full_grid(estimate: dict) -> str:
+    """One line: how long ``--grid full`` would take (``cases.full_grid_estimate``)."""
+    if not estimate["runs"]:
+        return "full grid: every run done"
+    if estimate["estimate_s"] is None:
+        return (f"full grid: {estimate['runs']} more runs (no default run succeeded to time "
+                "them); --grid full runs them")
+    minutes = estimate["estimate_s"] / 60.0
+    unknown = (f"; not counting {', '.join(estimate['unknown'])}, whose defaults failed"
+               if estimate["unknown"] else "")
+    return (f"full grid: {estimate['runs']} more runs, about {minutes:.1f} min here (each "
+            f"variant timed as its method's defaults{unknown}); --grid full runs them")
+
+
 def format_agreement(verdict: dict) -> str:
     """One line: where ``-m auto``'s choice ranks on the truth (``agreement``'s result)."""
     return (f"auto vs truth: auto's choice ranks {verdict['rank']} of {verdict['n_ranked']} on "
@@ -244,7 +271,7 @@ def _name(source, *, full: bool = True) -> str:
 
 
 def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
-                  grid: bool = True, truth_scale: float = 1.0,
+                  grid: bool | str = "defaults", truth_scale: float = 1.0,
                   preparation: Preparation | None = None, limits: Limits | None = None,
                   samples: int | None = None, auto: bool = False,
                   scheduler: str | None = None, n_workers: int | None = None,
@@ -307,7 +334,7 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
                      fingerprint={"input": _name(input), "truth": _name(truth),
                                   "voxel": preparation.voxel,
                                   "remove_outliers": preparation.remove_outliers,
-                                  "normals_k": preparation.k, "grid": grid},
+                                  "normals_k": preparation.k},
                      **limits.kwargs())
     if auto:
         from recon.experiments.auto import choose, format_choice

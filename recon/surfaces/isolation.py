@@ -1,14 +1,25 @@
-"""Run one reconstruction in a fresh process with a time limit and a memory limit.
+"""Run one reconstruction in a warm, isolated worker process with a time and a memory limit.
 
 Surface methods fail in ways a ``try`` cannot catch: Open3D's ball pivoting can run for hours,
 qhull can abort or segfault the process, Poisson can allocate without bound (failure modes
-reported upstream for each). ``run_isolated`` therefore starts ``python -m
-recon.surfaces.isolation JOBDIR`` for every run and waits for it from outside:
+reported upstream for each). ``run_isolated`` therefore runs every method in a child process
+and watches it from outside. The children are a pool of warm workers (``python -m
+recon.surfaces.isolation``, started with numpy, scipy, Open3D, pymeshlab and the metrics
+already imported, then reading one job after another), so a run pays neither a fresh
+interpreter nor fresh imports:
 
-- the child limits its own address space (``RLIMIT_AS``, so allocations fail inside it) and
-  writes no core files, then runs the method, checks the mesh and optionally scores it;
-- the parent kills the child's whole process group at the wall-clock limit, and reads the
-  child's exit status and peak memory with ``os.wait4`` even when it died;
+- for each job the worker limits its own address space (``RLIMIT_AS``, the run's limit on top
+  of what the warm worker already holds, so allocations fail inside it) while the method runs,
+  resets its peak-memory mark (``/proc/self/clear_refs``) so the peak it reports is the run's
+  own, checks the mesh and optionally scores it against a truth it keeps between jobs
+  (``metrics.Truth``: built once per worker and truth);
+- the parent kills the worker's whole process group at the limit, and otherwise reads the
+  worker's exit status when it died; the time limit counts from the moment the method starts
+  (a worker's start-up and a job's loading have their own, generous limit,
+  ``START_TIMEOUT_S``), so a loaded machine cannot make a fast method time out while
+  importing Open3D;
+- a worker is replaced after a crash, a hang, a memory failure, or ``WORKER_RUNS`` runs (Open3D's
+  Poisson is known to crash after hundreds of calls in one process);
 - every outcome becomes a result dict: ``status`` "ok" or "failed", and for a failure its
   ``failure`` kind and a one-line ``reason``.
 
@@ -18,12 +29,14 @@ triangles), ``degenerate`` (zero area, collapsed or far larger than the points),
 (the mesh was fine but scoring it failed).
 
 The job carries one ``Run`` (``recon.surfaces.methods``: method name, resolved parameters, the
-registering module): the child imports ``Run.module`` on the parent's ``sys.path`` and looks the
-method up by name once, so methods registered by test modules run too.
+registering module): the worker imports ``Run.module`` on the parent's ``sys.path`` and looks the
+method up by name, so methods registered by test modules run too.
 """
 
 from __future__ import annotations
 
+import atexit
+import hashlib
 import os
 import pickle
 import resource
@@ -35,6 +48,7 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,26 +64,32 @@ from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
 # with automatic radius took 155 s, measured on a 2-core, 24 GiB machine with pymeshlab 2025.7),
 # so a limit hit means a runaway.
 DEFAULT_TIMEOUT_S = 600.0
-# 8 GiB of address space: the child reserves ~1.8 GB of virtual memory just importing Open3D
-# and pymeshlab and running a small Poisson (measured with open3d 0.20), and two children (one
-# per core) must fit a 2-core, 24 GiB machine with room for the Dask workers.
+# 8 GiB of address space on top of the warm worker's own (~1.4 GB of virtual memory after
+# importing Open3D and pymeshlab, measured with open3d 0.20): two runs (one per core) must fit a
+# 2-core, 24 GiB machine with room for the Dask workers.
 DEFAULT_MEMORY_MB = 8192
 # Time allowed for checking and scoring a finished mesh, seconds (the method's own limit does
 # not include it): metrics.score of a 2e5-face mesh with its default 2e5 samples per side takes
-# ~10-30 s here; a limit hit means a runaway.
+# a few seconds here; a limit hit means a runaway.
 DEFAULT_SCORE_TIMEOUT_S = 600.0
-# How often the parent polls the child, seconds (start, growing to the maximum).
+# Time a worker may take to start (interpreter and imports: 3 s idle, 8 s at load 6 here) plus
+# a job's loading, seconds; a limit hit means a broken installation, not a slow method.
+START_TIMEOUT_S = 300.0
+# Runs a worker does before it is replaced (Open3D's Poisson crashes after hundreds of calls in
+# one process, reported upstream; 50 keeps far from that and costs one start-up per 50 runs).
+WORKER_RUNS = 50
+# Modules a worker imports before its first job (the methods' and scoring's heavy imports).
+WORKER_PRELOAD = ("numpy", "scipy.spatial", "open3d", "pymeshlab", "metrics.score")
+# How often the parent polls the worker, seconds (start, growing to the maximum).
 POLL_START_S, POLL_MAX_S = 0.02, 0.25
-# Lines of the child's output kept in a failure's reason.
+# Lines of the worker's output kept in a failure's reason.
 OUTPUT_TAIL_LINES = 3
 
 FAILURE_KINDS = ("timeout", "crash", "memory", "error", "empty", "degenerate", "score")
 # Linux prctl option asking the kernel to signal a process when its parent thread dies.
 _PR_SET_PDEATHSIG = 1
-
-# Process ids of the children running now (``kill_running`` ends them on an interrupt).
-_RUNNING: set[int] = set()
-_RUNNING_LOCK = threading.Lock()
+# Stages a job goes through, as the worker writes them to the job's ``stage`` file.
+_LOADING, _RUNNING, _CHECKING, _SCORING = "loading", "running", "checking", "scoring"
 
 
 class LimitError(ReconError, ValueError):
@@ -83,9 +103,9 @@ class Limits:
     Attributes
     ----------
     timeout_s : float, seconds
-        Wall-clock limit of the child up to the end of the method; must be positive.
+        Wall-clock limit of the method's own run; must be positive.
     memory_mb : int or None, MiB
-        Address-space limit of the child; None: unlimited.
+        Address space the method may add to its worker's; None: unlimited.
     """
 
     timeout_s: float = DEFAULT_TIMEOUT_S
@@ -120,27 +140,46 @@ def _check_limits(timeout: float, memory: int | None, timeout_name: str, memory_
 
 
 class _Failure(Exception):
-    """Raised in the child: a failure of a known kind with its reason."""
+    """Raised in the worker: a failure of a known kind with its reason."""
 
     def __init__(self, kind: str, reason: str):
         super().__init__(reason)
         self.kind = kind
 
 
+def _status_mb(field: str, pid: int | str = "self") -> float | None:
+    """A ``/proc/PID/status`` memory line (``VmHWM``, ``VmRSS``, ``VmSize``) in MB; None when
+    unreadable (the process is gone, or not Linux)."""
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            for line in status:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) / 1024.0  # kB
+    except (OSError, ValueError):
+        pass
+    return None
+
+
 def _maxrss_mb() -> float:
-    """This process's peak resident memory [MB].
+    """This process's peak resident memory [MB] since start or since ``_reset_peak``.
 
     Linux keeps ``ru_maxrss`` across fork and exec, so a child started by a large parent would
     report the parent's peak; the ``VmHWM`` line of /proc/self/status is this image's own.
     """
+    peak = _status_mb("VmHWM")
+    if peak is None:  # not Linux
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return peak
+
+
+def _reset_peak() -> None:
+    """Reset this process's ``VmHWM`` to its current resident size (Linux: writing 5 to
+    /proc/self/clear_refs), so a reused worker reports each run's own peak."""
     try:
-        with open("/proc/self/status") as status:
-            for line in status:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024.0  # kB
-    except OSError:  # not Linux
+        with open("/proc/self/clear_refs", "w") as refs:
+            refs.write("5")
+    except OSError:  # not Linux: the peak then covers the worker's earlier runs too
         pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _die_with_parent(parent: int) -> None:
@@ -157,45 +196,77 @@ def _die_with_parent(parent: int) -> None:
         os._exit(1)
 
 
-def _child(jobdir: Path) -> int:
-    """Body of ``python -m recon.surfaces.isolation JOBDIR``: run the job, write result.pkl."""
-    job = pickle.loads((jobdir / "job.pkl").read_bytes())
-    if job.get("parent_pid"):
-        _die_with_parent(job["parent_pid"])
+def _serve(parent: int) -> int:
+    """Body of a worker (``python -m recon.surfaces.isolation PARENT_PID``): import the heavy
+    modules once, then run each job directory named on a line of stdin until stdin closes."""
+    import importlib
+
+    _die_with_parent(parent)
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
-    if job["memory_mb"]:
-        limit = int(job["memory_mb"]) * 1024 * 1024
-        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-    for entry in reversed(job["sys_path"]):
-        if entry not in sys.path:
-            sys.path.insert(0, entry)
+    for name in WORKER_PRELOAD:
+        try:
+            importlib.import_module(name)
+        except ImportError:  # a method needing it fails at its own import, with the reason
+            pass
+    truths: dict[str, Any] = {}
+    for line in sys.stdin:
+        _run_job(Path(line.strip()), truths)
+        sys.stdout.flush()
+    return 0
+
+
+def _limit_memory(megabytes: int | None) -> None:
+    """Limit this process's address space to its current size plus ``megabytes`` (None: lift
+    the limit again)."""
+    _, hard = resource.getrlimit(resource.RLIMIT_AS)
+    soft = hard
+    if megabytes:
+        size = _status_mb("VmSize") or 0.0
+        soft = int((size + megabytes) * 1024 * 1024)
+        if hard != resource.RLIM_INFINITY:
+            soft = min(soft, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
+def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
+    """Run the job in ``jobdir``: the method, the checks, the score; write result.pkl."""
+    import importlib
+
     stage = jobdir / "stage"
     result: dict[str, Any] = {}
+    memory_mb = None
     try:
-        stage.write_text("loading")
-        import importlib
-
+        stage.write_text(_LOADING)
+        job = pickle.loads((jobdir / "job.pkl").read_bytes())
+        memory_mb = job["memory_mb"]
+        for entry in reversed(job["sys_path"]):
+            if entry not in sys.path:
+                sys.path.insert(0, entry)
         run: Run = job["run"]
         method = run.method_spec()
         for name in method.preload:
             importlib.import_module(name)
         cloud: MethodInput = job["cloud"]
+        _reset_peak()
         result["baseline_memory_mb"] = _maxrss_mb()
-        stage.write_text("running")
+        _limit_memory(memory_mb)
+        stage.write_text(_RUNNING)
         start = time.perf_counter()
         try:
             vertices, faces = method.run(cloud, **run.params)
         except MemoryError:
             raise _Failure("memory", f"{run.method}: out of memory (limit "
-                                     f"{job['memory_mb']} MB)") from None
+                                     f"{memory_mb} MB)") from None
         except MethodFailed as exc:
             raise _Failure("error", str(exc)) from None
         except Exception as exc:  # a library error is a recorded failure, with its type
             last = str(exc).strip().splitlines()[-1] if str(exc).strip() else ""
             raise _Failure("error", f"{run.method}: {type(exc).__name__}: {last}") from None
+        finally:
+            _limit_memory(None)  # the limit is the method's: checking and scoring are ours
         result["wall_time_s"] = time.perf_counter() - start
         result["peak_memory_mb"] = _maxrss_mb()
-        stage.write_text("checking")
+        stage.write_text(_CHECKING)
         try:
             vertices, faces = check_surface(vertices, faces, cloud.points, method=run.method)
         except SurfaceRejected as exc:
@@ -205,18 +276,19 @@ def _child(jobdir: Path) -> int:
         result.update(vertices=vertices, faces=faces, n_vertices=len(vertices),
                       n_faces=len(faces), watertight=watertight(faces))
         if job.get("truth") is not None:
-            stage.write_text("scoring")
+            stage.write_text(_SCORING)
             try:
-                result["scores"] = _score(vertices, faces, job["truth"], job["score_options"])
+                result["scores"] = _score(vertices, faces, job["truth"], job["truth_key"],
+                                          job["score_options"], truths)
             except Exception as exc:
                 raise _Failure("score", f"scoring failed: {type(exc).__name__}: {exc}") from None
         result.update(status="ok", failure=None, reason="")
     except _Failure as failure:
         result.update(status="failed", failure=failure.kind, reason=str(failure))
     except MemoryError:
+        _limit_memory(None)
         result.update(status="failed", failure="memory",
-                      reason=f"out of memory while {stage.read_text()} "
-                             f"(limit {job['memory_mb']} MB)")
+                      reason=f"out of memory while {stage.read_text()} (limit {memory_mb} MB)")
     except Exception as exc:
         traceback.print_exc()
         result.update(status="failed", failure="error",
@@ -224,24 +296,141 @@ def _child(jobdir: Path) -> int:
     tmp = jobdir / "result.pkl.partial"
     tmp.write_bytes(pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL))
     tmp.rename(jobdir / "result.pkl")
-    return 0
 
 
-def _score(vertices, faces, truth, options) -> dict:
-    """Score a mesh against the truth with ``metrics.score``; a flat dict of numbers."""
-    from metrics.score import score
+def _score(vertices, faces, truth, key: str, options, truths: dict[str, Any]) -> dict:
+    """Score a mesh against the truth with ``metrics.score``; a flat dict of numbers.
 
-    report = score((vertices, faces), truth, **(options or {}))
+    The worker keeps the last truth it saw (``metrics.Truth``, by ``key``): a comparison's runs
+    share its distance structure and samples.
+    """
+    from metrics.score import Truth, score
+
+    if key not in truths:
+        truths.clear()
+        truths[key] = Truth(truth)
+    report = score((vertices, faces), truths[key], **(options or {}))
     return {k: v for k, v in report.to_dict().items() if isinstance(v, (int, float, bool))
             or v is None}
 
 
-def _tail(path: Path) -> str:
+def _truth_key(truth) -> str:
+    """Identity of a truth mesh's arrays (the worker's cache key)."""
+    digest = hashlib.sha1()
+    for array in truth:
+        array = np.ascontiguousarray(array)
+        digest.update(str((array.dtype, array.shape)).encode())
+        digest.update(array)
+    return digest.hexdigest()
+
+
+def _tail(path: Path, offset: int = 0) -> str:
+    """The last lines of a worker's output after byte ``offset`` (this job's), joined."""
     try:
-        lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+        with open(path, "rb") as log:
+            log.seek(offset)
+            text = log.read().decode(errors="replace")
     except OSError:
         return ""
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     return " | ".join(lines[-OUTPUT_TAIL_LINES:])
+
+
+# --------------------------------------------------------------------------- the worker pool
+
+class _Worker:
+    """One warm worker process: its pipe, its output log, how many runs it did."""
+
+    def __init__(self, threads: int | None):
+        env = dict(os.environ)
+        if threads:
+            for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+                env[name] = str(int(threads))
+        self.dir = tempfile.TemporaryDirectory(prefix="recon-worker-")
+        self.log = Path(self.dir.name) / "output.log"
+        self.threads = threads
+        self.runs = 0
+        with open(self.log, "wb") as out:
+            # Started from the pool's own long-lived thread: the worker's parent-death signal
+            # follows the thread that started it (see _die_with_parent).
+            self.proc = _LAUNCHER.submit(
+                subprocess.Popen,
+                [sys.executable, "-m", "recon.surfaces.isolation", str(os.getpid())],
+                stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT, env=env,
+                start_new_session=True).result()
+
+    def submit(self, jobdir: Path) -> int:
+        """Hand the worker a job; returns the byte offset of its output where the job begins."""
+        offset = self.log.stat().st_size if self.log.exists() else 0
+        self.proc.stdin.write(f"{jobdir}\n".encode())
+        self.proc.stdin.flush()
+        self.runs += 1
+        return offset
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self) -> None:
+        """End the worker (its whole process group) and remove its files."""
+        _kill_group(self.proc.pid)
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            pass
+        for stream in (self.proc.stdin,):
+            try:
+                stream.close()
+            except OSError:
+                pass
+        self.dir.cleanup()
+
+
+_LAUNCHER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recon-isolation")
+_IDLE: dict[int | None, list[_Worker]] = {}
+_BUSY: set[_Worker] = set()
+_POOL_LOCK = threading.Lock()
+
+
+def _take(threads: int | None) -> _Worker:
+    """An idle live worker for ``threads`` (OMP threads), or a new one."""
+    with _POOL_LOCK:
+        idle = _IDLE.setdefault(threads, [])
+        while idle:
+            worker = idle.pop()
+            if worker.alive():
+                _BUSY.add(worker)
+                return worker
+            worker.stop()
+    worker = _Worker(threads)
+    with _POOL_LOCK:
+        _BUSY.add(worker)
+    return worker
+
+
+def _give_back(worker: _Worker, healthy: bool) -> None:
+    """Return a worker to the pool, or end it (after a failure that may have left it unwell,
+    or after ``WORKER_RUNS`` runs)."""
+    with _POOL_LOCK:
+        _BUSY.discard(worker)
+        if healthy and worker.alive() and worker.runs < WORKER_RUNS:
+            _IDLE.setdefault(worker.threads, []).append(worker)
+            return
+    worker.stop()
+
+
+@atexit.register
+def shutdown_workers() -> None:
+    """End every worker of this process's pool (at exit; also for tests)."""
+    with _POOL_LOCK:
+        workers = [w for idle in _IDLE.values() for w in idle] + list(_BUSY)
+        _IDLE.clear()
+        _BUSY.clear()
+    for worker in workers:
+        worker.stop()
+
+
+# Failures after which a worker is replaced rather than reused.
+_UNWELL = {"timeout", "crash", "memory", "score"}
 
 
 def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None, *,
@@ -250,7 +439,7 @@ def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None,
                  memory_mb: int | None = DEFAULT_MEMORY_MB, threads: int | None = None,
                  score_timeout_s: float = DEFAULT_SCORE_TIMEOUT_S,
                  on_wait: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """Run one method on one cloud in a fresh, limited process and report what happened.
+    """Run one method on one cloud in a warm, limited worker process and report what happened.
 
     Parameters
     ----------
@@ -261,150 +450,172 @@ def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None,
     params : dict, optional
         With a name only: overrides of the method's defaults (checked before any process starts).
     truth : (vertices, faces), optional
-        Truth mesh, metres, same frame: when given, the mesh is scored with ``metrics.score``.
+        Truth mesh, metres, same frame: when given, the mesh is scored with ``metrics.score``
+        (in the worker, which keeps the truth's ``metrics.Truth`` for its next runs).
     score_options : dict, optional
         Keyword arguments of ``metrics.score``.
     timeout_s : float
-        Wall-clock limit of the child up to the end of the method (start-up and imports
-        included), seconds.
+        Wall-clock limit of the method's own run, seconds (a worker's start-up and the job's
+        loading are limited separately by ``START_TIMEOUT_S``).
     memory_mb : int or None
-        Address-space limit of the child, MiB (None: unlimited).
+        Address space the method may add to its worker's, MiB (None: unlimited).
     threads : int, optional
-        ``OMP_NUM_THREADS`` and friends of the child (sweeps set 1 so parallel runs do not
-        compete for the cores).
+        ``OMP_NUM_THREADS`` and friends of the worker (sweeps set 1 so parallel runs do not
+        compete for the cores); workers are pooled per value.
     score_timeout_s : float
         Further limit for checking and scoring the mesh, counted from the method's end.
     on_wait : callable, optional
-        Called with the child's current stage (e.g. "running") each time the parent polls it,
+        Called with the job's current stage (e.g. "running") each time the parent polls it,
         at least every ``POLL_MAX_S``: drives a progress display.
 
     Returns
     -------
     dict
         ``method``, ``params`` (resolved), ``status`` ("ok" or "failed"), ``failure`` (kind or
-        None), ``reason``, ``wall_time_s`` (the method alone), ``process_time_s`` (the whole
-        child), ``peak_memory_mb`` (the child's peak resident set after the method, or at its
-        death), and when ok ``vertices``, ``faces``, ``n_vertices``, ``n_faces``,
-        ``watertight`` and (with a truth) ``scores``.
+        None), ``reason``, ``wall_time_s`` (the method alone; for a timeout, until it was
+        stopped), ``process_time_s`` (the whole job in its worker, from hand-over to result,
+        a new worker's start-up included), ``peak_memory_mb`` (the worker's peak resident set
+        during this run: after the method, or at its death), ``baseline_memory_mb`` (resident
+        just before the method), and when ok ``vertices``, ``faces``, ``n_vertices``,
+        ``n_faces``, ``watertight`` and (with a truth) ``scores``.
     """
     run = bind(run, params)
     limits = Limits(timeout_s, memory_mb)
     job = {"run": run, "cloud": cloud, "truth": truth, "score_options": score_options,
-           "memory_mb": limits.memory_mb, "sys_path": [p for p in sys.path if p],
-           "parent_pid": os.getpid()}
-    env = dict(os.environ)
-    if threads:
-        for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-            env[name] = str(int(threads))
+           "truth_key": None if truth is None else _truth_key(truth),
+           "memory_mb": limits.memory_mb, "sys_path": [p for p in sys.path if p]}
     base = {"method": run.method, "params": run.params}
     with tempfile.TemporaryDirectory(prefix="recon-run-") as tmp:
         jobdir = Path(tmp)
         (jobdir / "job.pkl").write_bytes(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
-        log = jobdir / "output.log"
         start = time.perf_counter()
-        with open(log, "wb") as out:
-            proc = subprocess.Popen([sys.executable, "-m", "recon.surfaces.isolation", str(jobdir)],
-                                    stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
-                                    env=env, start_new_session=True)
-        with _RUNNING_LOCK:
-            _RUNNING.add(proc.pid)
+        worker = _take(threads)
+        healthy = False
         try:
-            status, usage, timed_out = _wait(proc, timeout_s, jobdir / "stage", score_timeout_s,
-                                             on_wait)
+            try:
+                offset = worker.submit(jobdir)
+            except OSError:  # it died while idle: one fresh worker
+                _give_back(worker, False)
+                worker = _take(threads)
+                offset = worker.submit(jobdir)
+            outcome = _wait(worker, jobdir, timeout_s, score_timeout_s, on_wait)
+            result = _outcome(outcome, worker, jobdir, offset, limits, timeout_s,
+                              score_timeout_s)
+            healthy = result.get("failure") not in _UNWELL
         finally:
-            with _RUNNING_LOCK:
-                _RUNNING.discard(proc.pid)
-        elapsed = time.perf_counter() - start
-        peak = usage.ru_maxrss / 1024.0
-        result_file = jobdir / "result.pkl"
-        stage_file = jobdir / "stage"
-        stage = stage_file.read_text() if stage_file.exists() else "starting"
-        if timed_out:
-            limit = score_timeout_s if stage in ("checking", "scoring") else timeout_s
-            return base | {"status": "failed", "failure": "timeout",
-                           "reason": f"timed out after {limit:g} s while {stage}",
-                           "process_time_s": elapsed, "peak_memory_mb": peak}
-        if result_file.exists():
-            result = pickle.loads(result_file.read_bytes())
-            result.setdefault("peak_memory_mb", peak)
-            return base | result | {"process_time_s": elapsed}
-        if os.WIFSIGNALED(status):
-            number = os.WTERMSIG(status)
-            name = signal.Signals(number).name if number in signal.valid_signals() else number
-            kind = "crash"
-            hint = ""
-            if memory_mb and peak > 0.9 * memory_mb:
-                kind, hint = "memory", f" near the {memory_mb} MB memory limit"
-            elif number == signal.SIGKILL:
-                hint = " (by the system: out of memory?)"
-            reason = f"crashed with {name} while {stage}{hint}"
-        else:
-            kind = "crash"
-            reason = f"exited with status {os.WEXITSTATUS(status)} while {stage}"
-        tail = _tail(log)
-        if tail:
-            reason += f": {tail}"
-        return base | {"status": "failed", "failure": kind, "reason": reason,
-                       "process_time_s": elapsed, "peak_memory_mb": peak}
+            _give_back(worker, healthy)
+        return base | result | {"process_time_s": time.perf_counter() - start}
 
 
-def _wait(proc: subprocess.Popen, timeout_s: float, stage: Path, score_timeout_s: float,
-          on_wait: Callable[[str], None] | None = None):
-    """Wait for ``proc`` with ``os.wait4``; kill its process group at the limit.
+def _outcome(outcome: dict, worker: _Worker, jobdir: Path, offset: int, limits: Limits,
+             timeout_s: float, score_timeout_s: float) -> dict[str, Any]:
+    """The result dict of a finished, dead or stopped job (``_wait``'s ``outcome``)."""
+    stage = outcome["stage"]
+    peak = outcome["peak_mb"] or 0.0
+    if outcome["timed_out"]:
+        limit = score_timeout_s if stage in (_CHECKING, _SCORING) else (
+            timeout_s if stage == _RUNNING else START_TIMEOUT_S)
+        out = {"status": "failed", "failure": "timeout",
+               "reason": f"timed out after {limit:g} s while {stage}", "peak_memory_mb": peak}
+        if outcome["running_s"] is not None:
+            out["wall_time_s"] = outcome["running_s"]
+        return out
+    result_file = jobdir / "result.pkl"
+    if result_file.exists():
+        return pickle.loads(result_file.read_bytes())
+    status = outcome["status"]
+    memory_mb = limits.memory_mb
+    if status is not None and os.WIFSIGNALED(status):
+        number = os.WTERMSIG(status)
+        name = signal.Signals(number).name if number in signal.valid_signals() else number
+        kind = "crash"
+        hint = ""
+        if memory_mb and peak > 0.9 * memory_mb:
+            kind, hint = "memory", f" near the {memory_mb} MB memory limit"
+        elif number == signal.SIGKILL:
+            hint = " (by the system: out of memory?)"
+        reason = f"crashed with {name} while {stage}{hint}"
+    else:
+        code = "unknown" if status is None else os.WEXITSTATUS(status)
+        kind, reason = "crash", f"exited with status {code} while {stage}"
+    tail = _tail(worker.log, offset)
+    if tail:
+        reason += f": {tail}"
+    return {"status": "failed", "failure": kind, "reason": reason, "peak_memory_mb": peak}
 
-    The limit is ``timeout_s`` from the start until the child reports (in the ``stage`` file)
-    that the method has returned, then ``score_timeout_s`` from that moment. ``on_wait`` gets
-    the child's stage at every poll.
 
-    Returns ``(status, rusage, timed_out)``.
+def _wait(worker: _Worker, jobdir: Path, timeout_s: float, score_timeout_s: float,
+          on_wait: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Wait for the job in ``jobdir``; kill the worker's process group at the limit.
+
+    The limit is ``START_TIMEOUT_S`` until the worker reports (in the ``stage`` file) that the
+    method runs, then ``timeout_s`` from that moment, then ``score_timeout_s`` from the moment
+    it reports checking. The worker's resident peak is read from /proc at every poll, so a
+    worker killed by the system still has its run's peak. ``on_wait`` gets the stage at every
+    poll.
+
+    Returns
+    -------
+    dict
+        ``stage`` (the last seen), ``timed_out``, ``status`` (the worker's wait status when it
+        died, else None), ``peak_mb`` (last seen), ``running_s`` (time in the method so far, or
+        None when it never started).
     """
-    deadline = time.monotonic() + timeout_s
-    scoring = False
+    stage_file, result_file = jobdir / "stage", jobdir / "result.pkl"
+    pid = worker.proc.pid
+    deadline = time.monotonic() + START_TIMEOUT_S
+    stage, running_since, peak = "starting", None, None
     delay = POLL_START_S
     try:
         while True:
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
-            if pid:
-                break
-            current = stage.read_text() if stage.exists() else "starting"
+            if result_file.exists():
+                return {"stage": stage, "timed_out": False, "status": None, "peak_mb": peak,
+                        "running_s": None}
+            current = stage_file.read_text() if stage_file.exists() else "starting"
+            now = time.monotonic()
+            if current != stage:
+                if current == _RUNNING:
+                    running_since, deadline = now, now + timeout_s
+                elif current in (_CHECKING, _SCORING) and stage not in (_CHECKING, _SCORING):
+                    deadline = now + score_timeout_s
+                stage = current
+            if stage == _RUNNING:
+                peak = _status_mb("VmHWM", pid) or peak
             if on_wait is not None:
-                on_wait(current)
-            if not scoring and current in ("checking", "scoring"):
-                scoring = True
-                deadline = time.monotonic() + score_timeout_s
-            if time.monotonic() >= deadline:
-                _kill_group(proc.pid)
-                _, status, usage = os.wait4(proc.pid, 0)
-                proc.returncode = -signal.SIGKILL
-                return status, usage, True
+                on_wait(stage)
+            done, status = os.waitpid(pid, os.WNOHANG)
+            if done:
+                worker.proc.returncode = os.waitstatus_to_exitcode(status)
+                if result_file.exists():  # finished, then died (e.g. at exit)
+                    continue
+                return {"stage": stage, "timed_out": False, "status": status,
+                        "peak_mb": peak, "running_s": None}
+            if now >= deadline:
+                _kill_group(pid)
+                worker.proc.wait()
+                return {"stage": stage, "timed_out": True, "status": None, "peak_mb": peak,
+                        "running_s": None if running_since is None else now - running_since}
             time.sleep(delay)
             delay = min(delay * 1.5, POLL_MAX_S)
-    except BaseException:  # interrupted while waiting: never leave the child behind
-        _kill_group(proc.pid)
-        try:
-            os.wait4(proc.pid, 0)
-        except ChildProcessError:
-            pass
-        proc.returncode = -signal.SIGKILL
+    except BaseException:  # interrupted while waiting: never leave the worker behind
+        _kill_group(pid)
         raise
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    return status, usage, False
 
 
 def kill_running() -> int:
-    """SIGKILL every child this process is waiting on (from any thread); returns how many.
+    """SIGKILL every worker this process is waiting on (from any thread); returns how many.
 
     Their waiting threads then report them as crashed; a sweep calls this when interrupted.
     """
-    with _RUNNING_LOCK:
-        pids = list(_RUNNING)
+    with _POOL_LOCK:
+        pids = [worker.proc.pid for worker in _BUSY]
     for pid in pids:
         _kill_group(pid)
     return len(pids)
 
 
 def _kill_group(pid: int) -> None:
-    """SIGKILL the process group ``pid`` leads (the child and anything it started)."""
+    """SIGKILL the process group ``pid`` leads (the worker and anything it started)."""
     try:
         os.killpg(pid, signal.SIGKILL)
     except ProcessLookupError:
@@ -412,4 +623,4 @@ def _kill_group(pid: int) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(_child(Path(sys.argv[1])))
+    sys.exit(_serve(int(sys.argv[1])))

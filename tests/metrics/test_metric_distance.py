@@ -8,7 +8,7 @@ import trimesh
 from metrics_reference import MESHES, as_mesh, box, brute_force_distance, load
 
 from metrics import MeshDistance, MetricsInputError, point_mesh_distance
-from metrics.distance import closest_on_faces, vertex_neighbours
+from metrics.distance import closest_on_faces
 from metrics.inputs import Mesh, bbox_diagonal
 
 RTOL = 1e-9  # the brief's agreement
@@ -163,17 +163,6 @@ def test_guard_corrects_float32_near_ties_at_a_shared_vertex():
     np.testing.assert_allclose(md.query(probes)[0], expected, rtol=RTOL, atol=0)
 
 
-def test_vertex_neighbours_table_matches_definition():
-    mesh = as_mesh(trimesh.creation.icosphere(1))
-    table, valid = vertex_neighbours(mesh.faces, len(mesh.vertices))
-    for f in range(len(mesh.faces)):
-        shares = np.isin(mesh.faces, mesh.faces[f]).any(axis=1)
-        shares[f] = False
-        assert set(table[f][valid[f]]) == set(np.flatnonzero(shares))
-        assert np.all(table[f][~valid[f]] == f)
-    assert valid.sum(axis=1).max() == 12  # valence 5 and 6 vertices on an icosphere
-
-
 def test_results_do_not_depend_on_threads_or_blocks():
     mesh = box()
     points = probe_points(mesh, 30000, seed=8)
@@ -214,3 +203,40 @@ def test_error_is_a_recon_error_and_value_error():
 
     assert issubclass(MetricsInputError, ReconError)
     assert issubclass(MetricsInputError, ValueError)
+
+
+def ring_checked_everywhere(md: MeshDistance) -> MeshDistance:
+    """The same mesh with every point sent through the exact ring check (no fast path)."""
+    md._slope = np.full_like(md._slope, np.inf)
+    return md
+
+
+@pytest.mark.parametrize("name", ["icosphere", "box", "torus", "soup", "fandisk"])
+def test_fast_path_equals_the_ring_checked_path(name):
+    """The per-face bounds only skip work: every point's distance, face and closest point are
+    those of the exact ring check of every point, on the meshes of the tests above."""
+    if name == "fandisk":
+        if not (MESHES / "fandisk.obj").exists():
+            pytest.skip("shared meshes not present")
+        mesh = load("fandisk.obj")
+    elif name == "icosphere":
+        sphere = trimesh.creation.icosphere(2)
+        mesh = Mesh(sphere.vertices * 300.0 + [2.0e4, -1.0e4, 5.0e3], sphere.faces)
+    elif name == "box":
+        mesh = box()
+    elif name == "torus":
+        mesh = as_mesh(trimesh.creation.torus(major_radius=3.0, minor_radius=1.0,
+                                              major_sections=24, minor_sections=12))
+    else:
+        sphere = trimesh.creation.icosphere(2)
+        mesh = Mesh(sphere.vertices[sphere.faces].reshape(-1, 3) * 50.0,
+                    np.arange(3 * len(sphere.faces)).reshape(-1, 3))
+    points = probe_points(mesh, 400, seed=11)
+    fast = MeshDistance(mesh)
+    assert np.isfinite(fast._slope).mean() > 0.5  # the fast path is in use
+    distance, face, closest = fast.query(points)
+    d_ref, f_ref, q_ref = ring_checked_everywhere(MeshDistance(mesh)).query(points)
+    np.testing.assert_allclose(distance, d_ref, rtol=1e-9, atol=ATOL_FRACTION * fast.scale)
+    np.testing.assert_allclose(closest, q_ref, rtol=0, atol=1e-9 * fast.scale)
+    tied = face != f_ref  # a different face only where the two are equally close
+    np.testing.assert_allclose(distance[tied], d_ref[tied], rtol=1e-12, atol=1e-15 * fast.scale)

@@ -267,3 +267,24 @@ def test_frames_must_agree(sphere):
     with pytest.raises(MetricsInputError, match="test is in the inertial frame but truth in the "
                                                 "body frame"):
         score(inertial, sphere, edges=False, **SPEED)
+
+
+@pytest.mark.parametrize("kind", ["cloud", "mesh"])
+def test_a_truth_built_once_gives_the_same_reports_as_a_fresh_one(sphere, kind):
+    from metrics import Truth
+
+    rng = np.random.default_rng(12)
+    if kind == "mesh":
+        tests = [(sphere.vertices * s, sphere.faces) for s in (0.98, 1.0, 1.03)]
+    else:
+        tests = [rng.normal(size=(500, 3)) * 10.0 / np.sqrt(3) for _ in range(3)]
+    truth = Truth(sphere)
+    for test in tests:
+        for options in ({}, {"n_truth_samples": 3000, "seed": 4}):
+            reused = score(test, truth, **SPEED | options, edges=False)
+            fresh = score(test, sphere, **SPEED | options, edges=False)
+            assert reused.to_dict() == fresh.to_dict()
+            for name, array in fresh.arrays().items():
+                assert np.array_equal(reused.arrays()[name], array), name
+    assert len(truth._samples) == 2 and len(truth._lattices) == 1  # built once, reused
+    assert not truth.samples(3000, [4, 1])[0].flags.writeable  # shared: read-only

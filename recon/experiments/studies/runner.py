@@ -163,8 +163,11 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, prefixes_s: Seq
         (one dict per prefix: ``time_s``, ``hours``, ``rotations``, ``n_points`` and the
         scores, or ``scored`` False when too few points) and ``wall_time_s``.
     """
+    from metrics.score import Truth
+
     start = time.perf_counter()
     cloud, truth, summary = simulate_cloud(scene, overrides, seed=seed, sim_workers=sim_workers)
+    truth = Truth(truth)  # built once, reused by every prefix's score
     spin = float(summary["spin_period_s"])
     shot_time = cloud.attributes["time"]
     rng = np.random.default_rng([seed, 2])

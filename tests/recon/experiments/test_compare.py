@@ -87,6 +87,32 @@ def test_variants_and_labels():
     assert runs[1].label == "poisson depth=6"
     assert runs[0].label == "poisson"
     assert len(variants(["poisson"], grid=False)) == 1
+    assert variants(["poisson"], grid="defaults") == variants(["poisson"], grid=False)
+    assert variants(["poisson"], grid="full") == variants(["poisson"])
+
+
+def test_bad_grid_is_named():
+    from recon.experiments.sweep import SweepError
+
+    with pytest.raises(SweepError, match="grid must be one of defaults, full, got 'big'"):
+        variants(["poisson"], grid="big")
+
+
+def test_full_grid_estimate_times_each_variant_as_its_methods_defaults():
+    from recon.experiments.cases import full_grid_estimate
+    from recon.experiments.compare import format_full_grid
+    from recon.surfaces import methods
+
+    defaults = methods.get("poisson").defaults
+    records = [_record("poisson", "poisson", 4.0, 0.1, 0.9, params=dict(defaults)),
+               _record("convex-hull", "convex-hull", 1.0, 0.5, 0.5, status="crash")]
+    estimate = full_grid_estimate(records, ["poisson", "convex-hull"], workers=2)
+    # Poisson's 4 grid variants at 4 s each, on 2 workers; the hull's only run is done.
+    assert estimate == {"runs": 4, "estimate_s": 8.0, "unknown": []}
+    assert "4 more runs, about 0.1 min" in format_full_grid(estimate)
+    failed = full_grid_estimate(records[1:], ["poisson"], workers=2)
+    assert failed["estimate_s"] is None and failed["unknown"] == ["poisson"]
+    assert "no default run succeeded" in format_full_grid(failed)
 
 
 def test_agreement_on_another_truth_metric():
