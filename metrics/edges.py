@@ -130,6 +130,9 @@ class EdgeReport:
         FER; None when every test point is near a feature edge.
     missed_edge_rate : float or None
         MER, weighted; None when no truth edge has weight.
+    feature_missed_rate : float or None
+        Fraction of the feature edges' length not reconstructed (no edge point within t): the
+        feature variant's MER; None when the truth has no feature edge.
     variant : {"weighted", "feature"}
     n_points, n_edge_points : int
         Test points, and those classified as edge points.
@@ -164,6 +167,7 @@ class EdgeReport:
     score: float
     false_edge_rate: float | None
     missed_edge_rate: float | None
+    feature_missed_rate: float | None
     variant: str
     n_points: int
     n_edge_points: int
@@ -187,10 +191,10 @@ class EdgeReport:
     def to_dict(self) -> dict:
         """The scalar fields, JSON-ready."""
         return {name: getattr(self, name) for name in (
-            "score", "false_edge_rate", "missed_edge_rate", "variant", "n_points",
-            "n_edge_points", "n_truth_edges", "n_feature_edges", "feature_edge_length_m",
-            "truth_edge_weight", "feature_weight_fraction", "tolerance_m", "feature_angle_deg",
-            "k", "rule", "threshold")}
+            "score", "false_edge_rate", "missed_edge_rate", "feature_missed_rate", "variant",
+            "n_points", "n_edge_points", "n_truth_edges", "n_feature_edges",
+            "feature_edge_length_m", "truth_edge_weight", "feature_weight_fraction",
+            "tolerance_m", "feature_angle_deg", "k", "rule", "threshold")}
 
 
 def _check_k(k, n_points: int) -> int:
@@ -536,6 +540,9 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
     weight = sample_length if variant == "feature" else sample_length * np.radians(angle[which])
     total_weight = float(weight.sum())
     missed = float(weight[~found].sum() / total_weight) if total_weight > 0 else None
+    feature_length = float(sample_length[on_sharp].sum())
+    feature_missed = (float(sample_length[on_sharp & ~found].sum() / feature_length)
+                      if feature_length > 0 else None)
     edge_found = np.divide(np.bincount(which, weights=sample_length * found,
                                        minlength=len(edges)),
                            lengths, out=np.ones(len(edges)), where=lengths > 0)
@@ -552,8 +559,8 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
     terms = [x for x in (false_rate, missed) if x is not None]
     return EdgeReport(
         score=float(np.mean(terms)) if terms else 0.0, false_edge_rate=false_rate,
-        missed_edge_rate=missed, variant=variant, n_points=len(points),
-        n_edge_points=int(is_edge.sum()), n_truth_edges=len(edges),
+        missed_edge_rate=missed, feature_missed_rate=feature_missed, variant=variant,
+        n_points=len(points), n_edge_points=int(is_edge.sum()), n_truth_edges=len(edges),
         n_feature_edges=int(sharp.sum()), feature_edge_length_m=float(lengths[sharp].sum()),
         truth_edge_weight=total_weight,
         feature_weight_fraction=(float(weight[on_sharp].sum() / total_weight)

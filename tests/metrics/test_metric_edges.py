@@ -234,6 +234,7 @@ def test_weighted_equals_feature_variant_when_every_edge_is_sharp_or_flat():
     assert weighted.n_truth_edges == feature.n_truth_edges == 12  # diagonals weigh nothing
     assert weighted.feature_weight_fraction == 1.0
     assert weighted.score == pytest.approx(feature.score, abs=1e-12)
+    assert weighted.feature_missed_rate == pytest.approx(feature.missed_edge_rate, abs=1e-12)
     assert weighted.truth_edge_weight == pytest.approx(np.pi / 2 * feature.truth_edge_weight)
 
 
