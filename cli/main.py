@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "cli.logs",
     "cli.ingest",
     "cli.score",
+    "cli.edges",
     "cli.reconstruct",
     "cli.study",
 )
