@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "cli.logs",
     "cli.ingest",
     "cli.score",
+    "cli.edges",
     "cli.reconstruct",
     "cli.study",
 )

@@ -4,8 +4,9 @@
 completeness, Chamfer and Hausdorff distances, precision / recall / F-score at a threshold,
 coverage (total and per truth face), normal consistency and the paper's edge metric. ``Truth``
 prepares a truth once for many scores. The pieces are public too: ``point_mesh_distance`` /
-``MeshDistance`` (exact float64 point-to-mesh distance), ``sample_surface``, and
-``edge_score`` / ``detect_edges`` / ``feature_edges``.
+``MeshDistance`` (exact float64 point-to-mesh distance), ``sample_surface``, and ``edge_score``
+(the paper's weighted edge metric) / ``feature_edge_score`` / ``detect_edges`` /
+``dihedral_edges`` / ``feature_edges``.
 
 Imports only ``formats`` and third-party libraries; Open3D is imported on the first distance
 query.
@@ -16,7 +17,9 @@ from metrics.edges import (
     EdgeReport,
     SurfaceVariation,
     detect_edges,
+    dihedral_edges,
     edge_score,
+    feature_edge_score,
     feature_edges,
     surface_variation,
 )
@@ -36,7 +39,9 @@ __all__ = [
     "SurfaceVariation",
     "Truth",
     "detect_edges",
+    "dihedral_edges",
     "edge_score",
+    "feature_edge_score",
     "feature_edges",
     "point_mesh_distance",
     "sample_surface",

@@ -39,10 +39,33 @@ def nearest_distance(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
     """
     from scipy.spatial import cKDTree
 
-    tree = cKDTree(points[morton_order(points)])
+    return query_distance(cKDTree(points[morton_order(points)]), queries)
+
+
+def query_distance(tree, queries: np.ndarray, *, upper: float = np.inf,
+                   presorted: bool = False) -> np.ndarray:
+    """Distance from each query to the nearest point of a prebuilt cKDTree (all cores).
+
+    Parameters
+    ----------
+    tree : scipy.spatial.cKDTree
+    queries : (m, 3) float64
+    upper : float
+        Distances above this are not resolved and come back as ``inf`` (a bounded search,
+        much faster where most queries have no point that close).
+    presorted : bool
+        The queries are already in Morton order (else they are ordered here, which halves the
+        time of a large query).
+
+    Returns
+    -------
+    (m,) float64, in the queries' order
+    """
+    if presorted:
+        return tree.query(queries, k=1, distance_upper_bound=upper, workers=-1)[0]
     order = morton_order(queries)
     out = np.empty(len(queries))
-    out[order] = tree.query(queries[order], k=1, workers=-1)[0]
+    out[order] = tree.query(queries[order], k=1, distance_upper_bound=upper, workers=-1)[0]
     return out
 
 

@@ -5,6 +5,7 @@
 >>> cloud = api.ingest(log)                                      # body-frame Cloud
 >>> surface = api.reconstruct(cloud, method="auto")              # Surface (a Mesh)
 >>> report = api.score(surface, truth=log)                       # metrics.ScoreReport
+>>> pictures = api.edges(cloud, truth=log, output="edges")        # edge points: PLY + PNG
 >>> table = api.compare(cloud, truth=log, output="cmp")          # every method, speed x accuracy
 
 Every verb takes recon's own types (``formats.geometry.Cloud`` and ``Mesh``, a strike log path)
@@ -25,7 +26,7 @@ from typing import Any
 from formats.errors import ReconError
 from formats.geometry import Cloud, Frame, Mesh
 
-__all__ = ["SimulatedLog", "compare", "ingest", "reconstruct", "score", "simulate"]
+__all__ = ["SimulatedLog", "compare", "edges", "ingest", "reconstruct", "score", "simulate"]
 
 
 class ApiError(ReconError, ValueError):
@@ -169,6 +170,31 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
     return score_against(load(test, name="test"), truth, tau=tau,
                          tau_fraction=tau_fraction, edges=edges, seed=seed, progress=progress,
                          **options)
+
+
+def edges(test, *, truth, output, truth_scale: float = 1.0, seed: int = 0,
+          title: str | None = None, edge_options: dict | None = None, progress=None) -> dict:
+    """The edge points of a cloud against the truth, written as a PLY and the paper's picture
+    (``recon.edge_pictures``): ``recon edges``.
+
+    Parameters
+    ----------
+    test : Cloud, (n, 3) array, Mesh, or a file (cloud, mesh or log)
+    truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
+    output : str or Path
+        Directory for edges.ply, edges.png and edges.json.
+    truth_scale, seed, title, edge_options, progress
+        As ``api.score`` and ``recon.edge_pictures.edge_pictures``.
+
+    Returns
+    -------
+    dict
+        ``report`` (``metrics.EdgeReport``), ``files``, ``counts``.
+    """
+    from recon.edge_pictures import edge_pictures
+
+    return edge_pictures(load(test, name="test"), truth_of(truth, scale=truth_scale), output,
+                         seed=seed, title=title, edge_options=edge_options, progress=progress)
 
 
 def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None = None,

@@ -1,6 +1,6 @@
 """Every chart recon draws (matplotlib, Agg, one resolution): the studies' score panels, grouped
-bars, coverage maps and clouds, ``recon compare``'s speed against accuracy, and ``recon
-stability``'s failure and accuracy maps.
+bars, coverage maps and clouds, ``recon edges``' edge pictures, ``recon compare``'s speed against
+accuracy, and ``recon stability``'s failure and accuracy maps.
 
 Every chart of a study shows the paper's edge score beside the standard scores (F-score, Chamfer
 distance, coverage), each panel saying which way is better, so no conclusion rests on one metric.
@@ -34,6 +34,9 @@ DPI = 100
 OUTCOME_COLOURS = {"ok": "#4daf4a", "timeout": "#984ea3", "crash": "#e41a1c",
                    "memory": "#ff7f00", "error": "#377eb8", "empty": "#a65628",
                    "degenerate": "#f781bf", "score": "#999999", "task": "#333333"}
+# Points drawn per class in an edge picture (a seeded subsample beyond): 3D scatter cost grows
+# with the count, and 60,000 grey points already fill a 6-inch panel.
+MAX_DRAWN = 60_000
 # Equal-area bins of the coverage maps: longitude steps and latitude bands (uniform in sin).
 MAP_LON_BINS, MAP_LAT_BINS = 72, 36
 
@@ -316,6 +319,78 @@ def clouds(panels: Sequence[Mapping], path, *, title: str) -> Path:
         ax.set_ylabel("y [m]")
         ax.set_zlabel("z [m]")
     fig.suptitle(title, fontsize=12)
+    return _save(fig, path)
+
+
+def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_feature,
+                missed_gentle, title: str, note: str = "", seed: int = 0,
+                views=((22.0, -55.0), (22.0, 125.0))) -> Path:
+    """The paper's edge pictures (Figs. 15, 17, 19): a cloud's edge points, two opposite views.
+
+    Parameters
+    ----------
+    points : (n, 3) float64, metres
+    label : (n,) uint8
+        0 surface point (light grey), 1 detected edge point near a truth feature edge (blue, as
+        the paper's "Blue points are detected edges"), 2 false edge point (red).
+    path : str or Path
+        PNG to write.
+    bounds : ((3,), (3,)) metres
+        Lower and upper corner of the truth, so every picture of one body has the same box.
+    missed_feature : (a, 2, 3) float64, metres
+        Truth feature edges not reconstructed (black).
+    missed_gentle : (b, 2, 3) float64, metres
+        Gentler truth edges not reconstructed: the unsampled triangulation (orange).
+    title, note : str
+    seed : int
+        Seed of the subsample drawn when a class has more than ``MAX_DRAWN`` points.
+    views : sequence of (elevation, azimuth) degrees
+    """
+    from matplotlib.ticker import MaxNLocator
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    plt = _pyplot()
+    rng = np.random.default_rng(seed)
+    lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+    classes = ((0, "surface points", "0.72", 0.4), (2, "false edge points", "#d62728", 2.0),
+               (1, "detected edge points", "#1f3fbf", 2.0))
+    drawn = {}
+    for value, *_ in classes:
+        index = np.flatnonzero(label == value)
+        if len(index) > MAX_DRAWN:
+            index = np.sort(rng.choice(index, MAX_DRAWN, replace=False))
+        drawn[value] = (points[index], int((label == value).sum()))
+    lines = ((missed_gentle, "#ff9f1c", 0.5, "missed gentle truth edges"),
+             (missed_feature, "black", 1.3, "missed feature edges"))
+    fig = plt.figure(figsize=(12, 6.2), constrained_layout=True)
+    for i, (elevation, azimuth) in enumerate(views):
+        ax = fig.add_subplot(1, len(views), i + 1, projection="3d")
+        for segments, colour, width, text in lines:
+            segments = np.asarray(segments, dtype=float).reshape(-1, 2, 3)
+            if len(segments):
+                ax.add_collection3d(Line3DCollection(
+                    segments, colors=colour, linewidths=width,
+                    label=f"{text} ({len(segments):,})"))
+        for value, text, colour, size in classes:
+            p, total = drawn[value]
+            if total:
+                ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=size, c=colour, depthshade=False,
+                           linewidths=0, label=f"{text} ({total:,})")
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        ax.set_zlim(lo[2], hi[2])
+        ax.set_box_aspect(np.maximum(hi - lo, 1e-9 * (hi - lo).max()), zoom=0.9)
+        ax.view_init(elev=elevation, azim=azimuth)
+        ax.set_title(f"view from elevation {elevation:g} deg, azimuth {azimuth:g} deg",
+                     fontsize=9.5)
+        for axis, name in ((ax.xaxis, "x"), (ax.yaxis, "y"), (ax.zaxis, "z")):
+            axis.set_major_locator(MaxNLocator(4))
+            axis.set_label_text(f"{name} [m]")
+        if i == 0:
+            handles, texts = ax.get_legend_handles_labels()
+    fig.legend(handles, texts, loc="outside lower center", ncol=len(texts), fontsize=9,
+               markerscale=5, frameon=False)
+    _title(fig, title, note)
     return _save(fig, path)
 
 

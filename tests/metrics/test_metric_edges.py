@@ -1,4 +1,5 @@
-"""The edge metric: surface variation, truth feature edges, and the orderings the paper reports."""
+"""The edge metric: surface variation, the truth triangulation's weighted edges, and the orderings
+the paper reports (on sampled shapes; on simulated paper scenes: test_edge_paper_scenes.py)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,9 @@ from metrics import (
     MetricsInputError,
     defaults,
     detect_edges,
+    dihedral_edges,
     edge_score,
+    feature_edge_score,
     feature_edges,
     sample_surface,
     surface_variation,
@@ -69,6 +72,22 @@ def test_plane_has_no_variation_and_no_edges():
     is_edge, variation = detect_edges(points)
     assert variation.sigma.max() < 1e-12 and np.abs(variation.drop).max() < 1e-12
     assert not is_edge.any()
+
+
+def test_closed_form_smallest_eigenvalue_matches_lapack():
+    from metrics.edges import _smallest_eigenvalue
+
+    rng = np.random.default_rng(4)
+    shapes = [rng.normal(size=(16, 3)) * scale for scale in ([1, 1, 1], [1, 1, 1e-7],
+                                                              [1, 1e-7, 1e-7], [5, 1, 0])]
+    shapes += [rng.normal(size=(16, 3)) for _ in range(500)]
+    matrices = np.stack([(x - x.mean(0)).T @ (x - x.mean(0)) for x in shapes])
+    entries = [matrices[:, i, j] for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))]
+    expected = np.linalg.eigvalsh(matrices)[:, 0]
+    scale = np.trace(matrices, axis1=1, axis2=2)
+    assert np.abs(_smallest_eigenvalue(*entries) - expected).max() < 1e-12 * scale.max()
+    # A flat neighbourhood: the smallest eigenvalue stays at rounding level of the trace.
+    assert abs(_smallest_eigenvalue(*(e[3:4] for e in entries))[0]) < 1e-13 * scale[3]
 
 
 def test_default_threshold_sees_the_feature_angle_and_not_curvature():
@@ -132,10 +151,109 @@ def test_score_formula_from_the_report_arrays():
         defaults.EDGE_TOLERANCE_FRACTION * np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
 
 
-def test_smooth_body_scores_false_edges_only():
-    report = edge_score(cloud(ellipsoid(4), 2_000), ellipsoid(4))
+def test_feature_variant_on_a_smooth_body_scores_false_edges_only():
+    report = feature_edge_score(cloud(ellipsoid(4), 2_000), ellipsoid(4))
+    assert report.variant == "feature"
     assert report.missed_edge_rate is None and report.n_feature_edges == 0
     assert report.score == report.false_edge_rate > 0
+
+
+def test_dihedral_edges_of_a_box():
+    mesh = box((10.0, 6.0, 4.0))
+    edges, angle = dihedral_edges(mesh)
+    assert len(edges) == 18  # 12 box edges and 6 face diagonals
+    assert sorted(np.round(angle, 9)) == [0.0] * 6 + [90.0] * 12
+
+
+@needs_meshes
+def test_dihedral_edges_match_trimesh_adjacency(fandisk):
+    tm = trimesh.Trimesh(fandisk.vertices, fandisk.faces, process=False)
+    expected = dict(zip(map(tuple, np.sort(tm.face_adjacency_edges, axis=1)),
+                        np.degrees(tm.face_adjacency_angles), strict=True))
+    edges, angle = dihedral_edges(fandisk)
+    assert len(edges) == len(expected)
+    assert angle == pytest.approx([expected[tuple(e)] for e in edges], abs=1e-5)  # arccos near 1
+
+
+def weighted_missed_reference(points, mesh, tolerance, edge_points=None, feature_deg=30.0,
+                              per_edge=400):
+    """MER of the weighted metric, written another way: trimesh's face adjacency for the edges
+    and their angles, ``per_edge`` points along each edge, plain cKDTree queries."""
+    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    ends = mesh.vertices[tm.face_adjacency_edges]
+    angle = tm.face_adjacency_angles
+    t = ((np.arange(per_edge) + 0.5) / per_edge)[None, :, None]
+    along = (ends[:, 0, None] + t * (ends[:, 1] - ends[:, 0])[:, None]).reshape(-1, 3)
+    found = cKDTree(points).query(along)[0].reshape(len(angle), -1) <= tolerance
+    sharp = np.degrees(angle) > feature_deg
+    if sharp.any():
+        detected = np.zeros_like(found)
+        if edge_points is not None and len(edge_points):
+            detected = cKDTree(edge_points).query(along)[0].reshape(found.shape) <= tolerance
+        found[sharp] = detected[sharp]
+    weight = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1) * angle
+    return float(np.sum(weight * (1 - found.mean(axis=1))) / weight.sum())
+
+
+def test_weighted_score_counts_the_gentle_facet_edges_of_a_smooth_body():
+    """Paper: the metric reads "the triangulation of the ellipsoid"; a noise-free cloud of half
+    of it misses the other half's facet edges (weighted by length x dihedral angle)."""
+    mesh = ellipsoid(4)
+    points = cloud(mesh, 60_000)
+    half = points[points[:, 2] > 0]
+    report = edge_score(half, mesh)
+    assert report.variant == "weighted" and report.n_feature_edges == 0
+    assert report.n_truth_edges == 7_680 and report.feature_weight_fraction == 0.0
+    assert report.false_edge_rate < 1e-3  # a few points on the cut look like edges
+    assert report.missed_edge_rate == pytest.approx(
+        weighted_missed_reference(half, mesh, report.tolerance_m), abs=0.005)
+    assert 0.4 < report.missed_edge_rate < 0.6
+    assert report.score == pytest.approx((report.missed_edge_rate + report.false_edge_rate) / 2)
+    whole = edge_score(points, mesh)
+    assert 0.0 < whole.score < 0.005  # dense and noise-free: nearly every edge sampled
+    # Per-edge found fractions: the edges of the lower half (below -t) are missed whole.
+    low = (mesh.vertices[report.truth_edges][:, :, 2] < -report.tolerance_m).all(axis=1)
+    assert low.sum() > 3_000 and (report.edge_found[low] == 0).all()
+
+
+@needs_meshes
+def test_weighted_missed_rate_matches_an_independent_computation_on_a_cad_part(fandisk):
+    points = cloud(fandisk, 20_000, noise_fraction=0.0005)
+    points = points[points[:, 0] > np.median(points[:, 0])]  # half of it: holes too
+    report = edge_score(points, fandisk)
+    expected = weighted_missed_reference(points, fandisk, report.tolerance_m,
+                                         edge_points=points[report.is_edge])
+    assert report.missed_edge_rate == pytest.approx(expected, abs=0.01)
+    assert report.feature_weight_fraction > 0.5  # feature edges dominate a CAD part
+
+
+def test_weighted_equals_feature_variant_when_every_edge_is_sharp_or_flat():
+    mesh = box()
+    points = cloud(mesh, 20_000, noise_fraction=0.0005)
+    weighted, feature = edge_score(points, mesh), feature_edge_score(points, mesh)
+    assert weighted.n_truth_edges == feature.n_truth_edges == 12  # diagonals weigh nothing
+    assert weighted.feature_weight_fraction == 1.0
+    assert weighted.score == pytest.approx(feature.score, abs=1e-12)
+    assert weighted.feature_missed_rate == pytest.approx(feature.missed_edge_rate, abs=1e-12)
+    assert weighted.truth_edge_weight == pytest.approx(np.pi / 2 * feature.truth_edge_weight)
+
+
+def test_edge_weights_are_the_integrated_mean_curvature_whatever_the_triangulation():
+    """Sum of length x dihedral angle is twice the integrated mean curvature: 8 pi R for a
+    sphere, however finely it is triangulated; a cloud missing a cap misses the cap's share."""
+    radius = 50.0
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=(80_000, 3))
+    points = radius * u / np.linalg.norm(u, axis=1, keepdims=True)
+    kept = points[points[:, 2] < 0.5 * radius]  # no cap above z = R / 2: a quarter of the area
+    missed = []
+    for subdivisions in (3, 4, 5):
+        tm = trimesh.creation.icosphere(subdivisions, radius=radius)
+        report = edge_score(kept, Mesh(np.asarray(tm.vertices), np.asarray(tm.faces)))
+        assert report.truth_edge_weight == pytest.approx(8 * np.pi * radius, rel=0.03)
+        missed.append(report.missed_edge_rate)
+    assert max(missed) - min(missed) < 0.03
+    assert missed == pytest.approx([0.25] * 3, abs=0.04)  # a little less: the rim within t
 
 
 # --------------------------------------------------------------------------- the paper's orderings
@@ -245,6 +363,7 @@ def test_pauly_rule_variant():
     ({"tolerance": 0.1, "tolerance_fraction": 0.01}, "give tolerance or tolerance_fraction"),
     ({"tolerance": 0.0}, "tolerance must be a finite length > 0"),
     ({"feature_angle_deg": 190.0}, r"angle_deg must be in \[0, 180\)"),
+    ({"variant": "sharp"}, "variant must be one of"),
 ])
 def test_bad_edge_options_raise(kwargs, match):
     with pytest.raises(MetricsInputError, match=match):

@@ -51,7 +51,7 @@ MIN_SCORED_POINTS = 16
 # Scalars kept from each ScoreReport, and from its edge report.
 SCORE_KEYS = ("edge_score", "fscore", "precision", "recall", "chamfer_m", "coverage",
               "accuracy_mean_m", "completeness_mean_m", "hausdorff_m", "tau_m")
-EDGE_KEYS = ("false_edge_rate", "missed_edge_rate", "n_edge_points")
+EDGE_KEYS = ("false_edge_rate", "missed_edge_rate", "feature_missed_rate", "n_edge_points")
 # Decimals of the per-face coverage kept in records (a 20,480-face map is ~120 kB of JSON).
 FACE_COVERAGE_DECIMALS = 3
 

@@ -1,0 +1,151 @@
+"""Edge pictures: the edge points a cloud shows against its truth, as in the paper's Figs. 15, 17
+and 19 ("Blue points are detected edges").
+
+``edge_pictures(test, truth, output)`` runs the weighted edge metric (``metrics.edge_score``) and
+writes into the directory ``output``:
+
+- ``edges.ply``: the test points (a mesh: its seeded surface samples) with per-point ``label``
+  (0 surface point, 1 detected edge point within the tolerance of a truth feature edge, 2 false
+  edge point), ``near_edge`` (1 within the tolerance of a feature edge), ``sigma`` (surface
+  variation) and ``drop`` (its fall when the point leaves its neighbourhood);
+- ``edges.png``: two opposite views of the cloud, detected edge points in blue, false ones in
+  red, the truth's missed feature edges in black and its missed gentler edges (the unsampled
+  triangulation: blind spots) in orange;
+- ``edges.json``: the edge report's scalars and what was written.
+
+Every file appears only once complete (written under a temporary name and renamed), so an
+interrupted run leaves the previous outputs as they were.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from formats.errors import ReconError
+from formats.geometry import Mesh
+
+# File names in the output directory.
+PLY_NAME, PNG_NAME, JSON_NAME = "edges.ply", "edges.png", "edges.json"
+# Point labels of edges.ply.
+SURFACE, TRUE_EDGE, FALSE_EDGE = 0, 1, 2
+# A truth edge is drawn as missed when less than this fraction of its length is reconstructed.
+MISSED_BELOW = 0.5
+
+
+class EdgePicturesError(ReconError, ValueError):
+    """The output of ``edge_pictures`` cannot be written where asked."""
+
+
+def edge_pictures(test, truth, output, *, seed: int = 0, n_test_samples: int | None = None,
+                  title: str | None = None, edge_options: dict | None = None,
+                  progress=None) -> dict:
+    """Detect the edge points of a cloud, score them against the truth, draw and write them.
+
+    Parameters
+    ----------
+    test : Cloud, (n, 3) array or Mesh
+        Metres, in the truth's frame. A mesh is sampled uniformly by area first.
+    truth : Mesh
+    output : str or Path
+        Directory (created) for ``edges.ply``, ``edges.png`` and ``edges.json``.
+    seed : int
+        Seed of the surface samples of a test mesh and of the points drawn.
+    n_test_samples : int, optional
+        Samples of a test mesh (default ``metrics.defaults.TEST_MESH_SAMPLES``).
+    title : str, optional
+        Title of the picture.
+    edge_options : dict, optional
+        Keyword arguments of ``metrics.edge_score`` (``k``, ``rule``, ``threshold``,
+        ``feature_angle_deg``, ``tolerance``, ``tolerance_fraction``, ``variant``).
+    progress : callable, optional
+        Called with the name of each stage as it finishes (``edges``, ``ply``, ``png``).
+
+    Returns
+    -------
+    dict
+        ``report`` (``metrics.EdgeReport``), ``files`` (name -> Path), ``counts`` (surface, true
+        and false edge points, missed feature and gentle edges).
+    """
+    from metrics import defaults, edge_score, sample_surface
+    from metrics.inputs import as_mesh, as_test
+    from recon.experiments import charts
+
+    out = _output_dir(output)
+    stage = progress or (lambda name: None)
+    truth = as_mesh(truth, "truth")
+    test = as_test(test, "test")
+    if isinstance(test, Mesh):
+        points = sample_surface(test, n_test_samples or defaults.TEST_MESH_SAMPLES, seed=seed)[0]
+    else:
+        points = test.points
+    report = edge_score(points, truth, **dict(edge_options or {}))
+    stage("edges")
+
+    label = np.full(len(points), SURFACE, dtype=np.uint8)
+    label[report.is_edge & report.near_edge] = TRUE_EDGE
+    label[report.is_edge & ~report.near_edge] = FALSE_EDGE
+    files = {"ply": out / PLY_NAME, "png": out / PNG_NAME, "json": out / JSON_NAME}
+    _write_ply(files["ply"], points, label, report)
+    stage("ply")
+
+    sharp = report.edge_angle_deg > report.feature_angle_deg
+    missed = report.edge_found < MISSED_BELOW
+    segments = truth.vertices[report.truth_edges]
+    counts = {"surface_points": int((label == SURFACE).sum()),
+              "true_edge_points": int((label == TRUE_EDGE).sum()),
+              "false_edge_points": int((label == FALSE_EDGE).sum()),
+              "missed_feature_edges": int((missed & sharp).sum()),
+              "missed_gentle_edges": int((missed & ~sharp).sum())}
+    note = (f"edge score {report.score:.3f} ({report.variant}): false-edge rate "
+            f"{_number(report.false_edge_rate)}, missed (weighted) "
+            f"{_number(report.missed_edge_rate)}, feature edges missed "
+            f"{_number(report.feature_missed_rate)}\nk = {report.k}, tolerance "
+            f"{report.tolerance_m:.3g} m, feature angle {report.feature_angle_deg:g} deg")
+    _replace_atomically(files["png"], lambda path: charts.edge_points(
+        points, label, path, bounds=(truth.vertices.min(axis=0), truth.vertices.max(axis=0)),
+        missed_feature=segments[missed & sharp], missed_gentle=segments[missed & ~sharp],
+        title=title or "Edge points against the truth", note=note, seed=seed))
+    stage("png")
+    summary = {"edge": report.to_dict(), "counts": counts,
+               "files": {k: str(v) for k, v in files.items()}}
+    _replace_atomically(files["json"],
+                        lambda path: Path(path).write_text(json.dumps(summary, indent=2) + "\n"))
+    return {"report": report, "files": files, "counts": counts}
+
+
+def _number(value) -> str:
+    return "n/a" if value is None else f"{value:.3f}"
+
+
+def _output_dir(output) -> Path:
+    out = Path(output)
+    if out.exists() and not out.is_dir():
+        raise EdgePicturesError(f"-o {out}: is a file, not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise EdgePicturesError(f"-o {out}: cannot create the directory ({exc.strerror})") \
+            from None
+    return out
+
+
+def _write_ply(path: Path, points: np.ndarray, label: np.ndarray, report) -> None:
+    from formats.ply import write_ply
+
+    write_ply(path, {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2], "label": label,
+                     "near_edge": report.near_edge.astype(np.uint8),
+                     "sigma": report.variation.sigma, "drop": report.variation.drop})
+
+
+def _replace_atomically(path: Path, write) -> None:
+    """Call ``write(temporary)`` beside ``path``, then rename it to ``path``."""
+    temporary = path.with_name(f".{path.name}.partial{path.suffix}")
+    try:
+        write(temporary)
+        os.replace(temporary, path)
+    finally:
+        temporary.unlink(missing_ok=True)
