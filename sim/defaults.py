@@ -201,6 +201,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                     minimum=0.0, maximum=MAX_ATTITUDE_ARCSEC),
         "position_bias": Key([0.0, 0.0, 0.0], "vec3", "m",
                              "constant position-knowledge bias: radial, along-track, cross-track"),
+        "position_bias_inertial": Key([0.0, 0.0, 0.0], "vec3", "m",
+                                      "constant position-knowledge bias in the inertial frame I"),
         "position_drift": Key(0.0, "number", "m",
                               "1-sigma per axis of a slowly varying (Gauss-Markov) position error",
                               **NON_NEGATIVE),

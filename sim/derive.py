@@ -168,6 +168,7 @@ def sensor_errors(errors: dict) -> SensorErrors:
         attitude_walk=errors["attitude_walk_arcsec"] * RADIANS_PER["arcsec"]
         / SQRT_SECONDS_PER_HOUR,
         position_bias=tuple(errors["position_bias"]),
+        position_bias_inertial=tuple(errors["position_bias_inertial"]),
         position_drift=errors["position_drift"],
         position_drift_time=errors["position_drift_time"] if errors["position_drift"] > 0
         else 0.0,

@@ -16,7 +16,9 @@ shot's time and ``t' = t + time_tag_offset``:
   of the true orbit (radial, along-track, cross-track: how relative navigation states its
   errors), ``p`` a constant bias and ``g`` a first-order Gauss-Markov process (stationary
   1-sigma ``position_drift`` per axis, correlation time ``position_drift_time``). The white
-  per-shot error ``position_sigma3`` (sim/noise.py) adds to this.
+  per-shot error ``position_sigma3`` (sim/noise.py) adds to this, and so does a constant bias
+  in the inertial frame, ``position_bias_inertial`` (a target ephemeris error when the chaser's
+  own orbit is known inertially).
 - **target attitude**: recorded from the spin model with the known spin axis (the true one
   tilted by ``spin_axis_error`` about a direction drawn from the seed) and the known period
   (true plus ``spin_period_error``), at ``t'``; the attitude at ``t = 0`` is known.
@@ -206,8 +208,9 @@ def record(knowledge: PoseKnowledge, first: int, t: np.ndarray, pose_at: PoseFun
     tagged = t + e.time_tag_offset
     position, _, sensor = pose_at(tagged)
     rows = slice(first, first + len(t))
-    position = position + np.einsum("nij,nj->ni", orbital_frame(knowledge.orbit, t),
-                                    knowledge.position[rows])
+    position = (position + np.asarray(e.position_bias_inertial)
+                + np.einsum("nij,nj->ni", orbital_frame(knowledge.orbit, t),
+                            knowledge.position[rows]))
     error = (Rotation.from_rotvec(np.asarray(e.boresight_misalignment))
              * Rotation.from_rotvec(knowledge.attitude[rows]))
     sensor = (Rotation.from_matrix(sensor) * error).as_quat()

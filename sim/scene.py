@@ -21,8 +21,9 @@ every default and where it comes from)::
     [errors]  range_sigma3, azimuth_sigma3_deg, elevation_sigma3_deg, position_sigma3,
               dilation_alpha, dilation_half_angle_mrad, dilation_subrays,
               boresight_misalignment_deg, attitude_bias_arcsec, attitude_walk_arcsec,
-              position_bias, position_drift, position_drift_time, spin_axis_error_deg,
-              spin_period_error, time_tag_offset   (pose knowledge, sim/pose_errors.py)
+              position_bias, position_bias_inertial, position_drift, position_drift_time,
+              spin_axis_error_deg, spin_period_error, time_tag_offset
+              (pose knowledge, sim/pose_errors.py)
 
 Loading is three steps, one module each: this module resolves the layers; sim/schema.py checks
 the values against the bounds each key declares in sim/defaults.py (plus the few cross-key

@@ -42,9 +42,11 @@ _TRUTH_STRIKE_FIELDS = {"point": ((3,), np.float64), "facet": ((), np.uint32),
 # Pose-knowledge error models of /sensor/errors (SPEC.md): optional attributes, zero when absent
 # (logs written before they existed), the vectors of them 3 floats.
 POSE_ERROR_FIELDS = ("boresight_misalignment", "attitude_bias", "attitude_walk",
-                     "position_bias", "position_drift", "position_drift_time",
+                     "position_bias", "position_bias_inertial", "position_drift",
+                     "position_drift_time",
                      "spin_axis_error", "spin_period_error", "time_tag_offset")
-POSE_ERROR_VECTORS = ("boresight_misalignment", "attitude_bias", "position_bias")
+POSE_ERROR_VECTORS = ("boresight_misalignment", "attitude_bias", "position_bias",
+                      "position_bias_inertial")
 
 
 # The paper states every error as a 3-sigma bound and the log records those (SPEC.md,
@@ -92,6 +94,9 @@ class SensorErrors:
         ``attitude_walk * sqrt(t)``.
     position_bias : 3 floats, metres, (radial, along-track, cross-track)
         Constant error of the recorded sensor position in the local orbital frame.
+    position_bias_inertial : 3 floats, metres, I
+        Constant error of the recorded sensor position in the inertial frame (a target
+        ephemeris error when the chaser's own orbit is known inertially).
     position_drift : float, metres
         1-sigma per axis of a slowly varying (first-order Gauss-Markov) position error, same
         frame.
@@ -116,6 +121,7 @@ class SensorErrors:
     attitude_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
     attitude_walk: float = 0.0
     position_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    position_bias_inertial: tuple[float, float, float] = (0.0, 0.0, 0.0)
     position_drift: float = 0.0
     position_drift_time: float = 0.0
     spin_axis_error: float = 0.0

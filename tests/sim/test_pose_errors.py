@@ -44,6 +44,14 @@ def test_misalignment_and_position_bias_are_what_the_shots_record(tmp_path):
     assert recorded.position_bias == pytest.approx(tuple(bias)) and recorded.pose
 
 
+def test_inertial_position_bias_is_constant_in_the_inertial_frame(tmp_path):
+    data = read_all(run_scene(tmp_path, "asteroid-lrf", SHORT,
+                              "errors.position_bias_inertial=[1.0, -2.0, 0.5]")[1])
+    np.testing.assert_allclose(data["shots/sensor_position"] - data["truth/sensor_position"],
+                               np.broadcast_to([1.0, -2.0, 0.5], (*data["shots/time"].shape, 3)),
+                               atol=1e-9)
+
+
 def test_pose_errors_leave_the_truth_and_the_strikes_unchanged(tmp_path):
     clean = read_all(run_scene(tmp_path, "asteroid-lrf", SHORT, "errors.range_sigma3=0.3",
                                seed=4, name="clean.h5")[1])
