@@ -305,22 +305,17 @@ def _consensus(points: np.ndarray, time: np.ndarray, gap: float, jac: np.ndarray
         share = other[r] / count[r][:, None]                                   # (b, k)
         centroid = np.einsum("bk,bki->bi", share, neighbours)
         residual[start:start + len(r)] = np.einsum("bi,bi->b", normal, points[r] - centroid)
-        # How the centroid moves, along this point's normal (exact for a translation).
-        moves = np.einsum("bk,bkij->bij", share, _expanded(jac, weights, index[r]))
-        design[start:start + len(r)] = np.einsum(
-            "bi,bij->bj", normal, _expanded(jac, weights, r) - moves)
+        # How the point and the centroid move along this point's normal (the centroid's motion
+        # exactly, so a translation of everything leaves the residual unchanged).
+        own = np.einsum("bi,bij->bj", normal, jac[r])                          # (b, g)
+        theirs = np.einsum("bi,bkij->bkj", normal, jac[index[r]])              # (b, k, g)
+        knots = (np.einsum("bK,bg->bKg", weights[r], own[:, :6])
+                 - np.einsum("bk,bkK,bkg->bKg", share, weights[index[r]], theirs[:, :, :6]))
+        spin = own[:, 6:] - np.einsum("bk,bkg->bg", share, theirs[:, :, 6:])
+        design[start:start + len(r)] = np.concatenate(
+            [knots[:, :, :3].reshape(len(r), -1), knots[:, :, 3:].reshape(len(r), -1), spin],
+            axis=1)
     return rows, residual, design
-
-
-def _expanded(jac: np.ndarray, weights: np.ndarray, index: np.ndarray) -> np.ndarray:
-    """How points ``index`` (any shape) move per unit of every parameter: (..., 3, p), per knot
-    misalignment (3) and position (3), then the constant spin rate (if any)."""
-    j, w = jac[index], weights[index]                                          # (..., 3, g)
-    if w.shape[-1] == 1:                                                       # constant
-        return j
-    blocks = [(w[..., None, :, None] * j[..., :, None, 3 * g:3 * g + 3]).reshape(
-        *j.shape[:-1], -1) for g in range(2)]
-    return np.concatenate([*blocks, j[..., 6:]], axis=-1)
 
 
 def _n_params(jac: np.ndarray, weights: np.ndarray) -> int:
