@@ -1,37 +1,45 @@
 """Self-calibration of pose knowledge from the strikes alone: ``recon ingest LOG --refine``.
 
 A constant pose-knowledge error (a boresight misalignment, a position bias) moves every strike
-of a pass the same way in the sensor's frame, but the sensor's frame turns against the body
-frame as the chaser orbits and the target spins. Two passes that see the same patch of surface
+of a pass the same way in the sensor's or the inertial frame, but those frames turn against the
+body frame as the chaser orbits and the target spins. Passes that see the same patch of surface
 from different geometry therefore place it in different places, and the disagreement says which
 error it was: the crossover adjustment with which NEAR's laser rangefinder and OSIRIS-REx's OLA
-data were corrected. Here:
+data were corrected. Here, repeatedly until the corrections stop moving the points
+(``STOP_MOVE_M``):
 
 1. register a seeded sample of strikes with the recorded poses, corrected by the current
    estimate (none at first);
-2. pair each point with its nearest point from another pass (taken more than
-   ``PAIR_GAP_STEPS`` shots earlier or later, so never a neighbour on its own track), and take
-   the local plane of the consensus cloud (every pass) at the partner (recon/surfaces/normals.py);
-3. minimise the point-to-plane residuals ``n . (p_i - p_j)`` over the error parameters, both
-   points moving with them (scipy.optimize.least_squares, a soft-L1 loss against outliers and
-   pairs across edges, a weak prior that keeps unobservable parameters at zero); repeat until
-   the corrections stop moving the points.
+2. compare each point with the consensus of the other passes around it: the centroid of its
+   nearest points taken ``PAIR_GAP_STEPS`` shots or more away (never its own track), along the
+   normal of the local plane of the consensus cloud, ``r = n . (p - c)``;
+3. take a robust Gauss-Newton step on every parameter (Huber-weighted least squares; the point
+   and the centroid both move with the parameters; a weak prior holds at zero what the data
+   cannot see).
 
-Parameters (each piecewise-linear in time over knots ``interval`` seconds apart, or constant):
+Parameters (misalignment and position piecewise-linear in time over knots ``interval`` seconds
+apart, or constant):
 
 - ``misalignment``: a rotation vector in S; the true sensor attitude is the recorded one times
-  its inverse (the boresight misalignment and any constant attitude bias, which no data can tell
-  apart). About a single beam's own axis it moves no strike: not observable, reported so.
-- ``position``: the recorded sensor position minus the true one, along (radial, along-track,
-  cross-track): ``r_hat``, the sensor's ``+x`` axis made perpendicular to it (along-track for
-  the simulator's nadir and slewing sensors, sim/motion.py), and their cross product.
-- ``spin_rate`` (constant): the true spin rate minus the rate of the recorded target attitude,
-  about the spin axis the recorded attitudes turn about; the attitude at ``t = 0`` is taken as
-  known.
+  its inverse: a boresight misalignment plus any constant attitude bias, which no data can tell
+  apart. About a single beam's own axis it moves no strike: not observable, reported so.
+- ``position``: the recorded sensor position minus the true one, in the inertial frame I (a
+  target ephemeris error). Along the spin axis it shifts the whole cloud: not observable.
+- ``spin_rate`` (constant): the true spin rate minus that of the recorded target attitudes,
+  about the axis they turn about; the attitude at ``t = 0`` is taken as known.
 
-Each estimate comes with its formal 1-sigma uncertainty, ``sqrt(diag((J^T J)^-1))`` of the
-robust Jacobian scaled by the residuals' scatter. Pairs share points, so this may be optimistic
-by up to ~40 %. The log's ``/truth`` group is never read.
+What the data cannot separate, for a single beam looking at the target's centre: a position error
+in the orbital frame is, at range ``rho``, the displacement of a misalignment of ``error / rho``
+(only the spread of the range tells them apart), so a cross-track misalignment trades off against
+a position error along the orbit normal (their estimates move together, and their uncertainties
+say so), and a radial position error is a range bias, which only scales the cloud. Neither is a
+parameter here; an orbital-frame error ends up in the misalignment estimate, which still corrects
+the cloud.
+
+Each estimate comes with its formal 1-sigma uncertainty, the square root of the diagonal of the
+inverse of the robust normal matrix (prior included) at the residuals' scatter. Neighbouring
+residuals share points, so this can be optimistic; an unobservable parameter keeps its prior's
+sigma. The log's ``/truth`` group is never read.
 """
 
 from __future__ import annotations
@@ -46,21 +54,22 @@ from scipy.spatial.transform import Rotation
 from formats import Shots, StrikeChunk, StrikeLog
 from formats.errors import ReconError
 
-# Strikes sampled for the estimate (seeded, uniform): the demo's 77,400-strike log fits whole;
-# more adds little to a handful of parameters and the correction is applied to every strike.
+# Strikes sampled for the estimate (seeded, uniform): 30,000 of the demo's 77,400 estimate a
+# misalignment to ~0.002 deg; more adds little to a handful of parameters and costs time. The
+# correction is applied to every strike.
 MAX_POINTS = 30_000
-# Partners must be this many shots apart: a single-beam track advances ~0.6 m per 10 s shot on
-# the paper's asteroid, so 30 shots keep every partner off the point's own track.
+# Other passes are this many shots away: a single-beam track advances ~0.6 m per 10 s shot on
+# the paper's asteroid, so 30 shots keep every consensus point off the point's own track.
 PAIR_GAP_STEPS = 30
-# Nearest neighbours of each point: its plane, and its candidate partners from other passes. 32
+# Nearest neighbours of each point: its plane, and the other-pass points of its consensus. 32
 # neighbours span several single-beam tracks (recon/surfaces/normals.py: 98.5 % of the normals
 # agree in sign with the truth at 64, 93.9 % at 32).
 NEIGHBOURS = 32
 # Fewest other-pass neighbours that make a consensus, and fewest consensus points to refine.
 MIN_CONSENSUS = 3
 MIN_ROWS = 50
-# Pairs farther apart than this multiple of the median partner distance are dropped (the local
-# plane no longer describes both points there).
+# Other-pass neighbours farther than this multiple of the median distance to the nearest one are
+# left out of the consensus (the local plane no longer describes them).
 PAIR_DISTANCE_FACTOR = 3.0
 # Weak priors (1 sigma) that hold parameters the data cannot see at zero: a degree of attitude,
 # 10 m of position, 0.1 % of the spin rate; each far above what the data resolve when they can.
@@ -72,8 +81,8 @@ OBSERVABLE_SHRINK = 0.5
 # Outer iterations: stop when no sampled point moves more than STOP_MOVE_M further.
 MAX_ITERATIONS = 15
 STOP_MOVE_M = 5e-3
-# Pairs whose residual is this many robust sigmas from the median are left out of a step (pairs
-# across an edge, planes across a thin part); the soft-L1 loss weighs down the rest.
+# Residuals this many robust sigmas from the median are left out of a step (consensus across an
+# edge, planes across a thin part); the Huber weights weigh down the rest.
 OUTLIER_SIGMAS = 4.0
 # Robust steps: Huber weights beyond this many residual sigmas, reweighted this often.
 HUBER_SIGMAS = 1.5
@@ -84,7 +93,6 @@ BLOCK = 4096
 MAD_TO_SIGMA = 1.4826
 # A spin slower than this many turns over the whole log is treated as no spin (no parameter).
 MIN_SPIN_TURNS = 0.05
-PARAMETER_GROUPS = ("misalignment", "position")
 
 
 class RefineError(ReconError, ValueError):
@@ -177,6 +185,7 @@ class Refinement:
     residual_before_m, residual_after_m : float
         Robust scatter (1.4826 MAD) of the crossover residuals before and after.
     n_points, n_pairs, iterations : int
+        Points sampled, points compared with a consensus, Gauss-Newton steps.
     """
 
     correction: PoseCorrection
@@ -209,9 +218,9 @@ class Refinement:
     def lines(self) -> list[str]:
         """Human-readable lines: each estimate with its 1-sigma (constant part: the mean)."""
         c, s, obs = self.correction, self.sigma, self.observable
-        out = [f"pass agreement (robust sigma of crossover residuals): "
+        out = [f"pass agreement (robust sigma of residuals to the other passes): "
                f"{self.residual_before_m:.3f} m -> {self.residual_after_m:.3f} m "
-               f"({self.n_pairs:,} pairs of {self.n_points:,} points, "
+               f"({self.n_pairs:,} of {self.n_points:,} sampled points, "
                f"{self.iterations} iterations)"]
         what = "constant" if len(c.knots) == 1 else f"mean of {len(c.knots)} knots"
         for axis, name in enumerate("xyz"):

@@ -50,11 +50,9 @@ def _accuracy(path, correction=None) -> float:
 def test_true_parameters_undo_the_simulated_errors_exactly(tmp_path):
     """The correction model is the simulator's error model inverted (no noise, no estimate)."""
     path = tmp_path / "exact.h5"
-    sim.simulate(sim.load_scene("asteroid-lrf", ["time.duration=3000",
-                                                 "errors.boresight_misalignment_deg=[0.1, 0.2, 0.3]",
-                                                 "errors.position_bias_inertial=[1, -2, 3]",
-                                                 "errors.spin_period_error=30"]),
-                 path, seed=0, progress=False)
+    overrides = ["time.duration=3000", "errors.boresight_misalignment_deg=[0.1, 0.2, 0.3]",
+                 "errors.position_bias_inertial=[1, -2, 3]", "errors.spin_period_error=30"]
+    sim.simulate(sim.load_scene("asteroid-lrf", overrides), path, seed=0, progress=False)
     rate = 2 * math.pi / 15480.0 - 2 * math.pi / 15510.0
     correction = PoseCorrection(np.zeros(1), np.radians([[0.1, 0.2, 0.3]]),
                                 np.array([[1.0, -2.0, 3.0]]), rate, np.array([0.0, 0.0, 1.0]))
