@@ -6,6 +6,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from formats.errors import ReconError
+
+
+class IngestOptionError(ReconError, ValueError):
+    """Options of ``recon ingest`` that do not go together."""
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ingest", help="register a strike log into a point cloud",
@@ -17,6 +23,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="point cloud to write: .ply, .las, .laz or .h5")
     p.add_argument("--frame", choices=("body", "inertial"), default="body",
                    help="output frame (default: %(default)s; inertial is for debugging)")
+    p.add_argument("--refine", action="store_true",
+                   help="first estimate pose-knowledge errors (boresight misalignment, position "
+                        "bias, spin rate) from the agreement of passes, print each with its "
+                        "uncertainty, and register with the corrected poses")
+    p.add_argument("--refine-interval", type=float, metavar="SECONDS",
+                   help="with --refine: also estimate slowly varying errors, piecewise-linear "
+                        "with knots this far apart (default: constant errors only)")
+    p.add_argument("--refine-json", type=Path, metavar="FILE",
+                   help="with --refine: also write the estimates as JSON")
     p.set_defaults(func=run_ingest)
 
     p = sub.add_parser("trajectory", help="export the recorded sensor trajectory as text",
@@ -44,13 +59,40 @@ def run_ingest(args) -> int:
 
     from recon.registration.ingest import ingest_to_file
 
+    correction = None
+    if args.refine_interval is not None and not args.refine:
+        raise IngestOptionError("--refine-interval needs --refine")
+    if args.refine_json is not None and not args.refine:
+        raise IngestOptionError("--refine-json needs --refine")
+    if args.refine_json is not None and not args.refine_json.parent.is_dir():
+        raise IngestOptionError(f"--refine-json {args.refine_json}: directory "
+                                f"{args.refine_json.parent} does not exist")
+    if args.refine:
+        import json
+
+        from recon.registration.refine import refine
+
+        with tqdm(unit="iteration", disable=None, leave=False, desc="refine") as bar:
+            def step(done: int, total: int) -> None:
+                bar.total = total
+                bar.update(1)
+
+            refinement = refine(args.log, interval=args.refine_interval, progress=step)
+        for line in refinement.lines():
+            print(line)
+        if args.refine_json is not None:
+            args.refine_json.write_text(json.dumps(refinement.to_dict(), indent=2) + "\n")
+            print(f"wrote the estimates to {args.refine_json}")
+        correction = refinement.correction
     with tqdm(unit="strike", unit_scale=True, disable=None, leave=False, desc="ingest") as bar:
         def advance(done: int, total: int) -> None:
             bar.total = total
             bar.update(done)
 
-        summary = ingest_to_file(args.log, args.output, frame=args.frame, progress=advance)
-    print(f"wrote {summary['n_points']} points ({args.frame} frame) to {args.output}")
+        summary = ingest_to_file(args.log, args.output, frame=args.frame, progress=advance,
+                                 correction=correction)
+    print(f"wrote {summary['n_points']} points ({args.frame} frame"
+          + (", refined poses" if correction is not None else "") + f") to {args.output}")
     return 0
 
 

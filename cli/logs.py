@@ -37,14 +37,18 @@ def run_validate(args) -> int:
 
 
 def _describe_sensor(sensor: dict) -> str:
+    import numpy as np
+
     fov = [math.degrees(a) for a in sensor["field_of_view"]]
     text = f"{sensor['pattern']}, {sensor['n_beams']} beam(s)"
     if any(fov):
         text += (f", field of view az {fov[0]:+.3g}..{fov[1]:+.3g} deg, "
                  f"el {fov[2]:+.3g}..{fov[3]:+.3g} deg")
     text += f", range {sensor['range_min']:g}..{sensor['range_max']:g} m"
-    errors = {k: v for k, v in sensor["errors"].items() if v}
-    text += "; errors: " + (", ".join(f"{k}={v:g}" for k, v in errors.items()) or "none")
+    errors = {k: v for k, v in sensor["errors"].items() if any(np.atleast_1d(v))}
+    text += "; errors: " + (", ".join(
+        f"{k}=" + ",".join(f"{x:g}" for x in np.atleast_1d(v)) for k, v in errors.items())
+        or "none")
     return text
 
 

@@ -25,6 +25,11 @@ PATTERNS = ("single", "cross", "zigzag", "grid")
 # Limits on values (beyond sign checks) and why.
 MAX_SUBDIVISIONS = 8          # 1.3 M faces; subdivision 9 would need ~1 GB of mesh
 MAX_FIELD_OF_VIEW_DEG = 180.0  # a pattern spanning 180 deg or more is not a forward-looking sensor
+# Pose-knowledge errors beyond these are failures, not calibration errors: a sensor 10 deg off its
+# mounting, an attitude known to worse than a degree, a clock a minute off.
+MAX_MISALIGNMENT_DEG = 10.0
+MAX_ATTITUDE_ARCSEC = 3600.0
+MAX_TIME_TAG_S = 60.0
 # A beam-spread cone must open less than a right angle: 90 deg is 1000 * pi / 2 mrad.
 MAX_HALF_ANGLE_MRAD = 1000.0 * math.pi / 2
 
@@ -180,6 +185,37 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                         minimum=0.0, maximum=MAX_HALF_ANGLE_MRAD,
                                         exclusive_maximum=True),
         "dilation_subrays": Key(30, "int", "", "sub-rays m in the beam-spread cone", minimum=1),
+        # Pose knowledge (sim/pose_errors.py), off by default; the paper leaves it open. Scales
+        # a mission engineer would quote: Hayabusa2's LIDAR misalignment gave 0.4 m of error at
+        # 1 km (0.02 deg); star trackers know attitude to a few arcseconds; relative navigation
+        # near a small body to metres (OSIRIS-REx, NEAR).
+        "boresight_misalignment_deg": Key([0.0, 0.0, 0.0], "vec3", "deg",
+                                          "constant sensor misalignment, rotation vector in S",
+                                          minimum=-MAX_MISALIGNMENT_DEG,
+                                          maximum=MAX_MISALIGNMENT_DEG),
+        "attitude_bias_arcsec": Key([0.0, 0.0, 0.0], "vec3", "arcsec",
+                                    "constant attitude-knowledge bias, rotation vector in S",
+                                    minimum=-MAX_ATTITUDE_ARCSEC, maximum=MAX_ATTITUDE_ARCSEC),
+        "attitude_walk_arcsec": Key(0.0, "number", "arcsec/sqrt(h)",
+                                    "attitude random walk: 1-sigma per axis after one hour",
+                                    minimum=0.0, maximum=MAX_ATTITUDE_ARCSEC),
+        "position_bias": Key([0.0, 0.0, 0.0], "vec3", "m",
+                             "constant position-knowledge bias: radial, along-track, cross-track"),
+        "position_bias_inertial": Key([0.0, 0.0, 0.0], "vec3", "m",
+                                      "constant position-knowledge bias in the inertial frame I"),
+        "position_drift": Key(0.0, "number", "m",
+                              "1-sigma per axis of a slowly varying (Gauss-Markov) position error",
+                              **NON_NEGATIVE),
+        # Relative navigation errors change over hours (an orbit here lasts 25 h).
+        "position_drift_time": Key(3600.0, "number", "s", "correlation time of position_drift",
+                                   **POSITIVE),
+        "spin_axis_error_deg": Key(0.0, "number", "deg",
+                                   "tilt of the known spin axis (direction from the seed)",
+                                   minimum=0.0, maximum=MAX_MISALIGNMENT_DEG),
+        "spin_period_error": Key(0.0, "number", "s", "known spin period minus the true one"),
+        "time_tag_offset": Key(0.0, "number", "s",
+                               "recorded poses are the true poses at time + offset",
+                               minimum=-MAX_TIME_TAG_S, maximum=MAX_TIME_TAG_S),
     },
     # A run's cost is estimated before it starts (sim/derive.py, ``cost``) and refused above these;
     # raise them with --set limits.KEY=VALUE. The largest preset, asteroid-lidar-noise (15

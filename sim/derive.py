@@ -29,7 +29,9 @@ from sim.errors import SceneError
 
 # Scene units converted to SI where the log needs radians (sim/defaults.py: every angle key
 # says its unit); each conversion happens once, here.
-RADIANS_PER = {"deg": math.pi / 180.0, "mrad": 1e-3}
+RADIANS_PER = {"deg": math.pi / 180.0, "mrad": 1e-3, "arcsec": math.pi / 180.0 / 3600.0}
+# The attitude random walk is given per sqrt(hour) and recorded per sqrt(second).
+SQRT_SECONDS_PER_HOUR = 60.0
 # Shots are taken at t = k * step while t <= duration; the slack absorbs the rounding of
 # duration / step (e.g. 0.5 rotations of 15480 s in 10 s steps is 774, not 773.9999999).
 SHOT_COUNT_SLACK = 1e-9
@@ -106,6 +108,7 @@ def derive(values: dict) -> Derived:
     run_cost = cost(values, n_shots, errors, n_vertices=len(vertices), n_faces=len(faces))
     check_cost(run_cost, values["limits"])
     mu, period = orbit_mu_and_period(values["orbit"], vertices, faces)
+    check_spin_knowledge(values["target"]["spin_period"], values["errors"]["spin_period_error"])
     return Derived(vertices=vertices, faces=faces, target=label, mu=mu, orbit_period=period,
                    duration=duration, n_shots=n_shots, errors=errors, cost=run_cost)
 
@@ -206,6 +209,18 @@ def time_line(time: dict, spin_period: float) -> tuple[float, int]:
     return duration, n_shots
 
 
+def check_spin_knowledge(spin_period: float, error: float) -> None:
+    """The known spin period, ``spin_period + error`` [s], must be a positive spin period."""
+    if error == 0:
+        return
+    if math.isinf(spin_period):
+        raise SceneError("errors.spin_period_error needs a spinning target (target.spin_period "
+                         "is inf)")
+    if spin_period + error <= 0:
+        raise SceneError(f"errors.spin_period_error = {error:g} s makes the known spin period "
+                         f"{spin_period + error:g} s; it must stay positive")
+
+
 def sensor_errors(errors: dict) -> SensorErrors:
     """A scene's ``[errors]`` section as the log records it: 3-sigma values in SI units.
 
@@ -221,4 +236,17 @@ def sensor_errors(errors: dict) -> SensorErrors:
         pulse_dilation_alpha=errors["dilation_alpha"],
         pulse_dilation_half_angle=(errors["dilation_half_angle_mrad"] * RADIANS_PER["mrad"]
                                    if on else 0.0),
-        pulse_dilation_subrays=float(errors["dilation_subrays"]) if on else 0.0)
+        pulse_dilation_subrays=float(errors["dilation_subrays"]) if on else 0.0,
+        boresight_misalignment=tuple(v * RADIANS_PER["deg"]
+                                     for v in errors["boresight_misalignment_deg"]),
+        attitude_bias=tuple(v * RADIANS_PER["arcsec"] for v in errors["attitude_bias_arcsec"]),
+        attitude_walk=errors["attitude_walk_arcsec"] * RADIANS_PER["arcsec"]
+        / SQRT_SECONDS_PER_HOUR,
+        position_bias=tuple(errors["position_bias"]),
+        position_bias_inertial=tuple(errors["position_bias_inertial"]),
+        position_drift=errors["position_drift"],
+        position_drift_time=errors["position_drift_time"] if errors["position_drift"] > 0
+        else 0.0,
+        spin_axis_error=errors["spin_axis_error_deg"] * RADIANS_PER["deg"],
+        spin_period_error=errors["spin_period_error"],
+        time_tag_offset=errors["time_tag_offset"])

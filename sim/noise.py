@@ -28,7 +28,9 @@ with ``d_S`` the beam's nominal direction plus any reported angle offsets):
   reported angles are those of the moved point); a fixed LRF can only record a range, so it
   records the along-beam component (distributed like any one axis of the error) and the lateral
   components, which a single range cannot carry, are dropped.
-- **pose knowledge** (Gaussian per axis, per shot): added to the recorded sensor position.
+- **pose knowledge** (Gaussian per axis, per shot): added to the recorded sensor position. The
+  correlated pose-knowledge errors (misalignment, attitude bias and walk, position bias and
+  drift, spin knowledge, time tags) are in sim/pose_errors.py.
 
 Where several apply they add, as in the paper ("summed directly to account for the worst case").
 """
@@ -39,8 +41,9 @@ import numpy as np
 
 from formats.strike_log import SensorErrors, sigma_from_sigma3
 
-# Random streams, one per error model.
-STREAM_POSITION, STREAM_POINTING, STREAM_ANGLES, STREAM_RANGE, STREAM_DILATION = range(5)
+# Random streams, one per error model (the pose-knowledge ones: sim/pose_errors.py).
+(STREAM_POSITION, STREAM_POINTING, STREAM_ANGLES, STREAM_RANGE, STREAM_DILATION,
+ STREAM_ATTITUDE_WALK, STREAM_POSITION_DRIFT, STREAM_SPIN_AXIS) = range(8)
 # cos(theta) floor for pulse dilation, so a sub-ray exactly along a facet gives a large finite
 # tan(theta) (1e9) rather than an infinite error.
 MIN_COS_INCIDENCE = 1e-9

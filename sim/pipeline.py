@@ -40,7 +40,7 @@ from formats.strike_log import (
     angles_to_directions,
     directions_to_angles,
 )
-from sim import noise
+from sim import noise, pose_errors
 from sim.defaults import (
     CHUNKS_IN_FLIGHT,
     MAX_SEED,
@@ -72,6 +72,7 @@ class Plan:
     slew: dict | None
     pattern: BeamPattern
     errors: SensorErrors
+    pose: pose_errors.PoseKnowledge | None   # pose-knowledge errors (sim/pose_errors.py)
     cone: tuple[np.ndarray, np.ndarray] | None
     caster: EmbreeBackend | Open3DBackend
     exact: ExactHits
@@ -87,8 +88,10 @@ class Chunk:
     time: np.ndarray
     position: np.ndarray            # true sensor position, I
     recorded_position: np.ndarray   # with pose-knowledge error
-    sensor_attitude: np.ndarray     # quaternion S->I
-    target_attitude: np.ndarray     # quaternion B->I
+    sensor_attitude: np.ndarray     # true quaternion S->I
+    target_attitude: np.ndarray     # true quaternion B->I
+    recorded_sensor_attitude: np.ndarray   # with pose-knowledge error
+    recorded_target_attitude: np.ndarray
     shot: np.ndarray
     beam: np.ndarray
     range: np.ndarray
@@ -125,8 +128,11 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
     errors = scene.errors
     cone = (cone_pattern(int(errors.pulse_dilation_subrays), errors.pulse_dilation_half_angle)
             if errors.dilation else None)
-    return Plan(scene=scene, seed=seed, step=scene.values["time"]["step"], spin=spin,
-                orbit=the_orbit, slew=the_slew, pattern=pattern, errors=errors, cone=cone,
+    step = scene.values["time"]["step"]
+    pose = pose_errors.plan_knowledge(errors, seed=seed, n_shots=scene.n_shots, step=step,
+                                      spin=spin, orbit=the_orbit)
+    return Plan(scene=scene, seed=seed, step=step, spin=spin, orbit=the_orbit, slew=the_slew,
+                pattern=pattern, errors=errors, pose=pose, cone=cone,
                 caster=BACKENDS[backend](scene.vertices, scene.faces),
                 exact=ExactHits(scene.vertices, scene.faces),
                 range_min=sensor["range_min"], range_max=sensor["range_max"],
@@ -273,13 +279,18 @@ def compute_chunk(plan: Plan, index: int, first: int, stop: int) -> Chunk:
         if az_off is not None:
             az_off, el_off = az_off[keep], el_off[keep]
 
-    recorded_position = position
+    sensor_q, target_q = Rotation.from_matrix(rays.sensor).as_quat(), rays.target.as_quat()
+    recorded_position, recorded_sensor, recorded_target = position, sensor_q, target_q
+    if plan.pose is not None:
+        recorded_position, recorded_sensor, recorded_target = pose_errors.record(
+            plan.pose, first, t, lambda times: poses(plan, times))
     if errors.position_sigma > 0:
         rng = noise.stream(plan.seed, noise.STREAM_POSITION, index)
-        recorded_position = position + rng.normal(0.0, errors.position_sigma, (n, 3))
+        recorded_position = recorded_position + rng.normal(0.0, errors.position_sigma, (n, 3))
     return Chunk(time=t, position=position, recorded_position=recorded_position,
-                 sensor_attitude=Rotation.from_matrix(rays.sensor).as_quat(),
-                 target_attitude=rays.target.as_quat(), shot=shot + first, beam=beam,
+                 sensor_attitude=sensor_q, target_attitude=target_q,
+                 recorded_sensor_attitude=recorded_sensor,
+                 recorded_target_attitude=recorded_target, shot=shot + first, beam=beam,
                  range=recorded, azimuth_offset=az_off, elevation_offset=el_off, point=point,
                  facet=facet.astype(np.uint32), true_range=true_range, rays=cast)
 
@@ -372,8 +383,8 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
                               expected_shots=scene.n_shots,
                               expected_strikes=scene.n_shots * plan.pattern.n_beams) as log:
         for chunk in iter_chunks(plan, workers=workers):
-            log.write_shots(chunk.time, chunk.recorded_position, chunk.sensor_attitude,
-                            chunk.target_attitude,
+            log.write_shots(chunk.time, chunk.recorded_position, chunk.recorded_sensor_attitude,
+                            chunk.recorded_target_attitude,
                             truth=Shots(chunk.time, chunk.position, chunk.sensor_attitude,
                                         chunk.target_attitude))
             log.write_strikes(chunk.shot, chunk.beam, chunk.range,

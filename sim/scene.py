@@ -19,7 +19,11 @@ every default and where it comes from)::
     [sensor]  pattern = "single" | "cross" | "zigzag" | "grid", field_of_view_deg,
               beams (zigzag), resolution (grid), range_min, range_max
     [errors]  range_sigma3, azimuth_sigma3_deg, elevation_sigma3_deg, position_sigma3,
-              dilation_alpha, dilation_half_angle_mrad, dilation_subrays
+              dilation_alpha, dilation_half_angle_mrad, dilation_subrays,
+              boresight_misalignment_deg, attitude_bias_arcsec, attitude_walk_arcsec,
+              position_bias, position_bias_inertial, position_drift, position_drift_time,
+              spin_axis_error_deg, spin_period_error, time_tag_offset
+              (pose knowledge, sim/pose_errors.py)
 
 Loading is three steps, one module each: this module resolves the layers; sim/schema.py checks
 the values against the bounds each key declares in sim/defaults.py (plus the few cross-key

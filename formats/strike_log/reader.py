@@ -21,6 +21,8 @@ from formats.strike_log.schema import (
     _TRUTH_STRIKE_FIELDS,
     FORMAT_NAME,
     FORMAT_VERSION,
+    POSE_ERROR_FIELDS,
+    POSE_ERROR_VECTORS,
     READ_CHUNK_ROWS,
     SensorErrors,
     SensorInfo,
@@ -90,6 +92,16 @@ class StrikeLog:
             raise StrikeLogError(f"{where}: attribute '{name}' must be a boolean")
         return kind(arr)
 
+    def _error_attr(self, errors, name: str):
+        """One attribute of /sensor/errors: a number, or 3 finite numbers for a pose vector."""
+        if name not in POSE_ERROR_VECTORS:
+            return self._attr(errors, name, float)
+        arr = np.asarray(errors.attrs[name])
+        if arr.shape != (3,) or arr.dtype.kind not in "iuf" or not np.all(np.isfinite(arr)):
+            raise StrikeLogError(f"{self._where}: /sensor/errors attribute '{name}' must be 3 "
+                                 "finite numbers")
+        return tuple(float(v) for v in arr)
+
     def _dataset(self, path: str, n: int | None, tail: tuple, kinds: str) -> h5py.Dataset:
         where = self._where
         if path not in self._file:
@@ -147,8 +159,9 @@ class StrikeLog:
             range_max=self._attr(g, "range_max", float),
             field_of_view=tuple(float(a) for a in fov),
             reports_angles=self._attr(g, "reports_angles", bool),
-            errors=SensorErrors(**{k.name: self._attr(errors, k.name, float)
-                                   for k in fields(SensorErrors)}))
+            errors=SensorErrors(**{k.name: self._error_attr(errors, k.name)
+                                   for k in fields(SensorErrors)
+                                   if k.name in errors.attrs or k.name not in POSE_ERROR_FIELDS}))
         _check_sensor(self.sensor, where)
 
         self._shots = {k: self._dataset(f"shots/{k}", self.n_shots, tail, "f")

@@ -66,6 +66,15 @@ DATASET_UNITS = {
 
 # --------------------------------------------------------------------------- records
 
+# Pose-knowledge error models of /sensor/errors (SPEC.md): optional attributes, zero when absent
+# (logs written before they existed), the vectors of them 3 floats.
+POSE_ERROR_FIELDS = ("boresight_misalignment", "attitude_bias", "attitude_walk",
+                     "position_bias", "position_bias_inertial", "position_drift",
+                     "position_drift_time",
+                     "spin_axis_error", "spin_period_error", "time_tag_offset")
+POSE_ERROR_VECTORS = ("boresight_misalignment", "attitude_bias", "position_bias",
+                      "position_bias_inertial")
+
 
 # The paper states every error as a 3-sigma bound and the log records those (SPEC.md,
 # /sensor/errors); a Gaussian error model draws with the 1-sigma value, a third of it.
@@ -102,6 +111,30 @@ class SensorErrors:
     pulse_dilation_alpha : float, dimensionless, paper Eq. (1) (0: off)
     pulse_dilation_half_angle : float, radians, half-angle of the beam-spread cone
     pulse_dilation_subrays : float, a whole number, sub-rays in the cone
+    boresight_misalignment : 3 floats, radians, rotation vector in S
+        Constant rotation ``E`` of the sensor frame: the recorded attitude is the true one times
+        ``E`` (``R_SI_recorded = R_SI_true E``).
+    attitude_bias : 3 floats, radians, rotation vector in S
+        Constant attitude-knowledge bias, composed after the misalignment.
+    attitude_walk : float, radians per sqrt(second)
+        Attitude-knowledge random walk: per axis, the error's 1-sigma growth is
+        ``attitude_walk * sqrt(t)``.
+    position_bias : 3 floats, metres, (radial, along-track, cross-track)
+        Constant error of the recorded sensor position in the local orbital frame.
+    position_bias_inertial : 3 floats, metres, I
+        Constant error of the recorded sensor position in the inertial frame (a target
+        ephemeris error when the chaser's own orbit is known inertially).
+    position_drift : float, metres
+        1-sigma per axis of a slowly varying (first-order Gauss-Markov) position error, same
+        frame.
+    position_drift_time : float, seconds
+        Correlation time of the position drift.
+    spin_axis_error : float, radians
+        Tilt of the spin axis the target attitude was recorded with from the true one.
+    spin_period_error : float, seconds
+        Recorded spin period minus the true one.
+    time_tag_offset : float, seconds
+        The recorded poses are the true poses at ``time + time_tag_offset``.
     """
 
     range_sigma3: float = 0.0
@@ -111,6 +144,16 @@ class SensorErrors:
     pulse_dilation_alpha: float = 0.0
     pulse_dilation_half_angle: float = 0.0
     pulse_dilation_subrays: float = 0.0
+    boresight_misalignment: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    attitude_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    attitude_walk: float = 0.0
+    position_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    position_bias_inertial: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    position_drift: float = 0.0
+    position_drift_time: float = 0.0
+    spin_axis_error: float = 0.0
+    spin_period_error: float = 0.0
+    time_tag_offset: float = 0.0
 
     @property
     def range_sigma(self) -> float:
@@ -141,6 +184,11 @@ class SensorErrors:
     def dilation(self) -> bool:
         """True when pulse dilation is on."""
         return self.pulse_dilation_alpha > 0
+
+    @property
+    def pose(self) -> bool:
+        """True when a pose-knowledge error model other than ``position_sigma3`` is on."""
+        return any(np.any(np.asarray(getattr(self, name)) != 0) for name in POSE_ERROR_FIELDS)
 
 
 @dataclass(frozen=True)

@@ -158,7 +158,8 @@ class StrikeLogWriter(AtomicWriter):
         g.create_dataset("beam_directions",
                          data=np.asarray(sensor.beam_directions, dtype=np.float64))
         g.create_group("errors").attrs.update(
-            {k.name: float(getattr(sensor.errors, k.name)) for k in fields(SensorErrors)})
+            {k.name: np.asarray(getattr(sensor.errors, k.name), dtype=np.float64)
+             for k in fields(SensorErrors)})
 
         def columns(group, spec, rows):
             for name, (tail, dtype) in spec.items():

@@ -34,7 +34,7 @@ ATTRIBUTE_DTYPES = {"time": np.float64, "shot": np.uint32, "beam": np.uint32,
                     "view_x": np.float64, "view_y": np.float64, "view_z": np.float64}
 
 
-def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body"
+def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body", correction=None
                    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Place one block of strikes in space.
 
@@ -44,6 +44,8 @@ def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body"
         Strikes with their recorded shots (``StrikeLog.iter_chunks``).
     frame : {"body", "inertial"}
         Target body frame B (default) or the target-centred inertial frame I (for debugging).
+    correction : recon.registration.refine.PoseCorrection, optional
+        Corrections of the recorded poses estimated from the strikes (``refine``).
 
     Returns
     -------
@@ -53,6 +55,8 @@ def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body"
         ``azimuth`` and ``elevation`` [rad] in the sensor frame S, and the sensor position
         ``view_x/y/z`` [m] in ``frame``.
     """
+    if correction is not None:
+        chunk = correction.correct_chunk(chunk)
     row = chunk.shot - chunk.shot_offset
     position = chunk.shots.sensor_position[row]
     points = position + Rotation.from_quat(chunk.shots.sensor_attitude[row]).apply(
@@ -70,7 +74,8 @@ def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body"
 
 
 def iter_registered(log: StrikeLog, *, frame: Frame = "body", chunk_rows: int | None = None,
-                    progress=None) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
+                    progress=None, correction=None
+                    ) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
     """Yield registered blocks ``(points, attributes)`` of a log, in bounded memory.
 
     Parameters
@@ -81,18 +86,20 @@ def iter_registered(log: StrikeLog, *, frame: Frame = "body", chunk_rows: int | 
         Strikes per block (default: the reader's block size).
     progress : callable, optional
         Called as ``progress(strikes_in_block, total_strikes)`` after each block.
+    correction : recon.registration.refine.PoseCorrection, optional
+        Corrections of the recorded poses (``refine``).
     """
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
     chunks = log.iter_chunks() if chunk_rows is None else log.iter_chunks(chunk_rows)
     for chunk in chunks:
-        yield register_chunk(chunk, frame=frame)
+        yield register_chunk(chunk, frame=frame, correction=correction)
         if progress:
             progress(len(chunk), log.n_strikes)
 
 
 def _register_and_write(log_path, output, *, frame: Frame, chunk_rows: int | None, progress,
-                        keep: bool) -> tuple[int, list]:
+                        keep: bool, correction=None) -> tuple[int, list]:
     """One pass over a log: register every block, write it to ``output`` (if given) and keep it
     (if ``keep``). Returns the strike count and the kept blocks."""
     kept = []
@@ -102,7 +109,7 @@ def _register_and_write(log_path, output, *, frame: Frame, chunk_rows: int | Non
                   if output is not None else contextlib.nullcontext())
         with writer:
             for block in iter_registered(log, frame=frame, chunk_rows=chunk_rows,
-                                         progress=progress):
+                                         progress=progress, correction=correction):
                 if output is not None:
                     writer.write(*block)
                 if keep:
@@ -111,7 +118,7 @@ def _register_and_write(log_path, output, *, frame: Frame, chunk_rows: int | Non
 
 
 def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int | None = None,
-                   progress=None) -> dict:
+                   progress=None, correction=None) -> dict:
     """Register every strike of a log and stream the cloud to ``out_path`` (.ply, .las, .laz, .h5),
     in bounded memory.
 
@@ -123,12 +130,12 @@ def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int
         ``n_points``, ``frame``, ``output``.
     """
     n_points, _ = _register_and_write(log_path, out_path, frame=frame, chunk_rows=chunk_rows,
-                                      progress=progress, keep=False)
+                                      progress=progress, keep=False, correction=correction)
     return {"n_points": n_points, "frame": frame, "output": str(Path(out_path))}
 
 
 def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | None = None,
-           progress=None) -> Cloud:
+           progress=None, correction=None) -> Cloud:
     """Register a whole log in memory and return it as a point cloud with its attributes.
 
     Parameters
@@ -142,6 +149,9 @@ def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | No
         Strikes per block (default: the reader's block size).
     progress : callable, optional
         Called as ``progress(strikes_in_block, total_strikes)`` after each block.
+    correction : recon.registration.refine.PoseCorrection, optional
+        Corrections of the recorded poses estimated from the strikes
+        (``recon.registration.refine.refine(log).correction``).
 
     Returns
     -------
@@ -150,7 +160,7 @@ def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | No
         ``azimuth``, ``elevation``, ``view_x/y/z``.
     """
     _, blocks = _register_and_write(log_path, output, frame=frame, chunk_rows=chunk_rows,
-                                    progress=progress, keep=True)
+                                    progress=progress, keep=True, correction=correction)
     if not blocks:
         return Cloud(np.zeros((0, 3)), {k: np.zeros(0, dtype=v)
                                         for k, v in ATTRIBUTE_DTYPES.items()}, frame=frame)

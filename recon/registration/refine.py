@@ -1,0 +1,489 @@
+"""Self-calibration of pose knowledge from the strikes alone: ``recon ingest LOG --refine``.
+
+A constant pose-knowledge error (a boresight misalignment, a position bias) moves every strike
+of a pass the same way in the sensor's or the inertial frame, but those frames turn against the
+body frame as the chaser orbits and the target spins. Passes that see the same patch of surface
+from different geometry therefore place it in different places, and the disagreement says which
+error it was: the crossover adjustment with which NEAR's laser rangefinder and OSIRIS-REx's OLA
+data were corrected. Here, repeatedly until the corrections stop moving the points
+(``STOP_MOVE_M``):
+
+1. register a seeded sample of strikes with the recorded poses, corrected by the current
+   estimate (none at first);
+2. compare each point with the consensus of the other passes around it: the centroid of its
+   nearest points taken ``PAIR_GAP_STEPS`` shots or more away (never its own track), along the
+   normal of the local plane of the consensus cloud, ``r = n . (p - c)``;
+3. take a robust Gauss-Newton step on every parameter (Huber-weighted least squares; the point
+   and the centroid both move with the parameters; a weak prior holds at zero what the data
+   cannot see).
+
+Parameters (misalignment and position piecewise-linear in time over knots ``interval`` seconds
+apart, or constant):
+
+- ``misalignment``: a rotation vector in S; the true sensor attitude is the recorded one times
+  its inverse: a boresight misalignment plus any constant attitude bias, which no data can tell
+  apart. About a single beam's own axis it moves no strike: not observable, reported so.
+- ``position``: the recorded sensor position minus the true one, in the inertial frame I (a
+  target ephemeris error). Along the spin axis it shifts the whole cloud: not observable.
+- ``spin_rate`` (constant): the true spin rate minus that of the recorded target attitudes,
+  about the axis they turn about; the attitude at ``t = 0`` is taken as known.
+
+What the data cannot separate, for a single beam looking at the target's centre: a position error
+in the orbital frame is, at range ``rho``, the displacement of a misalignment of ``error / rho``
+(only the spread of the range tells them apart), so a cross-track misalignment trades off against
+a position error along the orbit normal (their estimates move together, and their uncertainties
+say so), and a radial position error is a range bias, which only scales the cloud. Neither is a
+parameter here; an orbital-frame error ends up in the misalignment estimate, which still corrects
+the cloud.
+
+Each estimate comes with its formal 1-sigma uncertainty, the square root of the diagonal of the
+inverse of the robust normal matrix (prior included) at the residuals' scatter. Neighbouring
+residuals share points, so this can be optimistic; an unobservable parameter keeps its prior's
+sigma. The log's ``/truth`` group is never read.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from formats import Shots, StrikeChunk, StrikeLog
+from formats.errors import ReconError
+
+# Strikes sampled for the estimate (seeded, uniform): 30,000 of the demo's 77,400 estimate a
+# misalignment to ~0.002 deg; more adds little to a handful of parameters and costs time. The
+# correction is applied to every strike.
+MAX_POINTS = 30_000
+# Other passes are this many shots away: a single-beam track advances ~0.6 m per 10 s shot on
+# the paper's asteroid, so 30 shots keep every consensus point off the point's own track.
+PAIR_GAP_STEPS = 30
+# Nearest neighbours of each point: its plane, and the other-pass points of its consensus. 32
+# neighbours span several single-beam tracks (recon/surfaces/normals.py: 98.5 % of the normals
+# agree in sign with the truth at 64, 93.9 % at 32).
+NEIGHBOURS = 32
+# Fewest other-pass neighbours that make a consensus, and fewest consensus points to refine.
+MIN_CONSENSUS = 3
+MIN_ROWS = 50
+# Other-pass neighbours farther than this multiple of the median distance to the nearest one are
+# left out of the consensus (the local plane no longer describes them).
+PAIR_DISTANCE_FACTOR = 3.0
+# Weak priors (1 sigma) that hold parameters the data cannot see at zero: a degree of attitude,
+# 10 m of position, 0.1 % of the spin rate; each far above what the data resolve when they can.
+PRIOR_ATTITUDE_RAD = math.radians(1.0)
+PRIOR_POSITION_M = 10.0
+PRIOR_SPIN_FRACTION = 1e-3
+# A parameter is "observable" when the data shrink its prior uncertainty at least this much.
+OBSERVABLE_SHRINK = 0.5
+# Outer iterations: stop when no sampled point moves more than STOP_MOVE_M further.
+MAX_ITERATIONS = 15
+STOP_MOVE_M = 5e-3
+# Residuals this many robust sigmas from the median are left out of a step (consensus across an
+# edge, planes across a thin part); the Huber weights weigh down the rest.
+OUTLIER_SIGMAS = 4.0
+# Robust steps: Huber weights beyond this many residual sigmas, reweighted this often.
+HUBER_SIGMAS = 1.5
+IRLS_ITERATIONS = 5
+# Points per block of the consensus: (block, NEIGHBOURS, 3, 7) float64 is ~15 MB.
+BLOCK = 4096
+# Consistent 1.4826 * median absolute deviation: the 1-sigma of Gaussian residuals.
+MAD_TO_SIGMA = 1.4826
+# A spin slower than this many turns over the whole log is treated as no spin (no parameter).
+MIN_SPIN_TURNS = 0.05
+
+
+class RefineError(ReconError, ValueError):
+    """A log or option the self-calibration cannot use."""
+
+
+def spin_of(shots: Shots) -> tuple[np.ndarray, float]:
+    """Spin axis (3,) in B and rate [rad/s] of the recorded target attitudes (rate 0: no spin).
+
+    From the rotation between consecutive recorded attitudes, ``R_BI(t_i)^T R_BI(t_i+1)``.
+    """
+    if len(shots) < 2:
+        return np.array([0.0, 0.0, 1.0]), 0.0
+    target = Rotation.from_quat(shots.target_attitude)
+    turns = (target[:-1].inv() * target[1:]).as_rotvec()
+    total = turns.sum(axis=0)
+    span = float(shots.time[-1] - shots.time[0])
+    angle = float(np.linalg.norm(total))
+    if angle < MIN_SPIN_TURNS * 2.0 * math.pi or span <= 0:
+        return np.array([0.0, 0.0, 1.0]), 0.0
+    return total / angle, angle / span
+
+
+@dataclass
+class PoseCorrection:
+    """Corrections of the recorded poses, piecewise-linear in time.
+
+    Attributes
+    ----------
+    knots : (k,) float64, seconds
+        Knot times (one knot: constant).
+    misalignment : (k, 3) float64, radians, rotation vectors in S
+    position : (k, 3) float64, metres, I: recorded sensor position minus the true one
+    spin_rate : float, rad/s
+        Added to the recorded spin rate about ``spin_axis``.
+    spin_axis : (3,) float64, unit vector, B
+    """
+
+    knots: np.ndarray
+    misalignment: np.ndarray
+    position: np.ndarray
+    spin_rate: float = 0.0
+    spin_axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+
+    def weights(self, t: np.ndarray) -> np.ndarray:
+        """Hat-function weights (n, k) of times ``t`` [s]: linear between knots, constant
+        beyond the ends."""
+        k = len(self.knots)
+        if k == 1:
+            return np.ones((len(t), 1))
+        x = np.interp(t, self.knots, np.arange(k, dtype=np.float64))
+        low = np.clip(np.floor(x).astype(np.int64), 0, k - 2)
+        frac = x - low
+        w = np.zeros((len(t), k))
+        rows = np.arange(len(t))
+        w[rows, low] = 1.0 - frac
+        w[rows, low + 1] = frac
+        return w
+
+    def correct(self, shots: Shots) -> Shots:
+        """The shots with corrected poses (time unchanged)."""
+        if len(shots) == 0:
+            return shots
+        w = self.weights(shots.time)
+        position = shots.sensor_position - w @ self.position
+        sensor = (Rotation.from_quat(shots.sensor_attitude)
+                  * Rotation.from_rotvec(w @ self.misalignment).inv())
+        target = Rotation.from_quat(shots.target_attitude)
+        if self.spin_rate:
+            target = target * Rotation.from_rotvec((self.spin_rate * shots.time)[:, None]
+                                                   * self.spin_axis)
+        return Shots(shots.time, position, sensor.as_quat(), target.as_quat())
+
+    def correct_chunk(self, chunk: StrikeChunk) -> StrikeChunk:
+        """A block of strikes with its shots' poses corrected."""
+        return replace(chunk, shots=self.correct(chunk.shots))
+
+
+@dataclass
+class Refinement:
+    """What the self-calibration estimated, with uncertainties, and how well the passes agree.
+
+    Attributes
+    ----------
+    correction : PoseCorrection
+    sigma : PoseCorrection
+        1-sigma uncertainties of every parameter (same layout).
+    observable : dict of str -> (k, 3) bool or bool
+        Parameters the data constrain (uncertainty below half the prior's).
+    residual_before_m, residual_after_m : float
+        Robust scatter (1.4826 MAD) of the crossover residuals before and after.
+    n_points, n_pairs, iterations : int
+        Points sampled, points compared with a consensus, Gauss-Newton steps.
+    """
+
+    correction: PoseCorrection
+    sigma: PoseCorrection
+    observable: dict
+    residual_before_m: float
+    residual_after_m: float
+    n_points: int
+    n_pairs: int
+    iterations: int
+
+    def to_dict(self) -> dict:
+        """A JSON-ready summary: estimates and 1-sigma in degrees, metres and ppm."""
+        c, s = self.correction, self.sigma
+        out = {"knots_s": c.knots.tolist(),
+               "misalignment_deg": np.degrees(c.misalignment).tolist(),
+               "misalignment_sigma_deg": np.degrees(s.misalignment).tolist(),
+               "misalignment_observable": self.observable["misalignment"].tolist(),
+               "position_bias_m": c.position.tolist(),
+               "position_bias_sigma_m": s.position.tolist(),
+               "position_observable": self.observable["position"].tolist(),
+               "spin_axis": c.spin_axis.tolist(), "spin_rate_rad_s": c.spin_rate,
+               "spin_rate_sigma_rad_s": s.spin_rate,
+               "spin_observable": bool(self.observable["spin"]),
+               "residual_before_m": self.residual_before_m,
+               "residual_after_m": self.residual_after_m, "n_points": self.n_points,
+               "n_pairs": self.n_pairs, "iterations": self.iterations}
+        return out
+
+    def lines(self) -> list[str]:
+        """Human-readable lines: each estimate with its 1-sigma (constant part: the mean)."""
+        c, s, obs = self.correction, self.sigma, self.observable
+        out = [f"pass agreement (robust sigma of residuals to the other passes): "
+               f"{self.residual_before_m:.3f} m -> {self.residual_after_m:.3f} m "
+               f"({self.n_pairs:,} of {self.n_points:,} sampled points, "
+               f"{self.iterations} iterations)"]
+        what = "constant" if len(c.knots) == 1 else f"mean of {len(c.knots)} knots"
+        for axis, name in enumerate("xyz"):
+            value = np.degrees(c.misalignment[:, axis]).mean()
+            out.append(f"misalignment about S {name}: {value:+.5f} +/- "
+                       f"{np.degrees(s.misalignment[:, axis]).mean():.5f} deg ({what})"
+                       + ("" if obs["misalignment"][:, axis].any() else "  [not observable]"))
+        for axis, name in enumerate("xyz"):
+            out.append(f"position bias along I {name}: {c.position[:, axis].mean():+.3f} +/- "
+                       f"{s.position[:, axis].mean():.3f} m ({what})"
+                       + ("" if obs["position"][:, axis].any() else "  [not observable]"))
+        if s.spin_rate:
+            out.append(f"spin rate correction: {c.spin_rate:+.4g} +/- {s.spin_rate:.2g} rad/s"
+                       + ("" if obs["spin"] else "  [not observable]"))
+        return out
+
+
+@dataclass
+class _Sample:
+    """The sampled strikes with their recorded shots, one row per strike."""
+
+    time: np.ndarray        # (n,) s
+    vector: np.ndarray      # (n, 3) m, S: range times measured direction
+    shots: Shots            # recorded poses, one row per strike
+
+
+def _sample(log: StrikeLog, max_points: int, seed: int) -> _Sample:
+    """A seeded uniform sample of at most ``max_points`` strikes (recorded values only)."""
+    n = log.n_strikes
+    keep = (np.arange(n) if n <= max_points
+            else np.sort(np.random.default_rng(seed).choice(n, max_points, replace=False)))
+    parts = []
+    for chunk in log.iter_chunks():
+        rows = keep[(keep >= chunk.start) & (keep < chunk.start + len(chunk))] - chunk.start
+        if not len(rows):
+            continue
+        r = chunk.shot[rows] - chunk.shot_offset
+        s = chunk.shots
+        parts.append((s.time[r], chunk.range[rows, None] * chunk.direction[rows],
+                      s.sensor_position[r], s.sensor_attitude[r], s.target_attitude[r]))
+    time, vector, position, sensor, target = (np.concatenate(p) for p in zip(*parts,
+                                                                               strict=True))
+    return _Sample(time, vector, Shots(time, position, sensor, target))
+
+
+def _register(sample: _Sample, shots: Shots) -> tuple[np.ndarray, Rotation, Rotation]:
+    """Body-frame points (n, 3) of the sample under ``shots``, with its rotations."""
+    sensor = Rotation.from_quat(shots.sensor_attitude)
+    target = Rotation.from_quat(shots.target_attitude)
+    points = target.inv().apply(shots.sensor_position + sensor.apply(sample.vector))
+    return points, sensor, target
+
+
+def _consensus(points: np.ndarray, time: np.ndarray, gap: float, jac: np.ndarray,
+               weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each point against the consensus of the other passes around it, linearised.
+
+    The consensus at point ``i`` is the centroid ``c_i`` of its ``NEIGHBOURS`` nearest points
+    that belong to other passes (``gap`` seconds or more away) and lie within
+    ``PAIR_DISTANCE_FACTOR`` times the median distance to the nearest such point; the normal is
+    that of the least-squares plane of all ``NEIGHBOURS`` (the consensus cloud). The residual is
+    ``n . (p_i - c_i)``: the centroid surrounds the point, so an error of the normal barely
+    matters. Both the point and the centroid move with the parameters.
+
+    Returns
+    -------
+    rows : (m,) int64
+        Points with a consensus.
+    residual : (m,) float64, metres
+    design : (m, p) float64
+        Change of each residual per unit of each parameter.
+    """
+    tree = cKDTree(points)
+    k = min(NEIGHBOURS, len(points))
+    distance, index = tree.query(points, k=k, workers=-1)
+    other = np.abs(time[index] - time[:, None]) >= gap
+    has = other.any(axis=1)
+    if has.sum() < 2:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros((0, _n_params(jac, weights)))
+    nearest = distance[has, np.argmax(other[has], axis=1)]
+    other &= distance <= PAIR_DISTANCE_FACTOR * np.median(nearest)
+    count = other.sum(axis=1)
+    rows = np.flatnonzero(count >= MIN_CONSENSUS)
+    residual = np.empty(len(rows))
+    design = np.empty((len(rows), _n_params(jac, weights)))
+    for start in range(0, len(rows), BLOCK):
+        r = rows[start:start + BLOCK]
+        neighbours = points[index[r]]                                          # (b, k, 3)
+        centred = neighbours - neighbours.mean(axis=1, keepdims=True)
+        normal = np.linalg.eigh(np.einsum("bki,bkj->bij", centred, centred))[1][:, :, 0]
+        share = other[r] / count[r][:, None]                                   # (b, k)
+        centroid = np.einsum("bk,bki->bi", share, neighbours)
+        residual[start:start + len(r)] = np.einsum("bi,bi->b", normal, points[r] - centroid)
+        # How the point and the centroid move along this point's normal (the centroid's motion
+        # exactly, so a translation of everything leaves the residual unchanged).
+        own = np.einsum("bi,bij->bj", normal, jac[r])                          # (b, g)
+        theirs = np.einsum("bi,bkij->bkj", normal, jac[index[r]])              # (b, k, g)
+        knots = (np.einsum("bK,bg->bKg", weights[r], own[:, :6])
+                 - np.einsum("bk,bkK,bkg->bKg", share, weights[index[r]], theirs[:, :, :6]))
+        spin = own[:, 6:] - np.einsum("bk,bkg->bg", share, theirs[:, :, 6:])
+        design[start:start + len(r)] = np.concatenate(
+            [knots[:, :, :3].reshape(len(r), -1), knots[:, :, 3:].reshape(len(r), -1), spin],
+            axis=1)
+    return rows, residual, design
+
+
+def _n_params(jac: np.ndarray, weights: np.ndarray) -> int:
+    return 6 * weights.shape[1] + jac.shape[2] - 6
+
+
+def _jacobian(sample: _Sample, points: np.ndarray, sensor: Rotation, target: Rotation,
+              spin_axis: np.ndarray | None) -> np.ndarray:
+    """How each body-frame point moves per unit of each parameter group: (n, 3, 6 or 7).
+
+    Columns: misalignment (3, radians, S), position (3, metres), spin rate (rad/s).
+    """
+    n = len(points)
+    to_body = target.inv()
+    v = sample.vector
+    # d p_B / d omega = R_BI^T R_SI [v]x: the rotated strike turns by -omega in S.
+    skew = np.zeros((n, 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2] = -v[:, 2], v[:, 1]
+    skew[:, 1, 0], skew[:, 1, 2] = v[:, 2], -v[:, 0]
+    skew[:, 2, 0], skew[:, 2, 1] = -v[:, 1], v[:, 0]
+    m = to_body.as_matrix() @ sensor.as_matrix()
+    columns = [m @ skew, -to_body.as_matrix()]
+    if spin_axis is not None:
+        columns.append(-(sample.time[:, None] * np.cross(spin_axis, points))[:, :, None])
+    return np.concatenate(columns, axis=2)
+
+
+def _robust_sigma(r: np.ndarray) -> float:
+    return float(MAD_TO_SIGMA * np.median(np.abs(r - np.median(r)))) if len(r) else 0.0
+
+
+def refine(log_path, *, interval: float | None = None, max_points: int = MAX_POINTS,
+           seed: int = 0, progress=None) -> Refinement:
+    """Estimate the constant and slowly varying pose-knowledge errors of a log from its strikes.
+
+    Parameters
+    ----------
+    log_path : str or os.PathLike
+        A strike log; only its recorded shots and strikes are read.
+    interval : float, optional, seconds
+        Knot spacing of slowly varying errors (None: constant errors only).
+    max_points : int
+        Strikes sampled for the estimate.
+    seed : int
+        Seed of the sample.
+    progress : callable, optional
+        Called with ``(iteration, max_iterations)`` after each iteration.
+
+    Returns
+    -------
+    Refinement
+        Apply ``refinement.correction`` to the shots to register the corrected cloud.
+
+    Raises
+    ------
+    RefineError
+        Bad options, or too few strikes seen twice to estimate anything.
+    """
+    if interval is not None and not (math.isfinite(interval) and interval > 0):
+        raise RefineError(f"refine interval must be a positive number of seconds, got {interval}")
+    if max_points < 100:
+        raise RefineError(f"max_points must be at least 100, got {max_points}")
+    with StrikeLog(log_path) as log:
+        if log.n_strikes < 100:
+            raise RefineError(f"{log_path}: {log.n_strikes} strikes are too few to refine the "
+                              "poses (at least 100)")
+        all_shots = log.shots()
+        sample = _sample(log, max_points, seed)
+    axis, rate = spin_of(all_shots)
+    t0, t1 = float(all_shots.time[0]), float(all_shots.time[-1])
+    knots = (np.array([t0]) if interval is None
+             else np.linspace(t0, t1, max(2, math.ceil((t1 - t0) / interval) + 1)))
+    k = len(knots)
+    step = float(np.median(np.diff(all_shots.time))) if len(all_shots) > 1 else 1.0
+    gap = PAIR_GAP_STEPS * step
+    spin_axis = axis if rate > 0 else None
+    estimate = PoseCorrection(knots, np.zeros((k, 3)), np.zeros((k, 3)), 0.0, axis)
+    weights = estimate.weights(sample.time)
+    # Prior 1-sigma of every parameter, in the solver's order (per knot: omega 3, position 3).
+    prior = np.concatenate([np.repeat([[PRIOR_ATTITUDE_RAD] * 3], k, axis=0).ravel(),
+                            np.full(3 * k, PRIOR_POSITION_M)]
+                           + ([[PRIOR_SPIN_FRACTION * rate]] if spin_axis is not None else []))
+    before = None
+    previous = None
+    for iteration in range(1, MAX_ITERATIONS + 1):
+        points, sensor, target = _register(sample, estimate.correct(sample.shots))
+        moved = (0.0 if previous is None
+                 else float(np.max(np.linalg.norm(points - previous, axis=1))))
+        if previous is not None and moved < STOP_MOVE_M:
+            break
+        previous = points
+        jac = _jacobian(sample, points, sensor, target, spin_axis)
+        rows, residual, design = _consensus(points, sample.time, gap, jac, weights)
+        if len(rows) < MIN_ROWS:
+            raise RefineError(f"{log_path}: only {len(rows)} strikes have neighbours from other "
+                              "passes; too few to refine the poses")
+        if before is None:
+            before = _robust_sigma(residual)
+        inlier = np.abs(residual - np.median(residual)) <= OUTLIER_SIGMAS * _robust_sigma(residual)
+        residual, design = residual[inlier], design[inlier]
+        scale = _robust_sigma(residual) or 1e-6
+        step, covariance = _solve(residual, design, prior, scale, _vector(estimate, spin_axis))
+        estimate = _updated(estimate, step, k, spin_axis is not None)
+        if progress:
+            progress(iteration, MAX_ITERATIONS)
+    points, sensor, target = _register(sample, estimate.correct(sample.shots))
+    jac = _jacobian(sample, points, sensor, target, spin_axis)
+    rows, after, _ = _consensus(points, sample.time, gap, jac, weights)
+    sigma = _uncertainty(covariance, k, spin_axis, knots)
+    observable = {"misalignment": sigma.misalignment < OBSERVABLE_SHRINK * PRIOR_ATTITUDE_RAD,
+                  "position": sigma.position < OBSERVABLE_SHRINK * PRIOR_POSITION_M,
+                  "spin": bool(spin_axis is not None
+                               and sigma.spin_rate < OBSERVABLE_SHRINK * prior[-1])}
+    return Refinement(correction=estimate, sigma=sigma, observable=observable,
+                      residual_before_m=before, residual_after_m=_robust_sigma(after),
+                      n_points=len(sample.time), n_pairs=len(rows), iterations=iteration)
+
+
+def _vector(estimate: PoseCorrection, spin_axis) -> np.ndarray:
+    """The estimate as the solver's parameter vector."""
+    parts = [estimate.misalignment.ravel(), estimate.position.ravel()]
+    return np.concatenate(parts + ([[estimate.spin_rate]] if spin_axis is not None else []))
+
+
+def _solve(residual: np.ndarray, design: np.ndarray, prior: np.ndarray, scale: float,
+           current: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Robust Gauss-Newton step: the increment ``x`` minimising the Huber loss of
+    ``residual + design x`` (residual scatter ``scale``) plus the prior on ``current + x``.
+
+    Iteratively reweighted least squares on the (p, p) normal equations.
+
+    Returns
+    -------
+    x : (p,) float64
+    covariance : (p, p) float64
+        Of the parameters after the step: the inverse of the weighted normal matrix.
+    """
+    x = np.zeros(design.shape[1])
+    precision = np.diag(1.0 / prior ** 2)
+    for _ in range(IRLS_ITERATIONS):
+        e = np.abs(residual + design @ x)
+        w = np.minimum(1.0, HUBER_SIGMAS * scale / np.maximum(e, 1e-12)) / scale ** 2
+        normal = design.T @ (w[:, None] * design) + precision
+        x = np.linalg.solve(normal, -(design.T @ (w * residual)) - precision @ current)
+    return x, np.linalg.inv(normal)
+
+
+def _updated(estimate: PoseCorrection, x: np.ndarray, k: int, spin: bool) -> PoseCorrection:
+    omega, position = x[:3 * k].reshape(k, 3), x[3 * k:6 * k].reshape(k, 3)
+    return PoseCorrection(estimate.knots, estimate.misalignment + omega,
+                          estimate.position + position,
+                          estimate.spin_rate + (float(x[-1]) if spin else 0.0),
+                          estimate.spin_axis)
+
+
+def _uncertainty(covariance: np.ndarray, k: int, spin_axis: np.ndarray | None,
+                 knots: np.ndarray) -> PoseCorrection:
+    """1-sigma of every parameter, from the diagonal of the covariance."""
+    sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    return PoseCorrection(knots, sigma[:3 * k].reshape(k, 3), sigma[3 * k:6 * k].reshape(k, 3),
+                          float(sigma[-1]) if spin_axis is not None else 0.0,
+                          np.zeros(3) if spin_axis is None else spin_axis)

@@ -1,0 +1,135 @@
+"""Self-calibration of pose knowledge: recovers known errors, leaves good poses alone, never
+reads the truth."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import h5py
+import numpy as np
+import pytest
+
+import sim
+from cli.main import main
+from formats import StrikeLog
+from recon.registration.ingest import ingest
+from recon.registration.refine import PoseCorrection, RefineError, refine
+
+# The paper's asteroid and single-beam LRF (0.3 m 3-sigma range noise), its 50 rotations (fewer
+# leave too few crossings of ascending and descending passes to separate the errors).
+BASE = ("target.subdivisions=4", "errors.range_sigma3=0.3")
+MISALIGNMENT_DEG = np.array([0.03, 0.04, 0.0])    # 0.05 deg
+BIAS_M = np.array([1.0, 0.0, 0.0])                # inertial, in the orbit plane
+
+
+def _simulate(path, *overrides):
+    sim.simulate(sim.load_scene("asteroid-lrf", [*BASE, *overrides]), path, seed=0,
+                 progress=False)
+    return path
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("refine")
+    clean = _simulate(tmp / "clean.h5")
+    posed = _simulate(tmp / "posed.h5",
+                      "errors.boresight_misalignment_deg=[{}, {}, {}]".format(*MISALIGNMENT_DEG),
+                      "errors.position_bias_inertial=[{}, {}, {}]".format(*BIAS_M))
+    return clean, posed
+
+
+def _accuracy(path, correction=None) -> float:
+    """Mean distance of the registered points from their true hit points [m]."""
+    with StrikeLog(path) as log:
+        truth = log.truth_strikes().point
+    return float(np.linalg.norm(ingest(path, correction=correction).points - truth, axis=1)
+                 .mean())
+
+
+def test_true_parameters_undo_the_simulated_errors_exactly(tmp_path):
+    """The correction model is the simulator's error model inverted (no noise, no estimate)."""
+    path = tmp_path / "exact.h5"
+    overrides = ["time.duration=3000", "errors.boresight_misalignment_deg=[0.1, 0.2, 0.3]",
+                 "errors.position_bias_inertial=[1, -2, 3]", "errors.spin_period_error=30"]
+    sim.simulate(sim.load_scene("asteroid-lrf", overrides), path, seed=0, progress=False)
+    rate = 2 * math.pi / 15480.0 - 2 * math.pi / 15510.0
+    correction = PoseCorrection(np.zeros(1), np.radians([[0.1, 0.2, 0.3]]),
+                                np.array([[1.0, -2.0, 3.0]]), rate, np.array([0.0, 0.0, 1.0]))
+    assert _accuracy(path) > 1.0
+    assert _accuracy(path, correction) < 1e-6
+
+
+def test_refine_recovers_a_misalignment_and_a_position_bias(logs):
+    _, posed = logs
+    result = refine(posed)
+    c, s = result.correction, result.sigma
+    estimate = np.degrees(c.misalignment[0])
+    # The well-observed axis (along-track) to 10 %, the misalignment's size to 15 %.
+    assert estimate[1] == pytest.approx(MISALIGNMENT_DEG[1], rel=0.1)
+    assert np.linalg.norm(estimate) == pytest.approx(0.05, rel=0.15)
+    assert c.position[0, 0] == pytest.approx(BIAS_M[0], abs=0.15)
+    # Not observable for a single beam: the roll about the beam and a shift along the spin axis.
+    assert not result.observable["misalignment"][0, 2]
+    assert not result.observable["position"][0, 2]
+    assert s.misalignment[0, 1] > 0 and s.position[0, 0] > 0
+    assert result.residual_after_m < result.residual_before_m
+    assert _accuracy(posed, c) < 0.4 * _accuracy(posed)
+
+
+def test_refine_moves_no_point_of_an_error_free_log_beyond_the_range_noise(logs):
+    clean, _ = logs
+    result = refine(clean)
+    before = ingest(clean).points
+    after = ingest(clean, correction=result.correction).points
+    range_sigma3 = 0.3
+    assert np.linalg.norm(after - before, axis=1).max() < range_sigma3
+
+
+def test_refine_never_reads_the_truth_group(tmp_path, logs):
+    _, posed = logs
+    reference = refine(posed, max_points=5000).to_dict()
+    corrupt = tmp_path / "corrupt.h5"
+    corrupt.write_bytes(posed.read_bytes())
+    with h5py.File(corrupt, "r+") as f:
+        for name in ("truth/point", "truth/sensor_position", "truth/sensor_attitude",
+                     "truth/target_attitude"):
+            f[name][...] = 0.0
+    assert refine(corrupt, max_points=5000).to_dict() == reference
+
+
+def test_slowly_varying_errors_are_estimated_per_knot(logs):
+    _, posed = logs
+    result = refine(posed, interval=20 * 15480.0, max_points=8000)
+    assert len(result.correction.knots) == 4   # 50 rotations: knots at 0, 20, 40, 50
+    assert result.correction.misalignment.shape == (4, 3)
+    assert np.all(np.degrees(result.correction.misalignment[:, 1]) > 0.02)
+
+
+def test_bad_refine_options_are_refused(logs, tmp_path):
+    _, posed = logs
+    with pytest.raises(RefineError, match="refine interval must be a positive number"):
+        refine(posed, interval=0.0)
+    tiny = _simulate(tmp_path / "tiny.h5", "time.duration=300")
+    with pytest.raises(RefineError, match="too few to refine the poses"):
+        refine(tiny)
+
+
+def test_cli_ingest_refine_prints_estimates_and_writes_json(logs, tmp_path, capsys):
+    _, posed = logs
+    out, estimates = tmp_path / "cloud.ply", tmp_path / "refine.json"
+    assert main(["ingest", str(posed), "-o", str(out), "--refine",
+                 "--refine-json", str(estimates)]) == 0
+    printed = capsys.readouterr().out
+    assert "misalignment about S y" in printed and "[not observable]" in printed
+    assert "refined poses" in printed and out.exists()
+    data = json.loads(estimates.read_text())
+    assert data["misalignment_deg"][0][1] == pytest.approx(0.04, rel=0.1)
+
+
+def test_cli_refine_options_need_refine(logs, tmp_path, capsys):
+    _, posed = logs
+    assert main(["ingest", str(posed), "-o", str(tmp_path / "c.ply"),
+                 "--refine-interval", "100"]) == 1
+    assert "--refine-interval needs --refine" in capsys.readouterr().err
+    assert not (tmp_path / "c.ply").exists()
