@@ -76,7 +76,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--list-methods", action="store_true",
                    help="list the methods, their defaults and grids, and exit")
     add_list_option(p, "--auto-methods", metavar="METHOD",
-                    help="candidates of -m auto (default: every method and its grid)")
+                    help="restrict -m auto's candidate ladder to these methods (default: all)")
     p.add_argument("--holdout", type=float, default=0.1,
                    help="fraction of points -m auto holds out (default: %(default)s)")
     p.add_argument("--in-process", action="store_true",

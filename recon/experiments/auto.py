@@ -1,31 +1,41 @@
-"""``-m auto``: the simplest method and resolution the data support, chosen without the truth.
+"""``-m auto``: the simplest model the data support, chosen without the truth.
 
-The rule (hold-out validation with Breiman's one-standard-error rule, model size in faces):
+What a strike log knows besides its points is used: each strike's view point (the beam), the
+sensor's recorded error model (``recon.surfaces.uncertainty``) and how much of the target the
+strikes cover. The rule:
 
-1. Hold out a seeded random ``holdout`` fraction of the points (10%); prepare the rest
-   (normals, spacing, noise) and fit every candidate (method, parameters) on it, each isolated
+1. **Hold out** a seeded random ``holdout`` fraction of the strikes (10%); prepare the rest
+   (normals, spacing, noise, per-point uncertainty) and fit candidates on it, each isolated
    like ``recon compare``'s runs (a crash or a timeout only removes that candidate).
-2. For every fitted surface predict each held-out measurement (``heldout_residuals``): the
-   held-out strike's beam, from its view point (the sensor) through the point, is intersected
-   with the surface, and the residual is the measured range minus the surface's range along
-   the beam. The held-out error ``e`` is the mean absolute residual. A surface that smooths
-   away real shape, leaves holes, or bridges concavities predicts those ranges badly; one that
-   chases the noise gains nothing on points it never saw. The beam matters: on the single-beam
-   LRF clouds of RSO-A the points are 3 cm apart along a track and scattered by 10 cm along
-   the beam, so a surface interpolating the noisy training points is a fine sawtooth that
-   passes within 2 cm of any held-out point (closest-point distance) while predicting its range
-   no better than the noise allows. A beam that misses the surface counts the point's
-   closest-point distance to it (a lower bound on that error); clouds without view points use
-   closest-point distances throughout (``metrics.distance.point_mesh_distance``).
-3. The best candidate has the lowest ``e``. Its standard error ``se = std(d) / sqrt(n_held)``
-   is the noise of that estimate: every candidate with ``e <= e_best + se`` fits the held-out
-   points as well as the best, to within what this cloud can tell apart.
-4. Face count is the penalty: among those candidates the one with the fewest faces wins (ties:
-   lower ``e``). The penalty is lexicographic, not a weighted sum, so no exchange rate between
-   metres and faces has to be invented; a 12-face box beats a 50,000-face Poisson surface only
-   when the Poisson surface is not measurably better.
+2. **Predict every held-out range** (``heldout_residuals``): the held-out strike's beam, from its
+   view point through the point, is cast against the surface; the residual is the measured
+   range minus the surface's range along the beam. Each residual is truncated at the strike's
+   tolerance ``cap = max(tau, 3 sigma)``: ``tau`` is 1% of the cloud's bounding-box diagonal
+   (the F-score threshold of ``metrics``, ``TAU_FRACTION``), ``sigma`` the strike's recorded
+   1-sigma range uncertainty at the incidence angle of the surface it hits. **A beam that
+   misses the surface counts the full cap**: a mesh with holes predicts nothing there (the old
+   rule counted its closest-point distance, a lower bound, so holes looked good). The held-out
+   error ``e`` is the mean truncated residual: about the Chamfer distance where the surface is
+   good, about the F-score where it is not.
+3. **One standard error**: the best candidate has the lowest ``e``; its standard error ``se``
+   is the noise of that estimate, and every candidate with ``e <= e_best + se`` fits the
+   held-out strikes as well as the best, to within what this cloud can tell apart.
+4. **Model size is the penalty**: among those, the fewest free parameters wins
+   (``Method.parameter_count``: 9 for an ellipsoid, 3 per plane, 3 per vertex of a free mesh),
+   then lower ``e``. **Coverage**: when the strikes cover less than ``COMPLETE_COVERAGE`` of the
+   surface of the best closed candidate (area within ``cap`` of a strike), closed candidates
+   come first within the band: where there are no strikes no open surface can be right, and a
+   closed model is the honest guess.
 
-The chosen candidate is then refitted on all points by the caller (``recon reconstruct -m auto``).
+**Coarse to fine** (``LADDER``): the candidates come in levels, models of a few numbers first
+(an ellipsoid, a polyhedron of planes), then coarse and default smooth and local surfaces, then
+fine ones. After each level the next is fitted only if it might matter: when the best so far
+came from the last level (or from level 0 or 1, which always run), and the search stops as
+soon as a level's best is not measurably better (by ``se``) than the best before it. The
+ladder holds ``MAX_FITS`` fits in all, a quarter of ``recon compare``'s ~45 runs.
+
+The chosen candidate is then refitted on all points by the caller (``recon reconstruct -m
+auto``).
 """
 
 from __future__ import annotations
@@ -41,15 +51,35 @@ from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limit
 from recon.surfaces.methods import MethodFailed, Run
 from recon.surfaces.normals import DEFAULT_K, Fallback
 from recon.surfaces.prepare import Preparation
+from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
+from recon.surfaces.uncertainty import MIN_COS
 
 # Fraction of points held out: 10% leaves the fit 90% of the density (a Poisson depth or a grid
-# cell chosen on 90% suits 100%) and gives ~1e4 held-out points on a 1e5-point cloud, so the
-# standard error of the mean distance is ~1% of the noise.
+# cell chosen on 90% suits 100%) and gives ~1e3 held-out points on a 1e4-point cloud, so the
+# standard error of the mean residual is ~3% of it.
 HOLDOUT_FRACTION = 0.1
 # Fewest held-out points for the standard error to mean anything.
 MIN_HELD_OUT = 30
-# Candidates of the default automatic choice: every listed method at its defaults and its
-# parameter grid (recon.experiments.cases.variants), as in ``recon compare``.
+# The F-score threshold of the truth scores (metrics/defaults.py TAU_FRACTION): 1% of the
+# bounding-box diagonal, here of the cloud's (the truth's is unknown).
+TAU_FRACTION = 0.01
+# Strike tolerance in recorded sigmas: 3 sigma, the paper's unit of error.
+SIGMAS = 3.0
+# Below this fraction of the best closed surface near a strike, coverage is incomplete and
+# closed candidates come first (module docstring, step 4). 0.9: a 10% unseen cap of the target.
+COMPLETE_COVERAGE = 0.9
+# Surface samples of the coverage estimate (its standard error < 0.5 / sqrt(n) = 0.5%).
+COVERAGE_SAMPLES = 10_000
+# The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
+# level 1: coarse smooth and local surfaces; level 2: the defaults; level 3: fine ones. The
+# levels come from ``benchmarks/suite.py``: the runs that were the truth's best on its clouds.
+LADDER: tuple[tuple[tuple[str, dict], ...], ...] = (
+    (("ellipsoid", {}), ("planes", {})),
+    (("poisson", {"depth": 6}), ("plane", {"cell": 2.0})),
+    (("screened-poisson", {}), ("plane", {}), ("delaunay-balls", {})),
+    (("poisson", {"depth": 9}), ("rimls", {}), ("ball-pivoting", {})),
+)
+MAX_FITS = sum(len(level) for level in LADDER)
 
 
 class AutoError(ReconError, ValueError):
@@ -66,20 +96,25 @@ class AutoChoice:
         The chosen method and its resolved parameters (``method``, ``params`` and ``label``
         read from it).
     reason : str
-        One paragraph: the best candidate, the band, the choice.
+        One paragraph: the best candidate, the band, the coverage, the choice, the ladder.
     candidates : list of dict
-        Per candidate: ``label``, ``method``, ``params``, ``kind``, ``status``, ``reason``,
-        ``heldout_mean_m`` (mean absolute held-out residual), ``heldout_se_m``, ``beam_hits``
-        (fraction of held-out beams that hit the surface), ``n_faces``, ``eligible``,
-        ``chosen``.
+        Per candidate: ``label``, ``method``, ``params``, ``kind``, ``level``, ``status``
+        ("ok", "failed" or "skipped": a level the ladder did not need), ``reason``,
+        ``heldout_mean_m`` (mean truncated held-out residual), ``heldout_se_m``, ``beam_hits``
+        (fraction of held-out beams that hit the surface), ``n_faces``, ``n_params``,
+        ``watertight``, ``fit_s`` (the isolated fit's process time), ``eligible``, ``chosen``.
     threshold_m : float
         ``e_best + se_best``: the band's upper edge.
+    coverage : float
+        Fraction of the best closed candidate's surface within a strike's tolerance (NaN when
+        no closed candidate succeeded).
     """
 
     run: Run
     reason: str
     candidates: list[dict] = field(default_factory=list)
     threshold_m: float = float("nan")
+    coverage: float = float("nan")
 
     @property
     def method(self) -> str:
@@ -96,17 +131,26 @@ class AutoChoice:
     def to_dict(self) -> dict:
         return {"method": self.method, "params": self.params, "label": self.label,
                 "reason": self.reason, "threshold_m": self.threshold_m,
-                "candidates": self.candidates}
+                "coverage": self.coverage, "candidates": self.candidates}
 
 
-def select(candidates: list[dict]) -> tuple[int, float, str]:
-    """Apply the rule of the module docstring to scored candidates.
+def _mean_se(d: np.ndarray) -> tuple[float, float]:
+    return float(np.mean(d)), (float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1
+                               else 0.0)
+
+
+def select(candidates: list[dict], *, coverage: float = float("nan")
+           ) -> tuple[int, float, str]:
+    """Apply steps 3 and 4 of the module docstring to scored candidates.
 
     Parameters
     ----------
     candidates : list of dict
-        Each with ``distances`` ((n_held,) float64 metres, or None for a failed fit),
-        ``n_faces`` and ``label``.
+        Each with ``distances`` ((n_held,) float64 truncated residuals in metres, or None for a
+        failed or skipped fit), ``n_params``, ``watertight`` and ``label``.
+    coverage : float
+        Fraction of the best closed surface near the strikes (NaN: unknown, taken as
+        complete).
 
     Returns
     -------
@@ -120,30 +164,38 @@ def select(candidates: list[dict]) -> tuple[int, float, str]:
     if not scored:
         raise MethodFailed("auto: every candidate failed: " + "; ".join(
             f"{c['label']}: {c.get('reason')}" for c in candidates))
-    mean = {i: float(np.mean(candidates[i]["distances"])) for i in scored}
-    best = min(scored, key=lambda i: (mean[i], candidates[i]["n_faces"]))
-    d_best = candidates[best]["distances"]
-    se = float(np.std(d_best, ddof=1) / np.sqrt(len(d_best))) if len(d_best) > 1 else 0.0
-    threshold = mean[best] + se
-    eligible = [i for i in scored if mean[i] <= threshold]
-    chosen = min(eligible, key=lambda i: (candidates[i]["n_faces"], mean[i]))
+    stats = {i: _mean_se(candidates[i]["distances"]) for i in scored}
+    best = min(scored, key=lambda i: (stats[i][0], candidates[i]["n_params"]))
+    mean_best, se = stats[best]
+    threshold = mean_best + se
+    eligible = [i for i in scored if stats[i][0] <= threshold]
+    incomplete = bool(coverage < COMPLETE_COVERAGE)
+    closed_first = incomplete and any(candidates[i].get("watertight") for i in eligible)
+    chosen = min(eligible, key=lambda i: (closed_first and not candidates[i].get("watertight"),
+                                          candidates[i]["n_params"], stats[i][0]))
     c, b = candidates[chosen], candidates[best]
+    size = f"{c['n_params']:,} parameters, {c['n_faces']:,} faces"
     if chosen == best:
-        reason = (f"chose {c['label']} ({c['n_faces']} faces): the lowest held-out error, "
-                  f"{mean[best]:.4g} m mean distance; "
-                  + (f"the other {len(eligible) - 1} candidate(s) within one standard error "
-                     f"({se:.2g} m) have more faces" if len(eligible) > 1 else
-                     f"no other candidate is within one standard error ({se:.2g} m)"))
+        reason = (f"chose {c['label']} ({size}): the lowest held-out error, "
+                  f"{mean_best:.4g} m; " + (
+                      f"the other {len(eligible) - 1} candidate(s) within one standard error "
+                      f"({se:.2g} m) are larger models" if len(eligible) > 1 else
+                      f"no other candidate is within one standard error ({se:.2g} m)"))
     else:
-        reason = (f"chose {c['label']} ({c['n_faces']} faces): held-out error {mean[chosen]:.4g} "
-                  f"m, within one standard error ({se:.2g} m) of the best, {b['label']} "
-                  f"({mean[best]:.4g} m, {b['n_faces']} faces); of the {len(eligible)} "
-                  f"candidates within that band it has the fewest faces")
+        reason = (f"chose {c['label']} ({size}): held-out error {stats[chosen][0]:.4g} m, "
+                  f"within one standard error ({se:.2g} m) of the best, {b['label']} "
+                  f"({mean_best:.4g} m, {b['n_params']:,} parameters); of the {len(eligible)} "
+                  "candidates within that band it is the "
+                  + ("smallest closed model" if closed_first else "smallest model"))
+    if np.isfinite(coverage):
+        reason += (f". The strikes cover {coverage:.0%} of the best closed surface"
+                   + ("; where there are no strikes a closed model is the honest guess, so "
+                      "closed candidates came first" if incomplete else ""))
     return chosen, threshold, reason
 
 
 def heldout_residuals(points: np.ndarray, view_points: np.ndarray | None, vertices: np.ndarray,
-                      faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                      faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Absolute range residuals of held-out strikes against a surface.
 
     Parameters
@@ -163,11 +215,15 @@ def heldout_residuals(points: np.ndarray, view_points: np.ndarray | None, vertic
         miss, and without view points, the closest-point distance to the surface.
     hit : (n,) bool
         Whether the beam hit the surface (all False without view points).
+    cos_incidence : (n,) float64
+        |cos| of the angle between the beam and the normal of the triangle it hit (1 where it
+        missed or without view points).
     """
     from metrics.distance import point_mesh_distance
 
     residual = np.empty(len(points))
     hit = np.zeros(len(points), dtype=bool)
+    cos_incidence = np.ones(len(points))
     if view_points is not None:
         import open3d as o3d
 
@@ -188,10 +244,51 @@ def heldout_residuals(points: np.ndarray, view_points: np.ndarray | None, vertic
         t = np.einsum("ij,ij->i", normal, a - view_points[hit]) / np.where(along == 0, 1e-300,
                                                                             along)
         residual[hit] = np.abs(measured[hit] - t)
+        cos_incidence[hit] = np.abs(along) / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)
     miss = ~hit
     if miss.any():
         residual[miss] = point_mesh_distance(points[miss], (vertices, faces))[0]
-    return residual, hit
+    return residual, hit, cos_incidence
+
+
+def range_sigma(columns: dict[str, np.ndarray] | None, cos_incidence: np.ndarray,
+                noise: float) -> np.ndarray:
+    """Each held-out strike's 1-sigma range uncertainty where its beam meets a surface.
+
+    Parameters
+    ----------
+    columns : dict of str to (n,) arrays, or None
+        The strikes' recorded uncertainty columns (``recon.surfaces.uncertainty``); None: the
+        cloud's robust noise scale stands for every strike.
+    cos_incidence : (n,) float64
+        |cos| of the beam's angle to the surface normal (``heldout_residuals``).
+    noise : float, metres
+
+    Returns
+    -------
+    (n,) float64, metres: along the beam, ``sqrt(s_along^2 + (d_along t)^2 + (s_across^2 +
+    (d_across t)^2) t^2)`` with ``t = tan(incidence)``: a lateral error moves the strike along
+    a tilted surface by ``t`` times as much in range.
+    """
+    if columns is None or not all(k in columns for k in SIGMA_COLUMNS):
+        return np.full(len(cos_incidence), float(noise))
+    along, across, d_along, d_across = (np.asarray(columns[k], dtype=np.float64)
+                                        for k in SIGMA_COLUMNS)
+    c = np.clip(cos_incidence, MIN_COS, 1.0)
+    t2 = (1.0 - c * c) / (c * c)
+    return np.sqrt(along**2 + d_along**2 * t2 + (across**2 + d_across**2 * t2) * t2)
+
+
+def coverage_of(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, reach: float,
+                *, seed: int = 0) -> float:
+    """Fraction of a surface's area within ``reach`` of a strike (uniform area samples)."""
+    from scipy.spatial import cKDTree
+
+    from metrics import Mesh, sample_surface
+
+    samples, _ = sample_surface(Mesh(vertices, faces), COVERAGE_SAMPLES, seed=seed)
+    distance, _ = cKDTree(points).query(samples, workers=-1)
+    return float(np.mean(distance <= reach))
 
 
 def _fit(*, run: Run, cloud, timeout_s, memory_mb) -> dict:
@@ -202,43 +299,57 @@ def _fit(*, run: Run, cloud, timeout_s, memory_mb) -> dict:
                         threads=SWEEP_THREADS)
 
 
+def ladder(methods: Sequence[str] | None = None) -> list[list[Run]]:
+    """The levels of ``LADDER`` as runs, restricted to ``methods`` (each named method not on the
+    ladder joins the last level at its defaults)."""
+    from recon.surfaces.methods import bind
+
+    levels = [[bind(name, params) for name, params in level
+               if methods is None or name in methods] for level in LADDER]
+    if methods is not None:
+        listed = {name for level in LADDER for name, _ in level}
+        levels[-1] += [bind(name) for name in methods if name not in listed]
+    return [level for level in levels if level]
+
+
 def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
+           uncertainty: dict[str, np.ndarray] | None = None,
            candidates: Sequence[Run | tuple[str, dict]] | None = None,
-           holdout: float = HOLDOUT_FRACTION, seed: int = 0, k: int = DEFAULT_K,
-           fallback: Fallback = "centroid", timeout_s: float = DEFAULT_TIMEOUT_S,
-           memory_mb: int | None = DEFAULT_MEMORY_MB, scheduler: str | None = "threads",
-           n_workers: int | None = None) -> AutoChoice:
-    """Choose a method and resolution by held-out error, without the truth.
+           methods: Sequence[str] | None = None, holdout: float = HOLDOUT_FRACTION,
+           seed: int = 0, k: int = DEFAULT_K, fallback: Fallback = "centroid",
+           timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
+           scheduler: str | None = "threads", n_workers: int | None = None) -> AutoChoice:
+    """Choose a method and resolution by held-out beams, without the truth.
 
     Parameters
     ----------
     points : (n, 3) float64, metres, body frame
     view_points : (n, 3) float64, metres, optional
-        Sensor positions (orient the normals).
+        Sensor positions (orient the normals, aim the held-out beams).
+    uncertainty : dict of str to (n,) arrays, optional
+        The strikes' recorded uncertainty columns (a ``Cloud``'s attributes as ingest writes
+        them, ``recon.surfaces.uncertainty``); other keys are ignored.
     candidates : sequence of Run or of (method, params), optional
-        Default: ``recon.experiments.cases.variants()`` (every listed method and its grid).
-        Pairs are resolved once here.
+        Fit these, all at once, instead of the ladder. Pairs are resolved once here.
+    methods : sequence of str, optional
+        Restrict the ladder to these methods (``ladder``).
     holdout : float
         Fraction of points held out, in (0, 0.5].
     seed : int
         Seed of the split (and of the methods).
     k, fallback
-        Normal estimation (``recon.surfaces.reconstruct.prepare``).
+        Normal estimation (``recon.surfaces.prepare.prepare``).
     timeout_s, memory_mb
         Limits of each isolated fit.
     scheduler, n_workers
         Where the fits run (``recon.experiments.sweep``; default: a local thread pool, each fit in
-        its own
-        process).
+        its own process).
 
     Returns
     -------
     AutoChoice
     """
-    from tqdm import tqdm
-
-    from recon.experiments.cases import as_runs, variants
-    from recon.experiments.sweep import iterate
+    from recon.experiments.cases import as_runs
     from recon.surfaces.prepare import prepare
 
     if not 0 < holdout <= 0.5:
@@ -248,58 +359,129 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     if n_held < MIN_HELD_OUT:
         raise AutoError(f"auto needs at least {MIN_HELD_OUT} held-out points; {holdout:g} of "
                         f"{len(points)} points is {n_held}")
-    runs = as_runs(candidates) if candidates else variants()
+    levels = [as_runs(candidates)] if candidates else ladder(methods)
+    columns = None
+    if uncertainty is not None and all(key in uncertainty for key in SIGMA_COLUMNS):
+        columns = {key: np.asarray(uncertainty[key]) for key in SIGMA_COLUMNS}
     order = np.random.default_rng(seed).permutation(len(points))
     held, train = np.sort(order[:n_held]), np.sort(order[n_held:])
-    cloud = prepare(points[train], view_points=None if view_points is None else
-                    view_points[train], k=k, fallback=fallback, seed=seed)
-    cases = {run.key: {"run": run} for run in runs}
-    results: dict[str, dict] = {}
-    with tqdm(total=len(cases), desc="auto", unit="fit", disable=None, leave=False) as bar:
-        for key, result in iterate(_fit, cases, shared={"cloud": cloud, "timeout_s": timeout_s,
-                                                        "memory_mb": memory_mb},
-                                   scheduler=scheduler, n_workers=n_workers):
-            results[key] = result
-            bar.update(1)
-    table = []
-    for key, case in cases.items():
-        result = results[key]
-        run = case["run"]
-        entry = {"label": run.label, "method": run.method, "params": run.params,
-                 "kind": run.kind, "run": run,
-                 "status": result.get("status", "failed"), "reason": result.get("reason", ""),
-                 "n_faces": result.get("n_faces"), "distances": None, "beam_hits": None}
-        if entry["status"] == "ok":
-            entry["distances"], hits = heldout_residuals(
-                points[held], None if view_points is None else view_points[held],
-                result["vertices"], result["faces"])
-            entry["beam_hits"] = float(hits.mean())
-        table.append(entry)
-    chosen, threshold, reason = select(table)
+    view = None if view_points is None else np.asarray(view_points, dtype=np.float64)
+    cloud = prepare(points[train], view_points=None if view is None else view[train], k=k,
+                    fallback=fallback, seed=seed,
+                    uncertainty=None if columns is None else {
+                        key: v[train] for key, v in columns.items()})
+    tau = TAU_FRACTION * float(np.linalg.norm(np.ptp(points, axis=0)))
+    held_columns = None if columns is None else {key: v[held] for key, v in columns.items()}
+    shared = {"cloud": cloud, "timeout_s": timeout_s, "memory_mb": memory_mb}
+    context = {"points": points[held], "view": None if view is None else view[held],
+               "columns": held_columns, "noise": cloud.noise, "tau": tau}
+    table: list[dict] = []
+    note = ""
+    for depth, level in enumerate(levels):
+        before = _best(table)
+        table += _fit_level(level, depth, shared, context, scheduler, n_workers)
+        after = _best(table)
+        if depth >= 1 and depth + 1 < len(levels) and before is not None and after is not None:
+            level_best = min((e for e in table if e["level"] == depth and
+                              e["distances"] is not None),
+                             key=lambda e: e["mean"], default=None)
+            if level_best is None or level_best["mean"] > before["mean"] - before["se"]:
+                skipped = sum(len(x) for x in levels[depth + 1:])
+                note = (f"; the ladder stopped after level {depth} of {len(levels) - 1} "
+                        f"({skipped} finer candidates not fitted): it was not measurably "
+                        "better than the levels before it")
+                for later, rest in enumerate(levels[depth + 1:], start=depth + 1):
+                    table += [_entry(run, later, status="skipped") for run in rest]
+                break
+    closed = [e for e in table if e["distances"] is not None and e["watertight"]]
+    coverage = float("nan")
+    if closed and view is not None:
+        best_closed = min(closed, key=lambda e: e["mean"])
+        coverage = coverage_of(best_closed["vertices"], best_closed["faces"], points,
+                               max(tau, SIGMAS * cloud.noise), seed=seed)
+    chosen, threshold, reason = select(table, coverage=coverage)
+    fitted = sum(e["status"] != "skipped" for e in table)
+    reason += f"; {fitted} candidate fit(s) of {len(table)}{note}."
     runs_of = [entry.pop("run") for entry in table]
     for i, entry in enumerate(table):
         d = entry.pop("distances")
-        entry["heldout_mean_m"] = None if d is None else float(np.mean(d))
-        entry["heldout_se_m"] = None if d is None else float(np.std(d, ddof=1) / np.sqrt(len(d)))
-        entry["eligible"] = d is not None and float(np.mean(d)) <= threshold
+        entry.pop("vertices", None)
+        entry.pop("faces", None)
+        entry["heldout_mean_m"] = entry.pop("mean")
+        entry["heldout_se_m"] = entry.pop("se")
+        entry["eligible"] = d is not None and entry["heldout_mean_m"] <= threshold
         entry["chosen"] = i == chosen
-    return AutoChoice(runs_of[chosen], reason, table, threshold)
+    return AutoChoice(runs_of[chosen], reason, table, threshold, coverage)
+
+
+def _entry(run: Run, level: int, *, status: str, reason: str = "") -> dict:
+    return {"label": run.label, "method": run.method, "params": run.params, "kind": run.kind,
+            "level": level, "run": run, "status": status, "reason": reason, "n_faces": None,
+            "n_params": None, "watertight": None, "fit_s": None, "distances": None,
+            "beam_hits": None, "mean": None, "se": None}
+
+
+def _best(table: list[dict]) -> dict | None:
+    return min((e for e in table if e["distances"] is not None), key=lambda e: e["mean"],
+               default=None)
+
+
+def _fit_level(level: list[Run], depth: int, shared: dict, context: dict,
+               scheduler: str | None, n_workers: int | None) -> list[dict]:
+    """Fit one level's runs (isolated, in parallel) and score them on the held-out strikes."""
+    from tqdm import tqdm
+
+    from recon.experiments.sweep import iterate
+
+    cases = {run.key: {"run": run} for run in level}
+    results: dict[str, dict] = {}
+    with tqdm(total=len(cases), desc=f"auto level {depth}", unit="fit", disable=None,
+              leave=False) as bar:
+        for key, result in iterate(_fit, cases, shared=shared, scheduler=scheduler,
+                                   n_workers=n_workers):
+            results[key] = result
+            bar.update(1)
+    out = []
+    for run in level:
+        result = results[run.key]
+        entry = _entry(run, depth, status=result.get("status", "failed"),
+                       reason=result.get("reason", ""))
+        entry["fit_s"] = result.get("process_time_s")
+        if entry["status"] == "ok":
+            vertices, faces = result["vertices"], result["faces"]
+            residual, hits, cos = heldout_residuals(context["points"], context["view"],
+                                                    vertices, faces)
+            cap = np.maximum(context["tau"],
+                             SIGMAS * range_sigma(context["columns"], cos, context["noise"]))
+            if context["view"] is not None:
+                residual = np.where(hits, residual, cap)
+            d = np.minimum(residual, cap)
+            entry.update(distances=d, vertices=vertices, faces=faces, n_faces=len(faces),
+                         n_params=run.method_spec().parameter_count(vertices, faces),
+                         watertight=bool(result.get("watertight")),
+                         beam_hits=float(hits.mean()) if context["view"] is not None else None)
+            entry["mean"], entry["se"] = _mean_se(d)
+        out.append(entry)
+    return out
 
 
 def format_choice(choice: AutoChoice) -> str:
     """The candidates table and the reason, as ``recon reconstruct -m auto`` prints them."""
-    lines = [f"{'':2}{'candidate':<38} {'kind':<13} {'held-out m':>11} {'faces':>9}",
-             "-" * 76]
+    lines = [f"{'':2}{'candidate':<34} {'level':>5} {'kind':<13} {'held-out m':>11} "
+             f"{'hits':>5} {'params':>8} {'faces':>8}", "-" * 92]
     ranked = sorted(choice.candidates, key=lambda c: (c["heldout_mean_m"] is None,
                                                       c["heldout_mean_m"] or 0.0))
     for c in ranked:
         mark = "*" if c["chosen"] else ("~" if c["eligible"] else " ")
-        if c["heldout_mean_m"] is None:
-            lines.append(f"{mark:2}{c['label'][:38]:<38} {c['kind']:<13} FAILED: "
-                         f"{(c['reason'] or '')[:60]}")
+        start = f"{mark:2}{c['label'][:34]:<34} {c['level']:>5} {c['kind']:<13}"
+        if c["status"] == "skipped":
+            lines.append(f"{start} not fitted (the ladder stopped before its level)")
+        elif c["heldout_mean_m"] is None:
+            lines.append(f"{start} FAILED: {(c['reason'] or '')[:50]}")
         else:
-            lines.append(f"{mark:2}{c['label'][:38]:<38} {c['kind']:<13} "
-                         f"{c['heldout_mean_m']:>11.4g} {c['n_faces']:>9d}")
+            hits = "" if c["beam_hits"] is None else f"{c['beam_hits']:.2f}"
+            lines.append(f"{start} {c['heldout_mean_m']:>11.4g} {hits:>5} "
+                         f"{c['n_params']:>8d} {c['n_faces']:>8d}")
     lines.append("(* chosen, ~ within one standard error of the best)")
     lines.append(choice.reason)
     return "\n".join(lines)
@@ -316,18 +498,15 @@ def choose_for(cloud, *, methods: Sequence[str] | None = None, holdout: float = 
     cloud : Cloud
         Metres, body frame; its view points, when present, aim the held-out beams.
     methods : sequence of str, optional
-        Candidate methods, each with its grid (default: every listed method).
+        Restrict the ladder to these methods (``ladder``; default: the whole ladder).
     holdout : float
     preparation : Preparation, optional
     limits : Limits, optional
     """
-    from recon.experiments.cases import variants
-
     preparation = preparation or Preparation()
-    return choose(cloud.points, view_points=cloud.view_points,
-                  candidates=variants(methods) if methods else None, holdout=holdout,
-                  seed=preparation.seed, k=preparation.k, fallback=preparation.fallback,
-                  **(limits or Limits()).kwargs())
+    return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
+                  methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
+                  fallback=preparation.fallback, **(limits or Limits()).kwargs())
 
 
 def choose_and_reconstruct(input, output, *, methods: Sequence[str] | None = None,
@@ -344,7 +523,7 @@ def choose_and_reconstruct(input, output, *, methods: Sequence[str] | None = Non
     output : str or Path
         Mesh to write (.ply).
     methods : sequence of str, optional
-        Candidate methods, each with its grid (default: every listed method).
+        Restrict the ladder to these methods (default: the whole ladder).
     holdout : float
         Fraction of points held out (``choose``).
     preparation : Preparation, optional

@@ -33,7 +33,8 @@ DPI = 100
 # Colours of the failure map, per outcome.
 OUTCOME_COLOURS = {"ok": "#4daf4a", "timeout": "#984ea3", "crash": "#e41a1c",
                    "memory": "#ff7f00", "error": "#377eb8", "empty": "#a65628",
-                   "degenerate": "#f781bf", "score": "#999999", "task": "#333333"}
+                   "degenerate": "#f781bf", "score": "#999999", "task": "#333333",
+                   "collapse": "#ffd92f"}
 # Points drawn per class in an edge picture (a seeded subsample beyond): 3D scatter cost grows
 # with the count, and 60,000 grey points already fill a 6-inch panel.
 MAX_DRAWN = 60_000
@@ -556,14 +557,16 @@ def _label_cells(ax, noise, density, outlier):
     ax.set_title(f"outliers {outlier:g}", fontsize=10)
 
 
-def failure_map(records, path, *, method, noise, density, outliers) -> Path:
-    """Per cell: green when the method succeeded, else the colour and name of its failure."""
+def failure_map(records, path, *, method, noise, density, outliers, rule: str = "") -> Path:
+    """Per cell: green when the method succeeded, else the colour and name of its failure
+    (``collapse``: an accuracy collapse, ``rule`` saying what counts as one)."""
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 
-    kinds = ["ok", *FAILURE_KINDS, "task"]
+    kinds = ["ok", *FAILURE_KINDS, "task", "collapse"]
     code = _cells(records, noise, density, outliers,
-                 lambda r: "ok" if r["status"] == "ok" else (r.get("failure") or "error"))
+                 lambda r: "collapse" if r.get("failure") == "collapse" else
+                 "ok" if r["status"] == "ok" else (r.get("failure") or "error"))
     fig, axes = _cell_axes(len(outliers))
     cmap = ListedColormap([OUTCOME_COLOURS[k] for k in kinds])
     for k, ax in enumerate(axes):
@@ -574,13 +577,14 @@ def failure_map(records, path, *, method, noise, density, outliers) -> Path:
         for i in range(len(noise)):
             for j in range(len(density)):
                 ax.text(j, i, code[k][i, j], ha="center", va="center", fontsize=9,
-                        color="white" if code[k][i, j] != "ok" else "black")
+                        color="black" if code[k][i, j] in ("ok", "collapse") else "white")
         _label_cells(ax, noise, density, outliers[k])
     seen = sorted({c for c in code.ravel() if c}, key=kinds.index)
     fig.legend(handles=[Patch(color=OUTCOME_COLOURS[c], label=c) for c in seen],
                loc="outside right center", fontsize=8)
     failed = sum(c != "ok" for c in code.ravel())
-    fig.suptitle(f"{method}: failure map ({failed} of {code.size} cells failed)", fontsize=11)
+    fig.suptitle(f"{method}: failure map ({failed} of {code.size} cells failed)"
+                 + (f"\n{rule}" if rule else ""), fontsize=11)
     return _save(fig, path)
 
 
@@ -611,6 +615,8 @@ def accuracy_map(records, path, *, method, noise, density, outliers) -> Path:
                 if np.isfinite(values[k, i, j]):
                     f = fscore[k][i, j]
                     text = f"{values[k, i, j]:.3g} m" + ("" if f is None else f"\nF {f:.2f}")
+                    if kind[k][i, j] == "collapse":
+                        text += "\ncollapse"
                     ax.text(j, i, text, ha="center", va="center", fontsize=8, color="white",
                             path_effects=_outline())
                 else:
@@ -630,3 +636,54 @@ def _outline():
     import matplotlib.patheffects as pe
 
     return [pe.withStroke(linewidth=1.5, foreground="black")]
+
+
+def choice_vs_ranking(summaries: Sequence[Mapping], path, *, title: str) -> Path:
+    """Per cloud, every run's truth score relative to the best (dots), the median run (bar)
+    and ``-m auto``'s choice (red star): F-score ratio (higher is better) and Chamfer ratio
+    (log, lower is better).
+
+    Parameters
+    ----------
+    summaries : sequence of dict
+        ``cloud``, ``ranking`` (runs with ``chamfer_m`` and ``fscore``) and ``verdict``
+        (``f_ratio``, ``chamfer_ratio``, unless ``failed``), as ``benchmarks/suite.py`` makes.
+    """
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, 1, figsize=(max(8.0, 0.75 * len(summaries) + 3), 8.5),
+                             sharex=True, constrained_layout=True)
+    x = np.arange(len(summaries))
+    for ax, key, ratio, lower in ((axes[0], FSCORE, "f_ratio", False),
+                                  (axes[1], CHAMFER, "chamfer_ratio", True)):
+        for i, s in enumerate(summaries):
+            values = np.array([r[key] for r in s["ranking"] if r.get(key) is not None], float)
+            if not values.size:
+                continue
+            best = values.min() if lower else values.max()
+            rel = values / best if best > 0 else np.full_like(values, np.nan)
+            ax.scatter(np.full(rel.size, i), rel, s=14, color="0.55", alpha=0.7, zorder=2,
+                       label="a run" if i == 0 else None)
+            ax.hlines(np.median(rel), i - 0.3, i + 0.3, color="0.2", lw=1.6, zorder=3,
+                      label="median run" if i == 0 else None)
+            v = s["verdict"]
+            if not v.get("failed"):
+                ax.scatter([i], [v[ratio]], marker="*", s=180, color="crimson",
+                           edgecolors="black", linewidths=0.6, zorder=4,
+                           label="auto's choice" if i == 0 else None)
+        band = 0.95 if not lower else 1.10
+        ax.axhline(band, color="crimson", ls=":", lw=1.2,
+                   label="target: within 5% of the best F" if not lower else
+                   "target: within 10% of the best Chamfer")
+        if lower:
+            ax.set_yscale("log")
+            _plain_log_ticks(ax.yaxis)
+            ax.set_ylabel("Chamfer / best Chamfer")
+        else:
+            ax.set_ylabel("F-score / best F-score")
+        ax.set_title(f"{'Chamfer distance' if lower else 'F-score'} relative to the truth's best"
+                     f" run ({_better(lower)})", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8, loc="lower left" if not lower else "upper left")
+    axes[1].set_xticks(x, [s["cloud"] for s in summaries], rotation=35, ha="right", fontsize=8)
+    _title(fig, title)
+    return _save(fig, path)

@@ -10,6 +10,8 @@ thread per core or on Dask (``recon.experiments.sweep``) and streams to
 
 - ``DIR/results.csv`` and ``DIR/results.json``: per run the method, parameters, status and
   failure reason, wall time of the method, peak memory of its process, face and vertex counts,
+  the model's free parameters (``n_params``: 9 for an ellipsoid, 3 per plane, 3 per vertex of a
+  free mesh; ``Method.parameter_count``),
   watertightness and every score of ``metrics.score`` (Chamfer, F-score, ...);
 - ``DIR/speed_accuracy.png``: time (log axis) against Chamfer and against F-score, one marker
   per method, the Pareto front drawn and labelled;
@@ -77,6 +79,9 @@ def flatten(run: Run, result: dict, *, mesh_dir: Path | None) -> dict:
                               "kind": run.kind}
     for column in BASE_COLUMNS[5:]:
         record[column] = result.get(column)
+    if result.get("status") == "ok":
+        record["n_params"] = run.method_spec().parameter_count(result["vertices"],
+                                                               result["faces"])
     if result.get("status") == "ok" and mesh_dir is not None:
         mesh_dir.mkdir(parents=True, exist_ok=True)
         path = mesh_dir / f"{_slug(run.label, run.key)}.ply"
@@ -88,8 +93,8 @@ def flatten(run: Run, result: dict, *, mesh_dir: Path | None) -> dict:
 
 def format_table(ranked: list[dict]) -> str:
     """The ranked table ``recon compare`` prints."""
-    head = (f"{'#':>3}  {'run':<38} {'time s':>8} {'peak MB':>8} {'faces':>9} {'closed':>6} "
-            f"{'Chamfer m':>10} {'F-score':>7}")
+    head = (f"{'#':>3}  {'run':<38} {'time s':>8} {'peak MB':>8} {'faces':>9} {'params':>8} "
+            f"{'closed':>6} {'Chamfer m':>10} {'F-score':>7}")
     lines = [head, "-" * len(head)]
     position = 0
     for r in ranked:
@@ -97,6 +102,7 @@ def format_table(ranked: list[dict]) -> str:
             position += 1
             lines.append(f"{position:>3}  {r['label'][:38]:<38} {r['wall_time_s']:>8.2f} "
                          f"{r.get('peak_memory_mb') or 0:>8.0f} {r['n_faces']:>9d} "
+                         f"{r.get('n_params') or 0:>8d} "
                          f"{'yes' if r['watertight'] else 'no':>6} {r[CHAMFER]:>10.4g} "
                          f"{r.get(FSCORE, float('nan')):>7.3f}")
         else:
@@ -296,8 +302,8 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
     samples : int, optional
         Surface samples per side when scoring (``recon.experiments.cases.score_options``).
     auto : bool
-        Also run ``-m auto``'s choice (``recon.experiments.auto.choose``) on the same candidates
-        and record where it ranks on the truth: ``DIR/auto.json``.
+        Also run ``-m auto``'s choice (``recon.experiments.auto.choose``: its ladder, restricted
+        to ``names``) and record where it ranks on the truth: ``DIR/auto.json``.
     scheduler, n_workers, resume, keep_meshes
         See ``compare``.
     say : callable, optional
@@ -339,9 +345,9 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
     if auto:
         from recon.experiments.auto import choose, format_choice
 
-        choice = choose(cloud.points, view_points=cloud.view_points, candidates=runs,
-                        seed=preparation.seed, k=preparation.k, fallback=preparation.fallback,
-                        **limits.kwargs())
+        choice = choose(cloud.points, view_points=cloud.view_points,
+                        uncertainty=cloud.attributes, methods=names, seed=preparation.seed,
+                        k=preparation.k, fallback=preparation.fallback, **limits.kwargs())
         verdict = agreement(report["records"], choice.run.key)
         report["auto"] = {"choice": choice.to_dict(), "agreement": verdict}
         (out_dir / "auto.json").write_text(json.dumps(to_jsonable(report["auto"]), indent=2)

@@ -25,13 +25,16 @@ from formats import StrikeChunk, StrikeLog
 from formats.cloud_io import open_cloud_writer
 from formats.geometry import Cloud
 from formats.strike_log.schema import directions_to_angles
+from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
+from recon.surfaces.uncertainty import strike_columns
 
 Frame = Literal["body", "inertial"]
 FRAMES = ("body", "inertial")
 # Per-point attributes written by ingest, with their dtypes (formats/cloud_io.py names them).
 ATTRIBUTE_DTYPES = {"time": np.float64, "shot": np.uint32, "beam": np.uint32,
                     "range": np.float64, "azimuth": np.float64, "elevation": np.float64,
-                    "view_x": np.float64, "view_y": np.float64, "view_z": np.float64}
+                    "view_x": np.float64, "view_y": np.float64,
+                    "view_z": np.float64} | dict.fromkeys(SIGMA_COLUMNS, np.float32)
 
 
 def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body", correction=None
@@ -88,12 +91,18 @@ def iter_registered(log: StrikeLog, *, frame: Frame = "body", chunk_rows: int | 
         Called as ``progress(strikes_in_block, total_strikes)`` after each block.
     correction : recon.registration.refine.PoseCorrection, optional
         Corrections of the recorded poses (``refine``).
+
+    Each block's attributes are ``register_chunk``'s plus the strikes' 1-sigma uncertainty
+    columns from the log's recorded error model (``recon.surfaces.uncertainty``).
     """
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
     chunks = log.iter_chunks() if chunk_rows is None else log.iter_chunks(chunk_rows)
     for chunk in chunks:
-        yield register_chunk(chunk, frame=frame, correction=correction)
+        points, attributes = register_chunk(chunk, frame=frame, correction=correction)
+        sigmas = strike_columns(log.sensor.errors, chunk.range,
+                                reports_angles=log.sensor.reports_angles)
+        yield points, attributes | {k: v.astype(np.float32) for k, v in sigmas.items()}
         if progress:
             progress(len(chunk), log.n_strikes)
 
@@ -157,7 +166,8 @@ def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | No
     -------
     Cloud
         (n, 3) float64 metres in ``frame``; attributes ``time``, ``shot``, ``beam``, ``range``,
-        ``azimuth``, ``elevation``, ``view_x/y/z``.
+        ``azimuth``, ``elevation``, ``view_x/y/z`` and the uncertainty columns
+        (``recon.surfaces.uncertainty.COLUMNS``).
     """
     _, blocks = _register_and_write(log_path, output, frame=frame, chunk_rows=chunk_rows,
                                     progress=progress, keep=True, correction=correction)

@@ -22,6 +22,8 @@ from formats.errors import ReconError
 from formats.geometry import Cloud
 from recon.surfaces.methods import MethodInput
 from recon.surfaces.normals import DEFAULT_K, Fallback, local_planes, orient
+from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
+from recon.surfaces.uncertainty import normal_sigma
 
 # Statistical outlier removal (Rusu et al. 2008, PCL's StatisticalOutlierRemoval): a point is an
 # outlier when its mean distance to its OUTLIER_K neighbours exceeds the cloud's mean of that
@@ -110,24 +112,30 @@ def preprocess(cloud: Cloud, *, remove_outliers: bool = False, outlier_k: int = 
     Returns
     -------
     Cloud
-        Points and (when the input had them) view points; other attributes are dropped.
+        Points and (when the input had them) view points and, without downsampling, the
+        uncertainty columns (``recon.surfaces.uncertainty``; a voxel mean has no recorded
+        error); other attributes are dropped.
     """
     points = cloud.points
     view = cloud.view_points
+    sigmas = {k: cloud.attributes[k] for k in SIGMA_COLUMNS if k in cloud.attributes}
     if remove_outliers:
         keep = remove_statistical_outliers(points, k=outlier_k, std_ratio=outlier_std)
         points = points[keep]
         view = None if view is None else view[keep]
+        sigmas = {k: v[keep] for k, v in sigmas.items()}
     if voxel is not None:
         points, view = voxel_downsample(points, voxel, view_points=view)
+        sigmas = {}
     attributes = {} if view is None else {"view_x": view[:, 0], "view_y": view[:, 1],
                                           "view_z": view[:, 2]}
-    return Cloud(points, attributes, frame=cloud.frame)
+    return Cloud(points, attributes | sigmas, frame=cloud.frame)
 
 
 def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
             normals: np.ndarray | None = None, k: int = DEFAULT_K,
-            fallback: Fallback = "centroid", seed: int = 0) -> MethodInput:
+            fallback: Fallback = "centroid", seed: int = 0,
+            uncertainty: dict[str, np.ndarray] | None = None) -> MethodInput:
     """Everything a method needs: oriented normals, spacing and noise scale.
 
     Parameters
@@ -142,6 +150,9 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
     fallback : {"centroid", "propagate"}
         Orientation heuristic when there are no view points.
     seed : int
+    uncertainty : dict of str to (n,) arrays, optional
+        The strikes' recorded uncertainty columns (``recon.surfaces.uncertainty.COLUMNS``, as
+        ingest writes them); with ``view_points`` they give ``MethodInput.sigma``.
 
     Returns
     -------
@@ -165,9 +176,14 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
     spacing = float(np.median(planes.spacing))
     if not spacing > 0:
         raise InputError("all points coincide: nothing to reconstruct")
+    sigma = None
+    if uncertainty is not None and view_points is not None and \
+            all(key in uncertainty for key in SIGMA_COLUMNS):
+        sigma = normal_sigma(normals, np.asarray(view_points, dtype=np.float64), points,
+                             uncertainty)
     return MethodInput(points=points, normals=normals, spacing=spacing,
                        noise=float(np.median(planes.noise)), seed=int(seed),
-                       neighbours=planes.neighbours)
+                       neighbours=planes.neighbours, sigma=sigma)
 
 
 def _check_voxel(voxel: float | None, name: str) -> None:
@@ -226,7 +242,8 @@ class Preparation:
         """
         cloud = preprocess(cloud, remove_outliers=self.remove_outliers, voxel=self.voxel)
         prepared = prepare(cloud.points, view_points=cloud.view_points, k=self.k,
-                           fallback=self.fallback, seed=self.seed)
+                           fallback=self.fallback, seed=self.seed,
+                           uncertainty=cloud.attributes)
         return cloud, prepared
 
 

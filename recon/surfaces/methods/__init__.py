@@ -29,13 +29,14 @@ import numpy as np
 
 from formats.errors import ReconError
 
-Kind = Literal["planar", "smooth", "interpolating", "baseline", "test"]
-KINDS = ("planar", "smooth", "interpolating", "baseline", "test")
+Kind = Literal["primitive", "planar", "smooth", "interpolating", "baseline", "test"]
+KINDS = ("primitive", "planar", "smooth", "interpolating", "baseline", "test")
 
 # Built-in method modules, imported (cheaply: heavy libraries load inside each ``run``) the first
 # time the registry is used.
 BUILTIN_MODULES = (
     "recon.surfaces.methods.convex_hull",
+    "recon.surfaces.methods.ellipsoid",
     "recon.surfaces.methods.planes",
     "recon.surfaces.methods.plane",
     "recon.surfaces.methods.poisson",
@@ -45,6 +46,7 @@ BUILTIN_MODULES = (
     "recon.surfaces.methods.alpha_shape",
     "recon.surfaces.methods.rimls",
     "recon.surfaces.methods.apss",
+    "recon.surfaces.methods.delaunay_balls",
 )
 
 
@@ -82,8 +84,13 @@ class MethodInput:
         Seed of every random choice a method makes.
     neighbours : (n,) int64, optional
         Size of each point's normal neighbourhood (``recon.surfaces.normals.local_planes``: grown
-        until
-        it spans a plane, e.g. across LRF tracks); methods fitting local planes start there.
+        until it spans a plane, e.g. across LRF tracks); methods fitting local planes start there.
+    sigma : (n,) float64, metres, optional
+        1-sigma uncertainty of each point along its surface normal, from the sensor error model
+        recorded in the strike log (``recon.surfaces.uncertainty``): anisotropic, the beam's
+        range error and its lateral (angle, pose) error projected on the normal. None when the
+        cloud carries no error model; methods that can weight points (``weighted``) use
+        ``1 / sigma^2``.
     """
 
     points: np.ndarray
@@ -92,6 +99,7 @@ class MethodInput:
     noise: float
     seed: int = 0
     neighbours: np.ndarray | None = None
+    sigma: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -173,8 +181,9 @@ class Method:
     params : dict of str to Param
     grid : tuple of dict
         Parameter overrides ``recon compare`` runs besides the defaults.
-    kind : {"planar", "smooth", "interpolating", "baseline", "test"}
-        ``planar``: a few planar polygons; ``smooth``: an implicit surface fitted to the points;
+    kind : {"primitive", "planar", "smooth", "interpolating", "baseline", "test"}
+        ``primitive``: a few numbers (an ellipsoid); ``planar``: a few planar polygons;
+        ``smooth``: an implicit surface fitted to the points;
         ``interpolating``: triangles through the points themselves; ``baseline``: a floor.
     summary : str
         One line for listings.
@@ -182,6 +191,9 @@ class Method:
         Modules imported before the clock starts, so timings exclude import cost.
     hidden : bool
         Test-only: runnable by name, never listed.
+    parameters : callable, optional
+        ``parameters(vertices, faces) -> int``: the model's free parameters (``parameter_count``);
+        None: a free mesh, 3 per vertex.
     """
 
     name: str
@@ -192,6 +204,7 @@ class Method:
     summary: str = ""
     preload: tuple[str, ...] = ()
     hidden: bool = False
+    parameters: Callable[[np.ndarray, np.ndarray], int] | None = None
     defaults: Mapping[str, Any] = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -203,6 +216,13 @@ class Method:
     def module(self) -> str:
         """Module that registers this method (an isolated child imports it to find the method)."""
         return self.run.__module__
+
+    def parameter_count(self, vertices: np.ndarray, faces: np.ndarray) -> int:
+        """Free parameters of the model this method made: 9 for an ellipsoid, 3 per plane for a
+        polyhedron, 3 per vertex for a free mesh (the default), reported beside faces."""
+        if self.parameters is not None:
+            return int(self.parameters(vertices, faces))
+        return 3 * len(vertices)
 
     def resolve(self, params: Mapping[str, Any] | None = None) -> dict[str, Any]:
         """The full parameter set: defaults overridden by ``params``, each checked.
@@ -268,7 +288,7 @@ class Run:
         The full, checked parameter set (defaults included). Do not mutate.
     module : str
         Module that registers the method: a fresh process imports it to find the method.
-    kind : {"planar", "smooth", "interpolating", "baseline", "test"}
+    kind : {"primitive", "planar", "smooth", "interpolating", "baseline", "test"}
     label : str
         The method and the parameters that differ from its defaults, e.g. ``poisson depth=6``.
     """

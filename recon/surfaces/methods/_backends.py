@@ -61,13 +61,16 @@ def auto_resolution(cloud: MethodInput, resolution: int | None) -> int:
     return int(np.clip(np.ceil(extent / cloud.spacing), low, high))
 
 
-def meshlab_set(cloud: MethodInput):
-    """A ``pymeshlab.MeshSet`` holding the cloud (vertices with normals, no faces)."""
+def meshlab_set(cloud: MethodInput, *, quality: np.ndarray | None = None):
+    """A ``pymeshlab.MeshSet`` holding the cloud (vertices with normals, no faces) and, when
+    given, a per-vertex quality ((n,) float64, e.g. a confidence)."""
     import pymeshlab
 
+    extra = {} if quality is None else {"v_scalar_array": np.ascontiguousarray(quality)}
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=np.ascontiguousarray(cloud.points),
-                               v_normals_matrix=np.ascontiguousarray(cloud.normals)), "cloud")
+                               v_normals_matrix=np.ascontiguousarray(cloud.normals), **extra),
+                "cloud")
     return ms
 
 

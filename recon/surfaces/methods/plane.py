@@ -7,7 +7,9 @@ way to reconstruct noisy, non-uniform LRF clouds. Two steps:
    spatial weights ``(1 - (d / r_k)^2)^2`` (``r_k`` the distance to the k-th neighbour), times
    Tukey biweights of the residuals (iteratively reweighted, ``iterations`` rounds, scale
    1.4826 x the median absolute residual, Tukey's constant 4.685), times zero for neighbours
-   whose oriented normal faces the other way (the far side of a thin panel). The point moves
+   whose oriented normal faces the other way (the far side of a thin panel), times (with
+   ``weighted``) each neighbour's ``1 / sigma^2``, its recorded uncertainty along the normal
+   (``MethodInput.sigma``, ``recon.surfaces.uncertainty``). The point moves
    onto its plane; the plane's normal keeps the input orientation. Noise along the normal
    shrinks roughly by the square root of the effective neighbour count. Where the neighbourhood
    of the normals had to grow to span a plane (LRF tracks, ``MethodInput.neighbours``), the
@@ -27,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from recon.surfaces import uncertainty
 from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
 from recon.surfaces.methods._contour import node_keys, surface_nets
 
@@ -78,8 +81,8 @@ def _quadric(u, v, h, weights, radius):
 
 
 def project_to_planes(points: np.ndarray, normals: np.ndarray, *, k: int, iterations: int,
-                      neighbours: np.ndarray | None = None, order: int = 1
-                      ) -> tuple[np.ndarray, np.ndarray]:
+                      neighbours: np.ndarray | None = None, order: int = 1,
+                      weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Move each point onto its robust weighted least-squares local plane.
 
     Parameters
@@ -98,6 +101,8 @@ def project_to_planes(points: np.ndarray, normals: np.ndarray, *, k: int, iterat
         1: project onto the plane. 2: then onto a weighted least-squares quadratic height field
         over that plane, which removes the plane's curvature bias (on a sphere of radius R the
         plane of neighbours within r lies ~r^2 / 4R inside the surface).
+    weights : (n,) float64, optional
+        Per-point weights (``1 / sigma^2``, ``recon.surfaces.uncertainty.weights``).
 
     Returns
     -------
@@ -108,6 +113,7 @@ def project_to_planes(points: np.ndarray, normals: np.ndarray, *, k: int, iterat
     n = len(points)
     sizes = np.full(n, min(int(k), n)) if neighbours is None else \
         np.minimum(np.maximum(int(k), neighbours), n)
+    weights = np.ones(n) if weights is None else np.asarray(weights, dtype=np.float64)
     tree = cKDTree(points)
     projected = np.empty_like(points)
     plane_normals = np.empty_like(points)
@@ -118,18 +124,18 @@ def project_to_planes(points: np.ndarray, normals: np.ndarray, *, k: int, iterat
             rows = group[start:start + block]
             d, idx = tree.query(points[rows], k=int(size), workers=-1)
             projected[rows], plane_normals[rows] = _project(points, normals, rows, d, idx,
-                                                            iterations, order)
+                                                            iterations, order, weights)
     return projected, plane_normals
 
 
-def _project(points, normals, rows, d, idx, iterations, order
+def _project(points, normals, rows, d, idx, iterations, order, weights
              ) -> tuple[np.ndarray, np.ndarray]:
     """Robust local fits of the neighbourhoods ``idx`` (b, k) of ``rows``; projections, normals."""
     neigh = points[idx]                                               # (b, k, 3)
     radius = np.maximum(d[:, -1:], 1e-300)
     spatial = (1.0 - np.clip(d / (radius * 1.0001), 0, 1) ** 2) ** 2
     same_side = np.einsum("bki,bi->bk", normals[idx], normals[rows]) > 0
-    base = spatial * same_side
+    base = spatial * same_side * weights[idx]
     centroid, frame = _fit_planes(neigh, base)
     for _ in range(int(iterations)):
         residual = np.einsum("bki,bi->bk", neigh - centroid[:, None, :], frame[:, :, 0])
@@ -207,8 +213,8 @@ def signed_distance_mesh(points: np.ndarray, normals: np.ndarray, *, cell: float
     return surface_nets(keys, values, shape, origin, cell)
 
 
-def run(cloud: MethodInput, *, k: int, iterations: int, cell: float, order: int
-        ) -> tuple[np.ndarray, np.ndarray]:
+def run(cloud: MethodInput, *, k: int, iterations: int, cell: float, order: int,
+        weighted: bool) -> tuple[np.ndarray, np.ndarray]:
     """Project onto robust local planes, then mesh the planes' signed distance.
 
     Parameters
@@ -223,6 +229,8 @@ def run(cloud: MethodInput, *, k: int, iterations: int, cell: float, order: int
     order : {1, 2}
         1: the plane (the paper's least-squares plane fitting); 2: plus a quadratic height
         correction (``project_to_planes``).
+    weighted : bool
+        Weight neighbours by their recorded uncertainty (``MethodInput.sigma``) when known.
 
     Returns
     -------
@@ -233,7 +241,9 @@ def run(cloud: MethodInput, *, k: int, iterations: int, cell: float, order: int
         raise MethodFailed(f"plane: need at least 3 points, got {len(cloud.points)}")
     projected, normals = project_to_planes(cloud.points, cloud.normals, k=k,
                                            iterations=iterations, neighbours=cloud.neighbours,
-                                           order=order)
+                                           order=order, weights=uncertainty.weights(
+                                               cloud.sigma if weighted else None,
+                                               len(cloud.points)))
     size = float(cell) * cloud.spacing
     if not size > 0:
         raise MethodFailed("plane: zero point spacing (all points identical?)")
@@ -264,5 +274,6 @@ METHOD = register(Method(
         # noise more (sigma 0.005: 0.0013 -> 0.0017 at 20000 points), so it is a grid option.
         "order": Param(1, int, "1: plane; 2: plane plus quadratic height correction",
                        choices=(1, 2)),
+        "weighted": Param(True, bool, "weight points by the recorded sensor error model"),
     },
     grid=({"cell": 0.5}, {"cell": 2.0}, {"k": 60}, {"order": 2})))

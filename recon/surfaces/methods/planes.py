@@ -274,8 +274,23 @@ def run(cloud: MethodInput, *, threshold: float, angle: float, max_planes: int,
     return open_polygons(cloud.points, patches, max(2.0 * cloud.spacing, metres))
 
 
+def parameter_count(vertices: np.ndarray, faces: np.ndarray) -> int:
+    """Free parameters of a planar model: 3 per distinct plane (normal and offset); open
+    polygons add 2 per outline corner (its position in its plane). A closed polyhedron's
+    corners follow from its planes."""
+    from recon.surfaces.checks import watertight
+
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    normal = np.cross(b - a, c - a)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    offset = np.einsum("ij,ij->i", normal, a)
+    scale = float(np.ptp(vertices, axis=0).max()) or 1.0
+    planes = np.unique(np.round(np.column_stack([normal, offset / scale]), 6), axis=0)
+    return 3 * len(planes) + (0 if watertight(faces) else 2 * len(vertices))
+
+
 METHOD = register(Method(
-    name="planes", run=run, kind="planar",
+    name="planes", run=run, kind="planar", parameters=parameter_count,
     summary="RANSAC + least-squares multi-plane segmentation, planar polygons (man-made targets)",
     params={
         # 1 x max(3 sigma, spacing): see the module docstring.

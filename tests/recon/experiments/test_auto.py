@@ -1,4 +1,4 @@
-"""``-m auto``: the simplest model whose held-out error is within the noise of the best."""
+"""``-m auto``: the simplest model whose held-out beam error is within the noise of the best."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from tests.recon.conftest import box_points, ellipsoid_points
 # Candidates of the tests: one of each kind, two resolutions of Poisson (a full default run of
 # every method and grid takes minutes; the rule does not depend on how many there are).
 CANDIDATES = [("planes", {}), ("convex-hull", {}), ("poisson", {"depth": 6}),
-              ("poisson", {}), ("plane", {}), ("ball-pivoting", {})]
+              ("poisson", {}), ("plane", {}), ("ball-pivoting", {}), ("ellipsoid", {})]
 
 
 def test_auto_picks_planes_for_a_box():
@@ -21,38 +21,79 @@ def test_auto_picks_planes_for_a_box():
     assert choice.method == "planes", format_choice(choice)
     assert "chose planes" in choice.reason
     table = {c["label"]: c for c in choice.candidates}
-    assert table["planes"]["n_faces"] < 50
+    assert table["planes"]["n_faces"] < 50 and table["planes"]["n_params"] <= 3 * 12
     assert table["planes"]["chosen"] and table["planes"]["eligible"]
 
 
-def test_auto_picks_a_smooth_surface_for_an_ellipsoid():
+def test_auto_explains_an_ellipsoid_by_nine_numbers():
     points, view, _ = ellipsoid_points(5000, noise=0.005, seed=3)
     choice = choose(points, view_points=view, candidates=CANDIDATES, seed=0)
-    chosen = next(c for c in choice.candidates if c["chosen"])
-    assert chosen["kind"] == "smooth", format_choice(choice)
+    assert choice.method == "ellipsoid", format_choice(choice)
+    assert "9 parameters" in choice.reason
     planes = next(c for c in choice.candidates if c["method"] == "planes")
+    chosen = next(c for c in choice.candidates if c["chosen"])
     assert planes["heldout_mean_m"] > 2 * chosen["heldout_mean_m"]
 
 
-def _candidate(label, distances, faces):
+def test_a_mesh_with_holes_pays_for_the_beams_it_misses():
+    # Half a sphere seen from all around: ball pivoting's open cap misses the beams of the
+    # held-out strikes on the far side, which cost a full tolerance each.
+    points, view, _ = ellipsoid_points(4000, noise=0.002, seed=5)
+    choice = choose(points, view_points=view, candidates=[("ellipsoid", {}),
+                                                          ("ball-pivoting", {"radii": (1.0,)})],
+                    seed=0)
+    table = {c["method"]: c for c in choice.candidates}
+    assert table["ellipsoid"]["beam_hits"] == pytest.approx(1.0)
+    assert table["ball-pivoting"]["beam_hits"] < table["ellipsoid"]["beam_hits"]
+    assert choice.method == "ellipsoid"
+
+
+def test_the_ladder_runs_coarse_to_fine_and_stops():
+    from recon.experiments.auto import LADDER, MAX_FITS
+
+    points, view, _ = ellipsoid_points(3000, noise=0.005, seed=4)
+    choice = choose(points, view_points=view, methods=["ellipsoid", "poisson", "plane"], seed=0)
+    levels = [c["level"] for c in choice.candidates]
+    assert levels == sorted(levels)
+    fitted = [c for c in choice.candidates if c["status"] != "skipped"]
+    skipped = [c for c in choice.candidates if c["status"] == "skipped"]
+    # The ellipsoid is exact: the finer levels cannot be measurably better.
+    assert choice.method == "ellipsoid" and skipped, format_choice(choice)
+    assert "the ladder stopped" in choice.reason
+    assert len(fitted) < MAX_FITS <= 12 and len(LADDER) >= 3
+
+
+def _candidate(label, distances, params, *, closed=True):
     return {"label": label, "distances": None if distances is None else np.asarray(distances),
-            "n_faces": faces, "reason": "" if distances is not None else "crashed"}
+            "n_params": params, "n_faces": params, "watertight": closed,
+            "reason": "" if distances is not None else "crashed"}
 
 
-def test_select_takes_fewest_faces_within_one_standard_error():
+def test_select_takes_the_smallest_model_within_one_standard_error():
     rng = np.random.default_rng(0)
-    base = rng.exponential(0.01, 10_000)  # held-out distances of the best fit
+    base = rng.exponential(0.01, 10_000)  # held-out residuals of the best fit
     se = base.std(ddof=1) / np.sqrt(base.size)
     candidates = [
         _candidate("fine", base, 100_000),
-        _candidate("coarse", base + 0.5 * se, 5_000),    # inside the band: fewer faces wins
-        _candidate("tiny", base + 3 * se, 12),          # outside the band
+        _candidate("coarse", base + 0.5 * se, 5_000),    # inside the band: smaller wins
+        _candidate("tiny", base + 3 * se, 9),           # outside the band
         _candidate("crashed", None, 0),
     ]
     chosen, threshold, reason = select(candidates)
     assert candidates[chosen]["label"] == "coarse"
     assert threshold == pytest.approx(base.mean() + se)
     assert "within one standard error" in reason and "fine" in reason
+
+
+def test_select_puts_closed_models_first_when_coverage_is_incomplete():
+    rng = np.random.default_rng(1)
+    base = rng.exponential(0.01, 10_000)
+    candidates = [_candidate("closed", base, 50_000),
+                  _candidate("open", base, 5_000, closed=False)]
+    assert candidates[select(candidates, coverage=0.95)[0]]["label"] == "open"
+    chosen, _, reason = select(candidates, coverage=0.6)
+    assert candidates[chosen]["label"] == "closed"
+    assert "cover 60%" in reason and "closed candidates came first" in reason
 
 
 def test_select_keeps_the_best_when_nothing_simpler_is_close():
@@ -85,12 +126,24 @@ def test_heldout_residuals_are_range_errors_along_the_beam():
     faces = np.array([[0, 1, 2], [0, 2, 3]])
     points = np.array([[0.0, 0.0, 0.1], [0.2, 0.3, -0.05], [5.0, 0.0, 0.2]])
     view = points + np.array([-10.0, 0.0, 10.0])
-    residual, hit = heldout_residuals(points, view, vertices, faces)
+    residual, hit, cos = heldout_residuals(points, view, vertices, faces)
     assert hit.tolist() == [True, True, False]
+    np.testing.assert_allclose(cos[:2], np.sqrt(0.5))
     # Along a 45-degree beam the range error is the height times sqrt(2).
     np.testing.assert_allclose(residual[:2], [0.1 * np.sqrt(2), 0.05 * np.sqrt(2)], rtol=1e-9)
     # A beam that misses counts the closest-point distance: to the edge x = 1 at (1, 0, 0).
     assert residual[2] == pytest.approx(np.hypot(4.0, 0.2))
-    closest, none = heldout_residuals(points, None, vertices, faces)
+    closest, none, _ = heldout_residuals(points, None, vertices, faces)
     np.testing.assert_allclose(closest[:2], [0.1, 0.05], rtol=1e-9)
     assert not none.any()
+
+
+def test_range_sigma_grows_with_incidence_as_the_error_model_says():
+    from recon.experiments.auto import range_sigma
+
+    columns = {"sigma_along": np.array([0.1, 0.1]), "sigma_across": np.array([0.2, 0.2]),
+               "dilation_along": np.zeros(2), "dilation_across": np.zeros(2)}
+    sigma = range_sigma(columns, np.array([1.0, np.sqrt(0.5)]), noise=0.05)
+    # Head-on: the range error; at 45 deg a lateral error moves the range by as much.
+    np.testing.assert_allclose(sigma, [0.1, np.hypot(0.1, 0.2)])
+    np.testing.assert_allclose(range_sigma(None, np.ones(3), noise=0.05), 0.05)

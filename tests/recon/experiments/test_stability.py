@@ -46,8 +46,17 @@ def test_stability_maps_failures_and_accuracy_per_method(tmp_path):
     dirty = next(r for r in hull if r["noise_sigma3_m"] == 0.03 and r["outliers"] == 0.05
                  and r["density"] == 1)
     assert dirty["chamfer_m"] > 3 * clean["chamfer_m"]
+    # ... far beyond what the noise explains: an accuracy collapse, its own kind of failure,
+    # with its scores kept. Noise alone (sigma 0.01 on the hull's clean error) is no collapse.
+    limit = 3 * clean["chamfer_m"] + 0.01
+    for r in hull:
+        assert (r["failure"] == "collapse") == (r["chamfer_m"] > limit), r
+    assert dirty["failure"] == "collapse" and "accuracy collapse" in dirty["reason"]
+    noisy = next(r for r in hull if r["noise_sigma3_m"] == 0.03 and r["outliers"] == 0)
+    assert noisy["failure"] is None
     summary = json.loads((tmp_path / "stability.json").read_text())
-    assert summary["failure_rate"] == {"convex-hull": 0.0, "test-abort": 1.0}
+    collapsed = sum(r["failure"] == "collapse" for r in hull) / len(hull)
+    assert summary["failure_rate"] == {"convex-hull": collapsed, "test-abort": 1.0}
     assert len((tmp_path / "stability.csv").read_text().splitlines()) == 9
     for method in ("convex-hull", "test-abort"):
         for kind in ("failures", "accuracy"):

@@ -9,6 +9,9 @@ Tolerance (documented here, checked against exact distances):
 - at least 97% of the truth surface within 1% of the diagonal of the mesh (no large holes;
   ``plane`` rounds the box's edges over its neighbourhood radius: measured 97.6%);
   for ``planes`` on the sphere 80% (the facets' corners stand off the sphere; measured 88%).
+- ``ellipsoid`` on the box: a box is no ellipsoid; its best 9-parameter fit is within
+  ``ELLIPSOID_ON_BOX`` = 4% of the diagonal (measured 2.7%), 20% of the box within 1% of the
+  diagonal (measured 29%).
 Measured Chamfer at these sample counts (fraction of the diagonal): 0.003% (apss on the sphere)
 to 0.1% (plane on the box).
 """
@@ -36,6 +39,7 @@ from tests.recon.conftest import (
 
 CHAMFER_FRACTION = 0.002
 PLANES_ON_SPHERE = 0.01
+ELLIPSOID_ON_BOX, ELLIPSOID_RECALL = 0.04, 0.2
 RECALL_FRACTION, MIN_RECALL, PLANES_RECALL = 0.01, 0.97, 0.8
 N_POINTS = 6000
 
@@ -63,11 +67,12 @@ def test_method_reconstructs_noise_free_shape(shapes, shape, name):
     accuracy = distance(samples).mean()
     completeness = point_mesh_distance(truth_samples, (surface.vertices, surface.faces))[0]
     chamfer = 0.5 * (accuracy + completeness.mean())
-    facets = (name, shape) == ("planes", "sphere")
-    tolerance = PLANES_ON_SPHERE if facets else CHAMFER_FRACTION
+    tolerance, min_recall = {("planes", "sphere"): (PLANES_ON_SPHERE, PLANES_RECALL),
+                             ("ellipsoid", "box"): (ELLIPSOID_ON_BOX, ELLIPSOID_RECALL)}.get(
+        (name, shape), (CHAMFER_FRACTION, MIN_RECALL))
     assert chamfer <= tolerance * diagonal, f"{name} on the {shape}: Chamfer {chamfer:.3g}"
     recall = np.mean(completeness < RECALL_FRACTION * diagonal)
-    assert recall >= (PLANES_RECALL if facets else MIN_RECALL), f"{name}: recall {recall:.3f}"
+    assert recall >= min_recall, f"{name}: recall {recall:.3f}"
 
 
 def test_planes_closes_a_box_into_its_six_faces(shapes):
@@ -130,7 +135,8 @@ def test_registry_lists_methods_and_hides_test_ones():
 
     listed = methods.available()
     assert {"plane", "planes", "poisson", "screened-poisson", "ball-pivoting",
-            "ball-pivoting-meshlab", "alpha-shape", "rimls", "apss", "convex-hull"} <= set(listed)
+            "ball-pivoting-meshlab", "alpha-shape", "rimls", "apss", "convex-hull", "ellipsoid",
+            "delaunay-balls"} <= set(listed)
     assert not any(name.startswith("test-") for name in listed)
     assert "test-abort" in methods.available(include_hidden=True)
     with pytest.raises(UnknownMethod, match=r"unknown method 'marching' .*poisson"):

@@ -1,0 +1,173 @@
+"""``ellipsoid``: a least-squares quadric of 9 parameters, the simplest closed model of a body.
+
+A tri-axial asteroid seen by a noisy sensor may support no more than its three semi-axes, its
+orientation and its centre. The quadric
+
+    a x^2 + b y^2 + c z^2 + 2 d xy + 2 e xz + 2 f yz + 2 g x + 2 h y + 2 i z = 1
+
+has 9 parameters (Li and Griffiths 2004, "Least squares ellipsoid specific fitting"). It is
+fitted in two steps, on coordinates centred on the points' mean and scaled by their RMS
+distance to it (for conditioning):
+
+1. **Algebraic least squares** of the 9 coefficients (``Q(p) = 1`` for every point).
+2. **Approximate geometric least squares**: ``iterations`` rounds of iteratively reweighted
+   least squares with Sampson's first-order distance ``(Q(p) - 1) / |grad Q(p)|``, i.e. each
+   point's equation weighted by ``1 / (|grad Q|^2 sigma^2)``, times Tukey biweights of those
+   distances (scale 1.4826 x their median absolute value, Tukey's constant 4.685) so spurious
+   returns drop out. ``sigma`` is each strike's uncertainty along the surface normal from the
+   recorded error model (``MethodInput.sigma``, ``weighted``), else 1.
+
+The quadric must be an ellipsoid (its 3 x 3 matrix positive definite after normalisation); a
+cloud of a flat or saddle-shaped patch fails with that reason. The surface is an icosphere of
+``subdivisions`` levels mapped onto the ellipsoid (level 5: 20,480 faces, the simulator's own
+ellipsoid resolution, ~0.01% of the radius off the exact surface). Its model size is 9
+parameters whatever the face count (``Method.parameters``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from recon.surfaces.methods.plane import MAD_TO_SIGMA, TUKEY_C
+
+# Free parameters of a general ellipsoid: centre (3), semi-axes (3), orientation (3).
+ELLIPSOID_PARAMETERS = 9
+# Fewest points for 9 coefficients with a little redundancy.
+MIN_POINTS = 12
+
+
+def _design(x: np.ndarray) -> np.ndarray:
+    """(n, 9) rows of the quadric's monomials at ``x`` (n, 3)."""
+    X, Y, Z = x.T
+    return np.column_stack([X * X, Y * Y, Z * Z, 2 * X * Y, 2 * X * Z, 2 * Y * Z,
+                            2 * X, 2 * Y, 2 * Z])
+
+
+def _gradient(x: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(n, 3) gradient of the quadric ``v`` (9,) at ``x`` (n, 3)."""
+    a, b, c, d, e, f, g, h, i = v
+    A = np.array([[a, d, e], [d, b, f], [e, f, c]])
+    return 2.0 * (x @ A + np.array([g, h, i]))
+
+
+def _solve(design: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted least squares of ``design @ v = 1``."""
+    w = np.sqrt(weights)[:, None]
+    v, *_ = np.linalg.lstsq(design * w, w[:, 0], rcond=None)
+    return v
+
+
+def fit_quadric(points: np.ndarray, *, sigma: np.ndarray | None = None, iterations: int = 20
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares ellipsoid of points (module docstring).
+
+    Parameters
+    ----------
+    points : (n, 3) float64, metres
+    sigma : (n,) float64, metres, optional
+        1-sigma uncertainty of each point along the surface normal (weights ``1 / sigma^2``).
+    iterations : int
+        Sampson-reweighted rounds after the algebraic fit.
+
+    Returns
+    -------
+    centre : (3,) float64, metres
+    axes : (3,) float64, metres
+        Semi-axes, ascending.
+    rotation : (3, 3) float64
+        Columns are the unit directions of ``axes`` (sends ellipsoid-frame vectors to the
+        points' frame).
+
+    Raises
+    ------
+    MethodFailed
+        Too few points, or the best quadric is not an ellipsoid.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) < MIN_POINTS:
+        raise MethodFailed(f"ellipsoid: need at least {MIN_POINTS} points, got {len(points)}")
+    mean = points.mean(axis=0)
+    scale = float(np.sqrt(np.mean(np.sum((points - mean) ** 2, axis=1)))) or 1.0
+    x = (points - mean) / scale
+    prior = np.ones(len(x)) if sigma is None else 1.0 / np.maximum(
+        np.asarray(sigma, dtype=np.float64) / scale, 1e-12) ** 2
+    prior = prior / prior.mean()
+    design = _design(x)
+    v = _solve(design, prior)
+    for _ in range(int(iterations)):
+        grad2 = np.maximum(np.sum(_gradient(x, v) ** 2, axis=1), 1e-12)
+        distance = (design @ v - 1.0) / np.sqrt(grad2)
+        spread = MAD_TO_SIGMA * np.median(np.abs(distance))
+        u = distance / (TUKEY_C * max(spread, 1e-9))
+        robust = np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        v = _solve(design, prior * robust / grad2)
+    a, b, c, d, e, f, g, h, i = v
+    A = np.array([[a, d, e], [d, b, f], [e, f, c]])
+    try:
+        centre = -np.linalg.solve(A, np.array([g, h, i]))
+    except np.linalg.LinAlgError:
+        raise MethodFailed("ellipsoid: the fitted quadric has no centre (a cylinder or a "
+                           "plane, not an ellipsoid)") from None
+    k = 1.0 + centre @ A @ centre
+    values, vectors = np.linalg.eigh(A / k)
+    if not np.all(values > 0):
+        raise MethodFailed("ellipsoid: the best quadric is not an ellipsoid (eigenvalues "
+                           f"{np.array2string(values, precision=3)}); the points do not "
+                           "enclose a convex body")
+    axes = scale / np.sqrt(values)
+    order = np.argsort(axes)
+    return mean + scale * centre, axes[order], vectors[:, order]
+
+
+def ellipsoid_mesh(centre: np.ndarray, axes: np.ndarray, rotation: np.ndarray,
+                   subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
+    """An icosphere of ``subdivisions`` levels mapped onto the ellipsoid, faces outward."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=int(subdivisions))
+    vertices = (np.asarray(sphere.vertices) * axes) @ rotation.T + centre
+    faces = np.asarray(sphere.faces, dtype=np.int64)
+    if np.linalg.det(rotation) < 0:  # a reflection turns the faces inside out
+        faces = faces[:, ::-1]
+    return vertices, faces
+
+
+def run(cloud: MethodInput, *, subdivisions: int, iterations: int, weighted: bool
+        ) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares ellipsoid of the points as a triangle mesh.
+
+    Parameters
+    ----------
+    cloud : MethodInput
+    subdivisions : int
+        Icosphere levels of the mesh (20 * 4**n faces).
+    iterations : int
+        Sampson-reweighted rounds (``fit_quadric``).
+    weighted : bool
+        Weight each point by its recorded uncertainty (``MethodInput.sigma``) when known.
+
+    Returns
+    -------
+    vertices : (v, 3) float64, metres, body frame
+    faces : (f, 3) int64, counter-clockwise seen from outside
+    """
+    sigma = cloud.sigma if weighted else None
+    centre, axes, rotation = fit_quadric(cloud.points, sigma=sigma, iterations=iterations)
+    return ellipsoid_mesh(centre, axes, rotation, subdivisions)
+
+
+METHOD = register(Method(
+    name="ellipsoid", run=run, kind="primitive",
+    summary="least-squares ellipsoid (9-parameter quadric, Sampson-reweighted, robust)",
+    parameters=lambda vertices, faces: ELLIPSOID_PARAMETERS,
+    params={
+        # 5: the simulator's ellipsoid resolution (sim/defaults.py target.subdivisions).
+        "subdivisions": Param(5, int, "icosphere levels of the mesh (20 * 4**n faces)",
+                              minimum=0, choices=tuple(range(8))),
+        # 20 rounds: from an algebraic start biased by 5% uniform outliers (short axis 2.4 x
+        # too long), 5 rounds leave it 1.2% off and 20 rounds 0.04%, as without outliers
+        # (measured on a 1 x 2 x 3.5 ellipsoid, 4000 points, noise 0.01).
+        "iterations": Param(20, int, "Sampson-reweighted robust rounds", minimum=0),
+        "weighted": Param(True, bool, "weight points by the recorded sensor error model"),
+    }))
