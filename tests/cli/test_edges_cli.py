@@ -16,7 +16,7 @@ from cli.main import main
 from formats.cloud_io import write_cloud
 from formats.geometry import Cloud, Mesh
 from formats.mesh_io import write_mesh
-from formats.ply import read_ply_columns
+from formats.ply import read_ply
 from metrics import edge_score, sample_surface
 
 BOX = trimesh.creation.box((4.0, 3.0, 2.0))
@@ -42,7 +42,7 @@ def test_cloud_writes_labelled_points_picture_and_scores(box_files, tmp_path, ca
     result = json.loads(capsys.readouterr().out)
     expected = edge_score(points, BOX_MESH)
     assert result["edge"]["score"] == pytest.approx(expected.score, abs=1e-12)
-    columns, faces = read_ply_columns(out / "edges.ply")
+    columns, faces, _ = read_ply(out / "edges.ply")
     assert faces is None
     assert np.allclose(np.column_stack([columns["x"], columns["y"], columns["z"]]), points)
     label = columns["label"]
