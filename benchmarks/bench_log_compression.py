@@ -78,15 +78,15 @@ def read_log(path: Path) -> float:
     return time.perf_counter() - start
 
 
-def scene_rows(scene: str, repeats: int) -> dict[str, tuple[float, float, float]]:
-    """Median simulate and ingest times [s] and log size [MB] of a preset, per compression."""
+def scene_rows(scene: str, repeats: int):
+    """Yield ``(compression, median simulate s, median ingest s, log MB)`` of a preset, "none"
+    first, each as soon as it is measured."""
     import functools
 
     import sim.pipeline
     from recon import api
     from recon.registration.ingest import ingest_to_file
 
-    rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         for compression in COMPRESSIONS:
             # the simulator writes with the writer's default; substitute one per compression
@@ -101,11 +101,10 @@ def scene_rows(scene: str, repeats: int) -> dict[str, tuple[float, float, float]
                 start = time.perf_counter()
                 ingest_to_file(path, cloud)
                 r.append(time.perf_counter() - start)
-            rows[compression] = (statistics.median(w), statistics.median(r),
-                                 path.stat().st_size / 1e6)
+            size = path.stat().st_size / 1e6
             path.unlink()
+            yield compression, statistics.median(w), statistics.median(r), size
     sim.pipeline.StrikeLogWriter = StrikeLogWriter
-    return rows
 
 
 def main() -> None:
@@ -115,15 +114,15 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="repeats with --scene")
     args = parser.parse_args()
     if args.scene:
-        rows = scene_rows(args.scene, args.repeats)
-        base_w, base_r, base_s = rows["none"]
         print(f"recon simulate {args.scene} and recon ingest; median of {args.repeats}; ratios "
               "against 'none' measured in this run")
         print(f"{'compression':<12}{'simulate s':>11}{'ingest s':>10}{'size MB':>9}"
-              f"{'simulate x':>11}{'ingest x':>9}{'size x':>8}")
-        for name, (w, r, s) in rows.items():
-            print(f"{name:<12}{w:11.2f}{r:10.2f}{s:9.1f}{w / base_w:11.2f}{r / base_r:9.2f}"
-                  f"{s / base_s:8.2f}")
+              f"{'simulate x':>11}{'ingest x':>9}{'size x':>8}", flush=True)
+        base = None
+        for name, w, r, s in scene_rows(args.scene, args.repeats):
+            base = base or (w, r, s)
+            print(f"{name:<12}{w:11.2f}{r:10.2f}{s:9.1f}{w / base[0]:11.2f}{r / base[1]:9.2f}"
+                  f"{s / base[2]:8.2f}", flush=True)
         return
     n_strikes, repeats = (200_000, 1) if args.quick else (10_000_000, 3)
     rows = {}
