@@ -25,11 +25,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output frame (default: %(default)s; inertial is for debugging)")
     p.add_argument("--refine", action="store_true",
                    help="first estimate pose-knowledge errors (boresight misalignment, position "
-                        "bias, spin rate) from the agreement of passes, print each with its "
+                        "bias) from the agreement of passes, print each with its "
                         "uncertainty, and register with the corrected poses")
     p.add_argument("--refine-interval", type=float, metavar="SECONDS",
                    help="with --refine: also estimate slowly varying errors, piecewise-linear "
                         "with knots this far apart (default: constant errors only)")
+    p.add_argument("--refine-spin", action="store_true",
+                   help="with --refine: also estimate a correction of the target's spin rate")
     p.add_argument("--refine-json", type=Path, metavar="FILE",
                    help="with --refine: also write the estimates as JSON")
     p.set_defaults(func=run_ingest)
@@ -64,6 +66,8 @@ def run_ingest(args) -> int:
         raise IngestOptionError("--refine-interval needs --refine")
     if args.refine_json is not None and not args.refine:
         raise IngestOptionError("--refine-json needs --refine")
+    if args.refine_spin and not args.refine:
+        raise IngestOptionError("--refine-spin needs --refine")
     if args.refine_json is not None and not args.refine_json.parent.is_dir():
         raise IngestOptionError(f"--refine-json {args.refine_json}: directory "
                                 f"{args.refine_json.parent} does not exist")
@@ -77,7 +81,8 @@ def run_ingest(args) -> int:
                 bar.total = total
                 bar.update(1)
 
-            refinement = refine(args.log, interval=args.refine_interval, progress=step)
+            refinement = refine(args.log, interval=args.refine_interval, spin=args.refine_spin,
+                                progress=step)
         for line in refinement.lines():
             print(line)
         if args.refine_json is not None:

@@ -87,6 +87,11 @@ OUTLIER_SIGMAS = 4.0
 # Robust steps: Huber weights beyond this many residual sigmas, reweighted this often.
 HUBER_SIGMAS = 1.5
 IRLS_ITERATIONS = 5
+# Parameter combinations that move the residuals less than this fraction as much as the best
+# determined one are not stepped along: on RSO-A at 250 m the range varies by ~4 %, too little to
+# separate a cross-track misalignment from a position error along the orbit normal, and noise
+# drove the pair metres apart; on the asteroid (range 460 to 660 m) the pair stays above it.
+WEAK_DIRECTION = 0.1
 # Points per block of the consensus: (block, NEIGHBOURS, 3, 7) float64 is ~15 MB.
 BLOCK = 4096
 # Consistent 1.4826 * median absolute deviation: the 1-sigma of Gaussian residuals.
@@ -266,20 +271,25 @@ def _sample(log: StrikeLog, max_points: int, seed: int) -> _Sample:
     return _Sample(time, vector, Shots(time, position, sensor, target))
 
 
-def _register(sample: _Sample, shots: Shots) -> tuple[np.ndarray, Rotation, Rotation]:
-    """Body-frame points (n, 3) of the sample under ``shots``, with its rotations."""
+def _register(sample: _Sample, shots: Shots
+              ) -> tuple[np.ndarray, np.ndarray, Rotation, Rotation]:
+    """Body-frame points (n, 3) of the sample under ``shots``, their view points (n, 3) and
+    the rotations."""
     sensor = Rotation.from_quat(shots.sensor_attitude)
     target = Rotation.from_quat(shots.target_attitude)
-    points = target.inv().apply(shots.sensor_position + sensor.apply(sample.vector))
-    return points, sensor, target
+    to_body = target.inv()
+    points = to_body.apply(shots.sensor_position + sensor.apply(sample.vector))
+    return points, to_body.apply(shots.sensor_position), sensor, target
 
 
-def _consensus(points: np.ndarray, time: np.ndarray, gap: float, jac: np.ndarray,
-               weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _consensus(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: float,
+               jac: np.ndarray, weights: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each point against the consensus of the other passes around it, linearised.
 
     The consensus at point ``i`` is the centroid ``c_i`` of its ``NEIGHBOURS`` nearest points
-    that belong to other passes (``gap`` seconds or more away) and lie within
+    that belong to other passes (``gap`` seconds or more away), saw the surface from the same side
+    as the point (so the two faces of a thin panel stay apart) and lie within
     ``PAIR_DISTANCE_FACTOR`` times the median distance to the nearest such point; the normal is
     that of the least-squares plane of all ``NEIGHBOURS`` (the consensus cloud). The residual is
     ``n . (p_i - c_i)``: the centroid surrounds the point, so an error of the normal barely
@@ -296,7 +306,13 @@ def _consensus(points: np.ndarray, time: np.ndarray, gap: float, jac: np.ndarray
     tree = cKDTree(points)
     k = min(NEIGHBOURS, len(points))
     distance, index = tree.query(points, k=k, workers=-1)
-    other = np.abs(time[index] - time[:, None]) >= gap
+    neighbours = points[index]                                                 # (n, k, 3)
+    centred = neighbours - neighbours.mean(axis=1, keepdims=True)
+    normal = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
+    sight = view - points                                                      # toward sensor
+    normal *= np.where(np.einsum("ni,ni->n", normal, sight) < 0, -1.0, 1.0)[:, None]
+    same_side = np.einsum("ni,nki->nk", normal, sight[index]) > 0
+    other = (np.abs(time[index] - time[:, None]) >= gap) & same_side
     has = other.any(axis=1)
     if has.sum() < 2:
         return np.zeros(0, np.int64), np.zeros(0), np.zeros((0, _n_params(jac, weights)))
@@ -308,16 +324,14 @@ def _consensus(points: np.ndarray, time: np.ndarray, gap: float, jac: np.ndarray
     design = np.empty((len(rows), _n_params(jac, weights)))
     for start in range(0, len(rows), BLOCK):
         r = rows[start:start + BLOCK]
-        neighbours = points[index[r]]                                          # (b, k, 3)
-        centred = neighbours - neighbours.mean(axis=1, keepdims=True)
-        normal = np.linalg.eigh(np.einsum("bki,bkj->bij", centred, centred))[1][:, :, 0]
+        n_r = normal[r]
         share = other[r] / count[r][:, None]                                   # (b, k)
-        centroid = np.einsum("bk,bki->bi", share, neighbours)
-        residual[start:start + len(r)] = np.einsum("bi,bi->b", normal, points[r] - centroid)
+        centroid = np.einsum("bk,bki->bi", share, neighbours[r])
+        residual[start:start + len(r)] = np.einsum("bi,bi->b", n_r, points[r] - centroid)
         # How the point and the centroid move along this point's normal (the centroid's motion
         # exactly, so a translation of everything leaves the residual unchanged).
-        own = np.einsum("bi,bij->bj", normal, jac[r])                          # (b, g)
-        theirs = np.einsum("bi,bkij->bkj", normal, jac[index[r]])              # (b, k, g)
+        own = np.einsum("bi,bij->bj", n_r, jac[r])                             # (b, g)
+        theirs = np.einsum("bi,bkij->bkj", n_r, jac[index[r]])                 # (b, k, g)
         knots = (np.einsum("bK,bg->bKg", weights[r], own[:, :6])
                  - np.einsum("bk,bkK,bkg->bKg", share, weights[index[r]], theirs[:, :, :6]))
         spin = own[:, 6:] - np.einsum("bk,bkg->bg", share, theirs[:, :, 6:])
@@ -356,8 +370,8 @@ def _robust_sigma(r: np.ndarray) -> float:
     return float(MAD_TO_SIGMA * np.median(np.abs(r - np.median(r)))) if len(r) else 0.0
 
 
-def refine(log_path, *, interval: float | None = None, max_points: int = MAX_POINTS,
-           seed: int = 0, progress=None) -> Refinement:
+def refine(log_path, *, interval: float | None = None, spin: bool = False,
+           max_points: int = MAX_POINTS, seed: int = 0, progress=None) -> Refinement:
     """Estimate the constant and slowly varying pose-knowledge errors of a log from its strikes.
 
     Parameters
@@ -366,6 +380,10 @@ def refine(log_path, *, interval: float | None = None, max_points: int = MAX_POI
         A strike log; only its recorded shots and strikes are read.
     interval : float, optional, seconds
         Knot spacing of slowly varying errors (None: constant errors only).
+    spin : bool
+        Also estimate a spin-rate correction (off by default: on RSO-A's flat faces a spin-rate
+        change lets the fit slide faces along themselves and it runs away; see
+        docs/pointing-knowledge.md).
     max_points : int
         Strikes sampled for the estimate.
     seed : int
@@ -400,7 +418,7 @@ def refine(log_path, *, interval: float | None = None, max_points: int = MAX_POI
     k = len(knots)
     step = float(np.median(np.diff(all_shots.time))) if len(all_shots) > 1 else 1.0
     gap = PAIR_GAP_STEPS * step
-    spin_axis = axis if rate > 0 else None
+    spin_axis = axis if rate > 0 and spin else None
     estimate = PoseCorrection(knots, np.zeros((k, 3)), np.zeros((k, 3)), 0.0, axis)
     weights = estimate.weights(sample.time)
     # Prior 1-sigma of every parameter, in the solver's order (per knot: omega 3, position 3).
@@ -410,14 +428,14 @@ def refine(log_path, *, interval: float | None = None, max_points: int = MAX_POI
     before = None
     previous = None
     for iteration in range(1, MAX_ITERATIONS + 1):
-        points, sensor, target = _register(sample, estimate.correct(sample.shots))
+        points, view, sensor, target = _register(sample, estimate.correct(sample.shots))
         moved = (0.0 if previous is None
                  else float(np.max(np.linalg.norm(points - previous, axis=1))))
         if previous is not None and moved < STOP_MOVE_M:
             break
         previous = points
         jac = _jacobian(sample, points, sensor, target, spin_axis)
-        rows, residual, design = _consensus(points, sample.time, gap, jac, weights)
+        rows, residual, design = _consensus(points, view, sample.time, gap, jac, weights)
         if len(rows) < MIN_ROWS:
             raise RefineError(f"{log_path}: only {len(rows)} strikes have neighbours from other "
                               "passes; too few to refine the poses")
@@ -430,9 +448,9 @@ def refine(log_path, *, interval: float | None = None, max_points: int = MAX_POI
         estimate = _updated(estimate, step, k, spin_axis is not None)
         if progress:
             progress(iteration, MAX_ITERATIONS)
-    points, sensor, target = _register(sample, estimate.correct(sample.shots))
+    points, view, sensor, target = _register(sample, estimate.correct(sample.shots))
     jac = _jacobian(sample, points, sensor, target, spin_axis)
-    rows, after, _ = _consensus(points, sample.time, gap, jac, weights)
+    rows, after, _ = _consensus(points, view, sample.time, gap, jac, weights)
     sigma = _uncertainty(covariance, k, spin_axis, knots)
     observable = {"misalignment": sigma.misalignment < OBSERVABLE_SHRINK * PRIOR_ATTITUDE_RAD,
                   "position": sigma.position < OBSERVABLE_SHRINK * PRIOR_POSITION_M,
@@ -454,7 +472,11 @@ def _solve(residual: np.ndarray, design: np.ndarray, prior: np.ndarray, scale: f
     """Robust Gauss-Newton step: the increment ``x`` minimising the Huber loss of
     ``residual + design x`` (residual scatter ``scale``) plus the prior on ``current + x``.
 
-    Iteratively reweighted least squares on the (p, p) normal equations.
+    Iteratively reweighted least squares on the (p, p) normal equations. Combinations of
+    parameters the data barely see (singular values of the column-normalised design below
+    ``WEAK_DIRECTION`` of the largest, such as a cross-track misalignment against a position
+    error along the orbit normal when the range hardly varies) are left out of the step, so noise
+    cannot drive them far along the valley.
 
     Returns
     -------
@@ -464,11 +486,21 @@ def _solve(residual: np.ndarray, design: np.ndarray, prior: np.ndarray, scale: f
     """
     x = np.zeros(design.shape[1])
     precision = np.diag(1.0 / prior ** 2)
+    norms = np.sqrt(np.mean(design ** 2, axis=0))
+    unit = np.where(norms > 1e-9 * norms.max(), norms, 1.0)
+    scaling = np.outer(unit, unit)
     for _ in range(IRLS_ITERATIONS):
         e = np.abs(residual + design @ x)
         w = np.minimum(1.0, HUBER_SIGMAS * scale / np.maximum(e, 1e-12)) / scale ** 2
-        normal = design.T @ (w[:, None] * design) + precision
-        x = np.linalg.solve(normal, -(design.T @ (w * residual)) - precision @ current)
+        data = design.T @ (w[:, None] * design)
+        normal = data + precision
+        rhs = -(design.T @ (w * residual)) - precision @ current
+        # In column-normalised coordinates y = unit * x, step only along the directions the
+        # data see well.
+        values, vectors = np.linalg.eigh(data / scaling)
+        kept = vectors[:, values >= WEAK_DIRECTION ** 2 * values.max()]
+        y = kept @ np.linalg.solve(kept.T @ (normal / scaling) @ kept, kept.T @ (rhs / unit))
+        x = y / unit
     return x, np.linalg.inv(normal)
 
 
