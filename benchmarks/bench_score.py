@@ -20,8 +20,8 @@ fresh truth each time (the truth's set-up included) and the exact distance query
 Cases: the Eros model (49k faces, km -> m) and the paper's asteroid (the ``asteroid-lrf``
 preset's 20k-face ellipsoid); per truth a 150k-face surface (Open3D Poisson, depth 9, of 2e5
 noisy samples, decimated), a 77,400-point cloud (noise 0.1 m), and on Eros the track cloud.
-Times are medians of ``--repeats`` (>= 3) repeats after one warm-up; within a repeat ours and Open3D run
-in turn, so both see the same load on the shared cores.
+Times are medians of ``--repeats`` (>= 3) repeats after one warm-up; within a repeat ours and
+Open3D run in turn, so both see the same load on the shared cores.
 
     .venv/bin/python benchmarks/bench_score.py            # ~3 minutes here
     .venv/bin/python benchmarks/bench_score.py --quick    # tiny sizes, seconds (CI)
