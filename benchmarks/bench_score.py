@@ -75,9 +75,9 @@ def truths(quick: bool) -> list[tuple[str, object]]:
             ("asteroid", Mesh(np.asarray(scene.vertices), np.asarray(scene.faces)))]
 
 
-def surface(truth, n: int, depth: int, seed: int, faces: int = SURFACE_FACES):
+def surface(truth, n: int, depth: int, seed: int, max_faces: int = SURFACE_FACES):
     """A reconstruction-like mesh: Open3D Poisson of noisy surface samples, decimated to at
-    most ``faces`` faces (quadric decimation)."""
+    most ``max_faces`` faces (quadric decimation)."""
     import open3d as o3d
 
     from metrics import Mesh, sample_surface
@@ -90,8 +90,8 @@ def surface(truth, n: int, depth: int, seed: int, faces: int = SURFACE_FACES):
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     pcd.normals = o3d.utility.Vector3dVector(normals / np.linalg.norm(normals, axis=1)[:, None])
     mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=depth)
-    if len(mesh.triangles) > faces:
-        mesh = mesh.simplify_quadric_decimation(faces)
+    if len(mesh.triangles) > max_faces:
+        mesh = mesh.simplify_quadric_decimation(max_faces)
     return Mesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles))
 
 
