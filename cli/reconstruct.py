@@ -90,9 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "each isolated in a warm worker process, one per core (or on Dask with "
                     "--scheduler); score each mesh against the truth; write DIR/results.csv, "
                     "DIR/results.json, DIR/speed_accuracy.png and the meshes; print the "
-                    "ranking, the Pareto fronts and how long the full grid would take. Every "
-                    "method's defaults keep a paper-scale cloud (~3e5 points) within a minute "
-                    "or two per run on a 2-core machine.")
+                    "ranking, the Pareto fronts and how long the full grid would take.")
     p.add_argument("input", nargs="?", metavar="INPUT", help="point cloud or strike log")
     add_truth_and_output_options(
         p, truth_help="truth mesh file, or a strike log with its truth mesh", truth_required=True)

@@ -87,7 +87,7 @@ def full_grid_estimate(records: Sequence[dict], names: Sequence[str] | None = No
     done = {r["key"] for r in records if "key" in r}
     time_of = {r["method"]: r["wall_time_s"] for r in records
                if r.get("status") == "ok" and r.get("wall_time_s")
-               and r["params"] == methods.get(r["method"]).defaults}
+               and r.get("key") == methods.bind(r["method"]).key}
     runs = [run for run in variants(names, grid="full") if run.key not in done]
     unknown = sorted({run.method for run in runs} - set(time_of))
     known = [time_of[run.method] for run in runs if run.method in time_of]

@@ -321,9 +321,12 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
         Every run failed (after results.csv and results.json record how).
     """
     from recon.inputs import load_truth
+    from recon.surfaces.isolation import start_workers
     from recon.surfaces.prepare import load_prepared
 
     runs = variants(names, grid=grid)
+    if scheduler in (None, "threads"):  # local workers import Open3D while the input loads
+        start_workers(min(len(runs), n_workers or default_workers()), SWEEP_THREADS)
     options = score_options(samples)
     preparation = preparation or Preparation()
     limits = limits or Limits()

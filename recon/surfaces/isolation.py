@@ -407,6 +407,16 @@ def _take(threads: int | None) -> _Worker:
     return worker
 
 
+def start_workers(count: int, threads: int | None = None) -> None:
+    """Start ``count`` workers for ``threads`` now, without waiting for their imports, so that
+    they warm up while the caller prepares its runs (idle ones already there count)."""
+    with _POOL_LOCK:
+        missing = count - sum(w.alive() for w in _IDLE.get(threads, []))
+    started = [_Worker(threads) for _ in range(max(0, missing))]
+    with _POOL_LOCK:
+        _IDLE.setdefault(threads, []).extend(started)
+
+
 def _give_back(worker: _Worker, healthy: bool) -> None:
     """Return a worker to the pool, or end it (after a failure that may have left it unwell,
     or after ``WORKER_RUNS`` runs)."""
