@@ -3,6 +3,7 @@ truth meshes, outputs."""
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 
@@ -27,6 +28,16 @@ def add_command(subparsers, name: str, handler, **parser_options):
     return parser
 
 
+def _scheduler(text: str) -> str:
+    """argparse type of ``--scheduler``: checked before any work starts."""
+    from recon.experiments.sweep import SweepError, check_scheduler
+
+    try:
+        return check_scheduler(text)
+    except SweepError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def add_sweep_options(parser, *, resume_help: str) -> None:
     """``--scheduler``, ``--workers`` and ``--resume`` (recon.experiments.sweep's schedulers).
 
@@ -36,7 +47,7 @@ def add_sweep_options(parser, *, resume_help: str) -> None:
     resume_help : str
         What ``--resume`` keeps, in the command's own words.
     """
-    parser.add_argument("--scheduler", metavar="ADDRESS",
+    parser.add_argument("--scheduler", metavar="ADDRESS", type=_scheduler,
                         help="Dask scheduler address of an existing cluster (default: a local "
                              "cluster); 'threads' or 'serial' run without Dask")
     parser.add_argument("--workers", type=int, metavar="N",
