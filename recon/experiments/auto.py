@@ -37,10 +37,11 @@ from typing import Any
 import numpy as np
 
 from formats.errors import ReconError
+from formats.paths import check_destination
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
 from recon.surfaces.methods import MethodFailed, Run
 from recon.surfaces.normals import DEFAULT_K, Fallback
-from recon.surfaces.prepare import Preparation
+from recon.surfaces.prepare import InputError, Preparation
 
 # Fraction of points held out: 10% leaves the fit 90% of the density (a Poisson depth or a grid
 # cell chosen on 90% suits 100%) and gives ~1e4 held-out points on a 1e5-point cloud, so the
@@ -369,6 +370,7 @@ def choose_and_reconstruct(input, output, *, methods: Sequence[str] | None = Non
 
     preparation = preparation or Preparation()
     limits = limits or Limits()
+    check_destination(output, InputError)   # before the work, not after it
     cloud, prepared = load_prepared(input, preparation)
     choice = choose_for(cloud, methods=methods, holdout=holdout, preparation=preparation,
                         limits=limits)

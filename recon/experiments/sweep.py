@@ -261,7 +261,7 @@ def iterate(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
 def _execute_dask(func, cases, pending, shared, scheduler, workers):
     from distributed import Client, as_completed
 
-    cluster = None
+    cluster = client = None
     try:
         if scheduler is None:
             cluster = local_cluster(workers)
@@ -271,23 +271,30 @@ def _execute_dask(func, cases, pending, shared, scheduler, workers):
                 client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
             except (OSError, TimeoutError, ValueError) as exc:
                 raise SweepError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-        with client:
-            # A one-element list scatters the value whole (a tuple would be split).
-            remote = {name: client.scatter([value], broadcast=True)[0]
-                      for name, value in shared.items()}
-            futures = {client.submit(_call, func, remote, cases[key], pure=False): key
-                       for key in pending}
-            try:
-                for future in as_completed(futures):
-                    key = futures[future]
-                    try:
-                        result = future.result()
-                    except Exception as exc:  # a worker lost (KilledWorker) or a task error
-                        result = _failed_task(exc)
-                    yield key, result
-            except BaseException:
-                client.cancel(list(futures))
-                raise
+        # A one-element list scatters the value whole (a tuple would be split).
+        remote = {name: client.scatter([value], broadcast=True)[0]
+                  for name, value in shared.items()}
+        futures = {client.submit(_call, func, remote, cases[key], pure=False): key
+                   for key in pending}
+        try:
+            for future in as_completed(futures):
+                key = futures[future]
+                try:
+                    result = future.result()
+                except Exception as exc:  # a worker lost (KilledWorker) or a task error
+                    result = _failed_task(exc)
+                yield key, result
+        except BaseException:
+            client.cancel(list(futures))
+            raise
+    except KeyboardInterrupt:
+        # No orderly shutdown on Ctrl-C: of a cluster still starting it fails with a traceback,
+        # of a running one it takes seconds. The command line ends the workers at once
+        # (cli/main.py); in a script they end with the interpreter.
+        cluster = client = None
+        raise
     finally:
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
