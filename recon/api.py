@@ -169,7 +169,12 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
     from metrics.score import score as score_against
 
     truth = truth_of(truth, scale=truth_scale)
-    return score_against(load(test, name="test", points_only=True), truth, tau=tau,
+    geometry = load(test, name="test", points_only=True)
+    if isinstance(test, str | os.PathLike):   # errors then name the file
+        from metrics.inputs import as_test
+
+        as_test(geometry, f"test {test}")
+    return score_against(geometry, truth, tau=tau,
                          tau_fraction=tau_fraction, edges=edges, seed=seed, progress=progress,
                          **options)
 

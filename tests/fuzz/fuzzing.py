@@ -242,6 +242,8 @@ def make_case(seed: int, inputs: dict[str, Path], directory: Path) -> Case:
         source = rng.choice(["truth_ply", "truth_obj", "cloud_ply", "cloud_las"])
         bad = directory / ("bad" + inputs[source].suffix)
         how, must = _damaged_copy(inputs[source], bad, rng)
+        if source == "truth_obj" and how == "truncate":
+            must = False   # OBJ is lines with no count: cut at a line end, it is a valid OBJ
         if source.startswith("truth"):
             args = ["score", inputs["cloud_ply"], "--truth", bad, "--no-edges"]
         else:
