@@ -268,3 +268,18 @@ def test_local_cluster_listens_on_loopback_only():
         listening = [c.laddr.ip for p in [me, *me.children(recursive=True)]
                      for c in p.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN]
     assert listening and set(listening) <= {"127.0.0.1"}, listening
+
+
+def test_far_point_in_a_cloud_is_one_line_naming_the_file(tmp_path, sphere_log, capsys):
+    """A point at 1e20 m crashed Open3D's float32 distance query (IndexError) before."""
+    from formats.cloud_io import write_cloud
+    from formats.geometry import Cloud
+
+    points = np.random.default_rng(0).normal(size=(500, 3)) * 50.0
+    points[7] = [1e20, 0.0, 0.0]
+    cloud = tmp_path / "far.ply"
+    write_cloud(cloud, Cloud(points))
+    assert main(["score", str(cloud), "--truth", str(sphere_log), "--no-edges"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == (f"recon score: error: test {cloud} points has 1 row(s) farther than 1e+12 m "
+                   "from the origin, first at row 7 (1e+20 m)")
