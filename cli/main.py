@@ -8,6 +8,7 @@ those callables, so ``recon --help`` starts instantly.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import signal
@@ -76,7 +77,34 @@ def main(argv: list[str] | None = None) -> int:
         signum = getattr(exc, "signum", signal.SIGINT)
         print(f"recon {args.command}: interrupted ({signal.Signals(signum).name}); outputs "
               "left as they were", file=sys.stderr)
-        return interrupt.EXIT_STATUS.get(signum, 130)
+        return _leave_now(interrupt.EXIT_STATUS.get(signum, 130))
+
+
+def _leave_now(status: int) -> int:
+    """After an interrupt: when work is still running (a Dask cluster's workers, an isolated
+    method run, a thread in a long library call), end it and exit at once.
+
+    Every writer has already dropped its temporary file while the interrupt unwound the stack,
+    so nothing is left to finish; waiting would only let a cluster that was still starting
+    fail its shutdown with a traceback, or a long C call run to its end. The children get
+    SIGKILL: on SIGTERM Dask's workers print a traceback each (Dask clears their scratch
+    directories when the next cluster starts).
+    """
+    import threading
+
+    import psutil
+
+    children = psutil.Process().children(recursive=True)
+    busy = [t for t in threading.enumerate()
+            if t is not threading.current_thread() and not t.daemon and t.is_alive()]
+    if not children and not busy:
+        return status
+    for child in children:
+        with contextlib.suppress(psutil.Error):
+            child.kill()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
 
 
 # Longest error message printed: a hostile value (a 5 MB scene string) is cut, not echoed.

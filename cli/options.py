@@ -86,6 +86,16 @@ def show_required(parser: argparse.ArgumentParser, *shown: str, alternatives: tu
     parser.usage = "\n       ".join(lines)
 
 
+def _scheduler(text: str) -> str:
+    """argparse type of ``--scheduler``: checked before any work starts."""
+    from recon.experiments.sweep import SweepError, check_scheduler
+
+    try:
+        return check_scheduler(text)
+    except SweepError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def add_sweep_options(parser, *, resume_help: str) -> None:
     """``--scheduler``, ``--workers`` and ``--resume`` (recon.experiments.sweep's schedulers).
 
@@ -95,7 +105,7 @@ def add_sweep_options(parser, *, resume_help: str) -> None:
     resume_help : str
         What ``--resume`` keeps, in the command's own words.
     """
-    parser.add_argument("--scheduler", metavar="ADDRESS",
+    parser.add_argument("--scheduler", metavar="ADDRESS", type=_scheduler,
                         help="Dask scheduler address of an existing cluster (default: a local "
                              "cluster); 'threads' or 'serial' run without Dask")
     parser.add_argument("--workers", type=int, metavar="N",

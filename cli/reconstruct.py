@@ -199,6 +199,8 @@ def run_reconstruct(args) -> int:
     auto = args.method == "auto"
     if auto and args.param:
         raise InputError("--param cannot be combined with -m auto")
+    if not 0 < args.holdout <= 0.5:   # checked even when unused: a bad value is a mistake
+        raise InputError(f"--holdout must be in (0, 0.5], got {args.holdout}")
     run = None if auto else methods.parse_run(args.method, args.param)
     options = {"preparation": _preparation(args), "limits": _limits(args),
                "isolate": not args.in_process}

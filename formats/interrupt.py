@@ -15,6 +15,7 @@ its caller's signals); :func:`check` is a no-op outside that block.
 from __future__ import annotations
 
 import contextlib
+import logging
 import signal
 import threading
 import weakref
@@ -44,6 +45,9 @@ def _swallowing(frame) -> bool:
 
 def _handler(signum, frame) -> None:
     _received.append(signum)
+    # What libraries log while they are torn down (a Dask cluster interrupted while starting
+    # logs each worker that never started, with its traceback) is noise after a Ctrl-C.
+    logging.disable(logging.CRITICAL)
     if not _swallowing(frame):   # else the next check() raises it
         raise Interrupted(signum)
 
@@ -65,6 +69,8 @@ def handled():
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        if _received:
+            logging.disable(logging.NOTSET)
 
 
 def received() -> int | None:

@@ -13,9 +13,15 @@ import numpy as np
 from formats.geometry import Cloud, Mesh, xyz_array
 from metrics.errors import MetricsInputError
 
+# Largest coordinate accepted [m], about 7 au: beyond any target imaged from nearby. The
+# distance queries run in float32 (Open3D) and square coordinates: at 1e20 m the square
+# overflows and no closest triangle is found.
+MAX_COORDINATE_M = 1e12
+
 
 def _finite_xyz(array, what: str) -> np.ndarray:
-    """``array`` as a C-contiguous (n, 3) float64 array of finite values, n >= 1."""
+    """``array`` as a C-contiguous (n, 3) float64 array of finite values within
+    ``MAX_COORDINATE_M`` of the origin, n >= 1."""
     arr = xyz_array(array, what, error=MetricsInputError)
     if len(arr) == 0:
         raise MetricsInputError(f"{what} is empty (0 rows)")
@@ -23,6 +29,11 @@ def _finite_xyz(array, what: str) -> np.ndarray:
         bad = ~np.isfinite(arr).all(axis=1)
         raise MetricsInputError(f"{what} has {int(bad.sum())} row(s) with NaN or Inf, first at "
                                 f"row {int(np.argmax(bad))}")
+    if np.abs(arr).max() > MAX_COORDINATE_M:
+        bad = (np.abs(arr) > MAX_COORDINATE_M).any(axis=1)
+        raise MetricsInputError(f"{what} has {int(bad.sum())} row(s) farther than "
+                                f"{MAX_COORDINATE_M:g} m from the origin, first at row "
+                                f"{int(np.argmax(bad))} ({np.abs(arr[np.argmax(bad)]).max():g} m)")
     return np.ascontiguousarray(arr)
 
 

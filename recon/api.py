@@ -105,17 +105,18 @@ def ingest(log, *, frame: Frame = "body", output=None,
     return register_log(log, frame=frame, output=output, progress=progress)
 
 
-def load(value, *, name: str = "input") -> Cloud | Mesh:
+def load(value, *, name: str = "input", points_only: bool = False) -> Cloud | Mesh:
     """A ``Cloud`` or ``Mesh`` from recon's types, plain arrays or a file (cloud, mesh or log).
 
-    A strike log is ingested into a body-frame cloud.
+    A strike log is ingested into a body-frame cloud (``points_only``: without its per-point
+    attributes).
     """
     if isinstance(value, Cloud | Mesh):
         return value
     if isinstance(value, str | os.PathLike):
         from recon.inputs import load_geometry
 
-        return load_geometry(value)
+        return load_geometry(value, points_only=points_only)
     if isinstance(value, tuple | list) or hasattr(value, "faces"):
         return Mesh.of(value, name)
     return Cloud.of(value, name)
@@ -139,8 +140,10 @@ def default_truth(test):
     ApiError
         ``test`` is not a strike log, so the truth must be given.
     """
+    from formats.paths import check_source
     from recon.inputs import is_strike_log
 
+    check_source(test, ApiError)
     if not is_strike_log(test):
         raise ApiError(f"{test}: is not a strike log with truth; give --truth")
     return test
@@ -167,7 +170,12 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
     from metrics.score import score as score_against
 
     truth = truth_of(truth, scale=truth_scale)
-    return score_against(load(test, name="test"), truth, tau=tau,
+    geometry = load(test, name="test", points_only=True)
+    if isinstance(test, str | os.PathLike):   # errors then name the file
+        from metrics.inputs import as_test
+
+        as_test(geometry, f"test {test}")
+    return score_against(geometry, truth, tau=tau,
                          tau_fraction=tau_fraction, edges=edges, seed=seed, progress=progress,
                          **options)
 

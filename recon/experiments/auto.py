@@ -47,10 +47,11 @@ from typing import Any
 import numpy as np
 
 from formats.errors import ReconError
+from formats.paths import check_destination
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
 from recon.surfaces.methods import MethodFailed, Run
 from recon.surfaces.normals import DEFAULT_K, Fallback
-from recon.surfaces.prepare import Preparation
+from recon.surfaces.prepare import InputError, Preparation
 from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
 from recon.surfaces.uncertainty import MIN_COS
 
@@ -548,6 +549,7 @@ def choose_and_reconstruct(input, output, *, methods: Sequence[str] | None = Non
 
     preparation = preparation or Preparation()
     limits = limits or Limits()
+    check_destination(output, InputError)   # before the work, not after it
     cloud, prepared = load_prepared(input, preparation)
     choice = choose_for(cloud, methods=methods, holdout=holdout, preparation=preparation,
                         limits=limits)

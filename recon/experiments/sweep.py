@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -41,10 +42,39 @@ RESULTS_NAME = "results.jsonl"
 FINGERPRINT_NAME = "sweep.json"
 # Seconds to wait for an existing Dask scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
+# A Dask scheduler address: ``host:port`` or ``protocol://host:port`` with one of Dask's comms.
+SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
+# Where a local cluster listens: this machine only. Its scheduler and dashboard (HTTP, no
+# authentication) would otherwise be open on every interface on random ports.
+LOCAL_HOST = "127.0.0.1"
 
 
 class SweepError(ReconError, ValueError):
     """A sweep cannot start: bad scheduler, unreachable cluster, or a mismatched resume."""
+
+
+def check_scheduler(scheduler, error: type[Exception] = SweepError):
+    """A ``--scheduler`` value: None, ``threads``, ``serial`` or a Dask address; returned as it
+    is, or ``error`` (one line) when it is none of them."""
+    if scheduler is None or scheduler in ("threads", "serial"):
+        return scheduler
+    if not isinstance(scheduler, str) or not SCHEDULER_ADDRESS.match(scheduler):
+        shown = repr(scheduler)[:80]
+        raise error(f"--scheduler must be a Dask scheduler address (tcp://host:port), "
+                    f"'threads' or 'serial', got {shown}")
+    return scheduler
+
+
+def local_cluster(n_workers: int):
+    """A ``LocalCluster`` of single-threaded worker processes on the loopback interface, its
+    dashboard on a free loopback port (the default 8787 may be taken by another cluster)."""
+    import logging
+
+    from distributed import LocalCluster
+
+    return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                        host=LOCAL_HOST, dashboard_address=f"{LOCAL_HOST}:0",
+                        silence_logs=logging.ERROR)
 
 
 def default_workers() -> int:
@@ -149,6 +179,9 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
     from tqdm import tqdm
 
     out_dir = Path(out_dir)
+    check_scheduler(scheduler)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise SweepError(f"{out_dir}: is not a directory (the output of a sweep is one)")
     out_dir.mkdir(parents=True, exist_ok=True)
     if n_workers is not None and n_workers < 1:
         raise SweepError(f"workers must be >= 1, got {n_workers}")
@@ -198,6 +231,7 @@ def iterate(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
 
     ``keys`` selects the cases (default: all); the other arguments are ``run_sweep``'s.
     """
+    check_scheduler(scheduler)
     pending = list(cases) if keys is None else list(keys)
     shared = dict(shared or {})
     workers = n_workers or default_workers()
@@ -225,40 +259,42 @@ def iterate(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
 
 
 def _execute_dask(func, cases, pending, shared, scheduler, workers):
-    import logging
+    from distributed import Client, as_completed
 
-    from distributed import Client, LocalCluster, as_completed
-
-    cluster = None
+    cluster = client = None
     try:
         if scheduler is None:
-            # ":0": the scheduler's HTTP server on a free port (the default 8787 may be taken
-            # by another cluster, which only warns, but warnings are errors in our tests).
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0", silence_logs=logging.ERROR)
+            cluster = local_cluster(workers)
             client = Client(cluster)
         else:
             try:
                 client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
-            except (OSError, TimeoutError) as exc:
+            except (OSError, TimeoutError, ValueError) as exc:
                 raise SweepError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-        with client:
-            # A one-element list scatters the value whole (a tuple would be split).
-            remote = {name: client.scatter([value], broadcast=True)[0]
-                      for name, value in shared.items()}
-            futures = {client.submit(_call, func, remote, cases[key], pure=False): key
-                       for key in pending}
-            try:
-                for future in as_completed(futures):
-                    key = futures[future]
-                    try:
-                        result = future.result()
-                    except Exception as exc:  # a worker lost (KilledWorker) or a task error
-                        result = _failed_task(exc)
-                    yield key, result
-            except BaseException:
-                client.cancel(list(futures))
-                raise
+        # A one-element list scatters the value whole (a tuple would be split).
+        remote = {name: client.scatter([value], broadcast=True)[0]
+                  for name, value in shared.items()}
+        futures = {client.submit(_call, func, remote, cases[key], pure=False): key
+                   for key in pending}
+        try:
+            for future in as_completed(futures):
+                key = futures[future]
+                try:
+                    result = future.result()
+                except Exception as exc:  # a worker lost (KilledWorker) or a task error
+                    result = _failed_task(exc)
+                yield key, result
+        except BaseException:
+            client.cancel(list(futures))
+            raise
+    except KeyboardInterrupt:
+        # No orderly shutdown on Ctrl-C: of a cluster still starting it fails with a traceback,
+        # of a running one it takes seconds. The command line ends the workers at once
+        # (cli/main.py); in a script they end with the interpreter.
+        cluster = client = None
+        raise
     finally:
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()

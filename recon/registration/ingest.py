@@ -22,6 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from formats import StrikeChunk, StrikeLog
+from formats.atomic import check_space
 from formats.cloud_io import open_cloud_writer
 from formats.geometry import Cloud
 from formats.strike_log.schema import directions_to_angles
@@ -113,6 +114,9 @@ def _register_and_write(log_path, output, *, frame: Frame, chunk_rows: int | Non
     (if ``keep``). Returns the strike count and the kept blocks."""
     kept = []
     with StrikeLog(log_path) as log:
+        if output is not None:   # per point: xyz and the attributes, as written
+            check_space(output, log.n_strikes * (24 + sum(
+                np.dtype(d).itemsize for d in ATTRIBUTE_DTYPES.values())))
         writer = (open_cloud_writer(output, log.n_strikes, ATTRIBUTE_DTYPES, frame=frame,
                                     source=Path(log_path).name)
                   if output is not None else contextlib.nullcontext())
@@ -141,6 +145,21 @@ def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int
     n_points, _ = _register_and_write(log_path, out_path, frame=frame, chunk_rows=chunk_rows,
                                       progress=progress, keep=False, correction=correction)
     return {"n_points": n_points, "frame": frame, "output": str(Path(out_path))}
+
+
+def ingest_points(log_path, *, frame: Frame = "body", chunk_rows: int | None = None
+                  ) -> np.ndarray:
+    """The registered points of a log alone, (n, 3) float64 metres in ``frame``.
+
+    For scoring: one preallocated array of 24 bytes a strike, filled block by block, instead of
+    the 80 bytes a strike of ``ingest``'s cloud with its attributes and the blocks it joins.
+    """
+    with StrikeLog(log_path) as log:
+        points = np.empty((log.n_strikes, 3))
+        for chunk in (log.iter_chunks() if chunk_rows is None else
+                      log.iter_chunks(chunk_rows)):
+            points[chunk.start:chunk.start + len(chunk)] = register_chunk(chunk, frame=frame)[0]
+    return points
 
 
 def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | None = None,

@@ -16,10 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from formats.geometry import Cloud, Mesh
+from formats.paths import check_destination
 from recon.surfaces.checks import check_surface, watertight
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
 from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
-from recon.surfaces.prepare import Preparation, load_prepared
+from recon.surfaces.prepare import InputError, Preparation, load_prepared
 
 
 class Surface(Mesh):
@@ -170,6 +171,7 @@ def reconstruct_input(input, output, *, method: str | Run = "poisson",
         ``input`` and ``reconstruct_to_file``'s summary.
     """
     run = bind(method, params)
+    check_destination(output, InputError)   # before the work, not after it
     cloud, prepared = load_prepared(input, preparation)
     return {"input": str(input)} | reconstruct_to_file(cloud, prepared, Path(output), run=run,
                                                        limits=limits, isolate=isolate,

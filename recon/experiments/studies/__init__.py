@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import importlib
 import json
-import re
 import time
 from pathlib import Path
 from types import ModuleType
@@ -34,8 +33,6 @@ from recon.experiments.studies.runner import SIZES, StudyError, check_size
 STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods")
 # ``recon study all`` writes this beside the study directories.
 INDEX_JSON = "index.json"
-# A Dask scheduler address: ``protocol://host:port`` or ``host:port``.
-_ADDRESS = re.compile(r"^([a-z][a-z0-9+]*://)?[A-Za-z0-9_.\-\[\]:]+:\d+$")
 # Seconds allowed to reach an existing scheduler before the study starts.
 CONNECT_TIMEOUT_S = 10
 
@@ -73,11 +70,10 @@ def check_scheduler(scheduler: str | None, *, connect: bool = True) -> str | Non
     StudyError
         Not ``threads``, ``serial`` or an address, or nothing answers at the address.
     """
-    if scheduler is None or scheduler in ("threads", "serial"):
+    from recon.experiments.sweep import check_scheduler as check_address
+
+    if check_address(scheduler, StudyError) in (None, "threads", "serial"):
         return scheduler
-    if not isinstance(scheduler, str) or not _ADDRESS.match(scheduler):
-        raise StudyError(f"--scheduler must be a Dask scheduler address (tcp://host:port), "
-                         f"'threads' or 'serial', got {scheduler!r}")
     if connect:
         from distributed import Client
 
@@ -174,15 +170,9 @@ def run_all(out_dir, *, size: str = "full", scheduler: str | None = None,
     cluster = None
     try:
         if scheduler is None:
-            import logging
+            from recon.experiments.sweep import default_workers, local_cluster
 
-            from distributed import LocalCluster
-
-            from recon.experiments.sweep import default_workers
-
-            cluster = LocalCluster(n_workers=n_workers or default_workers(),
-                                   threads_per_worker=1, processes=True,
-                                   dashboard_address=":0", silence_logs=logging.ERROR)
+            cluster = local_cluster(n_workers or default_workers())
             address = cluster.scheduler_address
         else:
             address = scheduler

@@ -1,0 +1,285 @@
+"""Outputs, signals, full disks and network exposure through the real `recon` command (issue 13).
+
+Each run is a real process: signals, exit statuses, umasks and file-size limits are process
+properties.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sim
+from cli.main import main
+from formats.mesh_io import write_mesh
+
+REPO = Path(__file__).resolve().parents[2]
+# The issue's bound on stopping after SIGINT or SIGTERM, seconds.
+STOP_WITHIN_S = 2.0
+
+
+def _env():
+    return dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def _recon(*args, **popen):
+    return subprocess.Popen([sys.executable, "-c", "from cli.main import main; "
+                             "import sys; sys.exit(main())", *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_env(),
+                            cwd=popen.pop("cwd", None), **popen)
+
+
+def _run(*args, **popen):
+    proc = _recon(*args, **popen)
+    out, err = proc.communicate(timeout=300)
+    return proc.returncode, out.decode(), err.decode()
+
+
+def _partials(directory: Path) -> list[str]:
+    return [p.name for p in directory.iterdir() if ".partial" in p.name]
+
+
+@pytest.fixture(scope="module")
+def big_log(tmp_path_factory):
+    """A 32 x 32 LIDAR log of 2.3 M strikes: ingest and score take seconds on it."""
+    path = tmp_path_factory.mktemp("big") / "lidar.h5"
+    sim.simulate(sim.load_scene("asteroid-lidar", ["time.duration=30000"]), path, seed=0)
+    return path
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+@pytest.mark.parametrize("make, what", [
+    (lambda p: p.mkdir(), "a directory"),
+    (lambda p: os.mkfifo(p), "a FIFO"),
+])
+@pytest.mark.parametrize("command", ["simulate", "ingest", "truth", "reconstruct"])
+def test_output_that_is_not_a_regular_file_is_refused_before_work(
+        command, make, what, tmp_path, sphere_log, capsys):
+    out = tmp_path / ("out.ply" if command in ("truth", "reconstruct") else "out.h5")
+    make(out)
+    args = {"simulate": ["simulate", "asteroid-lrf", "-o", out],
+            "ingest": ["ingest", sphere_log, "-o", out],
+            "truth": ["truth", sphere_log, "-o", out],
+            "reconstruct": ["reconstruct", sphere_log, "-o", out, "--in-process"]}[command]
+    start = time.perf_counter()
+    assert main([str(a) for a in args]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"{out}: is {what}; give the name of a file to write"), err
+    assert err.count("\n") == 0
+    assert time.perf_counter() - start < 5   # refused first: no simulation, no reconstruction
+    assert out.is_dir() if what == "a directory" else out.is_fifo()
+    assert _partials(tmp_path) == []
+
+
+def test_output_gets_the_users_umask(tmp_path, sphere_log):
+    out = tmp_path / "cloud.ply"
+    proc = _recon("ingest", sphere_log, "-o", out, preexec_fn=lambda: os.umask(0o027))
+    proc.communicate(timeout=120)
+    assert proc.returncode == 0
+    assert out.stat().st_mode & 0o777 == 0o640
+
+
+def test_stale_partials_of_dead_processes_are_removed(tmp_path, sphere_log, capsys):
+    out = tmp_path / "cloud.ply"
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = tmp_path / f".cloud.ply.partial-{dead.pid}-abcd1234"
+    live = tmp_path / f".cloud.ply.partial-{os.getppid()}-efgh5678"   # a running process's
+    stale.write_bytes(b"x" * 1000)
+    live.write_bytes(b"y")
+    assert main(["ingest", str(sphere_log), "-o", str(out)]) == 0
+    assert not stale.exists() and live.exists()
+
+
+# --------------------------------------------------------------------------- signals
+
+
+def _interrupt(args, signum, *, after_s, tmp_path, old: Path | None, wait_children: int = 0):
+    """Start ``recon ARGS``, send ``signum`` after ``after_s`` seconds; return the seconds it
+    took to exit and its stderr."""
+    import psutil
+
+    before = old.read_bytes() if old is not None else None
+    proc = _recon(*args, cwd=tmp_path)
+    time.sleep(after_s)
+    if wait_children:   # a Dask cluster up, its workers started: interrupt the work itself
+        deadline = time.monotonic() + 120
+        while len(psutil.Process(proc.pid).children(recursive=True)) < wait_children:
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.2)
+        time.sleep(2.0)
+    assert proc.poll() is None, "finished before the signal: make the run longer"
+    proc.send_signal(signum)
+    sent = time.monotonic()
+    _, err = proc.communicate(timeout=60)
+    took = time.monotonic() - sent
+    err = err.decode()
+    assert proc.returncode == 128 + signum, err
+    assert f"interrupted ({signal.Signals(signum).name})" in err
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    if old is not None:
+        assert old.read_bytes() == before
+    assert _partials(tmp_path) == [] and _partials(old.parent if old else tmp_path) == []
+    return took
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_simulate_stops_promptly_and_keeps_the_old_log(signum, tmp_path):
+    old = tmp_path / "run.h5"
+    old.write_bytes(b"previous output")
+    took = _interrupt(["simulate", "asteroid-lidar", "-o", old], signum, after_s=3.0,
+                      tmp_path=tmp_path, old=old)
+    assert took < STOP_WITHIN_S
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_ingest_stops_promptly(signum, big_log, tmp_path):
+    old = tmp_path / "cloud.ply"
+    old.write_bytes(b"previous output")
+    took = _interrupt(["ingest", big_log, "-o", old], signum, after_s=2.0, tmp_path=tmp_path,
+                      old=old)
+    assert took < STOP_WITHIN_S
+
+
+def test_score_stops_promptly(big_log, tmp_path):
+    took = _interrupt(["score", big_log], signal.SIGINT, after_s=3.0, tmp_path=tmp_path,
+                      old=None)
+    assert took < STOP_WITHIN_S
+
+
+@pytest.mark.parametrize("command", ["compare", "stability"])
+def test_sweeps_stop_promptly(command, big_log, tmp_path):
+    small = tmp_path / "small.h5"
+    sim.simulate(sim.load_scene("asteroid-lidar", ["time.duration=600"]), small, seed=0)
+    args = ([command, small, "--truth", small, "-o", tmp_path / "out"] +
+            (["--noise", "0,1", "--density", "1,0.5"] if command == "stability" else []))
+    took = _interrupt(args, signal.SIGINT, after_s=1.0, tmp_path=tmp_path, old=None,
+                      wait_children=2)
+    assert took < STOP_WITHIN_S
+
+
+def test_study_stops_promptly(tmp_path):
+    took = _interrupt(["study", "slew", "-o", tmp_path / "out", "--size", "tiny"],
+                      signal.SIGTERM, after_s=1.0, tmp_path=tmp_path, old=None, wait_children=2)
+    assert took < STOP_WITHIN_S
+
+
+# --------------------------------------------------------------------------- full disk
+
+
+def _file_size_limit(n_bytes):
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)   # writes past the limit fail with EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (n_bytes, n_bytes))
+    return limit
+
+
+@pytest.mark.parametrize("suffix", [".h5", ".ply", ".las"])
+def test_disk_full_while_ingesting_is_one_line(suffix, big_log, tmp_path):
+    out = tmp_path / f"cloud{suffix}"
+    status, _, err = _run("ingest", big_log, "-o", out,
+                          preexec_fn=_file_size_limit(20 << 20))
+    assert status == 1, err
+    assert err.strip().splitlines()[-1] == (
+        f"recon ingest: error: {out}: no space left on device (or quota exceeded) in {tmp_path}")
+    assert not out.exists() and _partials(tmp_path) == []
+
+
+def test_disk_full_while_simulating_is_one_line(tmp_path):
+    out = tmp_path / "run.h5"
+    status, _, err = _run("simulate", "asteroid-lidar", "-o", out, "--set",
+                          "time.duration=30000", preexec_fn=_file_size_limit(20 << 20))
+    assert status == 1, err
+    assert err.strip().splitlines()[-1] == (
+        f"recon simulate: error: {out}: no space left on device (or quota exceeded) in "
+        f"{tmp_path}")
+    assert not out.exists() and _partials(tmp_path) == []
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 5 MB tmpfs (needs root and mount); skipped where it cannot be made."""
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    if not shutil.which("mount") or subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", "size=5m", "tmpfs", str(mount)],
+            capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a tmpfs here; the RLIMIT_FSIZE tests cover the write path")
+    yield mount
+    subprocess.run(["umount", str(mount)], check=False)
+
+
+def test_full_tmpfs_is_refused_before_work(small_disk):
+    out = small_disk / "run.h5"
+    status, _, err = _run("simulate", "asteroid-lrf", "-o", out)
+    assert status == 1
+    assert err.strip() == (f"recon simulate: error: {out}: needs about 22.4 MB but "
+                           f"{small_disk} has 5.2 MB free")
+    assert list(small_disk.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- messages, network
+
+
+def test_truth_with_zero_area_names_its_file(tmp_path, sphere_log, capsys):
+    flat = tmp_path / "flat.ply"
+    write_mesh(flat, np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]), np.array([[0, 1, 2]]))
+    assert main(["score", str(sphere_log), "--truth", str(flat)]) == 1
+    assert f"truth {flat} has zero total area" in capsys.readouterr().err
+
+
+def test_long_values_are_cut_in_messages(capsys):
+    assert main(["simulate", "asteroid-lrf", "-o", "x.h5", "--set",
+                 "target.path=" + "p" * 5_000_000]) == 1
+    assert len(capsys.readouterr().err) < 600
+
+
+@pytest.mark.parametrize("command", ["compare", "stability"])
+def test_bad_scheduler_is_one_line(command, sphere_log, tmp_path, capsys):
+    with pytest.raises(SystemExit) as info:
+        main([command, str(sphere_log), "--truth", str(sphere_log), "-o", str(tmp_path / "o"),
+              "--scheduler", "garbage://x"])
+    assert info.value.code == 1
+    err = capsys.readouterr().err
+    assert "--scheduler must be a Dask scheduler address (tcp://host:port)" in err
+    assert "Traceback" not in err
+
+
+def test_local_cluster_listens_on_loopback_only():
+    import psutil
+
+    from recon.experiments.sweep import local_cluster
+
+    with local_cluster(1) as cluster:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        assert "127.0.0.1" in cluster.dashboard_link
+        me = psutil.Process()
+        listening = [c.laddr.ip for p in [me, *me.children(recursive=True)]
+                     for c in p.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN]
+    assert listening and set(listening) <= {"127.0.0.1"}, listening
+
+
+def test_far_point_in_a_cloud_is_one_line_naming_the_file(tmp_path, sphere_log, capsys):
+    """A point at 1e20 m crashed Open3D's float32 distance query (IndexError) before."""
+    from formats.cloud_io import write_cloud
+    from formats.geometry import Cloud
+
+    points = np.random.default_rng(0).normal(size=(500, 3)) * 50.0
+    points[7] = [1e20, 0.0, 0.0]
+    cloud = tmp_path / "far.ply"
+    write_cloud(cloud, Cloud(points))
+    assert main(["score", str(cloud), "--truth", str(sphere_log), "--no-edges"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == (f"recon score: error: test {cloud} points has 1 row(s) farther than 1e+12 m "
+                   "from the origin, first at row 7 (1e+20 m)")
