@@ -116,6 +116,40 @@ def cases(size: str) -> dict[str, dict]:
                     preset, [*scene_overrides, f"time.duration={duration:g}", *errs, *extra],
                     prefixes_s=[duration], seed=seed, score_options=plan["score"],
                     tags={"target": target, "configuration": config, "scenario": scenario})
+    out.update(_cause_cases(plan))
+    return out
+
+
+# Runs that show why two Table 1 claims differ (ours, not the paper's): the pulse-dilation alpha
+# at which the ellipsoid's score rises as in the paper, and the ellipsoid's stochastic scenario
+# without the 2 m origin error and at equal imaging time (15 rotations) for LIDAR and cross.
+DILATION_ALPHAS = {"full": (0.0005, 0.001, 0.002), "quick": (0.001,), "tiny": (0.001,)}
+CAUSE_ROTATIONS = {"full": 15.0, "quick": 3.0, "tiny": 0.25}
+
+
+def _cause_cases(plan) -> dict[str, dict]:
+    size = next(k for k, v in PLAN.items() if v is plan)
+    extra = plan["overrides"].get("ellipsoid", ()) if isinstance(plan["overrides"], dict) else ()
+    out = {}
+    cross, cross_overrides = SCENES[("ellipsoid", "cross LRF")]
+    duration = plan["duration"][("ellipsoid", "cross LRF")]
+    for alpha in DILATION_ALPHAS[size]:
+        out[f"ellipsoid | cross LRF | pulse dilation alpha {alpha:g} | seed 0"] = \
+            runner.scene_case(cross, [*cross_overrides, f"time.duration={duration:g}",
+                                      f"errors.dilation_alpha={alpha:g}", *extra],
+                              prefixes_s=[duration], score_options=plan["score"],
+                              tags={"check": "dilation alpha", "dilation_alpha": alpha})
+    long = rotations(CAUSE_ROTATIONS[size])
+    for config, preset, overrides, errs in (
+            ("LIDAR", *SCENES[("ellipsoid", "LIDAR")], LIDAR_STOCHASTIC),
+            ("cross LRF", cross, cross_overrides, ()),
+            ("cross LRF", cross, cross_overrides, LRF_STOCHASTIC)):
+        scenario = "stochastic without origin error" if errs else "no error"
+        out[f"ellipsoid | {config} | {scenario}, {CAUSE_ROTATIONS[size]:g} rotations"] = \
+            runner.scene_case(preset, [*overrides, f"time.duration={long:g}", *errs, *extra],
+                              prefixes_s=[long], score_options=plan["score"],
+                              tags={"check": "origin error", "configuration": config,
+                                    "scenario": scenario})
     return out
 
 
@@ -164,9 +198,69 @@ def finish(records: dict, out_dir, size: str) -> dict:
             note=f"bars: mean over {seeds} seed(s) of the noisy scenarios, error bars: standard "
                  "deviation; diamonds: the paper's edge scores")
         files += [f"{name}.csv", f"{name}.png"]
-    claims = [_claim_increase(tables["ellipsoid"]), _claim_lidar_worst(tables),
+    dilation = sorted(((r["tags"]["dilation_alpha"], r["prefixes"][-1]) for r in records.values()
+                       if r["tags"].get("check") == "dilation alpha"
+                       and r["prefixes"][-1].get("scored")), key=lambda q: q[0])
+    origin = {(r["tags"]["configuration"], r["tags"]["scenario"]): r["prefixes"][-1]
+              for r in records.values() if r["tags"].get("check") == "origin error"
+              and r["prefixes"][-1].get("scored")}
+    claims = [_claim_increase(tables["ellipsoid"]), _claim_dilation_scale(tables, dilation),
+              _claim_lidar_worst(tables), _claim_lidar_worst_cause(origin),
               _claim_rso_order(tables["rso-a"]), _claim_usable(tables)]
-    return {"claims": claims, "files": files, "extra": {"tables": tables}}
+    return {"claims": claims, "files": files,
+            "extra": {"tables": tables,
+                      "dilation_alpha": [{"alpha": a, **_scores(p)} for a, p in dilation],
+                      "without_origin_error": [{"configuration": c, "scenario": s_, **_scores(p)}
+                                               for (c, s_), p in origin.items()]}}
+
+
+def _scores(prefix: dict) -> dict:
+    return {k: prefix.get(k) for k in ("rotations", "n_points", "edge_score", "false_edge_rate",
+                                       "missed_edge_rate", "coverage", "fscore")}
+
+
+def _claim_dilation_scale(tables, dilation) -> dict:
+    text = ("(Our check.) At what alpha does pulse dilation raise the ellipsoid's edge score as "
+            "it does in the paper (0.0789 -> 0.1503 for the cross)?")
+    base = _value(tables["ellipsoid"], "cross LRF", "no error")
+    preset = _value(tables["ellipsoid"], "cross LRF", "pulse dilation")
+    if base is None or not dilation:
+        return claim("errors-dilation-scale", "Table 1", text, "-", "no data", "not tested")
+    runs = [(0.0002, {"edge_score": preset}), *dilation]  # the presets' alpha first
+    rises = [(a, p["edge_score"] - base) for a, p in runs if p["edge_score"] is not None]
+    ours = ("cross LRF edge score minus its no-error score, by alpha: "
+            + ", ".join(f"{a:g}: {d:+.4f} (3-sigma {a * 750:.2f} m x tan(theta) at 750 m)"
+                        for a, d in rises))
+    within = [d for a, d in rises if a * 750 <= 1.0]  # the paper: 3 sigma "less than 1 m"
+    verdict = ("reproduced" if within and max(within) > 0.01 else
+               "partly" if any(d > 0.01 for _, d in rises) else "not reproduced")
+    return claim("errors-dilation-scale", "Table 1", text,
+                 "alpha = 0.0002 gives a 3-sigma error below 1 m", ours, verdict,
+                 "reproduced when some alpha whose 3-sigma error at 750 m and 45 deg incidence "
+                 "stays within the paper's 1 m raises the edge score by more than 0.01; partly "
+                 "when only a larger alpha does.")
+
+
+def _claim_lidar_worst_cause(origin) -> dict:
+    text = ("(Our check.) Without the 2 m origin error and at equal imaging time, does the "
+            "LIDAR with its stochastic errors score worse than the cross LRF with its own?")
+    lidar = origin.get(("LIDAR", "stochastic without origin error"))
+    cross = origin.get(("cross LRF", "stochastic without origin error"))
+    clean = origin.get(("cross LRF", "no error"))
+    if lidar is None or cross is None:
+        return claim("errors-lidar-worst-cause", "Tables 1, 2", text, "-", "no data",
+                     "not tested")
+    ours = "; ".join(f"{name} after {p['rotations']:g} rotations: edge {p['edge_score']:.4f} "
+                     f"(false-edge rate {p['false_edge_rate']:.3f}, missed "
+                     f"{p['missed_edge_rate']:.3f})"
+                     for name, p in (("LIDAR, Jenoptik errors", lidar),
+                                     ("cross LRF, 0.3 m range error", cross),
+                                     ("cross LRF, no error", clean)) if p is not None)
+    verdict = "reproduced" if lidar["edge_score"] > cross["edge_score"] else "not reproduced"
+    return claim("errors-lidar-worst-cause", "Tables 1, 2", text,
+                 "LIDAR stochastic 0.2984 worst", ours, verdict,
+                 "reproduced when the LIDAR's edge score exceeds the cross LRF's once both run "
+                 "equally long without the origin error.")
 
 
 def _value(rows, config, scenario, metric="edge_score"):

@@ -52,6 +52,10 @@ MIN_SCORED_POINTS = 16
 SCORE_KEYS = ("edge_score", "fscore", "precision", "recall", "chamfer_m", "coverage",
               "accuracy_mean_m", "completeness_mean_m", "hausdorff_m", "tau_m")
 EDGE_KEYS = ("false_edge_rate", "missed_edge_rate", "feature_missed_rate", "n_edge_points")
+# What the claims about "the score" are decided on: the paper's edge score first (metrics/edges.py,
+# informative on the asteroid since it reads the whole triangulation), coverage and F-score beside
+# it; each with True when lower is better.
+CLAIM_METRICS = (("edge_score", True), ("coverage", False), ("fscore", False))
 # Decimals of the per-face coverage kept in records (a 20,480-face map is ~120 kB of JSON).
 FACE_COVERAGE_DECIMALS = 3
 
@@ -320,6 +324,13 @@ def first_time_reaching(xs: np.ndarray, ys: np.ndarray, level: float, *,
     """The first ``x`` at which ``ys`` reaches ``level`` (None if it never does)."""
     hit = ys >= level if higher_better else ys <= level
     return float(xs[np.argmax(hit)]) if hit.any() else None
+
+
+def goodness(metric: str, values):
+    """``values`` of a ``CLAIM_METRICS`` metric turned higher-is-better (the edge score negated),
+    so one comparison serves all three."""
+    lower = dict(CLAIM_METRICS)[metric]
+    return -np.asarray(values, dtype=float) if lower else np.asarray(values, dtype=float)
 
 
 def claim(cid: str, figure: str, claim_text: str, paper: str, ours: str, verdict: str,
