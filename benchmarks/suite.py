@@ -1,6 +1,6 @@
 """The auto suite: fixed, seeded clouds on which every method and ``-m auto`` meet the truth.
 
-    python benchmarks/suite.py                 # the whole suite (12 clouds; hours on 2 shared cores)
+    python benchmarks/suite.py                 # the whole suite (12 clouds; hours, 2 shared cores)
     python benchmarks/suite.py --quick         # 3 small clouds, 8 methods at defaults (CI)
     python benchmarks/suite.py --clouds rso-a-cross-noisy --out /tmp/suite
 
