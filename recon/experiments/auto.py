@@ -7,32 +7,36 @@ strikes cover. The rule:
 1. **Hold out** a seeded random ``holdout`` fraction of the strikes (10%); prepare the rest
    (normals, spacing, noise, per-point uncertainty) and fit candidates on it, each isolated
    like ``recon compare``'s runs (a crash or a timeout only removes that candidate).
-2. **Predict every held-out range** (``heldout_residuals``): the held-out strike's beam, from its
-   view point through the point, is cast against the surface; the residual is the measured
-   range minus the surface's range along the beam. Each residual is truncated at the strike's
-   tolerance ``cap = max(tau, 3 sigma)``: ``tau`` is 1% of the cloud's bounding-box diagonal
-   (the F-score threshold of ``metrics``, ``TAU_FRACTION``), ``sigma`` the strike's recorded
-   1-sigma range uncertainty at the incidence angle of the surface it hits. **A beam that
-   misses the surface counts the full cap**: a mesh with holes predicts nothing there (the old
-   rule counted its closest-point distance, a lower bound, so holes looked good). The held-out
-   error ``e`` is the mean truncated residual: about the Chamfer distance where the surface is
-   good, about the F-score where it is not.
+2. **Cast every held-out beam** (``heldout_errors``): the held-out strike's beam, from its view
+   point through the point, is cast against the surface. Where it hits, the strike's error is
+   its distance to the surface, truncated at the strike's tolerance ``cap = max(tau, 3
+   sigma)``: ``tau`` is 1% of the cloud's bounding-box diagonal (the F-score threshold of
+   ``metrics``, ``TAU_FRACTION``), ``sigma`` the strike's recorded 1-sigma uncertainty along
+   the normal of the surface it hits (``recon.surfaces.uncertainty``: the range error head-on,
+   the angle and pose errors at grazing incidence). **A beam that misses the surface costs the
+   full cap**: a mesh with holes predicts nothing there (the old rule counted its closest-point
+   distance, a lower bound, so holes looked good). The held-out error ``e`` is the mean: about
+   the Chamfer distance where the surface is good, about the F-score where it is not. (The
+   range residual along the beam, which an earlier rule used, ranked a smooth Poisson surface
+   above the truth's best runs on the suite's RSO-A cloud: at grazing incidence it multiplies
+   a small surface error by 1 / cos.)
 3. **One standard error**: the best candidate has the lowest ``e``; its standard error ``se``
    is the noise of that estimate, and every candidate with ``e <= e_best + se`` fits the
    held-out strikes as well as the best, to within what this cloud can tell apart.
 4. **Model size is the penalty**: among those, the fewest free parameters wins
    (``Method.parameter_count``: 9 for an ellipsoid, 3 per plane, 3 per vertex of a free mesh),
    then lower ``e``. **Coverage**: when the strikes cover less than ``COMPLETE_COVERAGE`` of the
-   surface of the best closed candidate (area within ``cap`` of a strike), closed candidates
+   surface of the best closed candidate (no edge bordering a single face; area within ``tau``,
+   3 noise or 2 spacings of a strike), closed candidates
    come first within the band: where there are no strikes no open surface can be right, and a
    closed model is the honest guess.
 
 **Coarse to fine** (``LADDER``): the candidates come in levels, models of a few numbers first
-(an ellipsoid, a polyhedron of planes), then coarse and default smooth and local surfaces, then
-fine ones. After each level the next is fitted only if it might matter: when the best so far
-came from the last level (or from level 0 or 1, which always run), and the search stops as
-soon as a level's best is not measurably better (by ``se``) than the best before it. The
-ladder holds ``MAX_FITS`` fits in all, a quarter of ``recon compare``'s ~45 runs.
+(an ellipsoid, a polyhedron of planes), then coarse smooth and local surfaces, then the
+defaults, then fine ones. The first ``ALWAYS_LEVELS`` levels always run; after that the search
+stops as soon as a level's best is not measurably better (by ``se``) than the best before it.
+The ladder holds ``MAX_FITS`` fits in all, a quarter of ``recon compare``'s ~45 runs, and each
+fit is cheaper than a compare run (no truth to score).
 
 The chosen candidate is then refitted on all points by the caller (``recon reconstruct -m
 auto``).
@@ -53,7 +57,7 @@ from recon.surfaces.methods import MethodFailed, Run
 from recon.surfaces.normals import DEFAULT_K, Fallback
 from recon.surfaces.prepare import InputError, Preparation
 from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
-from recon.surfaces.uncertainty import MIN_COS
+from recon.surfaces.uncertainty import sigma_at_incidence
 
 # Fraction of points held out: 10% leaves the fit 90% of the density (a Poisson depth or a grid
 # cell chosen on 90% suits 100%) and gives ~1e3 held-out points on a 1e4-point cloud, so the
@@ -69,18 +73,26 @@ SIGMAS = 3.0
 # Below this fraction of the best closed surface near a strike, coverage is incomplete and
 # closed candidates come first (module docstring, step 4). 0.9: a 10% unseen cap of the target.
 COMPLETE_COVERAGE = 0.9
+# A surface point counts as covered within max(tau, 3 noise, 2 spacings) of a strike: between
+# two strikes of a uniformly sampled patch no point is farther than about one spacing.
+COVERAGE_SPACINGS = 2.0
 # Surface samples of the coverage estimate (its standard error < 0.5 / sqrt(n) = 0.5%).
 COVERAGE_SAMPLES = 10_000
 # The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
-# level 1: coarse smooth and local surfaces; level 2: the defaults; level 3: fine ones. The
-# levels come from ``benchmarks/suite.py``: the runs that were the truth's best on its clouds.
+# level 1: coarse smooth and local surfaces; level 2: the defaults and a fine Poisson; level 3:
+# the MLS and ball-pivoting surfaces. The runs come from ``benchmarks/suite.py``: the truth's
+# best runs on its clouds are among them. Levels hold an even number of fits (2 workers).
 LADDER: tuple[tuple[tuple[str, dict], ...], ...] = (
     (("ellipsoid", {}), ("planes", {})),
     (("poisson", {"depth": 6}), ("plane", {"cell": 2.0})),
-    (("screened-poisson", {}), ("plane", {}), ("delaunay-balls", {})),
-    (("poisson", {"depth": 9}), ("rimls", {}), ("ball-pivoting", {})),
+    (("plane", {}), ("delaunay-balls", {}), ("screened-poisson", {}), ("poisson", {"depth": 9})),
+    (("rimls", {}), ("ball-pivoting", {})),
 )
 MAX_FITS = sum(len(level) for level in LADDER)
+# Levels fitted whatever the earlier ones gave: the primitives, the coarse surfaces and the
+# defaults (on the suite's RSO-A cloud the truth's best was a level-2 run whose level-1
+# predecessors were no better than the level-0 polyhedron).
+ALWAYS_LEVELS = 3
 
 
 class AutoError(ReconError, ValueError):
@@ -103,7 +115,7 @@ class AutoChoice:
         ("ok", "failed" or "skipped": a level the ladder did not need), ``reason``,
         ``heldout_mean_m`` (mean truncated held-out residual), ``heldout_se_m``, ``beam_hits``
         (fraction of held-out beams that hit the surface), ``n_faces``, ``n_params``,
-        ``watertight``, ``fit_s`` (the isolated fit's process time), ``eligible``, ``chosen``.
+        ``closed``, ``fit_s`` (the isolated fit's process time), ``eligible``, ``chosen``.
     threshold_m : float
         ``e_best + se_best``: the band's upper edge.
     coverage : float
@@ -148,7 +160,7 @@ def select(candidates: list[dict], *, coverage: float = float("nan")
     ----------
     candidates : list of dict
         Each with ``distances`` ((n_held,) float64 truncated residuals in metres, or None for a
-        failed or skipped fit), ``n_params``, ``watertight`` and ``label``.
+        failed or skipped fit), ``n_params``, ``closed`` and ``label``.
     coverage : float
         Fraction of the best closed surface near the strikes (NaN: unknown, taken as
         complete).
@@ -171,8 +183,8 @@ def select(candidates: list[dict], *, coverage: float = float("nan")
     threshold = mean_best + se
     eligible = [i for i in scored if stats[i][0] <= threshold]
     incomplete = bool(coverage < COMPLETE_COVERAGE)
-    closed_first = incomplete and any(candidates[i].get("watertight") for i in eligible)
-    chosen = min(eligible, key=lambda i: (closed_first and not candidates[i].get("watertight"),
+    closed_first = incomplete and any(candidates[i].get("closed") for i in eligible)
+    chosen = min(eligible, key=lambda i: (closed_first and not candidates[i].get("closed"),
                                           candidates[i]["n_params"], stats[i][0]))
     c, b = candidates[chosen], candidates[best]
     size = f"{c['n_params']:,} parameters, {c['n_faces']:,} faces"
@@ -252,32 +264,23 @@ def heldout_residuals(points: np.ndarray, view_points: np.ndarray | None, vertic
     return residual, hit, cos_incidence
 
 
-def range_sigma(columns: dict[str, np.ndarray] | None, cos_incidence: np.ndarray,
-                noise: float) -> np.ndarray:
-    """Each held-out strike's 1-sigma range uncertainty where its beam meets a surface.
-
-    Parameters
-    ----------
-    columns : dict of str to (n,) arrays, or None
-        The strikes' recorded uncertainty columns (``recon.surfaces.uncertainty``); None: the
-        cloud's robust noise scale stands for every strike.
-    cos_incidence : (n,) float64
-        |cos| of the beam's angle to the surface normal (``heldout_residuals``).
-    noise : float, metres
-
-    Returns
-    -------
-    (n,) float64, metres: along the beam, ``sqrt(s_along^2 + (d_along t)^2 + (s_across^2 +
-    (d_across t)^2) t^2)`` with ``t = tan(incidence)``: a lateral error moves the strike along
-    a tilted surface by ``t`` times as much in range.
-    """
-    if columns is None or not all(k in columns for k in SIGMA_COLUMNS):
+def strike_sigma(columns: dict[str, np.ndarray] | None, cos_incidence: np.ndarray,
+                 noise: float) -> np.ndarray:
+    """Each held-out strike's recorded 1-sigma uncertainty along the normal of the surface its
+    beam meets (``recon.surfaces.uncertainty.sigma_at_incidence``); without an error model
+    (None, or every column zero) the training cloud's robust noise scale ``noise`` [m]."""
+    if columns is None or not any(np.asarray(v).any() for v in columns.values()):
         return np.full(len(cos_incidence), float(noise))
-    along, across, d_along, d_across = (np.asarray(columns[k], dtype=np.float64)
-                                        for k in SIGMA_COLUMNS)
-    c = np.clip(cos_incidence, MIN_COS, 1.0)
-    t2 = (1.0 - c * c) / (c * c)
-    return np.sqrt(along**2 + d_along**2 * t2 + (across**2 + d_across**2 * t2) * t2)
+    return sigma_at_incidence(columns, cos_incidence)
+
+
+def closed(faces: np.ndarray) -> bool:
+    """True when no edge borders a single face: the surface encloses a volume (non-manifold
+    edges of a minimum cut allowed, unlike ``recon.surfaces.checks.watertight``)."""
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
+                    axis=1)
+    _, count = np.unique(edges, axis=0, return_counts=True)
+    return bool(len(faces)) and not np.any(count == 1)
 
 
 def coverage_of(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, reach: float,
@@ -382,7 +385,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
         before = _best(table)
         table += _fit_level(level, depth, shared, context, scheduler, n_workers)
         after = _best(table)
-        if depth >= 1 and depth + 1 < len(levels) and before is not None and after is not None:
+        if depth + 1 >= ALWAYS_LEVELS and depth + 1 < len(levels) and before is not None \
+                and after is not None:
             level_best = min((e for e in table if e["level"] == depth and
                               e["distances"] is not None),
                              key=lambda e: e["mean"], default=None)
@@ -394,12 +398,13 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
                 for later, rest in enumerate(levels[depth + 1:], start=depth + 1):
                     table += [_entry(run, later, status="skipped") for run in rest]
                 break
-    closed = [e for e in table if e["distances"] is not None and e["watertight"]]
+    enclosing = [e for e in table if e["distances"] is not None and e["closed"]]
     coverage = float("nan")
-    if closed and view is not None:
-        best_closed = min(closed, key=lambda e: e["mean"])
+    if enclosing and view is not None:
+        best_closed = min(enclosing, key=lambda e: e["mean"])
         coverage = coverage_of(best_closed["vertices"], best_closed["faces"], points,
-                               max(tau, SIGMAS * cloud.noise), seed=seed)
+                               max(tau, SIGMAS * cloud.noise, COVERAGE_SPACINGS * cloud.spacing),
+                               seed=seed)
     chosen, threshold, reason = select(table, coverage=coverage)
     fitted = sum(e["status"] != "skipped" for e in table)
     reason += f"; {fitted} candidate fit(s) of {len(table)}{note}."
@@ -418,13 +423,44 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
 def _entry(run: Run, level: int, *, status: str, reason: str = "") -> dict:
     return {"label": run.label, "method": run.method, "params": run.params, "kind": run.kind,
             "level": level, "run": run, "status": status, "reason": reason, "n_faces": None,
-            "n_params": None, "watertight": None, "fit_s": None, "distances": None,
+            "n_params": None, "closed": None, "fit_s": None, "distances": None,
             "beam_hits": None, "mean": None, "se": None}
 
 
 def _best(table: list[dict]) -> dict | None:
     return min((e for e in table if e["distances"] is not None), key=lambda e: e["mean"],
                default=None)
+
+
+def heldout_errors(context: dict, vertices: np.ndarray, faces: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Step 2 of the module docstring: each held-out strike's truncated error against a surface.
+
+    Parameters
+    ----------
+    context : dict
+        ``points`` (n, 3) and ``view`` ((n, 3) or None) of the held-out strikes, metres;
+        ``columns`` (their uncertainty columns or None), ``noise`` and ``tau`` (metres).
+    vertices : (v, 3) float64, metres
+    faces : (f, 3) int64
+
+    Returns
+    -------
+    error : (n,) float64, metres
+        ``min(distance, cap)`` for beams that hit the surface, ``cap`` for those that miss.
+    hits : (n,) bool, or None without view points
+    """
+    from metrics.distance import point_mesh_distance
+
+    view = context["view"]
+    distance = point_mesh_distance(context["points"], (vertices, faces))[0]
+    if view is None:
+        sigma = strike_sigma(context["columns"], np.ones(len(distance)), context["noise"])
+        return np.minimum(distance, np.maximum(context["tau"], SIGMAS * sigma)), None
+    _, hits, cos = heldout_residuals(context["points"], view, vertices, faces)
+    cap = np.maximum(context["tau"], SIGMAS * strike_sigma(context["columns"], cos,
+                                                            context["noise"]))
+    return np.where(hits, np.minimum(distance, cap), cap), hits
 
 
 def _fit_level(level: list[Run], depth: int, shared: dict, context: dict,
@@ -450,17 +486,11 @@ def _fit_level(level: list[Run], depth: int, shared: dict, context: dict,
         entry["fit_s"] = result.get("process_time_s")
         if entry["status"] == "ok":
             vertices, faces = result["vertices"], result["faces"]
-            residual, hits, cos = heldout_residuals(context["points"], context["view"],
-                                                    vertices, faces)
-            cap = np.maximum(context["tau"],
-                             SIGMAS * range_sigma(context["columns"], cos, context["noise"]))
-            if context["view"] is not None:
-                residual = np.where(hits, residual, cap)
-            d = np.minimum(residual, cap)
+            d, hits = heldout_errors(context, vertices, faces)
             entry.update(distances=d, vertices=vertices, faces=faces, n_faces=len(faces),
                          n_params=run.method_spec().parameter_count(vertices, faces),
-                         watertight=bool(result.get("watertight")),
-                         beam_hits=float(hits.mean()) if context["view"] is not None else None)
+                         closed=closed(faces),
+                         beam_hits=None if hits is None else float(hits.mean()))
             entry["mean"], entry["se"] = _mean_se(d)
         out.append(entry)
     return out

@@ -84,18 +84,23 @@ def normal_sigma(normals: np.ndarray, view_points: np.ndarray, points: np.ndarra
     (n,) float64, metres, or None when the recorded model is error-free (every column zero):
     then no point is more trustworthy than another.
     """
-    along, across, d_along, d_across = (np.asarray(columns[k], dtype=np.float64)
-                                        for k in COLUMNS)
-    if not (along.any() or across.any() or d_along.any() or d_across.any()):
+    if not any(np.asarray(columns[k]).any() for k in COLUMNS):
         return None
     beam = points - view_points
     beam /= np.maximum(np.linalg.norm(beam, axis=1, keepdims=True), 1e-300)
-    c = np.clip(np.abs(np.einsum("ij,ij->i", normals, beam)), MIN_COS, 1.0)
-    tan = np.sqrt(1.0 - c * c) / c
-    variance = (along**2 + (d_along * tan) ** 2) * c * c \
-        + (across**2 + (d_across * tan) ** 2) * (1.0 - c * c)
-    sigma = np.sqrt(variance)
+    sigma = sigma_at_incidence(columns, np.abs(np.einsum("ij,ij->i", normals, beam)))
     return np.maximum(sigma, 1e-3 * sigma.max())
+
+
+def sigma_at_incidence(columns: dict[str, np.ndarray], cos_incidence: np.ndarray) -> np.ndarray:
+    """1-sigma uncertainty along the surface normal of strikes meeting a surface at incidence
+    angles of cosine ``cos_incidence`` (n,): the formula of the module docstring."""
+    along, across, d_along, d_across = (np.asarray(columns[k], dtype=np.float64)
+                                        for k in COLUMNS)
+    c = np.clip(np.abs(cos_incidence), MIN_COS, 1.0)
+    tan = np.sqrt(1.0 - c * c) / c
+    return np.sqrt((along**2 + (d_along * tan) ** 2) * c * c
+                   + (across**2 + (d_across * tan) ** 2) * (1.0 - c * c))
 
 
 def weights(sigma: np.ndarray | None, n: int) -> np.ndarray:

@@ -65,7 +65,7 @@ def test_the_ladder_runs_coarse_to_fine_and_stops():
 
 def _candidate(label, distances, params, *, closed=True):
     return {"label": label, "distances": None if distances is None else np.asarray(distances),
-            "n_params": params, "n_faces": params, "watertight": closed,
+            "n_params": params, "n_faces": params, "closed": closed,
             "reason": "" if distances is not None else "crashed"}
 
 
@@ -138,12 +138,24 @@ def test_heldout_residuals_are_range_errors_along_the_beam():
     assert not none.any()
 
 
-def test_range_sigma_grows_with_incidence_as_the_error_model_says():
-    from recon.experiments.auto import range_sigma
+def test_strike_sigma_grows_with_incidence_as_the_error_model_says():
+    from recon.experiments.auto import strike_sigma
 
     columns = {"sigma_along": np.array([0.1, 0.1]), "sigma_across": np.array([0.2, 0.2]),
                "dilation_along": np.zeros(2), "dilation_across": np.zeros(2)}
-    sigma = range_sigma(columns, np.array([1.0, np.sqrt(0.5)]), noise=0.05)
-    # Head-on: the range error; at 45 deg a lateral error moves the range by as much.
-    np.testing.assert_allclose(sigma, [0.1, np.hypot(0.1, 0.2)])
-    np.testing.assert_allclose(range_sigma(None, np.ones(3), noise=0.05), 0.05)
+    sigma = strike_sigma(columns, np.array([1.0, np.sqrt(0.5)]), noise=0.05)
+    # Head-on: the range error; at 45 deg half of each variance along the normal.
+    np.testing.assert_allclose(sigma, [0.1, np.sqrt(0.5 * 0.1**2 + 0.5 * 0.2**2)])
+    np.testing.assert_allclose(strike_sigma(None, np.ones(3), noise=0.05), 0.05)
+    zero = dict.fromkeys(columns, np.zeros(2))
+    np.testing.assert_allclose(strike_sigma(zero, np.ones(2), noise=0.05), 0.05)
+
+
+def test_closed_allows_non_manifold_edges_but_no_border():
+    from recon.experiments.auto import closed
+    from tests.recon.conftest import box_mesh
+
+    _, faces = box_mesh()
+    assert closed(faces)
+    assert not closed(faces[1:])
+    assert closed(np.concatenate([faces, faces + 8]))       # two boxes: still no border
