@@ -22,6 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from formats import StrikeChunk, StrikeLog
+from formats.strike_log import follow
 from formats.cloud_io import open_cloud_writer
 from formats.geometry import Cloud
 
@@ -119,6 +120,44 @@ def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int
     """
     n_points, _ = _register_and_write(log_path, out_path, frame=frame, chunk_rows=chunk_rows,
                                       progress=progress, keep=False)
+    return {"n_points": n_points, "frame": frame, "output": str(Path(out_path))}
+
+
+def ingest_following(log_path, out_path, *, frame: Frame = "body", progress=None,
+                     poll_s: float = 0.5, timeout_s: float = 60.0) -> dict:
+    """Register the strikes of a log while a live writer writes it, then write the cloud.
+
+    Blocks are registered as they arrive (``formats.strike_log.follow``), so the work is done
+    when the writer closes; the registered cloud is held in memory until then and written to
+    ``out_path`` (.ply, .las, .laz, .h5) only once the log is complete.
+
+    Parameters
+    ----------
+    log_path : str or Path
+        The log's final path (``recon simulate --live -o LOG``).
+    out_path : str or Path
+    frame : {"body", "inertial"}
+    progress : callable, optional
+        Called as ``progress(strikes_in_block, strikes_committed_so_far)`` after each block.
+    poll_s, timeout_s : float, seconds
+        How often to look for new strikes; how long to wait for the writer before giving up.
+
+    Returns
+    -------
+    dict
+        ``n_points``, ``frame``, ``output``.
+    """
+    if frame not in FRAMES:
+        raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
+    blocks = []
+    for chunk, log in follow(log_path, poll_s=poll_s, timeout_s=timeout_s):
+        blocks.append(register_chunk(chunk, frame=frame))
+        if progress:
+            progress(len(chunk), log.n_strikes)
+    n_points = sum(len(points) for points, _ in blocks)
+    with open_cloud_writer(out_path, n_points, ATTRIBUTE_DTYPES) as writer:
+        for block in blocks:
+            writer.write(*block)
     return {"n_points": n_points, "frame": frame, "output": str(Path(out_path))}
 
 
