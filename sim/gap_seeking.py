@@ -214,15 +214,19 @@ class GapSeeker:
         def in_view(cells: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
             """Which ``cells`` shot ``k`` can aim at, and their aim directions (nominal)."""
             aim = points[cells] - chaser[k]
-            aim /= np.linalg.norm(aim, axis=1, keepdims=True)
+            aim /= np.sqrt(np.einsum("ci,ci->c", aim, aim))[:, None]
             faces = -np.einsum("ci,ci->c", aim, normals[cells]) >= cos_incidence
             aim_n = aim @ to_nominal[k].T
             return faces & (aim_n[:, 2] >= math.cos(self.max_offset)), aim_n
 
-        # The least-struck cells in view: gaps while there are any, else the sparsest cells.
-        seen = in_view(np.arange(GAP_CELLS), 0)[0]
+        # Cells in view during the interval (at its start, middle or end), and of those the
+        # least struck: gaps while there are any, else the sparsest cells.
+        every = np.arange(GAP_CELLS)
+        seen = np.zeros(GAP_CELLS, dtype=bool)
+        for k in sorted({0, n // 2, n - 1}):
+            seen |= in_view(every, k)[0]
         level = int(self.hits[seen].min()) if seen.any() else 0
-        gap = self.hits <= level
+        gap = seen & (self.hits <= level)
         cosine = np.maximum(np.einsum("ci,ci->c", self.cells, normals), MIN_AREA_COSINE)
         area = np.linalg.norm(points, axis=1) ** 2 * (4.0 * math.pi / GAP_CELLS) / cosine
         unstruck = np.bincount(self._parent, weights=np.where(gap, area, 0.0),

@@ -22,9 +22,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from formats import StrikeChunk, StrikeLog
-from formats.strike_log import follow
 from formats.cloud_io import open_cloud_writer
 from formats.geometry import Cloud
+from formats.strike_log import follow
 
 Frame = Literal["body", "inertial"]
 FRAMES = ("body", "inertial")

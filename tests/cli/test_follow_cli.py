@@ -24,7 +24,7 @@ def test_follow_registers_a_live_simulation_as_a_plain_ingest_of_the_finished_lo
         assert main(["ingest", str(log), "--follow", "--timeout", "120", "-o",
                      str(tmp_path / "followed.ply")]) == 0
     finally:
-        out, err = writer.communicate(timeout=300)
+        _, err = writer.communicate(timeout=300)
     assert writer.returncode == 0, err
     assert main(["ingest", str(log), "-o", str(tmp_path / "plain.ply")]) == 0
     followed, plain = read_cloud(tmp_path / "followed.ply"), read_cloud(tmp_path / "plain.ply")

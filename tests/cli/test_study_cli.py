@@ -11,7 +11,8 @@ import pytest
 
 from cli.main import main
 
-STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods")
+STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods",
+           "closed-loop")
 
 
 def _fails(capsys, argv, pattern):

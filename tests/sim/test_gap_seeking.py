@@ -41,16 +41,16 @@ def test_scene_keys_of_the_attitude_law():
     scene = sim.load_scene("asteroid-lrf-60deg-slew", ["attitude.mode=gaps"])
     assert scene.values["slew"] == {}                # the preset's slew gives way to the law
     assert scene["attitude.max_rate_deg_s"] == 1.0 and scene["attitude.replan_s"] == 300.0
-    with pytest.raises(sim.SceneError, match='slew.amplitude_deg is only used when '
-                                             'attitude.mode is "fixed"'):
+    with pytest.raises(sim.SceneError, match=r'slew\.amplitude_deg is only used when '
+                                             r'attitude\.mode is "fixed"'):
         sim.load_scene("asteroid-lrf", ["attitude.mode=gaps", "slew.amplitude_deg=2"])
-    with pytest.raises(sim.SceneError, match='attitude.max_rate_deg_s is only used when '
-                                             'attitude.mode is "gaps"'):
+    with pytest.raises(sim.SceneError, match=r'attitude\.max_rate_deg_s is only used when '
+                                             r'attitude\.mode is "gaps"'):
         sim.load_scene("asteroid-lrf", ["attitude.max_rate_deg_s=2"])
-    with pytest.raises(sim.SceneError, match="attitude.max_offset_deg must be above 0 and "
-                                             "below 90 deg, got 95"):
+    with pytest.raises(sim.SceneError, match=r"attitude\.max_offset_deg must be above 0 and "
+                                             r"below 90 deg, got 95"):
         sim.load_scene("asteroid-lrf", ["attitude.mode=gaps", "attitude.max_offset_deg=95"])
-    with pytest.raises(sim.SceneError, match="attitude.mode must be one of fixed, gaps"):
+    with pytest.raises(sim.SceneError, match=r"attitude\.mode must be one of fixed, gaps"):
         sim.load_scene("asteroid-lrf", ["attitude.mode=gap"])
 
 
