@@ -16,14 +16,17 @@ What it keeps, in the target body frame B:
 
 Every interval it predicts, shot by shot, where the chaser is in B (its orbit and the known spin),
 which gaps face it within ``GAP_MAX_INCIDENCE_DEG`` and lie within ``attitude.max_offset_deg`` of
-the nominal boresight, and turns the boresight by at most ``max_rate * step``:
+the nominal boresight (when no gap is in view during the interval, the least-struck cells in
+view take their place, so the beam densifies the sparsest surface instead of idling), and turns
+the boresight by at most ``max_rate * step``:
 
 1. onto the nearest such gap within that reach (so the beam sweeps a gap shot by shot at about
    one footprint per shot, the cheapest slew that covers new ground), marking its footprint as
    expected so the next shot moves on;
 2. else toward the most valuable gap region: the unstruck area within ``GAP_REGION_DEG`` of a cell,
    divided by the shots needed to get there;
-3. else (nothing unstruck in view) it holds its offset, which costs no slew.
+3. else (nothing of the target in view within the limits) it holds its offset, which costs no
+   slew.
 
 The commanded attitude is the nominal one (sim/motion.py) turned by the smallest rotation that
 takes the nominal boresight ``+z`` onto the commanded one, and is recorded like any other.

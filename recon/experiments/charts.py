@@ -571,6 +571,7 @@ def coverage_and_effort(panels: Sequence[Mapping], path, *, title: str,
         top.set_ylabel("coverage (area within τ; higher is better)")
         top.set_ylim(0.0, 1.0)
         bottom.set_yscale("log")
+        _plain_log_ticks(bottom.yaxis)
         bottom.set_ylabel("total angle slewed [deg] (lower is cheaper)")
         bottom.set_xlabel("time [h] (log scale)")
     handles, labels = axes[0, 0].get_legend_handles_labels()

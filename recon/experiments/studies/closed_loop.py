@@ -63,7 +63,8 @@ PLAN = {
               "overrides": ("target.subdivisions=4",),
               "score": {"n_truth_samples": 20_000, "coverage_points": 40_000}},
     "tiny": {"hours": {law: (0.5, 1) for law in LAWS},
-             "rso_hours": {law: (0.5, 1) for law in LAWS}, "surface_at": (1,), "methods": ("poisson",), "overrides": ("target.subdivisions=3",),
+             "rso_hours": {law: (0.5, 1) for law in LAWS}, "surface_at": (1,),
+             "methods": ("poisson",), "overrides": ("target.subdivisions=3",),
              "score": {"n_truth_samples": 4000, "coverage_points": 8000}},
 }
 
@@ -233,12 +234,12 @@ def finish(records: dict, out_dir, size: str) -> dict:
             if key not in records:
                 continue
             x, coverage = runner.series(records, key, "coverage", x="hours")
-            name = {"nadir": "nadir", "slew": f"fixed slew ±{amplitude:g} deg",
-                    "gaps": "gap-seeking"}[law]
+            name = {"nadir": "nadir", "slew": "the paper's fixed slew",
+                    "gaps": "gap-seeking (closed loop)"}[law]
             curves.append({"label": name, "x": x, "coverage": coverage,
                            "slew_deg": runner.series(records, key, "slew_deg", x="hours")[1],
                            "style": LAW_STYLE[law]})
-        panels.append({"title": label, "curves": curves})
+        panels.append({"title": f"{label} (fixed slew ±{amplitude:g} deg)", "curves": curves})
     charts.coverage_and_effort(
         panels, out_dir / "coverage_vs_time.png", levels=LEVELS,
         title="Single-beam LRF: coverage and slew effort, nadir vs the paper's fixed slew vs "
