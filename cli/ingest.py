@@ -34,6 +34,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --refine: also estimate a correction of the target's spin rate")
     p.add_argument("--refine-json", type=Path, metavar="FILE",
                    help="with --refine: also write the estimates as JSON")
+    p.add_argument("--follow", action="store_true",
+                   help="read the strikes while `recon simulate --live -o LOG` writes them; "
+                        "write the cloud once the log is complete")
+    p.add_argument("--timeout", type=float, default=60.0, metavar="S",
+                   help="--follow: give up after S seconds without a writer or new strikes "
+                        "(default: %(default)g)")
     p.set_defaults(func=run_ingest)
 
     p = sub.add_parser("trajectory", help="export the recorded sensor trajectory as text",
@@ -59,9 +65,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_ingest(args) -> int:
     from tqdm import tqdm
 
-    from recon.registration.ingest import ingest_to_file
+    from recon.registration.ingest import ingest_following, ingest_to_file
 
     correction = None
+    if not args.timeout > 0:
+        raise IngestOptionError(f"--timeout must be a positive number of seconds, got "
+                                f"{args.timeout:g}")
+    if args.follow and args.refine:
+        raise IngestOptionError("--follow and --refine do not go together: refinement needs the "
+                                "whole log (run ingest --refine once the log is complete)")
     if args.refine_interval is not None and not args.refine:
         raise IngestOptionError("--refine-interval needs --refine")
     if args.refine_json is not None and not args.refine:
@@ -89,13 +101,18 @@ def run_ingest(args) -> int:
             args.refine_json.write_text(json.dumps(refinement.to_dict(), indent=2) + "\n")
             print(f"wrote the estimates to {args.refine_json}")
         correction = refinement.correction
-    with tqdm(unit="strike", unit_scale=True, disable=None, leave=False, desc="ingest") as bar:
+    with tqdm(unit="strike", unit_scale=True, disable=None, leave=False,
+              desc="ingest (following)" if args.follow else "ingest") as bar:
         def advance(done: int, total: int) -> None:
             bar.total = total
             bar.update(done)
 
-        summary = ingest_to_file(args.log, args.output, frame=args.frame, progress=advance,
-                                 correction=correction)
+        if args.follow:
+            summary = ingest_following(args.log, args.output, frame=args.frame,
+                                       progress=advance, timeout_s=args.timeout)
+        else:
+            summary = ingest_to_file(args.log, args.output, frame=args.frame, progress=advance,
+                                     correction=correction)
     print(f"wrote {summary['n_points']} points ({args.frame} frame"
           + (", refined poses" if correction is not None else "") + f") to {args.output}")
     return 0

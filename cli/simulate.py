@@ -33,6 +33,9 @@ def register(subparsers) -> None:
     parser.add_argument("--list", action="store_true", help="list the presets and exit")
     parser.add_argument("--keys", action="store_true",
                         help="list every scene key with its default and unit, and exit")
+    parser.add_argument("--live", action="store_true",
+                        help="write in HDF5 SWMR mode so that `recon ingest LOG --follow` reads "
+                             "the strikes while they are written")
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                         help="show a progress bar (default: on a terminal, after 2 s)")
@@ -64,7 +67,7 @@ def run(args) -> int:
     from recon import api
 
     summary = api.simulate(args.scene, args.output, seed=args.seed, overrides=args.overrides,
-                           progress=args.progress).summary
+                           progress=args.progress, live=args.live).summary
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

@@ -52,7 +52,7 @@ class SimulatedLog(os.PathLike):
 
 
 def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
-             progress: bool | None = None) -> SimulatedLog:
+             progress: bool | None = None, live: bool = False) -> SimulatedLog:
     """Simulate a campaign and write its strike log.
 
     Parameters
@@ -67,6 +67,9 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
         ``section.key=value`` scene overrides, as ``recon simulate --set``.
     progress : bool or None
         Progress bar (None: on a terminal only).
+    live : bool
+        Write the log in HDF5 SWMR mode, so that ``recon ingest LOG --follow`` (and
+        ``formats.strike_log.follow``) read the strikes as they arrive.
 
     Returns
     -------
@@ -75,7 +78,7 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
     import sim
 
     summary = sim.simulate(sim.load_scene(str(scene), list(overrides)), output, seed=seed,
-                           progress=progress)
+                           progress=progress, live=live)
     return SimulatedLog(Path(summary["path"]), summary)
 
 

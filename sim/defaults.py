@@ -21,6 +21,9 @@ GRAVITATIONAL_CONSTANT = 6.67430e-11
 
 TARGET_KINDS = ("ellipsoid", "rso-a", "rso-b", "mesh")
 PATTERNS = ("single", "cross", "zigzag", "grid")
+# "fixed": nadir, or the sinusoidal slew of [slew]; "gaps": the closed-loop law of
+# sim/gap_seeking.py, aiming the boresight at what the chaser has not yet struck.
+ATTITUDE_MODES = ("fixed", "gaps")
 
 # Limits on values (beyond sign checks) and why.
 MAX_SUBDIVISIONS = 8          # 1.3 M faces; subdivision 9 would need ~1 GB of mesh
@@ -152,6 +155,24 @@ SCHEMA: dict[str, dict[str, Key]] = {
                     **DIRECTION),
         "phase_deg": Key(0.0, "number", "deg", "slew phase at t = 0"),
     },
+    "attitude": {
+        "mode": Key("fixed", "str", "", "fixed (nadir or the [slew] law) or gaps (closed loop)",
+                    choices=ATTITUDE_MODES),
+        # A conservative rate for a reaction-wheel small satellite: 1 deg/s of a 100 kg chaser
+        # (inertia ~10 kg m^2) stores 0.17 Nms, inside the 0.015-8 Nms of small-spacecraft wheels
+        # (NASA Small Spacecraft Technology State of the Art, ch. 5 GNC, Table 5-1). At the
+        # 10 s step it allows 10 deg between shots.
+        "max_rate_deg_s": Key(1.0, "number", "deg/s", "gaps: slew-rate limit of the boresight",
+                              **POSITIVE),
+        # Off the nominal boresight (the target centre): the paper's asteroid spans 21 deg from
+        # 750 m, so 30 deg reaches every limb with margin, while bounding how far off target a
+        # body-mounted sensor (and the chaser's nadir-facing arrays and antenna) is turned.
+        "max_offset_deg": Key(30.0, "number", "deg", "gaps: largest angle off the nominal "
+                              "boresight", **POSITIVE, maximum=90.0, exclusive_maximum=True),
+        # 30 shots of the paper's 10 s step: the target turns 7 deg per interval (4.3 h spin), so
+        # what the plan predicts stays close to what is struck.
+        "replan_s": Key(300.0, "number", "s", "gaps: replanning interval", **POSITIVE),
+    },
     "sensor": {
         "pattern": Key("single", "str", "", "single, cross, zigzag or grid", choices=PATTERNS),
         # Paper: "The cross configuration field of view is set to 10 x 10 deg" (asteroid); an
@@ -258,6 +279,13 @@ ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     ("target", "scale"): ("target", "kind", ("mesh",)),
     ("target", "center"): ("target", "kind", ("mesh",)),
     ("sensor", "field_of_view_deg"): ("sensor", "pattern", ("cross", "zigzag", "grid")),
+    ("attitude", "max_rate_deg_s"): ("attitude", "mode", ("gaps",)),
+    ("attitude", "max_offset_deg"): ("attitude", "mode", ("gaps",)),
+    ("attitude", "replan_s"): ("attitude", "mode", ("gaps",)),
+    ("slew", "amplitude_deg"): ("attitude", "mode", ("fixed",)),
+    ("slew", "period"): ("attitude", "mode", ("fixed",)),
+    ("slew", "axis"): ("attitude", "mode", ("fixed",)),
+    ("slew", "phase_deg"): ("attitude", "mode", ("fixed",)),
     ("sensor", "beams"): ("sensor", "pattern", ("zigzag",)),
     ("sensor", "resolution"): ("sensor", "pattern", ("grid",)),
 }
@@ -288,3 +316,17 @@ CHUNKS_IN_FLIGHT = 3
 # Progress bar: shown only on runs still going after this many seconds (issue: "a progress bar on
 # runs longer than a couple of seconds").
 PROGRESS_DELAY_S = 2.0
+
+# Gap-seeking law (sim/gap_seeking.py). Directions of its body-frame map: 2**15 cells are 1.1 deg
+# apart, finer than the footprint below seen from the centre of the paper's asteroid (6.7 m at
+# 288 m, 1.3 deg), so a strike always marks the cells it covers.
+GAP_CELLS = 1 << 15
+# The footprint a strike is taken to cover, as a fraction of the diagonal of the strikes' bounding
+# box: the 1 % of the coverage metric's tau (metrics/defaults.py), the sampling the law aims for.
+GAP_FOOTPRINT_FRACTION = 0.01
+# Cells are aimed at only when the proxy surface faces the chaser within this incidence: beyond
+# it a single-beam strike lands far from where it was aimed on any surface the proxy misjudges.
+GAP_MAX_INCIDENCE_DEG = 75.0
+# "The most valuable unobserved region": unstruck area within this angle (from the target
+# centre) of a cell, the goal when no gap is within one step of slew.
+GAP_REGION_DEG = 8.0

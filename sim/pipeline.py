@@ -35,6 +35,7 @@ from formats.strike_log import (
     SensorErrors,
     SensorInfo,
     Shots,
+    StrikeChunk,
     StrikeLogWriter,
     TruthStrikes,
     angles_to_directions,
@@ -48,6 +49,7 @@ from sim.defaults import (
     PROGRESS_DELAY_S,
     RAYS_PER_CHUNK,
 )
+from sim.gap_seeking import GapSeeker
 from sim.motion import (
     Orbit,
     equatorial_frame,
@@ -120,7 +122,7 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
                       change_time=orbit.get("change_time"),
                       change_inclination=None if change is None else math.radians(change))
     the_slew = None
-    if slew["amplitude_deg"] > 0:
+    if slew.get("amplitude_deg", 0.0) > 0:
         the_slew = {"amplitude": math.radians(slew["amplitude_deg"]), "period": slew["period"],
                     "axis": slew["axis"], "phase": math.radians(slew["phase_deg"])}
     pattern = beam_pattern(sensor["pattern"], fov_deg=sensor.get("field_of_view_deg"),
@@ -146,8 +148,12 @@ def shots_per_chunk(plan: Plan) -> int:
     return int(min(max(RAYS_PER_CHUNK // rays_per_shot, 1), MAX_SHOTS_PER_CHUNK))
 
 
-def poses(plan: Plan, t: np.ndarray) -> tuple[np.ndarray, Rotation, np.ndarray]:
+def poses(plan: Plan, t: np.ndarray, offset: np.ndarray | None = None
+          ) -> tuple[np.ndarray, Rotation, np.ndarray]:
     """True poses at times ``t`` (n,) [s].
+
+    ``offset`` (n, 3, 3), from a closed-loop law (sim/gap_seeking.py), sends sensor vectors to
+    the nominal sensor frame; without it the scene's fixed law (nadir or the slew) applies.
 
     Returns
     -------
@@ -158,7 +164,9 @@ def poses(plan: Plan, t: np.ndarray) -> tuple[np.ndarray, Rotation, np.ndarray]:
     rot_bi = target_attitude(t, **plan.spin)
     position, along_track = plan.orbit.state(t)
     m_si = nominal_sensor_attitude(position, along_track)
-    if plan.slew is not None:
+    if offset is not None:
+        m_si = m_si @ offset
+    elif plan.slew is not None:
         m_si = m_si @ slew_rotation(t, **plan.slew).as_matrix()
     return position, rot_bi, m_si
 
@@ -205,12 +213,13 @@ class Rays:
                 self.direction.astype(np.float32))
 
 
-def chunk_rays(plan: Plan, index: int, first: int, stop: int) -> Rays:
+def chunk_rays(plan: Plan, index: int, first: int, stop: int,
+               offset: np.ndarray | None = None) -> Rays:
     """Poses of shots ``first .. stop - 1`` and every pulse's ray (chunk number ``index``)."""
     errors, pattern = plan.errors, plan.pattern
     t = np.arange(first, stop, dtype=np.float64) * plan.step
     n, b = len(t), pattern.n_beams
-    position, rot_bi, m_si = poses(plan, t)
+    position, rot_bi, m_si = poses(plan, t, offset)
     m_ib = rot_bi.as_matrix().transpose(0, 2, 1)
     origin = np.einsum("nij,nj->ni", m_ib, position)          # sensor in B
     m_sb = m_ib @ m_si                                         # sends S vectors to B
@@ -227,10 +236,12 @@ def chunk_rays(plan: Plan, index: int, first: int, stop: int) -> Rays:
                 origin=origin, direction=direction)
 
 
-def compute_chunk(plan: Plan, index: int, first: int, stop: int) -> Chunk:
-    """Simulate shots ``first .. stop - 1`` (chunk number ``index``)."""
+def compute_chunk(plan: Plan, index: int, first: int, stop: int,
+                  offset: np.ndarray | None = None) -> Chunk:
+    """Simulate shots ``first .. stop - 1`` (chunk number ``index``), with the attitude
+    ``offset`` of :func:`poses` when a closed-loop law commands it."""
     errors, pattern = plan.errors, plan.pattern
-    rays = chunk_rays(plan, index, first, stop)
+    rays = chunk_rays(plan, index, first, stop, offset)
     t, position, origin, direction, m_sb = (rays.time, rays.position, rays.origin,
                                             rays.direction, rays.to_body)
     n, b = len(t), pattern.n_beams
@@ -283,7 +294,7 @@ def compute_chunk(plan: Plan, index: int, first: int, stop: int) -> Chunk:
     recorded_position, recorded_sensor, recorded_target = position, sensor_q, target_q
     if plan.pose is not None:
         recorded_position, recorded_sensor, recorded_target = pose_errors.record(
-            plan.pose, first, t, lambda times: poses(plan, times))
+            plan.pose, first, t, lambda times: poses(plan, times, offset))
     if errors.position_sigma > 0:
         rng = noise.stream(plan.seed, noise.STREAM_POSITION, index)
         recorded_position = recorded_position + rng.normal(0.0, errors.position_sigma, (n, 3))
@@ -327,6 +338,36 @@ def iter_chunks(plan: Plan, *, workers: int | None = None) -> Iterator[Chunk]:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
+def recorded_strikes(plan: Plan, chunk: Chunk, first: int) -> StrikeChunk:
+    """What the log records of a chunk of shots ``first ..``, as a reader yields it: recorded
+    poses, ranges and measured directions (never the truth)."""
+    direction = plan.pattern.directions[chunk.beam]
+    if plan.pattern.reports_angles:
+        az, el = directions_to_angles(direction)
+        direction = angles_to_directions(az + chunk.azimuth_offset, el + chunk.elevation_offset)
+    return StrikeChunk(start=0, shot=chunk.shot, beam=chunk.beam, range=chunk.range,
+                       direction=direction,
+                       shots=Shots(chunk.time, chunk.recorded_position,
+                                   chunk.recorded_sensor_attitude,
+                                   chunk.recorded_target_attitude), shot_offset=first)
+
+
+def iter_closed_loop(plan: Plan) -> Iterator[Chunk]:
+    """The campaign under the gap-seeking law: one replanning interval at a time, each planned
+    from the strikes recorded before it (sim/gap_seeking.py)."""
+    attitude = plan.scene.values["attitude"]
+    law = GapSeeker(step=plan.step, max_rate=math.radians(attitude["max_rate_deg_s"]),
+                    max_offset=math.radians(attitude["max_offset_deg"]),
+                    poses=lambda t: poses(plan, t))
+    size = max(1, round(attitude["replan_s"] / plan.step))
+    for index, first in enumerate(range(0, plan.scene.n_shots, size)):
+        stop = min(first + size, plan.scene.n_shots)
+        offset = law.command(np.arange(first, stop, dtype=np.float64) * plan.step)
+        chunk = compute_chunk(plan, index, first, stop, offset)
+        law.observe(recorded_strikes(plan, chunk, first))
+        yield chunk
+
+
 def sensor_info(plan: Plan) -> SensorInfo:
     """The log's description of the sensor."""
     p = plan.pattern
@@ -337,7 +378,8 @@ def sensor_info(plan: Plan) -> SensorInfo:
 
 
 def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
-             backend: str = DEFAULT_BACKEND, workers: int | None = None) -> dict:
+             backend: str = DEFAULT_BACKEND, workers: int | None = None,
+             live: bool = False) -> dict:
     """Simulate ``scene`` and write its strike log to ``path``.
 
     Parameters
@@ -355,6 +397,9 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
         Ray-casting backend (sim/raycast.py).
     workers : int, optional
         Worker threads (default: one per core).
+    live : bool
+        Write the log in HDF5 SWMR mode, readable while it is written
+        (``formats.strike_log.follow``).
 
     Returns
     -------
@@ -381,8 +426,11 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
                               scene=scene.to_toml(), seed=seed,
                               truth_mesh=(scene.vertices, scene.faces),
                               expected_shots=scene.n_shots,
-                              expected_strikes=scene.n_shots * plan.pattern.n_beams) as log:
-        for chunk in iter_chunks(plan, workers=workers):
+                              expected_strikes=scene.n_shots * plan.pattern.n_beams,
+                              live=live) as log:
+        closed_loop = scene["attitude.mode"] == "gaps"
+        for chunk in (iter_closed_loop(plan) if closed_loop else
+                      iter_chunks(plan, workers=workers)):
             log.write_shots(chunk.time, chunk.recorded_position, chunk.recorded_sensor_attitude,
                             chunk.recorded_target_attitude,
                             truth=Shots(chunk.time, chunk.position, chunk.sensor_attitude,

@@ -15,7 +15,8 @@ every default and where it comes from)::
     [orbit]   radius, inclination_deg, node_deg, phase_deg,
               density | mu | period, change_time, change_inclination_deg
     [time]    step, rotations | duration
-    [slew]    amplitude_deg, period, axis (nominal sensor frame), phase_deg
+    [slew]    amplitude_deg, period, axis (nominal sensor frame), phase_deg   (mode fixed)
+    [attitude] mode = "fixed" | "gaps", max_rate_deg_s, max_offset_deg, replan_s (gaps)
     [sensor]  pattern = "single" | "cross" | "zigzag" | "grid", field_of_view_deg,
               beams (zigzag), resolution (grid), range_min, range_max
     [errors]  range_sigma3, azimuth_sigma3_deg, elevation_sigma3_deg, position_sigma3,

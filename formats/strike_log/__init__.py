@@ -1,14 +1,16 @@
 """Reader and writer of strike logs, format v1 (formats/SPEC.md).
 
 ``schema``: names, layout, the records (``SensorInfo``, ``SensorErrors``, ``Shots``, ...) and the
-shared checks; ``writer``: ``StrikeLogWriter``; ``reader``: ``StrikeLog``.
+shared checks; ``writer``: ``StrikeLogWriter``; ``reader``: ``StrikeLog``, and ``follow`` for a
+log being written.
 """
 
-from formats.strike_log.reader import StrikeLog
+from formats.strike_log.reader import LiveStrikeLog, StrikeLog, follow
 from formats.strike_log.schema import (
     COMPRESSIONS,
     FORMAT_NAME,
     FORMAT_VERSION,
+    LIVE_COMMITTED,
     QUATERNION_NORM_TOLERANCE,
     READ_CHUNK_ROWS,
     SHOT_CHUNK_ROWS,
@@ -30,11 +32,13 @@ __all__ = [
     "COMPRESSIONS",
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "LIVE_COMMITTED",
     "QUATERNION_NORM_TOLERANCE",
     "READ_CHUNK_ROWS",
     "SHOT_CHUNK_ROWS",
     "SIGMA3_PER_SIGMA",
     "STRIKE_CHUNK_ROWS",
+    "LiveStrikeLog",
     "SensorErrors",
     "SensorInfo",
     "Shots",
@@ -45,5 +49,6 @@ __all__ = [
     "angles_to_directions",
     "directions_to_angles",
     "estimate_log_bytes",
+    "follow",
     "sigma_from_sigma3",
 ]

@@ -3,6 +3,7 @@ it is read, so a corrupt log raises ``StrikeLogError`` instead of numbers that l
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from dataclasses import fields
 
@@ -23,6 +24,7 @@ from formats.strike_log.schema import (
     FORMAT_VERSION,
     POSE_ERROR_FIELDS,
     POSE_ERROR_VECTORS,
+    LIVE_COMMITTED,
     READ_CHUNK_ROWS,
     SensorErrors,
     SensorInfo,
@@ -102,6 +104,17 @@ class StrikeLog:
                                  "finite numbers")
         return tuple(float(v) for v in arr)
 
+    def _counts(self) -> tuple[int, int]:
+        """Shot and strike rows of a complete log (written last, on a clean close)."""
+        for name in ("n_shots", "n_strikes"):
+            if name not in self._file.attrs:
+                raise StrikeLogError(f"{self._where}: incomplete log (no '{name}' attribute: "
+                                     "the writer did not close cleanly)")
+        return self._attr(self._file, "n_shots", int), self._attr(self._file, "n_strikes", int)
+
+    # A log being written has datasets longer than its committed rows (LiveStrikeLog).
+    _growing = False
+
     def _dataset(self, path: str, n: int | None, tail: tuple, kinds: str) -> h5py.Dataset:
         where = self._where
         if path not in self._file:
@@ -109,8 +122,8 @@ class StrikeLog:
         ds = self._file[path]
         if not isinstance(ds, h5py.Dataset):
             raise StrikeLogError(f"{where}: /{path} is not a dataset")
-        if ds.ndim != 1 + len(tail) or ds.shape[1:] != tail or (n is not None and
-                                                                ds.shape[0] != n):
+        short = n is not None and (ds.shape[0] < n if self._growing else ds.shape[0] != n)
+        if ds.ndim != 1 + len(tail) or ds.shape[1:] != tail or short:
             want = ("n" if n is None else str(n)) + "".join(f", {k}" for k in tail)
             raise StrikeLogError(f"{where}: /{path} has shape {ds.shape}, expected ({want})")
         if ds.dtype.kind not in kinds:
@@ -134,12 +147,7 @@ class StrikeLog:
                       if name not in ("format_version", "seed")}
         self.attrs["format_version"] = version
         self.attrs["seed"] = self._attr(f, "seed", int)
-        for name in ("n_shots", "n_strikes"):
-            if name not in f.attrs:
-                raise StrikeLogError(f"{where}: incomplete log (no '{name}' attribute: the "
-                                     "writer did not close cleanly)")
-        self.n_shots = self._attr(f, "n_shots", int)
-        self.n_strikes = self._attr(f, "n_strikes", int)
+        self.n_shots, self.n_strikes = self._counts()
         if self.n_shots < 0 or self.n_strikes < 0:
             raise StrikeLogError(f"{where}: negative row counts")
 
@@ -190,11 +198,12 @@ class StrikeLog:
             raise StrikeLogError(f"{self._where}: rows {start}:{stop} out of range (0:{n})")
         return start, stop
 
-    def _blocks(self, n: int, chunk_rows: int) -> Iterator[tuple[int, int]]:
-        """``(start, stop)`` of consecutive blocks of at most ``chunk_rows`` of ``n`` rows."""
+    def _blocks(self, n: int, chunk_rows: int, first: int = 0) -> Iterator[tuple[int, int]]:
+        """``(start, stop)`` of consecutive blocks of at most ``chunk_rows`` of rows
+        ``first .. n - 1``."""
         if chunk_rows < 1:
             raise StrikeLogError(f"{self._where}: chunk_rows must be positive")
-        for start in range(0, n, chunk_rows):
+        for start in range(first, n, chunk_rows):
             yield start, min(start + chunk_rows, n)
 
     def shots(self, start: int = 0, stop: int | None = None) -> Shots:
@@ -263,16 +272,18 @@ class StrikeLog:
         az, el = directions_to_angles(nominal)
         return angles_to_directions(az + d_az, el + d_el)
 
-    def iter_chunks(self, chunk_rows: int = READ_CHUNK_ROWS) -> Iterator[StrikeChunk]:
+    def iter_chunks(self, chunk_rows: int = READ_CHUNK_ROWS, *, first: int = 0,
+                    previous_shot: int | None = None) -> Iterator[StrikeChunk]:
         """Yield consecutive blocks of at most ``chunk_rows`` strikes with their shots.
 
         Ordering and duplicate (shot, beam) pairs across block boundaries are checked too, and
         the shots against the shots of the block before, so a full pass makes every check of
-        ``validate`` on the strikes and the shots they use.
+        ``validate`` on the strikes and the shots they use. ``first`` is the first strike read;
+        ``previous_shot`` the shot of the strike before it.
         """
-        previous_shot = previous_time = None
+        previous_time = None
         carried = np.zeros(0, dtype=np.int64)
-        for start, stop in self._blocks(self.n_strikes, chunk_rows):
+        for start, stop in self._blocks(self.n_strikes, chunk_rows, first):
             shot, beam, rng = self._checked_strikes(start, stop, previous_shot)
             carried = self._check_unique_pairs(shot, beam, carried, start)
             lo, hi = int(shot[0]), int(shot[-1]) + 1
@@ -412,3 +423,155 @@ class StrikeLog:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class LiveStrikeLog(StrikeLog):
+    """A log still being written by a live (SWMR) writer, opened at its temporary path.
+
+    ``n_shots`` and ``n_strikes`` are the rows the writer has committed (flushed and published,
+    SPEC.md, Live logs); :meth:`refresh` moves them on. Every read of :class:`StrikeLog` works on
+    the committed rows, so a reader never sees a half-written block.
+    """
+
+    _growing = True
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self._where = str(self.path)
+        with _hdf5_errors(self._where):
+            # No file lock: the writer reopens the file to finish it while readers hold it.
+            self._file = h5py.File(self.path, "r", libver="latest", swmr=True, locking=False)
+        try:
+            if LIVE_COMMITTED not in self._file:
+                raise StrikeLogError(f"{self._where}: not a live log (no /{LIVE_COMMITTED})")
+            self.closing = False
+            with _hdf5_errors(self._where):
+                self._check_schema()
+        except BaseException:
+            self._file.close()
+            raise
+
+    def _counts(self) -> tuple[int, int]:
+        committed = self._file[LIVE_COMMITTED]
+        committed.refresh()
+        n_shots, n_strikes, closing = (int(v) for v in committed[()])
+        self.closing = closing == 1
+        return n_shots, n_strikes
+
+    def refresh(self) -> None:
+        """Read the committed counts again and make the rows up to them readable."""
+        with _hdf5_errors(self._where):
+            n_shots, n_strikes = self._counts()
+            for datasets, n in ((self._shots, n_shots), (self._strikes, n_strikes)):
+                for ds in datasets.values():
+                    ds.refresh()
+                    if ds.shape[0] < n:
+                        raise StrikeLogError(f"{self._where}: committed rows beyond {ds.name}")
+        if n_shots < self.n_shots or n_strikes < self.n_strikes:
+            raise StrikeLogError(f"{self._where}: committed counts went backwards")
+        self.n_shots, self.n_strikes = n_shots, n_strikes
+
+
+def _open_live(path: Path, deadline: float, poll_s: float) -> LiveStrikeLog:
+    """Open a writer's temporary file, waiting until the writer has made it readable."""
+    while True:
+        try:
+            return LiveStrikeLog(path)
+        except StrikeLogError:
+            if time.monotonic() > deadline:
+                raise
+        time.sleep(poll_s)
+
+
+def _is_file(path: Path, inode: int) -> bool:
+    """Whether ``path`` is the file with inode number ``inode`` (a renamed temporary file)."""
+    try:
+        return path.stat().st_ino == inode
+    except FileNotFoundError:
+        return False
+
+
+def _partial_logs(path: Path) -> list[Path]:
+    """Temporary files of writers of ``path`` (formats/atomic.py), newest first."""
+    found = []
+    for p in path.parent.glob(f".{path.name}.partial-*"):
+        try:
+            found.append((p.stat().st_mtime, p))
+        except FileNotFoundError:   # a writer finished or gave up meanwhile
+            continue
+    return [p for _, p in sorted(found, reverse=True)]
+
+
+def follow(path, *, chunk_rows: int = READ_CHUNK_ROWS, poll_s: float = 0.5,
+           timeout_s: float = 60.0) -> Iterator[tuple[StrikeChunk, StrikeLog]]:
+    """Read the strikes of a log while a live writer (``StrikeLogWriter(live=True)``) writes it.
+
+    Waits for the writer's temporary file beside ``path``, yields every block of committed
+    strikes as it arrives, and ends once the writer has closed and renamed the log into place,
+    with the last blocks read from the complete log. A complete ``path`` with no writer at work is
+    read whole.
+
+    Parameters
+    ----------
+    path : str or Path
+        The log's final path.
+    chunk_rows : int
+        Most strikes per block.
+    poll_s : float, seconds
+        How often to look for new strikes.
+    timeout_s : float, seconds
+        How long to wait for a writer to start, and for new strikes or the close.
+
+    Yields
+    ------
+    (StrikeChunk, StrikeLog)
+        A block of strikes, and the log it was read from (its ``sensor``, ``n_strikes``).
+
+    Raises
+    ------
+    StrikeLogError
+        No writer appeared, the writer stopped (its temporary file vanished without the log
+        appearing, or nothing arrived for ``timeout_s``), or a block fails its checks.
+    """
+    path = Path(path)
+    deadline = time.monotonic() + timeout_s
+    while True:
+        partial = _partial_logs(path)
+        if partial:
+            break
+        if path.exists():
+            with StrikeLog(path) as log:
+                for chunk in log.iter_chunks(chunk_rows):
+                    yield chunk, log
+            return
+        if time.monotonic() > deadline:
+            raise StrikeLogError(f"{path}: no log and no writer at work after {timeout_s:g} s")
+        time.sleep(poll_s)
+    temporary = partial[0]
+    inode = temporary.stat().st_ino
+    done, previous_shot = 0, None
+    with _open_live(temporary, deadline, poll_s) as log:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            log.refresh()
+            if log.n_strikes > done:
+                for chunk in log.iter_chunks(chunk_rows, first=done, previous_shot=previous_shot):
+                    yield chunk, log
+                    done, previous_shot = chunk.start + len(chunk), int(chunk.shot[-1])
+                deadline = time.monotonic() + timeout_s
+            if log.closing or not temporary.exists():
+                break
+            if time.monotonic() > deadline:
+                raise StrikeLogError(f"{path}: nothing new for {timeout_s:g} s (is the writer "
+                                     "still running?)")
+            time.sleep(poll_s)
+    # The writer is finishing: the complete log appears at ``path``, the same file renamed.
+    deadline = time.monotonic() + timeout_s
+    while not _is_file(path, inode):
+        gone = not temporary.exists()
+        if (gone and not _is_file(path, inode)) or time.monotonic() > deadline:
+            raise StrikeLogError(f"{path}: the writer stopped before completing the log")
+        time.sleep(poll_s)
+    with StrikeLog(path) as final:
+        for chunk in final.iter_chunks(chunk_rows, first=done, previous_shot=previous_shot):
+            yield chunk, final

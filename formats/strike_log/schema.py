@@ -18,6 +18,9 @@ FORMAT_VERSION = 1
 # so a small log is not padded to these sizes.
 STRIKE_CHUNK_ROWS = 65_536
 SHOT_CHUNK_ROWS = 16_384
+# Live logs (SPEC.md, Live logs): while an SWMR writer is open, this dataset holds the shot and
+# strike rows complete and flushed, and 1 once the writer is closing.
+LIVE_COMMITTED = "live_committed"
 # How far from 1 a stored quaternion's norm may be (SPEC.md, Conventions).
 QUATERNION_NORM_TOLERANCE = 1e-6
 # Rows handed out per chunk by StrikeLog.iter_chunks: 2**20 strikes is ~100 MB of derived arrays.

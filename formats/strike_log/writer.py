@@ -24,6 +24,7 @@ from formats.strike_log.schema import (
     DEFAULT_COMPRESSION,
     FORMAT_NAME,
     FORMAT_VERSION,
+    LIVE_COMMITTED,
     SHOT_CHUNK_ROWS,
     STRIKE_CHUNK_ROWS,
     SensorErrors,
@@ -76,6 +77,9 @@ class StrikeLogWriter(AtomicWriter):
     expected_shots, expected_strikes : int, optional
         How many rows the log will hold (at most); chunks are no longer than that, so a small log
         is not padded to the default chunk sizes. Appending beyond it stays possible.
+    live : bool, optional
+        Write in HDF5 single-writer/multiple-reader mode, so that ``follow`` (reader.py) reads
+        the strikes while they are written (SPEC.md, Live logs).
 
     Examples
     --------
@@ -90,7 +94,7 @@ class StrikeLogWriter(AtomicWriter):
                  truth_mesh: tuple[np.ndarray, np.ndarray] | None = None,
                  producer: str = "recon", producer_version: str = __version__,
                  compression: str = DEFAULT_COMPRESSION, expected_shots: int | None = None,
-                 expected_strikes: int | None = None):
+                 expected_strikes: int | None = None, live: bool = False):
         where = str(path)
         _check_sensor(sensor, where)
         if compression not in COMPRESSIONS:
@@ -102,14 +106,18 @@ class StrikeLogWriter(AtomicWriter):
         self._n_shots = self._n_strikes = 0
         self._last_time: float | None = None
         self._last_shot: int | None = None
+        self.live = live
         try:
-            self._file = h5py.File(self.temporary, "w")
+            self._file = h5py.File(self.temporary, "w", **({"libver": "latest"} if live else {}))
             self._create_layout(sensor, target=target, scene=scene, seed=seed,
                                 truth_mesh=truth_mesh, producer=producer,
                                 producer_version=producer_version,
                                 filters={"fletcher32": True} | COMPRESSIONS[compression],
                                 rows=(_chunk_rows(expected_shots, SHOT_CHUNK_ROWS),
                                       _chunk_rows(expected_strikes, STRIKE_CHUNK_ROWS)))
+            if live:
+                self._file.create_dataset(LIVE_COMMITTED, data=np.zeros(3, dtype=np.int64))
+                self._file.swmr_mode = True
         except BaseException:
             self.abort()
             raise
@@ -130,7 +138,7 @@ class StrikeLogWriter(AtomicWriter):
             n_shots, n_strikes = log.n_shots, log.n_strikes
         self = cls.__new__(cls)
         AtomicWriter.__init__(self, path)
-        self.sensor, self.has_truth = sensor, has_truth
+        self.sensor, self.has_truth, self.live = sensor, has_truth, False
         shutil.copyfile(path, self.temporary)
         self._file = h5py.File(self.temporary, "r+")
         for name in ("n_shots", "n_strikes"):  # the file is incomplete until close
@@ -239,6 +247,7 @@ class StrikeLogWriter(AtomicWriter):
         self._n_shots += n
         if n:
             self._last_time = float(rows.time[-1])
+        self._commit()
 
     def write_strikes(self, shot, beam, range, *, azimuth_offset=None, elevation_offset=None,
                       truth: TruthStrikes | None = None) -> None:
@@ -294,11 +303,23 @@ class StrikeLogWriter(AtomicWriter):
         self._n_strikes += n
         if n:
             self._last_shot = int(shot[-1])
+        self._commit()
+
+    def _commit(self, closing: int = 0) -> None:
+        """Live logs: flush every row, then publish the counts (SPEC.md, Live logs)."""
+        if self.live:
+            self._file.flush()
+            self._file[LIVE_COMMITTED][:] = [self._n_shots, self._n_strikes, closing]
+            self._file[LIVE_COMMITTED].flush()
 
     # ------------------------------------------------------------------ closing
 
     def _finish(self) -> None:
         """Write the row counts that mark the log complete (SPEC.md, root attributes)."""
+        if self.live:   # attributes cannot be added in SWMR mode: reopen once readers are told
+            self._commit(closing=1)
+            self._file.close()
+            self._file = h5py.File(self.temporary, "r+")
         self._file.attrs["n_shots"] = np.int64(self._n_shots)
         self._file.attrs["n_strikes"] = np.int64(self._n_strikes)
         self._file.close()

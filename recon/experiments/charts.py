@@ -687,3 +687,46 @@ def choice_vs_ranking(summaries: Sequence[Mapping], path, *, title: str) -> Path
     axes[1].set_xticks(x, [s["cloud"] for s in summaries], rotation=35, ha="right", fontsize=8)
     _title(fig, title)
     return _save(fig, path)
+
+
+def coverage_and_effort(panels: Sequence[Mapping], path, *, title: str,
+                        levels: Sequence[float] = ()) -> Path:
+    """Coverage against time (top row) and the total slew angle (bottom row), a column per
+    target, a line per attitude law.
+
+    Parameters
+    ----------
+    panels : sequence of dict
+        ``title`` and ``curves``: each a dict of ``label``, ``x`` (n,) hours, ``coverage`` (n,),
+        ``slew_deg`` (n,) cumulative slew angle and optionally ``style``.
+    levels : sequence of float
+        Coverage levels drawn as dotted lines (the hours-to-level thresholds).
+    """
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, len(panels), figsize=(4.6 * len(panels), 7.4), squeeze=False,
+                             constrained_layout=True)
+    for column, panel in enumerate(panels):
+        top, bottom = axes[0, column], axes[1, column]
+        for curve in panel["curves"]:
+            style = {"marker": "o", "ms": 3.0, "lw": 1.6} | dict(curve.get("style", {}))
+            top.plot(curve["x"], curve["coverage"], label=curve["label"], **style)
+            bottom.plot(curve["x"], np.maximum(curve["slew_deg"], 1.0), **style)
+        for level in levels:
+            top.axhline(level, color="0.6", ls=":", lw=1.0)
+        for ax in (top, bottom):
+            ax.set_xscale("log")
+            _plain_log_ticks(ax.xaxis)
+            ax.grid(True, which="both", alpha=0.3)
+        top.set_title(panel["title"], fontsize=10.5)
+        top.set_ylabel("coverage (area within τ; higher is better)")
+        top.set_ylim(0.0, 1.0)
+        bottom.set_yscale("log")
+        _plain_log_ticks(bottom.yaxis)
+        bottom.set_ylabel("total angle slewed [deg] (lower is cheaper)")
+        bottom.set_xlabel("time [h] (log scale)")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=9,
+               frameon=False)
+    _title(fig, title, "dotted: " + ", ".join(f"{level:.0%}" for level in levels)
+           + " coverage" if levels else "")
+    return _save(fig, path)

@@ -28,6 +28,7 @@ from formats.geometry import Cloud
 from formats.strike_log.schema import directions_to_angles
 from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
 from recon.surfaces.uncertainty import strike_columns
+from formats.strike_log import follow
 
 Frame = Literal["body", "inertial"]
 FRAMES = ("body", "inertial")
@@ -100,12 +101,19 @@ def iter_registered(log: StrikeLog, *, frame: Frame = "body", chunk_rows: int | 
         raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
     chunks = log.iter_chunks() if chunk_rows is None else log.iter_chunks(chunk_rows)
     for chunk in chunks:
-        points, attributes = register_chunk(chunk, frame=frame, correction=correction)
-        sigmas = strike_columns(log.sensor.errors, chunk.range,
-                                reports_angles=log.sensor.reports_angles)
-        yield points, attributes | {k: v.astype(np.float32) for k, v in sigmas.items()}
+        yield _registered_block(log, chunk, frame=frame, correction=correction)
         if progress:
             progress(len(chunk), log.n_strikes)
+
+
+def _registered_block(log: StrikeLog, chunk: StrikeChunk, *, frame: Frame, correction=None
+                      ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """``register_chunk``'s points and attributes plus the strikes' 1-sigma uncertainty columns
+    from the log's recorded error model: one block as every writer of ingest writes it."""
+    points, attributes = register_chunk(chunk, frame=frame, correction=correction)
+    sigmas = strike_columns(log.sensor.errors, chunk.range,
+                            reports_angles=log.sensor.reports_angles)
+    return points, attributes | {k: v.astype(np.float32) for k, v in sigmas.items()}
 
 
 def _register_and_write(log_path, output, *, frame: Frame, chunk_rows: int | None, progress,
@@ -160,6 +168,45 @@ def ingest_points(log_path, *, frame: Frame = "body", chunk_rows: int | None = N
                       log.iter_chunks(chunk_rows)):
             points[chunk.start:chunk.start + len(chunk)] = register_chunk(chunk, frame=frame)[0]
     return points
+
+
+def ingest_following(log_path, out_path, *, frame: Frame = "body", progress=None,
+                     poll_s: float = 0.5, timeout_s: float = 60.0) -> dict:
+    """Register the strikes of a log while a live writer writes it, then write the cloud.
+
+    Blocks are registered as they arrive (``formats.strike_log.follow``), so the work is done
+    when the writer closes; the registered cloud is held in memory until then and written to
+    ``out_path`` (.ply, .las, .laz, .h5) only once the log is complete.
+
+    Parameters
+    ----------
+    log_path : str or Path
+        The log's final path (``recon simulate --live -o LOG``).
+    out_path : str or Path
+    frame : {"body", "inertial"}
+    progress : callable, optional
+        Called as ``progress(strikes_in_block, strikes_committed_so_far)`` after each block.
+    poll_s, timeout_s : float, seconds
+        How often to look for new strikes; how long to wait for the writer before giving up.
+
+    Returns
+    -------
+    dict
+        ``n_points``, ``frame``, ``output``.
+    """
+    if frame not in FRAMES:
+        raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
+    blocks = []
+    for chunk, log in follow(log_path, poll_s=poll_s, timeout_s=timeout_s):
+        blocks.append(_registered_block(log, chunk, frame=frame))
+        if progress:
+            progress(len(chunk), log.n_strikes)
+    n_points = sum(len(points) for points, _ in blocks)
+    with open_cloud_writer(out_path, n_points, ATTRIBUTE_DTYPES, frame=frame,
+                           source=Path(log_path).name) as writer:
+        for block in blocks:
+            writer.write(*block)
+    return {"n_points": n_points, "frame": frame, "output": str(Path(out_path))}
 
 
 def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | None = None,

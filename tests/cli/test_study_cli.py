@@ -11,7 +11,8 @@ import pytest
 
 from cli.main import main
 
-STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods")
+STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods",
+           "closed-loop")
 
 
 def _fails(capsys, argv, pattern):
@@ -102,7 +103,7 @@ def test_real_subprocess_on_a_local_dask_cluster(tmp_path):
     assert bad.returncode == 1
     assert bad.stderr.strip().splitlines() == [
         "recon study: error: unknown study 'nope' (studies: inclination, duration, slew, "
-        "patterns, rso, errors, methods, or all)"]
+        "patterns, rso, errors, methods, closed-loop, or all)"]
 
 
 @pytest.mark.parametrize("argv", [["study", "--help"], ["report", "--help"]])

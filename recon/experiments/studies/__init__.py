@@ -2,7 +2,8 @@
 
 Every study is a module here exposing ``NAME``, ``TITLE`` and either
 
-- ``cases(size) -> {key: run_case keyword arguments}`` and ``finish(records, out_dir, size) ->
+- ``cases(size) -> {key: run_case keyword arguments}`` (the module's own ``run_case`` if it
+  has one) and ``finish(records, out_dir, size) ->
   {"claims", "files", "extra"}`` (the scene studies: ``recon.experiments.studies.runner``
   simulates, ingests
   and scores every case on Dask, then ``finish`` draws the charts and checks the paper's
@@ -30,7 +31,8 @@ from types import ModuleType
 from recon.experiments.studies.runner import SIZES, StudyError, check_size
 
 # Study modules, in the order of the paper (and of ``recon study --list``).
-STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods")
+STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods",
+           "closed-loop")
 # ``recon study all`` writes this beside the study directories.
 INDEX_JSON = "index.json"
 # Seconds allowed to reach an existing scheduler before the study starts.
@@ -54,7 +56,7 @@ def get(name: str) -> ModuleType:
     """
     if name not in STUDIES:
         raise StudyError(f"unknown study {name!r} (studies: {', '.join(STUDIES)}, or all)")
-    return importlib.import_module(f"recon.experiments.studies.{name}")
+    return importlib.import_module(f"recon.experiments.studies.{name.replace('-', '_')}")
 
 
 def describe() -> list[tuple[str, str]]:
@@ -133,7 +135,8 @@ def run(name: str, out_dir, *, size: str = "full", scheduler: str | None = None,
     else:
         cases = module.cases(size)
         records = runner.execute(name, cases, out_dir, size=size, scheduler=scheduler,
-                                 resume=resume, n_workers=n_workers)
+                                 resume=resume, n_workers=n_workers,
+                                 func=getattr(module, "run_case", runner.run_case))
         runner.write_csv(runner.rows(records), out_dir / runner.RESULTS_CSV)
         done = module.finish(runner.ok(records), out_dir, size)
         runner.write_summary(out_dir, study=name, title=module.TITLE, size=size,

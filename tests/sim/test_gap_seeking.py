@@ -1,0 +1,116 @@
+"""The gap-seeking attitude law: scene keys, limits, closed loop from the log alone, coverage."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import sim
+from formats import StrikeLog
+from formats.strike_log import StrikeChunk
+from sim.gap_seeking import (
+    GapSeeker,
+    _turn_toward,
+    body_points,
+    fibonacci_directions,
+    turn_from_boresight,
+)
+from sim.pipeline import make_plan, poses
+
+SMALL = ["target.subdivisions=3", "orbit.inclination_deg=60", "attitude.mode=gaps"]
+
+
+def test_directions_and_turns():
+    u = fibonacci_directions(2000)
+    np.testing.assert_allclose(np.linalg.norm(u, axis=1), 1.0)
+    assert abs(u.mean(axis=0)).max() < 1e-3          # evenly spread: no net direction
+    b = np.array([[0, 0, 1.0], [1.0, 0, 0], [0, -0.6, 0.8]])
+    m = turn_from_boresight(b)
+    np.testing.assert_allclose(m[:, :, 2], b, atol=1e-15)        # +z goes onto the boresight
+    np.testing.assert_allclose(np.linalg.det(m), 1.0)
+    np.testing.assert_allclose(m[0], np.eye(3))                  # no turn: identity
+    turned = _turn_toward(np.array([0, 0, 1.0]), np.array([1.0, 0, 0]), math.radians(10))
+    np.testing.assert_allclose(turned, [math.sin(math.radians(10)), 0, math.cos(math.radians(10))])
+    np.testing.assert_array_equal(_turn_toward(np.array([0, 0, 1.0]), np.array([0, 0.1, 0.99]),
+                                               1.0), [0, 0.1, 0.99])
+
+
+def test_scene_keys_of_the_attitude_law():
+    scene = sim.load_scene("asteroid-lrf-60deg-slew", ["attitude.mode=gaps"])
+    assert scene.values["slew"] == {}                # the preset's slew gives way to the law
+    assert scene["attitude.max_rate_deg_s"] == 1.0 and scene["attitude.replan_s"] == 300.0
+    with pytest.raises(sim.SceneError, match=r'slew\.amplitude_deg is only used when '
+                                             r'attitude\.mode is "fixed"'):
+        sim.load_scene("asteroid-lrf", ["attitude.mode=gaps", "slew.amplitude_deg=2"])
+    with pytest.raises(sim.SceneError, match=r'attitude\.max_rate_deg_s is only used when '
+                                             r'attitude\.mode is "gaps"'):
+        sim.load_scene("asteroid-lrf", ["attitude.max_rate_deg_s=2"])
+    with pytest.raises(sim.SceneError, match=r"attitude\.max_offset_deg must be above 0 and "
+                                             r"below 90 deg, got 95"):
+        sim.load_scene("asteroid-lrf", ["attitude.mode=gaps", "attitude.max_offset_deg=95"])
+    with pytest.raises(sim.SceneError, match=r"attitude\.mode must be one of fixed, gaps"):
+        sim.load_scene("asteroid-lrf", ["attitude.mode=gap"])
+
+
+def _commanded_boresight(scene, log_path):
+    """Time (n,) and the commanded boresight (n, 3) in the nominal sensor frame, from the log."""
+    from scipy.spatial.transform import Rotation
+
+    with StrikeLog(log_path) as log:
+        shots = log.shots()
+    _, _, nominal = poses(make_plan(scene, seed=0), shots.time)
+    recorded = Rotation.from_quat(shots.sensor_attitude).as_matrix()
+    return shots.time, np.einsum("nji,nj->ni", nominal, recorded[:, :, 2])
+
+
+def test_closed_loop_keeps_its_limits_and_is_replayed_from_the_log_alone(tmp_path):
+    scene = sim.load_scene("asteroid-lrf", [*SMALL, "time.duration=10800",
+                                            "attitude.max_rate_deg_s=0.5",
+                                            "attitude.max_offset_deg=20"])
+    log_path = tmp_path / "gaps.h5"
+    sim.simulate(scene, log_path, seed=0, progress=False)
+    t, boresight = _commanded_boresight(scene, log_path)
+    off = np.degrees(np.arccos(np.clip(boresight[:, 2], -1, 1)))
+    step = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", boresight[1:], boresight[:-1]),
+                                        -1, 1)))
+    assert off.max() <= 20.0 + 1e-6 and step.max() <= 0.5 * 10.0 + 1e-6
+    assert off.max() > 10.0                       # the law does leave nadir
+    # Replay: a fresh law fed only what the log holds commands the same attitudes.
+    plan = make_plan(scene, seed=0)
+    law = GapSeeker(step=10.0, max_rate=math.radians(0.5), max_offset=math.radians(20),
+                    poses=lambda times: poses(plan, times))
+    with StrikeLog(log_path) as log:
+        shot, beam, rng = log.strikes()
+        direction = log.directions(beam, 0, log.n_strikes)
+        shots = log.shots()
+        for first in range(0, log.n_shots, 30):
+            stop = min(first + 30, log.n_shots)
+            command = law.command(t[first:stop])
+            np.testing.assert_allclose(command[:, :, 2], boresight[first:stop], atol=1e-9)
+            rows = (shot >= first) & (shot < stop)
+            law.observe(StrikeChunk(start=0, shot=shot[rows], beam=beam[rows], range=rng[rows],
+                                    direction=direction[rows],
+                                    shots=log.shots(first, stop), shot_offset=first))
+        # Registration from the recorded values puts every strike on its true point.
+        truth = log.truth_strikes().point
+        chunk = StrikeChunk(start=0, shot=shot, beam=beam, range=rng, direction=direction,
+                            shots=shots, shot_offset=0)
+        np.testing.assert_allclose(body_points(chunk), truth, atol=1e-6)
+
+
+def test_gap_seeking_covers_far_more_than_nadir_in_the_same_time(tmp_path):
+    from metrics.score import score
+    from recon.registration.ingest import ingest
+
+    coverage = {}
+    for mode in ("gaps", "fixed"):
+        scene = sim.load_scene("asteroid-lrf", [*SMALL[:2], f"attitude.mode={mode}",
+                                                "time.duration=14400"])
+        sim.simulate(scene, tmp_path / f"{mode}.h5", seed=0, progress=False)
+        cloud = ingest(tmp_path / f"{mode}.h5")
+        coverage[mode] = score(cloud.points, (scene.vertices, scene.faces), seed=0,
+                               n_truth_samples=20_000, coverage_points=40_000).coverage
+    # Measured: 0.15 against 0.03 after 4 h at 60 deg (one sixth of the 25 h orbit).
+    assert coverage["gaps"] > 3 * coverage["fixed"], coverage
