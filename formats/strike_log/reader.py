@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterator
 from dataclasses import fields
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -22,9 +23,9 @@ from formats.strike_log.schema import (
     _TRUTH_STRIKE_FIELDS,
     FORMAT_NAME,
     FORMAT_VERSION,
+    LIVE_COMMITTED,
     POSE_ERROR_FIELDS,
     POSE_ERROR_VECTORS,
-    LIVE_COMMITTED,
     READ_CHUNK_ROWS,
     SensorErrors,
     SensorInfo,

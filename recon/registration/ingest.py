@@ -25,10 +25,10 @@ from formats import StrikeChunk, StrikeLog
 from formats.atomic import check_space
 from formats.cloud_io import open_cloud_writer
 from formats.geometry import Cloud
+from formats.strike_log import follow
 from formats.strike_log.schema import directions_to_angles
 from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
 from recon.surfaces.uncertainty import strike_columns
-from formats.strike_log import follow
 
 Frame = Literal["body", "inertial"]
 FRAMES = ("body", "inertial")
