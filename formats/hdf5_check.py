@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -79,17 +81,40 @@ def _walk(path: str) -> str:
     return problems[0] if problems else ""
 
 
-def _child(path: str, conn) -> None:
+def _problem(path: str) -> str:
+    """``_walk``'s verdict, an exception of h5py included (runs in the child)."""
     try:
-        conn.send(_walk(path))
+        return _walk(path)
     except Exception as exc:  # h5py raises many types on damaged files; all mean "damaged"
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        conn.send(f"damaged or unreadable HDF5 ({text})")
+        return f"damaged or unreadable HDF5 ({text})"
+
+
+def _child(path: str, conn) -> None:
+    try:
+        conn.send(_problem(path))
     finally:
         conn.close()
 
 
+def _verdict_in_subprocess(path: Path, timeout: float) -> str:
+    """The walk in a fresh interpreter (``python -m formats.hdf5_check PATH``): for daemonic
+    processes (a Dask worker), which multiprocessing does not let have children."""
+    env = os.environ | {"PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    try:
+        done = subprocess.run([sys.executable, "-m", "formats.hdf5_check", str(path)],
+                              capture_output=True, text=True, timeout=timeout + 5.0, env=env)
+    except subprocess.TimeoutExpired:
+        return (f"damaged HDF5 structure (reading it did not finish in {timeout:g} s; "
+                "HDF5 loops on this damage)")
+    if done.returncode != 0:
+        return "damaged HDF5 structure (reading it crashed the HDF5 library)"
+    return done.stdout.strip()
+
+
 def _verdict(path: Path, timeout: float) -> str:
+    if multiprocessing.current_process().daemon:
+        return _verdict_in_subprocess(path, timeout)
     # Forking copies the held locks of other threads; with threads running, a fresh
     # interpreter (forkserver) walks the file instead.
     method = "fork" if threading.active_count() == 1 else "forkserver"
@@ -132,3 +157,7 @@ def check_hdf5(path, error: type[Exception], *, timeout: float | None = None) ->
         _VERDICTS[key] = _verdict(path, CHECK_TIMEOUT_S if timeout is None else timeout)
     if _VERDICTS[key]:
         raise error(f"{path}: {_VERDICTS[key]}")
+
+
+if __name__ == "__main__":   # the walk of _verdict_in_subprocess: print the problem or nothing
+    print(_problem(sys.argv[1]))
