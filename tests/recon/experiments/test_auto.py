@@ -159,3 +159,16 @@ def test_closed_allows_non_manifold_edges_but_no_border():
     assert closed(faces)
     assert not closed(faces[1:])
     assert closed(np.concatenate([faces, faces + 8]))       # two boxes: still no border
+
+
+def test_select_band_is_at_least_the_slack():
+    rng = np.random.default_rng(2)
+    base = rng.exponential(0.01, 10_000)
+    se = base.std(ddof=1) / np.sqrt(base.size)
+    candidates = [_candidate("interpolating", base, 17_000),
+                  _candidate("ellipsoid", base + 5 * se, 9)]
+    assert candidates[select(candidates)[0]]["label"] == "interpolating"
+    chosen, threshold, reason = select(candidates, slack=10 * se)
+    assert candidates[chosen]["label"] == "ellipsoid"
+    assert threshold == pytest.approx(base.mean() + 10 * se)
+    assert "1% of the score threshold tau" in reason
