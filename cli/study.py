@@ -11,7 +11,8 @@ from cli.options import add_command, add_sweep_options
 
 # Repeated from recon/experiments/studies/__init__.py (STUDIES) so that ``recon --help`` imports
 # nothing.
-STUDY_NAMES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods")
+STUDY_NAMES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods",
+               "pointing")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
