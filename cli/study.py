@@ -12,7 +12,7 @@ from cli.options import add_command, add_sweep_options, show_required
 # Repeated from recon/experiments/studies/__init__.py (STUDIES) so that ``recon --help`` imports
 # nothing.
 STUDY_NAMES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods",
-               "closed-loop")
+                "closed-loop", "pointing")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

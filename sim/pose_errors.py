@@ -37,7 +37,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import lfilter
 from scipy.spatial.transform import Rotation
 
 from formats.strike_log import SensorErrors
@@ -114,6 +113,8 @@ def gauss_markov(sigma: float, correlation_time: float, step: float, n: int,
     -------
     (n, 3) float64, the unit of ``sigma``.
     """
+    from scipy.signal import lfilter  # scipy.signal takes most of a second to import
+
     phi = math.exp(-step / correlation_time)
     drive = rng.standard_normal((n, 3)) * sigma
     drive[1:] *= math.sqrt(1.0 - phi * phi)

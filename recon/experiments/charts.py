@@ -122,39 +122,103 @@ def metric_panels(curves: Sequence[Mapping], path, *, title: str, x_label: str,
     fig, axes = plt.subplots(rows, cols, figsize=(11, 3.6 * rows + 0.9), squeeze=False,
                              constrained_layout=True)
     for ax, (key, label, lower) in zip(axes.flat, metrics, strict=False):
-        for curve in curves:
-            y = np.asarray(curve["y"].get(key, []), dtype=float)
-            if y.size == 0 or np.all(np.isnan(y)):
-                continue
-            style = {"marker": "o", "ms": 3.5, "lw": 1.6} | dict(curve.get("style", {}))
-            ax.plot(curve["x"], y, label=curve["label"], **style)
-        for ref in references:
-            value = ref["y"].get(key)
-            if value is not None and np.isfinite(value):
-                style = {"color": "0.35", "ls": ":", "lw": 1.4} | dict(ref.get("style", {}))
-                ax.axhline(value, label=ref["label"], **style)
-        if logx:
-            ax.set_xscale("log")
-            _plain_log_ticks(ax.xaxis)
-        if key.startswith("chamfer") and _spans(ax.get_lines(), LOG_SPAN):
-            ax.set_yscale("log")
-            _plain_log_ticks(ax.yaxis)
+        _metric_axis(ax, curves, key, label, lower, x_label=x_label, logx=logx,
+                     references=references)
         ax.set_title(f"{label} ({_better(lower)})", fontsize=10)
-        ax.set_xlabel(x_label)
-        ax.set_ylabel(label)
-        ax.grid(True, which="both", alpha=0.3)
     for ax in list(axes.flat)[n:]:
         ax.set_visible(False)
-    handles, labels = axes.flat[0].get_legend_handles_labels()
-    for ax in list(axes.flat)[1:n]:
+    _shared_legend(fig, list(axes.flat)[:n])
+    _title(fig, title, note)
+    return _save(fig, path)
+
+
+def metric_grid(rows: Sequence[Mapping], path, *, title: str, x_label: str,
+                metrics=METRICS, x_ticks: Sequence[float] | None = None, legend_columns: int = 2,
+                note: str = "") -> Path:
+    """A row of metric panels per group (e.g. per target), a line per curve, one legend.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        ``title`` (of the row) and ``curves`` (as for ``metric_panels``; the same labels in
+        every row share one legend entry).
+    path : str or Path
+        PNG to write.
+    title, x_label : str
+    metrics : sequence of (key, label, lower_is_better)
+        One column each.
+    x_ticks : sequence of float, optional
+        Ticks of every x axis, labelled as plain numbers. When they start at 0 and the positive
+        ones span more than ``LOG_SPAN``, the axes are symmetric-log (linear up to the smallest
+        positive tick), so small values do not bunch up at 0.
+    legend_columns : int
+        Columns of the legend (it fills column by column).
+    note : str
+        Small print under the title.
+    """
+    plt = _pyplot()
+    fig = plt.figure(figsize=(4.1 * len(metrics), 3.3 * len(rows) + 1.5), layout="constrained")
+    for sub, row in zip(fig.subfigures(len(rows), 1, squeeze=False)[:, 0], rows, strict=True):
+        for ax, (key, label, lower) in zip(sub.subplots(1, len(metrics), squeeze=False)[0],
+                                           metrics, strict=True):
+            _metric_axis(ax, row["curves"], key, label, lower, x_label=x_label)
+            ax.set_title(f"{label} ({_better(lower)})", fontsize=10)
+            if x_ticks is not None:
+                _set_x_ticks(ax, x_ticks)
+        sub.suptitle(row["title"], fontsize=11, fontweight="bold")
+    _shared_legend(fig, fig.axes, ncol=legend_columns)
+    _title(fig, title, note)
+    return _save(fig, path)
+
+
+def _set_x_ticks(ax, ticks: Sequence[float]) -> None:
+    """Plain-number ticks at ``ticks``; symmetric-log when they start at 0 and span decades."""
+    from matplotlib.ticker import FixedLocator, NullLocator
+
+    ticks = sorted(float(t) for t in ticks)
+    positive = [t for t in ticks if t > 0]
+    if ticks[0] == 0 and positive and positive[-1] > LOG_SPAN * positive[0]:
+        ax.set_xscale("symlog", linthresh=positive[0], linscale=0.6)
+    ax.xaxis.set_major_locator(FixedLocator(ticks))
+    ax.xaxis.set_minor_locator(NullLocator())
+    ax.set_xticklabels([f"{t:g}" for t in ticks])
+
+
+def _metric_axis(ax, curves: Sequence[Mapping], key: str, label: str, lower: bool, *,
+                 x_label: str, logx: bool = False, references: Sequence[Mapping] = ()) -> None:
+    """Draw the ``key`` values of ``curves`` (and reference lines) on one panel."""
+    for curve in curves:
+        y = np.asarray(curve["y"].get(key, []), dtype=float)
+        if y.size == 0 or np.all(np.isnan(y)):
+            continue
+        style = {"marker": "o", "ms": 3.5, "lw": 1.6} | dict(curve.get("style", {}))
+        ax.plot(curve["x"], y, label=curve["label"], **style)
+    for ref in references:
+        value = ref["y"].get(key)
+        if value is not None and np.isfinite(value):
+            style = {"color": "0.35", "ls": ":", "lw": 1.4} | dict(ref.get("style", {}))
+            ax.axhline(value, label=ref["label"], **style)
+    if logx:
+        ax.set_xscale("log")
+        _plain_log_ticks(ax.xaxis)
+    if key.startswith("chamfer") and _spans(ax.get_lines(), LOG_SPAN):
+        ax.set_yscale("log")
+        _plain_log_ticks(ax.yaxis)
+    ax.set_xlabel(x_label)
+    ax.set_ylabel(label)
+    ax.grid(True, which="both", alpha=0.3)
+
+
+def _shared_legend(fig, axes, *, ncol: int = 4) -> None:
+    """One legend below the panels with every label of ``axes`` once."""
+    handles, labels = [], []
+    for ax in axes:
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 4),
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), ncol),
                fontsize=8.5, frameon=False)
-    _title(fig, title, note)
-    return _save(fig, path)
 
 
 def grouped_bars(groups: Sequence[str], scenarios: Sequence[str], values: Mapping, path, *,

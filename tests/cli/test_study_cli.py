@@ -12,7 +12,7 @@ import pytest
 from cli.main import main
 
 STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods",
-           "closed-loop")
+           "closed-loop", "pointing")
 
 
 def _fails(capsys, argv, pattern):
@@ -34,6 +34,7 @@ def test_list_names_every_study(capsys):
     names = [line.split()[0] for line in out.splitlines()]
     assert names == [*STUDIES, "all"]
     assert "Tables 1 and 2" in out and "Fig. 18" in out.replace("Figs. 16-18", "Fig. 18")
+    assert "Pointing knowledge" in out
 
 
 def test_cli_names_match_the_registry():
@@ -108,7 +109,7 @@ def test_real_subprocess_on_a_local_dask_cluster(tmp_path):
     assert bad.returncode == 1
     assert bad.stderr.strip().splitlines() == [
         "recon study: error: unknown study 'nope' (studies: inclination, duration, slew, "
-        "patterns, rso, errors, methods, closed-loop, or all)"]
+        "patterns, rso, errors, methods, closed-loop, pointing, or all)"]
 
 
 @pytest.mark.parametrize("argv", [["study", "--help"], ["report", "--help"]])
@@ -117,3 +118,37 @@ def test_help(argv, capsys):
         main(argv)
     assert exit_info.value.code == 0
     assert "usage: recon" in capsys.readouterr().out
+
+
+def test_pointing_study_refined_cells_no_worse_where_the_misalignment_is_large(capsys, tmp_path):
+    """A piece of ``recon study pointing --quick`` (its asteroid cells at one range error):
+    every output, and self-calibration helping at the large misalignment."""
+    import csv
+
+    out = tmp_path / "pointing"
+    assert main(["study", "pointing", "-o", str(out), "--size", "tiny", "--scheduler",
+                 "serial"]) == 0
+    text = capsys.readouterr().out
+    assert "couples with the LRF's range errors" in text and f"wrote {out}" in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["n_failed"] == 0, summary["failures"]
+    for name in ("results.jsonl", "results.csv", "pointing.csv", "requirement.csv"):
+        assert (out / name).stat().st_size > 100, name
+    assert (out / "pointing.png").read_bytes()[:4] == b"\x89PNG"
+    cells = {(float(r["pointing_deg"]), r["pose"]): r
+             for r in csv.DictReader((out / "pointing.csv").read_text().splitlines())}
+    assert len(cells) == 4  # pointing 0 and 0.2 deg, each un-refined and refined
+    large = max(deg for deg, _ in cells)
+    before, after = cells[(large, "un-refined")], cells[(large, "refined")]
+    assert float(after["point_error_m"]) < 0.5 * float(before["point_error_m"])
+    assert float(after["fscore"]) >= float(before["fscore"])
+    assert float(after["chamfer_m"]) <= float(before["chamfer_m"])
+    assert float(after["estimated_deg"]) > 0.5 * large
+    # Resuming runs nothing again; the report embeds the chart.
+    jsonl = (out / "results.jsonl").read_text()
+    assert main(["study", "pointing", "-o", str(out), "--size", "tiny", "--scheduler",
+                 "serial", "--resume", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["study"] == "pointing"
+    assert (out / "results.jsonl").read_text() == jsonl
+    assert main(["report", str(out), "-o", str(tmp_path / "pointing.html")]) == 0
+    assert "pointing.png" in (tmp_path / "pointing.html").read_text()

@@ -9,7 +9,8 @@ Every study is a module here exposing ``NAME``, ``TITLE`` and either
   and scores every case on Dask, then ``finish`` draws the charts and checks the paper's
   claims), or
 - ``run(out_dir, *, size, scheduler, resume, n_workers) -> summary`` (``methods``, which runs
-  ``recon.experiments.compare`` per condition).
+  ``recon.experiments.compare`` per condition, and ``pointing``, whose cases each reconstruct
+  and score two clouds).
 
 Every study writes ``DIR/summary.json`` (claims with our numbers and a verdict, files, failures,
 score options), ``DIR/results.csv`` (one row per case and time prefix), ``DIR/results.jsonl``
@@ -32,7 +33,7 @@ from recon.experiments.studies.runner import SIZES, StudyError, check_size
 
 # Study modules, in the order of the paper (and of ``recon study --list``).
 STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods",
-           "closed-loop")
+           "closed-loop", "pointing")
 # ``recon study all`` writes this beside the study directories.
 INDEX_JSON = "index.json"
 # Seconds allowed to reach an existing scheduler before the study starts.

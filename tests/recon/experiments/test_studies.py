@@ -16,7 +16,7 @@ import pytest
 import sim
 from recon.experiments import charts, studies
 from recon.experiments.report import ReportError, render, write_report
-from recon.experiments.studies import duration, errors, inclination, rso, runner, slew
+from recon.experiments.studies import duration, errors, inclination, pointing, rso, runner, slew
 from recon.experiments.sweep import SweepError
 
 SCENE_STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors")
@@ -115,6 +115,63 @@ def test_rso_inclination_change_spans_76_to_94():
     scene = sim.load_scene(cases["rso-a change to 80"]["scene"],
                            cases["rso-a change to 80"]["overrides"])
     assert scene["orbit.change_time"] == 43 * 3600 and scene.duration == 86 * 3600
+
+
+@pytest.mark.parametrize("size", ["tiny", "quick", "full"])
+def test_pointing_cases_load_and_sweep_the_grid(size):
+    cases = pointing.cases(size)
+    plan = pointing.PLAN[size]
+    assert len(cases) == (len(plan["targets"]) * len(plan["pointing_deg"])
+                          * len(plan["range_sigma3"]))
+    for case in cases.values():
+        scene = sim.load_scene(case["scene"], case["overrides"])
+        tags = case["tags"]
+        assert scene["errors.range_sigma3"] == tags["range_sigma3"]
+        misalignment = np.asarray(scene["errors.boresight_misalignment_deg"])
+        assert np.linalg.norm(misalignment) == pytest.approx(tags["pointing_deg"])
+        assert misalignment[2] == 0  # about an axis across the beam (S z)
+        assert scene.duration == pytest.approx(runner.rotations(plan["rotations"]))
+    if size == "quick":  # CI: a 2 x 2 grid per target
+        assert len(plan["pointing_deg"]) == len(plan["range_sigma3"]) == 2
+        assert set(plan["targets"]) == set(pointing.TARGETS)
+    if size == "full":  # the paper's LRF and LIDAR range errors, 50 rotations
+        assert {0.3, 1.0} <= set(plan["range_sigma3"]) and plan["rotations"] == 50
+        assert min(plan["pointing_deg"]) == 0 and 0.2 in plan["pointing_deg"]
+
+
+def _cell(target, sigma, deg, pose, f, chamfer):
+    return {"target": target, "range_sigma3": sigma, "pointing_deg": deg, "pose": pose,
+            "fscore": f, "chamfer_m": chamfer}
+
+
+def test_pointing_requirement_is_the_largest_error_tolerated_with_every_smaller_one(monkeypatch):
+    monkeypatch.setitem(pointing.PLAN, "tiny", dict(pointing.PLAN["tiny"], targets=("rso-a",),
+                        pointing_deg=(0.0, 0.1, 0.2, 0.5), range_sigma3=(0.3, 1.0)))
+    cells = []
+    # range 0.3: F drops below 95 % at 0.2; refined holds to 0.5.
+    for deg, f in zip((0.0, 0.1, 0.2, 0.5), (0.90, 0.88, 0.80, 0.95), strict=True):
+        cells.append(_cell("rso-a", 0.3, deg, "un-refined", f, 1.0))
+        cells.append(_cell("rso-a", 0.3, deg, "refined", 0.9, 1.0))
+    # range 1: the Chamfer grows past 1.2 x at 0.5 only.
+    for deg, chamfer in zip((0.0, 0.1, 0.2, 0.5), (1.0, 1.1, 1.19, 1.3), strict=True):
+        cells.append(_cell("rso-a", 1.0, deg, "un-refined", 0.8, chamfer))
+        cells.append(_cell("rso-a", 1.0, deg, "refined", 0.8, chamfer))
+    rows = {(r["range_sigma3"], r["pose"]): r for r in pointing.requirement_rows(cells, "tiny")}
+    assert rows[(0.3, "un-refined")] | {} == {
+        "target": "rso-a", "range_sigma3": 0.3, "pose": "un-refined", "requirement_deg": 0.1,
+        "fails_at_deg": 0.2, "complete": True}  # 0.5 passing again does not count
+    assert rows[(0.3, "refined")]["requirement_deg"] == 0.5
+    assert rows[(0.3, "refined")]["fails_at_deg"] is None
+    assert rows[(1.0, "un-refined")]["fails_at_deg"] == 0.5
+    coupling = pointing._claim_coupling(list(rows.values()), "tiny")
+    assert coupling["verdict"] == "reproduced"  # fails at 0.2 with 0.3 m, at 0.5 with 1 m
+    refine_claim = pointing._claim_refinement(list(rows.values()))
+    assert refine_claim["verdict"] == "partly"  # relaxed at 0.3 m, unchanged at 1 m
+    # A missing score leaves the row incomplete, and the claims untested.
+    cells = [c for c in cells if not (c["range_sigma3"] == 1.0 and c["pointing_deg"] == 0.2)]
+    rows = pointing.requirement_rows(cells, "tiny")
+    assert [r["complete"] for r in rows] == [True, True, False, False]
+    assert pointing._claim_coupling(rows, "tiny")["verdict"] == "not tested"
 
 
 def test_unknown_study_and_size_are_refused(tmp_path):
