@@ -144,6 +144,9 @@ class AtomicWriter:
     def _flush(self) -> None:
         """Push buffered data to the file (subclasses that buffer override it)."""
 
+    def _published(self) -> None:
+        """Called once the file is in place (subclasses may record it)."""
+
     def _check(self) -> None:
         """Call at the start of every write: refuse a closed writer, stop on a signal."""
         if self.closed:
@@ -175,6 +178,7 @@ class AtomicWriter:
             os.chmod(self.temporary, 0o666 & ~_umask())
             interrupt.check()
             os.replace(self.temporary, self.path)
+            self._published()
         except (OSError, RuntimeError) as exc:
             self.abort(disk_full=is_disk_full(exc))
             if isinstance(exc, ReconError):

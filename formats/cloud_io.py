@@ -56,7 +56,7 @@ import numpy as np
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
 from formats.geometry import NORMAL_ATTRIBUTES, Cloud, file_metadata, frame_of
-from formats.hdf5_check import check_hdf5
+from formats.hdf5_check import check_hdf5, trust
 from formats.paths import check_source
 from formats.ply import PlyWriter, read_ply
 
@@ -167,6 +167,9 @@ class _H5Cloud(AtomicWriter):
 
     def _flush(self) -> None:
         self._h5.flush()
+
+    def _published(self) -> None:
+        trust(self.path)   # our own file: readers need not walk it (formats/hdf5_check.py)
 
     def _finish(self) -> None:
         self._h5.close()

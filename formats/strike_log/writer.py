@@ -13,6 +13,7 @@ import numpy as np
 
 from formats.atomic import AtomicWriter
 from formats.errors import StrikeLogError
+from formats.hdf5_check import trust
 from formats.strike_log.schema import (
     _ANGLE_FIELDS,
     _SHOT_FIELDS,
@@ -202,6 +203,9 @@ class StrikeLogWriter(AtomicWriter):
 
     def _flush(self) -> None:
         self._file.flush()
+
+    def _published(self) -> None:
+        trust(self.path)   # our own file: readers need not walk it (formats/hdf5_check.py)
 
     @staticmethod
     def _extend(group, values: dict) -> None:
