@@ -25,12 +25,18 @@ LIVE_COMMITTED = "live_committed"
 QUATERNION_NORM_TOLERANCE = 1e-6
 # Rows handed out per chunk by StrikeLog.iter_chunks: 2**20 strikes is ~100 MB of derived arrays.
 READ_CHUNK_ROWS = 1 << 20
-# Storage filters (SPEC.md, Storage; measured in benchmarks/bench_log_compression.py --scene):
-# lzf + shuffle by default (half the bytes of a LIDAR log at no measurable simulate or ingest
-# cost; gzip saves a tenth more and doubles the simulate time), Fletcher-32 checksums always.
+# Storage filters (SPEC.md, Storage; docs/decisions.md): lzf + shuffle by default, Fletcher-32
+# checksums always; gzip saves a little more and doubles the simulate time.
 DEFAULT_COMPRESSION = "lzf"
 COMPRESSIONS = {"none": {}, "lzf": {"compression": "lzf", "shuffle": True},
                 "gzip": {"compression": "gzip", "compression_opts": 4, "shuffle": True}}
+# Per-strike float64 measurements, noise down to their last bits: lzf keeps 80-85 % of their
+# bytes at 10x the CPU of storing them (44-48 ns a value against 4-5, measured on an
+# asteroid-lidar log), which made it 4/5 of the simulator's time. Under "lzf" they are stored
+# unfiltered (Fletcher-32 only); the angle offsets too when an angle error or pulse dilation
+# fills them (without one they are zeros, which lzf stores in 1 % of the bytes, cheaply).
+LZF_UNFILTERED = frozenset({"strikes/range", "truth/point", "truth/range"})
+NOISY_ANGLE_COLUMNS = frozenset({"strikes/azimuth_offset", "strikes/elevation_offset"})
 
 _PATTERNS = ("single", "cross", "zigzag", "grid", "custom")
 _ROOT_ATTRS = ("format", "format_version", "producer", "producer_version", "created_utc", "scene",

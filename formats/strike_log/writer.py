@@ -26,6 +26,8 @@ from formats.strike_log.schema import (
     FORMAT_NAME,
     FORMAT_VERSION,
     LIVE_COMMITTED,
+    LZF_UNFILTERED,
+    NOISY_ANGLE_COLUMNS,
     SHOT_CHUNK_ROWS,
     STRIKE_CHUNK_ROWS,
     SensorErrors,
@@ -49,6 +51,14 @@ def _chunk_rows(expected: int | None, largest: int) -> int:
         return largest
     expected = max(1, int(expected))
     return -(-expected // -(-expected // largest))
+
+
+def _filters(compression: str, name: str, noisy_angles: bool) -> dict:
+    """h5py filter keywords of dataset ``name`` (e.g. ``strikes/range``): Fletcher-32 always,
+    ``compression`` except, under lzf, on the noisy float64 strike columns (schema.py)."""
+    skip = name in LZF_UNFILTERED or (noisy_angles and name in NOISY_ANGLE_COLUMNS)
+    chosen = {} if compression == "lzf" and skip else COMPRESSIONS[compression]
+    return {"fletcher32": True} | chosen
 
 
 class StrikeLogWriter(AtomicWriter):
@@ -113,7 +123,7 @@ class StrikeLogWriter(AtomicWriter):
             self._create_layout(sensor, target=target, scene=scene, seed=seed,
                                 truth_mesh=truth_mesh, producer=producer,
                                 producer_version=producer_version,
-                                filters={"fletcher32": True} | COMPRESSIONS[compression],
+                                compression=compression,
                                 rows=(_chunk_rows(expected_shots, SHOT_CHUNK_ROWS),
                                       _chunk_rows(expected_strikes, STRIKE_CHUNK_ROWS)))
             if live:
@@ -149,7 +159,7 @@ class StrikeLogWriter(AtomicWriter):
         return self
 
     def _create_layout(self, sensor, *, target, scene, seed, truth_mesh, producer,
-                       producer_version, filters, rows):
+                       producer_version, compression, rows):
         f = self._file
         f.attrs.update({
             "format": FORMAT_NAME, "format_version": np.int64(FORMAT_VERSION),
@@ -170,10 +180,14 @@ class StrikeLogWriter(AtomicWriter):
             {k.name: np.asarray(getattr(sensor.errors, k.name), dtype=np.float64)
              for k in fields(SensorErrors)})
 
+        noisy_angles = sensor.errors.angles or sensor.errors.dilation
+
         def columns(group, spec, rows):
             for name, (tail, dtype) in spec.items():
                 group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
-                                     chunks=(rows, *tail), **filters)
+                                     chunks=(rows, *tail),
+                                     **_filters(compression, f"{group.name[1:]}/{name}",
+                                                noisy_angles))
 
         shot_rows, strike_rows = rows
         shots = {k: (tail, np.float64) for k, tail in _SHOT_FIELDS.items()}

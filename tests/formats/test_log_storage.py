@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import h5py
 import numpy as np
+import pytest
 
 from formats import StrikeLog
 from formats.strike_log.schema import COMPRESSIONS, DATASET_UNITS, DEFAULT_COMPRESSION
@@ -48,8 +49,11 @@ def test_small_simulated_log_is_sized_to_its_content(tmp_path):
         n_shots, n_strikes = int(f.attrs["n_shots"]), int(f.attrs["n_strikes"])
         assert f["shots/time"].chunks == (n_shots,)
         assert f["strikes/range"].chunks[0] <= n_strikes * 5  # at most the pulses fired
-        assert f["strikes/range"].compression == DEFAULT_COMPRESSION == "lzf"
-        assert f["strikes/range"].shuffle and f["strikes/range"].fletcher32
+        assert f["strikes/shot"].compression == DEFAULT_COMPRESSION == "lzf"
+        assert f["strikes/shot"].shuffle and f["strikes/shot"].fletcher32
+        # The noisy float64 columns: checksummed, not compressed (schema.LZF_UNFILTERED).
+        for name in ("strikes/range", "truth/point", "truth/range"):
+            assert f[name].compression is None and f[name].fletcher32, name
         payload = sum(ds.size * ds.dtype.itemsize for ds in _datasets(f).values())
     # measured before: 1,548 shots, 7,740 strikes in 6,966,084 bytes with fixed chunks
     assert (n_shots, n_strikes) == (1548, 7740)
@@ -79,3 +83,31 @@ def test_appending_beyond_the_expected_rows_works(tmp_path):
     with StrikeLog(tmp_path / "log.h5") as log:
         assert log.n_shots == 2 * len(shots)
         np.testing.assert_array_equal(log.strikes()[2][len(strikes[2]):], strikes[2])
+
+
+
+@pytest.mark.parametrize("angle_error", [0.0, 1e-3])
+def test_lzf_skips_the_angle_offsets_only_when_they_hold_noise(tmp_path, angle_error):
+    from formats import StrikeLogWriter
+    from formats.strike_log import SensorErrors, SensorInfo
+
+    sensor = SensorInfo("custom", np.array([[0.0, 0.0, 1.0]]), range_min=1.0, range_max=1e3,
+                        field_of_view=(0.0, 0.0, 0.0, 0.0), reports_angles=True,
+                        errors=SensorErrors(azimuth_sigma3=angle_error))
+    with StrikeLogWriter(tmp_path / "log.h5", sensor=sensor, target="t") as log:
+        log.write_shots([0.0], [[1e3, 0.0, 0.0]], [[0.0, 0.0, 0.0, 1.0]], [[0.0, 0.0, 0.0, 1.0]])
+        log.write_strikes([0], [0], [900.0], azimuth_offset=[0.0], elevation_offset=[0.0])
+    with h5py.File(tmp_path / "log.h5") as f:
+        expected = None if angle_error else "lzf"
+        assert f["strikes/azimuth_offset"].compression == expected
+        assert f["strikes/elevation_offset"].compression == expected
+        assert f["strikes/beam"].compression == "lzf"
+        assert f["strikes/range"].compression is None
+        assert all(f[name].fletcher32 for name in ("strikes/azimuth_offset", "strikes/range"))
+
+
+def test_gzip_compresses_every_column():
+    from formats.strike_log.writer import _filters
+
+    assert _filters("gzip", "strikes/range", True)["compression"] == "gzip"
+    assert _filters("none", "strikes/shot", False) == {"fletcher32": True}

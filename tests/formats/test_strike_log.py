@@ -163,7 +163,7 @@ def test_compressed_logs_read_the_same(tmp_path, compression):
         w.write_shots(t, pos, sq, tq)
         w.write_strikes(shot, beam, rho)
     with h5py.File(path) as f:
-        assert f["strikes/range"].compression == compression
+        assert f["strikes/shot"].compression == compression
     with StrikeLog(path) as log:
         log.validate()
         np.testing.assert_array_equal(log.strikes()[2], rho)
