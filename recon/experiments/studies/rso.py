@@ -41,8 +41,8 @@ LIDAR = ("sensor.pattern=grid", "sensor.field_of_view_deg=[6.0, 6.0]",
 # nominal sensor frame (sim/motion.py): about +x_S (along-track) the boresight swings across the
 # near-polar orbit, i.e. nearly in RSO-A's equatorial plane, along its 20 m panel axis as it
 # spins past; about +y_S it swings along the track, nearly along the spin axis and the 5 m bus.
-SLEW_AXES = {"x": ("[1, 0, 0]", "slew across track: along the longest (panel) axis"),
-             "y": ("[0, 1, 0]", "slew along track: along the spin axis (short)")}
+SLEW_AXES = {"x": ("[1, 0, 0]", "slew across track: along the longest (panel) axis", "tab:green"),
+             "y": ("[0, 1, 0]", "slew along track: along the spin axis (short)", "tab:orange")}
 SLEW_AMPLITUDE_DEG = 2.0  # the paper's slew at 85 deg; RSO-A spans +-2.3 deg at 250 m
 PLAN = {
     "full": {"hours": (4.3, 8.6, 12.9, 21.5, 43.0, 64.5, 86.0, 107.5, 129.0),
@@ -103,7 +103,7 @@ def cases(size: str) -> dict[str, dict]:
             score_options={**plan["score"], "edge_options": {"threshold": threshold}},
             tags={"target": "RSO-A", "sensor": "single-beam LRF", "edge_threshold": threshold})
     hours = plan["slew_hours"]
-    for axis, (vector, label) in SLEW_AXES.items():
+    for axis, (vector, label, _) in SLEW_AXES.items():
         out[_slew_key(axis)] = runner.scene_case(
             "rso-a-lrf", [f"time.duration={max(hours) * HOUR:g}",
                           f"slew.amplitude_deg={SLEW_AMPLITUDE_DEG:g}", f"slew.axis={vector}"],
@@ -155,11 +155,13 @@ def finish(records: dict, out_dir, size: str) -> dict:
             title="RSO-A: score after an inclination change at 43 h (paper Fig. 18)",
             x_label="inclination after the change [deg]")
         files.append("inclination_change.png")
-    slews = [key for key in (_slew_key(a) for a in SLEW_AXES) if key in records]
+    slews = [(key, colour) for key, colour in ((_slew_key(a), c) for a, (*_, c) in
+                                                SLEW_AXES.items()) if key in records]
     if slews and "rso-a" in records:
         charts.metric_panels(
-            [_curve(records, "rso-a", "no slew (nadir)", {"color": "tab:blue"}),
-             *(_curve(records, key, records[key]["tags"]["sensor"], {}) for key in slews)],
+            [_curve(records, "rso-a", "no slew (nadir)", {"color": "tab:gray"}),
+             *(_curve(records, key, records[key]["tags"]["sensor"], {"color": colour})
+               for key, colour in slews)],
             out_dir / "slew_axis.png", logx=True, metrics=RELATIVE_METRICS,
             title=f"RSO-A, single-beam LRF at 85 deg: {SLEW_AMPLITUDE_DEG:g} deg slew about "
                   "either axis (paper: slew along the longest axis)",
