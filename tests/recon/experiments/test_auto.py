@@ -52,13 +52,16 @@ def test_the_ladder_runs_coarse_to_fine_and_stops():
     from recon.experiments.auto import LADDER, MAX_FITS
 
     points, view, _ = ellipsoid_points(3000, noise=0.005, seed=4)
-    choice = choose(points, view_points=view, methods=["ellipsoid", "poisson", "plane"], seed=0)
+    choice = choose(points, view_points=view,
+                    methods=["ellipsoid", "poisson", "plane", "ball-pivoting"], seed=0)
     levels = [c["level"] for c in choice.candidates]
     assert levels == sorted(levels)
     fitted = [c for c in choice.candidates if c["status"] != "skipped"]
     skipped = [c for c in choice.candidates if c["status"] == "skipped"]
-    # The ellipsoid is exact: the finer levels cannot be measurably better.
-    assert choice.method == "ellipsoid" and skipped, format_choice(choice)
+    # The ellipsoid is exact: the defaults (level 2) are not measurably better than it, so the
+    # finest level (ball pivoting) is never fitted.
+    assert choice.method == "ellipsoid", format_choice(choice)
+    assert [c["method"] for c in skipped] == ["ball-pivoting"]
     assert "the ladder stopped" in choice.reason
     assert len(fitted) < MAX_FITS <= 12 and len(LADDER) >= 3
 
