@@ -7,19 +7,19 @@ strikes cover. The rule:
 1. **Hold out** a seeded random ``holdout`` fraction of the strikes (10%); prepare the rest
    (normals, spacing, noise, per-point uncertainty) and fit candidates on it, each isolated
    like ``recon compare``'s runs (a crash or a timeout only removes that candidate).
-2. **Cast every held-out beam** (``heldout_errors``): the held-out strike's beam, from its view
-   point through the point, is cast against the surface. Where it hits, the strike's error is
-   its distance to the surface, truncated at the strike's tolerance ``cap = max(tau, 3
-   sigma)``: ``tau`` is 1% of the cloud's bounding-box diagonal (the F-score threshold of
-   ``metrics``, ``TAU_FRACTION``), ``sigma`` the strike's recorded 1-sigma uncertainty along
-   the normal of the surface it hits (``recon.surfaces.uncertainty``: the range error head-on,
-   the angle and pose errors at grazing incidence). **A beam that misses the surface costs the
-   full cap**: a mesh with holes predicts nothing there (the old rule counted its closest-point
-   distance, a lower bound, so holes looked good). The held-out error ``e`` is the mean: about
-   the Chamfer distance where the surface is good, about the F-score where it is not. (The
-   range residual along the beam, which an earlier rule used, ranked a smooth Poisson surface
-   above the truth's best runs on the suite's RSO-A cloud: at grazing incidence it multiplies
-   a small surface error by 1 / cos.)
+2. **Cast every held-out beam** (``heldout_errors``, ``heldout_geometry``): the held-out
+   strike's beam, from its view point through the point, is cast against the surface. Where it
+   hits, the strike's error is its distance to the surface, truncated at the strike's tolerance
+   ``cap = max(tau, 3 sigma)``: ``tau`` is 1% of the cloud's bounding-box diagonal (the F-score
+   threshold of ``metrics``, ``TAU_FRACTION``), ``sigma`` the strike's recorded 1-sigma
+   uncertainty along the normal of the surface it hits (``recon.surfaces.uncertainty``: the
+   range error head-on, the angle and pose errors at grazing incidence). **A beam that misses
+   the surface costs the full cap**: a mesh with holes predicts nothing there (the old rule
+   counted its closest-point distance, a lower bound, so holes looked good). The held-out error
+   ``e`` is the mean: about the Chamfer distance where the surface is good, about the F-score
+   where it is not. (The range residual along the beam, which an earlier rule used, ranked a
+   smooth Poisson surface above the truth's best runs on the suite's RSO-A cloud: at grazing
+   incidence it multiplies a small surface error by 1 / cos.)
 3. **One standard error**: the best candidate has the lowest ``e``; its standard error ``se``
    is the noise of that estimate, and every candidate with ``e <= e_best + max(se,
    TAU_SLACK tau)`` fits the held-out strikes as well as the best, to within what this cloud
@@ -219,61 +219,52 @@ def select(candidates: list[dict], *, coverage: float = float("nan"), slack: flo
     return chosen, threshold, reason
 
 
-def heldout_residuals(points: np.ndarray, view_points: np.ndarray | None, vertices: np.ndarray,
-                      faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Absolute range residuals of held-out strikes against a surface.
+def heldout_geometry(points: np.ndarray, view_points: np.ndarray | None, vertices: np.ndarray,
+                     faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Held-out strikes against a surface: their distances, and whether their beams hit it.
 
     Parameters
     ----------
     points : (n, 3) float64, metres, body frame
         Held-out points.
     view_points : (n, 3) float64, metres, or None
-        Their sensor positions; None gives closest-point distances.
+        Their sensor positions (beams from each view point through its point).
     vertices : (v, 3) float64, metres
     faces : (f, 3) int64
 
     Returns
     -------
-    residual : (n,) float64, metres
-        ``| |p - v| - t |`` with ``t`` the range along the beam v -> p to its first hit on the
-        surface (exact, float64, on the triangle Embree's float32 cast found); for beams that
-        miss, and without view points, the closest-point distance to the surface.
+    distance : (n,) float64, metres
+        Closest-point distance of each point to the surface (Open3D's ``compute_distance`` in
+        float32 about the mesh's centre: ~1e-7 of the extent).
     hit : (n,) bool
-        Whether the beam hit the surface (all False without view points).
+        Whether the beam hits the surface (all False without view points).
     cos_incidence : (n,) float64
-        |cos| of the angle between the beam and the normal of the triangle it hit (1 where it
-        missed or without view points).
+        |cos| of the angle between the beam and the normal of the triangle it hits first (1
+        where it misses or without view points).
     """
-    from metrics.distance import point_mesh_distance
+    import open3d as o3d
 
-    residual = np.empty(len(points))
+    centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor((vertices - centre).astype(np.float32)),
+                        o3d.core.Tensor(faces.astype(np.uint32)))
+    distance = scene.compute_distance(o3d.core.Tensor(
+        (points - centre).astype(np.float32))).numpy().astype(np.float64)
     hit = np.zeros(len(points), dtype=bool)
     cos_incidence = np.ones(len(points))
     if view_points is not None:
-        import open3d as o3d
-
-        centre = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
-        scene = o3d.t.geometry.RaycastingScene()
-        scene.add_triangles(o3d.core.Tensor((vertices - centre).astype(np.float32)),
-                            o3d.core.Tensor(faces.astype(np.uint32)))
         ray = points - view_points
-        measured = np.linalg.norm(ray, axis=1)
-        direction = ray / np.maximum(measured, 1e-300)[:, None]
+        direction = ray / np.maximum(np.linalg.norm(ray, axis=1), 1e-300)[:, None]
         rays = np.hstack([view_points - centre, direction]).astype(np.float32)
         cast = scene.cast_rays(o3d.core.Tensor(rays))
         triangle = cast["primitive_ids"].numpy().astype(np.int64)
         hit = np.isfinite(cast["t_hit"].numpy()) & (triangle < len(faces))
         a, b, c = (vertices[faces[triangle[hit], i]] for i in range(3))
         normal = np.cross(b - a, c - a)
-        along = np.einsum("ij,ij->i", normal, direction[hit])
-        t = np.einsum("ij,ij->i", normal, a - view_points[hit]) / np.where(along == 0, 1e-300,
-                                                                            along)
-        residual[hit] = np.abs(measured[hit] - t)
-        cos_incidence[hit] = np.abs(along) / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)
-    miss = ~hit
-    if miss.any():
-        residual[miss] = point_mesh_distance(points[miss], (vertices, faces))[0]
-    return residual, hit, cos_incidence
+        cos_incidence[hit] = np.abs(np.einsum("ij,ij->i", normal, direction[hit])) / \
+            np.maximum(np.linalg.norm(normal, axis=1), 1e-300)
+    return distance, hit, cos_incidence
 
 
 def strike_sigma(columns: dict[str, np.ndarray] | None, cos_incidence: np.ndarray,
@@ -462,14 +453,11 @@ def heldout_errors(context: dict, vertices: np.ndarray, faces: np.ndarray
         ``min(distance, cap)`` for beams that hit the surface, ``cap`` for those that miss.
     hits : (n,) bool, or None without view points
     """
-    from metrics.distance import point_mesh_distance
-
     view = context["view"]
-    distance = point_mesh_distance(context["points"], (vertices, faces))[0]
+    distance, hits, cos = heldout_geometry(context["points"], view, vertices, faces)
     if view is None:
-        sigma = strike_sigma(context["columns"], np.ones(len(distance)), context["noise"])
+        sigma = strike_sigma(context["columns"], cos, context["noise"])
         return np.minimum(distance, np.maximum(context["tau"], SIGMAS * sigma)), None
-    _, hits, cos = heldout_residuals(context["points"], view, vertices, faces)
     cap = np.maximum(context["tau"], SIGMAS * strike_sigma(context["columns"], cos,
                                                             context["noise"]))
     return np.where(hits, np.minimum(distance, cap), cap), hits

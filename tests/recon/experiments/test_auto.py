@@ -52,13 +52,16 @@ def test_the_ladder_runs_coarse_to_fine_and_stops():
     from recon.experiments.auto import LADDER, MAX_FITS
 
     points, view, _ = ellipsoid_points(3000, noise=0.005, seed=4)
-    choice = choose(points, view_points=view, methods=["ellipsoid", "poisson", "plane"], seed=0)
+    choice = choose(points, view_points=view,
+                    methods=["ellipsoid", "poisson", "plane", "ball-pivoting"], seed=0)
     levels = [c["level"] for c in choice.candidates]
     assert levels == sorted(levels)
     fitted = [c for c in choice.candidates if c["status"] != "skipped"]
     skipped = [c for c in choice.candidates if c["status"] == "skipped"]
-    # The ellipsoid is exact: the finer levels cannot be measurably better.
-    assert choice.method == "ellipsoid" and skipped, format_choice(choice)
+    # The ellipsoid is exact: the defaults (level 2) are not measurably better than it, so the
+    # finest level (ball pivoting) is never fitted.
+    assert choice.method == "ellipsoid", format_choice(choice)
+    assert [c["method"] for c in skipped] == ["ball-pivoting"]
     assert "the ladder stopped" in choice.reason
     assert len(fitted) < MAX_FITS <= 12 and len(LADDER) >= 3
 
@@ -118,24 +121,36 @@ def test_bad_options_are_named(kwargs, match):
         choose(points, view_points=view, candidates=CANDIDATES, **kwargs)
 
 
-def test_heldout_residuals_are_range_errors_along_the_beam():
-    from recon.experiments.auto import heldout_residuals
+def test_heldout_geometry_measures_distances_and_which_beams_hit():
+    from recon.experiments.auto import heldout_geometry
 
     # The plane z = 0 over [-1, 1]^2; beams come in at 45 degrees from above.
     vertices = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=float)
     faces = np.array([[0, 1, 2], [0, 2, 3]])
     points = np.array([[0.0, 0.0, 0.1], [0.2, 0.3, -0.05], [5.0, 0.0, 0.2]])
     view = points + np.array([-10.0, 0.0, 10.0])
-    residual, hit, cos = heldout_residuals(points, view, vertices, faces)
+    distance, hit, cos = heldout_geometry(points, view, vertices, faces)
     assert hit.tolist() == [True, True, False]
-    np.testing.assert_allclose(cos[:2], np.sqrt(0.5))
-    # Along a 45-degree beam the range error is the height times sqrt(2).
-    np.testing.assert_allclose(residual[:2], [0.1 * np.sqrt(2), 0.05 * np.sqrt(2)], rtol=1e-9)
-    # A beam that misses counts the closest-point distance: to the edge x = 1 at (1, 0, 0).
-    assert residual[2] == pytest.approx(np.hypot(4.0, 0.2))
-    closest, none, _ = heldout_residuals(points, None, vertices, faces)
-    np.testing.assert_allclose(closest[:2], [0.1, 0.05], rtol=1e-9)
+    np.testing.assert_allclose(cos[:2], np.sqrt(0.5), rtol=1e-6)
+    # Closest-point distances, the third to the edge x = 1 at (1, 0, 0).
+    np.testing.assert_allclose(distance, [0.1, 0.05, np.hypot(4.0, 0.2)], rtol=1e-5)
+    again, none, _ = heldout_geometry(points, None, vertices, faces)
+    np.testing.assert_allclose(again, distance)
     assert not none.any()
+
+
+def test_heldout_errors_cost_a_full_cap_where_the_beam_misses():
+    from recon.experiments.auto import heldout_errors
+
+    vertices = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=float)
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    points = np.array([[0.0, 0.0, 0.01], [0.5, 0.5, 0.5], [1.2, 0.0, 0.0]])
+    view = points + np.array([0.0, 0.0, 10.0])
+    context = {"points": points, "view": view, "columns": None, "noise": 0.01, "tau": 0.1}
+    error, hits = heldout_errors(context, vertices, faces)
+    # Hit and close; hit but 0.5 off (capped at tau); missed although only 0.2 from the edge.
+    np.testing.assert_allclose(error, [0.01, 0.1, 0.1], rtol=1e-5)
+    assert hits.tolist() == [True, True, False]
 
 
 def test_strike_sigma_grows_with_incidence_as_the_error_model_says():
