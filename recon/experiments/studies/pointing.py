@@ -25,8 +25,9 @@ at which that stops, interpolated linearly between the tested errors.
 Writes ``pointing.csv`` (one row per cell and pose: the best scores, the methods that reached
 them, the mean point error, the self-calibration's estimate), ``requirement.csv`` (the
 requirement per target, range error and pose), ``results.csv`` (every method run) and
-``pointing.png``: per target, the best F-score, Chamfer distance and edge score against the
-pointing error, one colour per range error, solid un-refined, dashed refined.
+``pointing.png``: per target, the best F-score, Chamfer distance and edge score, and the
+registered cloud's mean point error, against the pointing error; one colour per range error,
+solid un-refined, dashed refined.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ TITLE = ("Pointing knowledge against range noise, without and with self-calibrat
 TARGETS = {"asteroid": ("asteroid, single-beam LRF at 750 m", "asteroid-lrf"),
            "rso-a": ("RSO-A, single-beam LRF at 250 m", "rso-a-lrf")}
 # Axis of the misalignment in S (the beam is S z): the benchmark's (0.03, 0.04, 0) deg per
-# 0.05 deg (benchmarks/bench_refine.py), both across-beam axes, along- and cross-track.
+# 0.05 deg (benchmarks/bench_refine.py), across the beam, with parts about both S x and S y.
 AXIS = (0.6, 0.8, 0.0)
 POSES = ("un-refined", "refined")
 # The two most accurate methods of the methods study on these targets (module docstring).
