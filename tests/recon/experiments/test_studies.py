@@ -144,30 +144,37 @@ def _cell(target, sigma, deg, pose, f, chamfer):
             "fscore": f, "chamfer_m": chamfer}
 
 
-def test_pointing_requirement_is_the_largest_error_tolerated_with_every_smaller_one(monkeypatch):
+def test_pointing_requirement_is_where_the_best_surface_stops_being_tolerated(monkeypatch):
     monkeypatch.setitem(pointing.PLAN, "tiny", dict(pointing.PLAN["tiny"], targets=("rso-a",),
                         pointing_deg=(0.0, 0.1, 0.2, 0.5), range_sigma3=(0.3, 1.0)))
     cells = []
-    # range 0.3: F drops below 95 % at 0.2; refined holds to 0.5.
+    # range 0.3: the F-score falls below 95 % between 0.1 and 0.2 deg; refined it holds.
     for deg, f in zip((0.0, 0.1, 0.2, 0.5), (0.90, 0.88, 0.80, 0.95), strict=True):
         cells.append(_cell("rso-a", 0.3, deg, "un-refined", f, 1.0))
         cells.append(_cell("rso-a", 0.3, deg, "refined", 0.9, 1.0))
-    # range 1: the Chamfer grows past 1.2 x at 0.5 only.
+    # range 1: the Chamfer passes 1.2 x between 0.2 and 0.5 deg, refined or not.
     for deg, chamfer in zip((0.0, 0.1, 0.2, 0.5), (1.0, 1.1, 1.19, 1.3), strict=True):
         cells.append(_cell("rso-a", 1.0, deg, "un-refined", 0.8, chamfer))
         cells.append(_cell("rso-a", 1.0, deg, "refined", 0.8, chamfer))
     rows = {(r["range_sigma3"], r["pose"]): r for r in pointing.requirement_rows(cells, "tiny")}
-    assert rows[(0.3, "un-refined")] | {} == {
-        "target": "rso-a", "range_sigma3": 0.3, "pose": "un-refined", "requirement_deg": 0.1,
-        "fails_at_deg": 0.2, "complete": True}  # 0.5 passing again does not count
-    assert rows[(0.3, "refined")]["requirement_deg"] == 0.5
-    assert rows[(0.3, "refined")]["fails_at_deg"] is None
-    assert rows[(1.0, "un-refined")]["fails_at_deg"] == 0.5
+    f_before, f_after = 0.95 * 0.90 / 0.88, 0.95 * 0.90 / 0.80   # degradation at 0.1, 0.2
+    row = rows[(0.3, "un-refined")]
+    assert row["exceeded"] and row["limited_by"] == "F-score" and row["complete"]
+    assert row["requirement_deg"] == pytest.approx(0.1 + 0.1 * (1 - f_before)
+                                                   / (f_after - f_before))
+    assert not rows[(0.3, "refined")]["exceeded"]   # tolerated up to the largest, 0.5
+    assert rows[(0.3, "refined")]["requirement_deg"] is None
+    c_before, c_after = 1.19 / 1.2, 1.3 / 1.2
+    row = rows[(1.0, "un-refined")]
+    assert row["limited_by"] == "Chamfer"
+    assert row["requirement_deg"] == pytest.approx(0.2 + 0.3 * (1 - c_before)
+                                                   / (c_after - c_before))
     coupling = pointing._claim_coupling(list(rows.values()), "tiny")
-    assert coupling["verdict"] == "reproduced"  # fails at 0.2 with 0.3 m, at 0.5 with 1 m
+    assert coupling["verdict"] == "reproduced"   # 0.13 deg at 0.3 m, 0.23 deg at 1 m
     refine_claim = pointing._claim_refinement(list(rows.values()))
-    assert refine_claim["verdict"] == "partly"  # relaxed at 0.3 m, unchanged at 1 m
-    # A missing score leaves the row incomplete, and the claims untested.
+    assert refine_claim["verdict"] == "partly"   # relaxed at 0.3 m, unchanged at 1 m
+    assert "> 0.5 deg" in refine_claim["ours"]
+    # A missing cell leaves its rows incomplete, and a claim with no complete pair untested.
     cells = [c for c in cells if not (c["range_sigma3"] == 1.0 and c["pointing_deg"] == 0.2)]
     rows = pointing.requirement_rows(cells, "tiny")
     assert [r["complete"] for r in rows] == [True, True, False, False]
