@@ -378,7 +378,8 @@ def main(argv=None) -> int:
     total = totals(summaries)
     (args.out / "summary.json").write_text(json.dumps({"clouds": summaries, "totals": total},
                                                       indent=2, default=str) + "\n")
-    command = "python benchmarks/suite.py" + (" --quick" if args.quick else "")
+    command = "python benchmarks/suite.py" + (" --quick" if args.quick else "") + (
+        f" --doc {args.doc}" if args.doc is not None else "")
     text = markdown(summaries, total, command=command)
     (args.out / "summary.md").write_text(text)
     chart = charts.choice_vs_ranking(summaries, args.out / "auto-suite.png",
