@@ -287,26 +287,35 @@ def _cell(cells: Sequence[dict], target: str, sigma: float, deg: float, pose: st
                  and c["pointing_deg"] == deg and c["pose"] == pose), None)
 
 
-def degradation(cell: dict, reference: dict) -> tuple[float, str] | None:
-    """How far ``cell`` is from tolerated, against ``reference`` (perfect pointing): the larger
-    of its Chamfer over ``TOLERATED_CHAMFER`` times the reference's and ``TOLERATED_F`` times
-    the reference's F-score over its own, with which of the two it is; at most 1 is tolerated.
+def degradation(cell: dict, reference: dict) -> dict[str, float] | None:
+    """How far ``cell`` is from tolerated, against ``reference`` (perfect pointing), per score:
+    ``Chamfer``, its Chamfer over ``TOLERATED_CHAMFER`` times the reference's, and ``F-score``,
+    ``TOLERATED_F`` times the reference's F-score over its own; above 1 is not tolerated.
     None when a score is missing."""
     if any(c.get(m) is None for c in (cell, reference) for m in ("fscore", "chamfer_m")):
         return None
-    chamfer = cell["chamfer_m"] / (TOLERATED_CHAMFER * reference["chamfer_m"])
-    fscore = TOLERATED_F * reference["fscore"] / max(cell["fscore"], 1e-12)
-    return (chamfer, "Chamfer") if chamfer >= fscore else (fscore, "F-score")
+    return {"Chamfer": cell["chamfer_m"] / (TOLERATED_CHAMFER * reference["chamfer_m"]),
+            "F-score": TOLERATED_F * reference["fscore"] / max(cell["fscore"], 1e-12)}
+
+
+def _crossing(x: Sequence[float], values: Sequence[float]) -> float | None:
+    """The first ``x`` at which ``values`` pass 1, linearly interpolated (None: never)."""
+    for i, v in enumerate(values):
+        if v > 1.0:
+            if i == 0:
+                return float(x[0])
+            return float(x[i - 1] + (1.0 - values[i - 1]) / (v - values[i - 1])
+                         * (x[i] - x[i - 1]))
+    return None
 
 
 def requirement_rows(cells: Sequence[dict], size: str) -> list[dict]:
     """The pointing-knowledge requirement per target, range error and pose.
 
-    The pointing error at which the best surface stops being tolerated (``degradation``
-    reaches 1), linearly interpolated between the tested errors: ``requirement_deg``, and
-    ``limited_by`` the score that failed first; ``requirement_deg`` is None (``exceeded``
-    False) when even the largest tested error is tolerated. ``complete`` is False when a cell
-    is missing.
+    For each score of ``degradation``, the pointing error at which it passes 1, linearly
+    interpolated between the tested errors; the requirement (``requirement_deg``) is the
+    smaller, ``limited_by`` names its score. None (``exceeded`` False) when even the largest
+    tested error is tolerated; ``complete`` False when a cell is missing.
     """
     plan = PLAN[size]
     levels = sorted(plan["pointing_deg"])
@@ -318,21 +327,19 @@ def requirement_rows(cells: Sequence[dict], size: str) -> list[dict]:
                 row = {"target": target, "range_sigma3": sigma, "pose": pose,
                        "requirement_deg": None, "limited_by": None, "exceeded": False,
                        "largest_tested_deg": levels[-1], "complete": True}
-                previous = (levels[0], 0.0)
-                for deg in levels:
-                    cell = _cell(cells, target, sigma, deg, pose)
-                    found = None if cell is None or reference is None else degradation(
-                        cell, reference)
-                    if found is None:
-                        row["complete"] = False
-                        break
-                    value, score = found
-                    if value > 1.0:
-                        x0, v0 = previous
-                        row.update(exceeded=True, limited_by=score, requirement_deg=(
-                            x0 if deg == x0 else x0 + (1.0 - v0) / (value - v0) * (deg - x0)))
-                        break
-                    previous = (deg, value)
+                found = [None if cell is None or reference is None
+                         else degradation(cell, reference)
+                         for cell in (_cell(cells, target, sigma, d, pose) for d in levels)]
+                if any(f is None for f in found):
+                    row["complete"] = False
+                else:
+                    crossings = {score: _crossing(levels, [f[score] for f in found])
+                                 for score in found[0]}
+                    passed = {k: v for k, v in crossings.items() if v is not None}
+                    if passed:
+                        score = min(passed, key=passed.get)
+                        row.update(requirement_deg=passed[score], limited_by=score,
+                                   exceeded=True)
                 out.append(row)
     return out
 

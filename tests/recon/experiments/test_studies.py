@@ -157,7 +157,7 @@ def test_pointing_requirement_is_where_the_best_surface_stops_being_tolerated(mo
         cells.append(_cell("rso-a", 1.0, deg, "un-refined", 0.8, chamfer))
         cells.append(_cell("rso-a", 1.0, deg, "refined", 0.8, chamfer))
     rows = {(r["range_sigma3"], r["pose"]): r for r in pointing.requirement_rows(cells, "tiny")}
-    f_before, f_after = 0.95 * 0.90 / 0.88, 0.95 * 0.90 / 0.80   # degradation at 0.1, 0.2
+    f_before, f_after = 0.95 * 0.90 / 0.88, 0.95 * 0.90 / 0.80   # F-score's at 0.1 and 0.2
     row = rows[(0.3, "un-refined")]
     assert row["exceeded"] and row["limited_by"] == "F-score" and row["complete"]
     assert row["requirement_deg"] == pytest.approx(0.1 + 0.1 * (1 - f_before)
@@ -169,6 +169,14 @@ def test_pointing_requirement_is_where_the_best_surface_stops_being_tolerated(mo
     assert row["limited_by"] == "Chamfer"
     assert row["requirement_deg"] == pytest.approx(0.2 + 0.3 * (1 - c_before)
                                                    / (c_after - c_before))
+    # Each score is interpolated on its own (the F-score's 0.95 at perfect pointing must not
+    # lower the Chamfer's crossing), and the first score to fail sets the requirement.
+    for cell in cells:
+        if cell["range_sigma3"] == 1.0 and cell["pointing_deg"] == 0.2:
+            cell["fscore"] = 0.8 * 0.95 / 1.05  # F-score's degradation 1.05 at 0.2 deg
+    row = pointing.requirement_rows(cells, "tiny")[2]
+    assert row["limited_by"] == "F-score"
+    assert row["requirement_deg"] == pytest.approx(0.1 + 0.1 * 0.05 / 0.1)
     coupling = pointing._claim_coupling(list(rows.values()), "tiny")
     assert coupling["verdict"] == "reproduced"   # 0.13 deg at 0.3 m, 0.23 deg at 1 m
     refine_claim = pointing._claim_refinement(list(rows.values()))
