@@ -70,3 +70,26 @@ def check_destination(path, error: type[Exception] = OSError) -> Path:
     if not stat.S_ISREG(mode):
         raise error(f"{path}: is {_kind(mode)}; give the name of a file to write")
     return path
+
+
+def output_directory(path, error: type[Exception] = OSError) -> Path:
+    """The output directory ``-o path``, created if missing; refuses a path that is a file.
+
+    Parameters
+    ----------
+    path : str or Path
+    error : exception class
+        Raised (a ReconError subclass in recon) with one line naming ``path``.
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise error(f"-o {path}: is a file, not a directory")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise error(f"-o {path}: cannot create the directory ({exc.strerror})") from None
+    return path

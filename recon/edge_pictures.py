@@ -27,6 +27,7 @@ import numpy as np
 
 from formats.errors import ReconError
 from formats.geometry import Mesh
+from formats.paths import output_directory
 
 # File names in the output directory.
 PLY_NAME, PNG_NAME, JSON_NAME = "edges.ply", "edges.png", "edges.json"
@@ -74,7 +75,7 @@ def edge_pictures(test, truth, output, *, seed: int = 0, n_test_samples: int | N
     from metrics.inputs import as_mesh, as_test
     from recon.experiments import charts
 
-    out = _output_dir(output)
+    out = output_directory(output, EdgePicturesError)
     stage = progress or (lambda name: None)
     truth = as_mesh(truth, "truth")
     test = as_test(test, "test")
@@ -119,18 +120,6 @@ def edge_pictures(test, truth, output, *, seed: int = 0, n_test_samples: int | N
 
 def _number(value) -> str:
     return "n/a" if value is None else f"{value:.3f}"
-
-
-def _output_dir(output) -> Path:
-    out = Path(output)
-    if out.exists() and not out.is_dir():
-        raise EdgePicturesError(f"-o {out}: is a file, not a directory")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise EdgePicturesError(f"-o {out}: cannot create the directory ({exc.strerror})") \
-            from None
-    return out
 
 
 def _write_ply(path: Path, points: np.ndarray, label: np.ndarray, report) -> None:

@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 from types import ModuleType
 
+from formats.paths import output_directory
 from recon.experiments.studies.runner import SIZES, StudyError, check_size
 
 # Study modules, in the order of the paper (and of ``recon study --list``).
@@ -90,14 +91,7 @@ def check_scheduler(scheduler: str | None, *, connect: bool = True) -> str | Non
 
 def check_output(out_dir) -> Path:
     """The output directory, created; refuses a path that is a file."""
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise StudyError(f"-o {out_dir}: is a file, not a directory")
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise StudyError(f"-o {out_dir}: cannot create the directory ({exc.strerror})") from None
-    return out_dir
+    return output_directory(out_dir, StudyError)
 
 
 def run(name: str, out_dir, *, size: str = "full", scheduler: str | None = None,
