@@ -6,6 +6,7 @@ properties.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import resource
 import shutil
@@ -108,20 +109,49 @@ def test_stale_partials_of_dead_processes_are_removed(tmp_path, sphere_log, caps
 # --------------------------------------------------------------------------- signals
 
 
-def _interrupt(args, signum, *, after_s, tmp_path, old: Path | None, wait_children: int = 0):
-    """Start ``recon ARGS``, send ``signum`` after ``after_s`` seconds; return the seconds it
-    took to exit and its stderr."""
+def _writing(directory: Path):
+    """Ready once a temporary output exists in ``directory``: the run is writing, not yet done."""
+    return lambda proc: bool(_partials(directory))
+
+
+def _reading(path: Path):
+    """Ready once the process has ``path`` open: its work has started."""
     import psutil
 
+    def ready(proc):
+        with contextlib.suppress(psutil.Error):
+            return any(f.path == str(path) for f in psutil.Process(proc.pid).open_files())
+        return False
+    return ready
+
+
+def _workers(n: int):
+    """Ready once ``n`` child processes run (a Dask cluster's workers, an isolated method)."""
+    import psutil
+
+    def ready(proc):
+        with contextlib.suppress(psutil.Error):
+            return len(psutil.Process(proc.pid).children(recursive=True)) >= n
+        return False
+    return ready
+
+
+def _interrupt(args, signum, *, ready, settle_s, tmp_path, old: Path | None):
+    """Start ``recon ARGS``; once ``ready(proc)`` holds and ``settle_s`` more seconds passed,
+    send ``signum``; return the seconds it took to exit.
+
+    Waiting for evidence that the work is under way (not a fixed delay) keeps the test from
+    racing a run that an idle machine finishes before the signal arrives: each run below lasts
+    several seconds past its ready point.
+    """
     before = old.read_bytes() if old is not None else None
     proc = _recon(*args, cwd=tmp_path)
-    time.sleep(after_s)
-    if wait_children:   # a Dask cluster up, its workers started: interrupt the work itself
-        deadline = time.monotonic() + 120
-        while len(psutil.Process(proc.pid).children(recursive=True)) < wait_children:
-            assert time.monotonic() < deadline and proc.poll() is None
-            time.sleep(0.2)
-        time.sleep(2.0)
+    deadline = time.monotonic() + 120
+    while not ready(proc):
+        assert proc.poll() is None, "finished before it was ready: make the run longer"
+        assert time.monotonic() < deadline, "never became ready"
+        time.sleep(0.02)
+    time.sleep(settle_s)
     assert proc.poll() is None, "finished before the signal: make the run longer"
     proc.send_signal(signum)
     sent = time.monotonic()
@@ -139,25 +169,26 @@ def _interrupt(args, signum, *, after_s, tmp_path, old: Path | None, wait_childr
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_simulate_stops_promptly_and_keeps_the_old_log(signum, tmp_path):
-    old = tmp_path / "run.h5"
+    old = tmp_path / "run.h5"   # the simulation streams into its partial for ~4 s (idle)
     old.write_bytes(b"previous output")
-    took = _interrupt(["simulate", "asteroid-lidar", "-o", old], signum, after_s=3.0,
-                      tmp_path=tmp_path, old=old)
+    took = _interrupt(["simulate", "asteroid-lidar", "-o", old], signum,
+                      ready=_writing(tmp_path), settle_s=0.5, tmp_path=tmp_path, old=old)
     assert took < STOP_WITHIN_S
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_ingest_stops_promptly(signum, big_log, tmp_path):
-    old = tmp_path / "cloud.ply"
+    old = tmp_path / "cloud.ply"   # the partial exists for ~2 s of a 2.7 s run (idle)
     old.write_bytes(b"previous output")
-    took = _interrupt(["ingest", big_log, "-o", old], signum, after_s=2.0, tmp_path=tmp_path,
-                      old=old)
+    took = _interrupt(["ingest", big_log, "-o", old], signum, ready=_writing(tmp_path),
+                      settle_s=0.3, tmp_path=tmp_path, old=old)
     assert took < STOP_WITHIN_S
 
 
 def test_score_stops_promptly(big_log, tmp_path):
-    took = _interrupt(["score", big_log], signal.SIGINT, after_s=3.0, tmp_path=tmp_path,
-                      old=None)
+    # The log is open from 0.5 s to 1.8 s of an 11 s run (idle); scoring follows the reading.
+    took = _interrupt(["score", big_log], signal.SIGINT, ready=_reading(big_log), settle_s=1.0,
+                      tmp_path=tmp_path, old=None)
     assert took < STOP_WITHIN_S
 
 
@@ -167,14 +198,16 @@ def test_sweeps_stop_promptly(command, big_log, tmp_path):
     sim.simulate(sim.load_scene("asteroid-lidar", ["time.duration=600"]), small, seed=0)
     args = ([command, small, "--truth", small, "-o", tmp_path / "out"] +
             (["--noise", "0,1", "--density", "1,0.5"] if command == "stability" else []))
-    took = _interrupt(args, signal.SIGINT, after_s=1.0, tmp_path=tmp_path, old=None,
-                      wait_children=2)
+    # The workers up, the methods running (the whole run takes minutes): interrupt the work.
+    took = _interrupt(args, signal.SIGINT, ready=_workers(2), settle_s=2.0, tmp_path=tmp_path,
+                      old=None)
     assert took < STOP_WITHIN_S
 
 
 def test_study_stops_promptly(tmp_path):
-    took = _interrupt(["study", "slew", "-o", tmp_path / "out", "--size", "tiny"],
-                      signal.SIGTERM, after_s=1.0, tmp_path=tmp_path, old=None, wait_children=2)
+    # --quick takes ~10 s (idle), its Dask cluster up after ~2 s.
+    took = _interrupt(["study", "slew", "-o", tmp_path / "out", "--quick"], signal.SIGTERM,
+                      ready=_workers(2), settle_s=1.0, tmp_path=tmp_path, old=None)
     assert took < STOP_WITHIN_S
 
 
