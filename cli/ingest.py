@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from formats.atomic import write_text_atomically
 from formats.errors import ReconError
 
 
@@ -98,7 +99,9 @@ def run_ingest(args) -> int:
         for line in refinement.lines():
             print(line)
         if args.refine_json is not None:
-            args.refine_json.write_text(json.dumps(refinement.to_dict(), indent=2) + "\n")
+            write_text_atomically(args.refine_json,
+                                  json.dumps(refinement.to_dict(), indent=2) + "\n",
+                                  error=IngestOptionError)
             print(f"wrote the estimates to {args.refine_json}")
         correction = refinement.correction
     with tqdm(unit="strike", unit_scale=True, disable=None, leave=False,

@@ -228,3 +228,48 @@ class AtomicWriter:
 def _abort_open_writers() -> None:
     for writer in list(_OPEN):
         writer.abort()
+
+
+class _WholeFile(AtomicWriter):
+    """A file written at once by a callback (a JSON summary, a chart): nothing to finish."""
+
+    def __init__(self, path, *, suffix: str, error: type[Exception]):
+        self.missing_dir_error = error
+        super().__init__(path, suffix=suffix)
+
+    def _finish(self) -> None:
+        pass
+
+    def _release(self) -> None:
+        pass
+
+
+def write_atomically(path, write, *, error: type[Exception] = OSError) -> Path:
+    """Call ``write(temporary)`` on a temporary file beside ``path``, then rename it to ``path``.
+
+    The same guarantees as every :class:`AtomicWriter`: the destination is checked first, an
+    interrupted or failed ``write`` leaves the old file and no partial, a full disk is one line.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination.
+    write : callable
+        Called with the temporary path (its suffix is ``path``'s: libraries such as matplotlib
+        pick the format from it); it writes the whole file.
+    error : exception class
+        Raised, with one line naming ``path``, for a destination that cannot be written.
+
+    Returns
+    -------
+    Path
+    """
+    with _WholeFile(path, suffix=Path(path).suffix, error=error) as writer:
+        write(writer.temporary)
+    return writer.path
+
+
+def write_text_atomically(path, text: str, *, error: type[Exception] = OSError) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` with :func:`write_atomically`."""
+    return write_atomically(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"),
+                            error=error)

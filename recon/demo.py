@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from formats.atomic import write_text_atomically
 from recon import api
 
 DEMO_SCENE = "asteroid-lrf-slew"   # the paper's slewing single-beam LRF at 85 deg, 50 rotations
@@ -83,7 +84,7 @@ def run_demo(output, *, scene: str = DEMO_SCENE, method: str = DEMO_METHOD,
     scores = {"cloud": api.score(cloud, truth=truth, seed=seed),
               "surface": api.score(surface, truth=truth, seed=seed)}
     say(f"  in {time.perf_counter() - start:.1f} s")
-    files["scores"].write_text(json.dumps(
+    write_text_atomically(files["scores"], json.dumps(
         {"scene": scene, "simulation": summary,
          "scores": {k: s.to_dict() for k, s in scores.items()}}, indent=2, default=str))
     return {"files": files, "simulation": summary, "scores": scores, "n_faces": surface.n_faces}

@@ -20,11 +20,11 @@ interrupted run leaves the previous outputs as they were.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
+from formats.atomic import write_atomically, write_text_atomically
 from formats.errors import ReconError
 from formats.geometry import Mesh
 from formats.paths import output_directory
@@ -106,15 +106,15 @@ def edge_pictures(test, truth, output, *, seed: int = 0, n_test_samples: int | N
             f"{_number(report.missed_edge_rate)}, feature edges missed "
             f"{_number(report.feature_missed_rate)}\nk = {report.k}, tolerance "
             f"{report.tolerance_m:.3g} m, feature angle {report.feature_angle_deg:g} deg")
-    _replace_atomically(files["png"], lambda path: charts.edge_points(
+    write_atomically(files["png"], error=EdgePicturesError, write=lambda path: charts.edge_points(
         points, label, path, bounds=(truth.vertices.min(axis=0), truth.vertices.max(axis=0)),
         missed_feature=segments[missed & sharp], missed_gentle=segments[missed & ~sharp],
         title=title or "Edge points against the truth", note=note, seed=seed))
     stage("png")
     summary = {"edge": report.to_dict(), "counts": counts,
                "files": {k: str(v) for k, v in files.items()}}
-    _replace_atomically(files["json"],
-                        lambda path: Path(path).write_text(json.dumps(summary, indent=2) + "\n"))
+    write_text_atomically(files["json"], json.dumps(summary, indent=2) + "\n",
+                          error=EdgePicturesError)
     return {"report": report, "files": files, "counts": counts}
 
 
@@ -128,13 +128,3 @@ def _write_ply(path: Path, points: np.ndarray, label: np.ndarray, report) -> Non
     write_ply(path, {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2], "label": label,
                      "near_edge": report.near_edge.astype(np.uint8),
                      "sigma": report.variation.sigma, "drop": report.variation.drop})
-
-
-def _replace_atomically(path: Path, write) -> None:
-    """Call ``write(temporary)`` beside ``path``, then rename it to ``path``."""
-    temporary = path.with_name(f".{path.name}.partial{path.suffix}")
-    try:
-        write(temporary)
-        os.replace(temporary, path)
-    finally:
-        temporary.unlink(missing_ok=True)

@@ -16,6 +16,7 @@ import json
 import math
 from pathlib import Path
 
+from formats.atomic import write_text_atomically
 from formats.errors import ReconError
 
 # Rows of a CSV table shown in the page (the file keeps them all).
@@ -289,7 +290,6 @@ def write_report(directory, output) -> Path:
     text = render(directory)
     try:
         output.parent.mkdir(parents=True, exist_ok=True)
-        output.write_text(text, encoding="utf-8")
     except OSError as exc:
-        raise ReportError(f"-o {output}: cannot write ({exc.strerror})") from None
-    return output
+        raise ReportError(f"-o {output}: cannot create {output.parent} ({exc.strerror})") from None
+    return write_text_atomically(output, text, error=ReportError)

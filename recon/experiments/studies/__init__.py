@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 from types import ModuleType
 
+from formats.atomic import write_text_atomically
 from formats.paths import output_directory
 from recon.experiments.studies.runner import SIZES, StudyError, check_size
 
@@ -140,7 +141,7 @@ def run(name: str, out_dir, *, size: str = "full", scheduler: str | None = None,
                              extra=done.get("extra"))
         summary = json.loads((out_dir / runner.SUMMARY_JSON).read_text())
     summary["wall_time_s"] = time.perf_counter() - start
-    (out_dir / runner.SUMMARY_JSON).write_text(json.dumps(summary, indent=2) + "\n")
+    write_text_atomically(out_dir / runner.SUMMARY_JSON, json.dumps(summary, indent=2) + "\n")
     return summary
 
 
@@ -185,10 +186,10 @@ def run_all(out_dir, *, size: str = "full", scheduler: str | None = None,
                                       "n_cases": summary["n_cases"],
                                       "n_failed": summary["n_failed"], "verdicts": verdicts}
             index["wall_time_s"] = time.perf_counter() - start
-            (out_dir / INDEX_JSON).write_text(json.dumps(index, indent=2) + "\n")
+            write_text_atomically(out_dir / INDEX_JSON, json.dumps(index, indent=2) + "\n")
     finally:
         if cluster is not None:
             cluster.close()
     index["wall_time_s"] = time.perf_counter() - start
-    (out_dir / INDEX_JSON).write_text(json.dumps(index, indent=2) + "\n")
+    write_text_atomically(out_dir / INDEX_JSON, json.dumps(index, indent=2) + "\n")
     return index

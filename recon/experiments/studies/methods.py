@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.atomic import write_text_atomically
 from recon.experiments import charts
 from recon.experiments.studies import runner
 from recon.experiments.studies.errors import DILATION, LRF_STOCHASTIC, ORIGIN
@@ -141,7 +142,7 @@ def run(out_dir, *, size: str, scheduler: str | None = None, resume: bool = Fals
     runner.write_csv(best, out_dir / "best.csv")
     files = ["methods.csv", "best.csv", *_heatmap(records, out_dir), *files]
     claims = [_claim_usable(best), _claim_planes(records)]
-    (out_dir / runner.RESULTS_CSV).write_text((out_dir / "methods.csv").read_text())
+    write_text_atomically(out_dir / runner.RESULTS_CSV, (out_dir / "methods.csv").read_text())
     failed = [{"key": f"{r['condition']} {r['label']}", "reason": r.get("reason")}
               for r in records if r.get("status") != "ok"]
     summary = {"study": NAME, "title": TITLE, "size": size, "n_cases": len(records),
@@ -153,8 +154,8 @@ def run(out_dir, *, size: str, scheduler: str | None = None, resume: bool = Fals
                "grid": plan["grid"]}
     from recon.experiments.sweep import to_jsonable
 
-    (out_dir / runner.SUMMARY_JSON).write_text(json.dumps(to_jsonable(summary), indent=2)
-                                               + "\n")
+    write_text_atomically(out_dir / runner.SUMMARY_JSON,
+                          json.dumps(to_jsonable(summary), indent=2) + "\n")
     return summary
 
 

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.atomic import write_text_atomically
 from recon.experiments import charts
 from recon.experiments.studies import runner
 from recon.experiments.studies.runner import claim, rotations
@@ -382,8 +383,8 @@ def run(out_dir, *, size: str, scheduler: str | None = None, resume: bool = Fals
                "misalignment_axis_in_S": list(AXIS), "requirement": requirement,
                "tolerated_rule": {"fscore_fraction": TOLERATED_F,
                                   "chamfer_multiple": TOLERATED_CHAMFER}}
-    (out_dir / runner.SUMMARY_JSON).write_text(json.dumps(to_jsonable(summary), indent=2)
-                                               + "\n")
+    write_text_atomically(out_dir / runner.SUMMARY_JSON,
+                          json.dumps(to_jsonable(summary), indent=2) + "\n")
     return summary
 
 

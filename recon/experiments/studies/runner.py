@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import json
 import math
 import tempfile
@@ -29,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from formats.atomic import write_text_atomically
 from formats.errors import ReconError
 
 # Study sizes: ``full`` reproduces the paper's durations, ``quick`` is for CI (every study in a
@@ -230,9 +232,7 @@ def drop_failed(out_dir: Path) -> int:
     done = read_results(path)
     kept = [r for r in done.values() if r.get("status") == "ok"]
     if len(kept) < len(done):
-        tmp = path.with_name(path.name + ".partial")
-        tmp.write_text("".join(json.dumps(r) + "\n" for r in kept))
-        tmp.replace(path)
+        write_text_atomically(path, "".join(json.dumps(r) + "\n" for r in kept))
     return len(done) - len(kept)
 
 
@@ -283,19 +283,18 @@ def rows(records: Mapping[str, dict]) -> list[dict]:
 def write_csv(table: Sequence[Mapping], path) -> Path:
     """Write rows as CSV; columns in first-seen order, missing values empty."""
     columns = list(dict.fromkeys(k for row in table for k in row))
-    path = Path(path)
-    with open(path, "w", newline="") as out:
-        writer = csv.writer(out)
-        writer.writerow(columns)
-        for row in table:
-            values = []
-            for c in columns:
-                v = row.get(c)
-                if isinstance(v, float):
-                    v = f"{v:.6g}"
-                values.append("" if v is None else v)
-            writer.writerow(values)
-    return path
+    out = io.StringIO(newline="")
+    writer = csv.writer(out)
+    writer.writerow(columns)
+    for row in table:
+        values = []
+        for c in columns:
+            v = row.get(c)
+            if isinstance(v, float):
+                v = f"{v:.6g}"
+            values.append("" if v is None else v)
+        writer.writerow(values)
+    return write_text_atomically(path, out.getvalue())
 
 
 def series(records: Mapping[str, dict], key: str, metric: str, *, x: str = "rotations"
@@ -361,6 +360,5 @@ def write_summary(out_dir, *, study: str, title: str, size: str, records: Mappin
                "score_options": [json.loads(text) for text in sorted(options)],
                "case_wall_time_s": sum(r.get("wall_time_s", 0.0) for r in done.values()),
                "wall_time_s": wall_time_s, **dict(extra or {})}
-    path = Path(out_dir) / SUMMARY_JSON
-    path.write_text(json.dumps(to_jsonable(summary), indent=2) + "\n")
-    return path
+    return write_text_atomically(Path(out_dir) / SUMMARY_JSON,
+                                 json.dumps(to_jsonable(summary), indent=2) + "\n")
