@@ -188,7 +188,7 @@ class StrikeLogWriter(AtomicWriter):
         def columns(group, spec, rows):
             for name, (tail, dtype) in spec.items():
                 group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
-                                     chunks=(rows, *tail),
+                                     chunks=(rows, *tail), fillvalue=0,
                                      **_filters(compression, f"{group.name[1:]}/{name}",
                                                 noisy_angles))
 
@@ -266,7 +266,8 @@ class StrikeLogWriter(AtomicWriter):
     def _write(ds, arr: np.ndarray) -> None:
         n = ds.shape[0]
         ds.resize(n + len(arr), axis=0)
-        ds[n:] = arr
+        if arr.any():   # rows never written read as the fill value, 0 (SPEC.md, Storage)
+            ds[n:] = arr
 
     def write_shots(self, time, sensor_position, sensor_attitude, target_attitude, *,
                     truth: Shots | None = None) -> None:

@@ -98,3 +98,26 @@ def test_an_aborted_writer_leaves_no_file(tmp_path):
         _write(w, shots, strikes, truth, [0, 7])
         raise RuntimeError("stop")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_rows_of_zeros_are_not_stored_and_read_back_as_zeros(tmp_path):
+    """A noise-free sensor's angle offsets are zeros: no chunk is stored for them (SPEC.md,
+    Storage); a column that is zeros only in part reads back exactly."""
+    from formats import StrikeLog
+
+    shots, strikes, truth = _rows(37)
+    strikes["azimuth_offset"][:] = 0.0
+    strikes["elevation_offset"][:30] = 0.0   # chunks of 10 rows: 3 of zeros, then values
+    with StrikeLogWriter(tmp_path / "log.h5", sensor=SENSOR, target="t", truth_mesh=MESH,
+                         expected_shots=6, expected_strikes=10) as w:
+        _write(w, shots, strikes, truth, [0, 4, 9, 20, 37])
+    with h5py.File(tmp_path / "log.h5") as f:
+        assert f["strikes/azimuth_offset"].id.get_num_chunks() == 0
+        assert f["strikes/elevation_offset"].id.get_num_chunks() < 8   # 74 rows, 8 chunks
+    with StrikeLog(tmp_path / "log.h5") as log:
+        chunk = next(log.iter_chunks())
+    assert chunk.range.tolist() == strikes["range"].tolist()
+    with h5py.File(tmp_path / "log.h5") as f:
+        np.testing.assert_array_equal(f["strikes/azimuth_offset"][()], 0.0)
+        np.testing.assert_array_equal(f["strikes/elevation_offset"][()],
+                                      strikes["elevation_offset"])
