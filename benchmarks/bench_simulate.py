@@ -12,10 +12,12 @@
    - *all cores*: one call per core at a time, as the simulator's worker threads call it (for
      embreex, which runs one thread per call, this is the strict bound).
 
-   Target (issue): end to end at least 70% of raw. Other jobs on a shared machine distort wall
-   times, so the process CPU time per ray is also compared (raw all-cores CPU / end-to-end
+   Target (issue 10): end to end at least 80% of raw. Other jobs on a shared machine distort
+   wall times, so the process CPU time per ray is also compared (raw all-cores CPU / end-to-end
    CPU): on an idle machine, with both saturating every core, it equals the wall-time ratio
-   against the all-cores raw.
+   against the all-cores raw. What the simulator adds to the cast, per ray: the float64 hit
+   refinement and the rest of the chunk (~35 ns), writing the log (~50 ns: Fletcher-32, lzf on
+   the index columns, the copy into the file); docs/decisions.md has the breakdown.
 2. **Memory**: peak resident memory of a ``--memory-rays`` (default 1e8) LIDAR run in a fresh
    process (target: under 2 GB), with its time.
 3. **The paper's 50-rotation single-beam run** (``asteroid-lrf``, 77,400 shots): in-process and
@@ -47,6 +49,7 @@ import sim  # noqa: E402
 from sim import pipeline  # noqa: E402
 
 LIDAR_BEAMS = 32 * 32   # asteroid-lidar preset
+TARGET_RATIO = 0.8      # issue 10: end to end / raw Embree on the same rays
 
 
 def lidar_scene(rays: float):
@@ -185,7 +188,8 @@ def main(argv=None) -> int:
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
-    print(f"asteroid-lidar (32 x 32 grid), medians of {args.repeats}, {report['cores']} cores")
+    print(f"asteroid-lidar (32 x 32 grid), medians of {args.repeats}, {report['cores']} cores; "
+          f"target: end to end >= {TARGET_RATIO:.0%} of raw")
     print(f"{'backend':8s} {'rays':>11s} {'raw 1 call':>12s} {'raw all cores':>14s} "
           f"{'end to end':>11s} {'e2e/1 call':>11s} {'e2e/all cores':>14s} "
           f"{'CPU ns/ray raw, e2e, ratio':>27s}")

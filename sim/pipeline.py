@@ -251,13 +251,14 @@ def compute_chunk(plan: Plan, index: int, first: int, stop: int,
     shot = pulse // b if b > 1 else pulse
     # np.take: row gathers several times faster than fancy indexing.
     o, d = np.take(origin, shot, axis=0), np.take(direction, pulse, axis=0)
-    true_range, facet, hit = plan.exact.refine(o, d, face[pulse], u[pulse], v[pulse],
+    true_range, facet, hit = plan.exact.refine(o, d, *(np.take(a, pulse) for a in (face, u, v)),
                                                scale=plan.scale)
     if not hit.all():
         pulse, shot, o, d = pulse[hit], shot[hit], o[hit], d[hit]
         true_range, facet = true_range[hit], facet[hit]
     beam = pulse - shot * b
-    point = o + true_range[:, None] * d
+    point = true_range[:, None] * d
+    point += o
     h, cast = len(pulse), n * b
 
     # What the sensor records.

@@ -136,12 +136,13 @@ class ExactHits:
         # One row per face, gathered once per hit: v0, normal, plane offset, g1, g2.
         self._table = np.hstack([v0, normals, offset, g1, g2])
         self.normals = normals
-        self._offset = offset[:, 0]
         # 1 / (smallest altitude) of each face: a distance d from an edge is a barycentric
         # weight of at least d / altitude. Degenerate faces get inf: always checked exactly.
         longest = np.sqrt(np.max([d11, d22, np.einsum("ij,ij->i", v2 - v1, v2 - v1)], axis=0))
-        self._inv_altitude = np.divide(longest, norm[:, 0], out=np.full(len(norm), np.inf),
-                                       where=norm[:, 0] > 0)
+        inv_altitude = np.divide(longest, norm[:, 0], out=np.full(len(norm), np.inf),
+                                 where=norm[:, 0] > 0)
+        # What the float32 hits need, one row per face: normal, plane offset, 1 / altitude.
+        self._plane = np.hstack([normals, offset, inv_altitude[:, None]])
         self._ring: tuple[np.ndarray, np.ndarray] | None = None
 
     def _intersect(self, origins, directions, face):
@@ -202,13 +203,14 @@ class ExactHits:
             check = np.flatnonzero(~hit)
         else:
             # np.take: row gathers several times faster than fancy indexing.
-            normal = np.take(self.normals, face, axis=0)
+            plane = np.take(self._plane, face, axis=0)
+            normal = plane[:, :3]
             denom = np.einsum("ij,ij->i", normal, directions)
             with np.errstate(divide="ignore", invalid="ignore"):
-                t = (np.take(self._offset, face) - np.einsum("ij,ij->i", normal, origins)) / denom
-            margin = (FLOAT32_POSITION_SLACK * scale) * np.take(self._inv_altitude, face)
+                t = (plane[:, 3] - np.einsum("ij,ij->i", normal, origins)) / denom
+            margin = plane[:, 4] * (FLOAT32_POSITION_SLACK * scale)
             edge = np.minimum(np.minimum(u, v), 1.0 - u - v)
-            check = np.flatnonzero((edge < margin) | ~((t > 0) & (t < np.inf)))
+            check = np.flatnonzero((edge < margin) | ~(t > 0) | (t == np.inf))
             hit = np.ones(len(face), bool)
             if len(check):
                 t[check], hit[check] = self._intersect(origins[check], directions[check],

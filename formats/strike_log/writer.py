@@ -115,6 +115,8 @@ class StrikeLogWriter(AtomicWriter):
         self.sensor = sensor
         self.has_truth = truth_mesh is not None
         self._n_shots = self._n_strikes = 0
+        self._datasets: dict = {}   # "group/name" -> h5py.Dataset, opened once
+        self._held: dict = {}       # "group/name" -> rows not yet written (_extend)
         self._last_time: float | None = None
         self._last_shot: int | None = None
         self.live = live
@@ -155,6 +157,7 @@ class StrikeLogWriter(AtomicWriter):
         for name in ("n_shots", "n_strikes"):  # the file is incomplete until close
             del self._file.attrs[name]
         self._n_shots, self._n_strikes = n_shots, n_strikes
+        self._datasets, self._held = {}, {}
         self._last_time, self._last_shot = last_time, last_shot
         return self
 
@@ -185,7 +188,7 @@ class StrikeLogWriter(AtomicWriter):
         def columns(group, spec, rows):
             for name, (tail, dtype) in spec.items():
                 group.create_dataset(name, shape=(0, *tail), maxshape=(None, *tail), dtype=dtype,
-                                     chunks=(rows, *tail),
+                                     chunks=(rows, *tail), fillvalue=0,
                                      **_filters(compression, f"{group.name[1:]}/{name}",
                                                 noisy_angles))
 
@@ -221,12 +224,49 @@ class StrikeLogWriter(AtomicWriter):
     def _published(self) -> None:
         trust(self.path)   # our own file: readers need not walk it (formats/hdf5_check.py)
 
-    @staticmethod
-    def _extend(group, values: dict) -> None:
+    def _extend(self, group: str, values: dict) -> None:
+        """Append rows to the datasets ``group/name``.
+
+        Outside live mode, rows are held until they complete a chunk, and only whole chunks
+        are written: each chunk then passes through the filters once, where a chunk written in
+        parts is filtered at every flush and read back to be completed. At most one chunk of
+        each dataset is held, and written on close.
+        """
         for name, arr in values.items():
-            ds = group[name]
-            n = ds.shape[0]
-            ds.resize(n + len(arr), axis=0)
+            key = f"{group}/{name}"
+            ds = self._datasets.get(key)
+            if ds is None:   # held open: closing a dataset flushes its chunk cache
+                ds = self._datasets[key] = self._file[key]
+            if self.live:
+                self._write(ds, arr)
+                continue
+            held = self._held.pop(key, arr[:0])
+            start = ds.shape[0] + len(held)
+            rows = ds.chunks[0]
+            whole = (start + len(arr)) // rows * rows - start   # rows of arr up to a boundary
+            if whole <= 0:
+                self._held[key] = np.concatenate([held, arr])
+                continue
+            if len(held):
+                room = -start % rows    # rows of arr that complete the held chunk
+                self._write(ds, np.concatenate([held, arr[:room]]))
+                arr, whole = arr[room:], whole - room
+            if whole:
+                self._write(ds, arr[:whole])
+            if whole < len(arr):
+                self._held[key] = arr[whole:].copy()
+
+    def _write_held(self) -> None:
+        """Write the rows held back by :meth:`_extend`."""
+        for key, arr in self._held.items():
+            self._write(self._datasets[key], arr)
+        self._held = {}
+
+    @staticmethod
+    def _write(ds, arr: np.ndarray) -> None:
+        n = ds.shape[0]
+        ds.resize(n + len(arr), axis=0)
+        if arr.any():   # rows never written read as the fill value, 0 (SPEC.md, Storage)
             ds[n:] = arr
 
     def write_shots(self, time, sensor_position, sensor_attitude, target_attitude, *,
@@ -259,8 +299,8 @@ class StrikeLogWriter(AtomicWriter):
                  for k, tail in _TRUTH_SHOT_FIELDS.items()}
             if any(len(v) != n for v in t.values()):
                 raise StrikeLogError(f"{where}: truth shots differ in length from the shots")
-            self._extend(self._file["truth"], t)
-        self._extend(self._file["shots"], {k: getattr(rows, k) for k in _SHOT_FIELDS})
+            self._extend("truth", t)
+        self._extend("shots", {k: getattr(rows, k) for k in _SHOT_FIELDS})
         self._wrote(n * (96 if truth is None else 184))   # bytes per row: SPEC.md, /shots
         self._n_shots += n
         if n:
@@ -315,8 +355,8 @@ class StrikeLogWriter(AtomicWriter):
                  for k, (tail, dtype) in _TRUTH_STRIKE_FIELDS.items()}
             if any(len(v) != n for v in t.values()):
                 raise StrikeLogError(f"{where}: truth strikes differ in length from the strikes")
-            self._extend(self._file["truth"], t)
-        self._extend(self._file["strikes"], values)
+            self._extend("truth", t)
+        self._extend("strikes", values)
         self._wrote(n * (16 + 8 * len(values) + (44 if truth is not None else 0)))
         self._n_strikes += n
         if n:
@@ -334,6 +374,7 @@ class StrikeLogWriter(AtomicWriter):
 
     def _finish(self) -> None:
         """Write the row counts that mark the log complete (SPEC.md, root attributes)."""
+        self._write_held()
         if self.live:   # attributes cannot be added in SWMR mode: reopen once readers are told
             self._commit(closing=1)
             self._file.close()
