@@ -33,8 +33,8 @@ memory that does not grow with its size, to the same numbers:
 - mean, RMS, max, the count within tau and the normals' sum of |cos| are running sums over the
   blocks (the same additions as ``score`` up to their grouping: equal to ~1e-15 relative);
 - completeness and recall, coverage: the nearest distance of each truth sample and lattice point
-  is the minimum over the blocks of its nearest distance to the block (exact: the same
-  distances);
+  is the minimum over groups of blocks (``defaults.STREAM_BLOCK`` points each) of its nearest
+  distance to the group (exact: the same distances);
 - the accuracy median and 95th percentile are exact order statistics by radix selection
   (``_RankFinder``): the first pass counts the distances by the top bits of their float64
   patterns, and further passes over the blocks (distances recomputed, nothing stored per point)
@@ -397,13 +397,16 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
     queries = setup.queries()
     nearest = np.full(len(queries), np.inf)
     accuracy = _Accuracy(setup, keep=False)
-    gathered = []
+    gathered, pending = [], []   # all points (for the edge metric); those not yet queried
     for points, normals in _checked_blocks(blocks, name):
         accuracy.add(points, normals)
-        _reduce_nearest(nearest, points, queries, accuracy.low, accuracy.high)
+        pending.append(points)
+        if sum(map(len, pending)) >= defaults.STREAM_BLOCK:
+            _reduce_nearest(nearest, pending, queries)
         if edges:
             gathered.append(points)
         interrupt.check()   # a swallowed Ctrl-C stops at the next block
+    _reduce_nearest(nearest, pending, queries)
     n = accuracy.n
     if n == 0:
         raise MetricsInputError(f"{name} points is empty (0 rows)")
@@ -436,16 +439,19 @@ def _checked_blocks(blocks: Blocks, name: str):
         yield cloud.points, cloud.normals
 
 
-def _reduce_nearest(nearest: np.ndarray, points: np.ndarray, queries: np.ndarray,
-                    low: np.ndarray, high: np.ndarray) -> None:
-    """Lower ``nearest`` (m,) to each query's distance to ``points`` where that is nearer.
+def _reduce_nearest(nearest: np.ndarray, pending: list[np.ndarray], queries: np.ndarray
+                    ) -> None:
+    """Lower ``nearest`` (m,) to each query's distance to the points of ``pending`` (blocks,
+    joined, then the list emptied) where that is nearer (``spatial.cloud_distance``, Open3D,
+    as ``score`` asks of the whole cloud).
 
-    Queries whose nearest distance so far is below their distance to the block's bounding box
-    (``low``, ``high`` are the running box, which holds the block) cannot come nearer and are
-    not queried.
+    Queries whose nearest distance so far is below their distance to the points' bounding box
+    cannot come nearer and are not asked.
     """
-    if len(points) == 0:
+    if not any(len(block) for block in pending):
         return
+    points = np.concatenate(pending) if len(pending) > 1 else pending[0]
+    pending.clear()
     lo, hi = points.min(axis=0), points.max(axis=0)
     outside = np.linalg.norm(np.maximum(0.0, np.maximum(lo - queries, queries - hi)), axis=1)
     ask = ~(nearest < outside * (1 - 1e-9))   # margin: the box distance's rounding

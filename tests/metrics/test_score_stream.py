@@ -59,6 +59,7 @@ def test_streamed_report_equals_the_whole_clouds(sphere, keep, with_normals, mon
     normals = normals if with_normals else None
     whole = score(Cloud(points, normals=normals), sphere, edges=True, **SPEED)
     monkeypatch.setattr(defaults, "QUANTILE_KEEP", keep)
+    monkeypatch.setattr(defaults, "STREAM_BLOCK", 2_500)   # three nearest-distance groups
     streamed = score_stream(blocks_of(points, normals, 1_000), sphere, edges=True, **SPEED)
     assert_same_report(whole, streamed)
     assert streamed.accuracy_median_m == whole.accuracy_median_m   # exact order statistics
@@ -128,6 +129,7 @@ def _peak_bytes(n_blocks: int, sphere) -> int:
 
 def test_memory_does_not_grow_with_the_stream(sphere, monkeypatch):
     monkeypatch.setattr(defaults, "QUANTILE_KEEP", 50_000)   # the 1x stream needs 2 passes too
+    monkeypatch.setattr(defaults, "STREAM_BLOCK", 20_000)
     score_stream(lambda: iter([noisy_points(100, 0)[0]]), sphere, edges=False, **SPEED)  # warm
     one, four = _peak_bytes(5, sphere), _peak_bytes(20, sphere)   # 100k and 400k points
     # The whole-cloud score of 400k points holds 40 bytes a point more (16 MB): far outside.
