@@ -5,6 +5,10 @@ are simulated once (seeded) into a temporary directory; each is scored by ``reco
 --json`` in a fresh process, ``--repeats`` times in turn, and the process's peak resident memory
 (VmHWM, its own high-water mark) is read at its end. Printed per size: strikes, median peak RSS,
 its ratio to the 1x log's (target: at most 1.1 at 4x, i.e. flat), and the median wall time.
+Scoring holds up to ``metrics.defaults.STREAM_BLOCK`` points (1 M) for each nearest-distance
+query, so a 1x log smaller than that sits below the plateau. With the edge metric (the default)
+the points themselves are gathered (24 bytes each: the metric's neighbourhoods span the cloud),
+so that run grows; ``--no-edges`` shows the streamed scoring alone.
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_score_memory.py                # ~5 min here
     PYTHONPATH=. .venv/bin/python benchmarks/bench_score_memory.py --no-edges
