@@ -102,3 +102,13 @@ EDGE_TOLERANCE_FRACTION = 0.01
 EDGE_SAMPLES_PER_TOLERANCE = 8
 # Points per block in the neighbourhood computations (k * 3 float64 per point, ~100 MB at 2**18).
 EDGE_BLOCK = 1 << 17
+# Points per nearest-neighbour query of a streamed score (``metrics.score.score_stream``): the
+# blocks are gathered into groups this size, each queried once by the truth samples and the
+# coverage lattice (completeness and coverage). Each query costs about as much as one into the
+# whole cloud, so larger groups are faster; a group holds 24 MB of points at 2**20, and Open3D's
+# KD-tree over them about twice that.
+STREAM_BLOCK = 1 << 20
+# Exact medians and 95th percentiles of a stream: values in the bins holding the wanted ranks are
+# kept and sorted once a bin holds at most this many (8 MB of float64 each); larger bins are
+# split by a further pass (metrics.score._RankFinder).
+QUANTILE_KEEP = 1 << 20

@@ -19,21 +19,26 @@ from metrics.errors import MetricsInputError
 MAX_COORDINATE_M = 1e12
 
 
-def _finite_xyz(array, what: str) -> np.ndarray:
+def _finite_xyz(array, what: str, *, first_row: int = 0, allow_empty: bool = False
+                ) -> np.ndarray:
     """``array`` as a C-contiguous (n, 3) float64 array of finite values within
-    ``MAX_COORDINATE_M`` of the origin, n >= 1."""
+    ``MAX_COORDINATE_M`` of the origin, n >= 1 (or 0 with ``allow_empty``). Rows are numbered
+    from ``first_row`` in messages (a block of a streamed input)."""
     arr = xyz_array(array, what, error=MetricsInputError)
     if len(arr) == 0:
+        if allow_empty:
+            return np.ascontiguousarray(arr)
         raise MetricsInputError(f"{what} is empty (0 rows)")
     if not np.isfinite(arr).all():  # one flat reduction; rows only when something is wrong
         bad = ~np.isfinite(arr).all(axis=1)
         raise MetricsInputError(f"{what} has {int(bad.sum())} row(s) with NaN or Inf, first at "
-                                f"row {int(np.argmax(bad))}")
+                                f"row {first_row + int(np.argmax(bad))}")
     if np.abs(arr).max() > MAX_COORDINATE_M:
         bad = (np.abs(arr) > MAX_COORDINATE_M).any(axis=1)
         raise MetricsInputError(f"{what} has {int(bad.sum())} row(s) farther than "
                                 f"{MAX_COORDINATE_M:g} m from the origin, first at row "
-                                f"{int(np.argmax(bad))} ({np.abs(arr[np.argmax(bad)]).max():g} m)")
+                                f"{first_row + int(np.argmax(bad))} "
+                                f"({np.abs(arr[np.argmax(bad)]).max():g} m)")
     return np.ascontiguousarray(arr)
 
 
@@ -58,16 +63,22 @@ def as_points(points, name: str = "points") -> np.ndarray:
     return _finite_xyz(points, name)
 
 
-def as_cloud(cloud, name: str = "cloud") -> Cloud:
-    """Validate a ``Cloud`` or an (n, 3) array; normals are checked and scaled to unit length."""
+def as_cloud(cloud, name: str = "cloud", *, first_row: int = 0, allow_empty: bool = False
+             ) -> Cloud:
+    """Validate a ``Cloud`` or an (n, 3) array; normals are checked and scaled to unit length.
+
+    ``first_row`` numbers the rows in messages (a block of a streamed cloud starting there);
+    ``allow_empty`` accepts a block of no points.
+    """
+    rows = {"first_row": first_row, "allow_empty": allow_empty}
     if isinstance(cloud, Cloud):
-        points = _finite_xyz(cloud.points, f"{name} points")
+        points = _finite_xyz(cloud.points, f"{name} points", **rows)
         normals = cloud.normals
     else:
-        points = _finite_xyz(cloud, name)
+        points = _finite_xyz(cloud, name, **rows)
         normals = None
     if normals is not None:
-        normals = _finite_xyz(normals, f"{name} normals")
+        normals = _finite_xyz(normals, f"{name} normals", **rows)
         if normals.shape != points.shape:
             raise MetricsInputError(
                 f"{name} normals must match its points, got {normals.shape} for {points.shape}")

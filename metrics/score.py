@@ -26,15 +26,33 @@ Scoring many tests against one truth (a comparison's runs, a study's time prefix
 sweep): build ``Truth(mesh)`` once and pass it as ``truth``; its distance structure, its samples
 and its coverage lattice are then made once and reused, and every report is the same as with a
 fresh truth.
+
+A cloud too large to hold (a long strike log) is scored block by block with ``score_stream``, in
+memory that does not grow with its size, to the same numbers:
+
+- mean, RMS, max, the count within tau and the normals' sum of |cos| are running sums over the
+  blocks (the same additions as ``score`` up to their grouping: equal to ~1e-15 relative);
+- completeness and recall, coverage: the nearest distance of each truth sample and lattice point
+  is the minimum over groups of blocks (``defaults.STREAM_BLOCK`` points each) of its nearest
+  distance to the group (exact: the same distances);
+- the accuracy median and 95th percentile are exact order statistics by radix selection
+  (``_RankFinder``): the first pass counts the distances by the top bits of their float64
+  patterns, and further passes over the blocks (distances recomputed, nothing stored per point)
+  narrow the bins holding the wanted ranks until they are small enough to keep and sort. A
+  stream of at most ``defaults.QUANTILE_KEEP`` points needs no second pass;
+- the edge metric needs every point's k nearest neighbours in the whole cloud, so with
+  ``edges=True`` the points themselves (24 bytes each) are gathered for it.
 """
 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from formats import interrupt
 from metrics import defaults
 from metrics.distance import MeshDistance
 from metrics.edges import EdgeReport, check_options, edge_report, resolve_length
@@ -42,6 +60,7 @@ from metrics.errors import MetricsInputError, ScaleMismatchWarning
 from metrics.inputs import (
     Cloud,
     Mesh,
+    as_cloud,
     as_mesh,
     as_test,
     bbox_diagonal,
@@ -52,6 +71,7 @@ from metrics.sampling import coverage_lattice, sample_surface, subdivision_level
 from metrics.spatial import cloud_distance
 
 _STATS = ("mean", "rms", "median", "p95", "max")
+_ARRAYS = ("accuracy_distances", "accuracy_faces", "test_points")  # None when streamed
 _EDGE_OPTIONS = {"k", "rule", "threshold", "feature_angle_deg", "tolerance", "tolerance_fraction",
                  "variant"}
 
@@ -81,9 +101,10 @@ class ScoreReport:
     edge_score : float in [0, 1] or None (None when not computed)
     test_kind : {"cloud", "mesh"}
     seed : int or None
-    accuracy_distances : (n_points,) float64
-    accuracy_faces : (n_points,) int64, truth face nearest each test point
-    test_points : (n_points, 3) float64
+    accuracy_distances : (n_points,) float64, or None from ``score_stream``
+    accuracy_faces : (n_points,) int64, truth face nearest each test point, or None from
+        ``score_stream``
+    test_points : (n_points, 3) float64, or None from ``score_stream``
     completeness_distances : (n_truth_samples,) float64
     truth_points : (n_truth_samples, 3) float64
     truth_point_faces : (n_truth_samples,) int64
@@ -116,9 +137,9 @@ class ScoreReport:
     edge_score: float | None
     test_kind: str
     seed: int | None
-    accuracy_distances: np.ndarray = field(repr=False)
-    accuracy_faces: np.ndarray = field(repr=False)
-    test_points: np.ndarray = field(repr=False)
+    accuracy_distances: np.ndarray | None = field(repr=False)
+    accuracy_faces: np.ndarray | None = field(repr=False)
+    test_points: np.ndarray | None = field(repr=False)
     completeness_distances: np.ndarray = field(repr=False)
     truth_points: np.ndarray = field(repr=False)
     truth_point_faces: np.ndarray = field(repr=False)
@@ -132,12 +153,12 @@ class ScoreReport:
             value = getattr(self, f.name)
             if f.name == "edge":
                 out["edge"] = None if value is None else value.to_dict()
-            elif not isinstance(value, np.ndarray):
+            elif not isinstance(value, np.ndarray) and f.name not in _ARRAYS:
                 out[f.name] = value
         return out
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The per-point and per-face arrays, by field name."""
+        """The per-point and per-face arrays, by field name (those a streamed score keeps)."""
         return {f.name: getattr(self, f.name) for f in fields(self)
                 if isinstance(getattr(self, f.name), np.ndarray)}
 
@@ -287,98 +308,393 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     ScaleMismatchWarning
         Test and truth bounding-box diagonals differ by more than ``SCALE_MISMATCH_RATIO`` (100).
     """
-    prepared = Truth.of(truth)
-    truth = prepared.mesh
+    setup = _Setup(truth, tau=tau, tau_fraction=tau_fraction, n_truth_samples=n_truth_samples,
+                   n_test_samples=n_test_samples, coverage_points=coverage_points, seed=seed,
+                   edge_options=edge_options)
     test = as_test(test, "test")
-    if test.frame != truth.frame:
-        raise MetricsInputError(f"test is in the {test.frame} frame but truth in the "
-                                f"{truth.frame} frame: register both in one frame")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int | np.integer)
-                             or seed < 0):
-        raise MetricsInputError(f"seed must be a non-negative integer or None, got {seed!r}")
-    n_truth_samples = _count(n_truth_samples, "n_truth_samples")
-    n_test_samples = _count(n_test_samples, "n_test_samples")
-    coverage_points = _count(coverage_points, "coverage_points")
-    diagonal = prepared.diagonal
-    tau = resolve_length(tau, tau_fraction, defaults.TAU_FRACTION, diagonal, "tau")
-    edge_options = dict(edge_options or {})
-    unknown = set(edge_options) - _EDGE_OPTIONS
-    if unknown:
-        raise MetricsInputError(f"edge_options has unknown key(s) {sorted(unknown)}; allowed: "
-                                f"{sorted(_EDGE_OPTIONS)}")
-
+    setup.check_frame(test.frame)
     if isinstance(test, Mesh):
-        test_points, test_faces = sample_surface(test, n_test_samples, seed=seed)
+        test_points, test_faces = sample_surface(test, setup.n_test_samples, seed=seed)
         test_normals = face_normals(test.vertices, test.faces)[test_faces]
         test_size = bbox_diagonal(test.vertices)
     else:
         test_points, test_normals = test.points, test.normals
         test_size = bbox_diagonal(test_points)
     if edges:  # fail now rather than after the distances
-        k = edge_options.get("k", defaults.EDGE_K)
-        if isinstance(k, int | np.integer) and k >= 4 and len(test_points) < k:
-            raise MetricsInputError(
-                f"test has {len(test_points)} points, fewer than the edge metric's k = {k} "
-                "(pass edges=False or a smaller edge_options['k'])")
-        check_options(len(test_points), diagonal, **edge_options)
-    if test_size > 0 and max(test_size / diagonal, diagonal / test_size) \
-            > defaults.SCALE_MISMATCH_RATIO:
-        warnings.warn(
-            f"test and truth sizes differ by {max(test_size / diagonal, diagonal / test_size):.0f}"
-            f"x (bounding-box diagonals {test_size:.4g} and {diagonal:.4g}): probably km "
-            "against m", ScaleMismatchWarning, stacklevel=2)
+        setup.check_edges(len(test_points))
+    setup.check_scale(test_size)
 
     report_stage = progress or (lambda stage: None)
-    # Accuracy: test -> truth surface, exact.
-    truth_distance = prepared.distance
-    accuracy, accuracy_faces, _ = truth_distance.query(test_points)
+    accuracy = _Accuracy(setup, keep=True)
+    accuracy.add(test_points, test_normals)
     report_stage("accuracy")
-
-    # Completeness: truth samples -> test; coverage lattice -> test (one query for both).
-    truth_points, truth_faces = prepared.samples(n_truth_samples, _child_seed(seed))
-    levels, lattice, lattice_faces = prepared.lattice(coverage_points)
-    queries = np.concatenate([truth_points, lattice])
+    queries = setup.queries()
     if isinstance(test, Mesh):
-        both = MeshDistance(test).query(queries)[0]
+        nearest = MeshDistance(test).query(queries)[0]
     else:
-        both = cloud_distance(test_points, queries)
-    completeness, lattice_distance = both[:n_truth_samples], both[n_truth_samples:]
+        nearest = cloud_distance(test_points, queries)
     report_stage("completeness")
-
-    acc, comp = _summary(accuracy), _summary(completeness)
-    precision = float(np.mean(accuracy < tau))
-    recall = float(np.mean(completeness < tau))
-    fscore = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
-    per_face = levels**2
-    covered = np.bincount(lattice_faces, weights=lattice_distance < tau,
-                          minlength=truth.n_faces)
-    face_coverage = covered / per_face
-    areas = prepared.areas
-    coverage = float(np.sum(areas * face_coverage) / areas.sum())
-    normal_consistency = None
-    if test_normals is not None:
-        cos = np.einsum("ij,ij->i", test_normals, truth_distance.normals[accuracy_faces])
-        normal_consistency = float(np.mean(np.abs(cos)))
-
     edge = None
     if edges:
-        edge = edge_report(test_points, truth, **edge_options)
+        edge = edge_report(test_points, setup.mesh, **setup.edge_options)
         report_stage("edges")
+    distances = np.concatenate(accuracy.distances)
+    return setup.report(accuracy, _summary(distances), nearest, edge,
+                        test_kind="mesh" if isinstance(test, Mesh) else "cloud",
+                        arrays={"accuracy_distances": distances,
+                                "accuracy_faces": np.concatenate(accuracy.faces),
+                                "test_points": test_points})
 
-    return ScoreReport(
-        n_points=len(test_points), n_truth_samples=n_truth_samples, tau_m=tau,
-        truth_diagonal_m=diagonal,
-        **{f"accuracy_{k}_m": acc[k] for k in _STATS},
-        **{f"completeness_{k}_m": comp[k] for k in _STATS},
-        chamfer_m=0.5 * (acc["mean"] + comp["mean"]),
-        hausdorff_m=max(acc["max"], comp["max"]),
-        precision=precision, recall=recall, fscore=float(fscore), coverage=coverage,
-        normal_consistency=normal_consistency,
-        edge_score=None if edge is None else edge.score,
-        test_kind="mesh" if isinstance(test, Mesh) else "cloud", seed=seed,
-        accuracy_distances=accuracy, accuracy_faces=accuracy_faces, test_points=test_points,
-        completeness_distances=completeness, truth_points=truth_points,
-        truth_point_faces=truth_faces, face_coverage=face_coverage, edge=edge)
+
+Blocks = Callable[[], Iterable[np.ndarray | tuple[np.ndarray, np.ndarray | None]]]
+
+
+def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "body",
+                 tau: float | None = None,
+                 tau_fraction: float | None = None,
+                 n_truth_samples: int = defaults.TRUTH_SAMPLES,
+                 coverage_points: int = defaults.COVERAGE_POINTS,
+                 seed: int | None = defaults.SEED, edges: bool = True,
+                 edge_options: dict | None = None, progress=None) -> ScoreReport:
+    """Score a test cloud given block by block, in memory that does not grow with its size.
+
+    The same report as ``score(cloud, truth, ...)`` of the whole cloud (module docstring: every
+    statistic equal to ~1e-15 relative, distances exact), without its per-point arrays
+    (``accuracy_distances``, ``accuracy_faces`` and ``test_points`` are None).
+
+    Parameters
+    ----------
+    blocks : callable
+        Called with no argument, returns an iterable of blocks, each an (b, 3) float64 array of
+        points (metres, the truth's frame) or a ``(points, normals)`` pair, normals (b, 3) or
+        None. Called once, and again for each further pass the exact median and 95th percentile
+        of accuracy need (none when the cloud has at most ``defaults.QUANTILE_KEEP`` points);
+        every call must give the same points in the same order.
+    truth : Truth, Mesh, (vertices, faces) tuple, or object with vertices/faces
+    name : str
+        The test's name in error messages (e.g. ``"test run.h5"``: "test run.h5 points has 1
+        row(s) with NaN or Inf, first at row 7"); rows are numbered across blocks.
+    tau, tau_fraction, n_truth_samples, coverage_points, seed, edges, edge_options, progress
+        As ``score``. With ``edges`` the points (24 bytes each) are gathered for the edge
+        metric, whose k-nearest neighbourhoods span the whole cloud.
+
+    Returns
+    -------
+    ScoreReport
+
+    Raises
+    ------
+    MetricsInputError
+        As ``score``; also a stream that gives other points on a later pass.
+    """
+    setup = _Setup(truth, tau=tau, tau_fraction=tau_fraction, n_truth_samples=n_truth_samples,
+                   n_test_samples=defaults.TEST_MESH_SAMPLES, coverage_points=coverage_points,
+                   seed=seed, edge_options=edge_options)
+    setup.check_frame(frame)
+    if edges:  # the options now; the point count against k once it is known
+        check_options(np.iinfo(np.int64).max, setup.diagonal, **setup.edge_options)
+    report_stage = progress or (lambda stage: None)
+    queries = setup.queries()
+    nearest = np.full(len(queries), np.inf)
+    accuracy = _Accuracy(setup, keep=False)
+    gathered, pending = [], []   # all points (for the edge metric); those not yet queried
+    for points, normals in _checked_blocks(blocks, name):
+        accuracy.add(points, normals)
+        pending.append(points)
+        if sum(map(len, pending)) >= defaults.STREAM_BLOCK:
+            _reduce_nearest(nearest, pending, queries)
+        if edges:
+            gathered.append(points)
+        interrupt.check()   # a swallowed Ctrl-C stops at the next block
+    _reduce_nearest(nearest, pending, queries)
+    n = accuracy.n
+    if n == 0:
+        raise MetricsInputError(f"{name} points is empty (0 rows)")
+    setup.check_scale(float(np.linalg.norm(accuracy.high - accuracy.low)))
+    summary = accuracy.summary(lambda: (setup.distance.query(points)[0] for points, _ in
+                                        _checked_blocks(blocks, name)))
+    report_stage("accuracy")
+    report_stage("completeness")
+    edge = None
+    if edges:
+        points = np.concatenate(gathered) if len(gathered) > 1 else gathered[0]
+        gathered.clear()
+        setup.check_edges(len(points))
+        edge = edge_report(points, setup.mesh, **setup.edge_options)
+        del points
+        report_stage("edges")
+    return setup.report(accuracy, summary, nearest, edge, test_kind="cloud",
+                        arrays=dict.fromkeys(_ARRAYS))
+
+
+def _checked_blocks(blocks: Blocks, name: str):
+    """The blocks of a stream as validated ``(points, normals)`` pairs, rows numbered across
+    blocks (``inputs.as_cloud``)."""
+    start = 0
+    for block in blocks():
+        points, normals = block if isinstance(block, tuple) else (block, None)
+        cloud = as_cloud(Cloud(points, normals=normals), name, first_row=start,
+                         allow_empty=True)
+        start += len(cloud.points)
+        yield cloud.points, cloud.normals
+
+
+def _reduce_nearest(nearest: np.ndarray, pending: list[np.ndarray], queries: np.ndarray
+                    ) -> None:
+    """Lower ``nearest`` (m,) to each query's distance to the points of ``pending`` (blocks,
+    joined, then the list emptied) where that is nearer (``spatial.cloud_distance``, Open3D,
+    as ``score`` asks of the whole cloud).
+
+    Queries whose nearest distance so far is below their distance to the points' bounding box
+    cannot come nearer and are not asked.
+    """
+    if not any(len(block) for block in pending):
+        return
+    points = np.concatenate(pending) if len(pending) > 1 else pending[0]
+    pending.clear()
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    outside = np.linalg.norm(np.maximum(0.0, np.maximum(lo - queries, queries - hi)), axis=1)
+    ask = ~(nearest < outside * (1 - 1e-9))   # margin: the box distance's rounding
+    if ask.any():
+        np.minimum.at(nearest, np.flatnonzero(ask), cloud_distance(points, queries[ask]))
+
+
+class _Setup:
+    """What a score derives from the truth and the options, validated before any work."""
+
+    def __init__(self, truth, *, tau, tau_fraction, n_truth_samples, n_test_samples,
+                 coverage_points, seed, edge_options):
+        self.prepared = Truth.of(truth)
+        self.mesh = self.prepared.mesh
+        if seed is not None and (isinstance(seed, bool) or
+                                 not isinstance(seed, int | np.integer) or seed < 0):
+            raise MetricsInputError(f"seed must be a non-negative integer or None, got {seed!r}")
+        self.seed = seed
+        self.n_truth_samples = _count(n_truth_samples, "n_truth_samples")
+        self.n_test_samples = _count(n_test_samples, "n_test_samples")
+        self.coverage_points = _count(coverage_points, "coverage_points")
+        self.diagonal = self.prepared.diagonal
+        self.tau = resolve_length(tau, tau_fraction, defaults.TAU_FRACTION, self.diagonal, "tau")
+        self.edge_options = dict(edge_options or {})
+        unknown = set(self.edge_options) - _EDGE_OPTIONS
+        if unknown:
+            raise MetricsInputError(f"edge_options has unknown key(s) {sorted(unknown)}; "
+                                    f"allowed: {sorted(_EDGE_OPTIONS)}")
+
+    @property
+    def distance(self) -> MeshDistance:
+        return self.prepared.distance
+
+    def check_frame(self, frame: str) -> None:
+        if frame != self.mesh.frame:
+            raise MetricsInputError(f"test is in the {frame} frame but truth in the "
+                                    f"{self.mesh.frame} frame: register both in one frame")
+
+    def check_edges(self, n_points: int) -> None:
+        k = self.edge_options.get("k", defaults.EDGE_K)
+        if isinstance(k, int | np.integer) and k >= 4 and n_points < k:
+            raise MetricsInputError(
+                f"test has {n_points} points, fewer than the edge metric's k = {k} "
+                "(pass edges=False or a smaller edge_options['k'])")
+        check_options(n_points, self.diagonal, **self.edge_options)
+
+    def check_scale(self, test_size: float) -> None:
+        diagonal = self.diagonal
+        if test_size > 0 and max(test_size / diagonal, diagonal / test_size) \
+                > defaults.SCALE_MISMATCH_RATIO:
+            warnings.warn(
+                f"test and truth sizes differ by "
+                f"{max(test_size / diagonal, diagonal / test_size):.0f}x (bounding-box "
+                f"diagonals {test_size:.4g} and {diagonal:.4g}): probably km against m",
+                ScaleMismatchWarning, stacklevel=3)
+
+    def queries(self) -> np.ndarray:
+        """Truth samples then coverage lattice points, (n_truth_samples + l, 3): completeness
+        and coverage in one nearest-distance query."""
+        truth_points, _ = self.prepared.samples(self.n_truth_samples, _child_seed(self.seed))
+        lattice = self.prepared.lattice(self.coverage_points)[1]
+        return np.concatenate([truth_points, lattice])
+
+    def report(self, accuracy: _Accuracy, acc: dict, nearest: np.ndarray, edge, *,
+               test_kind: str, arrays: dict) -> ScoreReport:
+        """The report from the accuracy statistics and the queries' nearest test distances."""
+        n_samples = self.n_truth_samples
+        truth_points, truth_faces = self.prepared.samples(n_samples, _child_seed(self.seed))
+        levels, _, lattice_faces = self.prepared.lattice(self.coverage_points)
+        completeness, lattice_distance = nearest[:n_samples], nearest[n_samples:]
+        comp = _summary(completeness)
+        precision = accuracy.within / accuracy.n
+        recall = float(np.mean(completeness < self.tau))
+        fscore = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
+        covered = np.bincount(lattice_faces, weights=lattice_distance < self.tau,
+                              minlength=self.mesh.n_faces)
+        face_coverage = covered / levels**2
+        areas = self.prepared.areas
+        coverage = float(np.sum(areas * face_coverage) / areas.sum())
+        normal_consistency = (None if accuracy.cos_sum is None
+                              else float(accuracy.cos_sum / accuracy.n))
+        return ScoreReport(
+            n_points=accuracy.n, n_truth_samples=n_samples, tau_m=self.tau,
+            truth_diagonal_m=self.diagonal,
+            **{f"accuracy_{k}_m": acc[k] for k in _STATS},
+            **{f"completeness_{k}_m": comp[k] for k in _STATS},
+            chamfer_m=0.5 * (acc["mean"] + comp["mean"]),
+            hausdorff_m=max(acc["max"], comp["max"]),
+            precision=float(precision), recall=recall, fscore=float(fscore),
+            coverage=coverage, normal_consistency=normal_consistency,
+            edge_score=None if edge is None else edge.score, test_kind=test_kind,
+            seed=self.seed, **arrays, completeness_distances=completeness,
+            truth_points=truth_points, truth_point_faces=truth_faces,
+            face_coverage=face_coverage, edge=edge)
+
+
+class _Accuracy:
+    """Running accuracy statistics (test points -> truth surface) over blocks of test points.
+
+    Keeps the count, sum, sum of squares and maximum of the distances, the count within tau,
+    the sum of |cos| between test normals and the nearest truth faces' normals, the running
+    bounding box of the points, and (``keep``) every block's distances and faces; without
+    ``keep``, the first-pass counts of ``_RankFinder``.
+    """
+
+    def __init__(self, setup: _Setup, *, keep: bool):
+        self.setup = setup
+        self.n = self.within = 0
+        self.total = self.squares = 0.0
+        self.top = -np.inf
+        self.cos_sum = None
+        self.low, self.high = np.full(3, np.inf), np.full(3, -np.inf)
+        self.keep = keep
+        self.distances, self.faces = [], []
+        self.ranks = None if keep else _RankFinder()
+
+    def add(self, points: np.ndarray, normals: np.ndarray | None) -> None:
+        """Add a block: points (b, 3) float64 metres, normals (b, 3) unit or None."""
+        if len(points) == 0:
+            return
+        if (normals is None) != (self.cos_sum is None) and self.n > 0:
+            raise MetricsInputError("test blocks must all have normals or none")
+        distance, faces, _ = self.setup.distance.query(points)
+        self.n += len(distance)
+        self.total += float(distance.sum())
+        self.squares += float(np.sum(distance**2))
+        self.top = max(self.top, float(distance.max()))
+        self.within += int(np.count_nonzero(distance < self.setup.tau))
+        if normals is not None:
+            cos = np.einsum("ij,ij->i", normals, self.setup.distance.normals[faces])
+            self.cos_sum = (self.cos_sum or 0.0) + float(np.sum(np.abs(cos)))
+        self.low = np.minimum(self.low, points.min(axis=0))
+        self.high = np.maximum(self.high, points.max(axis=0))
+        if self.keep:
+            self.distances.append(distance)
+            self.faces.append(faces)
+        else:
+            self.ranks.first_pass(distance)
+
+    def summary(self, again: Callable[[], Iterable[np.ndarray]]) -> dict[str, float]:
+        """Mean, RMS, median, 95th percentile and max; the order statistics exact, by further
+        passes over the distances (``again()`` yields them block by block) when needed."""
+        p50, p95 = self.ranks.percentiles(self.n, [50, 95], again)
+        return {"mean": self.total / self.n, "rms": float(np.sqrt(self.squares / self.n)),
+                "median": p50, "p95": p95, "max": self.top}
+
+
+class _RankFinder:
+    """Exact order statistics of a stream of non-negative float64, in bounded memory.
+
+    The bit patterns of non-negative floats, read as unsigned integers, sort as the floats do.
+    The first pass counts the values by their top ``_BITS[0]`` bits (and keeps them while
+    there are at most ``defaults.QUANTILE_KEEP``); each later pass, for every wanted rank whose
+    bin is still too full to keep, counts that bin's values by their next bits, or keeps the
+    bin's values to sort once it holds at most ``QUANTILE_KEEP``. A bin refined to all 64 bits
+    holds a single value. Memory: the counts (2**20 int64) and the kept values.
+    """
+
+    _BITS = (20, 16, 16, 12)
+
+    def __init__(self):
+        self.counts = np.zeros(1 << self._BITS[0], dtype=np.int64)
+        self.small: list[np.ndarray] | None = []   # every value, while there are few
+
+    def first_pass(self, values: np.ndarray) -> None:
+        keys = values.view(np.uint64)
+        self.counts += np.bincount(keys >> np.uint64(64 - self._BITS[0]),
+                                   minlength=len(self.counts))
+        if self.small is not None:
+            self.small.append(values)
+            if sum(len(v) for v in self.small) > defaults.QUANTILE_KEEP:
+                self.small = None
+
+    def percentiles(self, n: int, q: list[float], again: Callable[[], Iterable[np.ndarray]]
+                    ) -> list[float]:
+        """``np.percentile(values, q)`` (linear interpolation) of the ``n`` values streamed."""
+        if self.small is not None:
+            return [float(v) for v in np.percentile(np.concatenate(self.small), q)]
+        fractions = np.true_divide(q, 100)
+        virtual = (n - 1) * fractions   # numpy's "linear" method, step by step
+        previous = np.floor(virtual).astype(np.int64)
+        following = np.minimum(previous + 1, n - 1)
+        values = self._values(sorted(set(previous) | set(following)), again, n)
+        out = []
+        for v, i, j in zip(virtual, previous, following, strict=True):
+            a, b, t = values[i], values[j], v - i
+            diff = b - a
+            out.append(float(b - diff * (1 - t) if t >= 0.5 else a + diff * t))
+        return out
+
+    def _values(self, ranks: list[int], again, n: int) -> dict[int, np.float64]:
+        """The values of 0-based ascending ranks, by radix selection (class docstring)."""
+        found = {}
+        # per rank: (prefix of its bin, bits in the prefix, rank within the bin, keep the bin)
+        state = {r: self._narrow(self.counts, 0, 0, r) for r in ranks}
+        while state:
+            tasks = sorted({(p, used, keep) for p, used, _, keep in state.values()})
+            counts = {t: np.zeros(1 << self._next_bits(t[1]), np.int64) for t in tasks
+                      if not t[2]}
+            kept = {t: [] for t in tasks if t[2]}
+            seen = 0
+            for values in again():
+                keys = values.view(np.uint64)
+                seen += len(keys)
+                for prefix, used, keep in tasks:
+                    inside = keys[(keys >> np.uint64(64 - used)) == prefix]
+                    if keep:
+                        kept[prefix, used, keep].append(inside)
+                    else:
+                        bits = self._next_bits(used)
+                        digit = (inside >> np.uint64(64 - used - bits)) & np.uint64((1 << bits) - 1)
+                        counts[prefix, used, keep] += np.bincount(digit, minlength=1 << bits)
+                interrupt.check()
+            if seen != n:
+                raise MetricsInputError(f"the test gave {seen} points on a second pass, "
+                                        f"{n} on the first: it changed while it was scored")
+            for r, (prefix, used, within, keep) in list(state.items()):
+                if keep:
+                    values = np.sort(np.concatenate(kept[prefix, used, keep]))
+                    found[r] = values.view(np.float64)[within]
+                    del state[r]
+                else:
+                    state[r] = self._narrow(counts[prefix, used, keep], prefix, used, within)
+                    prefix, used, within, keep = state[r]
+                    if used == 64:   # one bit pattern: one value
+                        found[r] = np.array([prefix], np.uint64).view(np.float64)[0]
+                        del state[r]
+        return found
+
+    def _next_bits(self, used: int) -> int:
+        """Bits of the digit after a prefix of ``used`` bits."""
+        return self._BITS[list(np.cumsum((0, *self._BITS))).index(used)]
+
+    @staticmethod
+    def _narrow(counts: np.ndarray, prefix: int, used: int, within: int):
+        """The bin of ``counts`` (over the next bits after ``prefix``) holding rank ``within``:
+        its longer prefix, the rank inside it, and whether it is small enough to keep."""
+        cumulative = np.cumsum(counts)
+        digit = int(np.searchsorted(cumulative, within, side="right"))
+        before = int(cumulative[digit - 1]) if digit > 0 else 0
+        bits = int(np.log2(len(counts)))
+        return ((prefix << bits) | digit, used + bits, within - before,
+                int(counts[digit]) <= defaults.QUANTILE_KEEP)
 
 
 def _child_seed(seed: int | None):
@@ -389,4 +705,4 @@ def _child_seed(seed: int | None):
     return None if seed is None else [seed, 1]
 
 
-__all__ = ["Cloud", "Mesh", "ScoreReport", "Truth", "score"]
+__all__ = ["Cloud", "Mesh", "ScoreReport", "Truth", "score", "score_stream"]

@@ -173,14 +173,33 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
     from metrics.score import score as score_against
 
     truth = truth_of(truth, scale=truth_scale)
-    geometry = load(test, name="test", points_only=True)
-    if isinstance(test, str | os.PathLike):   # errors then name the file
+    options = {"tau": tau, "tau_fraction": tau_fraction, "edges": edges, "seed": seed,
+               "progress": progress} | options
+    if isinstance(test, str | os.PathLike):
+        # A file is scored block by block (metrics.score.score_stream): a strike log as it is
+        # registered, in memory flat in its size; a cloud file without per-point arrays
+        # beside it. Errors name the file.
+        from metrics import defaults
+        from metrics.score import score_stream
+        from recon.inputs import is_strike_log
+        from recon.registration.ingest import iter_points
+
+        if is_strike_log(test):
+            return score_stream(lambda: iter_points(test), truth, name=f"test {test}",
+                                **options)
+        geometry = load(test, name="test", points_only=True)
+        if isinstance(geometry, Cloud):
+            points, normals = geometry.points, geometry.normals
+            step = defaults.STREAM_BLOCK
+            return score_stream(
+                lambda: ((points[i:i + step], None if normals is None else normals[i:i + step])
+                         for i in range(0, len(points), step)), truth, name=f"test {test}",
+                frame=geometry.frame, **options)
         from metrics.inputs import as_test
 
         as_test(geometry, f"test {test}")
-    return score_against(geometry, truth, tau=tau,
-                         tau_fraction=tau_fraction, edges=edges, seed=seed, progress=progress,
-                         **options)
+        return score_against(geometry, truth, **options)
+    return score_against(load(test, name="test"), truth, **options)
 
 
 def edges(test, *, truth, output, truth_scale: float = 1.0, seed: int = 0,

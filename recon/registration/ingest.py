@@ -31,6 +31,10 @@ from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
 from recon.surfaces.uncertainty import strike_columns
 
 Frame = Literal["body", "inertial"]
+# Strikes per block when a log is scored as it is read (``iter_points``): the reader's and the
+# registration's temporaries, ~250 bytes a strike, stay near 65 MB, and the scoring of a block
+# (metrics.defaults.STREAM_BLOCK points) adds its own.
+SCORE_CHUNK_ROWS = 1 << 18
 FRAMES = ("body", "inertial")
 # Per-point attributes written by ingest, with their dtypes (formats/cloud_io.py names them).
 ATTRIBUTE_DTYPES = {"time": np.float64, "shot": np.uint32, "beam": np.uint32,
@@ -153,6 +157,19 @@ def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int
     n_points, _ = _register_and_write(log_path, out_path, frame=frame, chunk_rows=chunk_rows,
                                       progress=progress, keep=False, correction=correction)
     return {"n_points": n_points, "frame": frame, "output": str(Path(out_path))}
+
+
+def iter_points(log_path, *, frame: Frame = "body", chunk_rows: int | None = None
+                ) -> Iterator[np.ndarray]:
+    """The registered points of a log, block by block: (b, 3) float64 metres in ``frame``.
+
+    Opens the log on the first block and closes it after the last, so each iteration is a
+    fresh pass (``metrics.score.score_stream`` makes one or two). ``chunk_rows``: strikes per
+    block (default ``SCORE_CHUNK_ROWS``).
+    """
+    with StrikeLog(log_path) as log:
+        for chunk in log.iter_chunks(chunk_rows or SCORE_CHUNK_ROWS):
+            yield register_chunk(chunk, frame=frame)[0]
 
 
 def ingest_points(log_path, *, frame: Frame = "body", chunk_rows: int | None = None

@@ -1,0 +1,46 @@
+"""`recon score LOG` streams the log (metrics.score.score_stream): the same report as the whole
+registered cloud scored at once, as `recon score` gave before it streamed."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import sim
+from cli.main import main
+from formats.geometry import Cloud
+from metrics import defaults, score
+from recon.inputs import load_truth
+from recon.registration import ingest
+
+EXACT = ("accuracy_mean_m", "accuracy_rms_m", "chamfer_m")   # sums, grouped by block
+
+
+@pytest.fixture(scope="module")
+def rso_log(tmp_path_factory):
+    path = tmp_path_factory.mktemp("stream") / "rso.h5"
+    sim.simulate(sim.load_scene("rso-a-lrf", ["time.rotations=2"]), path, seed=1)
+    return path
+
+
+@pytest.mark.parametrize("log", ["rso_log", "sphere_log"])
+@pytest.mark.parametrize("edges", [True, False])
+def test_streamed_log_scores_as_the_whole_cloud(log, edges, request, monkeypatch, capsys):
+    path = request.getfixturevalue(log)
+    whole = score(Cloud(ingest.ingest_points(path)), load_truth(path), seed=0,
+                  edges=edges and log == "rso_log").to_dict()
+    # Many blocks, several nearest-distance groups, and radix passes for the median and p95.
+    monkeypatch.setattr(ingest, "SCORE_CHUNK_ROWS", 37)
+    monkeypatch.setattr(defaults, "STREAM_BLOCK", 500)
+    monkeypatch.setattr(defaults, "QUANTILE_KEEP", 20)
+    argv = ["score", str(path), "--json"] + ([] if edges and log == "rso_log" else ["--no-edges"])
+    assert main(argv) == 0
+    streamed = json.loads(capsys.readouterr().out)
+    assert streamed.pop("test") == streamed.pop("truth") == str(path)
+    assert streamed.keys() == whole.keys()
+    for key, value in whole.items():
+        if key in EXACT:
+            assert streamed[key] == pytest.approx(value, rel=1e-9, abs=0), key
+        else:
+            assert streamed[key] == value, key
