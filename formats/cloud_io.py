@@ -148,18 +148,22 @@ class _H5Cloud(AtomicWriter):
                                          dtype=np.float64, chunks=(rows, 3))
         points.attrs.update({"units": metadata["units"], "frame": metadata["frame"]})
         g = self._h5.create_group("attributes")
+        # The datasets stay open: reopening one per write empties its chunk cache each time,
+        # and after a full disk every dropped handle fails to flush and prints a traceback.
+        self._datasets = [points]
         for name, dtype in dtypes.items():
             ds = g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(rows,))
             if name in ATTRIBUTE_INFO:
                 ds.attrs["units"] = ATTRIBUTE_INFO[name][0]
             if name in _FRAMED:
                 ds.attrs["frame"] = metadata["frame"]
+            self._datasets.append(ds)
 
     def write(self, points: np.ndarray, attributes: dict[str, np.ndarray]) -> None:
         self._check()
         n = len(points)
-        for ds, values in [(self._h5["points"], points)] + [
-                (self._h5["attributes"][k], attributes[k]) for k in self.dtypes]:
+        for ds, values in zip(self._datasets, [points, *(attributes[k] for k in self.dtypes)],
+                              strict=True):
             ds.resize(self._written + n, axis=0)
             ds[self._written:] = values
         self._written += n

@@ -60,7 +60,7 @@ def test_a_signal_before_the_rename_keeps_the_old_file(tmp_path, monkeypatch):
 
 def test_a_directory_is_refused_with_the_given_error(tmp_path):
     (tmp_path / "out.json").mkdir()
-    with pytest.raises(_Refused, match="out.json: is a directory"):
+    with pytest.raises(_Refused, match=r"out\.json: is a directory"):
         write_text_atomically(tmp_path / "out.json", "x", error=_Refused)
     with pytest.raises(_Refused, match="does not exist"):
         write_text_atomically(tmp_path / "missing" / "out.json", "x", error=_Refused)
