@@ -47,6 +47,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="threshold as a fraction of the truth's bounding-box diagonal "
                             "(default 0.01)")
     p.add_argument("--no-edges", action="store_true", help="skip the edge metric")
+    p.add_argument("--edge-variant", choices=("weighted", "feature"), default="weighted",
+                   help="weighted: every truth edge by length x dihedral angle (the paper's "
+                        "metric); feature: only edges sharper than 30 deg (default: "
+                        "%(default)s; 'recon edges' draws them)")
     p.add_argument("--seed", type=int, default=0, help="seed of the surface sampling")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -67,7 +71,8 @@ def run(args) -> int:
         warnings.simplefilter("always")
         report = api.score(args.test, truth=truth, truth_scale=args.truth_scale, tau=args.tau,
                            tau_fraction=args.tau_fraction, seed=args.seed,
-                           edges=not args.no_edges, progress=lambda stage: bar.update(1))
+                           edges=not args.no_edges, edge_options={"variant": args.edge_variant},
+                           progress=lambda stage: bar.update(1))
     for w in caught:
         print(f"recon score: warning: {w.message}", file=sys.stderr)
     result = report.to_dict()

@@ -114,3 +114,17 @@ def test_km_against_m_warns(rso_log, tmp_path, capsys):
     assert main(["score", str(rso_log), "--truth", str(tmp_path / "km.ply"), "--no-edges"]) == 0
     err = capsys.readouterr().err
     assert "recon score: warning:" in err and "probably km against m" in err
+
+
+def test_edge_variant_option(rso_log, capsys):
+    from recon import api
+
+    for variant in ("weighted", "feature"):
+        result = _json(capsys, ["score", str(rso_log), "--json", "--edge-variant", variant])
+        expected = api.score(rso_log, truth=rso_log, edge_options={"variant": variant})
+        assert result["edge"]["variant"] == variant
+        assert result["edge_score"] == expected.edge_score
+    with pytest.raises(SystemExit) as exit_:
+        main(["score", str(rso_log), "--edge-variant", "sharp"])
+    assert exit_.value.code == 1
+    assert "invalid choice: 'sharp'" in capsys.readouterr().err
