@@ -210,9 +210,12 @@ def overhead(args) -> int:
         fits = {r["method"]: r["wall_time_s"] for r in result["runs"]}
         ratio = wall / sum(fits.values())
         ratios.append(ratio)
+        spent = {column: sum(r.get(column) or 0.0 for r in result["runs"])
+                 for column in ("score_time_s", "load_time_s", "process_time_s")}
         print(f"  repeat {i + 1}: total {wall:.1f} s, fits " + ", ".join(
             f"{m} {t:.2f} s" for m, t in fits.items()) + f" (sum {sum(fits.values()):.1f} s); "
-              f"ratio {ratio:.2f}")
+              f"ratio {ratio:.2f}; in the workers: scoring {spent['score_time_s']:.1f} s, "
+              f"loading {spent['load_time_s']:.1f} s, whole jobs {spent['process_time_s']:.1f} s")
     median = statistics.median(ratios)
     print(f"median total / sum of fits: {median:.2f} (target <= {TARGET_OVERHEAD}): "
           f"{'met' if median <= TARGET_OVERHEAD else 'MISSED'}")

@@ -20,10 +20,14 @@ from recon.surfaces.methods import Run
 # Scores charted and ranked on (metrics.score's names).
 CHAMFER, FSCORE = "chamfer_m", "fscore"
 # Leading columns of a results CSV, in order; the score columns follow, as metrics.score names
-# them. peak_memory_mb is the run's process at its peak after the method returned (imports and
-# the cloud included); baseline_memory_mb the same process just before the method started.
+# them. process_time_s is the whole job (hand-over to result), load_time_s its loading in the
+# worker and score_time_s its checking and scoring (recon.surfaces.isolation); the rest of
+# process_time_s beyond wall_time_s is passing the job and result. peak_memory_mb is the run's
+# process at its peak after the method returned (imports and the cloud included);
+# baseline_memory_mb the same process just before the method started.
 BASE_COLUMNS = ("key", "label", "method", "params", "kind", "status", "failure", "reason",
-                "wall_time_s", "process_time_s", "peak_memory_mb", "baseline_memory_mb",
+                "wall_time_s", "process_time_s", "load_time_s", "score_time_s",
+                "peak_memory_mb", "baseline_memory_mb",
                 "n_vertices", "n_faces", "watertight", "mesh")
 # Threads per isolated run in a sweep: parallelism comes from the workers (one run per core).
 SWEEP_THREADS = 1

@@ -235,6 +235,7 @@ def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
     stage = jobdir / "stage"
     result: dict[str, Any] = {}
     memory_mb = None
+    loaded = time.perf_counter()
     try:
         stage.write_text(_LOADING)
         job = pickle.loads((jobdir / "job.pkl").read_bytes())
@@ -252,6 +253,7 @@ def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
         _limit_memory(memory_mb)
         stage.write_text(_RUNNING)
         start = time.perf_counter()
+        result["load_time_s"] = start - loaded
         try:
             vertices, faces = method.run(cloud, **run.params)
         except MemoryError:
@@ -264,7 +266,8 @@ def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
             raise _Failure("error", f"{run.method}: {type(exc).__name__}: {last}") from None
         finally:
             _limit_memory(None)  # the limit is the method's: checking and scoring are ours
-        result["wall_time_s"] = time.perf_counter() - start
+        finished = time.perf_counter()
+        result["wall_time_s"] = finished - start
         result["peak_memory_mb"] = _maxrss_mb()
         stage.write_text(_CHECKING)
         try:
@@ -282,6 +285,7 @@ def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
                                           job["score_options"], truths)
             except Exception as exc:
                 raise _Failure("score", f"scoring failed: {type(exc).__name__}: {exc}") from None
+        result["score_time_s"] = time.perf_counter() - finished
         result.update(status="ok", failure=None, reason="")
     except _Failure as failure:
         result.update(status="failed", failure=failure.kind, reason=str(failure))
@@ -484,7 +488,9 @@ def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None,
         ``method``, ``params`` (resolved), ``status`` ("ok" or "failed"), ``failure`` (kind or
         None), ``reason``, ``wall_time_s`` (the method alone; for a timeout, until it was
         stopped), ``process_time_s`` (the whole job in its worker, from hand-over to result,
-        a new worker's start-up included), ``peak_memory_mb`` (the worker's peak resident set
+        a new worker's start-up included), ``load_time_s`` (the worker reading the job and
+        importing the method, before it runs), ``score_time_s`` (checking and scoring the mesh,
+        after it ran; when ok), ``peak_memory_mb`` (the worker's peak resident set
         during this run: after the method, or at its death), ``baseline_memory_mb`` (resident
         just before the method), and when ok ``vertices``, ``faces``, ``n_vertices``,
         ``n_faces``, ``watertight`` and (with a truth) ``scores``.
