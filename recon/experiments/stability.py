@@ -53,7 +53,7 @@ from formats import sigma_from_sigma3
 from formats.errors import ReconError
 from recon.experiments import charts
 from recon.experiments.cases import SWEEP_THREADS, score_options, variants, write_csv
-from recon.experiments.sweep import run_sweep, to_jsonable
+from recon.experiments.sweep import check_scheduler, default_workers, run_sweep, to_jsonable
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
@@ -320,6 +320,7 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
         record.update({k: v for k, v in (result.get("scores") or {}).items() if k not in record})
         return record
 
+    charts.preload()
     done = run_sweep(run_cell, cases, out_dir,
                      shared={"clouds": clouds, "source": source, "truth": truth, "seed": seed,
                              "timeout_s": timeout_s, "memory_mb": memory_mb,
@@ -445,10 +446,15 @@ def stability_input(source, out_dir, *, truth=None, truth_scale: float = 1.0,
         ``stability``'s report.
     """
     from recon.inputs import is_strike_log, load_cloud, load_truth
+    from recon.surfaces.isolation import start_workers, warm_truth
 
     variants(names, grid=False)  # unknown names fail before anything is simulated or read
     limits = limits or Limits()
     options = score_options(samples)
+    check_scheduler(scheduler)
+    local = scheduler in (None, "threads")
+    if local:  # local workers import Open3D while the input loads
+        start_workers(n_workers or default_workers(), SWEEP_THREADS)
     noise, density, outliers = (parse_levels(v, n) if isinstance(v, str) else tuple(v)
                                 for v, n in ((noise, "noise"), (density, "density"),
                                              (outliers, "outliers")))
@@ -470,6 +476,8 @@ def stability_input(source, out_dir, *, truth=None, truth_scale: float = 1.0,
                                              seed=seed)
         if truth is not None:
             truth_mesh = load_truth(truth, scale=truth_scale)
+    if local:  # the workers make the truth ready for scoring while the first cell is prepared
+        warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
     return stability(out_dir, clouds=clouds, truth=truth_mesh, names=names, noise=noise,
                      density=density, outliers=outliers, seed=seed, scheduler=scheduler,
                      n_workers=n_workers, resume=resume, score_options=options,
