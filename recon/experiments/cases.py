@@ -78,9 +78,10 @@ def full_grid_estimate(records: Sequence[dict], names: Sequence[str] | None = No
                        workers: int = 1) -> dict:
     """How long the full grid would take, from the defaults' run times.
 
-    Each grid variant is estimated at its method's default run time (a grid varies a
-    resolution both ways around the default, so this is the middle of its range); the runs
-    are shared among ``workers``.
+    Each grid variant is estimated at its method's default run time, the whole job (the fit,
+    checking and scoring: ``process_time_s``; the fit alone where that is missing): a grid
+    varies a resolution both ways around the default, so this is the middle of its range. The
+    runs are shared among ``workers``.
 
     Returns
     -------
@@ -89,7 +90,7 @@ def full_grid_estimate(records: Sequence[dict], names: Sequence[str] | None = No
         no default run succeeded), ``unknown`` (methods whose defaults failed: not counted).
     """
     done = {r["key"] for r in records if "key" in r}
-    time_of = {r["method"]: r["wall_time_s"] for r in records
+    time_of = {r["method"]: r.get("process_time_s") or r["wall_time_s"] for r in records
                if r.get("status") == "ok" and r.get("wall_time_s")
                and r.get("key") == methods.bind(r["method"]).key}
     runs = [run for run in variants(names, grid="full") if run.key not in done]

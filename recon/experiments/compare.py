@@ -257,7 +257,8 @@ def format_full_grid(estimate: dict) -> str:
     unknown = (f"; not counting {', '.join(estimate['unknown'])}, whose defaults failed"
                if estimate["unknown"] else "")
     return (f"full grid: {estimate['runs']} more runs, about {minutes:.1f} min here (each "
-            f"variant timed as its method's defaults{unknown}); --grid full runs them")
+            f"variant timed as its method's defaults, scoring included{unknown}); --grid full "
+            "runs them")
 
 
 def format_agreement(verdict: dict) -> str:
