@@ -8,7 +8,8 @@ mesh is recorded as that cell's failure and the sweep goes on. Results stream to
 truth; ``stability`` from clouds and a truth mesh. Finishing writes
 
 - ``DIR/stability.csv`` and ``DIR/stability.json``: one row per (method, cell) with the status,
-  failure kind and reason, time, memory, faces and scores;
+  failure kind and reason, time (the fit's, and the whole job's with its scoring), memory,
+  faces and scores;
 - ``DIR/<method>_failures.png``: the failure map (a panel per outlier fraction, noise against
   density, each cell coloured by its outcome, an accuracy collapse included);
 - ``DIR/<method>_accuracy.png``: the Chamfer heatmap on the same grid (failed cells hatched).
@@ -313,8 +314,9 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
         record = {"label": case["run"].label, "method": case["run"].method,
                   "noise_sigma3_m": case["noise_sigma3"], "density": case["density"],
                   "outliers": case["outliers"]}
-        for column in ("status", "failure", "reason", "wall_time_s", "peak_memory_mb",
-                       "n_points", "n_faces", "watertight"):
+        for column in ("status", "failure", "reason", "wall_time_s", "process_time_s",
+                       "load_time_s", "score_time_s", "peak_memory_mb", "n_points", "n_faces",
+                       "watertight"):
             record[column] = result.get(column)
         # The scores' own n_points counts the samples drawn on the mesh, not the cell's points.
         record.update({k: v for k, v in (result.get("scores") or {}).items() if k not in record})

@@ -94,6 +94,8 @@ def test_each_cell_is_degraded_and_prepared_once_for_all_its_methods(tmp_path, m
     assert [r["method"] for r in records] == ["convex-hull"] * 4 + ["test-abort"] * 4
     hull = {(r["noise_sigma3_m"], r["density"]): r["n_points"] for r in records[:4]}
     assert hull == {(0.0, 1.0): 900, (0.0, 0.5): 450, (0.03, 1.0): 900, (0.03, 0.5): 450}
+    for r in records[:4]:  # where each run's time went: the fit, then checks and scoring
+        assert r["process_time_s"] > r["wall_time_s"] + r["score_time_s"] > r["score_time_s"] > 0
 
 
 def test_scene_levels_are_fresh_simulations_with_range_noise(tmp_path):
