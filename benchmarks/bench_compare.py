@@ -12,8 +12,8 @@ user runs it (a fresh ``recon`` process, scoring with metrics' defaults), ``--re
 (``wall_time_s`` in its results.json) of the same run; the median ratio is quoted (target
 <= 1.5), with where the workers' time went (scoring, loading, whole jobs: ``score_time_s``,
 ``load_time_s``, ``process_time_s``). ``--defaults``: the default ``recon compare`` (every
-method at its defaults) of the ``rso-a`` and ``asteroid`` clouds below, total wall time quoted, with how long the full grid
-would take.
+method at its defaults) of the ``rso-a`` and ``asteroid`` clouds below, total wall time
+quoted, with how long the full grid would take.
 
 Clouds (each simulated with seed 0, then ingested; noise is the paper's LRF range error, 0.3 m
 3-sigma, "errors.range_sigma3"):
