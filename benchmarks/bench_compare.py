@@ -10,9 +10,10 @@
 user runs it (a fresh ``recon`` process, scoring with metrics' defaults), ``--repeats`` times
 (>= 3): its total wall time divided by the sum of the three methods' own fit times
 (``wall_time_s`` in its results.json) of the same run; the median ratio is quoted (target
-<= 1.5). ``--defaults``: the default ``recon compare`` (every method at its defaults) of the
-``rso-a`` and ``asteroid`` clouds below, total wall time quoted, with how long the full grid
-would take.
+<= 1.5), with where the workers' time went (scoring, loading, whole jobs: ``score_time_s``,
+``load_time_s``, ``process_time_s``). ``--defaults``: the default ``recon compare`` (every
+method at its defaults) of the ``rso-a`` and ``asteroid`` clouds below, total wall time
+quoted, with how long the full grid would take.
 
 Clouds (each simulated with seed 0, then ingested; noise is the paper's LRF range error, 0.3 m
 3-sigma, "errors.range_sigma3"):
@@ -210,9 +211,12 @@ def overhead(args) -> int:
         fits = {r["method"]: r["wall_time_s"] for r in result["runs"]}
         ratio = wall / sum(fits.values())
         ratios.append(ratio)
+        spent = {column: sum(r.get(column) or 0.0 for r in result["runs"])
+                 for column in ("score_time_s", "load_time_s", "process_time_s")}
         print(f"  repeat {i + 1}: total {wall:.1f} s, fits " + ", ".join(
             f"{m} {t:.2f} s" for m, t in fits.items()) + f" (sum {sum(fits.values()):.1f} s); "
-              f"ratio {ratio:.2f}")
+              f"ratio {ratio:.2f}; in the workers: scoring {spent['score_time_s']:.1f} s, "
+              f"loading {spent['load_time_s']:.1f} s, whole jobs {spent['process_time_s']:.1f} s")
     median = statistics.median(ratios)
     print(f"median total / sum of fits: {median:.2f} (target <= {TARGET_OVERHEAD}): "
           f"{'met' if median <= TARGET_OVERHEAD else 'MISSED'}")

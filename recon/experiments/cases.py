@@ -20,10 +20,14 @@ from recon.surfaces.methods import Run
 # Scores charted and ranked on (metrics.score's names).
 CHAMFER, FSCORE = "chamfer_m", "fscore"
 # Leading columns of a results CSV, in order; the score columns follow, as metrics.score names
-# them. peak_memory_mb is the run's process at its peak after the method returned (imports and
-# the cloud included); baseline_memory_mb the same process just before the method started.
+# them. process_time_s is the whole job (hand-over to result), load_time_s its loading in the
+# worker and score_time_s its checking and scoring (recon.surfaces.isolation); the rest of
+# process_time_s beyond wall_time_s is passing the job and result. peak_memory_mb is the run's
+# process at its peak after the method returned (imports and the cloud included);
+# baseline_memory_mb the same process just before the method started.
 BASE_COLUMNS = ("key", "label", "method", "params", "kind", "status", "failure", "reason",
-                "wall_time_s", "process_time_s", "peak_memory_mb", "baseline_memory_mb",
+                "wall_time_s", "process_time_s", "load_time_s", "score_time_s",
+                "peak_memory_mb", "baseline_memory_mb",
                 "n_vertices", "n_faces", "watertight", "mesh")
 # Threads per isolated run in a sweep: parallelism comes from the workers (one run per core).
 SWEEP_THREADS = 1
@@ -74,9 +78,10 @@ def full_grid_estimate(records: Sequence[dict], names: Sequence[str] | None = No
                        workers: int = 1) -> dict:
     """How long the full grid would take, from the defaults' run times.
 
-    Each grid variant is estimated at its method's default run time (a grid varies a
-    resolution both ways around the default, so this is the middle of its range); the runs
-    are shared among ``workers``.
+    Each grid variant is estimated at its method's default run time, the whole job (the fit,
+    checking and scoring: ``process_time_s``; the fit alone where that is missing): a grid
+    varies a resolution both ways around the default, so this is the middle of its range. The
+    runs are shared among ``workers``.
 
     Returns
     -------
@@ -85,7 +90,7 @@ def full_grid_estimate(records: Sequence[dict], names: Sequence[str] | None = No
         no default run succeeded), ``unknown`` (methods whose defaults failed: not counted).
     """
     done = {r["key"] for r in records if "key" in r}
-    time_of = {r["method"]: r["wall_time_s"] for r in records
+    time_of = {r["method"]: r.get("process_time_s") or r["wall_time_s"] for r in records
                if r.get("status") == "ok" and r.get("wall_time_s")
                and r.get("key") == methods.bind(r["method"]).key}
     runs = [run for run in variants(names, grid="full") if run.key not in done]

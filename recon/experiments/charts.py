@@ -51,6 +51,14 @@ def _pyplot():
     return plt
 
 
+def preload() -> None:
+    """Import matplotlib in a background thread now (a sweep calls it before its runs: its
+    parent only waits on the workers), so the charts at the end do not wait for the import."""
+    import threading
+
+    threading.Thread(target=_pyplot, name="recon-charts-preload", daemon=True).start()
+
+
 def _save(fig, path) -> Path:
     path = Path(path)
     fig.savefig(path, dpi=DPI)

@@ -201,6 +201,7 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
              "truth_faces": len(truth[1]), "timeout_s": timeout_s, "memory_mb": memory_mb,
              "score_options": score_options or {}} | dict(fingerprint or {})
     mesh_dir = out_dir / "meshes" if keep_meshes else None
+    charts.preload()
     done = run_sweep(run_case, cases, out_dir,
                      shared={"cloud": cloud, "truth": truth, "timeout_s": timeout_s,
                              "memory_mb": memory_mb, "score_options": score_options},
@@ -256,7 +257,8 @@ def format_full_grid(estimate: dict) -> str:
     unknown = (f"; not counting {', '.join(estimate['unknown'])}, whose defaults failed"
                if estimate["unknown"] else "")
     return (f"full grid: {estimate['runs']} more runs, about {minutes:.1f} min here (each "
-            f"variant timed as its method's defaults{unknown}); --grid full runs them")
+            f"variant timed as its method's defaults, scoring included{unknown}); --grid full "
+            "runs them")
 
 
 def format_agreement(verdict: dict) -> str:
@@ -321,11 +323,12 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
         Every run failed (after results.csv and results.json record how).
     """
     from recon.inputs import load_truth
-    from recon.surfaces.isolation import start_workers
+    from recon.surfaces.isolation import start_workers, warm_truth
     from recon.surfaces.prepare import load_prepared
 
     runs = variants(names, grid=grid)
-    if scheduler in (None, "threads"):  # local workers import Open3D while the input loads
+    local = scheduler in (None, "threads")
+    if local:  # local workers import Open3D while the input loads
         start_workers(min(len(runs), n_workers or default_workers()), SWEEP_THREADS)
     options = score_options(samples)
     preparation = preparation or Preparation()
@@ -333,6 +336,8 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
     out_dir = Path(out_dir)
     truth_mesh = (load_truth(truth, scale=truth_scale) if isinstance(truth, str | os.PathLike)
                   else Mesh.of(truth, "truth"))
+    if local:  # ... and make the truth ready for scoring while the cloud is prepared
+        warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
     cloud, prepared = load_prepared(input, preparation)
     if say is not None:
         say(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "

@@ -8,7 +8,8 @@ mesh is recorded as that cell's failure and the sweep goes on. Results stream to
 truth; ``stability`` from clouds and a truth mesh. Finishing writes
 
 - ``DIR/stability.csv`` and ``DIR/stability.json``: one row per (method, cell) with the status,
-  failure kind and reason, time, memory, faces and scores;
+  failure kind and reason, time (the fit's, and the whole job's with its scoring), memory,
+  faces and scores;
 - ``DIR/<method>_failures.png``: the failure map (a panel per outlier fraction, noise against
   density, each cell coloured by its outcome, an accuracy collapse included);
 - ``DIR/<method>_accuracy.png``: the Chamfer heatmap on the same grid (failed cells hatched).
@@ -42,6 +43,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import threading
+from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -51,14 +54,14 @@ from formats import sigma_from_sigma3
 from formats.errors import ReconError
 from recon.experiments import charts
 from recon.experiments.cases import SWEEP_THREADS, score_options, variants, write_csv
-from recon.experiments.sweep import run_sweep, to_jsonable
+from recon.experiments.sweep import check_scheduler, default_workers, run_sweep, to_jsonable
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
     Limits,
     run_isolated,
 )
-from recon.surfaces.methods import Run
+from recon.surfaces.methods import MethodInput, Run
 
 # Default grid. Noise: none, the paper's LRF (0.3 m 3-sigma) and its LIDAR (1 m 3-sigma).
 # Density: all points, 30% and 10%. Outliers: none and 2% (a few percent of spurious returns is
@@ -76,7 +79,9 @@ MIN_CELL_POINTS = 32
 COLLAPSE_RATIO = 3.0
 COLLAPSE_RULE = (f"collapse: Chamfer > {COLLAPSE_RATIO:g} x the clean cell's + the added noise "
                  "(1 sigma)")
-
+# Cells whose prepared clouds a process keeps (``_CellCache``): the cases run cell by cell, so
+# the cells in flight are at most one per worker plus the next; 4 covers 2 workers with room.
+CELL_CACHE = 4
 
 
 class StabilityError(ReconError, ValueError):
@@ -142,31 +147,75 @@ def degrade(points: np.ndarray, view_points: np.ndarray | None, *, noise_sigma3:
     return points, view_points
 
 
-def run_cell(*, run: Run, clouds: dict, truth, noise_key: str, noise_sigma3: float,
-             density: float, outliers: float, cell: tuple[int, int, int], seed: int,
-             timeout_s: float, memory_mb: int | None, score_options: dict | None) -> dict:
-    """Build one cell's cloud, prepare it and run ``run`` on it, isolated and scored."""
+def cell_cloud(clouds: dict, *, noise_key: str, noise_sigma3: float, density: float,
+               outliers: float, cell: tuple[int, int, int], seed: int
+               ) -> MethodInput | dict:
+    """One cell's cloud, degraded and prepared; or, when it cannot be, the failure every
+    method records for the cell (a dict with ``failure``, ``reason`` and ``n_points``)."""
     from recon.surfaces.prepare import prepare
 
-    method, params = run.method, run.params
     points, view_points, noisy = clouds[noise_key]
     sequence = np.random.SeedSequence((seed, *cell))
     points, view_points = degrade(points, view_points,
                                   noise_sigma3=0.0 if noisy else noise_sigma3,
                                   density=density, outliers=outliers, seed_sequence=sequence)
     if len(points) < MIN_CELL_POINTS:
-        return {"method": method, "params": params, "status": "failed", "failure": "empty",
+        return {"status": "failed", "failure": "empty",
                 "reason": f"only {len(points)} points left in this cell", "n_points": len(points)}
     try:
-        cloud = prepare(points, view_points=view_points, seed=seed)
+        return prepare(points, view_points=view_points, seed=seed)
     except ReconError as exc:
-        return {"method": method, "params": params, "status": "failed", "failure": "error",
+        return {"status": "failed", "failure": "error",
                 "reason": f"preparing the cloud failed: {exc}", "n_points": len(points)}
+
+
+class _CellCache:
+    """The last ``CELL_CACHE`` cells' clouds of this process, each built once.
+
+    The cases run cell by cell (every method of a cell, then the next cell), so the methods of
+    a cell find its cloud here instead of degrading and preparing it again; a thread asking for
+    a cell another thread is building waits for it.
+    """
+
+    def __init__(self, size: int):
+        self.size = size
+        self.entries: OrderedDict = OrderedDict()
+        self.lock = threading.Lock()
+
+    def get(self, key, build):
+        with self.lock:
+            entry = self.entries.get(key)
+            if entry is None:
+                entry = self.entries[key] = {"lock": threading.Lock(), "value": None}
+                while len(self.entries) > self.size:
+                    self.entries.popitem(last=False)
+            self.entries.move_to_end(key)
+        with entry["lock"]:
+            if entry["value"] is None:
+                entry["value"] = build()
+            return entry["value"]
+
+
+_CELLS = _CellCache(CELL_CACHE)
+
+
+def run_cell(*, run: Run, clouds: dict, source: str, truth, noise_key: str,
+             noise_sigma3: float, density: float, outliers: float, cell: tuple[int, int, int],
+             seed: int, timeout_s: float, memory_mb: int | None, score_options: dict | None
+             ) -> dict:
+    """Run ``run`` on one cell's cloud (``cell_cloud``, built once per cell in this process and
+    ``source``, the clouds' digest), isolated and scored."""
+    cloud = _CELLS.get((source, noise_key, noise_sigma3, density, outliers, cell, seed),
+                       lambda: cell_cloud(clouds, noise_key=noise_key, noise_sigma3=noise_sigma3,
+                                          density=density, outliers=outliers, cell=cell,
+                                          seed=seed))
+    if isinstance(cloud, dict):
+        return {"method": run.method, "params": run.params, **cloud}
     result = run_isolated(run, cloud, truth=truth, score_options=score_options,
                           timeout_s=timeout_s, memory_mb=memory_mb, threads=SWEEP_THREADS)
     result.pop("vertices", None)
     result.pop("faces", None)
-    result["n_points"] = len(points)
+    result["n_points"] = len(cloud.points)
     return result
 
 
@@ -227,7 +276,8 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
         Grid levels (module docstring).
     seed : int
     timeout_s, memory_mb, scheduler, n_workers, resume, score_options
-        As in ``recon.experiments.compare.compare``.
+        As in ``recon.experiments.compare.compare`` (no scheduler: ``"threads"``, one thread
+        per core waiting on its isolated worker).
     fingerprint : dict, optional
         Extra identity of the source for ``--resume`` checks.
 
@@ -240,11 +290,12 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
     density = _check_levels("density", density, 1e-9, 1.0)
     outliers = _check_levels("outliers", outliers, 0.0, None)
     runs = variants(names, grid=False)
-    cases = {}
-    for run in runs:
-        for i, nz in enumerate(noise):
-            for j, dn in enumerate(density):
-                for k, ol in enumerate(outliers):
+    scheduler = scheduler or "threads"
+    cases = {}  # cell by cell, so that a cell's methods share its cloud (``_CellCache``)
+    for i, nz in enumerate(noise):
+        for j, dn in enumerate(density):
+            for k, ol in enumerate(outliers):
+                for run in runs:
                     key = f"{run.method} noise={nz:g} density={dn:g} outliers={ol:g}"
                     cases[key] = {"run": run,
                                   "noise_key": "base" if "base" in clouds else _noise_key(nz),
@@ -253,7 +304,8 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
     digest = hashlib.sha1()
     for name in sorted(clouds):
         digest.update(np.ascontiguousarray(clouds[name][0]).tobytes())
-    ident = {"points_sha1": digest.hexdigest(), "seed": seed, "timeout_s": timeout_s,
+    source = digest.hexdigest()
+    ident = {"points_sha1": source, "seed": seed, "timeout_s": timeout_s,
              "memory_mb": memory_mb, "score_options": score_options or {}} | dict(
         fingerprint or {})
 
@@ -262,20 +314,24 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
         record = {"label": case["run"].label, "method": case["run"].method,
                   "noise_sigma3_m": case["noise_sigma3"], "density": case["density"],
                   "outliers": case["outliers"]}
-        for column in ("status", "failure", "reason", "wall_time_s", "peak_memory_mb",
-                       "n_points", "n_faces", "watertight"):
+        for column in ("status", "failure", "reason", "wall_time_s", "process_time_s",
+                       "load_time_s", "score_time_s", "peak_memory_mb", "n_points", "n_faces",
+                       "watertight"):
             record[column] = result.get(column)
-        record.update(result.get("scores") or {})
+        # The scores' own n_points counts the samples drawn on the mesh, not the cell's points.
+        record.update({k: v for k, v in (result.get("scores") or {}).items() if k not in record})
         return record
 
+    charts.preload()
     done = run_sweep(run_cell, cases, out_dir,
-                     shared={"clouds": clouds, "truth": truth, "seed": seed,
+                     shared={"clouds": clouds, "source": source, "truth": truth, "seed": seed,
                              "timeout_s": timeout_s, "memory_mb": memory_mb,
                              "score_options": score_options},
                      fingerprint=ident, scheduler=scheduler, n_workers=n_workers,
                      resume=resume, on_result=keep, desc="stability")
     records = []
-    for key, case in cases.items():
+    order = {run.key: i for i, run in enumerate(runs)}  # method by method, as before
+    for key, case in sorted(cases.items(), key=lambda item: order[item[1]["run"].key]):
         record = dict(done[key])
         record.setdefault("method", case["run"].method)
         record.setdefault("noise_sigma3_m", case["noise_sigma3"])
@@ -392,10 +448,15 @@ def stability_input(source, out_dir, *, truth=None, truth_scale: float = 1.0,
         ``stability``'s report.
     """
     from recon.inputs import is_strike_log, load_cloud, load_truth
+    from recon.surfaces.isolation import start_workers, warm_truth
 
     variants(names, grid=False)  # unknown names fail before anything is simulated or read
     limits = limits or Limits()
     options = score_options(samples)
+    check_scheduler(scheduler)
+    local = scheduler in (None, "threads")
+    if local:  # local workers import Open3D while the input loads
+        start_workers(n_workers or default_workers(), SWEEP_THREADS)
     noise, density, outliers = (parse_levels(v, n) if isinstance(v, str) else tuple(v)
                                 for v, n in ((noise, "noise"), (density, "density"),
                                              (outliers, "outliers")))
@@ -417,6 +478,8 @@ def stability_input(source, out_dir, *, truth=None, truth_scale: float = 1.0,
                                              seed=seed)
         if truth is not None:
             truth_mesh = load_truth(truth, scale=truth_scale)
+    if local:  # the workers make the truth ready for scoring while the first cell is prepared
+        warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
     return stability(out_dir, clouds=clouds, truth=truth_mesh, names=names, noise=noise,
                      density=density, outliers=outliers, seed=seed, scheduler=scheduler,
                      n_workers=n_workers, resume=resume, score_options=options,

@@ -18,6 +18,8 @@ interpreter nor fresh imports:
   (a worker's start-up and a job's loading have their own, generous limit,
   ``START_TIMEOUT_S``), so a loaded machine cannot make a fast method time out while
   importing Open3D;
+- ``warm_truth`` has idle workers build a truth's ``metrics.Truth`` ahead of the runs, while
+  the caller still reads and prepares the cloud;
 - a worker is replaced after a crash, a hang, a memory failure, or ``WORKER_RUNS`` runs (Open3D's
   Poisson is known to crash after hundreds of calls in one process);
 - every outcome becomes a result dict: ``status`` "ok" or "failed", and for a failure its
@@ -40,6 +42,7 @@ import hashlib
 import os
 import pickle
 import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -86,6 +89,11 @@ POLL_START_S, POLL_MAX_S = 0.02, 0.25
 OUTPUT_TAIL_LINES = 3
 
 FAILURE_KINDS = ("timeout", "crash", "memory", "error", "empty", "degenerate", "score")
+# Job directories named so are warm-ups (``warm_truth``), not runs.
+_WARM_PREFIX = "warm-"
+# About this many of the truth's vertices are scored by a warm-up (the truth's own structure,
+# samples and lattice are the work; the probe only has to exist).
+_WARM_PROBE = 64
 # Linux prctl option asking the kernel to signal a process when its parent thread dies.
 _PR_SET_PDEATHSIG = 1
 # Stages a job goes through, as the worker writes them to the job's ``stage`` file.
@@ -210,9 +218,30 @@ def _serve(parent: int) -> int:
             pass
     truths: dict[str, Any] = {}
     for line in sys.stdin:
-        _run_job(Path(line.strip()), truths)
+        jobdir = Path(line.strip())
+        if jobdir.name.startswith(_WARM_PREFIX):
+            _warm(jobdir, truths)
+        else:
+            _run_job(jobdir, truths)
         sys.stdout.flush()
     return 0
+
+
+def _warm(jobdir: Path, truths: dict[str, Any]) -> None:
+    """Make a truth ready for scoring before any run needs it (``warm_truth``): its
+    ``metrics.Truth`` with the distance structure, samples and coverage lattice the job's score
+    options ask for, built by scoring a few of the truth's own vertices. A failure here is
+    left for the runs' own scoring to report."""
+    try:
+        job = pickle.loads((jobdir / "job.pkl").read_bytes())
+        vertices = np.asarray(job["truth"][0], dtype=np.float64)
+        probe = vertices[:: max(1, len(vertices) // _WARM_PROBE)]
+        options = dict(job["score_options"] or {}) | {"edges": False}
+        _score(probe, None, job["truth"], job["truth_key"], options, truths)
+    except Exception:  # reported, if it matters, by the run that needs it
+        traceback.print_exc()
+    finally:
+        shutil.rmtree(jobdir, ignore_errors=True)
 
 
 def _limit_memory(megabytes: int | None) -> None:
@@ -235,6 +264,7 @@ def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
     stage = jobdir / "stage"
     result: dict[str, Any] = {}
     memory_mb = None
+    loaded = time.perf_counter()
     try:
         stage.write_text(_LOADING)
         job = pickle.loads((jobdir / "job.pkl").read_bytes())
@@ -252,6 +282,7 @@ def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
         _limit_memory(memory_mb)
         stage.write_text(_RUNNING)
         start = time.perf_counter()
+        result["load_time_s"] = start - loaded
         try:
             vertices, faces = method.run(cloud, **run.params)
         except MemoryError:
@@ -264,7 +295,8 @@ def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
             raise _Failure("error", f"{run.method}: {type(exc).__name__}: {last}") from None
         finally:
             _limit_memory(None)  # the limit is the method's: checking and scoring are ours
-        result["wall_time_s"] = time.perf_counter() - start
+        finished = time.perf_counter()
+        result["wall_time_s"] = finished - start
         result["peak_memory_mb"] = _maxrss_mb()
         stage.write_text(_CHECKING)
         try:
@@ -282,6 +314,7 @@ def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
                                           job["score_options"], truths)
             except Exception as exc:
                 raise _Failure("score", f"scoring failed: {type(exc).__name__}: {exc}") from None
+        result["score_time_s"] = time.perf_counter() - finished
         result.update(status="ok", failure=None, reason="")
     except _Failure as failure:
         result.update(status="failed", failure=failure.kind, reason=str(failure))
@@ -299,7 +332,8 @@ def _run_job(jobdir: Path, truths: dict[str, Any]) -> None:
 
 
 def _score(vertices, faces, truth, key: str, options, truths: dict[str, Any]) -> dict:
-    """Score a mesh against the truth with ``metrics.score``; a flat dict of numbers.
+    """Score a mesh (or, ``faces`` None, a cloud) against the truth with ``metrics.score``; a
+    flat dict of numbers.
 
     The worker keeps the last truth it saw (``metrics.Truth``, by ``key``): a comparison's runs
     share its distance structure and samples.
@@ -309,7 +343,8 @@ def _score(vertices, faces, truth, key: str, options, truths: dict[str, Any]) ->
     if key not in truths:
         truths.clear()
         truths[key] = Truth(truth)
-    report = score((vertices, faces), truths[key], **(options or {}))
+    test = vertices if faces is None else (vertices, faces)
+    report = score(test, truths[key], **(options or {}))
     return {k: v for k, v in report.to_dict().items() if isinstance(v, (int, float, bool))
             or v is None}
 
@@ -362,10 +397,14 @@ class _Worker:
     def submit(self, jobdir: Path) -> int:
         """Hand the worker a job; returns the byte offset of its output where the job begins."""
         offset = self.log.stat().st_size if self.log.exists() else 0
-        self.proc.stdin.write(f"{jobdir}\n".encode())
-        self.proc.stdin.flush()
+        self.send(jobdir)
         self.runs += 1
         return offset
+
+    def send(self, jobdir: Path) -> None:
+        """Name a job directory on the worker's stdin."""
+        self.proc.stdin.write(f"{jobdir}\n".encode())
+        self.proc.stdin.flush()
 
     def alive(self) -> bool:
         return self.proc.poll() is None
@@ -415,6 +454,28 @@ def start_workers(count: int, threads: int | None = None) -> None:
     started = [_Worker(threads) for _ in range(max(0, missing))]
     with _POOL_LOCK:
         _IDLE.setdefault(threads, []).extend(started)
+
+
+def warm_truth(truth: tuple[np.ndarray, np.ndarray], score_options: dict | None = None,
+               threads: int | None = None) -> None:
+    """Have every idle worker for ``threads`` make ``truth`` ready for scoring now.
+
+    Each builds the truth's ``metrics.Truth`` (its distance structure, and the samples and
+    coverage lattice of ``score_options``) while the caller prepares its runs, without waiting
+    for it; a run later handed to the worker with this truth and these options finds them
+    built (a run waits behind the warm-up, and its start-up limit covers both).
+    """
+    job = pickle.dumps({"truth": truth, "truth_key": _truth_key(truth),
+                        "score_options": score_options}, protocol=pickle.HIGHEST_PROTOCOL)
+    with _POOL_LOCK:
+        workers = [w for w in _IDLE.get(threads, []) if w.alive()]
+    for worker in workers:
+        jobdir = Path(tempfile.mkdtemp(prefix=_WARM_PREFIX, dir=worker.dir.name))
+        (jobdir / "job.pkl").write_bytes(job)
+        try:
+            worker.send(jobdir)
+        except OSError:  # it died: the next run replaces it
+            pass
 
 
 def _give_back(worker: _Worker, healthy: bool) -> None:
@@ -484,7 +545,9 @@ def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None,
         ``method``, ``params`` (resolved), ``status`` ("ok" or "failed"), ``failure`` (kind or
         None), ``reason``, ``wall_time_s`` (the method alone; for a timeout, until it was
         stopped), ``process_time_s`` (the whole job in its worker, from hand-over to result,
-        a new worker's start-up included), ``peak_memory_mb`` (the worker's peak resident set
+        a new worker's start-up included), ``load_time_s`` (the worker reading the job and
+        importing the method, before it runs), ``score_time_s`` (checking and scoring the mesh,
+        after it ran; when ok), ``peak_memory_mb`` (the worker's peak resident set
         during this run: after the method, or at its death), ``baseline_memory_mb`` (resident
         just before the method), and when ok ``vertices``, ``faces``, ``n_vertices``,
         ``n_faces``, ``watertight`` and (with a truth) ``scores``.

@@ -106,10 +106,13 @@ def test_full_grid_estimate_times_each_variant_as_its_methods_defaults():
     defaults = methods.get("poisson").defaults
     records = [_record("poisson", "poisson", 4.0, 0.1, 0.9, params=dict(defaults)),
                _record("convex-hull", "convex-hull", 1.0, 0.5, 0.5, status="crash")]
+    records[0]["process_time_s"] = 6.0  # the fit (4 s) checked and scored
     estimate = full_grid_estimate(records, ["poisson", "convex-hull"], workers=2)
-    # Poisson's 4 grid variants at 4 s each, on 2 workers; the hull's only run is done.
-    assert estimate == {"runs": 4, "estimate_s": 8.0, "unknown": []}
-    assert "4 more runs, about 0.1 min" in format_full_grid(estimate)
+    # Poisson's 4 grid variants at 6 s each, on 2 workers; the hull's only run is done.
+    assert estimate == {"runs": 4, "estimate_s": 12.0, "unknown": []}
+    assert "4 more runs, about 0.2 min" in format_full_grid(estimate)
+    del records[0]["process_time_s"]  # an older record: the fit alone
+    assert full_grid_estimate(records, ["poisson"], workers=2)["estimate_s"] == 8.0
     failed = full_grid_estimate(records[1:], ["poisson"], workers=2)
     assert failed["estimate_s"] is None and failed["unknown"] == ["poisson"]
     assert "no default run succeeded" in format_full_grid(failed)

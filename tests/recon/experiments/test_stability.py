@@ -73,6 +73,31 @@ def test_stability_resumes_without_rerunning(tmp_path):
     assert [r["wall_time_s"] for r in first] == [r["wall_time_s"] for r in second]
 
 
+def test_each_cell_is_degraded_and_prepared_once_for_all_its_methods(tmp_path, monkeypatch):
+    from recon.experiments import stability as module
+
+    built = []
+
+    def counting(clouds, **cell):
+        built.append(cell["cell"])
+        return module.cell_cloud.__wrapped__(clouds, **cell)
+
+    counting.__wrapped__ = module.cell_cloud
+    monkeypatch.setattr(module, "cell_cloud", counting)
+    points, view, _ = sphere_points(900, seed=11)  # a cloud no other test's cache holds
+    report = stability(tmp_path, clouds={"base": (points, view, False)}, truth=sphere_mesh(3),
+                       names=["convex-hull", "test-abort"], noise=(0.0, 0.03),
+                       density=(1.0, 0.5), outliers=(0.0,), scheduler="threads", n_workers=2,
+                       score_options=FAST_SCORE)
+    assert sorted(built) == [(0, 0, 0), (0, 1, 0), (1, 0, 0), (1, 1, 0)]
+    records = report["records"]  # method by method, each on its cell's points
+    assert [r["method"] for r in records] == ["convex-hull"] * 4 + ["test-abort"] * 4
+    hull = {(r["noise_sigma3_m"], r["density"]): r["n_points"] for r in records[:4]}
+    assert hull == {(0.0, 1.0): 900, (0.0, 0.5): 450, (0.03, 1.0): 900, (0.03, 0.5): 450}
+    for r in records[:4]:  # where each run's time went: the fit, then checks and scoring
+        assert r["process_time_s"] > r["wall_time_s"] + r["score_time_s"] > r["score_time_s"] > 0
+
+
 def test_scene_levels_are_fresh_simulations_with_range_noise(tmp_path):
     clouds, truth = simulate_levels("asteroid-lidar", [0.0, 3.0], tmp_path,
                                     overrides=["time.duration=30"], seed=0)

@@ -101,6 +101,40 @@ def test_a_good_run_returns_its_mesh_time_and_memory(cloud):
     assert 0.9 < result["scores"]["fscore"] <= 1.0
 
 
+def test_a_warm_up_builds_the_truth_a_run_then_scores_on(tmp_path):
+    from metrics.score import Truth
+    from recon.surfaces import isolation
+
+    truth = sphere_mesh(3)
+    jobdir = tmp_path / f"{isolation._WARM_PREFIX}job"
+    jobdir.mkdir()
+    key = isolation._truth_key(truth)
+    (jobdir / "job.pkl").write_bytes(isolation.pickle.dumps(
+        {"truth": truth, "truth_key": key, "score_options": FAST_SCORE}))
+    truths = {}
+    isolation._warm(jobdir, truths)  # what a worker does with a warm-up job
+    assert list(truths) == [key] and isinstance(truths[key], Truth)
+    built = truths[key]
+    assert built._distance is not None and not jobdir.exists()
+    assert list(built._lattices) == [FAST_SCORE["coverage_points"]]
+    assert [n for n, _ in built._samples] == [FAST_SCORE["n_truth_samples"]]
+
+
+def test_a_warmed_worker_scores_as_a_cold_one(cloud):
+    from recon.surfaces import isolation
+
+    truth = sphere_mesh(3)
+    isolation.shutdown_workers()
+    cold = run_isolated("convex-hull", cloud, truth=truth, score_options=FAST_SCORE)
+    isolation.shutdown_workers()
+    isolation.start_workers(1)
+    isolation.warm_truth(truth, FAST_SCORE)
+    warm = run_isolated("convex-hull", cloud, truth=truth, score_options=FAST_SCORE)
+    assert warm["status"] == cold["status"] == "ok"
+    assert warm["scores"] == cold["scores"]
+    assert len(isolation._IDLE[None]) == 1  # the warmed worker did the run
+
+
 def test_reconstruct_isolated_raises_method_failed(cloud):
     with pytest.raises(MethodFailed, match=r"test-abort failed \(crash\)"):
         reconstruct(cloud, method="test-abort", isolate=True)
