@@ -96,7 +96,7 @@ def _scheduler(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def add_sweep_options(parser, *, resume_help: str) -> None:
+def add_sweep_options(parser, *, resume_help: str, default: str) -> None:
     """``--scheduler``, ``--workers`` and ``--resume`` (recon.experiments.sweep's schedulers).
 
     Parameters
@@ -104,10 +104,12 @@ def add_sweep_options(parser, *, resume_help: str) -> None:
     parser : argparse.ArgumentParser or argument group
     resume_help : str
         What ``--resume`` keeps, in the command's own words.
+    default : str
+        What runs the work when ``--scheduler`` is not given, in the help's words.
     """
     parser.add_argument("--scheduler", metavar="ADDRESS", type=_scheduler,
-                        help="Dask scheduler address of an existing cluster (default: a local "
-                             "cluster); 'threads' or 'serial' run without Dask")
+                        help=f"Dask scheduler address of an existing cluster (default: {default}"
+                             "); 'threads' or 'serial' run without Dask")
     parser.add_argument("--workers", type=int, metavar="N",
                         help="local workers (default: one per core)")
     parser.add_argument("--resume", action="store_true", help=resume_help)

@@ -45,7 +45,8 @@ def _add_run_options(p: argparse.ArgumentParser, *, sweep: bool) -> None:
         g.add_argument("--samples", type=int, metavar="N",
                        help="points sampled per side when scoring (default: metrics' 200000; "
                             "fewer is faster and noisier)")
-        add_sweep_options(g, resume_help="keep DIR/results.jsonl and skip the runs it holds")
+        add_sweep_options(g, resume_help="keep DIR/results.jsonl and skip the runs it holds",
+                          default="threads, each method in its own worker process")
 
 
 def _add_closing_options(p: argparse.ArgumentParser, *, preprocessing: bool, sweep: bool

@@ -36,7 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true",
                    help="reduced version (minutes, for CI); verdicts of claims the reduced "
                         "runs cannot test say 'not tested'")
-    add_sweep_options(p, resume_help="keep the finished cases in DIR and run only the others")
+    add_sweep_options(p, resume_help="keep the finished cases in DIR and run only the others",
+                      default="a local Dask cluster")
     p.add_argument("--list", action="store_true", help="list the studies and exit")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--size", choices=("tiny",), help=argparse.SUPPRESS)  # tests only
