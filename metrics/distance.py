@@ -62,7 +62,7 @@ _INTERIOR_MARGIN = 1e-12
 # unit normal, dual basis vectors g_b and g_c, altitudes, then the bounds of the fast path
 # (MeshDistance._bounds; module docstring, 3.).
 _A, _N, _GB, _GC, _ALT = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
-_EDGE, _CORNER, _REACH, _RAYS = slice(15, 21), slice(21, 27), slice(27, 30), slice(30, 48)
+_EDGE, _CORNER, _RAYS, _GRAM = slice(15, 21), slice(21, 27), slice(27, 39), slice(39, 42)
 # Added to every cone angle beta (radians): covers the rounding of the unit normals and angles
 # (~1e-16 rad each on well-shaped faces). A ring face is then missed only if it rises by more
 # than 1e-9 of its distance from V beyond the bound: a distance error below 1e-9 of a face size.
@@ -129,7 +129,8 @@ class MeshDistance:
         self._start = np.concatenate([[0], np.cumsum(count)])
         self._scene_faces = np.flatnonzero(ok)
         self._table = np.hstack([a, normal, g_b, g_c, altitude,
-                                 self._bounds(normal, g_b, g_c, altitude, lengths)])
+                                 self._bounds(normal, g_b, g_c, altitude),
+                                 np.column_stack([bb, bc, cc])])
         self._scene = None
 
     # ------------------------------------------------------------------ set-up
@@ -154,24 +155,25 @@ class MeshDistance:
         keep = (ring != faces[row]) & ~self.degenerate[ring]
         return row[keep], ring[keep]
 
-    def _bounds(self, normal, g_b, g_c, altitude, lengths) -> np.ndarray:
+    def _bounds(self, normal, g_b, g_c, altitude) -> np.ndarray:
         """The per-face columns of the fast path's test (module docstring, 3.).
 
         Parameters
         ----------
         normal, g_b, g_c : (m, 3) float64, unit normal and dual basis of each face
-        altitude, lengths : (m, 3) float64, per corner its altitude and the opposite edge
+        altitude : (m, 3) float64, per corner its altitude
 
         Returns
         -------
-        (m, 33) float64
+        (m, 24) float64
             ``_EDGE``: per side (in front of the face, behind it) and edge k (opposite corner
             k), the slope c of the face across the edge (z <= c * distance beyond the edge
             line); ``_CORNER``: per side and corner, tan(beta) of the cone bound of the faces
-            touching the face at that corner only; ``_REACH``: the longer edge at each corner;
-            ``_RAYS``: per corner j and edge k != j, the coefficients of the barycentric weights
-            giving the in-plane distance of a projection from the line through corner j and the
-            vertex across edge k. Infinite slopes where nothing is shown.
+            touching the face at that corner only (0 where there are none or none rises);
+            ``_RAYS``: per corner j and each edge k != j, the unit in-plane direction from
+            corner j to the vertex across edge k, as the coefficients of the weights of
+            corners j + 1 and j + 2 in (p' - corner j) . direction. Infinite slopes where
+            nothing is shown.
         """
         f, v = self._f, self._v
         m, n_vertices = len(f), len(v)
@@ -243,6 +245,23 @@ class MeshDistance:
         cone[safe[vertex] & (np.diff(self._start)[vertex] == 3)] = 0.0  # no vertex-only face
         corner = np.repeat(cone.reshape(m, 1, 3), 2, axis=1)
 
+        # Unit in-plane directions u from corner j towards the far vertex X across each edge
+        # k != j, as the coefficients of the weights of the other two corners a, b giving
+        # (p' - V_j) . u (module docstring, 3.).
+        rays = np.zeros((m, 3, 2, 2))
+        x = v[far].reshape(m, 3, 3)
+        z = z.reshape(m, 3)
+        for j in range(3):
+            a_, b_ = (j + 1) % 3, (j + 2) % 3
+            for i, k in enumerate((a_, b_)):
+                d = x[:, k] - corners[:, j]
+                span = np.sqrt(np.maximum(np.einsum("ij,ij->i", d, d) - z[:, k] ** 2, 0.0))
+                scale = 1.0 / np.where(span > 0, span, np.inf)
+                rays[:, j, i, 0] = np.einsum("ij,ij->i", corners[:, a_] - corners[:, j], d) * scale
+                rays[:, j, i, 1] = np.einsum("ij,ij->i", corners[:, b_] - corners[:, j], d) * scale
+                above = span == 0  # X right above V: no direction
+                corner[above, :, j] = np.where(corner[above, :, j] == 0.0, 0.0, np.inf)
+
         # A side on which no ring vertex rises above the plane needs no bound at all: checked
         # where a bound is missing (sharp features such as a box's corners).
         for side, sign in enumerate((1.0, -1.0)):
@@ -255,19 +274,7 @@ class MeshDistance:
             np.maximum.at(rise, row, (sign * heights).max(axis=1))
             level = missing[rise <= eta]
             edge[level, side] = corner[level, side] = 0.0
-
-        # Lines through corner j and the far vertex across each edge k != j (in-plane).
-        rays = np.zeros((m, 3, 2, 3))
-        x = v[far].reshape(m, 3, 3)
-        for j in range(3):
-            for i, k in enumerate(((j + 1) % 3, (j + 2) % 3)):
-                d = x[:, k] - corners[:, j]
-                d -= np.einsum("ij,ij->i", d, normal)[:, None] * normal
-                length = np.linalg.norm(d, axis=1, keepdims=True)
-                nu = np.cross(normal, d) / np.where(length > 0, length, 1.0)
-                rays[:, j, i] = np.einsum("mcj,mj->mc", corners - corners[:, j:j + 1], nu)
-        reach = np.maximum(lengths, np.roll(lengths, -1, axis=1))[:, [1, 2, 0]]
-        return np.hstack([edge.reshape(m, 6), corner.reshape(m, 6), reach, rays.reshape(m, 18)])
+        return np.hstack([edge.reshape(m, 6), corner.reshape(m, 6), rays.reshape(m, 12)])
 
     def _get_scene(self):
         if self._scene is None:
@@ -345,19 +352,21 @@ class MeshDistance:
         behind = (h < 0)[:, None]
         edge = np.where(behind, row[:, 18:21], row[:, 15:18])
         corner = np.where(behind, row[:, 24:27], row[:, 21:24])
-        reach, rays = row[:, _REACH], row[:, _RAYS]
+        rays, gram = row[:, _RAYS], row[:, _GRAM]
         with np.errstate(invalid="ignore"):  # 0 * inf on the plane: the exact path decides
             for k, weight in enumerate((u, v, w)):
                 fast &= 2.0 * weight * row[:, 12 + k] > height * edge[:, k]
-            # The faces touching at corner j only: s**2 > 2 H tan(beta) (s + e), s the
-            # distance from the two lines bounding them.
-            for j in range(3):
-                s = np.minimum(np.abs(u * rays[:, 6 * j] + v * rays[:, 6 * j + 1]
-                                      + w * rays[:, 6 * j + 2]),
-                               np.abs(u * rays[:, 6 * j + 3] + v * rays[:, 6 * j + 4]
-                                      + w * rays[:, 6 * j + 5]))
-                bound = 2.0 * height * corner[:, j] * (s + reach[:, j])
-                fast &= (s * s > bound) | (bound == 0.0)
+            # The faces touching at corner j only: H tan(beta) < e - max((p' - V_j) . u) over
+            # the two rays u bounding them, e = |p' - V_j| (from the Gram matrix of AB, AC).
+            weights = (u, v, w)
+            for j, (wb, wc) in enumerate(((v, w), (v - 1.0, w), (v, w - 1.0))):
+                e = np.sqrt(np.maximum(wb * wb * gram[:, 0] + 2.0 * wb * wc * gram[:, 1]
+                                       + wc * wc * gram[:, 2], 0.0))
+                la, lb = weights[(j + 1) % 3], weights[(j + 2) % 3]
+                along = np.maximum(la * rays[:, 4 * j] + lb * rays[:, 4 * j + 1],
+                                   la * rays[:, 4 * j + 2] + lb * rays[:, 4 * j + 3])
+                bound = height * corner[:, j]
+                fast &= (e - along > bound) | (bound == 0.0)
         closest = p - h[:, None] * row[:, _N]
         face = t0.copy()
         slow = np.flatnonzero(~fast)
