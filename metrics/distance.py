@@ -72,7 +72,10 @@ _INTERIOR_MARGIN = 1e-12
 # unit normal, dual basis vectors g_b and g_c, altitudes, then the bounds of the fast path
 # (MeshDistance._bounds; module docstring, 3.).
 _A, _N, _GB, _GC, _ALT = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
-_EDGE, _CORNER, _RAYS, _GRAM = slice(15, 21), slice(21, 27), slice(27, 39), slice(39, 42)
+_EDGE, _QUICK = slice(15, 21), slice(21, 27)
+# Columns of the second table (MeshDistance._corners), gathered only for the points that fail
+# the quick corner test: the full corner test's slopes, ray coefficients and Gram matrix.
+_CORNER, _RAYS, _GRAM = slice(0, 6), slice(6, 18), slice(18, 21)
 # Added to every cone angle beta (radians): covers the rounding of the unit normals and angles
 # (~1e-16 rad each on well-shaped faces). A ring face is then missed only if it rises by more
 # than 1e-9 of its distance from V beyond the bound: a distance error below 1e-9 of a face size.
@@ -108,9 +111,14 @@ class MeshDistance:
         self.scale = max(bbox_diagonal(v), np.finfo(float).tiny)
         # Weld exactly repeated vertices (STL-style soups), so faces touching in space share
         # vertex indices in the ring; re-centre: all computation happens in _v, _f.
-        unique, inverse = np.unique(v, axis=0, return_inverse=True)
-        self._v = unique - self.centre
-        self._f = f = np.ascontiguousarray(inverse.reshape(-1)[mesh.faces])
+        order = np.lexsort(v.T[::-1])  # by x, then y, then z, as np.unique(axis=0) but faster
+        ordered = v[order]
+        new = np.ones(len(v), dtype=bool)
+        new[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+        inverse = np.empty(len(v), dtype=np.int64)
+        inverse[order] = np.cumsum(new) - 1
+        self._v = ordered[new] - self.centre
+        self._f = f = inverse[mesh.faces]
         a = self._v[f[:, 0]]
         ab = self._v[f[:, 1]] - a
         ac = self._v[f[:, 2]] - a
@@ -135,12 +143,15 @@ class MeshDistance:
         self.normals = normal
         # Faces around each vertex (CSR): the ring of a face is the faces around its corners.
         self._incident = np.argsort(f.ravel(), kind="stable") // 3
-        count = np.bincount(f.ravel(), minlength=len(unique))
+        count = np.bincount(f.ravel(), minlength=len(self._v))
         self._start = np.concatenate([[0], np.cumsum(count)])
         self._scene_faces = np.flatnonzero(ok)
-        self._table = np.hstack([a, normal, g_b, g_c, altitude,
-                                 self._bounds(normal, g_b, g_c, altitude),
-                                 np.column_stack([bb, bc, cc])])
+        self._table = table = np.empty((len(f), 27))
+        table[:, _A], table[:, _N], table[:, _GB], table[:, _GC] = a, normal, g_b, g_c
+        table[:, _ALT] = altitude
+        self._corners = np.empty((len(f), 21))
+        self._corners[:, _GRAM] = np.column_stack([bb, bc, cc])
+        self._bounds(lengths)
         self._scene = None
 
     # ------------------------------------------------------------------ set-up
@@ -165,48 +176,50 @@ class MeshDistance:
         keep = (ring != faces[row]) & ~self.degenerate[ring]
         return row[keep], ring[keep]
 
-    def _bounds(self, normal, g_b, g_c, altitude) -> np.ndarray:
-        """The per-face columns of the fast path's test (module docstring, 3.).
+    def _bounds(self, lengths: np.ndarray) -> None:
+        """Fill the columns of the fast path's tests in the per-face tables (module docstring, 3.).
+
+        ``_EDGE``: per side (in front of the face, behind it) and edge k (opposite corner k),
+        the slope c of the face across the edge (z <= c * distance beyond the edge line);
+        ``_CORNER``: per side and corner, tan(beta) of the cone bound of the faces touching the
+        face at that corner only (0 where there are none or none rises); ``_RAYS``: per corner
+        j and each edge k != j, the unit in-plane direction from corner j to the vertex across
+        edge k, as the coefficients of the weights of corners j + 1 and j + 2 in
+        (p' - corner j) . direction. Infinite slopes where nothing is shown. ``_QUICK``: per side
+        and corner j, ``tan(beta) / (altitude_j (1 - cos(phi_j)))`` with phi_j the smallest
+        angle between the rays and the face's angle at j: a point passes the corner test when
+        ``H * quick < 1 - weight_j``, as ``(1 - weight_j) altitude_j <= |p' - V_j|`` and
+        ``phi_j`` <= the angle phi of the full test.
 
         Parameters
         ----------
-        normal, g_b, g_c : (m, 3) float64, unit normal and dual basis of each face
-        altitude : (m, 3) float64, per corner its altitude
-
-        Returns
-        -------
-        (m, 24) float64
-            ``_EDGE``: per side (in front of the face, behind it) and edge k (opposite corner
-            k), the slope c of the face across the edge (z <= c * distance beyond the edge
-            line); ``_CORNER``: per side and corner, tan(beta) of the cone bound of the faces
-            touching the face at that corner only (0 where there are none or none rises);
-            ``_RAYS``: per corner j and each edge k != j, the unit in-plane direction from
-            corner j to the vertex across edge k, as the coefficients of the weights of
-            corners j + 1 and j + 2 in (p' - corner j) . direction. Infinite slopes where
-            nothing is shown.
+        lengths : (m, 3) float64, per corner the length of the opposite edge
         """
         f, v = self._f, self._v
+        table = self._table
         m, n_vertices = len(f), len(v)
         eta = defaults.COPLANAR_FRACTION * self.scale
+        normal, g_b, g_c = self.normals, table[:, _GB], table[:, _GC]
         corners = v[f]  # (m, 3 corners, 3)
         own = np.repeat(np.arange(m), 3)  # rows 3 face + k below
 
-        # Edge k of a face runs from corner k + 1 to corner k + 2; across it, the face holding
-        # the reverse edge. An edge met once in each direction is manifold; one with no
-        # reverse is a boundary; any other (repeated, or reversed twice) is neither.
+        # Edge k of a face runs from corner k + 1 to corner k + 2. An edge met exactly twice,
+        # once in each direction, is manifold, with a face across; one met once is a boundary;
+        # any other (met more often, or twice in one direction) is neither.
         start, end = f[:, [1, 2, 0]].ravel(), f[:, [2, 0, 1]].ravel()
-        key = start * n_vertices + end
-        order = np.argsort(key, kind="stable")
-        ordered = key[order]
-        same = ordered[1:] == ordered[:-1]
-        repeated = np.zeros(len(key), dtype=bool)
-        repeated[order[1:][same]] = repeated[order[:-1][same]] = True
-        twin = end * n_vertices + start
-        at = np.minimum(np.searchsorted(ordered, twin), len(key) - 1)
-        found = ordered[at] == twin
-        across = order[at]
-        manifold = found & ~repeated & ~repeated[across]
-        boundary = ~found & ~repeated
+        key = np.minimum(start, end) * n_vertices + np.maximum(start, end)
+        order = np.argsort(key)
+        equal = np.diff(key[order]) == 0
+        after, before = np.append(equal, False), np.insert(equal, 0, False)
+        first = np.flatnonzero(after & ~before & ~np.append(after[1:], False))  # runs of two
+        one, two = order[first], order[first + 1]
+        opposite = start[one] == end[two]
+        one, two = one[opposite], two[opposite]
+        across = np.arange(3 * m)
+        across[one], across[two] = two, one
+        manifold = across != np.arange(3 * m)
+        boundary = np.zeros(3 * m, dtype=bool)
+        boundary[order[~after & ~before]] = True
         neighbour = across // 3
         far = np.where(manifold, f[neighbour, across % 3], f[own, np.tile([0, 1, 2], m)])
 
@@ -216,7 +229,7 @@ class MeshDistance:
         bv = np.einsum("ij,ij->i", rel, g_b[own])
         bw = np.einsum("ij,ij->i", rel, g_c[own])
         weight = np.choose(np.tile([0, 1, 2], m), [1.0 - bv - bw, bv, bw])
-        beyond = -weight * altitude.ravel()  # distance of X's projection beyond the edge line
+        beyond = -weight * table[:, _ALT].ravel()  # distance of X's projection beyond the edge line
         flat = ~manifold | self.degenerate[neighbour]  # nothing across, or no surface
         edge = np.empty((m, 2, 3))
         for side, rise in enumerate((z, -z)):
@@ -284,7 +297,22 @@ class MeshDistance:
             np.maximum.at(rise, row, (sign * heights).max(axis=1))
             level = missing[rise <= eta]
             edge[level, side] = corner[level, side] = 0.0
-        return np.hstack([edge.reshape(m, 6), corner.reshape(m, 6), rays.reshape(m, 12)])
+        table[:, _EDGE] = edge.reshape(m, 6)
+        self._corners[:, _CORNER] = corner.reshape(m, 6)
+        self._corners[:, _RAYS] = rays.reshape(m, 12)
+        # Quick corner test: cos(phi_j) is the largest cosine between a ray and the two edges
+        # at corner j (edge to corner a has the length opposite corner b, and vice versa).
+        quick = np.full((m, 2, 3), np.inf)
+        for j in range(3):
+            a_, b_ = (j + 1) % 3, (j + 2) % 3
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cosine = np.maximum(rays[:, j, :, 0] / lengths[:, b_, None],
+                                    rays[:, j, :, 1] / lengths[:, a_, None]).max(axis=1)
+                room = table[:, 12 + j] * (1.0 - cosine)
+                ratio = corner[:, :, j] / np.where(room > 0, room, np.nan)[:, None]
+            quick[:, :, j] = np.where(np.isnan(ratio), np.inf, ratio)
+            quick[corner[:, :, j] == 0.0, j] = 0.0
+        table[:, _QUICK] = quick.reshape(m, 6)
 
     def _get_scene(self):
         if self._scene is None:
@@ -358,17 +386,50 @@ class MeshDistance:
         height = np.abs(h)
         m = _INTERIOR_MARGIN
         fast = (u > m) & (v > m) & (w > m)
-        # The faces across the edges: 2 r_k > H c_k, r_k the in-plane distance from edge k.
+        # The faces across the edges: 2 r_k > H c_k, r_k the in-plane distance from edge k;
+        # the faces at one corner: the quick test H * quick_j < 1 - weight_j.
         behind = (h < 0)[:, None]
         edge = np.where(behind, row[:, 18:21], row[:, 15:18])
-        corner = np.where(behind, row[:, 24:27], row[:, 21:24])
-        rays, gram = row[:, _RAYS], row[:, _GRAM]
+        quick = np.where(behind, row[:, 24:27], row[:, 21:24])
+        weights = (u, v, w)
         with np.errstate(invalid="ignore"):  # 0 * inf on the plane: the exact path decides
-            for k, weight in enumerate((u, v, w)):
+            for k, weight in enumerate(weights):
                 fast &= 2.0 * weight * row[:, 12 + k] > height * edge[:, k]
-            # The faces touching at corner j only: H tan(beta) < e - max((p' - V_j) . u) over
-            # the two rays u bounding them, e = |p' - V_j| (from the Gram matrix of AB, AC).
-            weights = (u, v, w)
+            full = fast.copy()
+            for j, rest in enumerate((v + w, u + w, u + v)):
+                fast &= height * quick[:, j] < rest
+        # The full corner test for the others (module docstring, 3.).
+        again = np.flatnonzero(full & ~fast)
+        if len(again):
+            fast[again] = self._corner_test(height[again], h[again] < 0, t0[again],
+                                            u[again], v[again], w[again])
+        closest = p - h[:, None] * row[:, _N]
+        face = t0.copy()
+        slow = np.flatnonzero(~fast)
+        if len(slow):
+            height[slow], face[slow], closest[slow] = self._guarded(p[slow], t0[slow])
+        return height, face, closest
+
+    def _corner_test(self, height, behind, t0, u, v, w) -> np.ndarray:
+        """The full corner test: ``H tan(beta) < e - max((p' - V_j) . ray)`` at every corner.
+
+        Parameters
+        ----------
+        height : (r,) float64, H; behind : (r,) bool, p behind the face; t0 : (r,) int64
+        u, v, w : (r,) float64, barycentric weights of the projection p'
+
+        Returns
+        -------
+        (r,) bool, the faces at one corner are farther than H at all three corners
+        """
+        row = np.take(self._corners, t0, axis=0)
+        corner = np.where(behind[:, None], row[:, 3:6], row[:, 0:3])
+        rays, gram = row[:, _RAYS], row[:, _GRAM]
+        weights = (u, v, w)
+        ok = np.ones(len(t0), dtype=bool)
+        with np.errstate(invalid="ignore"):
+            # e = |p' - V_j| from the Gram matrix of AB, AC and the weights of B and C in
+            # p' - V_j.
             for j, (wb, wc) in enumerate(((v, w), (v - 1.0, w), (v, w - 1.0))):
                 e = np.sqrt(np.maximum(wb * wb * gram[:, 0] + 2.0 * wb * wc * gram[:, 1]
                                        + wc * wc * gram[:, 2], 0.0))
@@ -376,13 +437,8 @@ class MeshDistance:
                 along = np.maximum(la * rays[:, 4 * j] + lb * rays[:, 4 * j + 1],
                                    la * rays[:, 4 * j + 2] + lb * rays[:, 4 * j + 3])
                 bound = height * corner[:, j]
-                fast &= (e - along > bound) | (bound == 0.0)
-        closest = p - h[:, None] * row[:, _N]
-        face = t0.copy()
-        slow = np.flatnonzero(~fast)
-        if len(slow):
-            height[slow], face[slow], closest[slow] = self._guarded(p[slow], t0[slow])
-        return height, face, closest
+                ok &= (e - along > bound) | (bound == 0.0)
+        return ok
 
     def _guarded(self, p: np.ndarray, t0: np.ndarray):
         """Minimum exact distance over t0 and its ring, for points (r, 3) off the fast path.

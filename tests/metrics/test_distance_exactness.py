@@ -10,7 +10,7 @@ import trimesh
 from metrics_reference import MESHES, as_mesh, box, brute_force_distance, ellipsoid, load, satellite
 
 from metrics import Mesh, MeshDistance, Truth, score
-from metrics.distance import _CORNER, _EDGE
+from metrics.distance import _CORNER, _EDGE, _QUICK
 from metrics.inputs import bbox_diagonal
 
 RTOL = 1e-9  # issue #10: the fast path equals the exact path to 1e-9 relative
@@ -41,7 +41,7 @@ def near_points(mesh: Mesh, n: int, seed: int) -> np.ndarray:
 def ring_checked(mesh: Mesh) -> MeshDistance:
     """The exact path for every point: the ring of every candidate is checked."""
     md = MeshDistance(mesh)
-    md._table[:, _EDGE] = md._table[:, _CORNER] = np.inf
+    md._table[:, _EDGE] = md._table[:, _QUICK] = md._corners[:, _CORNER] = np.inf
     return md
 
 
@@ -128,13 +128,13 @@ def test_bounds_where_the_fan_is_open_or_not_a_manifold():
     edges = trimesh.Trimesh(sphere.vertices, upper, process=False).edges_sorted
     rim = np.unique(edges[trimesh.grouping.group_rows(edges, require_count=1)])
     at_rim = np.isin(upper, rim)  # (faces, corners)
-    behind = MeshDistance(open_mesh)._table[:, _CORNER.start + 3:_CORNER.stop]  # inside
+    behind = MeshDistance(open_mesh)._corners[:, _CORNER.start + 3:_CORNER.stop]  # inside
     assert at_rim.any() and np.isinf(behind[at_rim]).all()
     assert np.isfinite(behind[~at_rim]).all()
     # A fin on one edge of a sheet: three faces on one edge.
     vertices = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1.0]])
     fin = MeshDistance(Mesh(vertices, np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])))
     assert np.isinf(fin._table[:, _EDGE]).any()
-    outside = MeshDistance(box())._table
-    assert (outside[:, _EDGE.start:_EDGE.start + 3] == 0).all()  # in front: nothing rises
-    assert (outside[:, _CORNER.start:_CORNER.start + 3] == 0).all()
+    outside = MeshDistance(box())
+    assert (outside._table[:, _EDGE.start:_EDGE.start + 3] == 0).all()  # in front: no rise
+    assert (outside._corners[:, _CORNER.start:_CORNER.start + 3] == 0).all()

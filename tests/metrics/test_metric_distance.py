@@ -8,7 +8,7 @@ import trimesh
 from metrics_reference import MESHES, as_mesh, box, brute_force_distance, load
 
 from metrics import MeshDistance, MetricsInputError, point_mesh_distance
-from metrics.distance import _CORNER, _EDGE, closest_on_faces
+from metrics.distance import _CORNER, _EDGE, _QUICK, closest_on_faces
 from metrics.inputs import Mesh, bbox_diagonal
 
 RTOL = 1e-9  # the brief's agreement
@@ -207,7 +207,7 @@ def test_error_is_a_recon_error_and_value_error():
 
 def ring_checked_everywhere(md: MeshDistance) -> MeshDistance:
     """The same mesh with every point sent through the exact ring check (no fast path)."""
-    md._table[:, _EDGE] = md._table[:, _CORNER] = np.inf
+    md._table[:, _EDGE] = md._table[:, _QUICK] = md._corners[:, _CORNER] = np.inf
     return md
 
 
