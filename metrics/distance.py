@@ -268,22 +268,34 @@ class MeshDistance:
         cone[safe[vertex] & (np.diff(self._start)[vertex] == 3)] = 0.0  # no vertex-only face
         corner = np.repeat(cone.reshape(m, 1, 3), 2, axis=1)
 
-        # Unit in-plane directions u from corner j towards the far vertex X across each edge
+        # Unit in-plane directions r from corner j towards the far vertex X across each edge
         # k != j, as the coefficients of the weights of the other two corners a, b giving
-        # (p' - V_j) . u (module docstring, 3.).
+        # (p' - V_j) . r (module docstring, 3.), all from X's barycentric weights (beta) and the
+        # Gram matrix: X' - V_j = beta_a (P_a - V_j) + beta_b (P_b - V_j).
+        bary = np.stack([1.0 - bv - bw, bv, bw], axis=1).reshape(m, 3, 3)  # (face, k, corner)
+        bb, bc, cc = self._corners[:, _GRAM].T
+        squared = lengths**2
         rays = np.zeros((m, 3, 2, 2))
-        x = v[far].reshape(m, 3, 3)
-        z = z.reshape(m, 3)
-        for j in range(3):
+        quick = np.full((m, 2, 3), np.inf)
+        for j, between in enumerate((bc, bb - bc, cc - bc)):  # (P_a - V_j) . (P_b - V_j)
             a_, b_ = (j + 1) % 3, (j + 2) % 3
+            cosine = np.full(m, -np.inf)  # largest cosine between a ray and an edge at j
             for i, k in enumerate((a_, b_)):
-                d = x[:, k] - corners[:, j]
-                span = np.sqrt(np.maximum(np.einsum("ij,ij->i", d, d) - z[:, k] ** 2, 0.0))
+                to_a = bary[:, k, a_] * squared[:, b_] + bary[:, k, b_] * between
+                to_b = bary[:, k, a_] * between + bary[:, k, b_] * squared[:, a_]
+                span = np.sqrt(np.maximum(bary[:, k, a_] * to_a + bary[:, k, b_] * to_b, 0.0))
                 scale = 1.0 / np.where(span > 0, span, np.inf)
-                rays[:, j, i, 0] = np.einsum("ij,ij->i", corners[:, a_] - corners[:, j], d) * scale
-                rays[:, j, i, 1] = np.einsum("ij,ij->i", corners[:, b_] - corners[:, j], d) * scale
+                rays[:, j, i, 0], rays[:, j, i, 1] = to_a * scale, to_b * scale
+                with np.errstate(divide="ignore", invalid="ignore"):  # NaN: no quick test
+                    cosine = np.maximum(cosine, np.maximum(rays[:, j, i, 0] / lengths[:, b_],
+                                                           rays[:, j, i, 1] / lengths[:, a_]))
                 above = span == 0  # X right above V: no direction
                 corner[above, :, j] = np.where(corner[above, :, j] == 0.0, 0.0, np.inf)
+            # Quick test coefficient tan(beta) / (altitude_j (1 - cos(phi_j))).
+            room = table[:, 12 + j] * (1.0 - cosine)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                quick[:, :, j] = np.where((room > 0)[:, None], corner[:, :, j] / room[:, None],
+                                          np.inf)
 
         # A side on which no ring vertex rises above the plane needs no bound at all: checked
         # where a bound is missing (sharp features such as a box's corners).
@@ -300,18 +312,7 @@ class MeshDistance:
         table[:, _EDGE] = edge.reshape(m, 6)
         self._corners[:, _CORNER] = corner.reshape(m, 6)
         self._corners[:, _RAYS] = rays.reshape(m, 12)
-        # Quick corner test: cos(phi_j) is the largest cosine between a ray and the two edges
-        # at corner j (edge to corner a has the length opposite corner b, and vice versa).
-        quick = np.full((m, 2, 3), np.inf)
-        for j in range(3):
-            a_, b_ = (j + 1) % 3, (j + 2) % 3
-            with np.errstate(divide="ignore", invalid="ignore"):
-                cosine = np.maximum(rays[:, j, :, 0] / lengths[:, b_, None],
-                                    rays[:, j, :, 1] / lengths[:, a_, None]).max(axis=1)
-                room = table[:, 12 + j] * (1.0 - cosine)
-                ratio = corner[:, :, j] / np.where(room > 0, room, np.nan)[:, None]
-            quick[:, :, j] = np.where(np.isnan(ratio), np.inf, ratio)
-            quick[corner[:, :, j] == 0.0, j] = 0.0
+        quick[corner == 0.0] = 0.0
         table[:, _QUICK] = quick.reshape(m, 6)
 
     def _get_scene(self):
