@@ -141,10 +141,6 @@ class MeshDistance:
         lengths = np.linalg.norm(np.stack([ac - ab, ac, ab], axis=1), axis=2)
         altitude = double_area[:, None] / np.where(lengths > 0, lengths, 1.0)
         self.normals = normal
-        # Faces around each vertex (CSR): the ring of a face is the faces around its corners.
-        self._incident = np.argsort(f.ravel(), kind="stable") // 3
-        count = np.bincount(f.ravel(), minlength=len(self._v))
-        self._start = np.concatenate([[0], np.cumsum(count)])
         self._scene_faces = np.flatnonzero(ok)
         self._table = table = np.empty((len(f), 27))
         table[:, _A], table[:, _N], table[:, _GB], table[:, _GC] = a, normal, g_b, g_c
@@ -195,13 +191,20 @@ class MeshDistance:
         ----------
         lengths : (m, 3) float64, per corner the length of the opposite edge
         """
+        corners = self._v[self._f]  # (m, 3 corners, 3)
+        own = np.repeat(np.arange(len(corners)), 3)  # rows 3 face + k
+        # The vertices' part on a second thread (numpy releases the GIL in its kernels).
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            fans = pool.submit(self._fans, corners)
+            self._face_bounds(lengths, corners, own, fans)
+
+    def _face_bounds(self, lengths, corners, own, fans) -> None:
+        """The faces' part of ``_bounds``, joined with the vertices' (``fans``) at the end."""
         f, v = self._f, self._v
         table = self._table
         m, n_vertices = len(f), len(v)
         eta = defaults.COPLANAR_FRACTION * self.scale
         normal, g_b, g_c = self.normals, table[:, _GB], table[:, _GC]
-        corners = v[f]  # (m, 3 corners, 3)
-        own = np.repeat(np.arange(m), 3)  # rows 3 face + k below
 
         # Edge k of a face runs from corner k + 1 to corner k + 2. An edge met exactly twice,
         # once in each direction, is manifold, with a face across; one met once is a boundary;
@@ -240,32 +243,11 @@ class MeshDistance:
             c[~manifold & ~boundary] = np.inf
             edge[:, side] = c.reshape(m, 3)
 
-        # Cone bound of the faces around each vertex.
-        vertex = f.ravel()  # rows 3 face + corner
-        face_normal = np.repeat(normal, 3, axis=0)
-        mean = np.stack([np.bincount(vertex, weights=face_normal[:, i], minlength=n_vertices)
-                         for i in range(3)], axis=1)
-        size = np.linalg.norm(mean, axis=1, keepdims=True)
-        mean /= np.where(size > 0, size, 1.0)
-        m_v = mean[vertex]
-        tilt = _angle_between(face_normal, m_v)  # angle(n_T, m_V) per corner row
-        alpha = np.zeros(n_vertices)
-        np.maximum.at(alpha, vertex, tilt)
-        # The fan around V winds once when its faces' angles at V, projected along m_V, add up
-        # to 2 pi: the m_V component of a face's cross product is that of its projected edges.
-        e1 = (np.roll(corners, -1, axis=1) - corners).reshape(-1, 3)
-        e2 = (np.roll(corners, -2, axis=1) - corners).reshape(-1, 3)
-        det = np.einsum("ij,ij->i", np.cross(e1, e2), m_v)
-        dot = (np.einsum("ij,ij->i", e1, e2)
-               - np.einsum("ij,ij->i", e1, m_v) * np.einsum("ij,ij->i", e2, m_v))
-        turn = np.bincount(vertex, weights=np.arctan2(det, dot), minlength=n_vertices)
-        safe = (np.abs(turn - 2 * np.pi) < 1.0) & (size[:, 0] > 0)
-        safe[f[self.degenerate].ravel()] = False
-        safe[start[~manifold]] = safe[end[~manifold]] = False
-        beta = alpha[vertex] + tilt + _ANGLE_MARGIN
-        with np.errstate(invalid="ignore"):
-            cone = np.where(safe[vertex] & (beta < 0.5 * np.pi), np.tan(beta), np.inf)
-        cone[safe[vertex] & (np.diff(self._start)[vertex] == 3)] = 0.0  # no vertex-only face
+        cone, fan = fans.result()
+        fan[start[~manifold]] = fan[end[~manifold]] = False
+        vertex = f.ravel()
+        cone = np.where(fan[vertex], cone, np.inf)
+        cone[fan[vertex] & (np.diff(self._start)[vertex] == 3)] = 0.0  # no vertex-only face
         corner = np.repeat(cone.reshape(m, 1, 3), 2, axis=1)
 
         # Unit in-plane directions r from corner j towards the far vertex X across each edge
@@ -314,6 +296,54 @@ class MeshDistance:
         self._corners[:, _RAYS] = rays.reshape(m, 12)
         quick[corner == 0.0] = 0.0
         table[:, _QUICK] = quick.reshape(m, 6)
+
+    def _fans(self, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The cone bound of the faces around each vertex (module docstring, 3.).
+
+        Also builds the faces-around-vertex index (``_incident``, ``_start``) of ``_ring``.
+
+        Parameters
+        ----------
+        corners : (m, 3, 3) float64, the faces' corners
+
+        Returns
+        -------
+        cone : (3 m,) float64, per face and corner (row 3 face + corner), tan(beta); infinite
+            where beta >= 90 deg
+        fan : (n_vertices,) bool, the faces around the vertex hold no degenerate face and wind
+            once around it, projected along their mean normal (edge manifoldness is checked
+            by the caller)
+        """
+        f, normal = self._f, self.normals
+        n_vertices = len(self._v)
+        vertex = f.ravel()  # rows 3 face + corner
+        # Faces around each vertex (CSR): the ring of a face is the faces around its corners.
+        self._incident = np.argsort(vertex, kind="stable") // 3
+        self._start = np.concatenate([[0], np.cumsum(np.bincount(vertex,
+                                                                   minlength=n_vertices))])
+        face_normal = np.repeat(normal, 3, axis=0)
+        mean = np.stack([np.bincount(vertex, weights=face_normal[:, i], minlength=n_vertices)
+                         for i in range(3)], axis=1)
+        size = np.linalg.norm(mean, axis=1, keepdims=True)
+        mean /= np.where(size > 0, size, 1.0)
+        m_v = mean[vertex]
+        tilt = _angle_between(face_normal, m_v)  # angle(n_T, m_V) per corner row
+        alpha = np.zeros(n_vertices)
+        np.maximum.at(alpha, vertex, tilt)
+        # The fan around V winds once when its faces' angles at V, projected along m_V, add up
+        # to 2 pi: the m_V component of a face's cross product is that of its projected edges.
+        e1 = (np.roll(corners, -1, axis=1) - corners).reshape(-1, 3)
+        e2 = (np.roll(corners, -2, axis=1) - corners).reshape(-1, 3)
+        det = np.einsum("ij,ij->i", np.cross(e1, e2), m_v)
+        dot = (np.einsum("ij,ij->i", e1, e2)
+               - np.einsum("ij,ij->i", e1, m_v) * np.einsum("ij,ij->i", e2, m_v))
+        turn = np.bincount(vertex, weights=np.arctan2(det, dot), minlength=n_vertices)
+        fan = (np.abs(turn - 2 * np.pi) < 1.0) & (size[:, 0] > 0)
+        fan[f[self.degenerate].ravel()] = False
+        beta = alpha[vertex] + tilt + _ANGLE_MARGIN
+        with np.errstate(invalid="ignore"):
+            cone = np.where(beta < 0.5 * np.pi, np.tan(beta), np.inf)
+        return cone, fan
 
     def _get_scene(self):
         if self._scene is None:
