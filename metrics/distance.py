@@ -63,6 +63,7 @@ import numpy as np
 
 from metrics import defaults
 from metrics.inputs import as_mesh, as_points, bbox_diagonal
+from metrics.spatial import morton_order
 
 # Barycentric margin of the fast path's "projects into the interior" test. Any value >= 0 is
 # exact (points inside the margin take the exact slow path); 1e-12 keeps points whose projection
@@ -381,7 +382,10 @@ class MeshDistance:
         closest : (n, 3) float64, metres, the closest point on the surface
         """
         points = as_points(points, "points")
-        p = points - self.centre
+        # Queried in Morton order, so neighbouring queries walk the same BVH nodes and read
+        # the same table rows: a third faster on a random-order million, ordering included.
+        order = morton_order(points)
+        p = points[order] - self.centre
         t0 = self.candidates(p)
         distance = np.empty(len(p))
         face = np.empty(len(p), dtype=np.int64)
@@ -390,7 +394,8 @@ class MeshDistance:
 
         def run(lo: int) -> None:
             sl = slice(lo, lo + step)
-            distance[sl], face[sl], closest[sl] = self._refine(p[sl], t0[sl])
+            rows = order[sl]
+            distance[rows], face[rows], closest[rows] = self._refine(p[sl], t0[sl])
 
         starts = range(0, len(p), step)
         if threads > 1 and len(p) > step:
