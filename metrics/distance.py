@@ -4,7 +4,8 @@ How a query works
 -----------------
 1. Open3D's ``RaycastingScene.compute_closest_points`` (Embree, float32, both cores) names a
    candidate triangle ``t0`` for every point. Coordinates are re-centred on the mesh's bounding-box
-   centre first, so float32 keeps ~7 digits of the mesh's size rather than of its position.
+   centre first, so float32 keeps ~7 digits of the mesh's size rather than of its position, and
+   the points are queried in Morton order (neighbours share BVH nodes and table rows).
 2. The exact float64 distance to ``t0`` is computed, and the triangles sharing a vertex with
    ``t0`` (its ring) are checked for being closer: this is the guard against float32 picking a
    wrong near-tie triangle. A near-tie at a shared edge or vertex is always with a ring face.
@@ -46,9 +47,13 @@ How a query works
    on a triangle (Ericson, *Real-Time Collision Detection*, 5.1.5) and the minimum taken; ties
    go to the lowest face index.
 
-The set-up costs about 3 us of CPU per face (a 150k-face surface: 0.4 s, a third of an Open3D
-query of 600k points; the per-pair analysis it replaced took 11 us); at query time nothing is
+The set-up is a few vectorised passes over the faces (edge slopes, rays) and, on a second thread,
+over the vertices (cones, fans): about 2 us of CPU per face (0.3 s for a 150k-face surface; the
+per-(face, ring face) analysis it replaced took 11 us). The fast path's test reads a 27-column
+row per point, with a quick corner test from precomputed coefficients; the full corner test
+(a second table) runs for the ~1 % of points the quick one rejects. At query time nothing is
 computed per (point, ring face) pair except for the points off the fast path.
+``benchmarks/bench_score.py`` times the whole score against Open3D's own float32 queries.
 
 Closest points on an edge or a vertex are computed from the edge's endpoints in a canonical order
 (lower vertex index first), so two faces sharing the edge give the same bits: results do not
