@@ -51,7 +51,7 @@ The set-up is a few vectorised passes over the faces (edge slopes, rays) and, on
 over the vertices (cones, fans): about 2 us of CPU per face (0.3 s for a 150k-face surface; the
 per-(face, ring face) analysis it replaced took 11 us). The fast path's test reads a 27-column
 row per point, with a quick corner test from precomputed coefficients; the full corner test
-(a second table) runs for the ~1 % of points the quick one rejects. At query time nothing is
+(a second table) runs for the 1-2 % of points the quick one rejects. At query time nothing is
 computed per (point, ring face) pair except for the points off the fast path.
 ``benchmarks/bench_score.py`` times the whole score against Open3D's own float32 queries.
 
