@@ -6,7 +6,10 @@ import numpy as np
 
 
 def morton_order(points: np.ndarray) -> np.ndarray:
-    """Permutation putting points (n, 3) in Morton (Z-curve) order on a 2**21 grid per axis."""
+    """Permutation putting points (n, 3) in Morton (Z-curve) order on a 2**21 grid per axis.
+
+    Points in the same cell come in any order (numpy's SIMD quicksort: 5x a stable sort).
+    """
     lo = points.min(axis=0)
     extent = max(float(np.ptp(points, axis=0).max()), np.finfo(float).tiny)
     cell = np.minimum((points - lo) / extent * (2**21 - 1), 2**21 - 1).astype(np.uint64)
@@ -19,7 +22,7 @@ def morton_order(points: np.ndarray) -> np.ndarray:
         v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
         v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
         code |= v << np.uint64(axis)
-    return np.argsort(code, kind="stable")
+    return np.argsort(code)
 
 
 def nearest_distance(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
