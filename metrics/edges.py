@@ -223,7 +223,8 @@ def surface_variation(points, *, k: int = defaults.EDGE_K) -> SurfaceVariation:
     -----
     The points are put in Morton (Z-curve) order before the KD-tree is built and queried, so
     consecutive queries touch the same tree nodes and memory: 2-3x faster on a million points.
-    Per block of points: k-nearest neighbours (scipy cKDTree, all cores), the six distinct
+    Per block of points: k-nearest neighbours (scipy cKDTree, all cores; ties in distance
+    broken by the points' coordinates, ``nearest_k``), the six distinct
     entries of each neighbourhood's scatter matrix from coordinate-major offsets, the scatter
     without the point by a rank-one downdate, and the smallest eigenvalue of both in closed form
     (``_smallest_eigenvalue``).
@@ -292,7 +293,9 @@ def nearest_k(tree, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray
     out_dist, out_idx = dist[:, :k].copy(), idx[:, :k].copy()
     rows, dist, idx = tied, dist[tied], idx[tied]
     while rows.size:
-        complete = (dist[:, -1] > dist[:, k - 1]) | (idx.shape[1] == n)
+        # Complete: every point at the k-th distance is a candidate; or that distance is 0,
+        # so the k nearest are all copies of the query (a log repeating one strike).
+        complete = (dist[:, -1] > dist[:, k - 1]) | (dist[:, k - 1] == 0) | (idx.shape[1] == n)
         near = tree.data[idx[complete]]
         pick = np.lexsort((near[..., 2], near[..., 1], near[..., 0], dist[complete]),
                           axis=-1)[:, :k]
@@ -576,7 +579,9 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
                 tolerance_fraction: float | None = None,
                 variant: EdgeVariant = "weighted") -> EdgeReport:
     """``edge_score`` of points and a mesh already validated (``inputs.as_points`` and
-    ``inputs.as_mesh``), as ``metrics.score`` passes them; the options are still checked."""
+    ``inputs.as_mesh``), as ``metrics.score`` passes them; the options are still checked.
+    A cloud given block by block: ``metrics.edges_stream.EdgeStream`` (the same report in
+    memory that does not grow with the cloud)."""
     t = resolve_length(tolerance, tolerance_fraction, defaults.EDGE_TOLERANCE_FRACTION,
                        bbox_diagonal(mesh.vertices), "tolerance")
     k = _check_k(k, len(points))

@@ -9,7 +9,8 @@ truth's longest axis, each holding at most ``defaults.EDGE_SLAB_POINTS`` points:
 
 1. The first pass (the one ``score_stream`` makes anyway) counts the points in
    ``defaults.EDGE_STREAM_BINS`` bins along that axis; slabs are runs of bins holding at most
-   the budget (a single fuller bin is a slab of its own), the outer two open-ended.
+   the budget (a single fuller bin is a slab of its own), the outer two open-ended. A cloud
+   within the budget is kept from this pass and is its own single slab.
 2. One pass per slab keeps the points of the slab (its core, ``lo <= x < hi``) and of a halo h
    either side, and finds every core point's k nearest among them (``edges.nearest_k``:
    canonical order, so ties are broken as in the whole cloud). A point whose k-th distance is
@@ -34,6 +35,7 @@ score, rates and counts exactly; only its per-point arrays are left out (None).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
+from functools import partial
 from itertools import pairwise
 
 import numpy as np
@@ -92,11 +94,16 @@ class EdgeStream:
         self.counts = np.zeros(len(self.cuts) + 1, dtype=np.int64)  # below, bins, above
         self.area = float(face_areas(mesh.vertices, mesh.faces).sum())
         self.n = 0
+        self.kept: list[np.ndarray] | None = []   # the blocks, while they fit in one slab
 
     def add(self, points: np.ndarray) -> None:
         """Count a block of the first pass: points (b, 3) float64, metres, truth frame."""
         self.counts += np.bincount(self._bin(points[:, self.axis]), minlength=len(self.counts))
         self.n += len(points)
+        if self.kept is not None:
+            self.kept.append(points)
+            if self.n > defaults.EDGE_SLAB_POINTS:
+                self.kept = None
 
     def report(self, blocks: Blocks) -> EdgeReport:
         """The edge report of the points counted, re-reading them with ``blocks()``.
@@ -107,6 +114,9 @@ class EdgeStream:
             Fewer points than k, or a pass that gives another number of points.
         """
         k = _check_k(self.k, self.n)
+        if self.kept is not None:   # one slab, held since the first pass: no further pass
+            kept, self.kept = self.kept, None
+            blocks = partial(iter, kept)
         side = self.side
         tally = _Tally(side, self)
         budget = max(defaults.EDGE_SLAB_POINTS, 1)
