@@ -6,9 +6,14 @@ are simulated once (seeded) into a temporary directory; each is scored by ``reco
 (VmHWM, its own high-water mark) is read at its end. Printed per size: strikes, median peak RSS,
 its ratio to the 1x log's (target: at most 1.1 at 4x, i.e. flat), and the median wall time.
 Scoring holds up to ``metrics.defaults.STREAM_BLOCK`` points (1 M) for each nearest-distance
-query, so a 1x log smaller than that sits below the plateau. With the edge metric (the default)
-the points themselves are gathered (24 bytes each: the metric's neighbourhoods span the cloud),
-so that run grows; ``--no-edges`` shows the streamed scoring alone.
+query, so a 1x log smaller than that sits below the plateau. The edge metric (the default) is
+streamed too (``metrics.edges_stream``: slabs of ``EDGE_SLAB_POINTS``, 0.5 M, one pass over
+the log each); ``--no-edges`` shows the rest of the scoring alone.
+
+Then, with the edge metric, the cost of streaming it: on the largest log, in this process, the
+edge metric alone by ``edge_report`` on the gathered points (``ingest_points``: the log read
+once, the cloud held) against ``EdgeStream`` over ``iter_points`` (the log read once per pass),
+medians of the repeats, with the passes it made; the two reports are checked equal.
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_score_memory.py                # ~5 min here
     PYTHONPATH=. .venv/bin/python benchmarks/bench_score_memory.py --no-edges
@@ -86,6 +91,7 @@ def main(argv=None) -> int:
                 peak, wall, _ = score_run(logs[size][0], extra)
                 peaks[size].append(peak)
                 walls[size].append(wall)
+        edge_cost = None if args.no_edges else edge_cost_line(logs[sizes[-1]], args.repeats)
     base = statistics.median(peaks[sizes[0]])
     print(f"recon score {' '.join(extra)} on asteroid-lidar logs, medians of {args.repeats}")
     print(f"{'size':>5} {'strikes':>10} {'peak RSS MB':>12} {'ratio':>6} {'wall s':>7}")
@@ -96,7 +102,42 @@ def main(argv=None) -> int:
     ratio = statistics.median(peaks[sizes[-1]]) / base
     print(f"peak RSS {sizes[-1]:g}x / {sizes[0]:g}x = {ratio:.2f} (target <= 1.10: "
           f"{'met' if ratio <= 1.10 else 'MISSED'})")
+    if edge_cost:
+        print(edge_cost)
     return 0
+
+
+def edge_cost_line(log: tuple[Path, int], repeats: int) -> str:
+    """Median wall time of the edge metric gathered and streamed on one log (module docs)."""
+    from metrics.edges import edge_report
+    from metrics.edges_stream import EdgeStream
+    from recon.api import truth_of
+    from recon.registration.ingest import ingest_points, iter_points
+
+    path, strikes = log
+    mesh = truth_of(path)
+    gathered, streamed, passes = [], [], []
+
+    def blocks():
+        passes.append(1)
+        return iter_points(path)
+    for _ in range(repeats):
+        start = time.perf_counter()
+        whole = edge_report(ingest_points(path), mesh)
+        gathered.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        passes.clear()
+        stream = EdgeStream(mesh)
+        for points in blocks():
+            stream.add(points)
+        report = stream.report(blocks)
+        streamed.append(time.perf_counter() - start)
+        if report.to_dict() != whole.to_dict():
+            raise SystemExit(f"streamed edge report differs: {report} != {whole}")
+    g, s = statistics.median(gathered), statistics.median(streamed)
+    return (f"edge metric alone on {strikes:,} strikes (log read included), medians of "
+            f"{repeats}: gathered {g:.1f} s, streamed {s:.1f} s in {len(passes)} passes "
+            f"({s / g:.2f}x)")
 
 
 if __name__ == "__main__":

@@ -108,6 +108,21 @@ EDGE_BLOCK = 1 << 17
 # whole cloud, so larger groups are faster; a group holds 24 MB of points at 2**20, and Open3D's
 # KD-tree over them about twice that.
 STREAM_BLOCK = 1 << 20
+# The edge metric of a streamed cloud (``metrics.edges_stream``) finds k-nearest neighbourhoods
+# slab by slab, each slab holding at most this many points plus its halo: 12 MB of points and
+# about as much again for their KD-tree, so it stays below the 2**20-point groups above (the
+# k-nearest temporaries are bounded by EDGE_BLOCK either way). Fewer points per slab means more
+# passes over the input (one per slab).
+EDGE_SLAB_POINTS = 1 << 19
+# Bins along the truth's longest axis in which the first pass counts the points, to cut slabs
+# of at most EDGE_SLAB_POINTS: 4096 bins of a 665 m asteroid are 16 cm wide, and a slab is a run
+# of whole bins (a bin holding more than the budget is a slab of its own).
+EDGE_STREAM_BINS = 4096
+# Halo of a slab, in neighbourhood radii (k-th neighbour distances: the 99th percentile of
+# those found so far; for the first slab, that of k points spread uniformly over the truth's
+# area). A core point whose neighbourhood reaches past the halo is resolved by a later pass,
+# so this sets only how many are: 2 radii leave those within a radius or so of a slab face.
+EDGE_HALO_RADII = 2.0
 # Exact medians and 95th percentiles of a stream: values in the bins holding the wanted ranks are
 # kept and sorted once a bin holds at most this many (8 MB of float64 each); larger bins are
 # split by a further pass (metrics.score._RankFinder).

@@ -151,17 +151,18 @@ class EdgeReport:
     k : int
     rule : str
     threshold : float
-    is_edge : (n,) bool
-        Edge points of the test cloud.
-    near_edge : (n,) bool
-        Test points within the tolerance of a truth feature edge.
+    is_edge : (n,) bool or None
+        Edge points of the test cloud (None when it was streamed, ``metrics.edges_stream``).
+    near_edge : (n,) bool or None
+        Test points within the tolerance of a truth feature edge (None when streamed).
     truth_edges : (e, 2) int64
         Vertex pairs of the truth edges that count.
     edge_angle_deg : (e,) float64, degrees
         Their dihedral angles.
     edge_found : (e,) float64, in [0, 1]
         Fraction of each edge's length that is reconstructed.
-    variation : SurfaceVariation
+    variation : SurfaceVariation or None
+        None when streamed.
     """
 
     score: float
@@ -181,12 +182,12 @@ class EdgeReport:
     k: int
     rule: str
     threshold: float
-    is_edge: np.ndarray = field(repr=False)
-    near_edge: np.ndarray = field(repr=False)
+    is_edge: np.ndarray | None = field(repr=False)
+    near_edge: np.ndarray | None = field(repr=False)
     truth_edges: np.ndarray = field(repr=False)
     edge_angle_deg: np.ndarray = field(repr=False)
     edge_found: np.ndarray = field(repr=False)
-    variation: SurfaceVariation = field(repr=False)
+    variation: SurfaceVariation | None = field(repr=False)
 
     def to_dict(self) -> dict:
         """The scalar fields, JSON-ready."""
@@ -222,7 +223,8 @@ def surface_variation(points, *, k: int = defaults.EDGE_K) -> SurfaceVariation:
     -----
     The points are put in Morton (Z-curve) order before the KD-tree is built and queried, so
     consecutive queries touch the same tree nodes and memory: 2-3x faster on a million points.
-    Per block of points: k-nearest neighbours (scipy cKDTree, all cores), the six distinct
+    Per block of points: k-nearest neighbours (scipy cKDTree, all cores; ties in distance
+    broken by the points' coordinates, ``nearest_k``), the six distinct
     entries of each neighbourhood's scatter matrix from coordinate-major offsets, the scatter
     without the point by a rank-one downdate, and the smallest eigenvalue of both in closed form
     (``_smallest_eigenvalue``).
@@ -249,31 +251,96 @@ def _surface_variation(points: np.ndarray, k: int):
     tree = cKDTree(ordered)
     columns = np.ascontiguousarray(ordered.T)  # (3, n): each coordinate's gathers contiguous
     n = len(points)
-    sigma = np.empty(n)
-    drop = np.empty(n)
-    radius = np.empty(n)
-    downdate = k / (k - 1.0)
-    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
+    out = np.empty((3, n))
     step = max(1, defaults.EDGE_BLOCK)
     for lo in range(0, n, step):  # blocks of points, bounded memory; each block is vectorised
         sl = slice(lo, lo + step)
-        dist, idx = tree.query(ordered[sl], k=k, workers=-1)
-        offset = columns[:, idx] - columns[:, sl, None]  # (3, b, k) relative to the point
-        total = offset.sum(axis=2)
-        mean = total / k
-        # Scatter entries: sum of products minus the mean term (offsets are small, so the
-        # subtraction loses nothing), then the same without the point (at the local origin,
-        # offset -mean from the neighbourhood mean).
-        scatter = [np.einsum("bk,bk->b", offset[i], offset[j]) - total[i] * mean[j]
-                   for i, j in pairs]
-        without = [s - downdate * mean[i] * mean[j] for s, (i, j) in zip(scatter, pairs,
-                                                                        strict=True)]
-        sigma[sl] = _variation(scatter)
-        drop[sl] = sigma[sl] - _variation(without)
-        radius[sl] = dist[:, -1]
-    out = np.empty((3, n))
-    out[:, order] = np.stack([sigma, drop, radius])
+        dist, idx = nearest_k(tree, ordered[sl], k)
+        out[:2, lo:lo + step] = neighbourhood_variation(columns[:, idx] - columns[:, sl, None])
+        out[2, lo:lo + step] = dist[:, -1]
+    out[:, order] = out.copy()
     return SurfaceVariation(sigma=out[0], drop=out[1], radius=out[2], k=k), tree, order
+
+
+def nearest_k(tree, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k nearest points of a cKDTree to each query, in canonical order.
+
+    Sorted by distance, equal distances by the points' x, then y, then z: the neighbourhood
+    and its order depend on the point set alone, not on the tree that holds it (nor on the
+    order of its points), so a neighbourhood found among a subset holding every point within
+    its k-th distance is the whole cloud's, bit for bit (``metrics.edges_stream``). Points that
+    tie in distance and coordinates are copies of one point: which copy is taken changes
+    nothing. Rows whose (k + 1)-th distance equals their k-th are asked again for twice as
+    many points until every point at the k-th distance is among them (a grid's rows; rare in
+    measured clouds).
+
+    Parameters
+    ----------
+    tree : scipy.spatial.cKDTree
+        Over n >= k points.
+    queries : (m, 3) float64
+    k : int
+
+    Returns
+    -------
+    dist : (m, k) float64, ascending
+    idx : (m, k) int64, rows of ``tree.data``
+    """
+    n = tree.n
+    want = min(k + 1, n)
+    dist, idx = _query(tree, queries, want)
+    tied = np.flatnonzero((dist[:, 1:] == dist[:, :-1]).any(axis=1))
+    out_dist, out_idx = dist[:, :k].copy(), idx[:, :k].copy()
+    rows, dist, idx = tied, dist[tied], idx[tied]
+    while rows.size:
+        # Complete: every point at the k-th distance is a candidate; or that distance is 0,
+        # so the k nearest are all copies of the query (a log repeating one strike).
+        complete = (dist[:, -1] > dist[:, k - 1]) | (dist[:, k - 1] == 0) | (idx.shape[1] == n)
+        near = tree.data[idx[complete]]
+        pick = np.lexsort((near[..., 2], near[..., 1], near[..., 0], dist[complete]),
+                          axis=-1)[:, :k]
+        out_dist[rows[complete]] = np.take_along_axis(dist[complete], pick, axis=1)
+        out_idx[rows[complete]] = np.take_along_axis(idx[complete], pick, axis=1)
+        rows = rows[~complete]
+        if rows.size:
+            dist, idx = _query(tree, queries[rows], min(2 * idx.shape[1], n))
+    return out_dist, out_idx
+
+
+def _query(tree, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """cKDTree's k nearest, always (m, k) arrays (all cores)."""
+    dist, idx = tree.query(queries, k=k, workers=-1)
+    return dist.reshape(len(queries), k), idx.reshape(len(queries), k)
+
+
+def neighbourhood_variation(offset: np.ndarray) -> np.ndarray:
+    """Surface variation of neighbourhoods and its leave-one-out drop.
+
+    Parameters
+    ----------
+    offset : (3, b, k) float64, metres
+        Each neighbourhood's points (the point itself among them) relative to the point,
+        coordinate-major.
+
+    Returns
+    -------
+    (2, b) float64
+        sigma and drop.
+    """
+    k = offset.shape[2]
+    downdate = k / (k - 1.0)
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
+    total = offset.sum(axis=2)
+    mean = total / k
+    # Scatter entries: sum of products minus the mean term (offsets are small, so the
+    # subtraction loses nothing), then the same without the point (at the local origin,
+    # offset -mean from the neighbourhood mean).
+    scatter = [np.einsum("bk,bk->b", offset[i], offset[j]) - total[i] * mean[j]
+               for i, j in pairs]
+    without = [s - downdate * mean[i] * mean[j] for s, (i, j) in zip(scatter, pairs,
+                                                                    strict=True)]
+    sigma = _variation(scatter)
+    return np.stack([sigma, sigma - _variation(without)])
 
 
 def _variation(entries) -> np.ndarray:
@@ -512,7 +579,9 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
                 tolerance_fraction: float | None = None,
                 variant: EdgeVariant = "weighted") -> EdgeReport:
     """``edge_score`` of points and a mesh already validated (``inputs.as_points`` and
-    ``inputs.as_mesh``), as ``metrics.score`` passes them; the options are still checked."""
+    ``inputs.as_mesh``), as ``metrics.score`` passes them; the options are still checked.
+    A cloud given block by block: ``metrics.edges_stream.EdgeStream`` (the same report in
+    memory that does not grow with the cloud)."""
     t = resolve_length(tolerance, tolerance_fraction, defaults.EDGE_TOLERANCE_FRACTION,
                        bbox_diagonal(mesh.vertices), "tolerance")
     k = _check_k(k, len(points))
@@ -522,14 +591,8 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
 
     variation, tree, order = _surface_variation(points, k)
     is_edge = _classify(variation, rule, threshold)
-    edges, angle = _dihedral_edges(mesh)
-    sharp = angle > feature_angle_deg
-    counted = sharp if variant == "feature" else angle > defaults.FLAT_EDGE_DEG
-    edges, angle, sharp = edges[counted], angle[counted], sharp[counted]
-    lengths = np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]], axis=1)
-    samples, sample_length, which = _edge_samples(
-        mesh.vertices, edges, t / defaults.EDGE_SAMPLES_PER_TOLERANCE)
-    on_sharp = sharp[which]
+    side = TruthEdges.of(mesh, t, feature_angle_deg, variant)
+    samples, on_sharp = side.samples, side.on_sharp
 
     # Reconstructed: feature-edge samples need an edge point within t, the others any point.
     found = np.zeros(len(samples), dtype=bool)
@@ -537,37 +600,114 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
         found[on_sharp] = nearest_distance(points[is_edge], samples[on_sharp]) <= t
     if (~on_sharp).any():
         found[~on_sharp] = query_distance(tree, samples[~on_sharp], upper=t) <= t
-    weight = sample_length if variant == "feature" else sample_length * np.radians(angle[which])
-    total_weight = float(weight.sum())
-    missed = float(weight[~found].sum() / total_weight) if total_weight > 0 else None
-    feature_length = float(sample_length[on_sharp].sum())
-    feature_missed = (float(sample_length[on_sharp & ~found].sum() / feature_length)
-                      if feature_length > 0 else None)
-    edge_found = np.divide(np.bincount(which, weights=sample_length * found,
-                                       minlength=len(edges)),
-                           lengths, out=np.ones(len(edges)), where=lengths > 0)
-
+    near = np.zeros(len(points), dtype=bool)
     if on_sharp.any():  # the tree's data are the points in Morton order
-        sharp_samples = samples[on_sharp]
-        near = np.empty(len(points), dtype=bool)
-        near[order] = query_distance(_tree(sharp_samples), tree.data, upper=t,
-                                     presorted=True) <= t
-    else:
-        near = np.zeros(len(points), dtype=bool)
+        near[order] = query_distance(side.sharp_tree(), tree.data, upper=t, presorted=True) <= t
     far = ~near
-    false_rate = float((is_edge & far).sum() / far.sum()) if far.any() else None
-    terms = [x for x in (false_rate, missed) if x is not None]
-    return EdgeReport(
-        score=float(np.mean(terms)) if terms else 0.0, false_edge_rate=false_rate,
-        missed_edge_rate=missed, feature_missed_rate=feature_missed, variant=variant,
-        n_points=len(points), n_edge_points=int(is_edge.sum()), n_truth_edges=len(edges),
-        n_feature_edges=int(sharp.sum()), feature_edge_length_m=float(lengths[sharp].sum()),
-        truth_edge_weight=total_weight,
-        feature_weight_fraction=(float(weight[on_sharp].sum() / total_weight)
-                                 if total_weight > 0 else None),
-        tolerance_m=t, feature_angle_deg=feature_angle_deg, k=variation.k, rule=rule,
-        threshold=threshold, is_edge=is_edge, near_edge=near, truth_edges=edges,
-        edge_angle_deg=angle, edge_found=edge_found, variation=variation)
+    return side.report(found, n_points=len(points), n_edge_points=int(is_edge.sum()),
+                       n_far=int(far.sum()), n_false_edges=int((is_edge & far).sum()), k=k,
+                       rule=rule, threshold=threshold, is_edge=is_edge, near_edge=near,
+                       variation=variation)
+
+
+@dataclass(frozen=True)
+class TruthEdges:
+    """The truth side of the edge metric: its counted edges and their samples every t / 8.
+
+    Attributes
+    ----------
+    tolerance_m, feature_angle_deg : float
+    variant : str
+    edges : (e, 2) int64
+        The counted truth edges (vertex pairs).
+    angle : (e,) float64, degrees
+    sharp : (e,) bool
+        Feature edges.
+    lengths : (e,) float64, metres
+    samples : (s, 3) float64, metres
+        Points along the edges (``_edge_samples``).
+    sample_length : (s,) float64, metres of edge each sample stands for
+    which : (s,) int64, the edge of each sample
+    on_sharp : (s,) bool, samples on feature edges
+    """
+
+    tolerance_m: float
+    feature_angle_deg: float
+    variant: str
+    edges: np.ndarray
+    angle: np.ndarray
+    sharp: np.ndarray
+    lengths: np.ndarray
+    samples: np.ndarray
+    sample_length: np.ndarray
+    which: np.ndarray
+    on_sharp: np.ndarray
+
+    @classmethod
+    def of(cls, mesh: Mesh, t: float, feature_angle_deg: float, variant: str) -> TruthEdges:
+        """The counted edges of a validated mesh at tolerance t (metres), options checked."""
+        edges, angle = _dihedral_edges(mesh)
+        sharp = angle > feature_angle_deg
+        counted = sharp if variant == "feature" else angle > defaults.FLAT_EDGE_DEG
+        edges, angle, sharp = edges[counted], angle[counted], sharp[counted]
+        lengths = np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]],
+                                 axis=1)
+        samples, sample_length, which = _edge_samples(
+            mesh.vertices, edges, t / defaults.EDGE_SAMPLES_PER_TOLERANCE)
+        return cls(tolerance_m=t, feature_angle_deg=feature_angle_deg, variant=variant,
+                   edges=edges, angle=angle, sharp=sharp, lengths=lengths, samples=samples,
+                   sample_length=sample_length, which=which, on_sharp=sharp[which])
+
+    def sharp_tree(self):
+        """cKDTree over the feature-edge samples (Morton order), for ``near`` queries."""
+        return _tree(self.samples[self.on_sharp])
+
+    def report(self, found: np.ndarray, *, n_points: int, n_edge_points: int, n_far: int,
+               n_false_edges: int, k: int, rule: str, threshold: float,
+               is_edge: np.ndarray | None = None, near_edge: np.ndarray | None = None,
+               variation: SurfaceVariation | None = None) -> EdgeReport:
+        """The report from what the test cloud gave.
+
+        Parameters
+        ----------
+        found : (s,) bool
+            The samples reconstructed.
+        n_points, n_edge_points : int
+            Test points, and those that are edge points.
+        n_far, n_false_edges : int
+            Test points not within t of a feature edge, and the edge points among them.
+        k, rule, threshold
+            The edge rule's options, validated.
+        is_edge, near_edge, variation
+            Per-point results, when the cloud was held whole (None when streamed).
+        """
+        variant, on_sharp, sample_length = self.variant, self.on_sharp, self.sample_length
+        weight = (sample_length if variant == "feature"
+                  else sample_length * np.radians(self.angle[self.which]))
+        total_weight = float(weight.sum())
+        missed = float(weight[~found].sum() / total_weight) if total_weight > 0 else None
+        feature_length = float(sample_length[on_sharp].sum())
+        feature_missed = (float(sample_length[on_sharp & ~found].sum() / feature_length)
+                          if feature_length > 0 else None)
+        edge_found = np.divide(np.bincount(self.which, weights=sample_length * found,
+                                           minlength=len(self.edges)),
+                               self.lengths, out=np.ones(len(self.edges)),
+                               where=self.lengths > 0)
+        false_rate = n_false_edges / n_far if n_far else None
+        terms = [x for x in (false_rate, missed) if x is not None]
+        return EdgeReport(
+            score=float(np.mean(terms)) if terms else 0.0, false_edge_rate=false_rate,
+            missed_edge_rate=missed, feature_missed_rate=feature_missed, variant=variant,
+            n_points=n_points, n_edge_points=n_edge_points, n_truth_edges=len(self.edges),
+            n_feature_edges=int(self.sharp.sum()),
+            feature_edge_length_m=float(self.lengths[self.sharp].sum()),
+            truth_edge_weight=total_weight,
+            feature_weight_fraction=(float(weight[on_sharp].sum() / total_weight)
+                                     if total_weight > 0 else None),
+            tolerance_m=self.tolerance_m, feature_angle_deg=self.feature_angle_deg, k=k,
+            rule=rule, threshold=threshold, is_edge=is_edge, near_edge=near_edge,
+            truth_edges=self.edges, edge_angle_deg=self.angle, edge_found=edge_found,
+            variation=variation)
 
 
 def _tree(points: np.ndarray):

@@ -40,8 +40,10 @@ memory that does not grow with its size, to the same numbers:
   patterns, and further passes over the blocks (distances recomputed, nothing stored per point)
   narrow the bins holding the wanted ranks until they are small enough to keep and sort. A
   stream of at most ``defaults.QUANTILE_KEEP`` points needs no second pass;
-- the edge metric needs every point's k nearest neighbours in the whole cloud, so with
-  ``edges=True`` the points themselves (24 bytes each) are gathered for it.
+- the edge metric (``edges_stream.EdgeStream``): exact k-nearest neighbourhoods slab by slab
+  along the truth's longest axis (``defaults.EDGE_SLAB_POINTS`` points each, one further pass
+  per slab), the points whose neighbourhood crosses a slab's halo resolved by another pass;
+  its score, rates and counts are the whole cloud's exactly, its per-point arrays None.
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ from formats import interrupt
 from metrics import defaults
 from metrics.distance import MeshDistance
 from metrics.edges import EdgeReport, check_options, edge_report, resolve_length
+from metrics.edges_stream import EdgeStream
 from metrics.errors import MetricsInputError, ScaleMismatchWarning
 from metrics.inputs import (
     Cloud,
@@ -375,8 +378,9 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
         The test's name in error messages (e.g. ``"test run.h5"``: "test run.h5 points has 1
         row(s) with NaN or Inf, first at row 7"); rows are numbered across blocks.
     tau, tau_fraction, n_truth_samples, coverage_points, seed, edges, edge_options, progress
-        As ``score``. With ``edges`` the points (24 bytes each) are gathered for the edge
-        metric, whose k-nearest neighbourhoods span the whole cloud.
+        As ``score``. With ``edges`` the edge metric takes one further pass per
+        ``defaults.EDGE_SLAB_POINTS`` points and one or more for points near slab faces
+        (``metrics.edges_stream``).
 
     Returns
     -------
@@ -393,18 +397,19 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
     setup.check_frame(frame)
     if edges:  # the options now; the point count against k once it is known
         check_options(np.iinfo(np.int64).max, setup.diagonal, **setup.edge_options)
+        edge_stream = EdgeStream(setup.mesh, **setup.edge_options)
     report_stage = progress or (lambda stage: None)
     queries = setup.queries()
     nearest = np.full(len(queries), np.inf)
     accuracy = _Accuracy(setup, keep=False)
-    gathered, pending = [], []   # all points (for the edge metric); those not yet queried
+    pending = []   # points not yet queried by the truth samples and the lattice
     for points, normals in _checked_blocks(blocks, name):
         accuracy.add(points, normals)
         pending.append(points)
         if sum(map(len, pending)) >= defaults.STREAM_BLOCK:
             _reduce_nearest(nearest, pending, queries)
         if edges:
-            gathered.append(points)
+            edge_stream.add(points)
         interrupt.check()   # a swallowed Ctrl-C stops at the next block
     _reduce_nearest(nearest, pending, queries)
     n = accuracy.n
@@ -417,11 +422,9 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
     report_stage("completeness")
     edge = None
     if edges:
-        points = np.concatenate(gathered) if len(gathered) > 1 else gathered[0]
-        gathered.clear()
-        setup.check_edges(len(points))
-        edge = edge_report(points, setup.mesh, **setup.edge_options)
-        del points
+        setup.check_edges(n)
+        edge = edge_stream.report(lambda: (points for points, _ in
+                                           _checked_blocks(blocks, name)))
         report_stage("edges")
     return setup.report(accuracy, summary, nearest, edge, test_kind="cloud",
                         arrays=dict.fromkeys(_ARRAYS))

@@ -60,6 +60,7 @@ def test_streamed_report_equals_the_whole_clouds(sphere, keep, with_normals, mon
     whole = score(Cloud(points, normals=normals), sphere, edges=True, **SPEED)
     monkeypatch.setattr(defaults, "QUANTILE_KEEP", keep)
     monkeypatch.setattr(defaults, "STREAM_BLOCK", 2_500)   # three nearest-distance groups
+    monkeypatch.setattr(defaults, "EDGE_SLAB_POINTS", 1_500)   # edge metric: four slabs
     streamed = score_stream(blocks_of(points, normals, 1_000), sphere, edges=True, **SPEED)
     assert_same_report(whole, streamed)
     assert streamed.accuracy_median_m == whole.accuracy_median_m   # exact order statistics
@@ -114,14 +115,15 @@ def test_a_stream_that_changes_between_passes_is_refused(sphere, monkeypatch):
         score_stream(blocks, sphere, edges=False, **SPEED)
 
 
-def _peak_bytes(n_blocks: int, sphere) -> int:
+def _peak_bytes(n_blocks: int, sphere, edges: bool = False) -> int:
     """tracemalloc's peak (numpy's allocations) of a stream of ``n_blocks`` generated blocks."""
     def blocks():
         for i in range(n_blocks):
             yield noisy_points(20_000, seed=100 + i)[0]
     tracemalloc.start()
     try:
-        score_stream(blocks, sphere, edges=False, **SPEED)
+        report = score_stream(blocks, sphere, edges=edges, **SPEED)
+        assert (report.edge is not None) == edges
         return tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -133,4 +135,15 @@ def test_memory_does_not_grow_with_the_stream(sphere, monkeypatch):
     score_stream(lambda: iter([noisy_points(100, 0)[0]]), sphere, edges=False, **SPEED)  # warm
     one, four = _peak_bytes(5, sphere), _peak_bytes(20, sphere)   # 100k and 400k points
     # The whole-cloud score of 400k points holds 40 bytes a point more (16 MB): far outside.
+    assert four < 1.1 * one, (one, four)
+
+
+def test_memory_does_not_grow_with_the_stream_with_the_edge_metric(sphere, monkeypatch):
+    monkeypatch.setattr(defaults, "QUANTILE_KEEP", 50_000)
+    monkeypatch.setattr(defaults, "STREAM_BLOCK", 20_000)
+    monkeypatch.setattr(defaults, "EDGE_SLAB_POINTS", 20_000)   # 5 slabs at 1x, 20 at 4x
+    score_stream(lambda: iter([noisy_points(100, 0)[0]]), sphere, **SPEED)  # warm
+    one, four = _peak_bytes(5, sphere, edges=True), _peak_bytes(20, sphere, edges=True)
+    # Gathering the 400k points for the whole-cloud edge metric holds 24 bytes a point (10 MB)
+    # and its neighbourhoods far more: far outside.
     assert four < 1.1 * one, (one, four)
