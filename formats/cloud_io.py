@@ -48,7 +48,9 @@ Formats read as well
 
 from __future__ import annotations
 
+import contextlib
 import json
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +60,7 @@ from formats.errors import MeshFormatError
 from formats.geometry import NORMAL_ATTRIBUTES, Cloud, file_metadata, frame_of
 from formats.hdf5_check import check_hdf5, trust
 from formats.paths import check_source
-from formats.ply import PlyWriter, read_ply
+from formats.ply import PlyWriter, binary_vertex_layout, read_ply
 
 WRITE_SUFFIXES = (".ply", ".las", ".laz", ".h5")
 TEXT_SUFFIXES = (".xyz", ".asc", ".txt")
@@ -331,7 +333,9 @@ def cloud_from_ply_columns(path, columns: dict[str, np.ndarray],
     return Cloud(points, attributes, frame=frame_of(metadata or {}, path))
 
 
-def _read_h5(path: Path) -> Cloud:
+@contextlib.contextmanager
+def _open_h5(path: Path):
+    """recon's HDF5 cloud ``path`` checked and open: yields ``(file, metadata)``."""
     import h5py
 
     check_hdf5(path, MeshFormatError)   # no other files, no loops: formats/hdf5_check.py
@@ -343,13 +347,20 @@ def _read_h5(path: Path) -> Cloud:
             if int(f.attrs.get("format_version", -1)) != CLOUD_FORMAT_VERSION:
                 raise MeshFormatError(f"{path}: point-cloud format version "
                                       f"{f.attrs.get('format_version')} is not supported")
-            metadata = {k: str(f.attrs[k]) for k in ("frame", "units") if k in f.attrs}
-            points = np.asarray(f["points"][()], dtype=np.float64)
-            attributes = {k: np.asarray(v[()]) for k, v in f["attributes"].items()}
+            yield f, {k: str(f.attrs[k]) for k in ("frame", "units") if k in f.attrs}
     except MeshFormatError:
         raise
     except (OSError, KeyError, ValueError, TypeError) as exc:
         raise MeshFormatError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
+
+
+def _read_h5(path: Path) -> Cloud:
+    with _open_h5(path) as (f, metadata):
+        try:
+            points = np.asarray(f["points"][()], dtype=np.float64)
+            attributes = {k: np.asarray(v[()]) for k, v in f["attributes"].items()}
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            raise MeshFormatError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
     return Cloud(points, attributes, frame=frame_of(metadata, path))
 
 
@@ -361,13 +372,7 @@ def _read_las(path: Path) -> Cloud:
     except Exception as exc:  # laspy raises its own and OS errors on bad files
         raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
     points = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
-    metadata = {}
-    for vlr in las.header.vlrs:
-        if (vlr.user_id, vlr.record_id) == (_LAS_VLR_USER, _LAS_VLR_RECORD):
-            try:
-                metadata = json.loads(vlr.record_data)
-            except (ValueError, UnicodeDecodeError):
-                raise MeshFormatError(f"{path}: the recon VLR is not JSON") from None
+    metadata = _las_metadata(path, las.header)
     standard = metadata.get("dimensions", {})
     if not metadata and np.any(np.asarray(las.gps_time) != 0):  # another tool's LAS with times
         standard = {"gps_time": "time"}
@@ -376,6 +381,17 @@ def _read_las(path: Path) -> Cloud:
     for name in las.point_format.extra_dimension_names:
         attributes[name] = np.asarray(las[name])
     return Cloud(points, attributes, frame=frame_of(metadata, path))
+
+
+def _las_metadata(path: Path, header) -> dict:
+    """The recon VLR of a LAS header as a dict ({} in files of other tools)."""
+    for vlr in header.vlrs:
+        if (vlr.user_id, vlr.record_id) == (_LAS_VLR_USER, _LAS_VLR_RECORD):
+            try:
+                return json.loads(vlr.record_data)
+            except (ValueError, UnicodeDecodeError):
+                raise MeshFormatError(f"{path}: the recon VLR is not JSON") from None
+    return {}
 
 
 def _text_columns(path: Path) -> tuple[list[str] | None, str | None]:
@@ -459,3 +475,117 @@ def _read_e57(path: Path) -> Cloud:
     if all("intensity" in s for s in scans):
         attributes["intensity"] = np.concatenate([s["intensity"] for s in scans])
     return Cloud(points.astype(np.float64), attributes)
+
+
+Blocks = Callable[[], Iterator[tuple[np.ndarray, np.ndarray | None]]]
+
+
+def stream_cloud(path, rows: int) -> tuple[str, Blocks] | None:
+    """A cloud file read from disk ``rows`` points at a time, for work whose memory must not
+    grow with the file (``recon score``).
+
+    Binary PLY files whose only element is the vertices, recon's HDF5 clouds and LAS/LAZ files
+    stream; other files (ASCII PLY, text, PCD, E57, PLY meshes, other suffixes) return None and
+    are read whole with :func:`read_cloud` or as meshes.
+
+    Parameters
+    ----------
+    path : str or Path
+    rows : int
+        Points per block.
+
+    Returns
+    -------
+    (frame, blocks) or None
+        ``blocks()`` opens the file and yields ``(points, normals)`` pairs: points (b, 3)
+        float64 metres in ``frame``, normals (b, 3) float64 or None. It may be called again
+        for another pass. A file shorter than its header says raises ``MeshFormatError``.
+    """
+    path = Path(path)
+    kind = path.suffix.lower()
+    if kind not in (".ply", ".h5", ".las", ".laz"):
+        return None
+    check_source(path, MeshFormatError)
+    if kind == ".ply":
+        return _stream_ply(path, rows)
+    if kind == ".h5":
+        return _stream_h5(path, rows)
+    if kind in (".las", ".laz"):
+        return _stream_las(path, rows)
+    return None
+
+
+def _block(columns, names) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(points, normals)`` of one block of named columns (``names``: x, y, z and normals)."""
+    points = np.stack([np.asarray(columns[k], dtype=np.float64) for k in names[:3]], axis=1)
+    normals = (np.stack([np.asarray(columns[k], dtype=np.float64) for k in names[3:]], axis=1)
+               if len(names) == 6 else None)
+    return points, normals
+
+
+def _stream_ply(path: Path, rows: int) -> tuple[str, Blocks] | None:
+    layout = binary_vertex_layout(path)
+    if layout is None:
+        return None
+    dtype, offset, count, metadata = layout
+    fields = dtype.names or ()
+    missing = [k for k in "xyz" if k not in fields]
+    if missing:
+        raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
+    held = (path.stat().st_size - offset) // dtype.itemsize
+    if held < count:
+        raise MeshFormatError(f"{path}: the header declares {count} vertices but the file holds "
+                              f"{held}")
+    names = ("x", "y", "z") + (NORMAL_ATTRIBUTES if all(k in fields for k in NORMAL_ATTRIBUTES)
+                               else ())
+
+    def blocks():
+        with open(path, "rb") as fh:
+            fh.seek(offset)
+            for start in range(0, count, rows):
+                records = np.fromfile(fh, dtype=dtype, count=min(rows, count - start))
+                if len(records) == 0:
+                    raise MeshFormatError(f"{path}: ends after {start} of {count} vertices")
+                yield _block(records, names)
+    return frame_of(metadata, path), blocks
+
+
+def _stream_h5(path: Path, rows: int) -> tuple[str, Blocks]:
+    import h5py
+
+    with _open_h5(path) as (f, metadata):
+        n = len(f["points"])
+        names = [k for k in NORMAL_ATTRIBUTES if k in f["attributes"]]
+        normals = len(names) == 3 and all(len(f["attributes"][k]) == n for k in names)
+
+    def blocks():
+        with h5py.File(path, "r") as f:
+            for start in range(0, n, rows):
+                points = np.asarray(f["points"][start:start + rows], dtype=np.float64)
+                yield points, (np.stack([f["attributes"][k][start:start + rows] for k in
+                                         NORMAL_ATTRIBUTES], axis=1).astype(np.float64)
+                               if normals else None)
+    return frame_of(metadata, path), blocks
+
+
+def _stream_las(path: Path, rows: int) -> tuple[str, Blocks]:
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            metadata = _las_metadata(path, reader.header)
+            extra = set(reader.header.point_format.extra_dimension_names)
+    except MeshFormatError:
+        raise
+    except Exception as exc:  # laspy raises its own and OS errors on bad files
+        raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
+    names = ("x", "y", "z") + (NORMAL_ATTRIBUTES if extra >= set(NORMAL_ATTRIBUTES) else ())
+
+    def blocks():
+        try:
+            with laspy.open(path) as reader:
+                for chunk in reader.chunk_iterator(rows):
+                    yield _block({k: getattr(chunk, k) for k in names}, names)
+        except Exception as exc:
+            raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
+    return frame_of(metadata, path), blocks

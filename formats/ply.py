@@ -200,3 +200,53 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
     faces = loaded.get("faces")
     faces = None if faces is None or len(faces) == 0 else np.asarray(faces, dtype=np.int64)
     return columns, faces, metadata
+
+
+# PLY scalar types (both spellings) as numpy type codes, for reading any binary PLY.
+_NUMPY_OF_PLY = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
+                 "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
+                 "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
+                 "float64": "f8"}
+
+
+def binary_vertex_layout(path) -> tuple[np.dtype, int, int, dict[str, str]] | None:
+    """Where a binary PLY file keeps its vertices, for reading them block by block.
+
+    Returns
+    -------
+    (dtype, offset, count, metadata) or None
+        The vertex record's structured dtype, the byte offset of the first vertex, the number
+        of vertices and the header's comments; None when the file cannot be read that way (an
+        ASCII file, vertices that are not the first element or hold lists, any faces).
+    """
+    path = check_source(path, MeshFormatError)
+    with open(path, "rb") as fh:
+        if fh.readline(16).strip() != b"ply":
+            return None
+        byte_order, elements = None, []
+        for _ in range(_MAX_HEADER_LINES):
+            words = fh.readline(4096).decode("ascii", errors="replace").split()
+            if not words:
+                continue
+            if words[0] == "end_header":
+                break
+            if words[0] == "format" and len(words) >= 2:
+                byte_order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(words[1])
+            elif words[0] == "element" and len(words) == 3 and words[2].isdigit():
+                elements.append((words[1], int(words[2]), []))
+            elif words[0] == "property" and elements:
+                kind = _NUMPY_OF_PLY.get(words[1]) if len(words) == 3 else None
+                elements[-1][2].append((words[-1], kind))
+        else:
+            return None
+        offset = fh.tell()
+        metadata = _header_metadata(fh)
+    if byte_order is None or not elements or elements[0][0] != "vertex":
+        return None
+    if any(n > 0 for name, n, _ in elements[1:]) or any(k is None for _, k in elements[0][2]):
+        return None
+    names = [name for name, _ in elements[0][2]]
+    if len(set(names)) != len(names):
+        return None
+    dtype = np.dtype([(name, byte_order + kind) for name, kind in elements[0][2]])
+    return dtype, offset, elements[0][1], metadata

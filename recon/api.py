@@ -177,8 +177,10 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
                "progress": progress} | options
     if isinstance(test, str | os.PathLike):
         # A file is scored block by block (metrics.score.score_stream): a strike log as it is
-        # registered, in memory flat in its size; a cloud file without per-point arrays
-        # beside it. Errors name the file.
+        # registered and a binary PLY, HDF5 or LAS cloud as it is read, in memory flat in
+        # their size; another cloud file read whole, without per-point arrays beside it.
+        # Errors name the file.
+        from formats.cloud_io import stream_cloud
         from metrics import defaults
         from metrics.score import score_stream
         from recon.inputs import is_strike_log
@@ -187,6 +189,10 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
         if is_strike_log(test):
             return score_stream(lambda: iter_points(test), truth, name=f"test {test}",
                                 **options)
+        streamed = stream_cloud(test, defaults.STREAM_BLOCK)
+        if streamed is not None:
+            frame, blocks = streamed
+            return score_stream(blocks, truth, name=f"test {test}", frame=frame, **options)
         geometry = load(test, name="test", points_only=True)
         if isinstance(geometry, Cloud):
             points, normals = geometry.points, geometry.normals

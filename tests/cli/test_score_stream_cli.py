@@ -44,3 +44,33 @@ def test_streamed_log_scores_as_the_whole_cloud(log, edges, request, monkeypatch
             assert streamed[key] == pytest.approx(value, rel=1e-9, abs=0), key
         else:
             assert streamed[key] == value, key
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".h5", ".las"])
+def test_streamed_cloud_file_scores_as_the_whole_cloud(suffix, rso_log, tmp_path, monkeypatch,
+                                                       capsys):
+    from formats import cloud_io
+
+    path = cloud_io.write_cloud(tmp_path / f"cloud{suffix}",
+                                Cloud(ingest.ingest_points(rso_log)))
+    cloud = cloud_io.read_cloud(path)
+    whole = score(cloud, load_truth(rso_log), seed=0).to_dict()
+    monkeypatch.setattr(defaults, "STREAM_BLOCK", 500)   # the file read in many blocks
+    monkeypatch.setattr(defaults, "QUANTILE_KEEP", 20)
+    stream_cloud, blocks_read = cloud_io.stream_cloud, []
+
+    def spy(file, rows):
+        frame, blocks = stream_cloud(file, rows)
+        return frame, lambda: (blocks_read.append(len(b[0])) or b for b in blocks())
+    monkeypatch.setattr(cloud_io, "stream_cloud", spy)
+    monkeypatch.setattr(cloud_io, "read_cloud", None)   # the file is never read whole
+    assert main(["score", str(path), "--truth", str(rso_log), "--json"]) == 0
+    assert max(blocks_read) == 500 and sum(blocks_read) >= 2 * len(cloud)   # blocks, passes
+    streamed = json.loads(capsys.readouterr().out)
+    streamed.pop("test"), streamed.pop("truth")
+    assert streamed.keys() == whole.keys()
+    for key, value in whole.items():
+        if key in EXACT:
+            assert streamed[key] == pytest.approx(value, rel=1e-9, abs=0), key
+        else:
+            assert streamed[key] == value, key

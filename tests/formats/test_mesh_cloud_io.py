@@ -114,3 +114,49 @@ def test_bad_cloud_inputs(tmp_path):
         Cloud(np.zeros((4, 2)))
     with pytest.raises(MeshFormatError, match="beyond"):
         write_cloud(tmp_path / "far.las", Cloud(np.array([[1e6, 0, 0]])))
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".h5", ".las", ".laz"])
+@pytest.mark.parametrize("with_normals", [False, True])
+def test_streamed_cloud_equals_the_whole_read(tmp_path, cloud, suffix, with_normals):
+    from formats.cloud_io import stream_cloud
+
+    if with_normals:
+        normals = np.random.default_rng(4).normal(size=(len(cloud), 3))
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        cloud = Cloud(cloud.points, cloud.attributes | dict(zip(("nx", "ny", "nz"), normals.T,
+                                                                strict=True)))
+    path = write_cloud(tmp_path / f"c{suffix}", cloud)
+    whole = read_cloud(path)
+    frame, blocks = stream_cloud(path, 300)
+    parts = list(blocks())
+    assert frame == whole.frame and len(parts) == 7   # 2000 points in blocks of 300
+    assert np.array_equal(np.concatenate([p for p, _ in parts]), whole.points)
+    if with_normals:
+        assert np.array_equal(np.concatenate([n for _, n in parts]), whole.normals)
+    else:
+        assert all(n is None for _, n in parts)
+    assert len(list(blocks())) == 7   # a second pass reads the file again
+
+
+def test_files_that_do_not_stream(tmp_path, cloud):
+    from formats.cloud_io import stream_cloud
+
+    text = tmp_path / "c.xyz"
+    np.savetxt(text, cloud.points)
+    ascii_ply = tmp_path / "ascii.ply"
+    ascii_ply.write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
+                         "property float y\nproperty float z\nend_header\n1 2 3\n")
+    mesh = tmp_path / "mesh.ply"
+    write_mesh(mesh, np.eye(3), np.array([[0, 1, 2]]))
+    assert all(stream_cloud(p, 100) is None for p in (text, ascii_ply, mesh))
+
+
+def test_truncated_binary_ply_is_one_line(tmp_path, cloud):
+    from formats.cloud_io import stream_cloud
+
+    path = write_cloud(tmp_path / "c.ply", cloud)
+    path.write_bytes(path.read_bytes()[:-100])
+    with pytest.raises(MeshFormatError, match=r"c\.ply: the header declares 2000 vertices but "
+                                              r"the file holds 1998"):
+        stream_cloud(path, 300)
