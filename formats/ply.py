@@ -240,6 +240,7 @@ def binary_vertex_layout(path) -> tuple[np.dtype, int, int, dict[str, str]] | No
         else:
             return None
         offset = fh.tell()
+        fh.seek(0)
         metadata = _header_metadata(fh)
     if byte_order is None or not elements or elements[0][0] != "vertex":
         return None

@@ -126,9 +126,11 @@ def test_streamed_cloud_equals_the_whole_read(tmp_path, cloud, suffix, with_norm
         normals /= np.linalg.norm(normals, axis=1, keepdims=True)
         cloud = Cloud(cloud.points, cloud.attributes | dict(zip(("nx", "ny", "nz"), normals.T,
                                                                 strict=True)))
+    cloud = Cloud(cloud.points, cloud.attributes, frame="inertial")   # the file's frame kept
     path = write_cloud(tmp_path / f"c{suffix}", cloud)
     whole = read_cloud(path)
     frame, blocks = stream_cloud(path, 300)
+    assert frame == "inertial"
     parts = list(blocks())
     assert frame == whole.frame and len(parts) == 7   # 2000 points in blocks of 300
     assert np.array_equal(np.concatenate([p for p, _ in parts]), whole.points)
