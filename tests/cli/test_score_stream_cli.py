@@ -17,6 +17,16 @@ from recon.registration import ingest
 EXACT = ("accuracy_mean_m", "accuracy_rms_m", "chamfer_m")   # sums, grouped by block
 
 
+def _assert_same_report(streamed: dict, whole: dict) -> None:
+    """Every key equal, the block-grouped sums to 1e-9 relative."""
+    assert streamed.keys() == whole.keys()
+    for key, value in whole.items():
+        if key in EXACT:
+            assert streamed[key] == pytest.approx(value, rel=1e-9, abs=0), key
+        else:
+            assert streamed[key] == value, key
+
+
 @pytest.fixture(scope="module")
 def rso_log(tmp_path_factory):
     path = tmp_path_factory.mktemp("stream") / "rso.h5"
@@ -38,12 +48,7 @@ def test_streamed_log_scores_as_the_whole_cloud(log, edges, request, monkeypatch
     assert main(argv) == 0
     streamed = json.loads(capsys.readouterr().out)
     assert streamed.pop("test") == streamed.pop("truth") == str(path)
-    assert streamed.keys() == whole.keys()
-    for key, value in whole.items():
-        if key in EXACT:
-            assert streamed[key] == pytest.approx(value, rel=1e-9, abs=0), key
-        else:
-            assert streamed[key] == value, key
+    _assert_same_report(streamed, whole)
 
 
 @pytest.mark.parametrize("suffix", [".ply", ".h5", ".las"])
@@ -68,9 +73,4 @@ def test_streamed_cloud_file_scores_as_the_whole_cloud(suffix, rso_log, tmp_path
     assert max(blocks_read) == 500 and sum(blocks_read) >= 2 * len(cloud)   # blocks, passes
     streamed = json.loads(capsys.readouterr().out)
     streamed.pop("test"), streamed.pop("truth")
-    assert streamed.keys() == whole.keys()
-    for key, value in whole.items():
-        if key in EXACT:
-            assert streamed[key] == pytest.approx(value, rel=1e-9, abs=0), key
-        else:
-            assert streamed[key] == value, key
+    _assert_same_report(streamed, whole)
