@@ -51,44 +51,49 @@ def _contents(path) -> dict:
         return found | {"n": (int(f.attrs["n_shots"]), int(f.attrs["n_strikes"]))}
 
 
+# Chunks of 6 shot rows and 10 strike rows, so that 37 shots cross many chunk boundaries.
+SMALL_CHUNKS = {"sensor": SENSOR, "target": "t", "truth_mesh": MESH, "expected_shots": 6,
+                "expected_strikes": 10}
+
+
+def _same_contents(a, b) -> tuple[dict, dict]:
+    """The contents of two logs, asserted equal dataset by dataset."""
+    one, other = _contents(a), _contents(b)
+    assert one.keys() == other.keys()
+    for name in one:
+        np.testing.assert_array_equal(other[name], one[name], err_msg=name)
+    return one, other
+
+
 @pytest.mark.parametrize("cuts", [[0, 1, 4, 5, 12, 12, 20, 31, 37], [0, 37], [0, 6, 8, 37]])
 def test_any_call_sizes_give_the_same_rows(tmp_path, cuts):
     """Chunks of 6 shot and 10 strike rows, calls that end inside, on and across them."""
     shots, strikes, truth = _rows(37)
-    kwargs = {"sensor": SENSOR, "target": "t", "truth_mesh": MESH, "expected_shots": 6,
-              "expected_strikes": 10}
-    with StrikeLogWriter(tmp_path / "one.h5", **kwargs) as w:
+    with StrikeLogWriter(tmp_path / "one.h5", **SMALL_CHUNKS) as w:
         _write(w, shots, strikes, truth, [0, 37])
-    with StrikeLogWriter(tmp_path / "cut.h5", **kwargs) as w:
+    with StrikeLogWriter(tmp_path / "cut.h5", **SMALL_CHUNKS) as w:
         for a, b in itertools.pairwise(cuts):
             _write(w, shots, strikes, truth, [a, b])
             # only whole chunks reach the file before the close
             assert w._file["strikes/range"].shape[0] == 2 * b // 10 * 10
             assert w._file["truth/point"].shape[0] == 2 * b // 10 * 10
             assert w._file["shots/time"].shape[0] == b // 6 * 6
-    one, cut = _contents(tmp_path / "one.h5"), _contents(tmp_path / "cut.h5")
+    one, cut = _same_contents(tmp_path / "one.h5", tmp_path / "cut.h5")
     assert one["n"] == cut["n"] == (37, 74)
-    assert one.keys() == cut.keys()
-    for name in one:
-        np.testing.assert_array_equal(cut[name], one[name], err_msg=name)
     np.testing.assert_array_equal(one["strikes/range"], strikes["range"])
     np.testing.assert_array_equal(one["truth/point"], truth.point)
 
 
 def test_appending_to_a_log_whose_last_chunk_is_partial(tmp_path):
     shots, strikes, truth = _rows(37)
-    kwargs = {"sensor": SENSOR, "target": "t", "truth_mesh": MESH, "expected_shots": 6,
-              "expected_strikes": 10}
-    with StrikeLogWriter(tmp_path / "one.h5", **kwargs) as w:
+    with StrikeLogWriter(tmp_path / "one.h5", **SMALL_CHUNKS) as w:
         _write(w, shots, strikes, truth, [0, 37])
-    with StrikeLogWriter(tmp_path / "cut.h5", **kwargs) as w:
+    with StrikeLogWriter(tmp_path / "cut.h5", **SMALL_CHUNKS) as w:
         _write(w, shots, strikes, truth, [0, 3, 13])     # 13 shots: 26 strikes, chunks of 10
     for cuts in ([13, 14, 22], [22, 37]):
         with StrikeLogWriter.append(tmp_path / "cut.h5") as w:
             _write(w, shots, strikes, truth, cuts)
-    one, cut = _contents(tmp_path / "one.h5"), _contents(tmp_path / "cut.h5")
-    for name in one:
-        np.testing.assert_array_equal(cut[name], one[name], err_msg=name)
+    _same_contents(tmp_path / "one.h5", tmp_path / "cut.h5")
 
 
 def test_an_aborted_writer_leaves_no_file(tmp_path):
