@@ -347,6 +347,9 @@ def _open_h5(path: Path):
             if int(f.attrs.get("format_version", -1)) != CLOUD_FORMAT_VERSION:
                 raise MeshFormatError(f"{path}: point-cloud format version "
                                       f"{f.attrs.get('format_version')} is not supported")
+            shape = f["points"].shape
+            if len(shape) != 2 or shape[1] != 3:
+                raise MeshFormatError(f"{path}: /points has shape {shape}, expected (n, 3)")
             yield f, {k: str(f.attrs[k]) for k in ("frame", "units") if k in f.attrs}
     except MeshFormatError:
         raise

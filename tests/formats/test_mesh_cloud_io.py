@@ -162,3 +162,19 @@ def test_truncated_binary_ply_is_one_line(tmp_path, cloud):
     with pytest.raises(MeshFormatError, match=r"c\.ply: the header declares 2000 vertices but "
                                               r"the file holds 1998"):
         stream_cloud(path, 300)
+
+
+def test_hdf5_cloud_points_of_the_wrong_shape_are_one_line(tmp_path):
+    import h5py
+
+    from formats.cloud_io import CLOUD_FORMAT_NAME, CLOUD_FORMAT_VERSION, stream_cloud
+
+    path = tmp_path / "flat.h5"
+    with h5py.File(path, "w") as f:
+        f.attrs.update({"format": CLOUD_FORMAT_NAME, "format_version": CLOUD_FORMAT_VERSION})
+        f["points"] = np.zeros((10, 2))
+        f.create_group("attributes")
+    for read in (read_cloud, lambda p: stream_cloud(p, 4)):
+        with pytest.raises(MeshFormatError, match=r"flat\.h5: /points has shape \(10, 2\), "
+                                                  r"expected \(n, 3\)"):
+            read(path)
