@@ -89,7 +89,7 @@ import numpy as np
 from metrics import defaults
 from metrics.errors import MetricsInputError
 from metrics.inputs import Mesh, as_mesh, as_points, bbox_diagonal, face_normals
-from metrics.spatial import morton_order, nearest_distance, query_distance
+from metrics.spatial import distinct_points, morton_order, nearest_distance, query_distance
 
 EdgeRule = Literal["leave_one_out", "pauly"]
 EdgeVariant = Literal["weighted", "feature"]
@@ -240,29 +240,57 @@ def _surface_variation(points: np.ndarray, k: int):
     -------
     variation : SurfaceVariation
     tree : scipy.spatial.cKDTree
-        Over ``points[order]``, for later nearest-point queries.
+        Over the distinct points (``spatial.distinct_points``) in Morton order, for later
+        nearest-point queries.
     order : (n,) int64
         The Morton order of the points.
+    ordered : (n, 3) float64
+        ``points[order]``.
     """
-    from scipy.spatial import cKDTree
-
     order = morton_order(points)
     ordered = points[order]
-    tree = cKDTree(ordered)
-    columns = np.ascontiguousarray(ordered.T)  # (3, n): each coordinate's gathers contiguous
+    tree, copies = copy_tree(ordered)
+    columns = np.ascontiguousarray(tree.data.T)  # (3, d): each coordinate's gathers contiguous
+    # The queries coordinate-major too: the offsets' memory layout sets neighbourhood_variation's
+    # summation order, hence its last bits.
+    queries = np.ascontiguousarray(ordered.T)
     n = len(points)
     out = np.empty((3, n))
     step = max(1, defaults.EDGE_BLOCK)
     for lo in range(0, n, step):  # blocks of points, bounded memory; each block is vectorised
         sl = slice(lo, lo + step)
-        dist, idx = nearest_k(tree, ordered[sl], k)
-        out[:2, lo:lo + step] = neighbourhood_variation(columns[:, idx] - columns[:, sl, None])
+        dist, idx = nearest_k(tree, ordered[sl], k, copies)
+        out[:2, lo:lo + step] = neighbourhood_variation(columns[:, idx] - queries[:, sl, None])
         out[2, lo:lo + step] = dist[:, -1]
     out[:, order] = out.copy()
-    return SurfaceVariation(sigma=out[0], drop=out[1], radius=out[2], k=k), tree, order
+    return SurfaceVariation(sigma=out[0], drop=out[1], radius=out[2], k=k), tree, order, ordered
 
 
-def nearest_k(tree, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+def copy_tree(points: np.ndarray):
+    """cKDTree over the distinct points, and how many copies each stands for.
+
+    Parameters
+    ----------
+    points : (n, 3) float64, best in Morton order (the tree keeps it when none repeats)
+
+    Returns
+    -------
+    tree : scipy.spatial.cKDTree
+        Over the distinct points (in Morton order when some repeat; else ``points``).
+    copies : (d,) int64 or None
+        Copies per row of ``tree.data``; None when there are none (every count 1).
+    """
+    from scipy.spatial import cKDTree
+
+    distinct, copies = distinct_points(points, counts=True)
+    if len(distinct) == len(points):
+        return cKDTree(points), None
+    order = morton_order(distinct)
+    return cKDTree(distinct[order]), copies[order]
+
+
+def nearest_k(tree, queries: np.ndarray, k: int, copies: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
     """The k nearest points of a cKDTree to each query, in canonical order.
 
     Sorted by distance, equal distances by the points' x, then y, then z: the neighbourhood
@@ -277,15 +305,27 @@ def nearest_k(tree, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray
     Parameters
     ----------
     tree : scipy.spatial.cKDTree
-        Over n >= k points.
+        Over n >= k points (with ``copies``: n distinct points standing for ``copies.sum()``
+        >= k).
     queries : (m, 3) float64
     k : int
+    copies : (n,) int64, optional
+        How many copies of the cloud each row of ``tree.data`` stands for (``copy_tree``):
+        the neighbours are those of the cloud with its copies, a row repeated once per copy.
+        A KD-tree cannot split copies, so one holding them is quadratic in their number.
 
     Returns
     -------
     dist : (m, k) float64, ascending
     idx : (m, k) int64, rows of ``tree.data``
     """
+    if copies is not None:
+        dist, idx = nearest_k(tree, queries, min(k, tree.n))
+        # Slot j of the cloud's neighbourhood is distinct neighbour i while the copies of
+        # neighbours 0..i first exceed j (copies are adjacent in the canonical order).
+        reach = np.cumsum(copies[idx], axis=1)
+        slot = (reach[:, :, None] <= np.arange(k)).sum(axis=1)
+        return np.take_along_axis(dist, slot, axis=1), np.take_along_axis(idx, slot, axis=1)
     n = tree.n
     want = min(k + 1, n)
     dist, idx = _query(tree, queries, want)
@@ -589,7 +629,7 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
     variant = _check_variant(variant)
     feature_angle_deg = _check_angle(feature_angle_deg)
 
-    variation, tree, order = _surface_variation(points, k)
+    variation, tree, order, ordered = _surface_variation(points, k)
     is_edge = _classify(variation, rule, threshold)
     side = TruthEdges.of(mesh, t, feature_angle_deg, variant)
     samples, on_sharp = side.samples, side.on_sharp
@@ -601,8 +641,8 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
     if (~on_sharp).any():
         found[~on_sharp] = query_distance(tree, samples[~on_sharp], upper=t) <= t
     near = np.zeros(len(points), dtype=bool)
-    if on_sharp.any():  # the tree's data are the points in Morton order
-        near[order] = query_distance(side.sharp_tree(), tree.data, upper=t, presorted=True) <= t
+    if on_sharp.any():
+        near[order] = query_distance(side.sharp_tree(), ordered, upper=t, presorted=True) <= t
     far = ~near
     return side.report(found, n_points=len(points), n_edge_points=int(is_edge.sum()),
                        n_far=int(far.sum()), n_false_edges=int((is_edge & far).sum()), k=k,

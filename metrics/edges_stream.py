@@ -52,6 +52,7 @@ from metrics.edges import (
     _check_rule,
     _check_variant,
     _tree,
+    copy_tree,
     nearest_k,
     neighbourhood_variation,
     resolve_length,
@@ -178,8 +179,6 @@ class EdgeStream:
               aside: list[np.ndarray]) -> np.ndarray:
         """One pass: the edge results of the slab's core points whose neighbourhood lies in
         the halo; the others set aside. Returns the k-th distances found (halo estimate)."""
-        from scipy.spatial import cKDTree
-
         a, b, axis, k = lo - h, hi + h, self.axis, self.k
         held = [p[(p[:, axis] >= a) & (p[:, axis] < b)] for p in self._points(blocks)]
         held = np.concatenate(held) if held else np.zeros((0, 3))
@@ -193,21 +192,21 @@ class EdgeStream:
         if len(held) < k:
             aside.append(np.column_stack([core, far]))
             return np.zeros(0)
-        tree = cKDTree(held)
-        columns = np.ascontiguousarray(held.T)
-        rows = np.flatnonzero(inside)
+        tree, copies = copy_tree(held)
+        columns = np.ascontiguousarray(tree.data.T)
+        queries = np.ascontiguousarray(core.T)  # C layout: the offsets' bits (edges.py)
         radii = np.empty(len(core))
         sure = np.empty(len(core), dtype=bool)
         is_edge = np.zeros(len(core), dtype=bool)
         step = max(1, defaults.EDGE_BLOCK)
         for start in range(0, len(core), step):
             sl = slice(start, start + step)
-            dist, idx = nearest_k(tree, core[sl], k)
+            dist, idx = nearest_k(tree, core[sl], k, copies)
             x = core[sl, axis]
             ok = dist[:, -1] < np.minimum(x - a, b - x) * (1 - 1e-9)
             radii[sl], sure[sl] = dist[:, -1], ok
-            at = rows[sl][ok]
-            value = neighbourhood_variation(columns[:, idx[ok]] - columns[:, at, None])
+            value = neighbourhood_variation(columns[:, idx[ok]]
+                                            - queries[:, sl][:, ok, None])
             is_edge[sl][ok] = self._edge(value)
         tally.add(core[sure], is_edge[sure], far[sure], lo, hi)
         aside.append(np.column_stack([core[~sure], far[~sure]]))
@@ -221,8 +220,6 @@ class EdgeStream:
     def _resolve(self, blocks: Blocks, tally: _Tally, aside: list[np.ndarray]) -> None:
         """One pass: the exact k nearest of the set-aside points over every block, merged in
         canonical order (distance, then x, y, z), then their edge results; ``aside`` emptied."""
-        from scipy.spatial import cKDTree
-
         rows = np.concatenate(aside) if aside else np.zeros((0, 4))
         aside.clear()
         if len(rows) == 0:
@@ -234,8 +231,8 @@ class EdgeStream:
         for block in self._points(blocks):
             if len(block) == 0:
                 continue
-            tree = cKDTree(block)
-            dist, idx = nearest_k(tree, points, min(k, len(block)))
+            tree, copies = copy_tree(block)
+            dist, idx = nearest_k(tree, points, min(k, len(block)), copies)
             best = np.concatenate([best, dist], axis=1)
             near = np.concatenate([near, tree.data[idx]], axis=1)
             pick = np.lexsort((near[..., 2], near[..., 1], near[..., 0], best), axis=-1)[:, :k]

@@ -42,6 +42,7 @@ def nearest_distance(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
     """
     from scipy.spatial import cKDTree
 
+    points = distinct_points(points)
     return query_distance(cKDTree(points[morton_order(points)]), queries)
 
 
@@ -92,6 +93,42 @@ def cloud_distance(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
     """
     import open3d as o3d  # heavy: imported only when a query runs
 
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(distinct_points(points)))
     probe = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(queries))
     return np.asarray(probe.compute_point_cloud_distance(cloud))
+
+
+def distinct_points(points: np.ndarray, *, counts: bool = False):
+    """The points with exact copies dropped (order not kept; no copy: the input itself).
+
+    Copies change no nearest distance, but a KD-tree cannot split them: a leaf of c copies is
+    scanned whole by every query reaching it, so c copies of one point cost c per query (2 x
+    10,000 copies, 600k queries: 33 s in Open3D's tree, 0.1 s once dropped). Only points whose
+    x repeats another point's x are compared whole, so a measured cloud (all x distinct) costs
+    one sort of x.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+    counts : bool
+        Also return how many copies each distinct point stands for.
+
+    Returns
+    -------
+    distinct : (d, 3) float64, d <= n
+    copies : (d,) int64, only with ``counts``; sums to n
+    """
+    order = np.argsort(points[:, 0])
+    x = points[order, 0]
+    same = x[1:] == x[:-1]
+    if not same.any():
+        return (points, np.ones(len(points), dtype=np.int64)) if counts else points
+    repeated = np.zeros(len(points), dtype=bool)
+    repeated[1:] |= same
+    repeated[:-1] |= same
+    single = points[order[~repeated]]
+    shared, copies = np.unique(points[order[repeated]], axis=0, return_counts=True)
+    distinct = np.concatenate([single, shared])
+    if not counts:
+        return distinct
+    return distinct, np.concatenate([np.ones(len(single), dtype=np.int64), copies])

@@ -10,7 +10,13 @@ from metrics_reference import box, ellipsoid, satellite
 from scipy.spatial import cKDTree
 
 from metrics import MetricsInputError, defaults, sample_surface
-from metrics.edges import edge_report, nearest_k
+from metrics.edges import (
+    copy_tree,
+    edge_report,
+    nearest_k,
+    neighbourhood_variation,
+    surface_variation,
+)
 from metrics.edges_stream import EdgeStream
 
 
@@ -97,10 +103,13 @@ def test_a_cloud_in_one_bin_and_one_point_per_block(monkeypatch):
 
 def test_a_log_repeating_two_points_scores_the_same(monkeypatch):
     """Copies of two points: every neighbourhood ties at distance 0, which nearest_k settles
-    without asking for every copy. (scipy's KD-tree itself is quadratic in the copies of one
-    point: one leaf holds them all; so few copies here.)"""
+    without asking for every copy. A KD-tree cannot split copies (one leaf holds them all, so
+    they cost each query their number): the trees hold the two distinct points, 2 x 40,000
+    copies take a second (over a minute before)."""
     mesh = box()
-    points = np.repeat(np.array([[1.0, 0.5, 0.2], [-2.0, 1.0, 0.0]]), 5_000, axis=0)
+    points = np.repeat(np.array([[1.0, 0.5, 0.2], [-2.0, 1.0, 0.0]]), 40_000, axis=0)
+    tree, copies = copy_tree(points)
+    assert tree.n == 2 and copies.tolist() in ([40_000, 40_000],)
     monkeypatch.setattr(defaults, "EDGE_SLAB_POINTS", 3_000)
     whole = edge_report(points, mesh)
     assert whole.n_edge_points == 0
@@ -143,6 +152,27 @@ def test_nearest_k_is_canonical_on_a_lattice_with_copies(k):
         dist, idx = nearest_k(cKDTree(points), queries, k)
         assert np.array_equal(dist, want_dist)
         assert np.array_equal(points[idx], want_near)
+        tree, copies = copy_tree(points)   # the distinct points, with their copies counted
+        assert tree.n == len(grid) and copies.sum() == len(data)
+        dist, idx = nearest_k(tree, queries, k, copies)
+        assert np.array_equal(dist, want_dist)
+        assert np.array_equal(tree.data[idx], want_near)
     few = data[:k]   # exactly k points: every point in every neighbourhood
     dist, idx = nearest_k(cKDTree(few), queries, k)
     assert np.array_equal(few[idx], canonical_brute_force(few, queries, k)[1])
+
+
+def test_surface_variation_counts_copies_as_points():
+    """A noisy cloud with copies (1-30 of some points): each point's variation is that of its
+    brute-force canonical neighbourhood, copies included, as if no copy were merged."""
+    rng = np.random.default_rng(4)
+    base = cloud(ellipsoid(2), 800, 8, 0.05)
+    points = np.repeat(base, np.where(rng.random(len(base)) < 0.2,
+                                      rng.integers(2, 31, len(base)), 1), axis=0)
+    points = points[rng.permutation(len(points))]
+    variation = surface_variation(points, k=16)
+    _, near = canonical_brute_force(points, points, 16)
+    offset = np.ascontiguousarray((near - points[:, None, :]).transpose(2, 0, 1))
+    sigma, drop = neighbourhood_variation(offset)
+    assert np.array_equal(variation.sigma, sigma)
+    assert np.array_equal(variation.drop, drop)

@@ -240,3 +240,17 @@ def test_fast_path_equals_the_ring_checked_path(name):
     np.testing.assert_allclose(closest, q_ref, rtol=0, atol=1e-9 * fast.scale)
     tied = face != f_ref  # a different face only where the two are equally close
     np.testing.assert_allclose(distance[tied], d_ref[tied], rtol=1e-12, atol=1e-15 * fast.scale)
+
+
+def test_distinct_points_drops_exact_copies_only():
+    """Copies go (counted); points sharing x but not y or z stay; no copy: the input itself."""
+    from metrics.spatial import distinct_points
+
+    points = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [2.0, 0.0, 0.0],
+                       [0.0, 0.0, 1e-300], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])
+    distinct, copies = distinct_points(points, counts=True)
+    got = sorted(zip(map(tuple, distinct), copies.tolist(), strict=True))
+    assert got == [((0.0, 0.0, 0.0), 3), ((0.0, 0.0, 1e-300), 1), ((0.0, 1.0, 0.0), 2),
+                   ((2.0, 0.0, 0.0), 1)]
+    unique = np.random.default_rng(0).normal(size=(100, 3))
+    assert distinct_points(unique) is unique

@@ -288,3 +288,15 @@ def test_a_truth_built_once_gives_the_same_reports_as_a_fresh_one(sphere, kind):
                 assert np.array_equal(reused.arrays()[name], array), name
     assert len(truth._samples) == 2 and len(truth._lattices) == 1  # built once, reused
     assert not truth.samples(3000, [4, 1])[0].flags.writeable  # shared: read-only
+
+
+def test_copies_of_points_score_as_the_points(sphere):
+    """A cloud of 2 x 40,000 copies of two points (a log repeating two strikes) scores as the
+    two points: copies change no distance, and the KD-tree holds the two distinct points (a
+    tree cannot split copies: they took over a minute before)."""
+    two = np.array([[10.0, 0.0, 0.0], [0.0, 10.5, 0.0]])
+    copies = score(np.repeat(two, 40_000, axis=0), sphere, edges=False, **SPEED)
+    alone = score(two, sphere, edges=False, **SPEED)
+    for key in ("completeness_mean_m", "completeness_p95_m", "accuracy_mean_m", "recall",
+                "coverage"):
+        assert getattr(copies, key) == pytest.approx(getattr(alone, key), rel=1e-12), key
