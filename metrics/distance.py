@@ -63,6 +63,7 @@ depend on which of two tied triangles Embree returned.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
+from functools import cached_property
 
 import numpy as np
 
@@ -481,15 +482,74 @@ class MeshDistance:
                 ok &= (e - along > bound) | (bound == 0.0)
         return ok
 
+    @cached_property
+    def _planes(self) -> np.ndarray:
+        """(m, 4) float64: each face's unit normal n and ``-n . A``, so that ``planes[t] . (p, 1)``
+        is p's height above face t's plane (0 for degenerate faces); built on first use."""
+        a = self._v[self._f[:, 0]]
+        return np.column_stack([self.normals, -np.einsum("ij,ij->i", self.normals, a)])
+
+    def _unique_rings(self, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rings of the distinct faces of t0, each ring face once (CSR).
+
+        Returns
+        -------
+        inverse : (r,) int64, index of t0's face among the distinct ones
+        start : (u + 1,) int64, where each distinct face's ring starts in ``ring``
+        ring : (q,) int64, ring faces, ascending within each ring
+        """
+        faces, inverse = np.unique(t0, return_inverse=True)
+        row, ring = self._ring(faces)
+        row, ring = np.divmod(np.unique(row * len(self._f) + ring), len(self._f))
+        return inverse, np.searchsorted(row, np.arange(len(faces) + 1)), ring
+
+    def _near_planes(self, p: np.ndarray, t0: np.ndarray, limit: np.ndarray):
+        """(point, ring face) pairs whose face plane lies within ``limit`` of the point, up to
+        rounding: the others cannot be closer than ``limit``.
+
+        One ring position at a time over all points (points sorted by ring size, so each
+        position is a prefix): a 32-byte plane row per pair and a dot product. ``slack`` covers
+        the rounding of this height and of ``n . (p - A)`` (the bound of ``_guarded``), each
+        below ~12 eps (|p|_1 + |A|_1), a thousand times over: a pair rejected here fails that
+        bound too.
+
+        Parameters
+        ----------
+        p : (r, 3) float64, re-centred points; t0 : (r,) int64, their candidate faces
+        limit : (r,) float64, the distance a ring face must not exceed
+
+        Returns
+        -------
+        row : (q,) int64, index into p; faces : (q,) int64, ring face
+        """
+        planes = self._planes
+        inverse, start, ring = self._unique_rings(t0)
+        count = np.diff(start)[inverse]
+        order = np.argsort(-count, kind="stable")
+        first = start[inverse[order]]
+        active = len(p) - np.cumsum(np.bincount(count))  # points with more than j ring faces
+        homogeneous = np.column_stack([p[order], np.ones(len(p))])
+        reach = np.abs(self._v).sum(axis=1).max()
+        slack = limit[order] + 1e-12 * (np.abs(homogeneous[:, :3]).sum(axis=1) + reach)
+        rows, faces = [np.empty(0, dtype=np.int64)], [np.empty(0, dtype=np.int64)]
+        for j, n in enumerate(active[:-1]):
+            face = ring[first[:n] + j]
+            height = np.einsum("ij,ij->i", np.take(planes, face, axis=0), homogeneous[:n])
+            near = np.flatnonzero(np.abs(height) <= slack[:n])
+            rows.append(order[near])
+            faces.append(face[near])
+        return np.concatenate(rows), np.concatenate(faces)
+
     def _guarded(self, p: np.ndarray, t0: np.ndarray):
         """Minimum exact distance over t0 and its ring, for points (r, 3) off the fast path.
 
-        A ring face is evaluated exactly unless its lower bound ``sqrt(h_t**2 + e_t**2)`` is not
-        below the distance to t0.
+        A ring face is evaluated exactly unless its plane lies farther than the distance to t0
+        (``_near_planes``) or its lower bound ``sqrt(h_t**2 + e_t**2)`` is not below it.
         """
         distance, closest = closest_on_faces(self._v, self._f, self.normals, self.degenerate,
                                              p, t0)
-        row, faces = self._ring(t0)
+        limit = distance * (1.0 + 1e-12)  # keep exact ties: the lowest face index wins
+        row, faces = self._near_planes(p, t0, limit)
         plane = np.take(self._table, faces, axis=0)
         ap = p[row] - plane[:, _A]
         v = np.einsum("ij,ij->i", ap, plane[:, _GB])
@@ -497,8 +557,7 @@ class MeshDistance:
         bary = np.stack([1.0 - v - w, v, w], axis=1)
         outside = np.maximum((-bary * plane[:, _ALT]).max(axis=1), 0.0)
         bound = np.einsum("ij,ij->i", ap, plane[:, _N]) ** 2 + outside**2
-        limit = distance[row] * (1.0 + 1e-12)  # keep exact ties: the lowest face index wins
-        keep = bound <= limit**2
+        keep = bound <= limit[row] ** 2
         row, faces = row[keep], faces[keep]
         d, q = closest_on_faces(self._v, self._f, self.normals, self.degenerate,
                                 p[row], faces)
