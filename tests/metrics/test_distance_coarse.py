@@ -1,12 +1,13 @@
-"""Coarse test meshes (convex hulls, `planes`-like polyhedra, a box) seen from far away: most
-points take the slow path of metrics.distance, whose answer must equal the minimum of the exact
-closed form over *all* faces, bit for bit, ties to the lowest face index."""
+"""Coarse test meshes (convex hulls, `planes`-like polyhedra, a box, a cone) seen from far
+away: most points take the slow path of metrics.distance, whose answer must equal the minimum
+of the exact closed form over *all* faces, bit for bit, ties to the lowest face index."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from metrics_reference import box, brute_force_distance, ellipsoid
+import trimesh
+from metrics_reference import as_mesh, box, brute_force_distance, ellipsoid
 from scipy.spatial import ConvexHull, HalfspaceIntersection
 
 from metrics import Mesh, MeshDistance
@@ -56,7 +57,8 @@ MESHES = {"hull": lambda: cloud_hull(400, seed=1),
           "hull (qhull order)": lambda: cloud_hull(400, seed=1, orient=False),
           "hull (40 points)": lambda: cloud_hull(40, seed=2),
           "polyhedron": lambda: polyhedron(120, seed=3),
-          "box": box}
+          "box": box,
+          "cone": lambda: as_mesh(trimesh.creation.cone(5.0, 12.0, sections=64))}
 
 
 def probes(mesh: Mesh, n: int, seed: int) -> np.ndarray:
@@ -120,7 +122,7 @@ def test_coarse_meshes_match_the_minimum_over_all_faces(name):
     np.testing.assert_allclose(distance, expected, rtol=RTOL, atol=1e-12 * md.scale)
 
 
-@pytest.mark.parametrize("name", ["hull (40 points)", "polyhedron", "box"])
+@pytest.mark.parametrize("name", ["hull (40 points)", "polyhedron", "box", "cone"])
 def test_slow_path_for_every_point_matches_all_faces(name):
     """``_guarded`` on every point, near ones included (not only those the fast path leaves):
     the same answer as the minimum over all faces."""
