@@ -51,7 +51,7 @@ How a query works
    them). A ring face is evaluated only if its plane lies within d0, ``|h_t| <= d0`` (a 32-byte
    row ``(n, -n . A)`` and a dot product; it leaves ~1 pair in 10^4 on a convex hull seen from
    inside), and then its lower bound ``sqrt(h_t**2 + e_t**2)`` is within d0 too (e_t: how far
-   the projection falls outside it, from the affine forms of its barycentric weights). Both
+   the projection falls outside it, the largest distance beyond one of its edge lines). Both
    tests allow a slack of ``1e-12 (|p|_1 + max |vertex|_1)``, a hundred times the rounding of
    these forms and of the closed form, so the result is that of evaluating the whole ring. The
    survivors are evaluated with the closed form and the minimum taken; ties go to the lowest
@@ -502,23 +502,26 @@ class MeshDistance:
 
     @cached_property
     def _affine(self) -> tuple[np.ndarray, np.ndarray, float]:
-        """The slow path's two per-face tables, built on first use.
+        """The slow path's two per-face tables, built on first use (zero for degenerate faces).
 
         Returns
         -------
         planes : (m, 4) float64, the row (n, -n . A): its product with (p, 1) is p's height
-            above the face's plane (0 for degenerate faces)
-        duals : (m, 3, 4) float64, the rows (g_b, -g_b . A) and (g_c, -g_c . A), whose
-            products with (p, 1) are the barycentric weights v, w of p's projection, and the
-            altitudes (A, B, C, 0)
-        reach : float, the largest |x| + |y| + |z| of a vertex (of the rounding bounds)
+            above the face's plane
+        edges : (m, 3, 4) float64, per edge k (opposite corner k) the row (o, -o . V), o the
+            unit in-plane normal pointing out of the face, V an end of the edge: its product
+            with (p, 1) is how far p's projection lies beyond the edge's line
+        reach : float, the largest |x| + |y| + |z| of a vertex (sets the rounding slack)
         """
-        a = self._v[self._f[:, 0]]
-        rows = np.stack([self.normals, self._table[:, _GB], self._table[:, _GC]], axis=1)
-        affine = np.concatenate([rows, -np.einsum("ikj,ij->ik", rows, a)[:, :, None]], axis=2)
-        duals = np.zeros((len(a), 3, 4))
-        duals[:, :2], duals[:, 2, :3] = affine[:, 1:], self._table[:, _ALT]
-        return np.ascontiguousarray(affine[:, 0]), duals, float(np.abs(self._v).sum(axis=1).max())
+        corners = self._v[self._f]
+        start, end = corners[:, [1, 2, 0]], corners[:, [2, 0, 1]]
+        out = np.cross(end - start, self.normals[:, None])
+        length = np.linalg.norm(out, axis=2, keepdims=True)
+        out /= np.where(length > 0, length, 1.0)
+        edges = np.concatenate([out, -np.einsum("ikj,ikj->ik", out, start)[:, :, None]], axis=2)
+        offset = -np.einsum("ij,ij->i", self.normals, corners[:, 0])
+        reach = float(np.abs(self._v).sum(axis=1).max())
+        return np.column_stack([self.normals, offset]), edges, reach
 
     def _unique_rings(self, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The rings of the distinct faces of t0, each ring face once (CSR).
@@ -541,9 +544,10 @@ class MeshDistance:
         One ring position at a time over all points (sorted by ring size, so each position is a
         prefix of them): first the plane test ``|h_t| <= limit``, a 32-byte row per pair (it
         leaves ~1 pair in 10^4 on a convex hull seen from inside), then the outside distance
-        ``e_t`` for the survivors. ``slack`` covers the rounding of these affine forms and of the
-        closed form of ``closest_on_faces`` (each below ~20 eps (|p|_1 + |A|_1)) a hundred times
-        over, so a pair rejected here cannot come out closer than ``limit`` in the closed form.
+        ``e_t`` (the largest distance beyond an edge line) for the survivors. ``slack`` covers
+        the rounding of these affine forms (unit normals: ~5 eps (|p|_1 + |V|_1) whatever the
+        face's shape) and of the closed form of ``closest_on_faces`` a hundred times over, so a
+        pair rejected here cannot come out closer than ``limit`` in the closed form.
 
         Parameters
         ----------
@@ -554,7 +558,7 @@ class MeshDistance:
         -------
         row : (q,) int64, index into p; faces : (q,) int64, ring face
         """
-        planes, duals, reach = self._affine
+        planes, edges, reach = self._affine
         inverse, start, ring = self._unique_rings(t0)
         count = np.diff(start)[inverse]
         order = np.argsort(-count, kind="stable")
@@ -568,10 +572,8 @@ class MeshDistance:
             h = np.einsum("ij,ij->i", np.take(planes, face, axis=0), homogeneous[:n])
             near = np.flatnonzero(np.abs(h) <= slack[:n])
             face, h = face[near], h[near]
-            dual = np.take(duals, face, axis=0)
-            vw = np.einsum("ikj,ij->ik", dual[:, :2], homogeneous[near])
-            bary = np.column_stack([1.0 - vw[:, 0] - vw[:, 1], vw])
-            outside = np.maximum((-bary * dual[:, 2, :3]).max(axis=1), 0.0)
+            beyond = np.einsum("ikj,ij->ik", np.take(edges, face, axis=0), homogeneous[near])
+            outside = np.maximum(beyond.max(axis=1), 0.0)
             keep = h * h + outside * outside <= slack[near] ** 2
             rows.append(order[near[keep]])
             faces.append(face[keep])
