@@ -80,6 +80,9 @@ def probes(mesh: Mesh, n: int, seed: int) -> np.ndarray:
         on + rng.normal(scale=1e-3 * size, size=(n, 3)),
         corner + away / np.linalg.norm(away, axis=1, keepdims=True),  # beyond a vertex
         middle + rng.normal(scale=0.1 * size, size=(n, 3)),
+        # Ties within 1e-7 of the size: rounding (~1e-16 of the size) is 1e-9 of the distance.
+        corner + 1e-7 * size * away / np.linalg.norm(away, axis=1, keepdims=True),
+        middle + rng.normal(scale=1e-7 * size, size=(n, 3)),
     ])
 
 
