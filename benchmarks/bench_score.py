@@ -13,18 +13,24 @@ on the same query points, in both directions:
 Ours is ``score(test, truth, edges=False)`` against a ``metrics.Truth`` built once (as a
 comparison, a study and a stability sweep use it): the test mesh's sampling and set-up, both
 exact queries and every statistic. The edge metric is timed by ``bench_edge_metric.py``.
-Targets: ours / Open3D <= 1.5 for the surface and the cloud, <= 3 for the track cloud (points
-along three rings: a nearest-neighbour worst case). Also printed: the same score against a
-fresh truth each time (the truth's set-up included) and the exact distance query alone.
+Targets: ours / Open3D <= 1.5 for the surface, the cloud and the coarse meshes, <= 3 for the
+track cloud (points along three rings: a nearest-neighbour worst case). Also printed: the same
+score against a fresh truth each time (the truth's set-up included) and the exact distance query
+alone.
 
 Cases: the Eros model (49k faces, km -> m) and the paper's asteroid (the ``asteroid-lrf``
 preset's 20k-face ellipsoid); per truth a 150k-face surface (Open3D Poisson, depth 9, of 2e5
-noisy samples, decimated), a 77,400-point cloud (noise 0.1 m), and on Eros the track cloud.
+noisy samples, decimated), a 77,400-point cloud (noise 0.1 m), on Eros the track cloud, and two
+coarse test meshes far from most truth samples (the exact query's slow path): the cloud's
+convex hull (as the ``convex-hull`` method makes it) and a ~500-face polyhedron (as ``planes``
+makes: the intersection of the half-spaces of 125 facets of the truth's convex hull).
+``--cases`` picks some of them.
 Times are medians of ``--repeats`` (>= 3) repeats after one warm-up; within a repeat ours and
 Open3D run in turn, so both see the same load on the shared cores.
 
     .venv/bin/python benchmarks/bench_score.py            # ~3 minutes here
     .venv/bin/python benchmarks/bench_score.py --quick    # tiny sizes, seconds (CI)
+    .venv/bin/python benchmarks/bench_score.py --cases hull polyhedron    # coarse meshes only
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ import os
 import statistics
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -41,10 +48,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without relying on the installed package
 MESH = ROOT.parent / "shared" / "meshes" / "eros_gaskell_49k.obj"
-TARGET = {"surface": 1.5, "cloud": 1.5, "tracks": 3.0}
+TARGET = {"surface": 1.5, "cloud": 1.5, "tracks": 3.0, "hull": 1.5, "polyhedron": 1.5}
 CLOUD_POINTS = 77_400  # the rso-a-lrf and asteroid-lrf presets' shots
 NOISE_M = 0.1
 SURFACE_FACES = 150_000  # the issue's "150k-face surface"
+POLYHEDRON_PLANES = 125  # ~4 triangles per plane: a ~500-face polyhedron, as `planes` makes
 
 
 def interleaved(fns: dict, repeats: int) -> tuple[dict, dict]:
@@ -117,6 +125,43 @@ def tracks(truth, n: int, seed: int) -> np.ndarray:
     return points + rng.normal(scale=NOISE_M, size=points.shape)
 
 
+def hull(truth, n: int, seed: int):
+    """The convex hull of ``cloud(truth, n, seed)``."""
+    return outward(cloud(truth, n, seed))
+
+
+def outward(points: np.ndarray):
+    """The convex hull of the points as a mesh, faces counter-clockwise seen from outside (as
+    the ``convex-hull`` and ``planes`` methods orient them)."""
+    from scipy.spatial import ConvexHull
+
+    from metrics import Mesh
+
+    qhull = ConvexHull(points)
+    used, faces = np.unique(qhull.simplices, return_inverse=True)
+    faces = faces.reshape(-1, 3)
+    a, b, c = (points[used][faces[:, i]] for i in range(3))
+    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), qhull.equations[:, :3]) < 0
+    faces[flip] = faces[flip][:, ::-1]
+    return Mesh(points[used], faces)
+
+
+def polyhedron(truth, planes: int):
+    """A `planes`-like closed polyhedron: the intersection of the half-spaces below ``planes``
+    facets of the truth's convex hull, those whose normals are nearest to a Fibonacci sphere's
+    directions (spread, so bounded); coarse, and enclosing the truth."""
+    from scipy.spatial import ConvexHull, HalfspaceIntersection
+
+    qhull = ConvexHull(truth.vertices)
+    k = np.arange(planes) + 0.5
+    z, angle = 1.0 - 2.0 * k / planes, np.pi * (1.0 + 5.0**0.5) * k
+    directions = np.column_stack([np.sqrt(1.0 - z * z) * np.cos(angle),
+                                  np.sqrt(1.0 - z * z) * np.sin(angle), z])
+    chosen = np.unique((directions @ qhull.equations[:, :3].T).argmax(axis=1))
+    interior = truth.vertices[qhull.vertices].mean(axis=0)
+    return outward(HalfspaceIntersection(qhull.equations[chosen], interior).intersections)
+
+
 def open3d_floor(test, truth_scene, queries32: np.ndarray, test_points32: np.ndarray):
     """Open3D's float32 queries of both directions (see the module docstring)."""
     import open3d as o3d
@@ -138,6 +183,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="tiny sizes (CI smoke run)")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--cases", nargs="+", choices=list(TARGET), default=list(TARGET),
+                        help="which tests to score (default: all)")
     args = parser.parse_args(argv)
     if args.repeats < 3 and not args.quick:
         parser.error("--repeats must be >= 3 (medians)")
@@ -164,12 +211,18 @@ def main(argv=None) -> int:
         truth_scene = o3d.t.geometry.RaycastingScene()
         truth_scene.add_triangles(truth.vertices.astype(np.float32),
                                   truth.faces.astype(np.uint32))
-        tests = {"surface": surface(truth, 200_000 if not args.quick else 20_000,
+        tests = {"surface": partial(surface, truth, 200_000 if not args.quick else 20_000,
                                     7 if args.quick else 9, seed=1),
-                 "cloud": cloud(truth, n_cloud, seed=2)}
-        if truth_name == "eros" or args.quick:
-            tests["tracks"] = tracks(truth, n_cloud, seed=3)
-        for kind, test in tests.items():
+                 "cloud": partial(cloud, truth, n_cloud, seed=2),
+                 "tracks": partial(tracks, truth, n_cloud, seed=3),
+                 "hull": partial(hull, truth, n_cloud, seed=2),
+                 "polyhedron": partial(polyhedron, truth, POLYHEDRON_PLANES)}
+        if not (truth_name == "eros" or args.quick):
+            del tests["tracks"]
+        for kind, build in tests.items():
+            if kind not in args.cases:
+                continue
+            test = build()
             is_mesh = isinstance(test, Mesh)
             # The same points both sides query: ours draws them inside score (same seeds).
             test_points = sample_surface(test, n_test, seed=defaults.SEED)[0] if is_mesh \
