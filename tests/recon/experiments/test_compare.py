@@ -135,3 +135,34 @@ def test_score_options_sample_coverage_on_twice_the_samples():
                                    "coverage_points": 8000}
     with pytest.raises(SweepError, match="--samples must be at least 100, got 99"):
         score_options(99)
+
+
+def test_compare_input_walks_its_hdf5_files_before_starting_workers(tmp_path, monkeypatch):
+    """A strike log's structure is walked before it is read (formats.hdf5_check): in a forked
+    child while recon has one thread, else in a fresh interpreter (0.6 s of CPU). compare walks
+    its files before the worker pool's launcher thread exists, so no interpreter is spawned."""
+    import recon.surfaces.isolation as isolation
+    from formats import hdf5_check
+    from recon.experiments.compare import compare_input
+    from tests.conftest import write_sphere_log
+
+    log = tmp_path / "log.h5"
+    write_sphere_log(log)
+    monkeypatch.setattr(hdf5_check, "_VERDICTS", {})  # forget that recon wrote it (trust)
+    walked = []
+
+    class Started(Exception):
+        pass
+
+    def start_workers(*args, **kwargs):
+        walked.append(hdf5_check._key(log) in hdf5_check._VERDICTS)
+        raise Started
+
+    def spawned(*args, **kwargs):
+        raise AssertionError("a fresh interpreter walked the file")
+
+    monkeypatch.setattr(isolation, "start_workers", start_workers)
+    monkeypatch.setattr(hdf5_check, "_spawned", spawned)
+    with pytest.raises(Started):
+        compare_input(log, log, tmp_path / "out", names=["convex-hull"])
+    assert walked == [True]
