@@ -322,19 +322,14 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
     MethodFailed
         Every run failed (after results.csv and results.json record how).
     """
-    from recon.inputs import is_strike_log, load_truth
+    from recon.inputs import load_truth, walk_early
     from recon.surfaces.isolation import start_workers, warm_truth
     from recon.surfaces.prepare import load_prepared
 
     runs = variants(names, grid=grid)
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
-        # An HDF5 file's structure is walked before it is read (formats.hdf5_check): in a
-        # forked child while this process has one thread, in a fresh interpreter (0.6 s of
-        # CPU) once the pool's launcher thread runs. Walk the files first; the verdict is kept.
-        for source in (input, truth):
-            if isinstance(source, str | os.PathLike):
-                is_strike_log(source)
+        walk_early(input, truth)  # before the pool's launcher thread starts
         start_workers(min(len(runs), n_workers or default_workers()), SWEEP_THREADS)
     options = score_options(samples)
     preparation = preparation or Preparation()

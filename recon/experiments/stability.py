@@ -447,7 +447,7 @@ def stability_input(source, out_dir, *, truth=None, truth_scale: float = 1.0,
     dict
         ``stability``'s report.
     """
-    from recon.inputs import is_strike_log, load_cloud, load_truth
+    from recon.inputs import is_strike_log, load_cloud, load_truth, walk_early
     from recon.surfaces.isolation import start_workers, warm_truth
 
     variants(names, grid=False)  # unknown names fail before anything is simulated or read
@@ -456,6 +456,7 @@ def stability_input(source, out_dir, *, truth=None, truth_scale: float = 1.0,
     check_scheduler(scheduler)
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
+        walk_early(source, truth)  # before the pool's launcher thread starts
         start_workers(n_workers or default_workers(), SWEEP_THREADS)
     noise, density, outliers = (parse_levels(v, n) if isinstance(v, str) else tuple(v)
                                 for v, n in ((noise, "noise"), (density, "density"),
