@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -75,3 +76,25 @@ def test_meshlab_ball_pivoting_default_uses_the_noise_radius(noisy_sphere):
     assert np.array_equal(default[1], explicit[1])
     clean = dataclasses.replace(noisy_sphere, noise=0.0)
     assert bpm.ball_radius(clean, None) == pytest.approx(1.5 * noisy_sphere.spacing)
+
+
+def test_every_listed_method_says_what_its_default_costs():
+    from recon.surfaces import methods
+
+    assert set(methods.DEFAULT_FIT_S) == set(methods.available())
+    listing = methods.listing()
+    for name, (lidar, lrf) in methods.DEFAULT_FIT_S.items():
+        block = listing.split(f"\n{name} [")[1].split("\n")[1]
+        assert block.strip() == f"default fit: {lidar:.2g} s (336k LIDAR), {lrf:.2g} s (77k LRF)"
+
+
+def test_help_states_the_slowest_measured_default():
+    from cli.reconstruct import COST_HELP
+    from recon.surfaces import methods
+
+    slowest = max(methods.DEFAULT_FIT_S, key=lambda name: methods.DEFAULT_FIT_S[name][0])
+    lidar = math.ceil(methods.DEFAULT_FIT_S[slowest][0])
+    assert f"at most {lidar} s each ({slowest};" in COST_HELP
+    lrf = math.ceil(max(lrf for _, lrf in methods.DEFAULT_FIT_S.values()))
+    assert f"LRF cloud in at most {lrf} s" in COST_HELP
+    assert f"Poisson {methods.DEFAULT_FIT_S['poisson'][0]:.2g} s" in COST_HELP
