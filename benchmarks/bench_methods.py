@@ -1,8 +1,8 @@
 """Every surface method at its defaults on paper-scale clouds: fit time, faces, score time.
 
-    python benchmarks/bench_methods.py                     # the three clouds (~1 h here)
+    python benchmarks/bench_methods.py                     # the three clouds (~20 min here)
     python benchmarks/bench_methods.py --clouds rso-a --methods plane,poisson
-    python benchmarks/bench_methods.py --quick             # small clouds, a few minutes (CI)
+    python benchmarks/bench_methods.py --quick             # small clouds (~4 min here)
 
 Each method runs as ``recon reconstruct -m METHOD INPUT`` runs it: the strike log read and
 prepared by ``recon.surfaces.prepare.load_prepared`` (ingest, oriented normals, spacing, noise,
@@ -26,8 +26,10 @@ Clouds (each simulated with seed 0, then ingested):
 - ``rso-a`` and ``asteroid``: ``bench_compare.CLOUDS``, the ``rso-a-lrf`` and ``asteroid-lrf``
   presets with the paper's 0.3 m 3-sigma LRF range error (77,400 shots).
 
-Results go to ``--out`` (default ``benchmarks/out/methods``) as ``results.json``, and the
-table is printed.
+Results go to ``--out`` (default ``benchmarks/out/methods``) as ``results.json`` and
+``results.md``, and the table is printed. The fit times of a full run are the table behind
+``recon reconstruct --list-methods`` (``recon.surfaces.methods.DEFAULT_FIT_S``) and the cost
+stated in ``recon reconstruct --help`` and ``recon compare --help`` (``cli.reconstruct``).
 """
 
 from __future__ import annotations
