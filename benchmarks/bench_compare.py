@@ -61,13 +61,15 @@ CLOUDS = {
 BASELINE = ("poisson", {})  # speed ratios are against Open3D Poisson at its defaults
 
 
-def simulate(name: str, out: Path) -> Path:
+def simulate(name: str, out: Path, clouds: dict | None = None) -> Path:
+    """The strike log of cloud ``name`` (``CLOUDS``, or ``clouds``: name -> (preset,
+    overrides)) simulated with seed 0 into ``out/logs``, or the one already there."""
     import sim
 
     path = out / "logs" / f"{name}.h5"
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
-        preset, overrides = CLOUDS[name]
+        preset, overrides = (clouds or CLOUDS)[name]
         sim.simulate(sim.load_scene(preset, overrides), path, seed=0)
     return path
 

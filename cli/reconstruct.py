@@ -19,6 +19,11 @@ from cli.options import (
 # they are repeated here only as help text, so that ``recon --help`` need not import numpy.
 TIMEOUT_HELP = "wall-clock limit of each method run, seconds (default: 600)"
 MEMORY_HELP = "address-space limit of each method run, MiB (default: 8192; 0: none)"
+# What the defaults cost, as benchmarks/bench_methods.py measured it (the slowest method of
+# recon/surfaces/methods DEFAULT_FIT_S, which --list-methods prints per method).
+COST_HELP = ("At their defaults the methods fit a 336k-point asteroid LIDAR cloud in at most "
+             "59 s each (ball-pivoting-meshlab; Open3D Poisson 1.9 s) and a 77k-point LRF "
+             "cloud in at most 12 s, on a shared 2-core machine (benchmarks/bench_methods.py).")
 
 
 def _add_input_options(p: argparse.ArgumentParser) -> None:
@@ -66,7 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Reconstruct a triangle mesh from a point cloud (or a strike log, ingested "
                     "on the fly) with one method, run in its own process with time and memory "
                     "limits. '-m auto' chooses the method and resolution without the truth and "
-                    "says why. '--list-methods' lists the methods and their parameters.")
+                    "says why. '--list-methods' lists the methods, their parameters and what "
+                    "each default costs. " + COST_HELP)
     p.add_argument("input", nargs="?", metavar="INPUT",
                    help="point cloud (.ply, .las, .laz, .h5, .xyz, .pcd, .e57...) or strike log")
     p.add_argument("-m", "--method", default="poisson",
@@ -91,7 +97,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "each isolated in a warm worker process, one per core (or on Dask with "
                     "--scheduler); score each mesh against the truth; write DIR/results.csv, "
                     "DIR/results.json, DIR/speed_accuracy.png and the meshes; print the "
-                    "ranking, the Pareto fronts and how long the full grid would take.")
+                    "ranking, the Pareto fronts and how long the full grid would take. "
+                    + COST_HELP)
     p.add_argument("input", nargs="?", metavar="INPUT", help="point cloud or strike log")
     add_truth_and_output_options(
         p, truth_help="truth mesh file, or a strike log with its truth mesh", truth_required=True)

@@ -49,6 +49,19 @@ BUILTIN_MODULES = (
     "recon.surfaces.methods.delaunay_balls",
 )
 
+# What a default costs: each listed method's fit time [s] at its defaults, isolated as ``recon
+# reconstruct`` runs it, on (the 336,333-point asteroid LIDAR cloud, the 77,400-point RSO-A LRF
+# cloud) of benchmarks/bench_methods.py (median of 3; load average 1-3 on a shared 2-core,
+# 24 GiB machine; open3d 0.20, pymeshlab 2025.7). Other machines: compare the ratios to
+# "poisson". ``listing`` prints them; a new method needs its line (tests/recon/surfaces).
+DEFAULT_FIT_S: dict[str, tuple[float, float]] = {
+    "convex-hull": (0.08, 0.01), "ellipsoid": (0.76, 0.22), "planes": (1.3, 0.82),
+    "plane": (14.3, 6.4), "poisson": (1.9, 1.2), "screened-poisson": (4.4, 2.3),
+    "ball-pivoting": (3.6, 0.56), "ball-pivoting-meshlab": (58.5, 4.0),
+    "alpha-shape": (45.3, 9.7), "rimls": (39.1, 10.3), "apss": (34.2, 8.7),
+    "delaunay-balls": (38.9, 11.2),
+}
+COST_SOURCE = "benchmarks/bench_methods.py, a shared 2-core machine"
 
 # How a parameter's type reads in an error message: (one value, several values).
 _TYPE_NAMES = {int: ("an integer", "integers"), float: ("a number", "numbers"),
@@ -373,11 +386,16 @@ def get(name: str) -> Method:
 
 
 def listing() -> str:
-    """The listed methods, their kinds, summaries, parameters with defaults, and grids."""
-    lines = []
+    """The listed methods, their kinds, summaries, what their defaults cost (``DEFAULT_FIT_S``),
+    parameters with defaults, and grids."""
+    lines = ["Default fit: seconds at the defaults on a 336k-point asteroid LIDAR cloud and a "
+             "77k-point RSO-A LRF cloud", f"({COST_SOURCE}).", ""]
     for name in available():
         spec = get(name)
         lines.append(f"{name} [{spec.kind}]: {spec.summary}")
+        if name in DEFAULT_FIT_S:
+            lidar, lrf = DEFAULT_FIT_S[name]
+            lines.append(f"    default fit: {lidar:.2g} s (336k LIDAR), {lrf:.2g} s (77k LRF)")
         for key, param in spec.params.items():
             default = "auto" if param.default is None else param.default
             lines.append(f"    {key} = {default}  ({param.doc})")

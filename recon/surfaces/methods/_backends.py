@@ -52,8 +52,35 @@ MIN_FINITE_FRACTION = 0.5
 AUTO_RESOLUTION_RANGE = (32, 1000)
 
 
+def above_noise(cloud: MethodInput, spacings: float, noises: float) -> float:
+    """A length no finer than the samples nor the noise: ``max(spacings x spacing, noises x
+    noise)``, metres.
+
+    The automatic cells and balls of the grid and pivoting methods. Where the out-of-surface
+    scatter is comparable to the spacing (the paper's clouds: RSO-A's LRF tracks, 0.035 m noise
+    at 0.048 m spacing; the asteroid LIDAR, 0.73 m at 0.92 m), a cell or ball of one spacing
+    resolves the noise itself: spurious sheets and bubbles, several times the faces (and the
+    time) for no accuracy (``benchmarks/bench_methods.py``). On clean clouds (noise well below
+    the spacing) it is ``spacings x spacing``.
+
+    Parameters
+    ----------
+    cloud : MethodInput
+    spacings, noises : float
+        Multiples of ``cloud.spacing`` and of ``cloud.noise``.
+    """
+    return max(float(spacings) * cloud.spacing, float(noises) * cloud.noise)
+
+
 def auto_resolution(cloud: MethodInput, resolution: int | None) -> int:
-    """``resolution`` or, when None, one grid cell per spacing along the longest side."""
+    """``resolution`` or, when None, one grid cell per spacing along the longest side.
+
+    One spacing, noise or not (unlike ``above_noise``): MeshLab's MLS projection from nodes
+    farther than its kernel (filter_scale x the local spacing) diverges, so a coarser grid leaves
+    holes. On the 336k-point asteroid LIDAR cloud cells of 3 x noise (2.4 spacings) took RIMLS
+    from a 0.59 m to a 10.5 m Chamfer distance (``benchmarks/bench_methods.py``); one cell per
+    spacing ran in under a minute there (1.2 M faces).
+    """
     if resolution is not None:
         return int(resolution)
     extent = float(np.ptp(cloud.points, axis=0).max())
