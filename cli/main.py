@@ -75,6 +75,13 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt as exc:
         return _interrupted(args, getattr(exc, "signum", signal.SIGINT), argv)
+    except BrokenPipeError:
+        # The reader of the output went away (recon ... | head): stop quietly, with the status
+        # of a process ended by SIGPIPE, as other Unix tools do. Outputs not yet closed were
+        # dropped as the error unwound; stdout goes to /dev/null so the interpreter's last
+        # flush does not raise again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + signal.SIGPIPE
     except Exception:
         # A signal that lands in a lazy import of a C extension (open3d) surfaces as that
         # import's ImportError ("initialization failed"), not as the interrupt.

@@ -89,3 +89,14 @@ def test_python_dash_m_cli_runs_recon():
                             text=True, timeout=60, check=False)
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("recon ")
+
+
+def test_a_reader_that_goes_away_ends_recon_quietly():
+    """``recon ... | head``: the pipe closes before recon writes; recon stops with SIGPIPE's
+    status and no traceback (it printed one from the listing's print)."""
+    proc = subprocess.Popen([sys.executable, "-m", "cli", "reconstruct", "--list-methods"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()   # long before the interpreter has started
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 141, err.decode()
+    assert err == b""
