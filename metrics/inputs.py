@@ -12,6 +12,7 @@ import numpy as np
 
 from formats.geometry import Cloud, Mesh, xyz_array
 from metrics.errors import MetricsInputError
+from metrics.spatial import bounds
 
 # Largest coordinate accepted [m], about 7 au: beyond any target imaged from nearby. The
 # distance queries run in float32 (Open3D) and square coordinates: at 1e20 m the square
@@ -184,4 +185,5 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def bbox_diagonal(points: np.ndarray) -> float:
     """Length of the diagonal of the axis-aligned bounding box of ``points`` (n, 3), metres."""
-    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    lo, hi = bounds(points)
+    return float(np.linalg.norm(hi - lo))
