@@ -87,10 +87,12 @@ from metrics.spatial import bounds, morton_order, row_cross, row_norms
 # lies on an edge, up to float64 rounding, off the fast path.
 _INTERIOR_MARGIN = 1e-12
 # Columns of the per-face table gathered once per query point (MeshDistance._table): vertex A,
-# unit normal, dual basis vectors g_b and g_c, altitudes, then the bounds of the fast path
-# (MeshDistance._bounds; module docstring, 3.).
+# unit normal, dual basis vectors g_b and g_c, altitudes.
 _A, _N, _GB, _GC, _ALT = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
-_EDGE, _QUICK = slice(15, 21), slice(21, 27)
+# Columns of the per-side table (MeshDistance._sides, row 2 face + side: 0 in front of the face,
+# 1 behind it), the row of the point's side gathered once per query point: the bounds of the
+# fast path (MeshDistance._bounds; module docstring, 3.).
+_EDGE, _QUICK = slice(0, 3), slice(3, 6)
 # Columns of the second table (MeshDistance._corners), gathered only for the points that fail
 # the quick corner test: the full corner test's slopes, ray coefficients and Gram matrix.
 _CORNER, _RAYS, _GRAM = slice(0, 6), slice(6, 18), slice(18, 21)
@@ -184,7 +186,7 @@ class MeshDistance:
         altitude = double_area[:, None] / np.where(lengths > 0, lengths, 1.0)
         self.normals = normal
         self._scene_faces = np.flatnonzero(ok)
-        self._table = table = np.empty((len(f), 27))
+        self._table = table = np.empty((len(f), 15))
         table[:, _A], table[:, _N], table[:, _GB], table[:, _GC] = a, normal, g_b, g_c
         table[:, _ALT] = altitude
         self._corners = np.empty((len(f), 21))
@@ -220,7 +222,8 @@ class MeshDistance:
         return row[keep], ring[keep]
 
     def _bounds(self, corners: np.ndarray, lengths: np.ndarray) -> None:
-        """Fill the columns of the fast path's tests in the per-face tables (module docstring, 3.).
+        """Fill the fast path's tests: ``_sides`` and the columns of ``_corners`` (module
+        docstring, 3.).
 
         ``_EDGE``: per side (in front of the face, behind it) and edge k (opposite corner k),
         the slope c of the face across the edge (z <= c * distance beyond the edge line);
@@ -343,11 +346,10 @@ class MeshDistance:
             np.maximum.at(rise, row, (sign * heights).max(axis=1))
             level = missing[rise <= eta]
             edge[level, side] = corner[level, side] = 0.0
-        table[:, _EDGE] = edge.reshape(m, 6)
         self._corners[:, _CORNER] = corner.reshape(m, 6)
         self._corners[:, _RAYS] = np.stack(rays, axis=1)
         quick[corner == 0.0] = 0.0
-        table[:, _QUICK] = quick.reshape(m, 6)
+        self._sides = np.concatenate([edge, quick], axis=2).reshape(2 * m, 6)
 
     def _fans(self, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The cone bound of the faces around each vertex (module docstring, 3.).
@@ -478,18 +480,17 @@ class MeshDistance:
         height = np.abs(h)
         m = _INTERIOR_MARGIN
         fast = (u > m) & (v > m) & (w > m)
-        # The faces across the edges: 2 r_k > H c_k, r_k the in-plane distance from edge k;
-        # the faces at one corner: the quick test H * quick_j < 1 - weight_j.
-        behind = (h < 0)[:, None]
-        edge = np.where(behind, row[:, 18:21], row[:, 15:18])
-        quick = np.where(behind, row[:, 24:27], row[:, 21:24])
+        # The bounds of p's side of the face (_EDGE, then _QUICK). The faces across the edges:
+        # 2 r_k > H c_k, r_k the in-plane distance from edge k; the faces at one corner: the
+        # quick test H * quick_j < 1 - weight_j.
+        side = np.take(self._sides, 2 * t0 + (h < 0), axis=0)
         weights = (u, v, w)
         with np.errstate(invalid="ignore"):  # 0 * inf on the plane: the exact path decides
             for k, weight in enumerate(weights):
-                fast &= 2.0 * weight * row[:, 12 + k] > height * edge[:, k]
+                fast &= 2.0 * weight * row[:, 12 + k] > height * side[:, k]
             full = fast.copy()
             for j, rest in enumerate((v + w, u + w, u + v)):
-                fast &= height * quick[:, j] < rest
+                fast &= height * side[:, 3 + j] < rest
         # The full corner test for the others (module docstring, 3.).
         again = np.flatnonzero(full & ~fast)
         if len(again):
