@@ -242,9 +242,11 @@ class MeshDistance:
         corners : (m, 3, 3) float64, the faces' corners
         lengths : (m, 3) float64, per corner the length of the opposite edge
         """
-        # The vertices' part on a second thread (numpy releases the GIL in its kernels).
+        # The vertices' part on a second thread (numpy releases the GIL in its kernels), then
+        # the slow path's tables, which every query of a reconstruction ends up needing.
         with ThreadPoolExecutor(max_workers=1) as pool:
             fans = pool.submit(self._fans, corners)
+            pool.submit(lambda: self._affine)
             self._face_bounds(lengths, corners, fans)
 
     def _face_bounds(self, lengths, corners, fans) -> None:
