@@ -24,8 +24,9 @@ Temples, Knapitsch et al. 2017, and Open3D's ``compute_metrics``):
 
 Scoring many tests against one truth (a comparison's runs, a study's time prefixes, a stability
 sweep): build ``Truth(mesh)`` once and pass it as ``truth``; its distance structure, its samples
-and its coverage lattice are then made once and reused, and every report is the same as with a
-fresh truth.
+and its coverage lattice (and both joined in Morton order, as the completeness query takes them)
+are then made once and reused, and every report is the same as with a fresh truth. A test mesh's
+distance structure is built on a second thread while its samples are scored against the truth.
 
 A cloud too large to hold (a long strike log) is scored block by block with ``score_stream``, in
 memory that does not grow with its size, to the same numbers:
