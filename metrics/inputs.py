@@ -12,6 +12,7 @@ import numpy as np
 
 from formats.geometry import Cloud, Mesh, xyz_array
 from metrics.errors import MetricsInputError
+from metrics.spatial import bounds, row_cross, row_norms
 
 # Largest coordinate accepted [m], about 7 au: beyond any target imaged from nearby. The
 # distance queries run in float32 (Open3D) and square coordinates: at 1e20 m the square
@@ -162,8 +163,8 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     -------
     (m,) float64, square metres
     """
-    a, b, c = (vertices[faces[:, i]] for i in range(3))
-    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    a, b, c = (np.take(vertices, faces[:, i], axis=0) for i in range(3))
+    return 0.5 * row_norms(row_cross(b - a, c - a))
 
 
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -173,9 +174,9 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     -------
     (m, 3) float64
     """
-    a, b, c = (vertices[faces[:, i]] for i in range(3))
-    n = np.cross(b - a, c - a)
-    length = np.linalg.norm(n, axis=1)
+    a, b, c = (np.take(vertices, faces[:, i], axis=0) for i in range(3))
+    n = row_cross(b - a, c - a)
+    length = row_norms(n)
     out = np.zeros_like(n)
     ok = length > 0
     out[ok] = n[ok] / length[ok, None]
@@ -184,4 +185,5 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def bbox_diagonal(points: np.ndarray) -> float:
     """Length of the diagonal of the axis-aligned bounding box of ``points`` (n, 3), metres."""
-    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    lo, hi = bounds(points)
+    return float(np.linalg.norm(hi - lo))

@@ -24,8 +24,9 @@ Temples, Knapitsch et al. 2017, and Open3D's ``compute_metrics``):
 
 Scoring many tests against one truth (a comparison's runs, a study's time prefixes, a stability
 sweep): build ``Truth(mesh)`` once and pass it as ``truth``; its distance structure, its samples
-and its coverage lattice are then made once and reused, and every report is the same as with a
-fresh truth.
+and its coverage lattice (and both joined in Morton order, as the completeness query takes them)
+are then made once and reused, and every report is the same as with a fresh truth. A test mesh's
+distance structure is built on a second thread while its samples are scored against the truth.
 
 A cloud too large to hold (a long strike log) is scored block by block with ``score_stream``, in
 memory that does not grow with its size, to the same numbers:
@@ -50,7 +51,9 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
+from functools import cached_property
 
 import numpy as np
 
@@ -71,7 +74,7 @@ from metrics.inputs import (
     face_normals,
 )
 from metrics.sampling import coverage_lattice, sample_surface, subdivision_levels
-from metrics.spatial import cloud_distance
+from metrics.spatial import bounds, cloud_distance, morton_order
 
 _STATS = ("mean", "rms", "median", "p95", "max")
 _ARRAYS = ("accuracy_distances", "accuracy_faces", "test_points")  # None when streamed
@@ -183,8 +186,9 @@ class Truth:
 
     Holds what ``score`` derives from the truth alone, built on first use and reused by every
     later call: the exact-distance structure (``MeshDistance``), the surface samples per
-    ``(n_truth_samples, seed)``, the coverage lattice per ``coverage_points`` and the face areas.
-    A report against a ``Truth`` is identical to one against the bare mesh.
+    ``(n_truth_samples, seed)``, the coverage lattice per ``coverage_points``, both joined in
+    Morton order (the completeness query) and the face areas. A report against a ``Truth`` is
+    identical to one against the bare mesh.
 
     Parameters
     ----------
@@ -206,6 +210,7 @@ class Truth:
         self._distance: MeshDistance | None = None
         self._samples: dict = {}
         self._lattices: dict = {}
+        self._queries: dict = {}
 
     @classmethod
     def of(cls, truth, name: str = "truth") -> Truth:
@@ -249,6 +254,32 @@ class Truth:
             self._lattices[coverage_points] = _frozen((levels,
                                                        *coverage_lattice(self.mesh, levels)))
         return self._lattices[coverage_points]
+
+    def queries(self, n: int, seed, coverage_points: int) -> tuple[np.ndarray, np.ndarray]:
+        """The samples (``samples(n, seed)``) then the lattice points (``lattice``), in Morton
+        order (``spatial.morton_order``), kept per ``(n, seed, coverage_points)``: the points
+        whose distances to a test give completeness and coverage, in the order a distance query
+        runs fastest (neighbours share BVH nodes and tree leaves).
+
+        Returns
+        -------
+        points : (n + l, 3) float64, metres, in Morton order
+        order : (n + l,) int64, ``points[i]`` is point ``order[i]`` of samples then lattice
+        """
+        if seed is None:  # fresh samples: nothing to keep
+            return _in_morton_order(self.samples(n, None)[0], self.lattice(coverage_points)[1])
+        key = (n, tuple(np.atleast_1d(seed).tolist()), coverage_points)
+        if key not in self._queries:
+            self._queries[key] = _frozen(_in_morton_order(self.samples(n, seed)[0],
+                                                          self.lattice(coverage_points)[1]))
+        return self._queries[key]
+
+
+def _in_morton_order(samples: np.ndarray, lattice: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Samples then lattice points, joined and put in Morton order; and that order."""
+    joined = np.concatenate([samples, lattice])
+    order = morton_order(joined)
+    return joined[order], order
 
 
 def _frozen(arrays: tuple) -> tuple:
@@ -316,26 +347,29 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
                    edge_options=edge_options)
     test = as_test(test, "test")
     setup.check_frame(test.frame)
-    if isinstance(test, Mesh):
-        test_points, test_faces = sample_surface(test, setup.n_test_samples, seed=seed)
-        test_normals = face_normals(test.vertices, test.faces)[test_faces]
-        test_size = bbox_diagonal(test.vertices)
-    else:
-        test_points, test_normals = test.points, test.normals
-        test_size = bbox_diagonal(test_points)
+    is_mesh = isinstance(test, Mesh)
     if edges:  # fail now rather than after the distances
-        setup.check_edges(len(test_points))
-    setup.check_scale(test_size)
+        setup.check_edges(setup.n_test_samples if is_mesh else len(test.points))
+    setup.check_scale(bbox_diagonal(test.vertices if is_mesh else test.points))
 
     report_stage = progress or (lambda stage: None)
     accuracy = _Accuracy(setup, keep=True)
-    accuracy.add(test_points, test_normals)
-    report_stage("accuracy")
-    queries = setup.queries()
-    if isinstance(test, Mesh):
-        nearest = MeshDistance(test).query(queries)[0]
-    else:
-        nearest = cloud_distance(test_points, queries)
+    # A test mesh's distance structure is set up on a second thread while its samples are drawn
+    # and scored (numpy releases the GIL in its kernels).
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        test_distance = pool.submit(MeshDistance, test) if is_mesh else None
+        if is_mesh:
+            test_points, test_faces = sample_surface(test, setup.n_test_samples, seed=seed)
+            test_normals = face_normals(test.vertices, test.faces)[test_faces]
+        else:
+            test_points, test_normals = test.points, test.normals
+        accuracy.add(test_points, test_normals)
+        report_stage("accuracy")
+        queries = setup.queries()
+        if is_mesh:
+            nearest = test_distance.result().query(queries, presorted=True)[0]
+        else:
+            nearest = cloud_distance(test_points, queries)
     report_stage("completeness")
     edge = None
     if edges:
@@ -343,7 +377,7 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
         report_stage("edges")
     distances = np.concatenate(accuracy.distances)
     return setup.report(accuracy, _summary(distances), nearest, edge,
-                        test_kind="mesh" if isinstance(test, Mesh) else "cloud",
+                        test_kind="mesh" if is_mesh else "cloud",
                         arrays={"accuracy_distances": distances,
                                 "accuracy_faces": np.concatenate(accuracy.faces),
                                 "test_points": test_points})
@@ -455,7 +489,7 @@ def _reduce_nearest(nearest: np.ndarray, pending: list[np.ndarray], queries: np.
         return
     points = np.concatenate(pending) if len(pending) > 1 else pending[0]
     pending.clear()
-    lo, hi = points.min(axis=0), points.max(axis=0)
+    lo, hi = bounds(points)
     outside = np.linalg.norm(np.maximum(0.0, np.maximum(lo - queries, queries - hi)), axis=1)
     ask = ~(nearest < outside * (1 - 1e-9))   # margin: the box distance's rounding
     if ask.any():
@@ -511,20 +545,34 @@ class _Setup:
                 f"diagonals {test_size:.4g} and {diagonal:.4g}): probably km against m",
                 ScaleMismatchWarning, stacklevel=3)
 
+    @cached_property
+    def truth_samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """``Truth.samples`` of this score, drawn once (fresh ones each call when unseeded)."""
+        return self.prepared.samples(self.n_truth_samples, _child_seed(self.seed))
+
+    @cached_property
+    def _queries(self) -> tuple[np.ndarray, np.ndarray]:
+        seed = _child_seed(self.seed)
+        if seed is None:  # the samples this score reports
+            return _in_morton_order(self.truth_samples[0],
+                                    self.prepared.lattice(self.coverage_points)[1])
+        return self.prepared.queries(self.n_truth_samples, seed, self.coverage_points)
+
     def queries(self) -> np.ndarray:
-        """Truth samples then coverage lattice points, (n_truth_samples + l, 3): completeness
-        and coverage in one nearest-distance query."""
-        truth_points, _ = self.prepared.samples(self.n_truth_samples, _child_seed(self.seed))
-        lattice = self.prepared.lattice(self.coverage_points)[1]
-        return np.concatenate([truth_points, lattice])
+        """Truth samples and coverage lattice points, (n_truth_samples + l, 3), in Morton order
+        (``Truth.queries``): completeness and coverage in one nearest-distance query."""
+        return self._queries[0]
 
     def report(self, accuracy: _Accuracy, acc: dict, nearest: np.ndarray, edge, *,
                test_kind: str, arrays: dict) -> ScoreReport:
-        """The report from the accuracy statistics and the queries' nearest test distances."""
+        """The report from the accuracy statistics and the nearest test distances of the points
+        of ``queries()``, in their order."""
         n_samples = self.n_truth_samples
-        truth_points, truth_faces = self.prepared.samples(n_samples, _child_seed(self.seed))
+        truth_points, truth_faces = self.truth_samples
         levels, _, lattice_faces = self.prepared.lattice(self.coverage_points)
-        completeness, lattice_distance = nearest[:n_samples], nearest[n_samples:]
+        unordered = np.empty_like(nearest)
+        unordered[self._queries[1]] = nearest
+        completeness, lattice_distance = unordered[:n_samples], unordered[n_samples:]
         comp = _summary(completeness)
         precision = accuracy.within / accuracy.n
         recall = float(np.mean(completeness < self.tau))
@@ -586,8 +634,8 @@ class _Accuracy:
         if normals is not None:
             cos = np.einsum("ij,ij->i", normals, self.setup.distance.normals[faces])
             self.cos_sum = (self.cos_sum or 0.0) + float(np.sum(np.abs(cos)))
-        self.low = np.minimum(self.low, points.min(axis=0))
-        self.high = np.maximum(self.high, points.max(axis=0))
+        low, high = bounds(points)
+        self.low, self.high = np.minimum(self.low, low), np.maximum(self.high, high)
         if self.keep:
             self.distances.append(distance)
             self.faces.append(faces)

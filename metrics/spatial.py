@@ -1,27 +1,57 @@
-"""Spatial helpers: Morton ordering and nearest-neighbour distances."""
+"""Spatial helpers: bounds, row-wise vector algebra, Morton ordering and nearest-neighbour
+distances."""
 
 from __future__ import annotations
 
 import numpy as np
 
 
+def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest and highest coordinate per axis of points (n, 3), n >= 1: two (3,) float64.
+
+    Column by column: numpy reduces an (n, 3) array along axis 0 some 20x slower (4.6 ms for
+    200k points here, against 0.2 ms).
+    """
+    lo = np.array([points[:, axis].min() for axis in range(points.shape[1])])
+    hi = np.array([points[:, axis].max() for axis in range(points.shape[1])])
+    return lo, hi
+
+
+def row_norms(x: np.ndarray) -> np.ndarray:
+    """Lengths of the rows of x (k, 3): ``np.linalg.norm(x, axis=1)`` bit for bit, column by
+    column (4x faster: numpy reduces a length-3 axis slowly)."""
+    return np.sqrt(x[:, 0] * x[:, 0] + x[:, 1] * x[:, 1] + x[:, 2] * x[:, 2])
+
+
+def row_cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products of the rows of a and b (k, 3): ``np.cross`` bit for bit, 1.7x faster."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def _spread(bits: int) -> np.ndarray:
+    """Table of the integers below 2**bits with their bits spread 3 apart (bit b to bit 3 b)."""
+    values = np.arange(1 << bits, dtype=np.uint64)
+    out = np.zeros_like(values)
+    for b in range(bits):
+        out |= ((values >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b)
+    return out
+
+
+_SPREAD = _spread(11)  # a 21-bit cell index spread in two look-ups, 11 and 10 bits
+
+
 def morton_order(points: np.ndarray) -> np.ndarray:
     """Permutation putting points (n, 3) in Morton (Z-curve) order on a 2**21 grid per axis.
 
-    Points in the same cell come in any order (numpy's SIMD quicksort: 5x a stable sort).
+    Points in the same cell come in any order (numpy's SIMD quicksort: 5x a stable sort). The
+    codes' bits are interleaved by table look-up (a third of the time of shifts and masks).
     """
-    lo = points.min(axis=0)
-    extent = max(float(np.ptp(points, axis=0).max()), np.finfo(float).tiny)
-    cell = np.minimum((points - lo) / extent * (2**21 - 1), 2**21 - 1).astype(np.uint64)
-    code = np.zeros(len(points), dtype=np.uint64)
-    for axis in range(3):
-        v = cell[:, axis]
-        v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-        v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-        v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-        v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-        v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
-        code |= v << np.uint64(axis)
+    lo, hi = bounds(points)
+    extent = max(float((hi - lo).max()), np.finfo(float).tiny)
+    cell = np.minimum((points - lo) / extent * (2**21 - 1), 2**21 - 1).astype(np.int64)
+    spread = (_SPREAD[cell >> 11] << np.uint64(33)) | _SPREAD[cell & 2047]
+    code = spread[:, 0] | (spread[:, 1] << np.uint64(1)) | (spread[:, 2] << np.uint64(2))
     return np.argsort(code)
 
 
@@ -94,7 +124,9 @@ def cloud_distance(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
     import open3d as o3d  # heavy: imported only when a query runs
 
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(distinct_points(points)))
-    probe = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(queries))
+    # Open3D takes only writeable buffers (it copies them either way).
+    probe = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(
+        queries if queries.flags.writeable else queries.copy()))
     return np.asarray(probe.compute_point_cloud_distance(cloud))
 
 

@@ -41,7 +41,7 @@ def near_points(mesh: Mesh, n: int, seed: int) -> np.ndarray:
 def ring_checked(mesh: Mesh) -> MeshDistance:
     """The exact path for every point: the ring of every candidate is checked."""
     md = MeshDistance(mesh)
-    md._table[:, _EDGE] = md._table[:, _QUICK] = md._corners[:, _CORNER] = np.inf
+    md._sides[:, _EDGE] = md._sides[:, _QUICK] = md._corners[:, _CORNER] = np.inf
     return md
 
 
@@ -134,7 +134,7 @@ def test_bounds_where_the_fan_is_open_or_not_a_manifold():
     # A fin on one edge of a sheet: three faces on one edge.
     vertices = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1.0]])
     fin = MeshDistance(Mesh(vertices, np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])))
-    assert np.isinf(fin._table[:, _EDGE]).any()
+    assert np.isinf(fin._sides[:, _EDGE]).any()
     outside = MeshDistance(box())
-    assert (outside._table[:, _EDGE.start:_EDGE.start + 3] == 0).all()  # in front: no rise
+    assert (outside._sides[0::2, _EDGE] == 0).all()  # in front: no rise
     assert (outside._corners[:, _CORNER.start:_CORNER.start + 3] == 0).all()

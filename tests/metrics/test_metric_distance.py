@@ -207,7 +207,7 @@ def test_error_is_a_recon_error_and_value_error():
 
 def ring_checked_everywhere(md: MeshDistance) -> MeshDistance:
     """The same mesh with every point sent through the exact ring check (no fast path)."""
-    md._table[:, _EDGE] = md._table[:, _QUICK] = md._corners[:, _CORNER] = np.inf
+    md._sides[:, _EDGE] = md._sides[:, _QUICK] = md._corners[:, _CORNER] = np.inf
     return md
 
 
@@ -233,7 +233,7 @@ def test_fast_path_equals_the_ring_checked_path(name):
                     np.arange(3 * len(sphere.faces)).reshape(-1, 3))
     points = probe_points(mesh, 400, seed=11)
     fast = MeshDistance(mesh)
-    assert np.isfinite(fast._table[:, _EDGE]).mean() > 0.5  # the fast path is in use
+    assert np.isfinite(fast._sides[:, _EDGE]).mean() > 0.5  # the fast path is in use
     distance, face, closest = fast.query(points)
     d_ref, f_ref, q_ref = ring_checked_everywhere(MeshDistance(mesh)).query(points)
     np.testing.assert_allclose(distance, d_ref, rtol=1e-9, atol=ATOL_FRACTION * fast.scale)

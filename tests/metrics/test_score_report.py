@@ -287,7 +287,26 @@ def test_a_truth_built_once_gives_the_same_reports_as_a_fresh_one(sphere, kind):
             for name, array in fresh.arrays().items():
                 assert np.array_equal(reused.arrays()[name], array), name
     assert len(truth._samples) == 2 and len(truth._lattices) == 1  # built once, reused
+    assert len(truth._queries) == 2  # the samples and lattice in Morton order, once per seed
     assert not truth.samples(3000, [4, 1])[0].flags.writeable  # shared: read-only
+    assert not truth.queries(3000, [4, 1], SPEED["coverage_points"])[0].flags.writeable
+
+
+@pytest.mark.parametrize("kind", ["cloud", "mesh"])
+def test_unseeded_scores_report_the_truth_samples_they_measured(sphere, kind):
+    """seed=None draws fresh truth samples each call: the completeness distances are those of
+    the truth points the report holds (one draw per score, kept by a Truth or not)."""
+    from metrics import Truth
+
+    test = ((sphere.vertices + np.array([3.0, 0.0, 0.0]), sphere.faces) if kind == "mesh"
+            else np.random.default_rng(3).normal(size=(400, 3)) * 6.0)
+    for truth in (sphere, Truth(sphere)):
+        report = score(test, truth, seed=None, edges=False, n_truth_samples=2000,
+                       coverage_points=2000, n_test_samples=2000)
+        expected = (brute_force_distance(report.truth_points, *test)
+                    if kind == "mesh" else cKDTree(test).query(report.truth_points)[0])
+        np.testing.assert_allclose(report.completeness_distances, expected, rtol=1e-9,
+                                   atol=1e-12)
 
 
 def test_copies_of_points_score_as_the_points(sphere):
