@@ -140,7 +140,7 @@ def test_score_options_sample_coverage_on_twice_the_samples():
 def test_compare_input_walks_its_hdf5_files_before_starting_workers(tmp_path, monkeypatch):
     """A strike log's structure is walked before it is read (formats.hdf5_check): in a forked
     child while recon has one thread, else in a fresh interpreter (0.6 s of CPU). compare walks
-    its files before the worker pool's launcher thread exists, so no interpreter is spawned."""
+    its files before the worker pool's launcher thread starts (the walk is kept)."""
     import recon.surfaces.isolation as isolation
     from formats import hdf5_check
     from recon.experiments.compare import compare_input
@@ -149,20 +149,21 @@ def test_compare_input_walks_its_hdf5_files_before_starting_workers(tmp_path, mo
     log = tmp_path / "log.h5"
     write_sphere_log(log)
     monkeypatch.setattr(hdf5_check, "_VERDICTS", {})  # forget that recon wrote it (trust)
-    walked = []
+    events = []
 
     class Started(Exception):
         pass
 
     def start_workers(*args, **kwargs):
-        walked.append(hdf5_check._key(log) in hdf5_check._VERDICTS)
+        events.append("start workers")
         raise Started
 
-    def spawned(*args, **kwargs):
-        raise AssertionError("a fresh interpreter walked the file")
+    def verdict(path, timeout):
+        events.append(f"walk {path.name}")
+        return ""
 
     monkeypatch.setattr(isolation, "start_workers", start_workers)
-    monkeypatch.setattr(hdf5_check, "_spawned", spawned)
+    monkeypatch.setattr(hdf5_check, "_verdict", verdict)
     with pytest.raises(Started):
         compare_input(log, log, tmp_path / "out", names=["convex-hull"])
-    assert walked == [True]
+    assert events == ["walk log.h5", "start workers"]
