@@ -259,15 +259,14 @@ class Truth:
         """The samples (``samples(n, seed)``) then the lattice points (``lattice``), in Morton
         order (``spatial.morton_order``), kept per ``(n, seed, coverage_points)``: the points
         whose distances to a test give completeness and coverage, in the order a distance query
-        runs fastest (neighbours share BVH nodes and tree leaves).
+        runs fastest (neighbours share BVH nodes and tree leaves). ``seed`` is not None: unseeded
+        samples are fresh each time, so there is nothing to keep (``_Setup`` joins them itself).
 
         Returns
         -------
         points : (n + l, 3) float64, metres, in Morton order
         order : (n + l,) int64, ``points[i]`` is point ``order[i]`` of samples then lattice
         """
-        if seed is None:  # fresh samples: nothing to keep
-            return _in_morton_order(self.samples(n, None)[0], self.lattice(coverage_points)[1])
         key = (n, tuple(np.atleast_1d(seed).tolist()), coverage_points)
         if key not in self._queries:
             self._queries[key] = _frozen(_in_morton_order(self.samples(n, seed)[0],
