@@ -24,6 +24,7 @@ COMMAND_MODULES = (
     "cli.demo",
     "cli.simulate",
     "cli.logs",
+    "cli.recover",
     "cli.ingest",
     "cli.score",
     "cli.edges",

@@ -74,7 +74,8 @@ def _umask() -> int:
     return mask
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether a process with id ``pid`` exists (ours or another user's)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -84,8 +85,20 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def partial_pid(path) -> int | None:
+    """The writer's process id in the name of a temporary file ``.NAME.partial-PID-XXXX``."""
+    match = re.match(r"^\..+\.partial-(\d+)-", Path(path).name)
+    return None if match is None else int(match.group(1))
+
+
+# Suffix of a live writer's temporary file: a dead live writer's file holds committed rows that
+# ``recon recover`` turns into a log, so it is never removed as stale.
+LIVE_SUFFIX = ".live"
+
+
 def remove_stale_partials(path) -> list[Path]:
-    """Delete the temporary files of ``path`` left by writers whose process is gone.
+    """Delete the temporary files of ``path`` left by writers whose process is gone (except a
+    live writer's, ``LIVE_SUFFIX``: recoverable).
 
     Returns the files removed.
     """
@@ -95,7 +108,9 @@ def remove_stale_partials(path) -> list[Path]:
     with contextlib.suppress(OSError):
         for entry in os.scandir(path.parent):
             match = pattern.match(entry.name)
-            if match and int(match.group(1)) != os.getpid() and not _alive(int(match.group(1))):
+            pid = int(match.group(1)) if match else None
+            if (pid is not None and pid != os.getpid() and not process_alive(pid)
+                    and not entry.name.endswith(LIVE_SUFFIX)):
                 with contextlib.suppress(OSError):
                     os.unlink(entry.path)
                     removed.append(Path(entry.path))

@@ -37,8 +37,10 @@ CHECK_TIMEOUT_S = 10.0
 _VERDICTS: dict[tuple, str] = {}   # (dev, inode, size, mtime_ns) -> "" or the problem
 
 
-def _walk(path: str) -> str:
-    """The first structural problem of ``path``, or "" (runs in the child)."""
+def _walk(path: str, live: bool = False) -> str:
+    """The first structural problem of ``path``, or "" (runs in the child); ``live``: the
+    temporary file of a live (SWMR) writer, opened as an SWMR reader (a writer that died left
+    its file marked open for writing, which an ordinary open refuses)."""
     import h5py
 
     size = os.path.getsize(path)
@@ -48,7 +50,7 @@ def _walk(path: str) -> str:
         if offset is None or offset < 0 or offset + nbytes > size:
             problems.append(f"{where} points outside the file")
 
-    with h5py.File(path, "r") as f:
+    with h5py.File(path, "r", **({"swmr": True, "locking": False} if live else {})) as f:
         def link(name, info):
             if isinstance(info, h5py.ExternalLink):
                 problems.append(f"/{name} is an external link to {info.filename}:{info.path} "
@@ -84,16 +86,16 @@ def _walk(path: str) -> str:
     return problems[0] if problems else ""
 
 
-def _report(path: str) -> bytes:
+def _report(path: str, live: bool = False) -> bytes:
     """The walk's verdict as the child sends it: ``b"="`` then the problem (empty when none)."""
     try:
-        return b"=" + _walk(path).encode()
+        return b"=" + _walk(path, live).encode()
     except Exception as exc:  # h5py raises many types on damaged files; all mean "damaged"
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         return b"=" + f"damaged or unreadable HDF5 ({text})".encode()
 
 
-def _forked(path: Path, timeout: float) -> bytes | None:
+def _forked(path: Path, timeout: float, live: bool = False) -> bytes | None:
     """Walk in a forked child; its report, or None when it did not finish in time."""
     import select
 
@@ -102,7 +104,7 @@ def _forked(path: Path, timeout: float) -> bytes | None:
     if pid == 0:   # the child: report and leave without running the parent's clean-up
         try:
             os.close(read)
-            os.write(write, _report(str(path)))
+            os.write(write, _report(str(path), live))
         finally:
             os._exit(0)
     os.close(write)
@@ -124,24 +126,25 @@ def _forked(path: Path, timeout: float) -> bytes | None:
         os.waitpid(pid, 0)
 
 
-def _spawned(path: Path, timeout: float) -> bytes | None:
+def _spawned(path: Path, timeout: float, live: bool = False) -> bytes | None:
     """Walk in a fresh interpreter; its report, or None when it did not finish in time."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     try:
         done = subprocess.run([sys.executable, "-c", "import sys; from formats.hdf5_check "
-                               "import _report; sys.stdout.buffer.write(_report(sys.argv[1]))",
-                               str(path)], capture_output=True, timeout=timeout, env=env)
+                               "import _report; sys.stdout.buffer.write(_report(sys.argv[1], "
+                               "sys.argv[2] == 'live'))", str(path), "live" if live else ""],
+                              capture_output=True, timeout=timeout, env=env)
     except subprocess.TimeoutExpired:
         return None
     return done.stdout
 
 
-def _verdict(path: Path, timeout: float) -> str:
+def _verdict(path: Path, timeout: float, live: bool = False) -> str:
     # fork() copies only the calling thread, and locks other threads hold stay held in the
     # child: with threads running (a Dask worker), a fresh interpreter walks the file instead.
     # (multiprocessing would refuse inside a Dask worker: daemonic processes have no children.)
     single = threading.active_count() == 1 and hasattr(os, "fork")
-    report = (_forked if single else _spawned)(path, timeout)
+    report = (_forked if single else _spawned)(path, timeout, live)
     if report is None:
         return (f"damaged HDF5 structure (reading it did not finish in {timeout:g} s; "
                 "HDF5 loops on this damage)")
@@ -150,9 +153,9 @@ def _verdict(path: Path, timeout: float) -> str:
     return report[1:].decode(errors="replace")
 
 
-def _key(path: Path) -> tuple:
+def _key(path: Path, live: bool = False) -> tuple:
     st = path.stat()
-    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, live)
 
 
 def trust(path) -> None:
@@ -162,7 +165,8 @@ def trust(path) -> None:
     _VERDICTS[_key(Path(path))] = ""
 
 
-def check_hdf5(path, error: type[Exception], *, timeout: float | None = None) -> None:
+def check_hdf5(path, error: type[Exception], *, timeout: float | None = None,
+               live: bool = False) -> None:
     """Raise ``error("PATH: problem")`` unless ``path``'s HDF5 structure is safe to read.
 
     Parameters
@@ -173,10 +177,12 @@ def check_hdf5(path, error: type[Exception], *, timeout: float | None = None) ->
         A ReconError subclass (``StrikeLogError``, ``MeshFormatError``).
     timeout : float, seconds, optional
         Limit of the structural walk (default ``CHECK_TIMEOUT_S``).
+    live : bool
+        ``path`` is a live (SWMR) writer's temporary file: walk it as an SWMR reader.
     """
     path = Path(path)
-    key = _key(path)
+    key = _key(path, live)
     if key not in _VERDICTS:
-        _VERDICTS[key] = _verdict(path, CHECK_TIMEOUT_S if timeout is None else timeout)
+        _VERDICTS[key] = _verdict(path, CHECK_TIMEOUT_S if timeout is None else timeout, live)
     if _VERDICTS[key]:
         raise error(f"{path}: {_VERDICTS[key]}")

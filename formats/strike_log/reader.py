@@ -11,6 +11,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from formats.atomic import partial_pid, process_alive
 from formats.errors import StrikeLogError
 from formats.geometry import Mesh
 from formats.hdf5_check import check_hdf5
@@ -562,6 +563,14 @@ def follow(path, *, chunk_rows: int = READ_CHUNK_ROWS, poll_s: float = 0.5,
                 deadline = time.monotonic() + timeout_s
             if log.closing or not temporary.exists():
                 break
+            pid = partial_pid(temporary)
+            if pid is not None and not process_alive(pid):
+                log.refresh()
+                if not log.closing and temporary.exists() and log.n_strikes == done:
+                    raise StrikeLogError(
+                        f"{path}: the writer (process {pid}) died after {log.n_shots} shots and "
+                        f"{done} strikes; `recon recover {path} -o LOG.h5` makes a log of them")
+                continue
             if time.monotonic() > deadline:
                 raise StrikeLogError(f"{path}: nothing new for {timeout_s:g} s (is the writer "
                                      "still running?)")

@@ -11,7 +11,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from formats.atomic import AtomicWriter
+from formats.atomic import LIVE_SUFFIX, AtomicWriter
 from formats.errors import StrikeLogError
 from formats.hdf5_check import trust
 from formats.strike_log.schema import (
@@ -111,7 +111,7 @@ class StrikeLogWriter(AtomicWriter):
         if compression not in COMPRESSIONS:
             raise StrikeLogError(f"{where}: compression must be one of "
                                  f"{', '.join(COMPRESSIONS)}, got {compression!r}")
-        super().__init__(path)
+        super().__init__(path, suffix=LIVE_SUFFIX if live else "")
         self.sensor = sensor
         self.has_truth = truth_mesh is not None
         self._n_shots = self._n_strikes = 0
