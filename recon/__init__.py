@@ -7,7 +7,7 @@ API in one screen; its verbs are also importable from here (``from recon import 
 on first use so that importing a subpackage stays light.
 """
 
-_API = ("simulate", "ingest", "reconstruct", "score", "compare")
+_API = ("simulate", "ingest", "reconstruct", "score", "compare", "edges")
 __all__ = list(_API)
 
 
@@ -17,3 +17,7 @@ def __getattr__(name: str):
 
         return getattr(api, name)
     raise AttributeError(f"module 'recon' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_API})

@@ -1,5 +1,5 @@
 """Command-line habits: one list syntax (commas; spaces and repeats accepted) that never swallows
-the positional argument, required options shown as required, and ``python -m cli``."""
+the positional argument, required options shown as required, and ``python -m recon``."""
 
 from __future__ import annotations
 
@@ -84,11 +84,21 @@ def test_list_syntax_reads_as_one_item_in_usage():
     assert "[--methods METHOD[,...]]" in usage
 
 
-def test_python_dash_m_cli_runs_recon():
-    result = subprocess.run([sys.executable, "-m", "cli", "--version"], capture_output=True,
+@pytest.mark.parametrize("package", ["recon", "cli"])
+def test_python_dash_m_runs_recon(package):
+    result = subprocess.run([sys.executable, "-m", package, "--version"], capture_output=True,
                             text=True, timeout=60, check=False)
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("recon ")
+
+
+def test_the_package_lists_its_verbs():
+    import recon
+    from recon import api
+
+    listed = set(dir(recon))
+    assert {"simulate", "ingest", "reconstruct", "score", "compare", "edges"} <= listed
+    assert recon.score is api.score
 
 
 def test_a_reader_that_goes_away_ends_recon_quietly():
