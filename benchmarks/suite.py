@@ -332,9 +332,13 @@ def hook(specs: tuple[str, ...]):
     for spec in specs:
         module, _, name = spec.partition(":")
         try:
-            return getattr(importlib.import_module(module), name), spec
-        except (ImportError, AttributeError):
-            continue
+            found = importlib.import_module(module)
+        except ModuleNotFoundError as exc:   # that module (or its package) is absent
+            if exc.name is not None and (module + ".").startswith(exc.name + "."):
+                continue
+            raise                            # it exists but imports something missing
+        if hasattr(found, name):
+            return getattr(found, name), spec
     return None, None
 
 
