@@ -19,7 +19,12 @@ from typing import Any
 GRAVITATIONAL_CONSTANT = 6.67430e-11
 
 
-TARGET_KINDS = ("ellipsoid", "rso-a", "rso-b", "mesh")
+# "satellite", "polyhedron" and "cratered-asteroid" are generated from target.seed
+# (sim/procedural.py).
+TARGET_KINDS = ("ellipsoid", "rso-a", "rso-b", "mesh", "satellite", "polyhedron",
+                "cratered-asteroid")
+GENERATED_KINDS = ("satellite", "polyhedron", "cratered-asteroid")
+SIZED_KINDS = ("polyhedron", "cratered-asteroid")
 PATTERNS = ("single", "cross", "zigzag", "grid")
 # "fixed": nadir, or the sinusoidal slew of [slew]; "gaps": the closed-loop law of
 # sim/gap_seeking.py, aiming the boresight at what the chaser has not yet struck.
@@ -87,9 +92,10 @@ DIRECTION = {"nonzero": True}
 # fmt: off
 SCHEMA: dict[str, dict[str, Key]] = {
     "target": {
-        # "ellipsoid" (the paper's asteroid), "rso-a", "rso-b" or "mesh" (a user file).
-        "kind": Key("ellipsoid", "str", "", "ellipsoid, rso-a, rso-b or mesh",
-                    choices=TARGET_KINDS),
+        # "ellipsoid" (the paper's asteroid), "rso-a", "rso-b", "mesh" (a user file), or a
+        # generated "satellite", "polyhedron" or "cratered-asteroid".
+        "kind": Key("ellipsoid", "str", "", "ellipsoid, rso-a, rso-b, mesh, satellite, "
+                    "polyhedron or cratered-asteroid", choices=TARGET_KINDS),
         # Paper, "Model: Tri-Axial Ellipsoid": 143.75, 86.25 and 287.50 m along x, y and z.
         "semi_axes": Key([143.75, 86.25, 287.5], "vec3", "m", "ellipsoid semi-axes along x, y, z",
                          **POSITIVE),
@@ -104,6 +110,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "scale": Key(1.0, "number", "m per file unit", "mesh coordinates times scale = metres",
                      **POSITIVE),
         "center": Key(False, "bool", "", "move the mesh's volume centroid to the origin"),
+        # Generated targets: every dimension drawn from this seed (same seed, same mesh).
+        "seed": Key(0, "int", "", "shape seed of a generated target", minimum=0),
+        # Absent: 5.7 m for a polyhedron, 500 m for a cratered asteroid (sim/procedural.py).
+        "size": Key(None, "number", "m", "longest extent of a generated polyhedron or "
+                    "cratered asteroid", **POSITIVE),
         # Paper: "a period of rotation of 15480 seconds, or 4.3 hours"; inf: not spinning.
         "spin_period": Key(15480.0, "number", "s", "spin period (inf: no spin)", **POSITIVE,
                            finite=False),
@@ -278,6 +289,8 @@ ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     ("target", "path"): ("target", "kind", ("mesh",)),
     ("target", "scale"): ("target", "kind", ("mesh",)),
     ("target", "center"): ("target", "kind", ("mesh",)),
+    ("target", "seed"): ("target", "kind", GENERATED_KINDS),
+    ("target", "size"): ("target", "kind", SIZED_KINDS),
     ("sensor", "field_of_view_deg"): ("sensor", "pattern", ("cross", "zigzag", "grid")),
     ("attitude", "max_rate_deg_s"): ("attitude", "mode", ("gaps",)),
     ("attitude", "max_offset_deg"): ("attitude", "mode", ("gaps",)),

@@ -17,7 +17,7 @@ import numpy as np
 
 from formats.errors import MeshFormatError
 from formats.strike_log import SensorErrors, estimate_log_bytes
-from sim import targets
+from sim import procedural, targets
 from sim.defaults import (
     BYTES_PER_FACE,
     BYTES_PER_RAY,
@@ -156,6 +156,14 @@ def target_mesh(target: dict) -> tuple[np.ndarray, np.ndarray, str]:
         return (*targets.rso_a(), "rso-a")
     if kind == "rso-b":
         return (*targets.rso_b(), "rso-b")
+    if kind == "satellite":
+        return (*procedural.satellite(target["seed"]), f"satellite:seed={target['seed']}")
+    if kind in ("polyhedron", "cratered-asteroid"):
+        build = procedural.polyhedron if kind == "polyhedron" else procedural.cratered_asteroid
+        size = target.get("size")
+        vertices, faces = build(target["seed"]) if size is None else build(target["seed"], size)
+        return vertices, faces, f"{kind}:seed={target['seed']}" + (
+            "" if size is None else f",size={size:g}")
     try:
         vertices, faces = targets.load_mesh(target["path"], target["scale"],
                                             center=target["center"])

@@ -8,9 +8,12 @@ alternative keys (``time.rotations`` / ``time.duration``; ``orbit.density`` / ``
 Schema (units: m, s, kg; angles in degrees as the ``_deg`` suffix says; see sim/defaults.py for
 every default and where it comes from)::
 
-    [target]  kind = "ellipsoid" | "rso-a" | "rso-b" | "mesh"
+    [target]  kind = "ellipsoid" | "rso-a" | "rso-b" | "mesh" | "satellite" | "polyhedron"
+                     | "cratered-asteroid"
               semi_axes, subdivisions          (ellipsoid)
               path, scale, center              (mesh)
+              seed                             (satellite, polyhedron, cratered-asteroid)
+              size                             (polyhedron, cratered-asteroid)
               spin_period, spin_axis (B), attitude (B->I quaternion x, y, z, w at t = 0)
     [orbit]   radius, inclination_deg, node_deg, phase_deg,
               density | mu | period, change_time, change_inclination_deg
@@ -102,7 +105,8 @@ class Scene(Derived):
         Truth mesh of the target.
     faces : (m, 3) int64
     target : str
-        Short target name for the log (``asteroid``, ``rso-a``, ``rso-b``, ``mesh:<file>``).
+        Short target name for the log (``asteroid``, ``rso-a``, ``rso-b``, ``mesh:<file>``,
+        ``satellite:seed=<n>``, ``polyhedron:seed=<n>[,size=<m>]``, ...).
     mu : float
         Gravitational parameter used for the orbit [m^3/s^2].
     orbit_period : float

@@ -711,20 +711,22 @@ def _outline():
 
 
 def choice_vs_ranking(summaries: Sequence[Mapping], path, *, title: str) -> Path:
-    """Per cloud, every run's truth score relative to the best (dots), the median run (bar)
-    and ``-m auto``'s choice (red star): F-score ratio (higher is better) and Chamfer ratio
-    (log, lower is better).
+    """Per cloud, every run's truth score relative to the best (dots), the median run (bar),
+    ``-m auto``'s choice (red star) and the visibility method's best run (blue diamond, where
+    it ran): F-score ratio (higher is better) and Chamfer ratio (log, lower is better).
 
     Parameters
     ----------
     summaries : sequence of dict
-        ``cloud``, ``ranking`` (runs with ``chamfer_m`` and ``fscore``) and ``verdict``
-        (``f_ratio``, ``chamfer_ratio``, unless ``failed``), as ``benchmarks/suite.py`` makes.
+        ``cloud``, ``ranking`` (runs with ``chamfer_m`` and ``fscore``), ``verdict``
+        (``f_ratio``, ``chamfer_ratio``, unless ``failed``) and optionally ``visibility``
+        (``present``, ``f_ratio``, ``chamfer_ratio``), as ``benchmarks/suite.py`` makes.
     """
     plt = _pyplot()
     fig, axes = plt.subplots(2, 1, figsize=(max(8.0, 0.75 * len(summaries) + 3), 8.5),
                              sharex=True, constrained_layout=True)
     x = np.arange(len(summaries))
+    marked = {"f_ratio": False, "chamfer_ratio": False}
     for ax, key, ratio, lower in ((axes[0], FSCORE, "f_ratio", False),
                                   (axes[1], CHAMFER, "chamfer_ratio", True)):
         for i, s in enumerate(summaries):
@@ -742,6 +744,13 @@ def choice_vs_ranking(summaries: Sequence[Mapping], path, *, title: str) -> Path
                 ax.scatter([i], [v[ratio]], marker="*", s=180, color="crimson",
                            edgecolors="black", linewidths=0.6, zorder=4,
                            label="auto's choice" if i == 0 else None)
+            seen = s.get("visibility") or {}
+            if seen.get("present"):
+                ax.scatter([i + 0.18], [seen[ratio]], marker="D", s=40, color="tab:blue",
+                           edgecolors="black", linewidths=0.5, zorder=4,
+                           label="visibility method (its best run)" if not marked[ratio]
+                           else None)
+                marked[ratio] = True
         band = 0.95 if not lower else 1.10
         ax.axhline(band, color="crimson", ls=":", lw=1.2,
                    label="target: within 5% of the best F" if not lower else
@@ -757,6 +766,57 @@ def choice_vs_ranking(summaries: Sequence[Mapping], path, *, title: str) -> Path
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8, loc="lower left" if not lower else "upper left")
     axes[1].set_xticks(x, [s["cloud"] for s in summaries], rotation=35, ha="right", fontsize=8)
+    _title(fig, title)
+    return _save(fig, path)
+
+
+def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path:
+    """Truth-free predicted Chamfer distance against the true one, every run of every cloud
+    (log-log, the line of equality dashed); auto's choices drawn with their predicted band.
+
+    Parameters
+    ----------
+    summaries : sequence of dict
+        ``cloud``, ``held_out``, ``predicted`` (``runs``: ``truth_m``, ``predicted_m``) and
+        ``auto`` (``chamfer_m``, ``predicted``: ``chamfer_m``, ``lo_m``, ``hi_m``), as
+        ``benchmarks/suite.py`` makes.
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(8.0, 7.0), constrained_layout=True)
+    colours = plt.get_cmap("tab20")
+    values = []
+    for i, s in enumerate(summaries):
+        runs = s["predicted"]["runs"]
+        if not runs:
+            continue
+        truth = np.array([r["truth_m"] for r in runs])
+        pred = np.array([r["predicted_m"] for r in runs])
+        values += [truth, pred]
+        ax.scatter(truth, pred, s=12, color=colours(i % 20), alpha=0.6,
+                   marker="^" if s.get("held_out") else "o",
+                   label=s["cloud"] + (" (held out)" if s.get("held_out") else ""))
+        a = s["auto"]
+        if a.get("predicted") and a.get("chamfer_m") is not None:
+            p = a["predicted"]
+            ax.errorbar([a["chamfer_m"]], [p["chamfer_m"]],
+                        yerr=[[p["chamfer_m"] - p["lo_m"]], [p["hi_m"] - p["chamfer_m"]]],
+                        fmt="*", ms=13, color=colours(i % 20), mec="black", mew=0.6,
+                        ecolor="black", elinewidth=0.8, capsize=3, zorder=4)
+    if values:
+        both = np.concatenate(values)
+        both = both[both > 0]
+        lo, hi = both.min() / 1.5, both.max() * 1.5
+        ax.plot([lo, hi], [lo, hi], ls="--", color="0.3", lw=1, label="predicted = true")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(lo, hi)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("true Chamfer distance [m]")
+    ax.set_ylabel("predicted Chamfer distance, without the truth [m]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2, loc="upper left")
+    ax.set_title("every run (dots; triangles: held-out clouds), auto's choice (star, its "
+                 "predicted band)", fontsize=9)
     _title(fig, title)
     return _save(fig, path)
 

@@ -5,19 +5,163 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from benchmarks import suite
 
 
+def _overrides(cloud) -> dict:
+    return dict(o.split("=", 1) for o in cloud.overrides)
+
+
 def test_suite_defines_the_clouds_the_issue_asks_for():
     clouds = suite.CLOUDS.values()
-    assert len(suite.CLOUDS) >= 12
+    assert len(suite.CLOUDS) >= 18
     assert {"asteroid", "RSO-A", "RSO-B"} <= {c.target for c in clouds}
     assert {"LRF + 2 deg slew", "cross", "LIDAR"} <= {c.sensor for c in clouds}
+    # Noisy single-beam, cross and LIDAR all appear.
+    assert {"LRF + 2 deg slew", "cross", "LIDAR"} <= {c.sensor for c in clouds
+                                                      if c.errors == "paper"}
     assert len({c.mesh for c in clouds if c.mesh}) >= 4
     assert {c.errors for c in clouds} == {"none", "paper"}
     assert {c.density for c in clouds} == {"dense", "sparse"}
+    generated = {name: _overrides(c) for name, c in suite.CLOUDS.items()
+                 if "target.seed" in _overrides(c)}
+    kinds = [o["target.kind"] for o in generated.values()]
+    satellites = {o["target.seed"] for o in generated.values() if o["target.kind"] == "satellite"}
+    assert len(satellites) >= 3 and kinds.count("cratered-asteroid") >= 1
+    # One polyhedron at two scales: the same seed, sizes 3.5 times apart.
+    polyhedra = [o for o in generated.values() if o["target.kind"] == "polyhedron"]
+    assert len(polyhedra) == 2 and polyhedra[0]["target.seed"] == polyhedra[1]["target.seed"]
+    sizes = sorted(float(o["target.size"]) for o in polyhedra)
+    assert sizes[1] == pytest.approx(3.5 * sizes[0])
+    # At least six held-out clouds, listed, and the generated ones among them.
+    assert len(suite.HELD_OUT) >= 6 and set(generated) <= set(suite.HELD_OUT)
+    assert all(suite.CLOUDS[n].held_out for n in suite.HELD_OUT)
+
+
+def test_every_generated_scene_loads():
+    import sim
+
+    for name in suite.HELD_OUT:
+        cloud = suite.CLOUDS[name]
+        scene = sim.load_scene(cloud.preset, list(cloud.overrides))
+        assert scene.target.split(":")[0] in ("satellite", "polyhedron", "cratered-asteroid")
+
+
+class _Estimate:
+    chamfer_m = 0.2
+    chamfer_band_m = (0.3, 0.1)
+
+
+@pytest.mark.parametrize(("result", "expected"), [
+    ({"predicted_chamfer_m": 0.1, "predicted_band_m": [0.15, 0.05]},
+     {"chamfer_m": 0.1, "lo_m": 0.05, "hi_m": 0.15}),
+    ({"estimate": {"chamfer_m": 0.4, "chamfer_lo_m": 0.3, "chamfer_hi_m": 0.5}},
+     {"chamfer_m": 0.4, "lo_m": 0.3, "hi_m": 0.5}),
+    (_Estimate(), {"chamfer_m": 0.2, "lo_m": 0.1, "hi_m": 0.3}),
+    ({"chamfer_m": 0.7}, {"chamfer_m": 0.7, "lo_m": 0.7, "hi_m": 0.7}),
+    ({"chamfer_m": float("nan")}, None),
+    ({"fscore": 0.9}, None),
+    (None, None),
+])
+def test_prediction_reads_what_an_estimate_returns(result, expected):
+    assert suite.prediction(result) == expected
+
+
+def _summary(name, pairs, choice, *, held_out=False):
+    """A cloud's summary as far as prediction_totals reads it: (true, predicted) per run and
+    auto's choice (true, predicted, lo, hi)."""
+    truth, predicted, lo, hi = choice
+    return {"cloud": name, "held_out": held_out,
+            "predicted": {"runs": [{"truth_m": t, "predicted_m": p, "lo_m": p, "hi_m": p}
+                                   for t, p in pairs]},
+            "auto": {"chamfer_m": truth,
+                     "predicted": {"chamfer_m": predicted, "lo_m": lo, "hi_m": hi}}}
+
+
+def test_prediction_totals_rank_correlation_and_band():
+    rising = [(0.1, 1.0), (0.2, 2.0), (0.4, 3.0), (0.8, 4.0)]
+    summaries = [_summary("a", rising, (0.1, 0.12, 0.08, 0.15)),
+                 _summary("b", [(t * 3, p * 3) for t, p in rising], (0.3, 0.5, 0.4, 0.6))]
+    out = suite.prediction_totals(summaries)
+    assert out["n_runs"] == 8 and out["spearman_within_cloud_median"] == pytest.approx(1.0)
+    # Over all runs the ranks still agree but for b's first runs ranked under a's last.
+    assert 0.8 < out["spearman"] < 1.0
+    assert out["n_choices"] == 2 and out["band_holds_truth"] == pytest.approx(0.5)
+    reversed_ = suite.prediction_totals([_summary("c", [(t, -p) for t, p in rising],
+                                                  (0.1, 0.1, 0.1, 0.1))])
+    assert reversed_["spearman"] == pytest.approx(-1.0) and reversed_["band_holds_truth"] == 1
+    # Constant predictions say nothing: NaN, not a warning or a number.
+    flat = suite.prediction_totals([_summary("d", [(t, 1.0) for t, _ in rising],
+                                             (0.1, 0.1, 0.1, 0.1))])
+    assert np.isnan(flat["spearman"])
+
+
+def _record(label, method, chamfer, fscore, wall):
+    return {"key": label, "label": label, "method": method, "status": "ok",
+            "chamfer_m": chamfer, "fscore": fscore, "wall_time_s": wall}
+
+
+def test_visibility_on_the_front_or_not_and_against_the_best():
+    records = [_record("plane", "plane", 0.10, 0.90, 1.0),
+               _record("poisson", "poisson", 0.05, 0.95, 10.0),
+               _record("visibility", "visibility", 0.08, 0.97, 5.0)]
+    report = {"records": records,
+              "pareto_chamfer": [{"label": "plane"}, {"label": "visibility"},
+                                 {"label": "poisson"}],
+              "pareto_fscore": [{"label": "plane"}, {"label": "visibility"}]}
+    v = suite.visibility(report)
+    assert v["present"] and v["on_front_chamfer"] and v["on_front_f"]
+    assert v["chamfer_ratio"] == pytest.approx(1.6) and v["f_ratio"] == pytest.approx(1.0)
+    assert v["rank_chamfer"] == 2 and v["best_chamfer_label"] == "poisson"
+    report["pareto_chamfer"] = [{"label": "plane"}, {"label": "poisson"}]
+    report["pareto_fscore"] = [{"label": "plane"}]
+    v = suite.visibility(report)
+    assert not v["on_front_chamfer"] and not v["on_front_f"]
+    absent = suite.visibility({"records": records[:2], "pareto_chamfer": [],
+                               "pareto_fscore": []})
+    assert not absent["present"] and "not a registered method" in absent["note"]
+
+
+def fake_estimate(mesh, cloud):
+    """A stand-in estimate for the hook: the mesh's largest extent over 100, and a band of
+    +-10 %."""
+    size = float(np.ptp(mesh.vertices, axis=0).max()) / 100.0
+    return {"chamfer_m": size, "chamfer_band_m": (0.9 * size, 1.1 * size)}
+
+
+def test_predict_runs_uses_the_estimate_hook_on_kept_meshes(tmp_path, monkeypatch):
+    from formats.mesh_io import write_mesh
+    from sim import targets
+
+    (tmp_path / "meshes").mkdir()
+    records = []
+    for i, edge in enumerate((1.0, 2.0, 4.0)):
+        path = tmp_path / "meshes" / f"run{i}.ply"
+        write_mesh(path, *targets.box([0, 0, 0], [edge, edge, edge]))
+        records.append({"key": f"k{i}", "status": "ok", "chamfer_m": edge / 10,
+                        "mesh": f"meshes/run{i}.ply"})
+    records.append({"key": "failed", "status": "failed"})
+    records.append({"key": "given", "status": "ok", "chamfer_m": 1.0,
+                    "predicted_chamfer_m": 0.5, "predicted_band_m": [0.4, 0.6]})
+    monkeypatch.setattr(suite, "ESTIMATORS", ("no.such.module:estimate",
+                                              f"{__name__}:fake_estimate"))
+    out = suite.predict_runs(records, None, tmp_path)
+    assert out["estimator"] == f"{__name__}:fake_estimate" and out["note"] == ""
+    assert out["runs"]["k2"] == pytest.approx({"chamfer_m": 0.04, "lo_m": 0.036,
+                                               "hi_m": 0.044})
+    assert out["runs"]["given"] == {"chamfer_m": 0.5, "lo_m": 0.4, "hi_m": 0.6}
+    assert "failed" not in out["runs"]
+    # Cached beside the compare: the same estimator is not asked again.
+    for r in records[:3]:
+        (tmp_path / r["mesh"]).unlink()
+    assert suite.predict_runs(records, None, tmp_path)["runs"] == out["runs"]
+    monkeypatch.setattr(suite, "ESTIMATORS", ("no.such.module:estimate",))
+    missing = suite.predict_runs(records, None, tmp_path)
+    assert missing["estimator"] is None and "no estimate function found" in missing["note"]
+    assert missing["runs"]["given"] is not None and missing["runs"]["k0"] is None
 
 
 def test_quick_suite_on_one_cloud(tmp_path):
@@ -42,3 +186,8 @@ def test_quick_suite_on_one_cloud(tmp_path):
     text = doc.read_text()
     assert "asteroid-cross-noisy" in text and "| cloud | points | auto's choice" in text
     assert (doc.parent / "figures" / "auto-suite.png").stat().st_size > 10_000
+    # The estimate and visibility columns are there when their hooks are, else said missing.
+    estimate, _ = suite.hook(suite.ESTIMATORS)
+    assert (cloud["predicted"]["note"] == "") == (estimate is not None)
+    assert cloud["visibility"]["present"] is False    # not among the methods asked for
+    assert "## The `visibility` method" in text and "Held out" in text
