@@ -43,17 +43,31 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(default: %(default)g)")
     p.set_defaults(func=run_ingest)
 
-    p = sub.add_parser("trajectory", help="export the recorded sensor trajectory as text",
+    p = sub.add_parser("trajectory",
+                       help="export the recorded sensor trajectory as text or SPICE kernels",
                        description="Write one line per shot: time [s], sensor position [m] and "
                                    "attitude (roll, pitch, yaw [rad] and the quaternion x y z w) "
                                    "in the body frame (as the ingested cloud) or the inertial "
                                    "frame, like the trajectory HELIOS++ writes beside its "
-                                   "clouds.")
+                                   "clouds. Or write the poses as SPICE kernels: an SPK (.bsp) "
+                                   "of RECON_SENSOR relative to RECON_TARGET in J2000, or a CK "
+                                   "(.bc) of the frames RECON_SENSOR_FRAME and "
+                                   "RECON_TARGET_FIXED, with the frames kernel (.tf) and, for "
+                                   "a CK, the clock kernel (.tsc) beside it.")
     p.add_argument("log", help="strike log (.h5)")
     p.add_argument("-o", "--output", required=True, type=Path, metavar="TRAJ.txt",
-                   help="trajectory to write: .txt (space-separated) or .csv")
-    p.add_argument("--frame", choices=("body", "inertial"), default="body",
-                   help="frame of positions and attitudes (default: %(default)s)")
+                   help="trajectory to write: .txt (space-separated), .csv, .bsp (SPK) or .bc "
+                        "(CK)")
+    p.add_argument("--frame", choices=("body", "inertial"),
+                   help="text: frame of positions and attitudes (default: body); kernels hold "
+                        "both frames")
+    epoch = p.add_mutually_exclusive_group()
+    epoch.add_argument("--epoch-utc", metavar="UTC",
+                       help="kernels: UTC of the log's time 0, e.g. 2019-02-13T01:00:00 "
+                            "(default: the log's own epoch when its scene was SPICE-driven, "
+                            "else the J2000 epoch)")
+    epoch.add_argument("--epoch-et", type=float, metavar="ET",
+                       help="kernels: the same as TDB seconds past J2000")
     p.set_defaults(func=run_trajectory)
 
     p = sub.add_parser("truth", help="export the truth mesh embedded in a strike log",
@@ -122,10 +136,26 @@ def run_ingest(args) -> int:
 
 
 def run_trajectory(args) -> int:
-    from recon.registration.trajectory import export_trajectory
+    from recon.registration.trajectory import KERNEL_SUFFIXES, export_kernel, export_trajectory
 
-    summary = export_trajectory(args.log, args.output, frame=args.frame)
-    print(f"wrote {summary['n_shots']} poses ({args.frame} frame) to {args.output}")
+    if args.output.suffix.lower() in KERNEL_SUFFIXES:
+        if args.frame is not None:
+            raise IngestOptionError("--frame is for text trajectories: an SPK is in J2000 (the "
+                                    "log's inertial frame) and a CK holds the body frame too")
+        epoch = args.epoch_et
+        if args.epoch_utc is not None:
+            from formats.spice import utc_to_et
+
+            epoch = utc_to_et(args.epoch_utc, "--epoch-utc")
+        summary = export_kernel(args.log, args.output, epoch_et=epoch)
+        print(f"wrote {summary['n_shots']} poses from ET {summary['epoch_et']:.6f} to "
+              + ", ".join(summary["written"]))
+        return 0
+    if args.epoch_utc is not None or args.epoch_et is not None:
+        raise IngestOptionError("--epoch-utc and --epoch-et are for kernels (.bsp, .bc)")
+    frame = args.frame or "body"
+    summary = export_trajectory(args.log, args.output, frame=frame)
+    print(f"wrote {summary['n_shots']} poses ({frame} frame) to {args.output}")
     return 0
 
 
