@@ -337,6 +337,16 @@ def positions(observer: str, target: str, frame: str, et: np.ndarray) -> np.ndar
     return np.asarray(km, dtype=np.float64).reshape(-1, 3) * KM
 
 
+def states(observer: str, target: str, frame: str, et: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Position (n, 3) [m] and velocity (n, 3) [m/s] of ``observer`` relative to ``target`` in
+    ``frame`` at each ET (geometric, one ``spkezr`` call each)."""
+    with calls(f"state of {observer} from {target} in {frame}") as sp:
+        km, _ = sp.spkezr(observer, np.asarray(et, dtype=np.float64), frame, "NONE", target)
+    km = np.asarray(km, dtype=np.float64).reshape(-1, 6) * KM
+    return km[:, :3], km[:, 3:]
+
+
 def rotations(source: str, destination: str, et: np.ndarray) -> np.ndarray:
     """Matrices (n, 3, 3) that send ``source``-frame vectors to ``destination`` at each ET."""
     with calls(f"rotation from {source} to {destination}") as sp:

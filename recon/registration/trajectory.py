@@ -102,8 +102,8 @@ def export_trajectory(log, output, *, frame: str = "body", chunk_rows: int = REA
     """
     output = Path(output)
     if output.suffix.lower() not in SUFFIXES:
-        raise TrajectoryError(f"{output}: a trajectory is written as "
-                              f"{', '.join(SUFFIXES + KERNEL_SUFFIXES)}")
+        raise TrajectoryError(f"{output}: a trajectory is written as .txt or .csv (text), "
+                              ".bsp (SPK) or .bc (CK)")
     if frame not in FRAMES:
         raise TrajectoryError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
     csv = output.suffix.lower() == ".csv"
