@@ -74,6 +74,7 @@ LAS_SCAN_ANGLE_STEP_DEG = 0.006
 # Units and a description (LAS extra-bytes descriptions hold 32 characters) of known attributes.
 ATTRIBUTE_INFO = {
     "time": ("s", "shot time since start [s]"),
+    "et": ("s", "ET, TDB s past J2000"),
     "shot": ("1", "shot index in the source log"),
     "beam": ("1", "beam index in the source log"),
     "range": ("m", "measured range [m]"),
