@@ -31,6 +31,7 @@ from tqdm import tqdm
 
 from formats.atomic import check_space
 from formats.paths import check_destination
+from formats.spice import SpiceError
 from formats.strike_log import (
     SensorErrors,
     SensorInfo,
@@ -117,9 +118,12 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
                                   target=orbit["target"], inertial_frame=orbit["inertial_frame"],
                                   target_frame=orbit["target_frame"],
                                   sensor_frame=orbit.get("sensor_frame"),
-                                  epoch_et=scene.epoch_et).open()
+                                  epoch_et=scene.epoch_et)
         try:
-            check_spice_geometry(the_orbit, scene)
+            check_spice_geometry(the_orbit.open(), scene)
+        except SpiceError as exc:
+            the_orbit.close()
+            raise SceneError(f"[orbit] kind = spice: {exc}") from None
         except BaseException:
             the_orbit.close()
             raise
