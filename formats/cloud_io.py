@@ -7,6 +7,7 @@ Attribute names recon uses (any others are kept as they are):
 name                   dtype      meaning
 =====================  =========  ==============================================================
 ``time``               float64    shot time [s] since the start of the campaign
+``et``                 float64    shot time as SPICE ET [s, TDB past J2000] (altimetry products)
 ``shot``, ``beam``     uint32     shot and beam index in the source strike log
 ``range``              float64    measured range [m]
 ``azimuth``,           float64    measured beam direction in the sensor frame S [rad]

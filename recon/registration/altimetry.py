@@ -107,6 +107,8 @@ def export_altimetry(log, output, *, product: str | None = None,
                      epoch_et: float | None = None) -> dict:
     """Write a strike log's strikes as an altimetry product (see the module docstring).
 
+    The log is registered in memory (its cloud, and for OLA one 186-byte row per pulse).
+
     Parameters
     ----------
     log : str or Path

@@ -63,11 +63,35 @@ def test_spk_and_ck_return_the_recorded_poses_at_every_shot(noisy_log, tmp_path,
             ticks = spiceypy.sce2c(spice.CLOCK_ID, et[row])
             cmat, _ = spiceypy.ckgp(spice.SENSOR_CK_ID, ticks, 0, "J2000")
             assert _angle(cmat.T[None], shots.sensor_attitude[row:row + 1])[0] < MICRORADIAN
+        # the CK's angular rates: the target spins about its z axis at the recorded period
+        # (the true 15,480 s plus the 5 s knowledge error)
+        middle = et[len(et) // 2]
+        state = spiceypy.sxform("RECON_TARGET_FIXED", "J2000", middle)
+        rotation, derivative = state[:3, :3], state[3:, :3]
+        skew = derivative @ rotation.T
+        omega = np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
+        np.testing.assert_allclose(omega, rotation[:, 2] * 2 * np.pi / 15485.0, rtol=1e-3,
+                                   atol=1e-9)
         # between shots the SPK interpolates: a point halfway lies between its neighbours
         half = 0.5 * (et[:-1] + et[1:])
         between = spice.positions("RECON_SENSOR", "RECON_TARGET", "J2000", half)
         chord = 0.5 * (shots.sensor_position[:-1] + shots.sensor_position[1:])
         assert np.abs(between - chord).max() < 5.0
+
+
+def test_a_log_epoch_must_be_finite(noisy_log, tmp_path):
+    import shutil
+
+    import h5py
+
+    from formats.errors import StrikeLogError
+
+    bad = tmp_path / "bad.h5"
+    shutil.copyfile(noisy_log, bad)
+    with h5py.File(bad, "r+") as f:
+        f.attrs["epoch_et"] = np.float64(np.inf)
+    with pytest.raises(StrikeLogError, match="'epoch_et' must be finite"):
+        StrikeLog(bad)
 
 
 def test_log_epoch_is_the_default_and_kernels_match_the_text_trajectory(noisy_log, tmp_path):
