@@ -117,21 +117,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                         **DIRECTION),
     },
     "orbit": {
-        "kind": Key("kepler", "str", "", "kepler (the keys below) or spice (kernels)",
+        "kind": Key("kepler", "str", "", "kepler (radius .. change_inclination_deg) or spice "
+                    "(kernels .. start_et)",
                     choices=ORBIT_KINDS),
-        # kind = "spice": where the chaser is and where everything points come from kernels;
-        # shots at time t are at ET = start + t (TDB seconds past J2000).
-        "kernels": Key(None, "paths", "", "spice: kernel files (SPK, CK, FK, SCLK, PCK, "
-                       "meta-kernel), relative to the scene file"),
-        "observer": Key(None, "str", "", "spice: NAIF name or ID of the sensor"),
-        "target": Key(None, "str", "", "spice: NAIF name or ID of the target centre"),
-        # The log's inertial frame I (formats/SPEC.md); J2000 as recon's own kernels write it.
-        "inertial_frame": Key("J2000", "str", "", "spice: inertial frame of the log"),
-        "target_frame": Key(None, "str", "", "spice: target body-fixed frame (B)"),
-        "sensor_frame": Key(None, "str", "", "spice: sensor frame, +z the boresight (absent: "
-                            "nadir pointing and the [slew] law)"),
-        "start_utc": Key(None, "str", "", "spice: UTC of the first shot"),
-        "start_et": Key(None, "number", "s", "spice: ET (TDB s past J2000) of the first shot"),
         # Paper: 750 m around the asteroid (the RSO presets set 250 m).
         "radius": Key(750.0, "number", "m", "circular orbit radius about the target centre",
                       **POSITIVE),
@@ -152,6 +140,19 @@ SCHEMA: dict[str, dict[str, Key]] = {
                            **NON_NEGATIVE),
         "change_inclination_deg": Key(None, "number", "deg", "inclination after the change",
                                       minimum=0.0, maximum=180.0),
+        # kind = "spice": where the chaser is and where everything points come from kernels;
+        # shots at time t are at ET = start + t (TDB seconds past J2000).
+        "kernels": Key(None, "paths", "", "spice: kernel files (SPK, CK, FK, SCLK, PCK, "
+                       "meta-kernel), relative to the scene file"),
+        "observer": Key(None, "str", "", "spice: NAIF name or ID of the sensor"),
+        "target": Key(None, "str", "", "spice: NAIF name or ID of the target centre"),
+        # The log's inertial frame I (formats/SPEC.md); J2000 as recon's own kernels write it.
+        "inertial_frame": Key("J2000", "str", "", "spice: inertial frame of the log"),
+        "target_frame": Key(None, "str", "", "spice: target body-fixed frame (B)"),
+        "sensor_frame": Key(None, "str", "", "spice: sensor frame, +z the boresight (absent: "
+                            "nadir pointing and the [slew] law)"),
+        "start_utc": Key(None, "str", "", "spice: UTC of the first shot"),
+        "start_et": Key(None, "number", "s", "spice: ET (TDB s past J2000) of the first shot"),
     },
     "time": {
         # Paper: "moved along the orbit path in time steps of 10 seconds".

@@ -93,3 +93,23 @@ def test_export_refuses_a_suffix_it_cannot_write(bennu_log, tmp_path, capsys):
     assert main(["ingest", str(tmp_path / "none.csv"), "-o", str(tmp_path / "c.ply"),
                  "--refine"]) == 1
     assert "--refine apply to strike logs" in capsys.readouterr().err
+
+
+def test_a_truncated_table_is_one_line_from_the_command(bennu_log, tmp_path):
+    """Through a real process: exit status 1, one line naming the table, no traceback."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    export_altimetry(bennu_log, tmp_path / "ola.xml")
+    data = tmp_path / "ola.dat"
+    data.write_bytes(data.read_bytes()[:-100])
+    repo = Path(__file__).resolve().parents[3]
+    done = subprocess.run([sys.executable, "-m", "cli", "ingest", str(tmp_path / "ola.xml"),
+                           "-o", str(tmp_path / "c.ply")], capture_output=True, text=True,
+                          cwd=tmp_path, env=os.environ | {"PYTHONPATH": str(repo)},
+                          timeout=120)
+    assert done.returncode == 1
+    assert done.stderr.count("\n") == 1 and "ola.dat" in done.stderr
+    assert "declares" in done.stderr and "Traceback" not in done.stderr
+    assert not (tmp_path / "c.ply").exists()
