@@ -108,7 +108,8 @@ class Chunk:
 
 
 def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Plan:
-    """Turn a scene into the fixed parts of a run (builds the ray-casting structures)."""
+    """Turn a scene into the fixed parts of a run (builds the ray-casting structures; loads the
+    kernels of a SPICE-driven scene, which :func:`close_plan` unloads)."""
     if backend not in BACKENDS:
         raise SceneError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     target, orbit, slew, sensor = (scene.values[s] for s in ("target", "orbit", "slew", "sensor"))
@@ -118,15 +119,7 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
                                   target=orbit["target"], inertial_frame=orbit["inertial_frame"],
                                   target_frame=orbit["target_frame"],
                                   sensor_frame=orbit.get("sensor_frame"),
-                                  epoch_et=scene.epoch_et)
-        try:
-            check_spice_geometry(the_orbit.open(), scene)
-        except SpiceError as exc:
-            the_orbit.close()
-            raise SceneError(f"[orbit] kind = spice: {exc}") from None
-        except BaseException:
-            the_orbit.close()
-            raise
+                                  epoch_et=scene.epoch_et)   # opened last, below
     else:
         spin = {"spin_period": target["spin_period"], "spin_axis": target["spin_axis"],
                 "attitude": target["attitude"]}
@@ -151,12 +144,22 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
     step = scene.values["time"]["step"]
     pose = pose_errors.plan_knowledge(errors, seed=seed, n_shots=scene.n_shots, step=step,
                                       spin=spin, orbit=the_orbit)
-    return Plan(scene=scene, seed=seed, step=step, spin=spin, orbit=the_orbit, slew=the_slew,
+    plan = Plan(scene=scene, seed=seed, step=step, spin=spin, orbit=the_orbit, slew=the_slew,
                 pattern=pattern, errors=errors, pose=pose, cone=cone,
                 caster=BACKENDS[backend](scene.vertices, scene.faces),
                 exact=ExactHits(scene.vertices, scene.faces),
                 range_min=sensor["range_min"], range_max=sensor["range_max"],
                 scale=orbit.get("radius", 0.0))
+    if isinstance(the_orbit, SpiceGeometry):   # the kernels stay loaded until close_plan
+        try:
+            check_spice_geometry(the_orbit.open(), scene)
+        except SpiceError as exc:
+            the_orbit.close()
+            raise SceneError(f"[orbit] kind = spice: {exc}") from None
+        except BaseException:
+            the_orbit.close()
+            raise
+    return plan
 
 
 def check_spice_geometry(geometry: SpiceGeometry, scene: Scene) -> None:
