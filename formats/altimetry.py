@@ -337,6 +337,10 @@ def read_ola_l2(label) -> Altimetry:
     time = table.optional("et") or table.field("et", "utc", where=where)
     sc = [table.optional(n, f"sc_{n[-1]}", f"sc_pos_{n[-1]}") for n in ("scx", "scy", "scz")]
     sc = sc if all(s is not None for s in sc) else None
+    for fld in (rng, flag, *xyz, *(sc or [])):
+        if fld.dtype.kind == "S":
+            raise AltimetryError(f"{where}: field {fld.name!r} is {fld.data_type}, expected a "
+                                 "number")
     columns = read_columns(table, [rng, flag, *xyz, time, *(sc or [])])
     code = columns[flag.name].astype(np.int64) % 100
     keep = np.isin(code, OLA_KEPT_FLAGS)

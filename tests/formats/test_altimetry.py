@@ -157,6 +157,13 @@ def test_ola_l2_takes_every_layout_detail_from_the_label(tmp_path):
                          '<?xml version="1.0"?><!DOCTYPE x [<!ENTITY a "b">]>'),
      r"declares no DOCTYPE or entities"),
     (lambda t: t[:200], r"t\.xml: not an XML label"),
+    (lambda t: t.replace("<name>range</name><field_number>10</field_number>"
+                         '<field_location unit="byte">75</field_location>'
+                         "<data_type>IEEE754LSBDouble</data_type>",
+                         "<name>range</name><field_number>10</field_number>"
+                         '<field_location unit="byte">75</field_location>'
+                         "<data_type>ASCII_String</data_type>"),
+     r"field 'range' is ASCII_String, expected a number"),
 ])
 def test_ola_l2_refuses_hostile_labels_in_one_line(tmp_path, change, message):
     values, *_ = _ola_values()
