@@ -1,5 +1,6 @@
-"""``recon ingest`` (strikes to a body-frame cloud), ``recon trajectory`` (the sensor's recorded
-poses as text) and ``recon truth`` (the embedded mesh)."""
+"""``recon ingest`` (strikes or a mission's altimetry to a body-frame cloud), ``recon trajectory``
+(the sensor's recorded poses as text or SPICE kernels), ``recon altimetry`` (a log as a mission's
+altimetry product) and ``recon truth`` (the embedded mesh)."""
 
 from __future__ import annotations
 
@@ -15,11 +16,18 @@ class IngestOptionError(ReconError, ValueError):
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("ingest", help="register a strike log into a point cloud",
+    p = sub.add_parser("ingest", help="register a strike log (or read altimetry) into a point "
+                                      "cloud",
                        description="Place every strike in the target body frame using only the "
                                    "recorded poses and measurements (never the truth), keeping "
-                                   "time, shot, beam, range and the view point per point.")
-    p.add_argument("log", help="strike log (.h5)")
+                                   "time, shot, beam, range and the view point per point. Or "
+                                   "read a mission's laser altimetry: an OSIRIS-REx OLA Level-2 "
+                                   "table through its PDS4 label (.xml) or a Hayabusa2 LIDAR "
+                                   "Level-2 CSV (.csv), keeping time, ET, range and the "
+                                   "spacecraft position per return; flagged returns are dropped "
+                                   "and counted.")
+    p.add_argument("log", help="strike log (.h5), OLA Level-2 label (.xml) or Hayabusa2 LIDAR "
+                               "Level-2 CSV (.csv)")
     p.add_argument("-o", "--output", required=True, type=Path,
                    help="point cloud to write: .ply, .las, .laz or .h5")
     p.add_argument("--frame", choices=("body", "inertial"), default="body",
@@ -43,18 +51,50 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(default: %(default)g)")
     p.set_defaults(func=run_ingest)
 
-    p = sub.add_parser("trajectory", help="export the recorded sensor trajectory as text",
+    p = sub.add_parser("trajectory",
+                       help="export the recorded sensor trajectory as text or SPICE kernels",
                        description="Write one line per shot: time [s], sensor position [m] and "
                                    "attitude (roll, pitch, yaw [rad] and the quaternion x y z w) "
                                    "in the body frame (as the ingested cloud) or the inertial "
                                    "frame, like the trajectory HELIOS++ writes beside its "
-                                   "clouds.")
+                                   "clouds. Or write the poses as SPICE kernels: an SPK (.bsp) "
+                                   "of RECON_SENSOR relative to RECON_TARGET in J2000, or a CK "
+                                   "(.bc) of the frames RECON_SENSOR_FRAME and "
+                                   "RECON_TARGET_FIXED, with the frames kernel (.tf) and, for "
+                                   "a CK, the clock kernel (.tsc) beside it.")
     p.add_argument("log", help="strike log (.h5)")
     p.add_argument("-o", "--output", required=True, type=Path, metavar="TRAJ.txt",
-                   help="trajectory to write: .txt (space-separated) or .csv")
-    p.add_argument("--frame", choices=("body", "inertial"), default="body",
-                   help="frame of positions and attitudes (default: %(default)s)")
+                   help="trajectory to write: .txt (space-separated), .csv, .bsp (SPK) or .bc "
+                        "(CK)")
+    p.add_argument("--frame", choices=("body", "inertial"),
+                   help="text: frame of positions and attitudes (default: body); kernels hold "
+                        "both frames")
+    epoch = p.add_mutually_exclusive_group()
+    epoch.add_argument("--epoch-utc", metavar="UTC",
+                       help="kernels: UTC of the log's time 0, e.g. 2019-02-13T01:00:00 "
+                            "(default: the log's own epoch when its scene was SPICE-driven, "
+                            "else the J2000 epoch)")
+    epoch.add_argument("--epoch-et", type=float, metavar="ET",
+                       help="kernels: the same as TDB seconds past J2000")
     p.set_defaults(func=run_trajectory)
+
+    p = sub.add_parser("altimetry", help="export a strike log as a mission's altimetry product",
+                       description="Write the strikes, registered with the recorded poses, in "
+                                   "the layout of OSIRIS-REx OLA Level 2 (a PDS4 binary table "
+                                   "and its XML label; pulses that struck nothing become "
+                                   "'no return' rows) or of Hayabusa2 LIDAR Level 2 (CSV); "
+                                   "`recon ingest` reads both back.")
+    p.add_argument("log", help="strike log (.h5)")
+    p.add_argument("-o", "--output", required=True, type=Path, metavar="PRODUCT",
+                   help="OLA Level-2 label to write (.xml, with the .dat table beside it) or "
+                        "Hayabusa2 LIDAR Level-2 CSV (.csv)")
+    epoch = p.add_mutually_exclusive_group()
+    epoch.add_argument("--epoch-utc", metavar="UTC",
+                       help="UTC of the log's time 0 (default: the log's own epoch when its "
+                            "scene was SPICE-driven, else the J2000 epoch)")
+    epoch.add_argument("--epoch-et", type=float, metavar="ET",
+                       help="the same as TDB seconds past J2000")
+    p.set_defaults(func=run_altimetry)
 
     p = sub.add_parser("truth", help="export the truth mesh embedded in a strike log",
                        description="Write the log's /truth/mesh as a binary PLY.")
@@ -66,8 +106,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_ingest(args) -> int:
     from tqdm import tqdm
 
+    from recon.registration.altimetry import is_altimetry
     from recon.registration.ingest import ingest_following, ingest_to_file
 
+    if is_altimetry(args.log):
+        return _ingest_altimetry(args)
     correction = None
     if not args.timeout > 0:
         raise IngestOptionError(f"--timeout must be a positive number of seconds, got "
@@ -121,11 +164,57 @@ def run_ingest(args) -> int:
     return 0
 
 
-def run_trajectory(args) -> int:
-    from recon.registration.trajectory import export_trajectory
+def _ingest_altimetry(args) -> int:
+    """``recon ingest PRODUCT``: a mission's altimetry, already in the body frame."""
+    from recon.registration.altimetry import ingest_altimetry
 
-    summary = export_trajectory(args.log, args.output, frame=args.frame)
-    print(f"wrote {summary['n_shots']} poses ({args.frame} frame) to {args.output}")
+    given = [name for name, on in (("--refine", args.refine), ("--follow", args.follow),
+                                   ("--frame inertial", args.frame != "body")) if on]
+    if given:
+        raise IngestOptionError(f"{args.log}: {', '.join(given)} apply to strike logs; an "
+                                "altimetry product is read as its body-frame returns")
+    summary = ingest_altimetry(args.log, args.output)
+    dropped = summary["dropped"]
+    print(f"read {summary['n_points']} returns of {summary['product']} {args.log}; dropped "
+          + (", ".join(f"{n} {why}" for why, n in dropped.items()) if dropped else "none"))
+    print(f"wrote {summary['n_points']} points (body frame) to {args.output}")
+    return 0
+
+
+def _epoch(args) -> float | None:
+    if args.epoch_utc is None:
+        return args.epoch_et
+    from formats.spice import utc_to_et
+
+    return utc_to_et(args.epoch_utc, "--epoch-utc")
+
+
+def run_altimetry(args) -> int:
+    from recon.registration.altimetry import export_altimetry
+
+    summary = export_altimetry(args.log, args.output, epoch_et=_epoch(args))
+    extra = (f" and {summary['n_no_return']} no-return rows" if summary["n_no_return"] else "")
+    print(f"wrote {summary['n_returns']} returns{extra} ({summary['product']}) to "
+          + ", ".join(summary["written"]))
+    return 0
+
+
+def run_trajectory(args) -> int:
+    from recon.registration.trajectory import KERNEL_SUFFIXES, export_kernel, export_trajectory
+
+    if args.output.suffix.lower() in KERNEL_SUFFIXES:
+        if args.frame is not None:
+            raise IngestOptionError("--frame is for text trajectories: an SPK is in J2000 (the "
+                                    "log's inertial frame) and a CK holds the body frame too")
+        summary = export_kernel(args.log, args.output, epoch_et=_epoch(args))
+        print(f"wrote {summary['n_shots']} poses from ET {summary['epoch_et']:.6f} to "
+              + ", ".join(summary["written"]))
+        return 0
+    if args.epoch_utc is not None or args.epoch_et is not None:
+        raise IngestOptionError("--epoch-utc and --epoch-et are for kernels (.bsp, .bc)")
+    frame = args.frame or "body"
+    summary = export_trajectory(args.log, args.output, frame=frame)
+    print(f"wrote {summary['n_shots']} poses ({frame} frame) to {args.output}")
     return 0
 
 

@@ -75,6 +75,11 @@ def run_info(args) -> int:
         ("sensor", _describe_sensor(summary["sensor"])),
         ("truth", "present" if summary["has_truth"] else "absent"),
     ]
+    if summary.get("epoch_et") is not None:   # a SPICE-driven scene: ET of time 0
+        from formats.spice import et_to_utc
+
+        rows.insert(7, ("epoch", f"ET {summary['epoch_et']:.6f} s (UTC "
+                                 f"{et_to_utc(summary['epoch_et'])[0]})"))
     width = max(len(k) for k, _ in rows)
     for key, value in rows:
         print(f"{key:<{width}}  {value}")

@@ -7,6 +7,7 @@ Attribute names recon uses (any others are kept as they are):
 name                   dtype      meaning
 =====================  =========  ==============================================================
 ``time``               float64    shot time [s] since the start of the campaign
+``et``                 float64    shot time as SPICE ET [s, TDB past J2000] (altimetry products)
 ``shot``, ``beam``     uint32     shot and beam index in the source strike log
 ``range``              float64    measured range [m]
 ``azimuth``,           float64    measured beam direction in the sensor frame S [rad]
@@ -74,6 +75,7 @@ LAS_SCAN_ANGLE_STEP_DEG = 0.006
 # Units and a description (LAS extra-bytes descriptions hold 32 characters) of known attributes.
 ATTRIBUTE_INFO = {
     "time": ("s", "shot time since start [s]"),
+    "et": ("s", "ET, TDB s past J2000"),
     "shot": ("1", "shot index in the source log"),
     "beam": ("1", "beam index in the source log"),
     "range": ("m", "measured range [m]"),

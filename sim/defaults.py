@@ -26,6 +26,9 @@ TARGET_KINDS = ("ellipsoid", "rso-a", "rso-b", "mesh", "satellite", "polyhedron"
 GENERATED_KINDS = ("satellite", "polyhedron", "cratered-asteroid")
 SIZED_KINDS = ("polyhedron", "cratered-asteroid")
 PATTERNS = ("single", "cross", "zigzag", "grid")
+# "kepler": the circular orbit of [orbit] about the target and the uniform spin of [target];
+# "spice": positions and attitudes read from SPICE kernels (sim/motion.py, SpiceGeometry).
+ORBIT_KINDS = ("kepler", "spice")
 # "fixed": nadir, or the sinusoidal slew of [slew]; "gaps": the closed-loop law of
 # sim/gap_seeking.py, aiming the boresight at what the chaser has not yet struck.
 ATTITUDE_MODES = ("fixed", "gaps")
@@ -52,7 +55,7 @@ class Key:
         ``None``: no default, the key is optional.
     kind : str
         ``number``, ``int``, ``str``, ``bool``, ``vec<N>`` (N numbers), ``ivec<N>`` (N
-        integers) or ``fov`` (2 or 4 numbers).
+        integers), ``fov`` (2 or 4 numbers) or ``paths`` (an array of file names).
     unit : str
         Unit of the value as the scene gives it (``""``: none). Angles are in ``deg`` (or
         ``mrad``); sim/derive.py converts them to radians once, at load.
@@ -125,6 +128,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                         **DIRECTION),
     },
     "orbit": {
+        "kind": Key("kepler", "str", "", "kepler (radius .. change_inclination_deg) or spice "
+                    "(kernels .. start_et)",
+                    choices=ORBIT_KINDS),
         # Paper: 750 m around the asteroid (the RSO presets set 250 m).
         "radius": Key(750.0, "number", "m", "circular orbit radius about the target centre",
                       **POSITIVE),
@@ -145,6 +151,19 @@ SCHEMA: dict[str, dict[str, Key]] = {
                            **NON_NEGATIVE),
         "change_inclination_deg": Key(None, "number", "deg", "inclination after the change",
                                       minimum=0.0, maximum=180.0),
+        # kind = "spice": where the chaser is and where everything points come from kernels;
+        # shots at time t are at ET = start + t (TDB seconds past J2000).
+        "kernels": Key(None, "paths", "", "spice: kernel files (SPK, CK, FK, SCLK, PCK, "
+                       "meta-kernel), relative to the scene file"),
+        "observer": Key(None, "str", "", "spice: NAIF name or ID of the sensor"),
+        "target": Key(None, "str", "", "spice: NAIF name or ID of the target centre"),
+        # The log's inertial frame I (formats/SPEC.md); J2000 as recon's own kernels write it.
+        "inertial_frame": Key("J2000", "str", "", "spice: inertial frame of the log"),
+        "target_frame": Key(None, "str", "", "spice: target body-fixed frame (B)"),
+        "sensor_frame": Key(None, "str", "", "spice: sensor frame, +z the boresight (absent: "
+                            "nadir pointing and the [slew] law)"),
+        "start_utc": Key(None, "str", "", "spice: UTC of the first shot"),
+        "start_et": Key(None, "number", "s", "spice: ET (TDB s past J2000) of the first shot"),
     },
     "time": {
         # Paper: "moved along the orbit path in time steps of 10 seconds".
@@ -263,6 +282,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
 }
 # Longest string value of a scene (a mesh path): longer is a mistake or an attack, not a path.
 MAX_STRING_CHARS = 4096
+# Most files in an array of paths (orbit.kernels): a mission's meta-kernel lists a few hundred.
+MAX_PATHS = 1000
 # Largest scene file read, bytes: a scene states a few dozen keys.
 MAX_SCENE_BYTES = 1 << 20
 # Largest seed: logs store it as a signed 64-bit integer.
@@ -300,6 +321,15 @@ ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     ("slew", "axis"): ("attitude", "mode", ("fixed",)),
     ("slew", "phase_deg"): ("attitude", "mode", ("fixed",)),
     ("sensor", "beams"): ("sensor", "pattern", ("zigzag",)),
+    **{("orbit", key): ("orbit", "kind", ("kepler",)) for key in (
+        "radius", "inclination_deg", "node_deg", "phase_deg", "density", "mu", "period",
+        "change_time", "change_inclination_deg")},
+    **{("orbit", key): ("orbit", "kind", ("spice",)) for key in (
+        "kernels", "observer", "target", "inertial_frame", "target_frame", "sensor_frame",
+        "start_utc", "start_et")},
+    # The target's attitude comes from its kernel frame in a SPICE-driven scene.
+    **{("target", key): ("orbit", "kind", ("kepler",)) for key in (
+        "spin_period", "spin_axis", "attitude")},
     ("sensor", "resolution"): ("sensor", "pattern", ("grid",)),
 }
 
@@ -307,6 +337,8 @@ ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
 # A key with no default that a scene needs when another key has one of some values.
 NEEDED_WHEN: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     ("target", "path"): ("target", "kind", ("mesh",)),
+    **{("orbit", key): ("orbit", "kind", ("spice",)) for key in (
+        "kernels", "observer", "target", "target_frame")},
 }
 # Keys given both or neither: the inclination change needs its time and its new inclination.
 TOGETHER: tuple[tuple[tuple[str, str], tuple[str, str]], ...] = (

@@ -72,12 +72,13 @@ class Derived:
     vertices: np.ndarray = field(repr=False)
     faces: np.ndarray = field(repr=False)
     target: str
-    mu: float
-    orbit_period: float
+    mu: float | None
+    orbit_period: float | None
     duration: float
     n_shots: int
     errors: SensorErrors
     cost: Cost
+    epoch_et: float | None
 
 
 def derive(values: dict) -> Derived:
@@ -100,17 +101,58 @@ def derive(values: dict) -> Derived:
         mesh, rotations for a target that does not spin, the campaign is shorter than a step,
         or its cost is above ``[limits]``.
     """
-    duration, n_shots = time_line(values["time"], values["target"]["spin_period"])
+    spice = values["orbit"]["kind"] == "spice"
+    epoch_et = spice_epoch(values) if spice else None
+    duration, n_shots = time_line(values["time"], values["target"].get("spin_period", math.inf),
+                                  spice=spice)
     vertices, faces, label = target_mesh(values["target"])
-    q = np.asarray(values["target"]["attitude"])
-    values["target"]["attitude"] = (q / np.linalg.norm(q)).tolist()
+    if not spice:
+        q = np.asarray(values["target"]["attitude"])
+        values["target"]["attitude"] = (q / np.linalg.norm(q)).tolist()
     errors = sensor_errors(values["errors"])
     run_cost = cost(values, n_shots, errors, n_vertices=len(vertices), n_faces=len(faces))
     check_cost(run_cost, values["limits"])
-    mu, period = orbit_mu_and_period(values["orbit"], vertices, faces)
-    check_spin_knowledge(values["target"]["spin_period"], values["errors"]["spin_period_error"])
+    if spice:
+        check_spice_pose_errors(values)
+        mu = period = None
+    else:
+        mu, period = orbit_mu_and_period(values["orbit"], vertices, faces)
+        check_spin_knowledge(values["target"]["spin_period"],
+                             values["errors"]["spin_period_error"])
     return Derived(vertices=vertices, faces=faces, target=label, mu=mu, orbit_period=period,
-                   duration=duration, n_shots=n_shots, errors=errors, cost=run_cost)
+                   duration=duration, n_shots=n_shots, errors=errors, cost=run_cost,
+                   epoch_et=epoch_et)
+
+
+def spice_epoch(values: dict) -> float:
+    """ET [s, TDB past J2000] of the first shot of a SPICE-driven scene (orbit.start_utc or
+    orbit.start_et, exactly one)."""
+    orbit = values["orbit"]
+    given = [k for k in ("start_utc", "start_et") if k in orbit]
+    if len(given) != 1:
+        raise SceneError("orbit.kind = \"spice\" needs one of orbit.start_utc, orbit.start_et"
+                         + (", not both" if given else ""))
+    if "start_et" in orbit:
+        return orbit["start_et"]
+    from formats.spice import SpiceError, utc_to_et
+
+    try:
+        return utc_to_et(orbit["start_utc"], "orbit.start_utc")
+    except SpiceError as exc:
+        raise SceneError(str(exc)) from None
+
+
+def check_spice_pose_errors(values: dict) -> None:
+    """Refuse the pose-knowledge errors that need the spin model, and a slew on top of a sensor
+    attitude read from kernels."""
+    errors = values["errors"]
+    for key in ("spin_axis_error_deg", "spin_period_error"):
+        if errors[key] != 0:
+            raise SceneError(f"errors.{key} needs the spin model of orbit.kind = \"kepler\"; "
+                             "a SPICE-driven target's attitude comes from its frame")
+    if "sensor_frame" in values["orbit"] and values["slew"].get("amplitude_deg", 0.0) > 0:
+        raise SceneError("slew.amplitude_deg turns the nadir pointing; with orbit.sensor_frame "
+                         "the sensor attitude comes from the kernels (leave the slew at 0)")
 
 
 def n_beams(sensor: dict) -> int:
@@ -168,7 +210,10 @@ def target_mesh(target: dict) -> tuple[np.ndarray, np.ndarray, str]:
         vertices, faces = targets.load_mesh(target["path"], target["scale"],
                                             center=target["center"])
     except MeshFormatError as exc:
-        raise SceneError(f"target.path: {exc}") from None
+        hint = ("" if Path(target["path"]).is_absolute() else
+                " (a preset's mesh is looked up in the current directory and the directories "
+                "of RECON_MESH_PATH; or give --set target.path=FILE)")
+        raise SceneError(f"target.path: {exc}{hint}") from None
     return vertices, faces, f"mesh:{Path(target['path']).name}"
 
 
@@ -197,12 +242,15 @@ def orbit_mu_and_period(orbit: dict, vertices: np.ndarray, faces: np.ndarray
     return mu, 2.0 * math.pi * math.sqrt(radius ** 3 / mu)
 
 
-def time_line(time: dict, spin_period: float) -> tuple[float, int]:
+def time_line(time: dict, spin_period: float, *, spice: bool = False) -> tuple[float, int]:
     """Duration [s] of ``[time]`` and its number of shots, at ``t = k * step``."""
     step = time["step"]
     if "duration" in time:
         duration, key = time["duration"], "time.duration"
     else:
+        if spice:
+            raise SceneError("time.rotations needs the spin model of orbit.kind = \"kepler\"; "
+                             "give time.duration for a SPICE-driven scene")
         if math.isinf(spin_period):
             raise SceneError("time.rotations needs a spinning target (target.spin_period is "
                              "inf); give time.duration instead")

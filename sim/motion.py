@@ -19,15 +19,22 @@ azimuth, +y elevation).
   an optional slew ``theta(t) = A sin(2 pi t / P_s + phi)`` turns the sensor about a fixed axis of
   that nominal frame. About ``+x_S`` (the default) the boresight swings in the plane normal to the
   orbit plane, as in the paper.
+- **From SPICE kernels** (``[orbit] kind = "spice"``, :class:`SpiceGeometry`): the chaser's
+  position and velocity relative to the target (``spkezr``, geometric), the target attitude from
+  its body-fixed frame and, when a sensor frame is named, the sensor attitude (``pxform``), at
+  ``ET = start + t``. Without a sensor frame the nominal pointing above (and the slew) applies
+  to the kernels' trajectory. One ``spkezr`` and one or two ``pxform`` calls a shot.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from formats import spice
 
 
 def _unit(v) -> np.ndarray:
@@ -168,3 +175,87 @@ def slew_rotation(t: np.ndarray, *, amplitude: float, period: float, axis,
     """
     angle = amplitude * np.sin(2.0 * math.pi * np.asarray(t, np.float64) / period + phase)
     return Rotation.from_rotvec(angle[:, None] * _unit(axis))
+
+
+@dataclass
+class SpiceGeometry:
+    """Positions and attitudes read from SPICE kernels, with :class:`Orbit`'s ``state``.
+
+    Attributes
+    ----------
+    kernels : list of str
+        Files loaded by :meth:`open` (SPK, CK, FK, SCLK, PCK, meta-kernels).
+    observer, target : str
+        NAIF names or IDs of the sensor and of the target centre (the origin of I and B).
+    inertial_frame : str
+        The log's inertial frame I.
+    target_frame : str
+        The target's body-fixed frame B.
+    sensor_frame : str or None
+        The sensor frame S (+z the boresight); None: nominal pointing from the trajectory.
+    epoch_et : float
+        ET [s, TDB past J2000] of t = 0.
+    """
+
+    kernels: list
+    observer: str
+    target: str
+    inertial_frame: str
+    target_frame: str
+    sensor_frame: str | None
+    epoch_et: float
+    _loaded: object = field(default=None, repr=False)
+
+    maneuver_time = None   # no impulse of recon's own: whatever the kernels hold is flown
+
+    def open(self) -> SpiceGeometry:
+        """Load the kernels (until :meth:`close`)."""
+        if self._loaded is None:
+            self._loaded = spice.loaded(self.kernels, "orbit.kernels")
+            self._loaded.__enter__()
+        return self
+
+    def close(self) -> None:
+        """Unload the kernels."""
+        if self._loaded is not None:
+            loaded, self._loaded = self._loaded, None
+            loaded.__exit__(None, None, None)
+
+    def _et(self, t) -> np.ndarray:
+        return self.epoch_et + np.asarray(t, dtype=np.float64)
+
+    def state(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position and along-track direction at times ``t``, as :meth:`Orbit.state`.
+
+        Parameters
+        ----------
+        t : (n,) float64, seconds since the first shot
+
+        Returns
+        -------
+        position : (n, 3) float64, metres, inertial frame I
+        along_track : (n, 3) float64, unit vectors in I: the velocity's part perpendicular to
+            the position (any perpendicular direction where the chaser hovers)
+        """
+        position, velocity = spice.states(self.observer, self.target, self.inertial_frame,
+                                          self._et(t))
+        r_hat = position / np.linalg.norm(position, axis=1, keepdims=True)
+        along = velocity - np.einsum("ij,ij->i", velocity, r_hat)[:, None] * r_hat
+        norm = np.linalg.norm(along, axis=1)
+        still = norm <= 1e-12 * np.maximum(np.linalg.norm(velocity, axis=1), 1.0)
+        if still.any():
+            helper = np.where((np.abs(r_hat[still, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0],
+                              [0.0, 1.0, 0.0])
+            along[still] = np.cross(r_hat[still], helper)
+            norm[still] = np.linalg.norm(along[still], axis=1)
+        return position, along / norm[:, None]
+
+    def target_attitude(self, t: np.ndarray) -> Rotation:
+        """Rotation of length n that sends B vectors to I at times ``t`` [s]."""
+        return Rotation.from_matrix(spice.rotations(self.target_frame, self.inertial_frame,
+                                                    self._et(t)))
+
+    def sensor_attitude(self, t: np.ndarray) -> np.ndarray:
+        """Matrices (n, 3, 3) that send S vectors to I at times ``t`` [s] (needs
+        ``sensor_frame``)."""
+        return spice.rotations(self.sensor_frame, self.inertial_frame, self._et(t))

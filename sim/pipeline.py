@@ -31,6 +31,7 @@ from tqdm import tqdm
 
 from formats.atomic import check_space
 from formats.paths import check_destination
+from formats.spice import SpiceError
 from formats.strike_log import (
     SensorErrors,
     SensorInfo,
@@ -52,6 +53,7 @@ from sim.defaults import (
 from sim.gap_seeking import GapSeeker
 from sim.motion import (
     Orbit,
+    SpiceGeometry,
     equatorial_frame,
     nominal_sensor_attitude,
     slew_rotation,
@@ -69,8 +71,8 @@ class Plan:
     scene: Scene
     seed: int
     step: float
-    spin: dict
-    orbit: Orbit
+    spin: dict | None              # None: a SPICE-driven target attitude
+    orbit: Orbit | SpiceGeometry
     slew: dict | None
     pattern: BeamPattern
     errors: SensorErrors
@@ -106,21 +108,30 @@ class Chunk:
 
 
 def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Plan:
-    """Turn a scene into the fixed parts of a run (builds the ray-casting structures)."""
+    """Turn a scene into the fixed parts of a run (builds the ray-casting structures; loads the
+    kernels of a SPICE-driven scene, which :func:`close_plan` unloads)."""
     if backend not in BACKENDS:
         raise SceneError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     target, orbit, slew, sensor = (scene.values[s] for s in ("target", "orbit", "slew", "sensor"))
-    spin = {"spin_period": target["spin_period"], "spin_axis": target["spin_axis"],
-            "attitude": target["attitude"]}
-    spin_axis_inertial = Rotation.from_quat(target["attitude"]).apply(target["spin_axis"])
-    change = orbit.get("change_inclination_deg")
-    the_orbit = Orbit(radius=orbit["radius"], mu=scene.mu,
-                      inclination=math.radians(orbit["inclination_deg"]),
-                      node=math.radians(orbit["node_deg"]),
-                      phase=math.radians(orbit["phase_deg"]),
-                      frame=equatorial_frame(spin_axis_inertial),
-                      change_time=orbit.get("change_time"),
-                      change_inclination=None if change is None else math.radians(change))
+    spin = the_orbit = None
+    if orbit["kind"] == "spice":
+        the_orbit = SpiceGeometry(kernels=orbit["kernels"], observer=orbit["observer"],
+                                  target=orbit["target"], inertial_frame=orbit["inertial_frame"],
+                                  target_frame=orbit["target_frame"],
+                                  sensor_frame=orbit.get("sensor_frame"),
+                                  epoch_et=scene.epoch_et)   # opened last, below
+    else:
+        spin = {"spin_period": target["spin_period"], "spin_axis": target["spin_axis"],
+                "attitude": target["attitude"]}
+        spin_axis_inertial = Rotation.from_quat(target["attitude"]).apply(target["spin_axis"])
+        change = orbit.get("change_inclination_deg")
+        the_orbit = Orbit(radius=orbit["radius"], mu=scene.mu,
+                          inclination=math.radians(orbit["inclination_deg"]),
+                          node=math.radians(orbit["node_deg"]),
+                          phase=math.radians(orbit["phase_deg"]),
+                          frame=equatorial_frame(spin_axis_inertial),
+                          change_time=orbit.get("change_time"),
+                          change_inclination=None if change is None else math.radians(change))
     the_slew = None
     if slew.get("amplitude_deg", 0.0) > 0:
         the_slew = {"amplitude": math.radians(slew["amplitude_deg"]), "period": slew["period"],
@@ -133,12 +144,45 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
     step = scene.values["time"]["step"]
     pose = pose_errors.plan_knowledge(errors, seed=seed, n_shots=scene.n_shots, step=step,
                                       spin=spin, orbit=the_orbit)
-    return Plan(scene=scene, seed=seed, step=step, spin=spin, orbit=the_orbit, slew=the_slew,
+    plan = Plan(scene=scene, seed=seed, step=step, spin=spin, orbit=the_orbit, slew=the_slew,
                 pattern=pattern, errors=errors, pose=pose, cone=cone,
                 caster=BACKENDS[backend](scene.vertices, scene.faces),
                 exact=ExactHits(scene.vertices, scene.faces),
                 range_min=sensor["range_min"], range_max=sensor["range_max"],
-                scale=orbit["radius"])
+                scale=orbit.get("radius", 0.0))
+    if isinstance(the_orbit, SpiceGeometry):   # the kernels stay loaded until close_plan
+        try:
+            check_spice_geometry(the_orbit.open(), scene)
+        except SpiceError as exc:
+            the_orbit.close()
+            raise SceneError(f"[orbit] kind = spice: {exc}") from None
+        except BaseException:
+            the_orbit.close()
+            raise
+    return plan
+
+
+def check_spice_geometry(geometry: SpiceGeometry, scene: Scene) -> None:
+    """Evaluate a SPICE-driven scene's poses at its first and last shots, so that a missing
+    kernel, name or frame, or a trajectory inside the target, is one line before any work."""
+    t = np.array([0.0, (scene.n_shots - 1) * scene.values["time"]["step"]])
+    position, _ = geometry.state(t)
+    geometry.target_attitude(t)
+    if geometry.sensor_frame is not None:
+        geometry.sensor_attitude(t)
+    reach = float(np.linalg.norm(scene.vertices, axis=1).max())
+    inside = np.linalg.norm(position, axis=1) <= reach
+    if inside.any():
+        raise SceneError(f"orbit.kernels put {geometry.observer} "
+                         f"{np.linalg.norm(position[np.argmax(inside)]):.4g} m from "
+                         f"{geometry.target} at t = {t[np.argmax(inside)]:g} s, inside the "
+                         f"target (its farthest point is {reach:.4g} m from the centre)")
+
+
+def close_plan(plan: Plan) -> None:
+    """Release what a plan holds beyond memory: the kernels of a SPICE-driven scene."""
+    if isinstance(plan.orbit, SpiceGeometry):
+        plan.orbit.close()
 
 
 def shots_per_chunk(plan: Plan) -> int:
@@ -161,8 +205,14 @@ def poses(plan: Plan, t: np.ndarray, offset: np.ndarray | None = None
     target : Rotation, B->I
     sensor : (n, 3, 3) float64, matrices sending S vectors to I
     """
-    rot_bi = target_attitude(t, **plan.spin)
     position, along_track = plan.orbit.state(t)
+    if plan.spin is None:   # SPICE-driven
+        rot_bi = plan.orbit.target_attitude(t)
+        if plan.orbit.sensor_frame is not None:
+            m_si = plan.orbit.sensor_attitude(t)
+            return position, rot_bi, m_si if offset is None else m_si @ offset
+    else:
+        rot_bi = target_attitude(t, **plan.spin)
     m_si = nominal_sensor_attitude(position, along_track)
     if offset is not None:
         m_si = m_si @ offset
@@ -251,8 +301,9 @@ def compute_chunk(plan: Plan, index: int, first: int, stop: int,
     shot = pulse // b if b > 1 else pulse
     # np.take: row gathers several times faster than fancy indexing.
     o, d = np.take(origin, shot, axis=0), np.take(direction, pulse, axis=0)
+    scale = max(plan.scale, float(np.abs(origin).max(initial=0.0)))
     true_range, facet, hit = plan.exact.refine(o, d, *(np.take(a, pulse) for a in (face, u, v)),
-                                               scale=plan.scale)
+                                               scale=scale)
     if not hit.all():
         pulse, shot, o, d = pulse[hit], shot[hit], o[hit], d[hit]
         true_range, facet = true_range[hit], facet[hit]
@@ -420,6 +471,16 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
     check_space(path, scene.cost.disk_bytes, SceneError)
     start = time.perf_counter()
     plan = make_plan(scene, seed=seed, backend=backend)
+    try:
+        return _simulate(plan, path, progress=progress, backend=backend, workers=workers,
+                         live=live, start=start)
+    finally:
+        close_plan(plan)
+
+
+def _simulate(plan: Plan, path, *, progress, backend, workers, live, start) -> dict:
+    """:func:`simulate` once its plan is made (``start``: ``perf_counter`` at its start)."""
+    scene, seed = plan.scene, plan.seed
     strikes = rays = 0
     bar = tqdm(total=scene.n_shots, unit="shot", desc=f"simulate {scene.name}",
                delay=PROGRESS_DELAY_S, disable=None if progress is None else not progress)
@@ -429,6 +490,8 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
                               expected_shots=scene.n_shots,
                               expected_strikes=scene.n_shots * plan.pattern.n_beams,
                               live=live) as log:
+        if scene.epoch_et is not None:
+            log.write_epoch(scene.epoch_et)
         closed_loop = scene["attitude.mode"] == "gaps"
         for chunk in (iter_closed_loop(plan) if closed_loop else
                       iter_chunks(plan, workers=workers)):

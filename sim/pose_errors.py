@@ -41,7 +41,7 @@ from scipy.spatial.transform import Rotation
 
 from formats.strike_log import SensorErrors
 from sim import noise
-from sim.motion import Orbit, target_attitude
+from sim.motion import Orbit, SpiceGeometry, target_attitude
 
 # A pose function: true (position (n, 3) m in I, target Rotation B->I, sensor (n, 3, 3) S->I)
 # at times (n,) s; sim/pipeline.py's ``poses``.
@@ -60,18 +60,19 @@ class PoseKnowledge:
         ``b + w(t)`` of every shot.
     position : (n_shots, 3) float64, metres, (radial, along-track, cross-track)
         ``p + g(t)`` of every shot.
-    spin : dict
+    spin : dict or None
         The known spin (``spin_period``, ``spin_axis`` in B, ``attitude`` at t = 0), as
-        ``sim.motion.target_attitude`` takes it.
-    orbit : Orbit
+        ``sim.motion.target_attitude`` takes it; None for a SPICE-driven target, whose attitude
+        is known as the kernels give it.
+    orbit : Orbit or sim.motion.SpiceGeometry
         The true orbit, whose local frame the position error is stated in.
     """
 
     errors: SensorErrors
     attitude: np.ndarray
     position: np.ndarray
-    spin: dict
-    orbit: Orbit
+    spin: dict | None
+    orbit: Orbit | SpiceGeometry
 
 
 def random_walk(sigma_rate: float, step: float, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -169,6 +170,9 @@ def plan_knowledge(errors: SensorErrors, *, seed: int, n_shots: int, step: float
     if errors.position_drift > 0:
         position += gauss_markov(errors.position_drift, errors.position_drift_time, step,
                                  n_shots, noise.stream(seed, noise.STREAM_POSITION_DRIFT, 0))
+    if spin is None:   # SPICE-driven: the target attitude is known as the kernels give it
+        return PoseKnowledge(errors=errors, attitude=attitude, position=position, spin=None,
+                             orbit=orbit)
     known = dict(spin)
     if errors.spin_axis_error > 0:
         known["spin_axis"] = known_spin_axis(spin["spin_axis"], errors.spin_axis_error,
@@ -207,7 +211,7 @@ def record(knowledge: PoseKnowledge, first: int, t: np.ndarray, pose_at: PoseFun
     """
     e = knowledge.errors
     tagged = t + e.time_tag_offset
-    position, _, sensor = pose_at(tagged)
+    position, true_target, sensor = pose_at(tagged)
     rows = slice(first, first + len(t))
     position = (position + np.asarray(e.position_bias_inertial)
                 + np.einsum("nij,nj->ni", orbital_frame(knowledge.orbit, t),
@@ -215,5 +219,6 @@ def record(knowledge: PoseKnowledge, first: int, t: np.ndarray, pose_at: PoseFun
     error = (Rotation.from_rotvec(np.asarray(e.boresight_misalignment))
              * Rotation.from_rotvec(knowledge.attitude[rows]))
     sensor = (Rotation.from_matrix(sensor) * error).as_quat()
-    target = target_attitude(tagged, **knowledge.spin).as_quat()
+    target = (true_target if knowledge.spin is None else
+              target_attitude(tagged, **knowledge.spin)).as_quat()
     return position, sensor, target

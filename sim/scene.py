@@ -15,8 +15,11 @@ every default and where it comes from)::
               seed                             (satellite, polyhedron, cratered-asteroid)
               size                             (polyhedron, cratered-asteroid)
               spin_period, spin_axis (B), attitude (B->I quaternion x, y, z, w at t = 0)
-    [orbit]   radius, inclination_deg, node_deg, phase_deg,
-              density | mu | period, change_time, change_inclination_deg
+    [orbit]   kind = "kepler" | "spice"
+              radius, inclination_deg, node_deg, phase_deg,
+              density | mu | period, change_time, change_inclination_deg      (kepler)
+              kernels, observer, target, inertial_frame, target_frame, sensor_frame,
+              start_utc | start_et                                             (spice)
     [time]    step, rotations | duration
     [slew]    amplitude_deg, period, axis (nominal sensor frame), phase_deg   (mode fixed)
     [attitude] mode = "fixed" | "gaps", max_rate_deg_s, max_offset_deg, replan_s (gaps)
@@ -42,6 +45,7 @@ import copy
 import difflib
 import json
 import math
+import os
 import tomllib
 from dataclasses import dataclass, fields
 from importlib import resources
@@ -107,14 +111,16 @@ class Scene(Derived):
     target : str
         Short target name for the log (``asteroid``, ``rso-a``, ``rso-b``, ``mesh:<file>``,
         ``satellite:seed=<n>``, ``polyhedron:seed=<n>[,size=<m>]``, ...).
-    mu : float
-        Gravitational parameter used for the orbit [m^3/s^2].
-    orbit_period : float
-        Period of the chaser's orbit [s].
+    mu : float or None
+        Gravitational parameter used for the orbit [m^3/s^2] (None: SPICE-driven).
+    orbit_period : float or None
+        Period of the chaser's orbit [s] (None: SPICE-driven).
     duration : float
         Length of the campaign [s].
     n_shots : int
         Number of shots, at ``t = k * step`` for ``k = 0 .. n_shots - 1``.
+    epoch_et : float or None
+        ET [s, TDB past J2000] of the first shot of a SPICE-driven scene (None otherwise).
     errors : SensorErrors
         The ``[errors]`` section converted once (sim/derive.py) to what the log records:
         3-sigma values in SI units (radians); its properties give the 1-sigma values.
@@ -218,6 +224,31 @@ def _read_source(name_or_path) -> tuple[str, str, Path | None]:
 
 # --------------------------------------------------------------------------- loading
 
+# Directories (os.pathsep-separated) where a preset's relative mesh path is looked up after the
+# current directory: presets name published shape models by file name, not by a path on one
+# machine (bennu-ola names bennu_radar_2.7k.obj).
+MESH_PATH_VARIABLE = "RECON_MESH_PATH"
+
+
+def _resolve_paths(layer: dict, base: Path | None) -> None:
+    """Make a layer's file paths absolute: relative to the scene file's directory ``base``; for
+    a preset (``base`` None), a mesh path is looked up in the current directory, then in the
+    directories of ``RECON_MESH_PATH``."""
+    target, orbit = layer.get("target", {}), layer.get("orbit", {})
+    if "path" in target:
+        path = Path(target["path"]).expanduser()
+        if base is not None and not path.is_absolute():
+            path = base / path
+        elif base is None and not path.is_absolute() and not path.exists():
+            for directory in os.environ.get(MESH_PATH_VARIABLE, "").split(os.pathsep):
+                if directory and (Path(directory) / path).is_file():
+                    path = Path(directory) / path
+                    break
+        target["path"] = str(path)
+    if "kernels" in orbit and base is not None:
+        orbit["kernels"] = [str(p if p.is_absolute() else base / p)
+                            for p in (Path(k).expanduser() for k in orbit["kernels"])]
+
 
 def load_scene(name_or_path, overrides=()) -> Scene:
     """Resolve and validate a scene: a preset name or a TOML path, then ``--set`` overrides.
@@ -244,9 +275,7 @@ def load_scene(name_or_path, overrides=()) -> Scene:
     name, text, base = _read_source(name_or_path)
     file_layer = _parse_toml(text, f"scene {name}")
     file_layer = check_layer(file_layer, f"scene {name}")
-    if base is not None and "path" in file_layer.get("target", {}):
-        path = Path(file_layer["target"]["path"]).expanduser()
-        file_layer["target"]["path"] = str(path if path.is_absolute() else base / path)
+    _resolve_paths(file_layer, base)
 
     override_layer: dict[str, dict] = {}
     for text_override in overrides:

@@ -17,6 +17,7 @@ key.
 
 from __future__ import annotations
 
+import datetime
 import difflib
 import math
 from collections.abc import Callable
@@ -24,6 +25,7 @@ from collections.abc import Callable
 from sim.defaults import (
     ALTERNATIVES,
     MAX_FIELD_OF_VIEW_DEG,
+    MAX_PATHS,
     MAX_STRING_CHARS,
     NEEDED_WHEN,
     ONLY_WITH,
@@ -56,6 +58,19 @@ def _is_number(value) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
+def _iso_utc(value) -> str:
+    """A TOML date or date-time as ISO 8601 text, in UTC when it has an offset."""
+    if isinstance(value, datetime.datetime) and value.tzinfo is not None:
+        value = value.astimezone(datetime.UTC).replace(tzinfo=None)
+    return value.isoformat()
+
+
+def _typed_string(name: str, value: str) -> None:
+    if len(value) > MAX_STRING_CHARS or any(ord(c) < 32 for c in value):
+        raise SceneError(f"{name} must be a string of at most {MAX_STRING_CHARS} printable "
+                         f"characters, got {len(value):,} characters {brief(value)}")
+
+
 def _typed(section: str, key: str, value):
     """Check the type of one value against the schema; return it normalised (floats, lists)."""
     spec = SCHEMA[section][key]
@@ -73,12 +88,21 @@ def _typed(section: str, key: str, value):
             raise SceneError(f"{name} must be an integer, {got}")
         return value
     if kind == "str":
+        if isinstance(value, datetime.datetime | datetime.date):
+            value = _iso_utc(value)   # a bare TOML date-time (orbit.start_utc)
         if not isinstance(value, str):
             raise SceneError(f"{name} must be a string, {got}")
         if len(value) > MAX_STRING_CHARS or any(ord(c) < 32 for c in value):
             raise SceneError(f"{name} must be a string of at most {MAX_STRING_CHARS} printable "
                              f"characters, got {len(value):,} characters {brief(value)}")
         return value
+    if kind == "paths":
+        if not isinstance(value, list) or not value or len(value) > MAX_PATHS or \
+                not all(isinstance(v, str) and v for v in value):
+            raise SceneError(f"{name} must be an array of 1 to {MAX_PATHS} file names, {got}")
+        for item in value:
+            _typed_string(name, item)
+        return list(value)
     if kind == "bool":
         if not isinstance(value, bool):
             raise SceneError(f"{name} must be true or false, {got}")
@@ -200,7 +224,7 @@ def _check_value(name: str, spec: Key, value) -> None:
         if spec.choices and value not in spec.choices:
             raise SceneError(f"{name} must be {requirement(spec)}, got {brief(value)}")
         return
-    if spec.kind == "bool":
+    if spec.kind in ("bool", "paths"):
         return
     items = value if isinstance(value, list) else [value]
     if isinstance(value, list) and spec.finite and not all(math.isfinite(x) for x in items):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,9 @@ from formats import SensorInfo, Shots, StrikeLogWriter, TruthStrikes
 
 # The real shape models beside the checkout (../shared/meshes; README there).
 SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
+# Presets name shared shape models by file name, found through RECON_MESH_PATH (sim/scene.py):
+# the tests look in the shared folder unless the environment names another.
+os.environ.setdefault("RECON_MESH_PATH", str(SHARED_MESHES))
 SPHERE_RADIUS_M = 50.0
 ORBIT_RADIUS_M = 250.0
 

@@ -149,6 +149,10 @@ class StrikeLog:
                       if name not in ("format_version", "seed")}
         self.attrs["format_version"] = version
         self.attrs["seed"] = self._attr(f, "seed", int)
+        # Optional (SPEC.md): ET of time 0 when the scene was SPICE-driven.
+        self.epoch_et = self._attr(f, "epoch_et", float) if "epoch_et" in f.attrs else None
+        if self.epoch_et is not None and not np.isfinite(self.epoch_et):
+            raise StrikeLogError(f"{where}: root attribute 'epoch_et' must be finite")
         self.n_shots, self.n_strikes = self._counts()
         if self.n_shots < 0 or self.n_strikes < 0:
             raise StrikeLogError(f"{where}: negative row counts")
@@ -415,6 +419,7 @@ class StrikeLog:
             "duration_s": None if t0 is None else t1 - t0,
             "sensor": self.sensor.to_dict(),
             "has_truth": self.has_truth,
+            "epoch_et": self.epoch_et,
         }
 
     def close(self) -> None:

@@ -370,6 +370,17 @@ class StrikeLogWriter(AtomicWriter):
             self._file[LIVE_COMMITTED][:] = [self._n_shots, self._n_strikes, closing]
             self._file[LIVE_COMMITTED].flush()
 
+    def write_epoch(self, epoch_et: float) -> None:
+        """Record the ET of time 0 (root attribute ``epoch_et``, SPEC.md): the log's times are
+        then ``ET = epoch_et + time``, TDB seconds past J2000 (a SPICE-driven scene)."""
+        self._check()
+        if not np.isfinite(epoch_et):
+            raise StrikeLogError(f"{self.path}: epoch_et must be finite, got {epoch_et!r}")
+        if self.live:   # attributes cannot be added in SWMR mode: written on close
+            self._epoch_et = float(epoch_et)
+        else:
+            self._file.attrs["epoch_et"] = np.float64(epoch_et)
+
     # ------------------------------------------------------------------ closing
 
     def _finish(self) -> None:
@@ -379,6 +390,8 @@ class StrikeLogWriter(AtomicWriter):
             self._commit(closing=1)
             self._file.close()
             self._file = h5py.File(self.temporary, "r+")
+        if getattr(self, "_epoch_et", None) is not None:   # held back by SWMR mode
+            self._file.attrs["epoch_et"] = np.float64(self._epoch_et)
         self._file.attrs["n_shots"] = np.int64(self._n_shots)
         self._file.attrs["n_strikes"] = np.int64(self._n_strikes)
         self._file.close()

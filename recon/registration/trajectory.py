@@ -13,6 +13,13 @@ rotation as intrinsic z-y'-x'' angles (yaw about z, then pitch about the new y, 
 the new x; scipy's ``as_euler("ZYX")`` reversed). In the body frame B (default) position and
 attitude are relative to the target, like a body-frame cloud; in the inertial frame I they are
 as recorded. Only the recorded poses are used, never the log's ``/truth``.
+
+The same poses go to SPICE as kernels (``.bsp``, ``.bc``; conventions in formats/spice.py): an
+SPK of the sensor relative to the target in J2000 (the log's I), or a CK of the sensor and
+target attitudes, each with the frames kernel (``.tf``) it needs written beside it, and for a CK
+the clock kernel (``.tsc``): ``traj.bsp`` comes with ``traj.tf``, ``att.bc`` with ``att.tf``
+and ``att.tsc``. A shot at time ``t`` is at ``ET = epoch + t``: the log's ``epoch_et`` when
+its scene was SPICE-driven, otherwise the epoch given (0, the J2000 epoch, by default).
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ from formats.strike_log import READ_CHUNK_ROWS
 COLUMNS = ("time", "x", "y", "z", "roll", "pitch", "yaw", "qx", "qy", "qz", "qw")
 UNITS = ("s", "m", "m", "m", "rad", "rad", "rad", "1", "1", "1", "1")
 SUFFIXES = (".txt", ".csv")
+KERNEL_SUFFIXES = (".bsp", ".bc")
 
 
 class TrajectoryError(ReconError, ValueError):
@@ -94,7 +102,8 @@ def export_trajectory(log, output, *, frame: str = "body", chunk_rows: int = REA
     """
     output = Path(output)
     if output.suffix.lower() not in SUFFIXES:
-        raise TrajectoryError(f"{output}: a trajectory is written as {' or '.join(SUFFIXES)}")
+        raise TrajectoryError(f"{output}: a trajectory is written as .txt or .csv (text), "
+                              ".bsp (SPK) or .bc (CK)")
     if frame not in FRAMES:
         raise TrajectoryError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
     csv = output.suffix.lower() == ".csv"
@@ -112,3 +121,72 @@ def export_trajectory(log, output, *, frame: str = "body", chunk_rows: int = REA
             np.savetxt(writer.fh, rows, fmt="%.17g", delimiter="," if csv else " ")
         n_shots = strike_log.n_shots
     return {"n_shots": n_shots, "frame": frame, "output": str(output)}
+
+
+def log_epoch(log: StrikeLog, epoch_et: float | None) -> float:
+    """ET [s] of the log's time 0: ``epoch_et`` when given, else the log's, else 0 (J2000)."""
+    if epoch_et is not None:
+        if not np.isfinite(epoch_et):
+            raise TrajectoryError(f"epoch must be a finite ET, got {epoch_et!r}")
+        return float(epoch_et)
+    return 0.0 if log.epoch_et is None else log.epoch_et
+
+
+def export_kernel(log, output, *, epoch_et: float | None = None) -> dict:
+    """Write the recorded poses of a strike log as a SPICE kernel (see the module docstring).
+
+    Parameters
+    ----------
+    log : str or Path
+        Strike log.
+    output : str or Path
+        ``.bsp``: SPK of ``RECON_SENSOR`` relative to ``RECON_TARGET`` in J2000 (with ``.tf``
+        beside it); ``.bc``: CK of ``RECON_SENSOR_FRAME`` and ``RECON_TARGET_FIXED`` relative
+        to J2000 (with ``.tf`` and ``.tsc`` beside it). Every file is written atomically.
+    epoch_et : float, optional
+        ET [s, TDB past J2000] of the log's time 0 (default: the log's ``epoch_et``, else 0).
+
+    Returns
+    -------
+    dict
+        ``n_shots``, ``epoch_et``, ``output`` and ``written`` (every file written).
+    """
+    from formats import spice
+    from formats.atomic import write_atomically, write_text_atomically
+
+    output = Path(output)
+    suffix = output.suffix.lower()
+    if suffix not in KERNEL_SUFFIXES:
+        raise TrajectoryError(f"{output}: a kernel is written as {' or '.join(KERNEL_SUFFIXES)}")
+    with StrikeLog(log) as strike_log:
+        if strike_log.n_shots == 0:
+            raise TrajectoryError(f"{log}: no shots to write")
+        shots = strike_log.shots()
+        epoch = log_epoch(strike_log, epoch_et)
+    et = epoch + shots.time
+    if not np.all(np.diff(et) > 0):
+        raise TrajectoryError(f"{log}: shot times do not stay strictly increasing at ET "
+                              f"{epoch:.17g} + t (float64 resolution); give an earlier epoch")
+    comment = (f"recon {Path(log).name}: {len(et)} recorded shots, ET = {epoch!r} + time")
+    frames = output.with_suffix(".tf")
+    write_text_atomically(frames, spice.frames_kernel(), error=TrajectoryError)
+    written = [frames]
+
+    def kernel(write):
+        def into(temporary):
+            Path(temporary).unlink(missing_ok=True)   # the toolkit creates the file itself
+            write(temporary)
+        write_atomically(output, into, error=TrajectoryError)
+
+    if suffix == ".bsp":
+        kernel(lambda tmp: spice.write_spk(tmp, et, shots.sensor_position, comment=comment))
+    else:
+        clock = output.with_suffix(".tsc")
+        write_text_atomically(clock, spice.clock_kernel(epoch), error=TrajectoryError)
+        written.append(clock)
+        with spice.loaded([clock], "SCLK"):
+            kernel(lambda tmp: spice.write_ck(
+                tmp, et, {spice.SENSOR_CK_ID: shots.sensor_attitude,
+                          spice.TARGET_CK_ID: shots.target_attitude}, comment=comment))
+    return {"n_shots": len(et), "epoch_et": epoch, "output": str(output),
+            "written": [str(output), *map(str, written)]}
