@@ -12,6 +12,8 @@ from formats.errors import StrikeLogError
 
 FORMAT_NAME = "recon-strike-log"
 FORMAT_VERSION = 1
+# Suffixes a strike log is written under: it is an HDF5 file.
+LOG_SUFFIXES = (".h5", ".hdf5")
 
 # Largest chunk rows: 65,536 strike rows of float64 are 512 KiB, inside HDF5's default 1 MiB chunk
 # cache. A writer told the expected row counts uses chunks no longer than those (SPEC.md, Storage),
