@@ -535,10 +535,6 @@ def _stream_ply(path: Path, rows: int) -> tuple[str, Blocks] | None:
     missing = [k for k in "xyz" if k not in fields]
     if missing:
         raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
-    held = (path.stat().st_size - offset) // dtype.itemsize
-    if held < count:
-        raise MeshFormatError(f"{path}: the header declares {count} vertices but the file holds "
-                              f"{held}")
     names = ("x", "y", "z") + (NORMAL_ATTRIBUTES if all(k in fields for k in NORMAL_ATTRIBUTES)
                                else ())
 
