@@ -499,7 +499,7 @@ def _check_pcd(path: Path) -> None:
             if words[0].upper() == "DATA":
                 break
         else:
-            raise MeshFormatError(f"{path}: not a PCD file (no DATA line in its header)")
+            raise MeshFormatError(f"{path}: not a readable PCD file (no DATA line in its header)")
         offset = fh.tell()
     missing = [k for k in ("FIELDS", "SIZE", "TYPE", "WIDTH", "POINTS", "DATA")
                if k not in header]
