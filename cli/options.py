@@ -65,8 +65,11 @@ class _ListAction(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None):
         current = getattr(namespace, self.dest, None)
         items = [] if current is None or current is self.default else list(current)
-        items += [item for value in values for item in value.split(",") if item]
-        setattr(namespace, self.dest, items)
+        given = [item.strip() for value in values for item in value.split(",") if item.strip()]
+        if not given:
+            parser.error(f"{option_string} needs at least one name or value, got "
+                         f"{' '.join(repr(v) for v in values)}")
+        setattr(namespace, self.dest, items + given)
 
 
 def add_list_option(parser, *flags: str, metavar: str, help: str, **options) -> None:
