@@ -307,6 +307,34 @@ def check_body(path, header: PlyHeader) -> None:
     if lines != declared:
         raise MeshFormatError(f"{path}: the PLY header declares {header.describe()} elements "
                               f"({declared:,} lines) but the body has {lines:,} lines")
+    _check_ascii_values(path, header, _values_per_line(text, lines))
+
+
+def _values_per_line(text: bytes, lines: int) -> np.ndarray:
+    """Whitespace-separated values on each line of ``text`` (lines, int64), counted with
+    array operations over its bytes."""
+    data = np.frombuffer(text, dtype=np.uint8)
+    space = np.isin(data, np.frombuffer(b" \t\r\n\v\f", dtype=np.uint8))
+    starts = ~space & np.concatenate([[True], space[:-1]])
+    line = np.cumsum(data == ord("\n")) - (data == ord("\n"))
+    return np.bincount(line[starts], minlength=lines)
+
+
+def _check_ascii_values(path, header: PlyHeader, values: np.ndarray) -> None:
+    """Each ASCII line holds its element's values: exactly one per property, or, with lists,
+    at least one per scalar property and list count."""
+    first = 0
+    for name, count, properties in header.elements:
+        block = values[first:first + count]
+        lists = any(isinstance(kind, tuple) for _, kind in properties)
+        bad = np.flatnonzero(block < len(properties) if lists else block != len(properties))
+        if len(bad):
+            line = first + int(bad[0]) + 1
+            want = f"at least {len(properties)}" if lists else str(len(properties))
+            raise MeshFormatError(f"{path}: line {line:,} of the ASCII PLY body holds "
+                                  f"{int(block[bad[0]])} values where a {name} element has "
+                                  f"{want}")
+        first += count
 
 
 def read_ply_metadata(path) -> dict[str, str]:

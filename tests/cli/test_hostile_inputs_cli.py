@@ -154,6 +154,7 @@ TETRA = POINTS[:4]
     ("400-of-100", "the PLY header declares 400 vertex elements (400 lines) but the body has "
                    "100 lines"),
     ("empty-line", "line 3 of the ASCII PLY body is empty"),
+    ("extra-values", "line 1 of the ASCII PLY body holds 4 values where a vertex element has 3"),
 ])
 def test_lying_ply_cloud_is_one_line(case, expected, tmp_path, sphere_log):
     path = tmp_path / f"{case}.ply"
@@ -163,6 +164,8 @@ def test_lying_ply_cloud_is_one_line(case, expected, tmp_path, sphere_log):
         _ascii_ply(path, n_vertices=100, vertices=POINTS, fmt="ascii 2.0")
     elif case == "400-of-100":
         _ascii_ply(path, n_vertices=400, vertices=POINTS)
+    elif case == "extra-values":
+        _ascii_ply(path, n_vertices=100, vertices=np.c_[POINTS, np.ones(100)])
     else:
         _ascii_ply(path, n_vertices=100, vertices=POINTS, blank_line=True)
     _refused(["score", path, "--truth", sphere_log, "--no-edges"], f"{path}: {expected}")
