@@ -14,7 +14,8 @@ import os
 import signal
 import sys
 
-from formats import interrupt
+from cli import options
+from formats import interrupt, paths
 from formats.atomic import DiskFull
 from formats.errors import ReconError
 from formats.version import __version__
@@ -61,7 +62,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 1
     try:
-        with interrupt.handled():
+        with interrupt.handled(), paths.protecting(options.inputs_of(args)):
+            _check_outputs(args)
             status = int(args.func(args) or 0)
             interrupt.check()   # a signal whose exception a library swallowed
         return status
@@ -89,6 +91,14 @@ def main(argv: list[str] | None = None) -> int:
         if interrupt.received() is None:
             raise
         return _interrupted(args, interrupt.received(), argv)
+
+
+def _check_outputs(args) -> None:
+    """Refuse, before any work, an output that is an existing file the command reads (the
+    writers refuse it again, with the files of output directories, as they open)."""
+    for output in options.outputs_of(args):
+        if os.path.isfile(output):
+            paths.check_destination(output, options.UsageError)
 
 
 def _interrupted(args, signum: int, argv) -> int:
@@ -136,7 +146,10 @@ def _one_line(exc: Exception) -> str:
     """The message of ``exc`` on one line of at most MAX_MESSAGE_CHARS characters."""
     text = " ".join(str(exc).split("\n"))
     if len(text) > MAX_MESSAGE_CHARS:
-        text = text[:MAX_MESSAGE_CHARS - 40] + f"... ({len(text):,} characters cut)"
+        # the start names the file or key, the end often says what is wrong: keep both
+        keep = (MAX_MESSAGE_CHARS - 40) // 2
+        text = (f"{text[:keep]} ... ({len(text) - 2 * keep:,} characters cut) ... "
+                f"{text[-keep:]}")
     return text
 
 

@@ -4,8 +4,37 @@ truth meshes, outputs, lists, and usage lines that show what is required."""
 from __future__ import annotations
 
 import argparse
+import os
 import re
 from pathlib import Path
+
+from formats.errors import ReconError
+
+# Arguments (argparse ``dest``) that name what a command writes; every other argument that
+# names an existing file is an input the command must not write over (``inputs_of``).
+OUTPUT_DESTS = ("output", "refine_json")
+
+
+class UsageError(ReconError, ValueError):
+    """Arguments that do not go together (an output that is one of the inputs...)."""
+
+
+def inputs_of(args: argparse.Namespace) -> list[str]:
+    """Every argument value (or list item) of ``args`` that may name an input file: all but the
+    outputs (``OUTPUT_DESTS``). ``formats.paths.protecting`` keeps those that are files."""
+    values = []
+    for dest, value in vars(args).items():
+        if dest in OUTPUT_DESTS:
+            continue
+        for item in value if isinstance(value, list | tuple) else [value]:
+            if isinstance(item, str | os.PathLike):
+                values.append(item)
+    return values
+
+
+def outputs_of(args: argparse.Namespace) -> list[Path]:
+    """The output arguments (``OUTPUT_DESTS``) given in ``args``."""
+    return [Path(v) for dest in OUTPUT_DESTS if (v := getattr(args, dest, None)) is not None]
 
 
 def add_command(subparsers, name: str, handler, **parser_options):
@@ -36,8 +65,11 @@ class _ListAction(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None):
         current = getattr(namespace, self.dest, None)
         items = [] if current is None or current is self.default else list(current)
-        items += [item for value in values for item in value.split(",") if item]
-        setattr(namespace, self.dest, items)
+        given = [item.strip() for value in values for item in value.split(",") if item.strip()]
+        if not given:
+            parser.error(f"{option_string} needs at least one name or value, got "
+                         f"{' '.join(repr(v) for v in values)}")
+        setattr(namespace, self.dest, items + given)
 
 
 def add_list_option(parser, *flags: str, metavar: str, help: str, **options) -> None:

@@ -50,6 +50,7 @@ Formats read as well
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -369,9 +370,37 @@ def _read_h5(path: Path) -> Cloud:
     return Cloud(points, attributes, frame=frame_of(metadata, path))
 
 
+def _las_header(path: Path):
+    """The header of the LAS/LAZ file ``path``, checked: finite, non-zero scales and finite
+    offsets (a zero scale puts every point at the offset), and for uncompressed files a point
+    count the file's size can hold (checked before any point is read)."""
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            header = reader.header
+    except Exception as exc:  # laspy raises its own and OS errors on bad files
+        raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
+    scales, offsets = np.asarray(header.scales), np.asarray(header.offsets)
+    if not (np.all(np.isfinite(scales)) and np.all(scales != 0)):
+        raise MeshFormatError(f"{path}: LAS scale factors must be finite and non-zero, got "
+                              f"{', '.join(f'{v:g}' for v in scales)}")
+    if not np.all(np.isfinite(offsets)):
+        raise MeshFormatError(f"{path}: LAS offsets must be finite, got "
+                              f"{', '.join(f'{v:g}' for v in offsets)}")
+    if not header.are_points_compressed:
+        record = header.point_format.size
+        held = (path.stat().st_size - header.offset_to_point_data) // max(record, 1)
+        if header.point_count > held:
+            raise MeshFormatError(f"{path}: the LAS header declares {header.point_count:,} "
+                                  f"points but the file holds {max(held, 0):,}")
+    return header
+
+
 def _read_las(path: Path) -> Cloud:
     import laspy
 
+    _las_header(path)
     try:
         las = laspy.read(path)
     except Exception as exc:  # laspy raises its own and OS errors on bad files
@@ -400,8 +429,14 @@ def _las_metadata(path: Path, header) -> dict:
 
 
 def _text_columns(path: Path) -> tuple[list[str] | None, str | None]:
-    """The column names a comment line gives (or None) and the delimiter of a text cloud."""
-    names, delimiter = None, None
+    """The column names a comment line gives (or None) and the delimiter of a text cloud.
+
+    Raises
+    ------
+    MeshFormatError
+        The file has no data line (empty, or comments only).
+    """
+    names = None
     with open(path, encoding="utf-8", errors="replace") as fh:
         for line in fh:
             text = line.strip()
@@ -412,9 +447,8 @@ def _text_columns(path: Path) -> tuple[list[str] | None, str | None]:
                 if words[:3] and [w.lower() for w in words[:3]] == ["x", "y", "z"]:
                     names = [w.lower() for w in words]
                 continue
-            delimiter = "," if "," in text else None
-            break
-    return names, delimiter
+            return names, "," if "," in text else None
+    raise MeshFormatError(f"{path}: holds no points (no line of numbers)")
 
 
 def _read_text(path: Path) -> Cloud:
@@ -437,9 +471,93 @@ def _read_text(path: Path) -> Cloud:
     return Cloud(np.stack([columns.pop(k) for k in "xyz"], axis=1), columns)
 
 
+# PCD header keys in the order the format (PCL's PCD v0.7) puts them.
+_PCD_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT",
+             "POINTS", "DATA")
+_PCD_MAX_HEADER_LINES = 64
+
+
+def _pcd_int(path: Path, header: dict, key: str) -> int:
+    words = header.get(key, [])
+    if len(words) != 1 or not words[0].isdigit():
+        raise MeshFormatError(f"{path}: PCD header {key} must be one non-negative integer, got "
+                              f"{' '.join(words)[:40]!r}")
+    return int(words[0])
+
+
+def _check_pcd(path: Path) -> None:
+    """Refuse a PCD file whose header is malformed or whose body does not hold the declared
+    points: ASCII rows with another number of values than the fields declare, or fewer rows;
+    binary data shorter than POINTS records. Checked before Open3D reads it (Open3D reads a
+    short row as a point)."""
+    header = {}
+    with open(path, "rb") as fh:
+        for _ in range(_PCD_MAX_HEADER_LINES):
+            line = fh.readline(4096).decode("ascii", errors="replace").split("#", 1)[0]
+            words = line.split()
+            if not words:
+                continue
+            header[words[0].upper()] = words[1:]
+            if words[0].upper() == "DATA":
+                break
+        else:
+            raise MeshFormatError(f"{path}: not a readable PCD file (no DATA line in its header)")
+        offset = fh.tell()
+    missing = [k for k in ("FIELDS", "SIZE", "TYPE", "WIDTH", "POINTS", "DATA")
+               if k not in header]
+    if missing:
+        raise MeshFormatError(f"{path}: PCD header lacks {', '.join(missing)}")
+    fields = header["FIELDS"]
+    counts = header.get("COUNT", ["1"] * len(fields))
+    sizes, types = header["SIZE"], header["TYPE"]
+    if not (len(fields) == len(sizes) == len(types) == len(counts)) or not fields:
+        raise MeshFormatError(f"{path}: PCD header FIELDS, SIZE, TYPE and COUNT disagree "
+                              f"({len(fields)}, {len(sizes)}, {len(types)}, {len(counts)} "
+                              "entries)")
+    if (any(s not in ("1", "2", "4", "8") for s in sizes)
+            or any(t not in ("I", "U", "F") for t in types)
+            or any(not c.isdigit() or int(c) < 1 for c in counts)):
+        raise MeshFormatError(f"{path}: PCD header SIZE, TYPE or COUNT has a value the format "
+                              "does not allow")
+    n = _pcd_int(path, header, "POINTS")
+    width = _pcd_int(path, header, "WIDTH")
+    height = _pcd_int(path, header, "HEIGHT") if "HEIGHT" in header else 1
+    if width * height != n:
+        raise MeshFormatError(f"{path}: PCD header declares {n:,} POINTS but WIDTH x HEIGHT is "
+                              f"{width:,} x {height:,}")
+    values = sum(int(c) for c in counts)
+    kind = header["DATA"][0].lower() if header["DATA"] else ""
+    body = path.stat().st_size - offset
+    if kind == "binary":
+        need = n * sum(int(s) * int(c) for s, c in zip(sizes, counts, strict=True))
+        if body < need:
+            raise MeshFormatError(f"{path}: the PCD header declares {n:,} points ({need:,} "
+                                  f"bytes) but the body holds {body:,} bytes")
+    elif kind == "ascii":
+        with open(path, "rb") as fh:
+            fh.seek(offset)
+            text = fh.read().decode("ascii", errors="replace")
+        rows, columns = 0, values
+        if text.strip():   # numpy warns on a body without data
+            try:
+                rows, columns = np.loadtxt(io.StringIO(text), ndmin=2, dtype=np.float64).shape
+            except ValueError as exc:
+                reason = str(exc).splitlines()[0].split(";")[0]
+                raise MeshFormatError(f"{path}: PCD data rows do not match the "
+                                      f"{values} values per point its header declares "
+                                      f"({reason})") from None
+        if columns != values or rows != n:
+            raise MeshFormatError(f"{path}: the PCD header declares {n:,} points of {values} "
+                                  f"values but the body has {rows:,} rows of {columns}")
+    elif kind != "binary_compressed":
+        raise MeshFormatError(f"{path}: PCD DATA {kind[:20]!r} is not ascii, binary or "
+                              "binary_compressed")
+
+
 def _read_pcd(path: Path) -> Cloud:
     import open3d as o3d
 
+    _check_pcd(path)
     try:
         pcd = o3d.t.io.read_point_cloud(str(path))
     except Exception as exc:  # Open3D raises RuntimeError and others on bad files
@@ -537,10 +655,6 @@ def _stream_ply(path: Path, rows: int) -> tuple[str, Blocks] | None:
     missing = [k for k in "xyz" if k not in fields]
     if missing:
         raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
-    held = (path.stat().st_size - offset) // dtype.itemsize
-    if held < count:
-        raise MeshFormatError(f"{path}: the header declares {count} vertices but the file holds "
-                              f"{held}")
     names = ("x", "y", "z") + (NORMAL_ATTRIBUTES if all(k in fields for k in NORMAL_ATTRIBUTES)
                                else ())
 
@@ -576,14 +690,9 @@ def _stream_h5(path: Path, rows: int) -> tuple[str, Blocks]:
 def _stream_las(path: Path, rows: int) -> tuple[str, Blocks]:
     import laspy
 
-    try:
-        with laspy.open(path) as reader:
-            metadata = _las_metadata(path, reader.header)
-            extra = set(reader.header.point_format.extra_dimension_names)
-    except MeshFormatError:
-        raise
-    except Exception as exc:  # laspy raises its own and OS errors on bad files
-        raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
+    header = _las_header(path)
+    metadata = _las_metadata(path, header)
+    extra = set(header.point_format.extra_dimension_names)
     names = ("x", "y", "z") + (NORMAL_ATTRIBUTES if extra >= set(NORMAL_ATTRIBUTES) else ())
 
     def blocks():

@@ -15,7 +15,7 @@ import numpy as np
 from formats.errors import MeshFormatError
 from formats.geometry import Mesh, file_metadata, frame_of
 from formats.paths import check_source
-from formats.ply import read_ply_metadata, write_ply
+from formats.ply import read_ply, write_ply
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
@@ -49,14 +49,23 @@ def read_mesh(path, *, scale: float = 1.0) -> Mesh:
                               f"{', '.join(MESH_SUFFIXES)})")
     if not (np.isfinite(scale) and scale > 0):
         raise MeshFormatError(f"{path}: scale must be a positive number, got {scale}")
-    frame = frame_of(read_ply_metadata(path), path) if path.suffix.lower() == ".ply" else "body"
-    try:
-        mesh = trimesh.load(path, force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many types on bad files; all mean "unreadable"
-        raise MeshFormatError(f"{path}: not a readable mesh ({type(exc).__name__}: "
-                              f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
-    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
-    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    if path.suffix.lower() == ".ply":   # the strict reader: header, counts and faces checked
+        columns, faces, metadata = read_ply(path)
+        missing = [k for k in "xyz" if k not in columns]
+        if missing:
+            raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
+        vertices = np.stack([np.asarray(columns[k], dtype=np.float64) for k in "xyz"], axis=1)
+        faces = np.zeros((0, 3), dtype=np.int64) if faces is None else faces
+        frame = frame_of(metadata, path)
+    else:
+        try:
+            mesh = trimesh.load(path, force="mesh", process=False)
+        except Exception as exc:  # trimesh raises many types on bad files: "unreadable"
+            raise MeshFormatError(f"{path}: not a readable mesh ({type(exc).__name__}: "
+                                  f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+        faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
+        vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
+        frame = "body"
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise MeshFormatError(f"{path}: has no triangles (a point cloud, not a mesh?)")
     if not np.all(np.isfinite(vertices)):

@@ -15,6 +15,8 @@ through trimesh's parser and keeps every vertex property.
 
 from __future__ import annotations
 
+import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -139,33 +141,253 @@ def write_ply(path, columns: dict[str, np.ndarray], *, faces: np.ndarray | None 
             writer.write_faces(faces)
 
 
-def _header_metadata(fh) -> dict[str, str]:
-    """``comment KEY VALUE`` lines of a PLY header as ``{KEY: VALUE}`` (other comments, e.g.
-    ``comment Created by CloudCompare``, too: the first word is the key)."""
-    metadata = {}
-    for _ in range(_MAX_HEADER_LINES):
-        line = fh.readline(4096)
-        if not line or line.strip() == b"end_header":
-            break
-        words = line.decode("ascii", errors="replace").split(None, 2)
-        if len(words) == 3 and words[0] == "comment":
-            metadata.setdefault(words[1], words[2].strip())
-    fh.seek(0)
-    return metadata
+# The encodings of PLY 1.0 (Turk 1994; the only version there is).
+_ENCODINGS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
+_VERSION = "1.0"
+# Fewest indices of a polygon in a face element.
+_MIN_FACE_INDICES = 3
+_FACE_LISTS = ("vertex_indices", "vertex_index")
+
+
+@dataclass(frozen=True)
+class PlyHeader:
+    """A PLY header, checked against the format (``read_header``).
+
+    Attributes
+    ----------
+    encoding : {"ascii", "binary_little_endian", "binary_big_endian"}
+    elements : tuple of (name, count, properties)
+        In file order; each property is ``(name, kind)`` with ``kind`` a numpy type code
+        (``"f4"``) or, for a list, ``(count code, item code)``.
+    offset : int
+        Byte offset of the body.
+    metadata : dict of str to str
+        The ``comment KEY VALUE`` lines (``comment Created by X`` too: the first word is the key).
+    """
+
+    encoding: str
+    elements: tuple
+    offset: int
+    metadata: dict
+
+    def count(self, name: str) -> int:
+        """Declared number of ``name`` elements (0 when there is no such element)."""
+        return sum(n for element, n, _ in self.elements if element == name)
+
+    def describe(self) -> str:
+        """The declared counts in words: ``400 vertex and 2 face``."""
+        words = [f"{n:,} {name}" for name, n, _ in self.elements]
+        return " and ".join([", ".join(words[:-1]), words[-1]] if len(words) > 1 else words)
+
+
+def _ply_kind(word: str, path, line: int) -> str:
+    kind = _NUMPY_OF_PLY.get(word)
+    if kind is None:
+        raise MeshFormatError(f"{path}: PLY header line {line}: unknown property type {word!r}")
+    return kind
+
+
+def read_header(path) -> PlyHeader:
+    """Read and check the header of the PLY file ``path``.
+
+    Refused, each with one line naming the file: no ``ply`` magic, a format other than
+    ``ascii``, ``binary_little_endian`` or ``binary_big_endian``, a version other than 1.0,
+    an element count that is not a non-negative integer, an unknown property type, a property
+    before any element, an unknown header line, and a header without ``end_header``.
+
+    Raises
+    ------
+    MeshFormatError
+    """
+    path = check_source(path, MeshFormatError)
+    encoding, elements, metadata = None, [], {}
+    with open(path, "rb") as fh:
+        if fh.readline(16).rstrip(b"\r\n") != b"ply":
+            raise MeshFormatError(f"{path}: not a PLY file (no 'ply' magic line)")
+        for number in range(2, _MAX_HEADER_LINES):
+            raw = fh.readline(4096)
+            if not raw:
+                break
+            text = raw.decode("ascii", errors="replace")
+            words = text.split()
+            if not words:
+                continue
+            key = words[0]
+            if key == "end_header":
+                if encoding is None:
+                    raise MeshFormatError(f"{path}: PLY header has no format line")
+                return PlyHeader(encoding, tuple(elements), fh.tell(), metadata)
+            if key in ("comment", "obj_info"):
+                parts = text.split(None, 2)
+                if key == "comment" and len(parts) == 3:
+                    metadata.setdefault(parts[1], parts[2].strip())
+            elif key == "format":
+                if len(words) != 3 or words[1] not in _ENCODINGS:
+                    raise MeshFormatError(f"{path}: PLY format {' '.join(words[1:])!r} is not "
+                                          f"one of {', '.join(_ENCODINGS)}")
+                if words[2] != _VERSION:
+                    raise MeshFormatError(f"{path}: PLY version {words[2]!r} is not supported "
+                                          f"(the format has version {_VERSION})")
+                encoding = words[1]
+            elif key == "element":
+                if len(words) != 3 or not words[2].isdigit():
+                    raise MeshFormatError(f"{path}: PLY header line {number}: element "
+                                          f"{' '.join(words[1:])!r} needs a name and a count")
+                elements.append((words[1], int(words[2]), []))
+            elif key == "property":
+                if not elements:
+                    raise MeshFormatError(f"{path}: PLY header line {number}: a property "
+                                          "before any element")
+                if len(words) == 5 and words[1] == "list":
+                    kind = (_ply_kind(words[2], path, number), _ply_kind(words[3], path, number))
+                elif len(words) == 3:
+                    kind = _ply_kind(words[1], path, number)
+                else:
+                    raise MeshFormatError(f"{path}: PLY header line {number}: malformed "
+                                          f"property {text.strip()!r}")
+                elements[-1][2].append((words[-1], kind))
+            else:
+                raise MeshFormatError(f"{path}: PLY header line {number}: unknown keyword "
+                                      f"{key[:40]!r}")
+    raise MeshFormatError(f"{path}: PLY header has no end_header line")
+
+
+def _min_record_bytes(name: str, properties) -> tuple[int, bool]:
+    """Fewest bytes of one binary record of element ``name``, and whether its size is fixed.
+
+    A face's index list holds at least ``_MIN_FACE_INDICES`` items; other lists may be empty.
+    """
+    size, fixed = 0, True
+    for prop, kind in properties:
+        if isinstance(kind, tuple):
+            least = _MIN_FACE_INDICES if name == "face" and prop in _FACE_LISTS else 0
+            size += np.dtype(kind[0]).itemsize + least * np.dtype(kind[1]).itemsize
+            fixed = False
+        else:
+            size += np.dtype(kind).itemsize
+    return size, fixed
+
+
+def check_body(path, header: PlyHeader) -> None:
+    """Refuse a PLY body that does not hold what the header declares, before reading it.
+
+    Binary: the body's size must be the declared records' (at least, with lists: a face has at
+    least 3 indices); ASCII: one non-empty line per declared element (trailing blank lines
+    aside). Checked from the file's size and lines, so a header declaring 10**12 faces costs
+    nothing.
+
+    Raises
+    ------
+    MeshFormatError
+        Naming the file, the declared counts and what the body holds.
+    """
+    path = Path(path)
+    body = path.stat().st_size - header.offset
+    if header.encoding != "ascii":
+        least, exact = 0, True
+        for name, count, properties in header.elements:
+            size, fixed = _min_record_bytes(name, properties)
+            least += count * size
+            exact = exact and fixed
+        if body < least or (exact and body != least):
+            need = f"{least:,}" if exact else f"at least {least:,}"
+            raise MeshFormatError(f"{path}: the PLY header declares {header.describe()} "
+                                  f"elements ({need} bytes) but the body holds {body:,} bytes")
+        return
+    with open(path, "rb") as fh:
+        fh.seek(header.offset)
+        text = fh.read().rstrip()
+    empty = re.search(rb"(?:^|\n)[ \t\r]*\n", text)
+    if empty is not None:
+        line = text[:empty.end()].count(b"\n")
+        raise MeshFormatError(f"{path}: line {line} of the ASCII PLY body is empty (the format "
+                              "has one element per line)")
+    lines = text.count(b"\n") + 1 if text else 0
+    declared = sum(n for _, n, _ in header.elements)
+    if lines != declared:
+        raise MeshFormatError(f"{path}: the PLY header declares {header.describe()} elements "
+                              f"({declared:,} lines) but the body has {lines:,} lines")
+    _check_ascii_values(path, header, _values_per_line(text, lines))
+
+
+def _values_per_line(text: bytes, lines: int) -> np.ndarray:
+    """Whitespace-separated values on each line of ``text`` (lines, int64), counted with
+    array operations over its bytes."""
+    data = np.frombuffer(text, dtype=np.uint8)
+    space = np.isin(data, np.frombuffer(b" \t\r\n\v\f", dtype=np.uint8))
+    starts = ~space & np.concatenate([[True], space[:-1]])
+    line = np.cumsum(data == ord("\n")) - (data == ord("\n"))
+    return np.bincount(line[starts], minlength=lines)
+
+
+def _check_ascii_values(path, header: PlyHeader, values: np.ndarray) -> None:
+    """Each ASCII line holds its element's values: exactly one per property, or, with lists,
+    at least one per scalar property and list count."""
+    first = 0
+    for name, count, properties in header.elements:
+        block = values[first:first + count]
+        lists = any(isinstance(kind, tuple) for _, kind in properties)
+        bad = np.flatnonzero(block < len(properties) if lists else block != len(properties))
+        if len(bad):
+            line = first + int(bad[0]) + 1
+            want = f"at least {len(properties)}" if lists else str(len(properties))
+            raise MeshFormatError(f"{path}: line {line:,} of the ASCII PLY body holds "
+                                  f"{int(block[bad[0]])} values where a {name} element has "
+                                  f"{want}")
+        first += count
 
 
 def read_ply_metadata(path) -> dict[str, str]:
     """The ``comment KEY VALUE`` lines of a PLY file's header, without reading its data."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            return _header_metadata(fh)
-    except FileNotFoundError:
-        raise MeshFormatError(f"{path}: no such file") from None
+    return read_header(path).metadata
+
+
+def _face_lists(path, raw: dict, n_vertices: int) -> None:
+    """Refuse face elements whose index lists have fewer than 3 items or index missing
+    vertices (``raw``: trimesh's ``_ply_raw``); a reader that dropped them would give a mesh
+    with holes that looks complete."""
+    face = raw.get("face", {}).get("data")
+    if face is None:
+        return
+    names = face.dtype.names if isinstance(face, np.ndarray) else list(face)
+    name = next((k for k in _FACE_LISTS if k in (names or ())), None)
+    if name is None:
+        return
+    lists = face[name]
+    if isinstance(lists, np.ndarray) and lists.dtype.names:   # binary: (count, items) records
+        counts, items = lists[lists.dtype.names[0]], lists[lists.dtype.names[1]]
+        width = items.shape[1] if items.ndim == 2 else 1
+        bad = np.flatnonzero(counts != width)
+        sizes = np.where(counts == width, width, counts)
+    elif isinstance(lists, np.ndarray) and lists.dtype != object:   # ASCII, equal lengths
+        items = lists.reshape(len(lists), -1)
+        sizes = np.full(len(items), items.shape[1])
+        bad = np.zeros(0, dtype=np.intp)
+    else:   # ASCII, lists of different lengths
+        sizes = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+        items = np.concatenate([np.asarray(x).ravel() for x in lists]) if len(lists) else None
+        bad = np.zeros(0, dtype=np.intp)
+    if len(bad):
+        raise MeshFormatError(f"{path}: face {int(bad[0])} declares {int(counts[bad[0]])} "
+                              f"indices where the binary PLY holds {width}")
+    small = np.flatnonzero(sizes < _MIN_FACE_INDICES)
+    if len(small):
+        raise MeshFormatError(f"{path}: face {int(small[0])} has {int(sizes[small[0]])} "
+                              f"vertex indices; a face needs at least {_MIN_FACE_INDICES}")
+    if items is not None and np.size(items):
+        items = np.asarray(items)
+        if items.min() < 0 or items.max() >= n_vertices:
+            raise MeshFormatError(f"{path}: faces index vertices that do not exist (the file "
+                                  f"has {n_vertices:,} vertices, indices run "
+                                  f"{int(items.min())}..{int(items.max())})")
 
 
 def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, str]]:
     """Read every vertex property of an ASCII or binary PLY file, its triangles and metadata.
+
+    The header and the body's size are checked first (``read_header``, ``check_body``), the
+    faces after parsing: each needs 3 or more indices of existing vertices (polygons are
+    triangulated).
 
     Returns
     -------
@@ -173,21 +395,20 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
     faces : (m, 3) int64 or None
     metadata : dict of str to str
         The header's ``comment KEY VALUE`` lines.
+
+    Raises
+    ------
+    MeshFormatError
+        A header, body or face that breaks the format, naming the file.
     """
     from trimesh.exchange.ply import load_ply
 
-    path = check_source(path, MeshFormatError)
+    header = read_header(path)
+    path = Path(path)
+    check_body(path, header)
     try:
         with open(path, "rb") as fh:
-            if fh.readline(16).strip() != b"ply":
-                raise MeshFormatError(f"{path}: not a PLY file (no 'ply' magic line)")
-            fh.seek(0)
-            metadata = _header_metadata(fh)
             loaded = load_ply(fh, prefer_color="vertex")
-    except FileNotFoundError:
-        raise MeshFormatError(f"{path}: no such file") from None
-    except MeshFormatError:
-        raise
     except Exception as exc:  # trimesh's parser raises many types on malformed input
         raise MeshFormatError(f"{path}: not a readable PLY file ({type(exc).__name__})") from None
     raw = loaded.get("metadata", {}).get("_ply_raw", {})
@@ -197,9 +418,14 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
     # binary files give a structured array, ASCII files a dict of arrays
     names = vertex.dtype.names if isinstance(vertex, np.ndarray) else list(vertex)
     columns = {name: np.asarray(vertex[name]).reshape(-1) for name in names}
+    n_vertices = header.count("vertex")
+    if any(len(c) != n_vertices for c in columns.values()):
+        raise MeshFormatError(f"{path}: the PLY header declares {n_vertices:,} vertices but "
+                              f"{min(len(c) for c in columns.values()):,} were read")
+    _face_lists(path, raw, n_vertices)
     faces = loaded.get("faces")
     faces = None if faces is None or len(faces) == 0 else np.asarray(faces, dtype=np.int64)
-    return columns, faces, metadata
+    return columns, faces, header.metadata
 
 
 # PLY scalar types (both spellings) as numpy type codes, for reading any binary PLY.
@@ -212,6 +438,8 @@ _NUMPY_OF_PLY = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "shor
 def binary_vertex_layout(path) -> tuple[np.dtype, int, int, dict[str, str]] | None:
     """Where a binary PLY file keeps its vertices, for reading them block by block.
 
+    The header is checked (``read_header``) and the body's size against it (``check_body``).
+
     Returns
     -------
     (dtype, offset, count, metadata) or None
@@ -219,35 +447,17 @@ def binary_vertex_layout(path) -> tuple[np.dtype, int, int, dict[str, str]] | No
         of vertices and the header's comments; None when the file cannot be read that way (an
         ASCII file, vertices that are not the first element or hold lists, any faces).
     """
-    path = check_source(path, MeshFormatError)
-    with open(path, "rb") as fh:
-        if fh.readline(16).strip() != b"ply":
-            return None
-        byte_order, elements = None, []
-        for _ in range(_MAX_HEADER_LINES):
-            words = fh.readline(4096).decode("ascii", errors="replace").split()
-            if not words:
-                continue
-            if words[0] == "end_header":
-                break
-            if words[0] == "format" and len(words) >= 2:
-                byte_order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(words[1])
-            elif words[0] == "element" and len(words) == 3 and words[2].isdigit():
-                elements.append((words[1], int(words[2]), []))
-            elif words[0] == "property" and elements:
-                kind = _NUMPY_OF_PLY.get(words[1]) if len(words) == 3 else None
-                elements[-1][2].append((words[-1], kind))
-        else:
-            return None
-        offset = fh.tell()
-        fh.seek(0)
-        metadata = _header_metadata(fh)
+    header = read_header(path)
+    check_body(path, header)
+    elements = header.elements
+    byte_order = _ENCODINGS[header.encoding]
     if byte_order is None or not elements or elements[0][0] != "vertex":
         return None
-    if any(n > 0 for name, n, _ in elements[1:]) or any(k is None for _, k in elements[0][2]):
+    if any(n > 0 for _, n, _ in elements[1:]) or any(isinstance(k, tuple)
+                                                     for _, k in elements[0][2]):
         return None
     names = [name for name, _ in elements[0][2]]
     if len(set(names)) != len(names):
         return None
     dtype = np.dtype([(name, byte_order + kind) for name, kind in elements[0][2]])
-    return dtype, offset, elements[0][1], metadata
+    return dtype, header.offset, elements[0][1], header.metadata

@@ -284,6 +284,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
 MAX_STRING_CHARS = 4096
 # Most files in an array of paths (orbit.kernels): a mission's meta-kernel lists a few hundred.
 MAX_PATHS = 1000
+# Magnitudes of the numbers of a scene, in each key's unit, beyond a key's own bounds: at most
+# 1e15 (1e15 m is 6,700 au and 1e15 s 32 million years, beyond every scene recon simulates) and,
+# unless zero, at least 1e-15 (a femtometre, a femtosecond). Cubes and inverse squares the
+# derivations take (an orbit's period from radius**3 / mu, mu from the period) then stay far
+# inside float64's range instead of overflowing.
+MAX_MAGNITUDE = 1e15
+MIN_MAGNITUDE = 1e-15
 # Largest scene file read, bytes: a scene states a few dozen keys.
 MAX_SCENE_BYTES = 1 << 20
 # Largest seed: logs store it as a signed 64-bit integer.

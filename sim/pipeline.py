@@ -24,6 +24,7 @@ from collections import deque
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -33,6 +34,7 @@ from formats.atomic import check_space
 from formats.paths import check_destination
 from formats.spice import SpiceError
 from formats.strike_log import (
+    LOG_SUFFIXES,
     SensorErrors,
     SensorInfo,
     Shots,
@@ -467,6 +469,9 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
         raise SceneError(f"seed must be a non-negative integer of at most {MAX_SEED}, got "
                          f"{seed!r}")
     seed = int(seed)
+    if Path(path).suffix.lower() not in LOG_SUFFIXES:
+        raise SceneError(f"{path}: a strike log is an HDF5 file; name it "
+                         f"{' or '.join(LOG_SUFFIXES)}")
     check_destination(path, SceneError)
     check_space(path, scene.cost.disk_bytes, SceneError)
     start = time.perf_counter()

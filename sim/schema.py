@@ -25,8 +25,10 @@ from collections.abc import Callable
 from sim.defaults import (
     ALTERNATIVES,
     MAX_FIELD_OF_VIEW_DEG,
+    MAX_MAGNITUDE,
     MAX_PATHS,
     MAX_STRING_CHARS,
+    MIN_MAGNITUDE,
     NEEDED_WHEN,
     ONLY_WITH,
     ORDERED,
@@ -231,6 +233,10 @@ def _check_value(name: str, spec: Key, value) -> None:
         raise SceneError(f"{name} must be finite, got {value!r}")
     if not all(_within(spec, x) for x in items):
         raise SceneError(f"{name} must be {requirement(spec)}, got {_shown(value)}")
+    if any(math.isfinite(x) and x != 0 and not MIN_MAGNITUDE <= abs(x) <= MAX_MAGNITUDE
+           for x in items):
+        raise SceneError(f"{name} must lie within {MIN_MAGNITUDE:g} to {MAX_MAGNITUDE:g}"
+                         f"{_unit(spec, False)} in magnitude, got {_shown(value)}")
     if spec.nonzero and not any(items):
         raise SceneError(f"{name} must be a non-zero vector, got {value!r}")
 

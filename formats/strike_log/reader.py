@@ -40,6 +40,7 @@ from formats.strike_log.schema import (
     _check_strike_rows,
     _hdf5_errors,
     angles_to_directions,
+    check_time,
     directions_to_angles,
     mesh_checksum,
 )
@@ -245,6 +246,7 @@ class StrikeLog:
             raise StrikeLogError(f"{self._where}: negative beam index")
         _check_strike_rows(shot, beam, rng, n_shots=self.n_shots, n_beams=self.sensor.n_beams,
                            where=self._where, row0=start, previous_shot=previous_shot,
+                           range_min=self.sensor.range_min,
                            range_max=self.sensor.range_max)
         return shot.astype(np.int64), beam.astype(np.int64), rng
 
@@ -278,6 +280,17 @@ class StrikeLog:
         az, el = directions_to_angles(nominal)
         return angles_to_directions(az + d_az, el + d_el)
 
+    def check_time(self, chunk_rows: int = READ_CHUNK_ROWS) -> None:
+        """Check that the time of every shot is finite and strictly increases, reading the
+        time column alone block by block (shots that no strike uses included: a log whose
+        time does not increase is refused even when it holds no strikes)."""
+        previous_time = None
+        for start, stop in self._blocks(self.n_shots, chunk_rows):
+            with _hdf5_errors(self._where):
+                time = np.asarray(self._shots["time"][start:stop], dtype=np.float64)
+            check_time(time, self._where, start, previous_time)
+            previous_time = float(time[-1])
+
     def iter_chunks(self, chunk_rows: int = READ_CHUNK_ROWS, *, first: int = 0,
                     previous_shot: int | None = None) -> Iterator[StrikeChunk]:
         """Yield consecutive blocks of at most ``chunk_rows`` strikes with their shots.
@@ -285,8 +298,11 @@ class StrikeLog:
         Ordering and duplicate (shot, beam) pairs across block boundaries are checked too, and
         the shots against the shots of the block before, so a full pass makes every check of
         ``validate`` on the strikes and the shots they use. ``first`` is the first strike read;
-        ``previous_shot`` the shot of the strike before it.
+        ``previous_shot`` the shot of the strike before it. A pass from the first strike
+        checks the time of every shot first (``check_time``).
         """
+        if first == 0:
+            self.check_time(chunk_rows)
         previous_time = None
         carried = np.zeros(0, dtype=np.int64)
         for start, stop in self._blocks(self.n_strikes, chunk_rows, first):

@@ -12,6 +12,8 @@ from formats.errors import StrikeLogError
 
 FORMAT_NAME = "recon-strike-log"
 FORMAT_VERSION = 1
+# Suffixes a strike log is written under: it is an HDF5 file.
+LOG_SUFFIXES = (".h5", ".hdf5")
 
 # Largest chunk rows: 65,536 strike rows of float64 are 512 KiB, inside HDF5's default 1 MiB chunk
 # cache. A writer told the expected row counts uses chunks no longer than those (SPEC.md, Storage),
@@ -346,7 +348,14 @@ def _check_shot_rows(shots: Shots, where: str, row0: int, previous_time: float |
     _check_finite("sensor_position", shots.sensor_position, where)
     _check_quaternions("sensor_attitude", shots.sensor_attitude, where, row0)
     _check_quaternions("target_attitude", shots.target_attitude, where, row0)
-    t = shots.time if previous_time is None else np.concatenate([[previous_time], shots.time])
+    check_time(shots.time, where, row0, previous_time)
+
+
+def check_time(time: np.ndarray, where: str, row0: int, previous_time: float | None) -> None:
+    """Shot times ``time`` (n,) [s] of shots ``row0..`` are finite and strictly increase,
+    also from ``previous_time`` (the shot before ``row0``)."""
+    _check_finite("time", time, where)
+    t = time if previous_time is None else np.concatenate([[previous_time], time])
     steps = np.diff(t)
     if np.any(steps <= 0):
         bad = int(np.argmax(steps <= 0)) + row0 + (0 if previous_time is None else -1) + 1
@@ -355,9 +364,9 @@ def _check_shot_rows(shots: Shots, where: str, row0: int, previous_time: float |
 
 def _check_strike_rows(shot: np.ndarray, beam: np.ndarray, rng: np.ndarray, *, n_shots: int,
                        n_beams: int, where: str, row0: int, previous_shot: int | None,
-                       range_max: float = np.inf) -> None:
-    """Index ranges, ordering and positive finite ranges up to ``range_max`` (SPEC.md,
-    /strikes)."""
+                       range_min: float = 0.0, range_max: float = np.inf) -> None:
+    """Index ranges, ordering and positive finite ranges from ``range_min`` to ``range_max``
+    (SPEC.md, /strikes)."""
     if len(shot) and int(shot.max()) >= n_shots:
         bad = int(np.argmax(shot >= n_shots))
         raise StrikeLogError(f"{where}: strike {row0 + bad} has shot index {int(shot[bad])} out "
@@ -376,6 +385,10 @@ def _check_strike_rows(shot: np.ndarray, beam: np.ndarray, rng: np.ndarray, *, n
         bad = int(np.argmax(~(np.isfinite(rng) & (rng > 0))))
         raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r}, "
                              "expected a finite positive number of metres")
+    if len(rng) and rng.min() < range_min:
+        bad = int(np.argmax(rng < range_min))
+        raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
+                             f"below the sensor's range_min of {range_min!r} m")
     if len(rng) and rng.max() > range_max:
         bad = int(np.argmax(rng > range_max))
         raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "

@@ -335,6 +335,7 @@ class StrikeLogWriter(AtomicWriter):
             raise StrikeLogError(f"{where}: shot and beam indices must be non-negative")
         _check_strike_rows(shot, beam, rng, n_shots=self._n_shots, n_beams=self.sensor.n_beams,
                            where=where, row0=self._n_strikes, previous_shot=self._last_shot,
+                           range_min=self.sensor.range_min,
                            range_max=self.sensor.range_max)
         values = {"shot": shot.astype(np.uint32), "beam": beam.astype(np.uint32), "range": rng}
         if self.sensor.reports_angles != (azimuth_offset is not None

@@ -46,6 +46,10 @@ def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
+    # Every text is drawn as written: titles, labels and file names are the user's free text,
+    # and a '$' in them (`--title '$\frac{a}{$'`, a file named 'a$b.ply') is a dollar sign,
+    # not TeX for matplotlib's mathtext parser to fail on.
+    matplotlib.rcParams["text.parse_math"] = False
     import matplotlib.pyplot as plt
 
     return plt

@@ -34,7 +34,9 @@ from typing import Any
 
 import numpy as np
 
+from formats.atomic import write_text_atomically
 from formats.geometry import Mesh
+from formats.paths import output_directory
 from recon.experiments import charts
 from recon.experiments.cases import (
     BASE_COLUMNS,
@@ -239,7 +241,8 @@ def finish(records: list[dict], out_dir, *, title: str = "", extra: dict | None 
     summary = {"runs": ranked, "pareto_chamfer": fronts[CHAMFER],
                "pareto_fscore": fronts[FSCORE], **(extra or {})}
     json_path = out_dir / "results.json"
-    json_path.write_text(json.dumps(to_jsonable(summary), indent=2) + "\n")
+    write_text_atomically(json_path, json.dumps(to_jsonable(summary), indent=2) + "\n",
+                          error=MethodFailed)
     png_path = charts.speed_accuracy(ranked, out_dir / "speed_accuracy.png", title=title)
     return {"records": ranked, "table": format_table(ranked),
             "pareto_chamfer": fronts[CHAMFER], "pareto_fscore": fronts[FSCORE],
@@ -324,9 +327,10 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
     """
     from recon.inputs import load_truth, walk_early
     from recon.surfaces.isolation import start_workers, warm_truth
-    from recon.surfaces.prepare import load_prepared
+    from recon.surfaces.prepare import InputError, load_prepared
 
     runs = variants(names, grid=grid)
+    out_dir = output_directory(out_dir, InputError)   # before any work
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
         walk_early(input, truth)  # before the pool's launcher thread starts
@@ -334,7 +338,6 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
     options = score_options(samples)
     preparation = preparation or Preparation()
     limits = limits or Limits()
-    out_dir = Path(out_dir)
     truth_mesh = (load_truth(truth, scale=truth_scale) if isinstance(truth, str | os.PathLike)
                   else Mesh.of(truth, "truth"))
     if local:  # ... and make the truth ready for scoring while the cloud is prepared
@@ -359,8 +362,9 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
                         k=preparation.k, fallback=preparation.fallback, **limits.kwargs())
         verdict = agreement(report["records"], choice.run.key)
         report["auto"] = {"choice": choice.to_dict(), "agreement": verdict}
-        (out_dir / "auto.json").write_text(json.dumps(to_jsonable(report["auto"]), indent=2)
-                                           + "\n")
+        write_text_atomically(out_dir / "auto.json",
+                              json.dumps(to_jsonable(report["auto"]), indent=2) + "\n",
+                              error=MethodFailed)
         report["auto_text"] = format_choice(choice) + "\n" + format_agreement(verdict)
     if not any(r.get("status") == "ok" for r in report["records"]):
         kinds = sorted({str(r.get("failure")) for r in report["records"]})

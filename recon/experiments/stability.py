@@ -51,7 +51,9 @@ from pathlib import Path
 import numpy as np
 
 from formats import sigma_from_sigma3
+from formats.atomic import write_text_atomically
 from formats.errors import ReconError
+from formats.paths import output_directory
 from recon.experiments import charts
 from recon.experiments.cases import SWEEP_THREADS, score_options, variants, write_csv
 from recon.experiments.sweep import check_scheduler, default_workers, run_sweep, to_jsonable
@@ -384,7 +386,8 @@ def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
                                                   if r["method"] == m]))
                                 for m in dict.fromkeys(r["method"] for r in records)}}
     json_path = out_dir / "stability.json"
-    json_path.write_text(json.dumps(to_jsonable(summary), indent=2) + "\n")
+    write_text_atomically(json_path, json.dumps(to_jsonable(summary), indent=2) + "\n",
+                          error=StabilityError)
     pngs = []
     for method in dict.fromkeys(r["method"] for r in records):
         mine = [r for r in records if r["method"] == method]
@@ -454,6 +457,7 @@ def stability_input(source, out_dir, *, truth=None, truth_scale: float = 1.0,
     limits = limits or Limits()
     options = score_options(samples)
     check_scheduler(scheduler)
+    out_dir = output_directory(out_dir, StabilityError)   # before any work
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
         walk_early(source, truth)  # before the pool's launcher thread starts

@@ -32,6 +32,9 @@ OUTLIER_K = 20
 OUTLIER_STD = 2.0
 # Fewest points any method is given.
 MIN_POINTS = 16
+# Most voxels along a cloud's extent in voxel downsampling: voxel indices are int64, and a
+# billion voxels across is already finer than float64 coordinates of a 100 km target resolve.
+MAX_VOXELS_ACROSS = 1e9
 
 
 class InputError(ReconError, ValueError):
@@ -82,8 +85,12 @@ def voxel_downsample(points: np.ndarray, voxel: float, *, view_points: np.ndarra
     points : (m, 3) float64
     view_points : (m, 3) float64 or None
     """
-    if not voxel > 0:
+    if not (voxel > 0 and np.isfinite(voxel)):
         raise InputError(f"voxel must be a positive size in metres, got {voxel}")
+    extent = float(np.ptp(points, axis=0).max()) if len(points) else 0.0
+    if extent / voxel > MAX_VOXELS_ACROSS:
+        raise InputError(f"voxel {voxel:g} m is too small for the cloud: {extent:g} m across "
+                         f"would be more than {MAX_VOXELS_ACROSS:g} voxels")
     cells = np.floor((points - points.min(axis=0)) / voxel).astype(np.int64)
     _, inverse, count = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
@@ -187,7 +194,7 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
 
 
 def _check_voxel(voxel: float | None, name: str) -> None:
-    if voxel is not None and not voxel > 0:
+    if voxel is not None and not (voxel > 0 and np.isfinite(voxel)):
         raise InputError(f"{name} must be a positive size in metres, got {voxel:g}")
 
 

@@ -156,11 +156,14 @@ def test_files_that_do_not_stream(tmp_path, cloud):
 
 def test_truncated_binary_ply_is_one_line(tmp_path, cloud):
     from formats.cloud_io import stream_cloud
+    from formats.ply import read_header
 
     path = write_cloud(tmp_path / "c.ply", cloud)
+    body = path.stat().st_size - read_header(path).offset
     path.write_bytes(path.read_bytes()[:-100])
-    with pytest.raises(MeshFormatError, match=r"c\.ply: the header declares 2000 vertices but "
-                                              r"the file holds 1998"):
+    with pytest.raises(MeshFormatError, match=rf"c\.ply: the PLY header declares 2,000 vertex "
+                                              rf"elements \({body:,} bytes\) but the body "
+                                              rf"holds {body - 100:,} bytes"):
         stream_cloud(path, 300)
 
 

@@ -43,8 +43,10 @@ def _refuse(cloud: MethodInput) -> tuple[np.ndarray, np.ndarray]:
 
 for name, run, params in [
     ("test-abort", _abort, {}),
-    ("test-hang", _hang, {"seconds": Param(3600.0, float, "how long to hang")}),
-    ("test-hog", _hog, {"megabytes": Param(4096, int, "how much to allocate")}),
+    ("test-hang", _hang, {"seconds": Param(3600.0, float, "how long to hang", minimum=0.0,
+                                           maximum=86_400.0)}),
+    ("test-hog", _hog, {"megabytes": Param(4096, int, "how much to allocate", minimum=0,
+                                           maximum=1 << 20)}),
     ("test-empty", _empty, {}),
     ("test-flat", _flat, {}),
     ("test-refuse", _refuse, {}),

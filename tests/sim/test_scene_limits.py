@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 import sim
@@ -47,8 +49,21 @@ def test_a_limit_can_be_raised():
 
 
 def test_unbounded_shot_count_is_one_line():
-    with pytest.raises(SceneError, match=r"time.duration gives 1e\+300 s in steps of 1e-300 s"):
+    with pytest.raises(SceneError, match=r"time.step must lie within 1e-15 to 1e\+15 s in "
+                                         r"magnitude, got 1e-300"):
         sim.load_scene("asteroid-lrf", ["time.duration=1e300", "time.step=1e-300"])
+    with pytest.raises(SceneError, match=r"limits.rays = 1e\+10: this scene needs 1e\+30"):
+        sim.load_scene("asteroid-lrf", ["time.duration=1e15", "time.step=1e-15"])
+
+
+@pytest.mark.parametrize("override, key", [
+    ("orbit.radius=1e300", "orbit.radius"), ("orbit.period=1e-300", "orbit.period"),
+    ("target.semi_axes=[1e100, 1, 1]", "target.semi_axes"), ("orbit.density=1e300",
+                                                               "orbit.density")])
+def test_values_that_would_overflow_are_refused_naming_the_key(override, key):
+    with pytest.raises(SceneError, match=rf"^{re.escape(key)} must lie within 1e-15 to "
+                                         r"1e\+15 .*in magnitude, got"):
+        sim.load_scene("asteroid-lrf", [override])
 
 
 def test_seed_above_int64_is_refused(tmp_path):

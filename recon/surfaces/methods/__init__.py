@@ -117,14 +117,37 @@ class MethodInput:
 
 @dataclass(frozen=True)
 class Param:
-    """One method parameter: its default, type, a one-line meaning and its allowed values."""
+    """One method parameter: its default, type, a one-line meaning and its allowed values.
+
+    Every number is bounded: an ``int`` or ``float`` parameter gives ``choices`` or both
+    ``minimum`` and ``maximum`` (``Method`` refuses one without), so that a value that would
+    run out of memory or time (a Poisson depth of 100) is refused before any work, in the
+    process or isolated. ``math.inf`` is a bound only where infinity means something (a trim
+    that keeps everything).
+    """
 
     default: Any
     type: type
     doc: str
     choices: tuple | None = None
     minimum: float | None = None
+    maximum: float | None = None
     sequence: bool = False  # a comma-separated list of ``type`` (e.g. ball radii)
+
+    @property
+    def bounded(self) -> bool:
+        """Whether the allowed values are declared (numbers need bounds or choices)."""
+        if self.type not in (int, float) or self.choices is not None:
+            return True
+        return self.minimum is not None and self.maximum is not None
+
+    def allowed(self) -> str:
+        """The allowed values in words, e.g. ``1 to 12`` (empty when any value goes)."""
+        if self.choices is not None:
+            return "one of " + ", ".join(str(c) for c in self.choices)
+        if self.minimum is not None and self.maximum is not None:
+            return f"{self.minimum:g} to {self.maximum:g}"
+        return ""
 
     def parse(self, text: str, *, name: str, method: str) -> Any:
         """Convert ``text`` from the command line (``--param name=text``) and check it.
@@ -163,9 +186,10 @@ class Param:
             if self.choices is not None and item not in self.choices:
                 raise ParameterError(f"method {method!r}: parameter {name} must be one of "
                                      f"{self.choices}, got {item!r}")
-            if self.minimum is not None and not item >= self.minimum:
-                raise ParameterError(f"method {method!r}: parameter {name} must be >= "
-                                     f"{self.minimum}, got {item!r}")
+            if ((self.minimum is not None and not item >= self.minimum)
+                    or (self.maximum is not None and not item <= self.maximum)):
+                raise ParameterError(f"method {method!r}: parameter {name} must be from "
+                                     f"{self.allowed()}, got {item!r}")
             coerced.append(item)
         return tuple(coerced) if self.sequence else coerced[0]
 
@@ -223,6 +247,10 @@ class Method:
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
+        unbounded = [k for k, p in self.params.items() if not p.bounded]
+        if unbounded:
+            raise ValueError(f"method {self.name!r}: parameter {unbounded[0]!r} needs a minimum "
+                             "and a maximum (or choices)")
         object.__setattr__(self, "defaults", {k: p.default for k, p in self.params.items()})
 
     @property
@@ -398,7 +426,8 @@ def listing() -> str:
             lines.append(f"    default fit: {lidar:.2g} s (336k LIDAR), {lrf:.2g} s (77k LRF)")
         for key, param in spec.params.items():
             default = "auto" if param.default is None else param.default
-            lines.append(f"    {key} = {default}  ({param.doc})")
+            allowed = f"; {param.allowed()}" if param.allowed() else ""
+            lines.append(f"    {key} = {default}  ({param.doc}{allowed})")
         for overrides in spec.grid:
             lines.append(f"    grid: {' '.join(f'{k}={v}' for k, v in overrides.items())}")
     return "\n".join(lines)

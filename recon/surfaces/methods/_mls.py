@@ -12,17 +12,21 @@ import numpy as np
 
 from recon.surfaces.methods import MethodInput, Param
 from recon.surfaces.methods._backends import (
+    AUTO_RESOLUTION_RANGE,
     auto_resolution,
     meshlab_arrays,
     meshlab_call,
     meshlab_set,
 )
 
-# 2 and 200: MeshLab's defaults (print_filter_parameter_list).
-FILTER_SCALE = Param(2.0, float, "kernel support / local spacing", minimum=0.0)
+# 2 and 200: MeshLab's defaults (print_filter_parameter_list). A kernel of 50 spacings holds
+# thousands of neighbours per query and smooths away all but the target's outline.
+FILTER_SCALE = Param(2.0, float, "kernel support / local spacing", minimum=0.1, maximum=50.0)
 # None: one cell per spacing; MeshLab's default 200 gave 26x the faces for the same accuracy on a
-# 6000-point unit sphere (0.028% vs 0.016% of the diagonal, Chamfer).
-RESOLUTION = Param(None, int, "marching-cubes cells per side (default: automatic)", minimum=8)
+# 6000-point unit sphere (0.028% vs 0.016% of the diagonal, Chamfer). At most twice the top of
+# the automatic range (AUTO_RESOLUTION_RANGE): the grid holds up to resolution**3 cells.
+RESOLUTION = Param(None, int, "marching-cubes cells per side (default: automatic)", minimum=8,
+                   maximum=2 * AUTO_RESOLUTION_RANGE[1])
 GRID = ({"resolution": 200}, {"filter_scale": 4.0})
 
 

@@ -65,10 +65,12 @@ METHOD = register(Method(
     name="alpha-shape", run=run, kind="interpolating", preload=("open3d",),
     summary="Open3D alpha shape; alpha automatic or in multiples of the spacing",
     params={
+        # Up to 1000 spacings: the shape is the convex hull long before.
         "alpha": Param(None, float, "alpha radius / spacing (default: automatic)",
-                       minimum=0.0),
-        # 0.9: a surface through the samples uses nearly every one of them as a vertex.
+                       minimum=0.01, maximum=1000.0),
+        # 0.9: a surface through the samples uses nearly every one of them as a vertex; a
+        # fraction.
         "min_used": Param(0.9, float, "points the automatic alpha's shape must use",
-                          minimum=0.0),
+                          minimum=0.0, maximum=1.0),
     },
     grid=({"alpha": 1.5}, {"alpha": 6.0})))

@@ -37,5 +37,6 @@ METHOD = register(Method(
     name="apss", run=run, kind="smooth", preload=("pymeshlab",),
     summary="algebraic point set surfaces (pymeshlab), marching cubes",
     # 1: MeshLab's default (print_filter_parameter_list).
-    params=mls_params("spherical", Param(1.0, float, "0 = planes, 1 = spheres", minimum=0.0)),
+    params=mls_params("spherical", Param(1.0, float, "0 = planes, 1 = spheres", minimum=0.0,
+                                                   maximum=1.0)),
     grid=GRID))

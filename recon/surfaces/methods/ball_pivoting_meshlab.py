@@ -72,11 +72,14 @@ METHOD = register(Method(
     name="ball-pivoting-meshlab", run=run, kind="interpolating", preload=("pymeshlab",),
     summary="MeshLab ball pivoting (pymeshlab), one radius in multiples of the spacing",
     params={
+        # Up to 50 spacings: a ball that wide touches thousands of points per pivot.
         "radius": Param(None, float, "ball radius / spacing (default: automatic, 1.5, or "
-                        "8 x noise when larger)", minimum=0.0),
-        # 20 % and 90 deg: MeshLab's defaults (print_filter_parameter_list).
+                        "8 x noise when larger)", minimum=0.01, maximum=50.0),
+        # 20 % and 90 deg: MeshLab's defaults (print_filter_parameter_list); a percentage and
+        # an angle between two faces.
         "clustering": Param(20.0, float, "vertex clustering, percent of the radius",
-                            minimum=0.0),
-        "crease_angle": Param(90.0, float, "maximum crease angle [deg]", minimum=0.0),
+                            minimum=0.0, maximum=100.0),
+        "crease_angle": Param(90.0, float, "maximum crease angle [deg]", minimum=0.0,
+                              maximum=180.0),
     },
     grid=({"radius": 1.0}, {"radius": 3.0})))

@@ -202,7 +202,8 @@ METHOD = register(Method(
         # them, so seeds go as close to the surface as the noise allows. Measured on 6000
         # samples of the 2 x 1 x 0.5 box (Chamfer / diagonal, clean and with 0.01 noise):
         # kappa 1: 0.0003 / 0.0022, 1.5: 0.0007 / 0.0031, 2: 0.0015 / 0.0041.
-        "kappa": Param(1.0, float, "big ball radius / spacing", minimum=0.0),
+        # Up to 100 spacings: beyond, no Delaunay ball of a sampled surface is big.
+        "kappa": Param(1.0, float, "big ball radius / spacing", minimum=0.0, maximum=100.0),
         "denoise": Param(None, bool, "project onto robust local planes first (default: when "
                          "the noise exceeds a tenth of the spacing)"),
         "weighted": Param(True, bool, "weight the denoising by the recorded error model"),

@@ -167,7 +167,8 @@ METHOD = register(Method(
                               minimum=0, choices=tuple(range(8))),
         # 20 rounds: from an algebraic start biased by 5% uniform outliers (short axis 2.4 x
         # too long), 5 rounds leave it 1.2% off and 20 rounds 0.04%, as without outliers
-        # (measured on a 1 x 2 x 3.5 ellipsoid, 4000 points, noise 0.01).
-        "iterations": Param(20, int, "Sampson-reweighted robust rounds", minimum=0),
+        # (measured on a 1 x 2 x 3.5 ellipsoid, 4000 points, noise 0.01); at most 1000.
+        "iterations": Param(20, int, "Sampson-reweighted robust rounds", minimum=0,
+                            maximum=1000),
         "weighted": Param(True, bool, "weight points by the recorded sensor error model"),
     }))

@@ -282,11 +282,13 @@ METHOD = register(Method(
     params={
         # 30 neighbours: the biweight spatial kernel leaves about a third effective, enough to
         # cut normal-direction noise by ~3x while following the RSO's 5 m bus faces.
-        "k": Param(30, int, "neighbours per local plane", minimum=3),
-        # 2 rounds: the Tukey weights settle after two rounds on our clouds.
-        "iterations": Param(2, int, "robust reweighting rounds", minimum=0),
+        # At most 1000 neighbours: the neighbour table holds k indices per point.
+        "k": Param(30, int, "neighbours per local plane", minimum=3, maximum=1000),
+        # 2 rounds: the Tukey weights settle after two rounds on our clouds (at most 100).
+        "iterations": Param(2, int, "robust reweighting rounds", minimum=0, maximum=100),
+        # 0.01 to 100 spacings (run refuses more than 4000 cells across the cloud as well).
         "cell": Param(None, float, "grid cell / spacing (default: automatic, 1, or 2 x noise "
-                      "when larger)", minimum=0.0),
+                      "when larger)", minimum=0.01, maximum=100.0),
         # 1: the paper's plane. Order 2 removes the curvature bias (measured on a noise-free
         # unit sphere, 5000 points, k = 30: mean vertex error 0.0023 -> 0.0004) but follows
         # noise more (sigma 0.005: 0.0013 -> 0.0017 at 20000 points), so it is a grid option.

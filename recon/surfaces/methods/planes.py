@@ -294,15 +294,19 @@ METHOD = register(Method(
     summary="RANSAC + least-squares multi-plane segmentation, planar polygons (man-made targets)",
     params={
         # 1 x max(3 sigma, spacing): see the module docstring.
-        "threshold": Param(1.0, float, "inlier distance / max(3 noise, spacing)", minimum=0.0),
+        "threshold": Param(1.0, float, "inlier distance / max(3 noise, spacing)", minimum=0.0,
+                           maximum=100.0),
         # 30 deg: PCA normals of 16 neighbours stay within it at the paper's LRF noise.
-        "angle": Param(30.0, float, "inlier normal deviation [deg]", minimum=0.0),
+        "angle": Param(30.0, float, "inlier normal deviation [deg]", minimum=0.0,
+                       maximum=90.0),
         # 30 planes: RSO-A has 6 bus faces, 4 panel faces and a dish; room for small parts.
-        "max_planes": Param(30, int, "most planes found", minimum=1),
+        "max_planes": Param(30, int, "most planes found", minimum=1, maximum=1000),
         # 0.5 %: a 1 m x 1 m patch on RSO-A's ~300 m^2 of surface.
-        "min_fraction": Param(0.005, float, "smallest patch / points", minimum=0.0),
+        "min_fraction": Param(0.005, float, "smallest patch / points", minimum=0.0,
+                              maximum=1.0),
         # 256: see the module docstring (3% planes found with probability > 0.9995).
-        "hypotheses": Param(256, int, "RANSAC hypotheses per plane", minimum=1),
+        "hypotheses": Param(256, int, "RANSAC hypotheses per plane", minimum=1,
+                            maximum=100_000),
         "closure": Param("auto", str, "closed polyhedron, open polygons, or auto (if convex)",
                          choices=("auto", "closed", "open")),
     },

@@ -15,12 +15,20 @@ varying order and the same input gives meshes that differ in the last bits (meas
 
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
 
 from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
 from recon.surfaces.methods._backends import open3d_arrays, open3d_cloud
+
+# Deepest octree accepted (Poisson and screened Poisson). A depth-d octree fills its finest level
+# on a surface with about 4**d samples (4**14 = 2.7e8, beyond any cloud recon makes): deeper
+# levels add memory, not detail. Open3D's Poisson on 20,000 points of a unit sphere peaked at
+# 0.38 GB at depth 10, 0.63 GB at 12 and 0.92 GB at 14 (open3d 0.20); depth 100 ran out of
+# memory (23 GB) before returning.
+MAX_DEPTH = 14
 
 
 def trim_low_density(vertices: np.ndarray, faces: np.ndarray, density: np.ndarray, trim: float
@@ -80,12 +88,15 @@ METHOD = register(Method(
         # depth 8: best Chamfer at 5e4-2e5 points of the paper's ellipsoid with 0.3 m noise
         # (0.092 / 0.058 m; depth 10 fits the noise there: 0.094 / 0.089 m), measured on a
         # 2-core, 24 GiB machine with open3d 0.20.
-        "depth": Param(8, int, "octree depth (grid of up to 2**depth cells)", minimum=1),
-        # 1.1: Kazhdan's and Open3D's default.
-        "scale": Param(1.1, float, "reconstruction cube / bounding cube", minimum=1.0),
-        # 1.0: see the module docstring (half-sphere measurement).
+        "depth": Param(8, int, "octree depth (grid of up to 2**depth cells)", minimum=1,
+                       maximum=MAX_DEPTH),
+        # 1.1: Kazhdan's and Open3D's default; at 4 the points span a quarter of the cube and
+        # three quarters of the depth's resolution are spent on empty space.
+        "scale": Param(1.1, float, "reconstruction cube / bounding cube", minimum=1.0,
+                       maximum=4.0),
+        # 1.0: see the module docstring (half-sphere measurement); inf keeps every vertex.
         "trim": Param(1.0, float, "density drop below the median that trims a vertex",
-                      minimum=0.0),
+                      minimum=0.0, maximum=math.inf),
         "linear_fit": Param(False, bool, "linear interpolation of iso-vertices"),
     },
     grid=({"depth": 6}, {"depth": 7}, {"depth": 9}, {"depth": 10})))

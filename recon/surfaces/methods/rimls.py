@@ -36,6 +36,8 @@ def run(cloud: MethodInput, *, filter_scale: float, sigma_n: float, resolution: 
 METHOD = register(Method(
     name="rimls", run=run, kind="smooth", preload=("pymeshlab",),
     summary="robust implicit MLS (pymeshlab), marching cubes",
-    # 0.75: MeshLab's default (print_filter_parameter_list).
-    params=mls_params("sigma_n", Param(0.75, float, "normal reweighting width", minimum=0.0)),
+    # 0.75: MeshLab's default (print_filter_parameter_list); a width of 10 weighs every normal
+    # alike (the weights are exp(-(difference / sigma_n)**2) of unit-normal differences <= 2).
+    params=mls_params("sigma_n", Param(0.75, float, "normal reweighting width", minimum=0.0,
+                                       maximum=10.0)),
     grid=GRID))

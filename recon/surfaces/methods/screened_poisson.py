@@ -16,13 +16,14 @@ threads spin-waiting on a shared core).
 
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
 
 from recon.surfaces.methods import Method, MethodInput, Param, register
 from recon.surfaces.methods._backends import meshlab_arrays, meshlab_call, meshlab_set
-from recon.surfaces.methods.poisson import trim_low_density
+from recon.surfaces.methods.poisson import MAX_DEPTH, trim_low_density
 from recon.surfaces.uncertainty import weights
 
 
@@ -67,12 +68,16 @@ METHOD = register(Method(
     params={
         # depth 8: best Chamfer of the methods measured (0.086 m at 5e4 points of the paper's
         # ellipsoid, 0.3 m noise; pymeshlab 2025.7 on a 2-core, 24 GiB machine).
-        "depth": Param(8, int, "octree depth", minimum=1),
-        # 4 and 1.5: MeshLab's defaults (print_filter_parameter_list).
-        "point_weight": Param(4.0, float, "screening weight (0 = plain Poisson)", minimum=0.0),
-        "samples_per_node": Param(1.5, float, "minimum samples per node", minimum=1.0),
+        "depth": Param(8, int, "octree depth", minimum=1, maximum=MAX_DEPTH),
+        # 4 and 1.5: MeshLab's defaults (print_filter_parameter_list). The bounds: a weight of
+        # 1000 already makes the surface interpolate the points (250 x the default), and nodes
+        # of 100 samples are coarser than the surfaces our clouds resolve.
+        "point_weight": Param(4.0, float, "screening weight (0 = plain Poisson)", minimum=0.0,
+                              maximum=1000.0),
+        "samples_per_node": Param(1.5, float, "minimum samples per node", minimum=1.0,
+                                  maximum=100.0),
         "trim": Param(1.0, float, "density drop below the median that trims a vertex",
-                      minimum=0.0),
+                      minimum=0.0, maximum=math.inf),
         "weighted": Param(True, bool, "per-point confidence from the recorded error model"),
     },
     grid=({"depth": 6}, {"depth": 10}, {"samples_per_node": 5.0})))

@@ -157,7 +157,12 @@ def test_parameters_parse_check_and_default():
     ("poisson", ["depth"], "--param must be key=value"),
     ("poisson", ["colour=red"], "method 'poisson' has no parameter 'colour'"),
     ("poisson", ["depth=deep"], r"parameter depth='deep' is not an integer"),
-    ("poisson", ["depth=0"], "depth must be >= 1"),
+    ("poisson", ["depth=0"], "depth must be from 1 to 14, got 0"),
+    ("poisson", ["depth=100"], "depth must be from 1 to 14, got 100"),
+    ("screened-poisson", ["depth=15"], "depth must be from 1 to 14, got 15"),
+    ("ball-pivoting", ["radii=1,1e9"], r"radii must be from 0\.01 to 50, got 1000000000\.0"),
+    ("ellipsoid", ["iterations=1000000"], "iterations must be from 0 to 1000"),
+    ("poisson", ["scale=nan"], "scale must be from 1 to 4, got nan"),
     ("poisson", ["linear_fit=maybe"], "is not a bool"),
     ("planes", ["closure=ajar"], "closure must be one of"),
     ("ball-pivoting", ["radii=1,x"], "comma-separated list of numbers"),
@@ -165,6 +170,18 @@ def test_parameters_parse_check_and_default():
 def test_bad_parameters_are_named(method, pairs, match):
     with pytest.raises(ParameterError, match=match):
         methods.get(method).parse(pairs)
+
+
+def test_every_number_parameter_declares_its_bounds():
+    """A number parameter without bounds is refused when its method is made, and every
+    registered method's numbers carry them (or choices)."""
+    with pytest.raises(ValueError, match="parameter 'n' needs a minimum and a maximum"):
+        methods.Method(name="unbounded", run=lambda cloud, n: None,
+                       params={"n": methods.Param(1, int, "n", minimum=0)})
+    for name in methods.available(include_hidden=True):
+        for key, param in methods.get(name).params.items():
+            assert param.bounded and (param.type not in (int, float) or param.allowed()), \
+                (name, key)
 
 
 def test_resolve_rejects_unknown_names():
