@@ -17,7 +17,7 @@ Per cloud (``run_cloud``):
 1. ``recon.experiments.compare.compare`` runs every listed method at its defaults and its grid,
    plus the unweighted twin of each method that weights points by the recorded error model
    (``WEIGHTED_METHODS``, ``weighted=false``), isolated, scored against the simulator's truth;
-2. ``recon.experiments.auto.choose`` picks a run without the truth (its ladder, its reason);
+2. ``recon.surfaces.auto.choose`` picks a run without the truth (its ladder, its reason);
 3. the agreement: auto's F-score against the best (within ``F_TOLERANCE``), its Chamfer
    distance against the best (within ``CHAMFER_TOLERANCE``), and against the median run;
    auto's wall time over compare's on the same cloud, both measured in this run.
@@ -240,7 +240,7 @@ def compare_cloud(cloud: SuiteCloud, args):
 
 def run_cloud(cloud: SuiteCloud, args) -> dict:
     """Compare, auto and their agreement on one cloud (module docstring)."""
-    from recon.experiments.auto import choose
+    from recon.surfaces.auto import choose
 
     points, prepared, report, timing = compare_cloud(cloud, args)
     names = args.methods or (QUICK_METHODS if args.quick else None)
@@ -256,11 +256,11 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
             "errors": cloud.errors, "density": cloud.density, "n_points": len(points.points),
             "spacing_m": prepared.spacing, "noise_m": prepared.noise,
             "auto": {"label": choice.label, "reason": choice.reason,
-                     "fits": sum(c["status"] != "skipped" for c in choice.candidates)},
+                     "fits": sum(c.status != "skipped" for c in choice.candidates)},
             "verdict": verdict(records, choice.run.key), "weighting": weighting(records),
             "compare_s": timing["compare_s"], "auto_s": timing["auto_s"],
             "cost_ratio": timing["auto_s"] / timing["compare_s"],
-            "fit_ratio": sum(c["fit_s"] or 0.0 for c in choice.candidates)
+            "fit_ratio": sum(c.fit_s or 0.0 for c in choice.candidates)
             / timing["compare_fit_s"],
             "ranking": [{"label": r["label"], "chamfer_m": r["chamfer_m"],
                          "fscore": r.get("fscore"), "n_faces": r.get("n_faces"),

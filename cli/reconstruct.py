@@ -214,7 +214,7 @@ def run_reconstruct(args) -> int:
                "isolate": not args.in_process}
     with _StageBar(args.method) as bar:
         if auto:
-            from recon.experiments.auto import choose_and_reconstruct
+            from recon.surfaces.auto import choose_and_reconstruct
 
             summary = choose_and_reconstruct(args.input, args.output,
                                              methods=args.auto_methods,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recon.experiments.auto import AutoError, choose, format_choice, select
+from recon.surfaces.auto import AutoError, choose, format_choice, select
 from recon.surfaces.methods import MethodFailed
 from tests.recon.conftest import box_points, ellipsoid_points
 
@@ -49,7 +49,7 @@ def test_a_mesh_with_holes_pays_for_the_beams_it_misses():
 
 
 def test_the_ladder_runs_coarse_to_fine_and_stops():
-    from recon.experiments.auto import LADDER, MAX_FITS
+    from recon.surfaces.auto import LADDER, MAX_FITS
 
     points, view, _ = ellipsoid_points(3000, noise=0.005, seed=4)
     choice = choose(points, view_points=view,
@@ -122,7 +122,7 @@ def test_bad_options_are_named(kwargs, match):
 
 
 def test_heldout_geometry_measures_distances_and_which_beams_hit():
-    from recon.experiments.auto import heldout_geometry
+    from recon.surfaces.auto import heldout_geometry
 
     # The plane z = 0 over [-1, 1]^2; beams come in at 45 degrees from above.
     vertices = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=float)
@@ -140,7 +140,7 @@ def test_heldout_geometry_measures_distances_and_which_beams_hit():
 
 
 def test_heldout_errors_cost_a_full_cap_where_the_beam_misses():
-    from recon.experiments.auto import heldout_errors
+    from recon.surfaces.auto import heldout_errors
 
     vertices = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=float)
     faces = np.array([[0, 1, 2], [0, 2, 3]])
@@ -154,7 +154,7 @@ def test_heldout_errors_cost_a_full_cap_where_the_beam_misses():
 
 
 def test_strike_sigma_grows_with_incidence_as_the_error_model_says():
-    from recon.experiments.auto import strike_sigma
+    from recon.surfaces.auto import strike_sigma
 
     columns = {"sigma_along": np.array([0.1, 0.1]), "sigma_across": np.array([0.2, 0.2]),
                "dilation_along": np.zeros(2), "dilation_across": np.zeros(2)}
@@ -167,7 +167,7 @@ def test_strike_sigma_grows_with_incidence_as_the_error_model_says():
 
 
 def test_closed_allows_non_manifold_edges_but_no_border():
-    from recon.experiments.auto import closed
+    from recon.surfaces.auto import closed
     from tests.recon.conftest import box_mesh
 
     _, faces = box_mesh()
