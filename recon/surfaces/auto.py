@@ -408,9 +408,9 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
     """The reason in words: what was chosen, open or closed, the statistic and the band, and
     what decided among the candidates in the band (only what the rule actually did)."""
     c, b = candidates[selection.chosen], candidates[selection.best]
-    shape = "closed" if c.closed else "open"
+    shape = "a closed" if c.closed else "an open"
     se = b.chi2_se
-    text = (f"chose {c.label}, a {shape} surface ({c.n_params:,} parameters, {c.n_faces:,} "
+    text = (f"chose {c.label}, {shape} surface ({c.n_params:,} parameters, {c.n_faces:,} "
             f"faces): held-out chi-square {c.chi2:.3g} per strike (1 = at the recorded noise), "
             f"{c.violated:.1%} of beams cut before their strike, {c.holes:.1%} of strikes in "
             f"holes")

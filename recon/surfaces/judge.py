@@ -501,12 +501,13 @@ class HeldOut:
     block: np.ndarray
 
 
-def _voxel_weights(points: np.ndarray, edge: float) -> np.ndarray:
-    """Per-point weights 1 / (points in its voxel of ``edge`` metres), normalised to sum 1:
-    each occupied voxel of the surface counts once, however densely it was struck."""
-    cells = np.floor((points - points.min(axis=0)) / edge).astype(np.int64)
-    _, inverse, count = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
-    w = 1.0 / count[inverse.ravel()]
+def _area_weights(points: np.ndarray, reach: float) -> np.ndarray:
+    """Per-point weights 1 / (points within ``reach`` metres), normalised to sum 1: each patch
+    of the struck surface counts by its area, however densely it was struck."""
+    from scipy.spatial import cKDTree
+
+    count = cKDTree(points).query_ball_point(points, reach, return_length=True, workers=-1)
+    w = 1.0 / np.maximum(count, 1)
     return w / w.sum()
 
 
@@ -519,9 +520,10 @@ def _error_band(d2: np.ndarray, s2: np.ndarray, w: np.ndarray, *, heldout: bool,
         _, se = block_mean_se((d2 - s2) * w * len(w), block)
         return (np.sqrt(max(excess, 0.0)), np.sqrt(max(excess - 2 * se, 0.0)),
                 np.sqrt(max(excess + 2 * se, 0.0)))
+    se = float(np.sqrt(np.sum(w**2 * (d2 - s2 - excess) ** 2)))
     variance = float(np.sum(w * s2))
-    return (np.sqrt(abs(excess)), np.sqrt(max(excess, 0.0)),
-            np.sqrt(max(excess + 2 * variance, 0.0)))
+    return (np.sqrt(abs(excess)), np.sqrt(max(excess - 2 * se, 0.0)),
+            np.sqrt(max(excess + 2 * variance + 2 * se, 0.0)))
 
 
 def _hit_fraction(tau: float, rms: float) -> float:
@@ -586,9 +588,9 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     """Predict a surface's Chamfer distance and F-score against the unknown truth.
 
     **Where there are strikes** they are noisy samples of the truth, and the recorded error
-    model says how noisy. With ``d`` a strike's closest-point distance to the surface and
-    ``sigma`` its recorded error along the surface normal, the squared surface error there is
-    ``d^2 - sigma^2``:
+    model says how noisy (without one, the cloud's local-plane scatter). With ``d`` a strike's
+    closest-point distance to the surface and ``sigma`` its recorded error along the surface
+    normal, the squared surface error there is ``d^2 - sigma^2``:
 
     - **held-out** (``heldout`` given: strikes the surface was not fitted on, their noise
       independent of it): ``e^2 = mean(d^2) - mean(sigma^2)``, band +-2 block-level standard
@@ -596,12 +598,12 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     - **in-sample** (the strikes it was fitted on): a fit with ``p`` effective parameters per
       strike absorbs a fraction ``p`` of the noise, ``mean(d^2) = sigma^2 (1 - p) + b^2`` and
       ``e^2 = b^2 + p sigma^2``; ``p`` in [0, 1] bounds ``e^2`` by
-      ``[mean(d^2) - sigma^2, mean(d^2) + sigma^2]``, and ``|mean(d^2) - sigma^2|`` is the
-      central value (exact for a noise-free model, and for an interpolant: ``d = 0``,
-      ``e = sigma``).
+      ``[mean(d^2) - sigma^2, mean(d^2) + sigma^2]`` (widened by 2 standard errors of the
+      mean), and ``|mean(d^2) - sigma^2|`` is the central value (exact for a noise-free model,
+      and for an interpolant: ``d = 0``, ``e = sigma``).
 
-    Means are area-weighted (one weight per occupied voxel of the support reach ``max(tau,
-    3 noise, 2 spacings)``) over the strikes with a surface within their tolerance; the
+    Means are area-weighted (each strike by one over the strikes within the support reach
+    ``max(tau, 3 noise, 2 spacings)``) over the strikes with a surface within their tolerance; the
     others are **holes**, a fraction ``h`` of the struck area whose distance to the surface is
     their mean distance ``D``. The mean error ``E`` is taken between ``MEAN_OVER_RMS`` times the
     RMS (a Gaussian error) and the RMS (a constant offset), central halfway.
@@ -647,12 +649,16 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     tree = cKDTree(strikes.points)
     probe = strikes.points[subsample(len(strikes), MAX_CHECKED, seed)]
     spacing = float(np.median(tree.query(probe, k=2, workers=-1)[0][:, 1]))
-    noise = strikes.noise() or 0.0
+    noise = strikes.noise()
+    if noise is None:   # no recorded error model: the cloud's local-plane scatter
+        from recon.surfaces.normals import noise_scale
+
+        noise = noise_scale(probe)
     reach = max(tau, SIGMAS * noise, COVERAGE_SPACINGS * spacing)
     checked = strikes.take(subsample(len(strikes), MAX_CHECKED, seed))
     caster = Caster(vertices, faces)
     result = check(checked, caster, tau=tau, noise=noise)
-    w = _voxel_weights(checked.points, reach)
+    w = _area_weights(checked.points, reach)
     hole = result.hole
     h = float(np.sum(w[hole]))
     hole_distance = float(np.sum(w[hole] * result.distance[hole]) / h) if h > 0 else 0.0
