@@ -544,15 +544,18 @@ class _Unsupported:
     ``gap`` to the other surface and ``rho`` to the nearest strike [m]. The truth passes
     through that strike, so near a far sample it lies within ``rho`` of it: the sample's
     distance to the truth is within ``gap +- rho`` of its distance to the proxy, and (for
-    ``bounded``, a sample of the judged surface itself) at most ``rho``."""
+    ``bounded``, a sample of the judged surface itself) at most ``rho``. Unseen truth (not
+    ``bounded``) may also lie beyond the strikes' hull, as far as the target's ``scale``: the
+    high edge is at least that."""
 
     share: float
     gap: np.ndarray
     rho: np.ndarray
     bounded: bool
+    scale: float
 
     def _range(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        high = self.rho if self.bounded else self.gap + self.rho
+        high = self.rho if self.bounded else np.maximum(self.gap + self.rho, self.scale)
         return np.minimum(self.gap, high), np.maximum(self.gap - self.rho, 0.0), high
 
     def mean(self) -> tuple[float, float, float]:
@@ -571,7 +574,7 @@ class _Unsupported:
 
 
 def _unsupported(vertices, faces, tree, reach: float, other: Caster, seed: int, *,
-                 bounded: bool) -> _Unsupported:
+                 bounded: bool, scale: float = 0.0) -> _Unsupported:
     """Area samples of (vertices, faces) farther than ``reach`` from every strike (``tree``),
     with their distances to the surface ``other``."""
     from metrics import Mesh, sample_surface
@@ -580,7 +583,7 @@ def _unsupported(vertices, faces, tree, reach: float, other: Caster, seed: int, 
     rho, _ = tree.query(samples, workers=-1)
     far = rho > reach
     return _Unsupported(float(far.mean()), other.distance(samples[far]) if far.any()
-                        else np.zeros(0), rho[far], bounded)
+                        else np.zeros(0), rho[far], bounded, scale)
 
 
 def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int = 0
@@ -614,7 +617,9 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     every strike (fraction ``u``) is as far from the truth as from the hull, ``G``, with band
     ``[G - rho, rho]`` (never more than ``rho``); the hull's area farther than the reach from
     every strike (fraction ``v``) stands for unseen truth, as far from the surface as the hull
-    is, ``H``, band ``H +- rho``. Then:
+    is, ``H``, band from ``H - rho`` to the larger of ``H + rho`` and the bounding-box diagonal
+    of the strikes and the surface (the unseen truth may extend beyond the strikes' hull: a cap
+    struck on one side of a body says nothing of its far side). Then:
 
     - accuracy (surface to truth) = ``(1 - u) E + u G``;
     - completeness (truth to surface) = ``(1 - v) ((1 - h) E + h D) + v H``;
@@ -623,9 +628,12 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
       ``(1 - v) (1 - h) P(|e| <= tau) + v P(H <= tau)``, with ``e`` Gaussian of the RMS error,
       F = 2PR / (P + R), tau 1% of the cloud's diagonal.
 
-    The band's edges take every part at its own edge. The hull proxy is good for convex and
-    mildly concave bodies; across a deep concavity (between a satellite's panels and its bus)
-    it stands for truth that is not there.
+    The band's edges take every part at its own edge: narrow where the strikes cover the
+    target, as wide as the target where they do not. The hull proxy of the central value is
+    good for convex and mildly concave bodies seen all round; across a deep concavity (between
+    a satellite's panels and its bus) it stands for truth that is not there, and on a body
+    struck on one side it misses the far side (the central value then favours surfaces that
+    hug the strikes).
 
     Parameters
     ----------
@@ -680,7 +688,10 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     hull_faces = hull.simplices.astype(np.int64)
     bare = _unsupported(vertices, faces, tree, reach, Caster(hull.points, hull_faces), seed,
                         bounded=True)
-    unseen = _unsupported(hull.points, hull_faces, tree, reach, caster, seed, bounded=False)
+    both = np.vstack([strikes.points, vertices])
+    scale = float(np.linalg.norm(np.ptp(both, axis=0)))
+    unseen = _unsupported(hull.points, hull_faces, tree, reach, caster, seed, bounded=False,
+                          scale=scale)
     u, v = bare.share, unseen.share
     accuracy = [(1 - u) * e + u * g for e, g in zip(error, bare.mean(), strict=True)]
     completeness = [(1 - v) * ((1 - h) * e + h * hole_distance) + v * g
