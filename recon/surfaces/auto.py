@@ -236,14 +236,16 @@ class _Context:
 
 @dataclass(frozen=True)
 class Selection:
-    """``select``'s answer: the chosen index, the band's upper edge, whether closed candidates
-    came first, and the candidates within the band."""
+    """``select``'s answer: the chosen index, the best's, the band's upper edge, whether closed
+    candidates came first, the candidates within the band, and the smallest of them whatever
+    its shape (the choice had closed candidates not come first)."""
 
     chosen: int
     best: int
     threshold: float
     closed_first: bool
     eligible: tuple[int, ...]
+    smallest: int
 
 
 def closed(faces: np.ndarray) -> bool:
@@ -401,7 +403,8 @@ def select(candidates: list[Candidate], *, coverage: float = float("nan")) -> Se
                                                              for i in eligible)
     chosen = min(eligible, key=lambda i: (closed_first and not candidates[i].closed,
                                           candidates[i].n_params, candidates[i].chi2))
-    return Selection(chosen, best, threshold, closed_first, eligible)
+    smallest = min(eligible, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
+    return Selection(chosen, best, threshold, closed_first, eligible, smallest)
 
 
 def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
@@ -415,10 +418,12 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
             f"{c.violated:.1%} of beams cut before their strike, {c.holes:.1%} of strikes in "
             f"holes")
     others = len(selection.eligible) - 1
+    decided = selection.smallest != selection.chosen   # closed first changed the choice
     if selection.chosen == selection.best:
         text += ("; the lowest held-out statistic" + (
             f"; the {others} other candidate(s) within one block standard error ({se:.2g}) "
-            "are larger models" if others else
+            + ("include a smaller open model" if decided else "are larger models")
+            if others else
             f"; no other candidate is within one block standard error ({se:.2g})"))
     else:
         rule = ("the smallest closed model" if selection.closed_first and c.closed
@@ -431,9 +436,11 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
                  "it follows part of the noise")
     if np.isfinite(coverage):
         text += f". The strikes cover {coverage:.0%} of the best closed surface"
-        if selection.closed_first:
-            text += ("; below the complete coverage, where no strike says where the surface "
-                     "is, closed candidates in the band were preferred")
+    if decided:
+        smaller = candidates[selection.smallest]
+        text += (f"; below the complete coverage, where no strike says where the surface is, "
+                 f"closed candidates in the band were preferred: the smaller {smaller.label} "
+                 f"({smaller.n_params:,} parameters) is open")
     return text
 
 
@@ -531,7 +538,7 @@ def format_choice(choice: AutoChoice) -> str:
         elif not c.scored:
             lines.append(f"{start} FAILED: {c.reason[:50]}")
         else:
-            lines.append(f"{start} {c.chi2:>7.3g} {c.chi2_se:>6.2g} {c.chi_fit:>7.2g} "
+            lines.append(f"{start} {c.chi2:>7.3g} {round(c.chi2_se, 9):>6.2g} {c.chi_fit:>7.2g} "
                          f"{c.violated:>6.1%} {c.holes:>6.1%} {c.n_params:>8d} {c.n_faces:>8d}")
     split = choice.split
     lines.append(f"(chi2: held-out chi-square per strike over {split.n_blocks} blocks of "

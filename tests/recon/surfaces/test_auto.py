@@ -144,6 +144,19 @@ def test_the_reason_says_when_closed_models_were_preferred():
     assert "within one block standard error (0.05) of the best, open" in reason
 
 
+def test_the_reason_names_a_smaller_open_model_set_aside_for_the_best_closed_one():
+    from recon.surfaces.auto import explain
+
+    candidates = [_candidate("closed best", 1.0, 50_000, se=0.05),
+                  _candidate("open small", 1.02, 500, closed=False)]
+    selection = select(candidates, coverage=0.5)
+    assert selection.chosen == selection.best == 0
+    reason = explain(candidates, selection, 0.5)
+    assert "the lowest held-out statistic" in reason and "larger models" not in reason
+    assert "include a smaller open model" in reason
+    assert "the smaller open small (500 parameters) is open" in reason
+
+
 def test_select_fails_when_every_candidate_failed():
     with pytest.raises(MethodFailed, match="auto: every candidate failed: x: crashed"):
         select([_candidate("x", None, 0)])
