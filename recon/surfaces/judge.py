@@ -264,7 +264,7 @@ def pass_split(cloud: Cloud, holdout: float, *, noise: float | None = None, seed
     tested = inside & (position >= margin) & (position < block_shots - margin)
     test = np.flatnonzero(tested)
     return Split(train=np.flatnonzero(~inside), test=test, block=index[test],
-                 n_blocks=n_blocks, block_shots=block_shots, margin=margin, step_m=step)
+                 n_blocks=n_blocks, block_shots=block_shots, margin=margin, step_m=float(step))
 
 
 @dataclass(frozen=True)
