@@ -27,7 +27,7 @@ Clouds (each simulated with seed 0, then ingested; noise is the paper's LRF rang
 For each cloud ``recon.experiments.compare.compare`` runs every method at its defaults and its
 parameter
 grid, isolated and on a local Dask cluster, scored against the simulator's truth mesh; then
-``recon.experiments.auto.choose`` picks a run without the truth, and its place in the truth ranking
+``recon.surfaces.auto.choose`` picks a run without the truth, and its place in the truth ranking
 is
 recorded (how often ``-m auto`` agrees with the truth). Written to ``--out`` (default
 ``benchmarks/out/compare``): per cloud the comparison's files, and ``summary.json`` /
@@ -76,10 +76,10 @@ def simulate(name: str, out: Path, clouds: dict | None = None) -> Path:
 
 def run_cloud(name: str, args) -> dict:
     from formats import StrikeLog
-    from recon.experiments.auto import choose, format_choice
     from recon.experiments.cases import score_options, variants
     from recon.experiments.compare import agreement, compare
     from recon.registration.ingest import ingest
+    from recon.surfaces.auto import choose, format_choice
     from recon.surfaces.methods import bind
     from recon.surfaces.prepare import prepare
 

@@ -468,7 +468,7 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
             "n_points": len(points.points),
             "spacing_m": prepared.spacing, "noise_m": prepared.noise,
             "auto": {"label": choice.label, "reason": choice.reason, "key": choice.run.key,
-                     "fits": sum(c["status"] != "skipped" for c in choice.candidates),
+                     "fits": sum(c.status != "skipped" for c in choice.candidates),
                      "predicted": predicted["runs"].get(choice.run.key),
                      "chamfer_m": truth.get(choice.run.key)},
             "predicted": {"estimator": predicted["estimator"], "note": predicted["note"],
@@ -479,7 +479,7 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
             "verdict": verdict(records, choice.run.key), "weighting": weighting(records),
             "compare_s": timing["compare_s"], "auto_s": timing["auto_s"],
             "cost_ratio": timing["auto_s"] / timing["compare_s"],
-            "fit_ratio": sum(c["fit_s"] or 0.0 for c in choice.candidates)
+            "fit_ratio": sum(c.fit_s or 0.0 for c in choice.candidates)
             / timing["compare_fit_s"],
             "ranking": [{"label": r["label"], "chamfer_m": r["chamfer_m"],
                          "fscore": r.get("fscore"), "n_faces": r.get("n_faces"),

@@ -71,7 +71,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Reconstruct a triangle mesh from a point cloud (or a strike log, ingested "
                     "on the fly) with one method, run in its own process with time and memory "
                     "limits. '-m auto' chooses the method and resolution without the truth and "
-                    "says why. '--list-methods' lists the methods, their parameters and what "
+                    "says why. Every surface comes with a predicted Chamfer distance and F-score "
+                    "(a band, from the strikes and their rays, without the truth). "
+                    "'--list-methods' lists the methods, their parameters and what "
                     "each default costs. " + COST_HELP)
     p.add_argument("input", nargs="?", metavar="INPUT",
                    help="point cloud (.ply, .las, .laz, .h5, .xyz, .pcd, .e57...) or strike log")
@@ -85,7 +87,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_list_option(p, "--auto-methods", metavar="METHOD",
                     help="restrict -m auto's candidate ladder to these methods (default: all)")
     p.add_argument("--holdout", type=float, default=0.1,
-                   help="fraction of points -m auto holds out (default: %(default)s)")
+                   help="fraction of shots -m auto holds out, in whole passes "
+                        "(default: %(default)s)")
     p.add_argument("--in-process", action="store_true",
                    help="run the method in this process (no isolation; a crash ends recon)")
     _add_closing_options(p, preprocessing=True, sweep=False)
@@ -192,6 +195,17 @@ def _print_json(value) -> None:
     print(json.dumps(to_jsonable(value), indent=2, default=str))
 
 
+def _estimate_line(estimate: dict) -> str:
+    """The truth-free predicted Chamfer distance and F-score of a reconstruction, one line."""
+    return (f"predicted without the truth ({estimate['source']} residuals): Chamfer "
+            f"{estimate['chamfer_m']:.3g} m [{estimate['chamfer_low_m']:.3g}, "
+            f"{estimate['chamfer_high_m']:.3g}], F-score at {estimate['tau_m']:.3g} m "
+            f"{estimate['fscore']:.3f} [{estimate['fscore_low']:.3f}, "
+            f"{estimate['fscore_high']:.3f}]; {estimate['unsupported']:.0%} of the surface far "
+            f"from any strike, {estimate['holes']:.1%} of strikes in holes, "
+            f"{estimate['violated']:.1%} of beams cut before their strike")
+
+
 def run_reconstruct(args) -> int:
     from recon.surfaces import methods
     from recon.surfaces.prepare import InputError
@@ -214,7 +228,7 @@ def run_reconstruct(args) -> int:
                "isolate": not args.in_process}
     with _StageBar(args.method) as bar:
         if auto:
-            from recon.experiments.auto import choose_and_reconstruct
+            from recon.surfaces.auto import choose_and_reconstruct
 
             summary = choose_and_reconstruct(args.input, args.output,
                                              methods=args.auto_methods,
@@ -231,6 +245,7 @@ def run_reconstruct(args) -> int:
         print(f"{summary['method']}: {summary['n_faces']} faces "
               f"({'watertight' if summary['watertight'] else 'open'}) in "
               f"{summary['wall_time_s']:.2f} s; wrote {args.output}")
+        print(_estimate_line(summary["estimate"]))
     return 0
 
 

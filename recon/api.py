@@ -261,12 +261,16 @@ def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None
     Returns
     -------
     recon.surfaces.reconstruct.Surface
-        A ``Mesh`` with ``method``, resolved ``params`` and run ``info``.
+        A ``Mesh`` with ``method``, resolved ``params`` and run ``info``; ``info["estimate"]``
+        is the truth-free predicted Chamfer distance and F-score with their band
+        (``recon.surfaces.judge.estimate``; for ``"auto"`` from the chosen candidate's held-out
+        passes).
     """
-    from recon.experiments.auto import HOLDOUT_FRACTION, choose_for
+    from recon.surfaces.auto import HOLDOUT_FRACTION, choose_for
     from recon.surfaces.isolation import Limits
     from recon.surfaces.methods import bind
     from recon.surfaces.prepare import Preparation, load_prepared
+    from recon.surfaces.reconstruct import estimate_of
     from recon.surfaces.reconstruct import reconstruct as run_method
 
     preparation = Preparation(remove_outliers=remove_outliers, voxel=voxel, fallback=orient,
@@ -286,6 +290,9 @@ def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None
         run = choice.run
     surface = run_method(prepared, method=run, isolate=isolate, **limits.kwargs())
     surface.frame = cloud.frame  # so that scoring against a truth in another frame is refused
+    surface.info["estimate"] = estimate_of(
+        surface, cloud, heldout=None if choice is None else choice.chosen.heldout,
+        seed=seed).to_dict()
     if choice is not None:
         surface.info["auto"] = choice.to_dict()
     return surface

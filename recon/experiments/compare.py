@@ -307,7 +307,7 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
     samples : int, optional
         Surface samples per side when scoring (``recon.experiments.cases.score_options``).
     auto : bool
-        Also run ``-m auto``'s choice (``recon.experiments.auto.choose``: its ladder, restricted
+        Also run ``-m auto``'s choice (``recon.surfaces.auto.choose``: its ladder, restricted
         to ``names``) and record where it ranks on the truth: ``DIR/auto.json``.
     scheduler, n_workers, resume, keep_meshes
         See ``compare``.
@@ -355,7 +355,7 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
                                   "normals_k": preparation.k},
                      **limits.kwargs())
     if auto:
-        from recon.experiments.auto import choose, format_choice
+        from recon.surfaces.auto import choose, format_choice
 
         choice = choose(cloud.points, view_points=cloud.view_points,
                         uncertainty=cloud.attributes, methods=names, seed=preparation.seed,

@@ -35,6 +35,8 @@ MIN_POINTS = 16
 # Most voxels along a cloud's extent in voxel downsampling: voxel indices are int64, and a
 # billion voxels across is already finer than float64 coordinates of a 100 km target resolve.
 MAX_VOXELS_ACROSS = 1e9
+# Attributes that say when and by which beam a strike was taken (ingest writes them).
+ORDER_COLUMNS = ("time", "shot", "beam")
 
 
 class InputError(ReconError, ValueError):
@@ -121,11 +123,13 @@ def preprocess(cloud: Cloud, *, remove_outliers: bool = False, outlier_k: int = 
     Cloud
         Points and (when the input had them) view points and, without downsampling, the
         uncertainty columns (``recon.surfaces.uncertainty``; a voxel mean has no recorded
-        error); other attributes are dropped.
+        error) and ``ORDER_COLUMNS`` (when and by which beam each strike was taken: the
+        held-out passes of ``recon.surfaces.auto``); other attributes are dropped.
     """
     points = cloud.points
     view = cloud.view_points
-    sigmas = {k: cloud.attributes[k] for k in SIGMA_COLUMNS if k in cloud.attributes}
+    sigmas = {k: cloud.attributes[k] for k in (*SIGMA_COLUMNS, *ORDER_COLUMNS)
+              if k in cloud.attributes}
     if remove_outliers:
         keep = remove_statistical_outliers(points, k=outlier_k, std_ratio=outlier_std)
         points = points[keep]
@@ -164,6 +168,10 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
     Returns
     -------
     MethodInput
+        Its ``noise`` is the recorded noise length when ``uncertainty`` records one (the median
+        1-sigma error along the beam: range and pose knowledge), else the median local-plane
+        scatter. The recorded value is the better one: on a single-beam track the local plane
+        contains the beam and reads a scatter far below the range noise.
     """
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
@@ -184,13 +192,16 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
     if not spacing > 0:
         raise InputError("all points coincide: nothing to reconstruct")
     sigma = None
-    if uncertainty is not None and view_points is not None and \
-            all(key in uncertainty for key in SIGMA_COLUMNS):
-        sigma = normal_sigma(normals, np.asarray(view_points, dtype=np.float64), points,
-                             uncertainty)
-    return MethodInput(points=points, normals=normals, spacing=spacing,
-                       noise=float(np.median(planes.noise)), seed=int(seed),
-                       neighbours=planes.neighbours, sigma=sigma)
+    noise = float(np.median(planes.noise))
+    if uncertainty is not None and all(key in uncertainty for key in SIGMA_COLUMNS):
+        if view_points is not None:
+            sigma = normal_sigma(normals, np.asarray(view_points, dtype=np.float64), points,
+                                 uncertainty)
+        along = np.asarray(uncertainty["sigma_along"], dtype=np.float64)
+        if along.any():
+            noise = float(np.median(along))
+    return MethodInput(points=points, normals=normals, spacing=spacing, noise=noise,
+                       seed=int(seed), neighbours=planes.neighbours, sigma=sigma)
 
 
 def _check_voxel(voxel: float | None, name: str) -> None:

@@ -23,6 +23,14 @@ from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
 from recon.surfaces.prepare import InputError, Preparation, load_prepared
 
 
+def estimate_of(surface: Mesh, cloud: Cloud, *, heldout=None, seed: int = 0):
+    """``recon.surfaces.judge.estimate`` of a surface on the (prepared) cloud it was made from:
+    its truth-free predicted Chamfer distance and F-score band."""
+    from recon.surfaces.judge import estimate
+
+    return estimate((surface.vertices, surface.faces), cloud, heldout=heldout, seed=seed)
+
+
 class Surface(Mesh):
     """A reconstructed triangle mesh and how it was made: a ``formats.geometry.Mesh``.
 
@@ -34,8 +42,9 @@ class Surface(Mesh):
     params : dict
         The resolved parameters.
     info : dict
-        ``wall_time_s``, ``watertight``, for isolated runs ``peak_memory_mb``, and for
-        ``method="auto"`` the choice (``auto``).
+        ``wall_time_s``, ``watertight``, for isolated runs ``peak_memory_mb``, ``estimate``
+        when made from a cloud (``estimate_of``), and for ``method="auto"`` the choice
+        (``auto``).
     """
 
     __slots__ = ("info", "method", "params")
@@ -102,7 +111,8 @@ def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: di
 
 def reconstruct_to_file(cloud: Cloud, prepared: MethodInput, output, *, run: Run,
                         limits: Limits | None = None, isolate: bool = True,
-                        on_wait: Callable[[str], None] | None = None) -> dict[str, Any]:
+                        on_wait: Callable[[str], None] | None = None,
+                        heldout=None) -> dict[str, Any]:
     """Reconstruct a prepared cloud with ``run``, write the mesh, and summarise.
 
     Parameters
@@ -120,19 +130,24 @@ def reconstruct_to_file(cloud: Cloud, prepared: MethodInput, output, *, run: Run
         Run in a child process (default) or in this one.
     on_wait : callable, optional
         Called with the isolated child's stage while waiting.
+    heldout : recon.surfaces.judge.HeldOut, optional
+        Held-out residuals of the same run (``-m auto``'s), for the estimate.
 
     Returns
     -------
     dict
         ``n_points``, ``spacing_m``, ``noise_m``, ``view_points``, ``method``, ``params``,
-        ``label``, ``output``, ``n_vertices``, ``n_faces``, ``wall_time_s``, ``watertight``
-        and, isolated, ``peak_memory_mb``.
+        ``label``, ``output``, ``n_vertices``, ``n_faces``, ``wall_time_s``, ``watertight``,
+        ``estimate`` (``recon.surfaces.judge.Estimate.to_dict``: the truth-free predicted
+        Chamfer distance and F-score) and, isolated, ``peak_memory_mb``.
     """
     from formats.mesh_io import write_mesh
 
     limits = limits or Limits()
     surface = reconstruct(prepared, method=run, isolate=isolate, on_wait=on_wait,
                           **limits.kwargs())
+    surface.info["estimate"] = estimate_of(surface, cloud, heldout=heldout,
+                                           seed=prepared.seed).to_dict()
     write_mesh(output, Mesh(surface.vertices, surface.faces, frame=cloud.frame))
     return {"n_points": len(prepared.points), "spacing_m": prepared.spacing,
             "noise_m": prepared.noise, "view_points": cloud.view_points is not None,
@@ -148,7 +163,7 @@ def reconstruct_input(input, output, *, method: str | Run = "poisson",
     """Read a cloud or a strike log, prepare it, reconstruct it with one method, write the mesh.
 
     What ``recon reconstruct -m METHOD`` does (``-m auto``:
-    ``recon.experiments.auto.choose_and_reconstruct``).
+    ``recon.surfaces.auto.choose_and_reconstruct``).
 
     Parameters
     ----------

@@ -23,12 +23,18 @@ def test_reconstruct_and_score_take_arrays_and_pairs():
     report = api.score(surface, truth=tuple(sphere_mesh(4)), edges=False,
                        n_truth_samples=5000, coverage_points=5000)
     assert report.chamfer_m < 0.05 * SPHERE_RADIUS   # a hull of 2,000 points on the sphere
+    # Every surface comes with its truth-free predicted Chamfer band, which holds the truth's.
+    estimate = surface.info["estimate"]
+    assert estimate["source"] == "in-sample"
+    assert estimate["chamfer_low_m"] <= report.chamfer_m <= estimate["chamfer_high_m"]
 
 
 def test_auto_records_its_choice():
     surface = api.reconstruct(_sphere_cloud(), method="auto", auto_methods=["convex-hull"])
     assert surface.method == "convex-hull"
     assert surface.info["auto"]["method"] == "convex-hull"
+    assert surface.info["estimate"]["source"] == "held-out"
+    assert surface.info["auto"]["candidates"][0]["chosen"]
 
 
 def test_auto_refuses_params():

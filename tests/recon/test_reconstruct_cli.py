@@ -33,7 +33,8 @@ def test_reconstruct_from_a_log(rso_log, tmp_path, capsys):
     out = tmp_path / "rso.ply"
     assert main(["reconstruct", str(rso_log), "-m", "plane", "--param", "cell=2",
                  "-o", str(out)]) == 0
-    assert f"wrote {out}" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert f"wrote {out}" in text and "predicted without the truth (in-sample" in text
     vertices, faces = read_mesh(out)
     assert len(faces) > 1000
     # RSO-A is 20 m wide across its 5 cm thin solar panels; plane keeps them (normals oriented
@@ -49,6 +50,8 @@ def test_reconstruct_json_and_preprocessing(box_files, tmp_path, capsys):
     assert summary["method"] == "planes" and summary["watertight"]
     assert summary["view_points"] and summary["n_points"] < 4000
     assert summary["peak_memory_mb"] > 0
+    band = summary["estimate"]
+    assert band["chamfer_low_m"] <= band["chamfer_m"] <= band["chamfer_high_m"]
 
 
 def test_reconstruct_auto_says_what_it_chose_and_why(box_files, tmp_path, capsys):
@@ -56,7 +59,8 @@ def test_reconstruct_auto_says_what_it_chose_and_why(box_files, tmp_path, capsys
     assert main(["reconstruct", str(box_files[0]), "-m", "auto", "--auto-methods", "planes",
                  "convex-hull", "-o", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "chose planes" in text and "* planes" in text
+    assert "chose planes, a closed surface" in text and "* planes" in text
+    assert "predicted without the truth (held-out" in text
     assert len(read_mesh(out)[1]) < 50
 
 

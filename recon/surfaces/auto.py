@@ -1,0 +1,623 @@
+"""``-m auto``: the simplest surface the strikes support, chosen without the truth.
+
+What a strike log knows besides its points is used (``recon.surfaces.judge``): when and by
+which beam each strike was taken, its sensor position, and its recorded error model. The rule:
+
+1. **Hold out whole passes** (``judge.pass_split``): ``holdout`` (10%) of the shots, in
+   contiguous time blocks spread over the log, each tested only in its interior, so no tested
+   strike has a training strike of its own track within two noise lengths. Prepare the rest
+   (normals, spacing, the recorded noise) and fit the candidates on it, each isolated like
+   ``recon compare``'s runs (a crash or a timeout only removes that candidate).
+2. **Judge each candidate on the held-out strikes** (``judge.check``): each held-out beam is
+   cast against the surface; the strike's cost is its capped chi-square, distance over its
+   recorded 1-sigma error along the surface normal, squared, capped at the tolerance
+   ``max(tau, 3 sigma)``. **A beam the surface cuts before its strike, or misses, costs the
+   full cap**: the ray evidence enters the statistic. The statistic ``chi2`` is the mean cost,
+   about 1 for the true surface; its standard error comes from the spread of the held-out
+   blocks' means. Reported beside it: ``chi_fit`` (the same on the training strikes: well below
+   1 for a surface that follows the noise), and over all strikes the fraction of beams the
+   surface cuts before their strike (``violated``) and of strikes with no surface within their
+   tolerance (``holes``).
+3. **One standard error**: every candidate with ``chi2 <= chi2_best + se_best`` fits the
+   held-out passes as well as the best, to within what these passes can tell apart.
+4. **Model size is the penalty**: among those, the fewest free parameters wins
+   (``Method.parameter_count``: 9 for an ellipsoid, 3 per plane, 3 per vertex of a free mesh),
+   then the lower ``chi2``. **Coverage**: when the strikes cover less than
+   ``COMPLETE_COVERAGE`` of the best closed candidate's surface, closed candidates in the band
+   come first: where there are no strikes no open surface can be right, and a closed model is
+   the honest guess.
+
+**Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
+planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
+visibility graph cut when that method is registered), then fine ones. The first
+``ALWAYS_LEVELS`` levels always run; after that the search stops as soon as a level's best is
+not measurably better (by ``se``) than the best before it.
+
+The chosen run is then refitted on all points by the caller (``choose_and_reconstruct``,
+``recon.api.reconstruct``), and ``judge.estimate`` predicts its Chamfer distance and F-score
+from the chosen candidate's held-out residuals.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+
+from formats.errors import ReconError
+from formats.geometry import Cloud
+from formats.paths import check_destination
+from recon.surfaces import judge
+from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
+from recon.surfaces.methods import MethodFailed, MethodInput, Run
+from recon.surfaces.normals import DEFAULT_K, Fallback
+from recon.surfaces.prepare import InputError, Preparation
+
+# Fraction of shots held out: 10% leaves the fit 90% of the density (a Poisson depth or a grid
+# cell chosen on 90% suits 100%).
+HOLDOUT_FRACTION = 0.1
+# Fewest tested strikes for the standard error to mean anything.
+MIN_HELD_OUT = 30
+# Below this fraction of the best closed surface near a strike, coverage is incomplete and
+# closed candidates come first (module docstring, step 4). 0.9: a 10% unseen cap of the target.
+COMPLETE_COVERAGE = 0.9
+# The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
+# level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson and the
+# visibility graph cut; level 3: the MLS and ball-pivoting surfaces. The runs come from
+# ``benchmarks/suite.py``: the truth's best runs on its clouds are among them. A method that is
+# not registered (``visibility`` where it is not installed) is left out.
+LADDER: tuple[tuple[tuple[str, dict], ...], ...] = (
+    (("ellipsoid", {}), ("planes", {}), ("convex-hull", {})),
+    (("poisson", {"depth": 6}), ("plane", {"cell": 2.0})),
+    (("plane", {}), ("delaunay-balls", {}), ("screened-poisson", {}), ("poisson", {"depth": 9}),
+     ("visibility", {})),
+    (("rimls", {}), ("ball-pivoting", {})),
+)
+MAX_FITS = sum(len(level) for level in LADDER)
+# Levels fitted whatever the earlier ones gave: the primitives, the coarse surfaces and the
+# defaults.
+ALWAYS_LEVELS = 3
+# Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
+# compete for the cores.
+FIT_THREADS = 1
+
+
+class AutoError(ReconError, ValueError):
+    """Bad options of the automatic choice."""
+
+
+@dataclass
+class Candidate:
+    """One candidate of the choice and how it fared (module docstring).
+
+    Attributes
+    ----------
+    run : Run
+    level : int
+        Its level on the ladder.
+    status : {"ok", "failed", "skipped"}
+        "skipped": a level the ladder did not need.
+    reason : str
+        Why it failed (empty otherwise).
+    fit_s : float or None
+        The isolated fit's process time [s].
+    n_faces, n_params : int or None
+    closed : bool or None
+        No edge borders a single face.
+    chi2, chi2_se : float or None
+        Held-out statistic (mean capped chi-square of the tested strikes) and its block-level
+        standard error.
+    chi_heldout, chi_fit : float or None
+        ``sqrt(chi2)`` and the same RMS on the training strikes.
+    heldout_mean_m : float or None
+        Mean capped held-out distance [m].
+    beam_misses : float or None
+        Fraction of held-out beams that miss the surface.
+    violated, holes : float or None
+        Over all strikes (a seeded subsample of ``judge.MAX_CHECKED``): fraction of beams the
+        surface cuts before their strike, and of strikes with no surface within tolerance.
+    eligible, chosen : bool
+    """
+
+    run: Run
+    level: int
+    status: str
+    reason: str = ""
+    fit_s: float | None = None
+    n_faces: int | None = None
+    n_params: int | None = None
+    closed: bool | None = None
+    chi2: float | None = None
+    chi2_se: float | None = None
+    chi_heldout: float | None = None
+    chi_fit: float | None = None
+    heldout_mean_m: float | None = None
+    beam_misses: float | None = None
+    violated: float | None = None
+    holes: float | None = None
+    eligible: bool = False
+    chosen: bool = False
+    heldout: judge.HeldOut | None = field(default=None, repr=False)
+    mesh: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+
+    @property
+    def label(self) -> str:
+        return self.run.label
+
+    @property
+    def scored(self) -> bool:
+        return self.chi2 is not None
+
+    def to_dict(self) -> dict:
+        """The JSON-ready record: the attributes, with ``label``, ``method``, ``params`` and
+        ``kind`` of the run (the residual arrays and the mesh left out)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)
+               if f.name not in ("run", "heldout", "mesh")}
+        return {"label": self.label, "method": self.run.method, "params": self.run.params,
+                "kind": self.run.kind} | out
+
+
+@dataclass
+class AutoChoice:
+    """What ``choose`` picked and why.
+
+    Attributes
+    ----------
+    run : Run
+        The chosen method and its resolved parameters (``method``, ``params`` and ``label``
+        read from it).
+    reason : str
+        One paragraph: what was chosen (open or closed), the statistic, the band, the coverage,
+        the ladder.
+    candidates : list of Candidate
+    threshold : float
+        ``chi2_best + se_best``: the band's upper edge.
+    coverage : float
+        Fraction of the best closed candidate's surface near a strike (NaN when no closed
+        candidate succeeded).
+    split : judge.Split
+        The held-out blocks.
+    noise_m, tau_m : float, metres
+        The recorded noise length (or the local-plane scatter without one) and the tolerance
+        floor.
+    """
+
+    run: Run
+    reason: str
+    candidates: list[Candidate]
+    threshold: float
+    coverage: float
+    split: judge.Split
+    noise_m: float
+    tau_m: float
+
+    @property
+    def method(self) -> str:
+        return self.run.method
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return self.run.params
+
+    @property
+    def label(self) -> str:
+        return self.run.label
+
+    @property
+    def chosen(self) -> Candidate:
+        return next(c for c in self.candidates if c.chosen)
+
+    def to_dict(self) -> dict:
+        split = self.split
+        return {"method": self.method, "params": self.params, "label": self.label,
+                "reason": self.reason, "threshold": self.threshold, "coverage": self.coverage,
+                "noise_m": self.noise_m, "tau_m": self.tau_m,
+                "split": {"n_train": len(split.train), "n_test": len(split.test),
+                          "n_blocks": split.n_blocks, "block_shots": split.block_shots,
+                          "margin_shots": split.margin, "step_m": split.step_m},
+                "candidates": [c.to_dict() for c in self.candidates]}
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What every candidate is fitted on and judged against."""
+
+    prepared: MethodInput
+    test: judge.Strikes
+    block: np.ndarray
+    train: judge.Strikes
+    checked: judge.Strikes
+    tau: float
+    noise: float
+
+
+@dataclass(frozen=True)
+class Selection:
+    """``select``'s answer: the chosen index, the best's, the band's upper edge, whether closed
+    candidates came first, the candidates within the band, and the smallest of them whatever
+    its shape (the choice had closed candidates not come first)."""
+
+    chosen: int
+    best: int
+    threshold: float
+    closed_first: bool
+    eligible: tuple[int, ...]
+    smallest: int
+
+
+def closed(faces: np.ndarray) -> bool:
+    """True when no edge borders a single face: the surface encloses a volume (non-manifold
+    edges of a minimum cut allowed, unlike ``recon.surfaces.checks.watertight``)."""
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
+                    axis=1)
+    _, count = np.unique(edges, axis=0, return_counts=True)
+    return bool(len(faces)) and not np.any(count == 1)
+
+
+def coverage_of(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, reach: float,
+                *, seed: int = 0) -> float:
+    """Fraction of a surface's area within ``reach`` [m] of a strike (uniform area samples)."""
+    from scipy.spatial import cKDTree
+
+    from metrics import Mesh, sample_surface
+
+    samples, _ = sample_surface(Mesh(vertices, faces), judge.SURFACE_SAMPLES, seed=seed)
+    distance, _ = cKDTree(points).query(samples, workers=-1)
+    return float(np.mean(distance <= reach))
+
+
+def ladder(methods: Sequence[str] | None = None) -> list[list[Run]]:
+    """The levels of ``LADDER`` as runs, restricted to ``methods`` and to the registered methods
+    (each named method not on the ladder joins the last level at its defaults)."""
+    from recon.surfaces.methods import available, bind
+
+    known = set(available())
+    levels = [[bind(name, params) for name, params in level
+               if name in known and (methods is None or name in methods)] for level in LADDER]
+    if methods is not None:
+        listed = {name for level in LADDER for name, _ in level}
+        levels[-1] += [bind(name) for name in methods if name not in listed]
+    return [level for level in levels if level]
+
+
+def _columns(attributes: dict | None) -> dict[str, np.ndarray]:
+    """The attributes ``choose`` reads: uncertainty columns and ``time``/``shot``/``beam``."""
+    from recon.surfaces.uncertainty import COLUMNS
+
+    wanted = (*COLUMNS, "time", "shot", "beam")
+    return {k: np.asarray(v) for k, v in (attributes or {}).items() if k in wanted}
+
+
+def _context(cloud: Cloud, split: judge.Split, *, k: int, fallback: Fallback, seed: int
+             ) -> _Context:
+    """Prepare the training strikes and gather the held-out ones (step 1)."""
+    from recon.surfaces.prepare import prepare
+
+    strikes = judge.Strikes.of(cloud)
+    train = cloud.subset(split.train)
+    prepared = prepare(train.points, view_points=train.view_points, k=k, fallback=fallback,
+                       seed=seed, uncertainty=train.attributes)
+    fit_rows = split.train[judge.subsample(len(split.train), judge.MAX_CHECKED, seed)]
+    all_rows = judge.subsample(len(strikes), judge.MAX_CHECKED, seed)
+    return _Context(prepared=prepared, test=strikes.take(split.test), block=split.block,
+                    train=strikes.take(fit_rows), checked=strikes.take(all_rows),
+                    tau=judge.tau_of(cloud.points), noise=prepared.noise)
+
+
+def _fit_all(runs: list[Run], prepared: MethodInput, *, limits: Limits, n_workers: int | None,
+             desc: str) -> dict[str, dict]:
+    """Fit ``runs`` on ``prepared``, each in its own limited process, a few at a time."""
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+
+    from tqdm import tqdm
+
+    from recon.surfaces.isolation import run_isolated
+
+    workers = n_workers or max(1, len(os.sched_getaffinity(0)))
+    results: dict[str, dict] = {}
+    with ThreadPoolExecutor(max_workers=workers) as pool, \
+            tqdm(total=len(runs), desc=desc, unit="fit", disable=None, leave=False) as bar:
+        futures = {pool.submit(run_isolated, run, prepared, threads=FIT_THREADS,
+                               **limits.kwargs()): run.key for run in runs}
+        for future in as_completed(futures):
+            results[futures[future]] = future.result()
+            bar.update(1)
+    return results
+
+
+def judge_candidate(run: Run, level: int, result: dict, context: _Context) -> Candidate:
+    """Step 2 of the module docstring for one fitted run (``result`` of ``run_isolated``)."""
+    candidate = Candidate(run, level, status=result.get("status", "failed"),
+                          reason=result.get("reason", "") or "",
+                          fit_s=result.get("process_time_s"))
+    if candidate.status != "ok":
+        return candidate
+    vertices, faces = result["vertices"], result["faces"]
+    caster = judge.Caster(vertices, faces)
+    options = {"tau": context.tau, "noise": context.noise}
+    held = judge.check(context.test, caster, **options)
+    everywhere = judge.check(context.checked, caster, **options)
+    chi2, se = judge.block_mean_se(held.cost, context.block)
+    return replace(candidate, n_faces=len(faces),
+                   n_params=run.method_spec().parameter_count(vertices, faces),
+                   closed=closed(faces), chi2=chi2, chi2_se=se, chi_heldout=float(np.sqrt(chi2)),
+                   chi_fit=judge.check(context.train, caster, fitted=True, **options).chi(),
+                   heldout_mean_m=float(np.mean(np.minimum(held.distance, held.tolerance))),
+                   beam_misses=float(held.missed.mean()),
+                   violated=float(everywhere.violated.mean()),
+                   holes=float(everywhere.hole.mean()),
+                   heldout=judge.HeldOut(held.distance, held.sigma_normal, context.block),
+                   mesh=(vertices, faces))
+
+
+def _best(candidates: list[Candidate]) -> Candidate | None:
+    return min((c for c in candidates if c.scored), key=lambda c: c.chi2, default=None)
+
+
+def _stops(candidates: list[Candidate], before: Candidate | None, depth: int) -> bool:
+    """Whether level ``depth`` was not measurably better than the best before it."""
+    level_best = _best([c for c in candidates if c.level == depth])
+    return before is not None and (level_best is None
+                                   or level_best.chi2 > before.chi2 - before.chi2_se)
+
+
+def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
+          n_workers: int | None) -> tuple[list[Candidate], str]:
+    """Fit and judge the ladder's levels, coarse to fine, until one is not measurably better
+    (module docstring). Returns the candidates and a note on where the ladder stopped."""
+    candidates: list[Candidate] = []
+    for depth, level in enumerate(levels):
+        before = _best(candidates)
+        results = _fit_all(level, context.prepared, limits=limits, n_workers=n_workers,
+                           desc=f"auto level {depth}")
+        candidates += [judge_candidate(run, depth, results[run.key], context) for run in level]
+        rest = levels[depth + 1:]
+        if depth + 1 >= ALWAYS_LEVELS and rest and _stops(candidates, before, depth):
+            candidates += [Candidate(run, later, status="skipped")
+                           for later, runs in enumerate(rest, start=depth + 1) for run in runs]
+            return candidates, (f"the ladder stopped after level {depth} of {len(levels) - 1} "
+                                f"({sum(map(len, rest))} finer candidates not fitted): it was "
+                                "not measurably better than the levels before it")
+    return candidates, ""
+
+
+def select(candidates: list[Candidate], *, coverage: float = float("nan")) -> Selection:
+    """Steps 3 and 4 of the module docstring.
+
+    Raises
+    ------
+    MethodFailed
+        No candidate was scored.
+    """
+    scored = [i for i, c in enumerate(candidates) if c.scored]
+    if not scored:
+        raise MethodFailed("auto: every candidate failed: " + "; ".join(
+            f"{c.label}: {c.reason}" for c in candidates if c.status != "skipped"))
+    best = min(scored, key=lambda i: (candidates[i].chi2, candidates[i].n_params))
+    threshold = candidates[best].chi2 + candidates[best].chi2_se
+    eligible = tuple(i for i in scored if candidates[i].chi2 <= threshold)
+    closed_first = bool(coverage < COMPLETE_COVERAGE) and any(candidates[i].closed
+                                                             for i in eligible)
+    chosen = min(eligible, key=lambda i: (closed_first and not candidates[i].closed,
+                                          candidates[i].n_params, candidates[i].chi2))
+    smallest = min(eligible, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
+    return Selection(chosen, best, threshold, closed_first, eligible, smallest)
+
+
+def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
+    """The reason in words: what was chosen, open or closed, the statistic and the band, and
+    what decided among the candidates in the band (only what the rule actually did)."""
+    c, b = candidates[selection.chosen], candidates[selection.best]
+    shape = "a closed" if c.closed else "an open"
+    se = b.chi2_se
+    text = (f"chose {c.label}, {shape} surface ({c.n_params:,} parameters, {c.n_faces:,} "
+            f"faces): held-out chi-square {c.chi2:.3g} per strike (1 = at the recorded noise), "
+            f"{c.violated:.1%} of beams cut before their strike, {c.holes:.1%} of strikes in "
+            f"holes")
+    others = len(selection.eligible) - 1
+    decided = selection.smallest != selection.chosen   # closed first changed the choice
+    if selection.chosen == selection.best:
+        text += ("; the lowest held-out statistic" + (
+            f"; the {others} other candidate(s) within one block standard error ({se:.2g}) "
+            + ("include a smaller open model" if decided else "are larger models")
+            if others else
+            f"; no other candidate is within one block standard error ({se:.2g})"))
+    else:
+        rule = ("the smallest closed model" if selection.closed_first and c.closed
+                else "the smallest model")
+        text += (f"; within one block standard error ({se:.2g}) of the best, {b.label} "
+                 f"({b.chi2:.3g}, {b.n_params:,} parameters); of the {others + 1} candidates "
+                 f"in that band it is {rule}")
+    if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
+        text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
+                 "it follows part of the noise")
+    if np.isfinite(coverage):
+        text += f". The strikes cover {coverage:.0%} of the best closed surface"
+    if decided:
+        smaller = candidates[selection.smallest]
+        text += (f"; below the complete coverage, where no strike says where the surface is, "
+                 f"closed candidates in the band were preferred: the smaller {smaller.label} "
+                 f"({smaller.n_params:,} parameters) is open")
+    return text
+
+
+def _coverage(candidates: list[Candidate], points: np.ndarray, context: _Context, seed: int
+              ) -> float:
+    enclosing = [c for c in candidates if c.scored and c.closed]
+    if not enclosing:
+        return float("nan")
+    best = min(enclosing, key=lambda c: c.chi2)
+    reach = max(context.tau, judge.SIGMAS * context.noise,
+                judge.COVERAGE_SPACINGS * context.prepared.spacing)
+    return coverage_of(*best.mesh, points, reach, seed=seed)
+
+
+def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
+           uncertainty: dict[str, np.ndarray] | None = None,
+           candidates: Sequence[Run | tuple[str, dict]] | None = None,
+           methods: Sequence[str] | None = None, holdout: float = HOLDOUT_FRACTION,
+           seed: int = 0, k: int = DEFAULT_K, fallback: Fallback = "centroid",
+           timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
+           n_workers: int | None = None) -> AutoChoice:
+    """Choose a method and resolution by held-out passes and the sensor rays, without the truth.
+
+    Parameters
+    ----------
+    points : (n, 3) float64, metres, body frame
+    view_points : (n, 3) float64, metres, optional
+        Sensor positions (orient the normals, aim the beams).
+    uncertainty : dict of str to (n,) arrays, optional
+        The cloud's attributes as ingest writes them: the recorded uncertainty columns
+        (``recon.surfaces.uncertainty``) and ``time``, ``shot``, ``beam``, which order the
+        held-out passes (without them the points' order is taken as the time order); other keys
+        are ignored.
+    candidates : sequence of Run or of (method, params), optional
+        Fit these, all at once, instead of the ladder.
+    methods : sequence of str, optional
+        Restrict the ladder to these methods (``ladder``).
+    holdout : float
+        Fraction of the shots held out, in (0, 0.5].
+    seed : int
+        Seed of the blocks' places (and of the methods).
+    k, fallback
+        Normal estimation (``recon.surfaces.prepare.prepare``).
+    timeout_s, memory_mb
+        Limits of each isolated fit.
+    n_workers : int, optional
+        Fits run at once (default: the usable cores), each in its own process.
+
+    Returns
+    -------
+    AutoChoice
+    """
+    from recon.surfaces.methods import bind
+
+    if not 0 < holdout <= 0.5:
+        raise AutoError(f"holdout must be in (0, 0.5], got {holdout}")
+    attributes = _columns(uncertainty)
+    if view_points is not None:
+        attributes |= dict(zip(("view_x", "view_y", "view_z"), np.asarray(view_points).T,
+                               strict=True))
+    cloud = Cloud(np.asarray(points, dtype=np.float64), attributes)
+    split = judge.pass_split(cloud, holdout, seed=seed)
+    if len(split.test) < MIN_HELD_OUT:
+        raise AutoError(f"auto needs at least {MIN_HELD_OUT} held-out points; {holdout:g} of "
+                        f"{len(cloud)} points in {split.n_blocks} blocks tests "
+                        f"{len(split.test)}")
+    levels = ([[bind(*r) if isinstance(r, tuple) else bind(r) for r in candidates]]
+              if candidates else ladder(methods))
+    context = _context(cloud, split, k=k, fallback=fallback, seed=seed)
+    table, note = climb(levels, context, limits=Limits(timeout_s=timeout_s, memory_mb=memory_mb),
+                        n_workers=n_workers)
+    coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
+        else float("nan")
+    selection = select(table, coverage=coverage)
+    for i, c in enumerate(table):
+        c.eligible, c.chosen = i in selection.eligible, i == selection.chosen
+    fitted = sum(c.status != "skipped" for c in table)
+    reason = (explain(table, selection, coverage)
+              + f"; {fitted} candidate fit(s) of {len(table)}" + (f"; {note}" if note else "")
+              + ".")
+    return AutoChoice(table[selection.chosen].run, reason, table, selection.threshold,
+                      coverage, split, context.noise, context.tau)
+
+
+def format_choice(choice: AutoChoice) -> str:
+    """The candidates table and the reason, as ``recon reconstruct -m auto`` prints them."""
+    lines = [f"{'':2}{'candidate':<30} {'lvl':>3} {'kind':<13} {'chi2':>7} {'+-se':>6} "
+             f"{'chi fit':>7} {'cut':>6} {'holes':>6} {'params':>8} {'faces':>8}", "-" * 104]
+    ranked = sorted(choice.candidates, key=lambda c: (not c.scored, c.chi2 or 0.0))
+    for c in ranked:
+        mark = "*" if c.chosen else ("~" if c.eligible else " ")
+        start = f"{mark:2}{c.label[:30]:<30} {c.level:>3} {c.run.kind:<13}"
+        if c.status == "skipped":
+            lines.append(f"{start} not fitted (the ladder stopped before its level)")
+        elif not c.scored:
+            lines.append(f"{start} FAILED: {c.reason[:50]}")
+        else:
+            lines.append(f"{start} {c.chi2:>7.3g} {round(c.chi2_se, 9):>6.2g} {c.chi_fit:>7.2g} "
+                         f"{c.violated:>6.1%} {c.holes:>6.1%} {c.n_params:>8d} {c.n_faces:>8d}")
+    split = choice.split
+    lines.append(f"(chi2: held-out chi-square per strike over {split.n_blocks} blocks of "
+                 f"{split.block_shots} shots, {len(split.test)} strikes tested; chi fit: on "
+                 "the training strikes; cut: beams cut before their strike; * chosen, ~ within "
+                 "one block standard error of the best)")
+    lines.append(choice.reason)
+    return "\n".join(lines)
+
+
+def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
+               holdout: float = HOLDOUT_FRACTION, preparation: Preparation | None = None,
+               limits: Limits | None = None) -> AutoChoice:
+    """``choose`` on a cleaned ``Cloud`` (``Preparation.apply``) with a preparation's normals
+    options and a run's limits: the choice ``-m auto`` makes.
+
+    Parameters
+    ----------
+    cloud : Cloud
+        Metres, body frame; its view points aim the beams, its ``time``/``shot``/``beam`` and
+        uncertainty attributes shape the hold-out.
+    methods : sequence of str, optional
+        Restrict the ladder to these methods (``ladder``; default: the whole ladder).
+    holdout : float
+    preparation : Preparation, optional
+    limits : Limits, optional
+    """
+    preparation = preparation or Preparation()
+    return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
+                  methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
+                  fallback=preparation.fallback, **(limits or Limits()).kwargs())
+
+
+def choose_and_reconstruct(input, output, *, methods: Sequence[str] | None = None,
+                           holdout: float = HOLDOUT_FRACTION,
+                           preparation: Preparation | None = None, limits: Limits | None = None,
+                           isolate: bool = True, on_wait: Callable[[str], None] | None = None,
+                           say: Callable[[str], None] | None = None) -> dict:
+    """``recon reconstruct -m auto``: read and prepare the input, choose, refit on all points.
+
+    Parameters
+    ----------
+    input : str or Path
+        Point cloud or strike log (``recon.inputs.load_cloud``).
+    output : str or Path
+        Mesh to write (.ply).
+    methods : sequence of str, optional
+        Restrict the ladder to these methods (default: the whole ladder).
+    holdout : float
+        Fraction of shots held out (``choose``).
+    preparation : Preparation, optional
+        Cleaning, thinning and normals; its ``k``, ``fallback`` and ``seed`` serve the choice too.
+    limits : Limits, optional
+        Of every isolated fit.
+    isolate, on_wait
+        Of the final fit (``recon.surfaces.reconstruct.reconstruct_to_file``).
+    say : callable, optional
+        Called with the candidates table and the reason (``format_choice``) once chosen.
+
+    Returns
+    -------
+    dict
+        The summary of ``reconstruct_to_file`` (with its ``estimate``, here from the chosen
+        candidate's held-out residuals) with ``input`` and ``auto`` (``AutoChoice.to_dict()``).
+    """
+    from pathlib import Path
+
+    from recon.surfaces.prepare import load_prepared
+    from recon.surfaces.reconstruct import reconstruct_to_file
+
+    preparation = preparation or Preparation()
+    limits = limits or Limits()
+    check_destination(output, InputError)   # before the work, not after it
+    cloud, prepared = load_prepared(input, preparation)
+    choice = choose_for(cloud, methods=methods, holdout=holdout, preparation=preparation,
+                        limits=limits)
+    if say is not None:
+        say(format_choice(choice))
+    summary = reconstruct_to_file(cloud, prepared, Path(output), run=choice.run, limits=limits,
+                                  isolate=isolate, on_wait=on_wait,
+                                  heldout=choice.chosen.heldout)
+    return {"input": str(input), "auto": choice.to_dict()} | summary

@@ -1,0 +1,183 @@
+"""``-m auto``: the simplest model whose held-out chi-square is within a block standard error of
+the best, and a reason that says truthfully what was chosen."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from recon.surfaces.auto import AutoError, Candidate, choose, format_choice, select
+from recon.surfaces.methods import MethodFailed
+from tests.recon.conftest import box_points, ellipsoid_points
+
+# Candidates of the tests: one of each kind, two resolutions of Poisson (a full default run of
+# every method and grid takes minutes; the rule does not depend on how many there are).
+CANDIDATES = [("planes", {}), ("convex-hull", {}), ("poisson", {"depth": 6}),
+              ("poisson", {}), ("plane", {}), ("ball-pivoting", {}), ("ellipsoid", {})]
+
+
+def test_auto_picks_planes_for_a_box():
+    points, view, _ = box_points(5000, noise=0.004, seed=2)
+    choice = choose(points, view_points=view, candidates=CANDIDATES, seed=0)
+    assert choice.method == "planes", format_choice(choice)
+    assert "chose planes" in choice.reason
+    table = {c.label: c for c in choice.candidates}
+    assert table["planes"].n_faces < 50 and table["planes"].n_params <= 3 * 12
+    assert table["planes"].chosen and table["planes"].eligible
+    assert "a closed surface" in choice.reason
+
+
+def test_auto_explains_an_ellipsoid_by_nine_numbers():
+    points, view, _ = ellipsoid_points(5000, noise=0.005, seed=3)
+    choice = choose(points, view_points=view, candidates=CANDIDATES, seed=0)
+    assert choice.method == "ellipsoid", format_choice(choice)
+    assert "9 parameters" in choice.reason
+    planes = next(c for c in choice.candidates if c.run.method == "planes")
+    assert planes.chi2 > 2 * choice.chosen.chi2
+
+
+def test_a_mesh_with_holes_pays_for_the_beams_it_misses():
+    # Half a sphere seen from all around: ball pivoting's open cap misses the beams of the
+    # held-out strikes on the far side, which cost a full tolerance each.
+    points, view, _ = ellipsoid_points(4000, noise=0.002, seed=5)
+    choice = choose(points, view_points=view, candidates=[("ellipsoid", {}),
+                                                          ("ball-pivoting", {"radii": (1.0,)})],
+                    seed=0)
+    table = {c.run.method: c for c in choice.candidates}
+    assert table["ellipsoid"].beam_misses == pytest.approx(0.0)
+    assert table["ball-pivoting"].beam_misses > table["ellipsoid"].beam_misses
+    assert choice.method == "ellipsoid"
+
+
+def test_the_ladder_runs_coarse_to_fine_and_stops():
+    from recon.surfaces.auto import LADDER, MAX_FITS
+
+    points, view, _ = ellipsoid_points(3000, noise=0.005, seed=4)
+    choice = choose(points, view_points=view,
+                    methods=["ellipsoid", "poisson", "plane", "ball-pivoting"], seed=0)
+    levels = [c.level for c in choice.candidates]
+    assert levels == sorted(levels)
+    fitted = [c for c in choice.candidates if c.status != "skipped"]
+    skipped = [c for c in choice.candidates if c.status == "skipped"]
+    # The ellipsoid is exact: the defaults (level 2) are not measurably better than it, so the
+    # finest level (ball pivoting) is never fitted.
+    assert choice.method == "ellipsoid", format_choice(choice)
+    assert [c.run.method for c in skipped] == ["ball-pivoting"]
+    assert "the ladder stopped" in choice.reason
+    assert len(fitted) < MAX_FITS <= 12 and len(LADDER) >= 3
+
+
+def test_the_ladder_holds_the_convex_hull_and_names_visibility_only_when_registered():
+    from recon.surfaces import methods
+    from recon.surfaces.auto import ladder
+
+    names = [run.method for level in ladder() for run in level]
+    assert "convex-hull" in names and "planes" in names
+    assert ("visibility" in names) == ("visibility" in methods.available())
+
+
+def test_auto_on_a_noisy_track_log_chooses_the_sphere(track_sphere):
+    # Single-beam tracks whose strikes are 5 mm apart under 0.1 m noise: the pass-blocked
+    # hold-out sees the noise-following surfaces for what they are.
+    cloud, _ = track_sphere
+    choice = choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
+                    candidates=[("ellipsoid", {}), ("poisson", {"depth": 9}),
+                                ("ball-pivoting", {})], seed=0)
+    assert choice.method == "ellipsoid", format_choice(choice)
+    assert 0.8 < choice.chosen.chi2 < 1.2
+    assert choice.split.margin > 10 and choice.noise_m == pytest.approx(0.1)
+    others = [c for c in choice.candidates if c.scored and not c.chosen]
+    assert all(c.chi2 > choice.chosen.chi2 + c.chi2_se for c in others)
+    record = choice.to_dict()
+    assert record["split"]["margin_shots"] == choice.split.margin
+    assert {"chi2", "chi2_se", "chi_fit", "violated", "holes"} <= set(record["candidates"][0])
+
+
+def _candidate(label, chi2, params, *, se=0.01, closed=True):
+    from recon.surfaces.methods import bind
+
+    run = bind("ellipsoid")
+    run = type(run)(run.method, run.params, run.module, run.kind, label)
+    if chi2 is None:
+        return Candidate(run, 0, status="failed", reason="crashed")
+    return Candidate(run, 0, status="ok", n_params=params, n_faces=params, closed=closed,
+                     chi2=chi2, chi2_se=se, chi_heldout=chi2**0.5, chi_fit=chi2**0.5,
+                     violated=0.0, holes=0.0)
+
+
+def test_select_takes_the_smallest_model_within_one_block_standard_error():
+    candidates = [_candidate("fine", 1.00, 100_000, se=0.05),
+                  _candidate("coarse", 1.04, 5_000),      # inside the band: smaller wins
+                  _candidate("tiny", 1.20, 9),            # outside the band
+                  _candidate("crashed", None, 0)]
+    selection = select(candidates)
+    assert candidates[selection.chosen].label == "coarse"
+    assert selection.threshold == pytest.approx(1.05)
+    assert set(selection.eligible) == {0, 1}
+
+
+def test_the_reason_says_an_open_choice_is_open_and_claims_no_closed_preference():
+    from recon.surfaces.auto import explain
+
+    candidates = [_candidate("closed big", 1.3, 50_000),
+                  _candidate("open", 1.0, 5_000, closed=False)]
+    selection = select(candidates, coverage=0.6)   # coverage incomplete, no closed in the band
+    assert candidates[selection.chosen].label == "open" and not selection.closed_first
+    reason = explain(candidates, selection, 0.6)
+    assert "chose open, an open surface" in reason
+    assert "preferred" not in reason and "closed candidates" not in reason
+    assert "the lowest held-out statistic" in reason and "cover 60%" in reason
+
+
+def test_the_reason_says_when_closed_models_were_preferred():
+    from recon.surfaces.auto import explain
+
+    candidates = [_candidate("closed", 1.02, 50_000),
+                  _candidate("open", 1.0, 5_000, se=0.05, closed=False)]
+    complete = select(candidates, coverage=0.95)
+    assert candidates[complete.chosen].label == "open"
+    selection = select(candidates, coverage=0.6)
+    assert candidates[selection.chosen].label == "closed" and selection.closed_first
+    reason = explain(candidates, selection, 0.6)
+    assert "chose closed, a closed surface" in reason
+    assert "closed candidates in the band were preferred" in reason
+    assert "within one block standard error (0.05) of the best, open" in reason
+
+
+def test_the_reason_names_a_smaller_open_model_set_aside_for_the_best_closed_one():
+    from recon.surfaces.auto import explain
+
+    candidates = [_candidate("closed best", 1.0, 50_000, se=0.05),
+                  _candidate("open small", 1.02, 500, closed=False)]
+    selection = select(candidates, coverage=0.5)
+    assert selection.chosen == selection.best == 0
+    reason = explain(candidates, selection, 0.5)
+    assert "the lowest held-out statistic" in reason and "larger models" not in reason
+    assert "include a smaller open model" in reason
+    assert "the smaller open small (500 parameters) is open" in reason
+
+
+def test_select_fails_when_every_candidate_failed():
+    with pytest.raises(MethodFailed, match="auto: every candidate failed: x: crashed"):
+        select([_candidate("x", None, 0)])
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"holdout": 0.0}, r"holdout must be in \(0, 0.5\]"),
+    ({"holdout": 0.9}, r"holdout must be in \(0, 0.5\]"),
+    ({"holdout": 0.01}, "auto needs at least 30 held-out points"),
+])
+def test_bad_options_are_named(kwargs, match):
+    points, view, _ = box_points(500)
+    with pytest.raises(AutoError, match=match):
+        choose(points, view_points=view, candidates=CANDIDATES, **kwargs)
+
+
+def test_closed_allows_non_manifold_edges_but_no_border():
+    from recon.surfaces.auto import closed
+    from tests.recon.conftest import box_mesh
+
+    _, faces = box_mesh()
+    assert closed(faces)
+    assert not closed(faces[1:])
+    assert closed(np.concatenate([faces, faces + 8]))       # two boxes: still no border

@@ -1,0 +1,145 @@
+"""Truth-free judgement: pass-blocked hold-out, the chi-square against the recorded noise, the
+free-space evidence of the beams and the predicted Chamfer band."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import ConvexHull
+
+from formats.geometry import Cloud
+from recon.surfaces import judge
+from tests.recon.conftest import sphere_mesh, sphere_points
+
+NOISE = 0.1   # the 1-sigma range noise of TRACK_SPHERE (0.3 m 3-sigma)
+
+
+def _through(points):
+    """A surface through every one of ``points`` (on a sphere about the origin): their radial
+    projections triangulated, each vertex at its noisy point."""
+    hull = ConvexHull(points / np.linalg.norm(points, axis=1, keepdims=True))
+    return points, hull.simplices.astype(np.int64)
+
+
+def _judged(cloud, split, mesh):
+    strikes = judge.Strikes.of(cloud)
+    caster = judge.Caster(*mesh)
+    options = {"tau": judge.tau_of(cloud.points), "noise": NOISE}
+    held = judge.check(strikes.take(split.test), caster, **options)
+    fit = judge.check(strikes.take(split.train), caster, fitted=True, **options)
+    return judge.block_mean_se(held.cost, split.block), held, fit
+
+
+def test_pass_split_holds_out_whole_runs_of_a_track(track_sphere):
+    cloud, _ = track_sphere
+    split = judge.pass_split(cloud, 0.1, seed=0)
+    shot = cloud.attributes["shot"].astype(np.int64)
+    # The track moves far less than the noise a shot; the margin covers two noise lengths.
+    assert split.step_m < NOISE / 10
+    assert split.margin == pytest.approx(2 * NOISE / split.step_m, rel=0.35)
+    assert not set(split.train) & set(split.test)
+    gap = np.abs(shot[split.test][:, None] - shot[split.train][None, :]).min(axis=1)
+    assert gap.min() > split.margin
+    assert split.n_blocks >= 5 and len(np.unique(split.block)) == split.n_blocks
+    held = 1 - (len(split.train) / len(shot))
+    assert held == pytest.approx(0.1, abs=0.02)
+    again = judge.pass_split(cloud, 0.1, seed=0)
+    np.testing.assert_array_equal(again.test, split.test)
+
+
+def test_a_surface_through_the_noise_scores_worse_than_the_truth(track_sphere):
+    cloud, truth = track_sphere
+    split = judge.pass_split(cloud, 0.1, seed=0)
+    (truth_chi2, _), truth_held, truth_fit = _judged(cloud, split, truth)
+    (noisy_chi2, _), noisy_held, noisy_fit = _judged(cloud, split, _through(
+        cloud.points[split.train]))
+    # At the truth the chi-square per strike is ~1; a surface through the training strikes'
+    # noise adds its own error to the held-out strikes' and scores worse, by more than twice
+    # the block-level standard error of the difference...
+    assert 0.8 < truth_chi2 < 1.2
+    worse, se = judge.block_mean_se(noisy_held.cost - truth_held.cost, split.block)
+    assert noisy_chi2 > 1.2 and worse > 2 * se
+    # ... while on its own training strikes it reads far below the noise.
+    assert 0.9 < truth_fit.chi() < 1.1
+    assert noisy_fit.chi() < 0.1
+
+
+def test_a_surface_cutting_the_beams_is_penalised(track_sphere):
+    cloud, (vertices, faces) = track_sphere
+    split = judge.pass_split(cloud, 0.1, seed=0)
+    (truth_chi2, _), truth_held, _ = _judged(cloud, split, (vertices, faces))
+    (big_chi2, _), big, _ = _judged(cloud, split, (1.05 * vertices, faces))
+    (small_chi2, _), small, _ = _judged(cloud, split, (0.95 * vertices, faces))
+    # 0.5 m too large: it stands in the empty space every beam crossed.
+    assert truth_held.violated.mean() < 0.01
+    assert big.violated.mean() > 0.9
+    # 0.5 m too small: no beam is cut, but the strikes are in the air above it (holes).
+    assert small.violated.mean() < 0.01 and small.hole.mean() > 0.9
+    assert big_chi2 > 5 * truth_chi2 and small_chi2 > 5 * truth_chi2
+
+
+def test_check_measures_along_the_beam_and_flags_misses_and_cuts():
+    # The plane z = 0 over [-1, 1]^2, beams straight down from 10 m.
+    vertices = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=float)
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    points = np.array([[0.0, 0.0, 0.01], [0.5, 0.5, -0.5], [1.2, 0.0, 0.0], [0, 0.3, 0.05]])
+    strikes = judge.Strikes(points, points + np.array([0.0, 0.0, 10.0]))
+    result = judge.check(strikes, judge.Caster(vertices, faces), tau=0.1, noise=0.01)
+    # Close; 0.5 behind the plane (the beam was cut before it); beyond the edge (missed);
+    # close. Cost: (residual / sigma)^2, the cap (tau / sigma)^2 = 100 when cut or missed.
+    assert result.violated.tolist() == [False, True, False, False]
+    assert result.missed.tolist() == [False, False, True, False]
+    assert result.hole.tolist() == [False, True, True, False]
+    np.testing.assert_allclose(result.cost, [1.0, 100.0, 100.0, 25.0], rtol=1e-3)
+    fitted = judge.check(strikes, judge.Caster(vertices, faces), tau=0.1, noise=0.01,
+                         fitted=True)
+    # Fitted: the closest-point distance (0.2 m to the edge, capped at tau), no miss charged.
+    np.testing.assert_allclose(fitted.cost[[2, 3]], [100.0, 25.0], rtol=1e-3)
+
+
+def test_block_mean_se_is_the_spread_of_the_block_means():
+    values = np.array([1.0, 1.0, 3.0, 3.0, 2.0, 2.0])
+    block = np.array([0, 0, 1, 1, 2, 2])
+    mean, se = judge.block_mean_se(values, block)
+    assert mean == pytest.approx(2.0)
+    assert se == pytest.approx(np.std([1.0, 3.0, 2.0], ddof=1) / np.sqrt(3))
+    assert judge.block_mean_se(values, np.zeros(6, dtype=int))[1] == 0.0
+
+
+def _scored_chamfer(mesh, truth):
+    from metrics import score
+
+    return score(mesh, truth, n_truth_samples=5000, n_test_samples=5000,
+                 coverage_points=10_000, edges=False).chamfer_m
+
+
+@pytest.mark.parametrize("scale", [1.0, 1.03, 0.97])
+def test_the_estimate_brackets_the_true_chamfer_of_a_seen_sphere(scale):
+    # Seen all round, head-on, with a recorded 1 cm range noise (the sphere's normal noise).
+    points, view, _ = sphere_points(4000, noise=0.01, seed=1)
+    sigma = {"sigma_along": np.full(4000, 0.01), "sigma_across": np.zeros(4000),
+             "dilation_along": np.zeros(4000), "dilation_across": np.zeros(4000)}
+    cloud = Cloud(points, dict(zip(("view_x", "view_y", "view_z"), view.T, strict=True))
+                  | sigma)
+    truth = sphere_mesh(6)
+    vertices, faces = sphere_mesh(4)
+    surface = (scale * vertices, faces)
+    estimate = judge.estimate(surface, cloud)
+    true = _scored_chamfer(surface, truth)
+    assert estimate.contains(true), (true, estimate)
+    assert estimate.chamfer_m == pytest.approx(true, abs=0.01)
+    assert estimate.source == "in-sample" and estimate.unseen < 0.05
+
+
+def test_the_estimate_brackets_the_true_chamfer_on_a_noisy_track_log(track_sphere):
+    # Sparse tracks (most of the sphere unseen): the band is wide, and holds the truth.
+    cloud, (vertices, faces) = track_sphere
+    for scale in (0.97, 1.02, 1.05):
+        surface = (scale * vertices, faces)
+        estimate = judge.estimate(surface, cloud)
+        true = _scored_chamfer(surface, (vertices, faces))
+        assert estimate.contains(true), (scale, true, estimate.describe())
+        assert estimate.unseen > 0.5
+    # A surface 0.5 m out: every strike in a hole, every beam cut.
+    out = judge.estimate((1.05 * vertices, faces), cloud)
+    assert out.holes > 0.9 and out.violated > 0.9
