@@ -204,7 +204,7 @@ SAMPLES = 20_000
 # Where -m auto's choice lives, tried in order ("module:function"): it moves to recon.surfaces.
 CHOOSERS = ("recon.surfaces.auto:choose", "recon.experiments.auto:choose")
 # The truth-free accuracy estimate of one surface, tried in order: ``estimate(mesh, cloud)``
-# with ``mesh`` a formats.geometry.Mesh and ``cloud`` the prepared MethodInput (points, view
+# with ``mesh`` a formats.geometry.Mesh and ``cloud`` the ingested formats.Cloud (points, view
 # points, recorded uncertainty), returning a mapping or an object that holds the predicted
 # Chamfer distance and its band (``prediction`` reads the names it may use). A run record that
 # already carries ``predicted_chamfer_m`` (and ``predicted_band_m``) is used as it is. Without
@@ -460,7 +460,7 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
     timing["auto_s"] = time.perf_counter() - start
     (out_dir / "auto.json").write_text(json.dumps(choice.to_dict(), indent=2, default=str))
     records = report["records"]
-    predicted = predict_runs(records, prepared, out_dir)
+    predicted = predict_runs(records, points, out_dir)
     truth = {r["key"]: r[CHAMFER_KEY] for r in records
              if r.get("status") == "ok" and r.get(CHAMFER_KEY) is not None}
     return {"cloud": cloud.name, "target": cloud.target, "sensor": cloud.sensor,
