@@ -52,7 +52,8 @@ class SimulatedLog(os.PathLike):
 
 
 def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
-             progress: bool | None = None, live: bool = False) -> SimulatedLog:
+             progress: bool | None = None, live: bool = False,
+             compression: str | None = None) -> SimulatedLog:
     """Simulate a campaign and write its strike log.
 
     Parameters
@@ -70,15 +71,21 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
     live : bool
         Write the log in HDF5 SWMR mode, so that ``recon ingest LOG --follow`` (and
         ``formats.strike_log.follow``) read the strikes as they arrive.
+    compression : str, optional
+        Filter of the log's datasets: ``"gzip"`` or ``"gzip:LEVEL"`` (deflate with shuffle,
+        LEVEL 0-9, readable by every HDF5 tool; the default), ``"lzf"`` (with shuffle, readable
+        only where h5py's lzf filter is installed) or ``"none"``.
 
     Returns
     -------
     SimulatedLog
     """
     import sim
+    from formats.strike_log import DEFAULT_COMPRESSION
 
     summary = sim.simulate(sim.load_scene(str(scene), list(overrides)), output, seed=seed,
-                           progress=progress, live=live)
+                           progress=progress, live=live,
+                           compression=compression or DEFAULT_COMPRESSION)
     return SimulatedLog(Path(summary["path"]), summary)
 
 

@@ -32,6 +32,7 @@ from tqdm import tqdm
 from formats.atomic import check_space
 from formats.paths import check_destination
 from formats.strike_log import (
+    DEFAULT_COMPRESSION,
     SensorErrors,
     SensorInfo,
     Shots,
@@ -39,6 +40,7 @@ from formats.strike_log import (
     StrikeLogWriter,
     TruthStrikes,
     angles_to_directions,
+    compression_filters,
     directions_to_angles,
 )
 from sim import noise, pose_errors
@@ -380,7 +382,7 @@ def sensor_info(plan: Plan) -> SensorInfo:
 
 def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
              backend: str = DEFAULT_BACKEND, workers: int | None = None,
-             live: bool = False) -> dict:
+             live: bool = False, compression: str = DEFAULT_COMPRESSION) -> dict:
     """Simulate ``scene`` and write its strike log to ``path``.
 
     Parameters
@@ -401,6 +403,9 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
     live : bool
         Write the log in HDF5 SWMR mode, readable while it is written
         (``formats.strike_log.follow``).
+    compression : str
+        Filter of the log's datasets: ``"gzip"``, ``"gzip:LEVEL"`` (0-9), ``"lzf"`` or
+        ``"none"`` (``formats.StrikeLogWriter``; default deflate, which every HDF5 tool reads).
 
     Returns
     -------
@@ -416,6 +421,7 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
         raise SceneError(f"seed must be a non-negative integer of at most {MAX_SEED}, got "
                          f"{seed!r}")
     seed = int(seed)
+    compression_filters(compression)   # a bad name fails before the ray casting
     check_destination(path, SceneError)
     check_space(path, scene.cost.disk_bytes, SceneError)
     start = time.perf_counter()
@@ -428,7 +434,7 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
                               truth_mesh=(scene.vertices, scene.faces),
                               expected_shots=scene.n_shots,
                               expected_strikes=scene.n_shots * plan.pattern.n_beams,
-                              live=live) as log:
+                              live=live, compression=compression) as log:
         closed_loop = scene["attitude.mode"] == "gaps"
         for chunk in (iter_closed_loop(plan) if closed_loop else
                       iter_chunks(plan, workers=workers)):
