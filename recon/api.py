@@ -132,13 +132,14 @@ def load(value, *, name: str = "input", points_only: bool = False) -> Cloud | Me
     return Cloud.of(value, name)
 
 
-def truth_of(value, *, scale: float = 1.0) -> Mesh:
-    """The truth mesh named by ``value``: a ``Mesh`` or ``(vertices, faces)``, a mesh file (its
-    coordinates times ``scale``), or a strike log with its embedded truth mesh."""
+def truth_of(value, *, scale: float = 1.0, units: str | None = None) -> Mesh:
+    """The truth mesh named by ``value``: a ``Mesh`` or ``(vertices, faces)``, a mesh file (in
+    ``units``, default the format's, then times ``scale``), or a strike log with its embedded
+    truth mesh."""
     if isinstance(value, str | os.PathLike):
         from recon.inputs import load_truth
 
-        return load_truth(value, scale=scale)
+        return load_truth(value, scale=scale, units=units)
     return Mesh.of(value, "truth")
 
 
@@ -159,7 +160,8 @@ def default_truth(test):
     return test
 
 
-def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
+def score(test, *, truth, truth_scale: float = 1.0, truth_units: str | None = None,
+          tau: float | None = None,
           tau_fraction: float | None = None, edges: bool = True, seed: int | None = 0,
           progress=None, **options):
     """Score a cloud or a mesh against the truth mesh (``metrics.score``).
@@ -170,6 +172,8 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
     truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
     truth_scale : float
         Factor on a truth mesh file's coordinates (e.g. 1000 for km).
+    truth_units : {"km", "m"}, optional
+        Units of a truth mesh file (default: the format's; km for PDS tables, ICQ and DSK).
     tau, tau_fraction, edges, seed, progress, **options
         As ``metrics.score``.
 
@@ -179,7 +183,7 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
     """
     from metrics.score import score as score_against
 
-    truth = truth_of(truth, scale=truth_scale)
+    truth = truth_of(truth, scale=truth_scale, units=truth_units)
     options = {"tau": tau, "tau_fraction": tau_fraction, "edges": edges, "seed": seed,
                "progress": progress} | options
     if isinstance(test, str | os.PathLike):

@@ -44,12 +44,12 @@ def compression_filters(spec: str, where: str | None = None) -> dict:
         Any other name; the message names ``where`` (the log, when given) and the allowed
         forms.
     """
-    name, _, level = str(spec).partition(":")
-    if name == "none" and not level:
+    name, colon, level = str(spec).partition(":")
+    if name == "none" and not colon:
         return {}
-    if name == "lzf" and not level:
+    if name == "lzf" and not colon:
         return {"compression": "lzf", "shuffle": True}
-    if name == "gzip" and (not level or (level.isdigit() and 0 <= int(level) <= 9)):
+    if name == "gzip" and (not colon or (level.isdigit() and 0 <= int(level) <= 9)):
         return {"compression": "gzip", "compression_opts": int(level or GZIP_LEVEL),
                 "shuffle": True}
     prefix = f"{where}: " if where else ""

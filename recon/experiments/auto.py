@@ -587,5 +587,5 @@ def choose_and_reconstruct(input, output, *, methods: Sequence[str] | None = Non
     if say is not None:
         say(format_choice(choice))
     summary = reconstruct_to_file(cloud, prepared, Path(output), run=choice.run, limits=limits,
-                                  isolate=isolate, on_wait=on_wait)
+                                  isolate=isolate, on_wait=on_wait, source=input)
     return {"input": str(input), "auto": choice.to_dict()} | summary
