@@ -84,6 +84,8 @@ def read_mesh(path, *, scale: float = 1.0, units: str | None = None) -> Mesh:
                               f"{', '.join(MESH_SUFFIXES)})")
     if not (np.isfinite(scale) and scale > 0):
         raise MeshFormatError(f"{path}: scale must be a positive number, got {scale}")
+    if units is not None:
+        units_factor(units, path)   # a bad name first
     stated = _stated_units(path, suffix)
     if units is not None and stated is not None and units != stated:
         raise MeshFormatError(f"{path}: the file is in {stated}, not {units} (omit the units)")

@@ -158,7 +158,7 @@ def target_mesh(target: dict) -> tuple[np.ndarray, np.ndarray, str]:
         return (*targets.rso_b(), "rso-b")
     try:
         vertices, faces = targets.load_mesh(target["path"], target["scale"],
-                                            center=target["center"])
+                                            center=target["center"], units=target.get("units"))
     except MeshFormatError as exc:
         raise SceneError(f"target.path: {exc}") from None
     return vertices, faces, f"mesh:{Path(target['path']).name}"
