@@ -266,3 +266,44 @@ def test_cli_truth_writes_each_format(tmp_path, sphere_log):
         back = read_mesh(tmp_path / name)
         np.testing.assert_allclose(back.vertices, truth.vertices, rtol=1e-14, atol=1e-9)
     assert main(["truth", str(sphere_log), "-o", str(tmp_path / "t.obj")]) == 1
+
+
+# --------------------------------------------------------------------------- scenes
+
+
+def test_a_scene_simulated_on_its_own_dsk_reproduces_the_log(tmp_path):
+    from cli.main import main
+    from formats import StrikeLog
+    from recon import api
+
+    first = api.simulate("asteroid-cross", tmp_path / "a.h5", seed=3,
+                         overrides=["time.duration=2000"]).path
+    assert main(["truth", str(first), "-o", str(tmp_path / "shape.bds")]) == 0
+    again = api.simulate("asteroid-cross", tmp_path / "b.h5", seed=3,
+                         overrides=["time.duration=2000", "target.kind=mesh",
+                                    f"target.path={tmp_path / 'shape.bds'}"]).path
+    with StrikeLog(first) as a, StrikeLog(again) as b:
+        assert b.attrs["target"] == "mesh:shape.bds"
+        np.testing.assert_allclose(b.truth_mesh().vertices, a.truth_mesh().vertices,
+                                   rtol=1e-14, atol=1e-9)
+        for x, y in zip(a.strikes(), b.strikes(), strict=True):
+            np.testing.assert_allclose(y, x, rtol=0, atol=1e-9)   # metres
+
+
+@pytest.mark.parametrize("units", [None, "m"])
+def test_a_scene_takes_an_icq_target_in_its_units(tmp_path, units):
+    from formats import StrikeLog
+    from recon import api
+
+    q, axes = 4, np.array([0.3, 0.2, 0.15]) * (1000.0 if units == "m" else 1.0)
+    path = tmp_path / "shape.icq"
+    path.write_text(f"{q}\n" + "".join(f"{x:.9f} {y:.9f} {z:.9f}\n"
+                                       for x, y, z in _icq_grid(q, axes).reshape(-1, 3)))
+    keys = ["time.duration=600", "target.kind=mesh", f"target.path={path}"]
+    log = api.simulate("asteroid-cross", tmp_path / "icq.h5", seed=0,
+                       overrides=keys + ([f"target.units={units}"] if units else [])).path
+    with StrikeLog(log) as reader:
+        truth = reader.truth_mesh()
+        assert reader.n_strikes > 0
+    extent = truth.vertices.max(axis=0) - truth.vertices.min(axis=0)
+    np.testing.assert_allclose(extent, [600.0, 400.0, 300.0], rtol=0.02)   # metres
