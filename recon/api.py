@@ -219,8 +219,9 @@ def score(test, *, truth, truth_scale: float = 1.0, truth_units: str | None = No
     return score_against(load(test, name="test"), truth, **options)
 
 
-def edges(test, *, truth, output, truth_scale: float = 1.0, seed: int = 0,
-          title: str | None = None, edge_options: dict | None = None, progress=None) -> dict:
+def edges(test, *, truth, output, truth_scale: float = 1.0, truth_units: str | None = None,
+          seed: int = 0, title: str | None = None, edge_options: dict | None = None,
+          progress=None) -> dict:
     """The edge points of a cloud against the truth, written as a PLY and the paper's picture
     (``recon.edge_pictures``): ``recon edges``.
 
@@ -230,7 +231,7 @@ def edges(test, *, truth, output, truth_scale: float = 1.0, seed: int = 0,
     truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
     output : str or Path
         Directory for edges.ply, edges.png and edges.json.
-    truth_scale, seed, title, edge_options, progress
+    truth_scale, truth_units, seed, title, edge_options, progress
         As ``api.score`` and ``recon.edge_pictures.edge_pictures``.
 
     Returns
@@ -240,8 +241,9 @@ def edges(test, *, truth, output, truth_scale: float = 1.0, seed: int = 0,
     """
     from recon.edge_pictures import edge_pictures
 
-    return edge_pictures(load(test, name="test"), truth_of(truth, scale=truth_scale), output,
-                         seed=seed, title=title, edge_options=edge_options, progress=progress)
+    truth_mesh = truth_of(truth, scale=truth_scale, units=truth_units)
+    return edge_pictures(load(test, name="test"), truth_mesh, output, seed=seed, title=title,
+                         edge_options=edge_options, progress=progress)
 
 
 def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None = None,

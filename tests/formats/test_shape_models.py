@@ -18,6 +18,8 @@ Where each layout is specified (the hand-made files below follow these, not reco
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -307,3 +309,23 @@ def test_a_scene_takes_an_icq_target_in_its_units(tmp_path, units):
         assert reader.n_strikes > 0
     extent = truth.vertices.max(axis=0) - truth.vertices.min(axis=0)
     np.testing.assert_allclose(extent, [600.0, 400.0, 300.0], rtol=0.02)   # metres
+
+
+def test_score_and_edges_take_the_truth_units(tmp_path, sphere_log, capsys):
+    from cli.main import main
+    from formats import StrikeLog
+
+    with StrikeLog(sphere_log) as log:
+        truth = log.truth_mesh()
+    write_mesh(tmp_path / "truth_m.tab", truth, units="m")
+    assert main(["score", str(sphere_log), "--no-edges", "--json"]) == 0   # its own truth
+    expected = json.loads(capsys.readouterr().out)["accuracy_mean_m"]
+    assert main(["score", str(sphere_log), "--truth", str(tmp_path / "truth_m.tab"),
+                 "--truth-units", "m", "--no-edges", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["accuracy_mean_m"] == pytest.approx(expected)
+    # read as km (the default for .tab), the truth is 1000 times too big: a stated warning
+    assert main(["score", str(sphere_log), "--truth", str(tmp_path / "truth_m.tab"),
+                 "--no-edges", "--json"]) == 0
+    assert "probably km against m" in capsys.readouterr().err
+    assert main(["edges", str(sphere_log), "--truth", str(tmp_path / "truth_m.tab"),
+                 "--truth-units", "m", "-o", str(tmp_path / "edges"), "--json"]) == 0
