@@ -1,14 +1,17 @@
-"""Strike-log storage: write time, read time and size with no compression, lzf and gzip.
+"""Strike-log storage: write time, read time and size with no compression, lzf and gzip levels.
 
 A 10-million-strike log shaped like a scanning-LIDAR campaign (10 strikes per shot, a smooth
 orbit and attitude, noisy ranges), with its truth group, written by the real StrikeLogWriter in
-1-million-strike blocks and read back through StrikeLog.iter_chunks. The baseline is "none".
+1-million-strike blocks and read back through StrikeLog.iter_chunks. The baseline is "none";
+``--compressions`` lists the filters to measure (default: none, lzf and gzip at levels 1, 4, 6
+and 9).
 
     .venv/bin/python benchmarks/bench_log_compression.py            # 10 M strikes, 3 repeats
     .venv/bin/python benchmarks/bench_log_compression.py --quick    # 200 k strikes, 1 repeat
 
-``--scene PRESET`` measures the real pipeline instead: ``recon simulate PRESET`` (the simulator
-with its Embree ray casting) and ``recon ingest`` of the log, per compression:
+``--scene PRESET`` measures the real pipeline instead: ``recon simulate PRESET --compression C``
+(the simulator with its Embree ray casting) and ``recon ingest`` of the log, per compression, with
+simulate time also as a ratio against lzf's in the same run (the default's budget: 1.3x):
 
     .venv/bin/python benchmarks/bench_log_compression.py --scene asteroid-lidar --repeats 1
     .venv/bin/python benchmarks/bench_log_compression.py --scene asteroid-lrf-slew
@@ -26,10 +29,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from formats import SensorInfo, Shots, StrikeLog, StrikeLogWriter, TruthStrikes
-from formats.strike_log import COMPRESSIONS, angles_to_directions
+from formats.strike_log import angles_to_directions, compression_filters
 
 STRIKES_PER_SHOT = 10
 BLOCK = 1_000_000
+COMPRESSIONS = ("none", "lzf", "gzip:1", "gzip:4", "gzip:6", "gzip:9")
 
 
 def synthetic_blocks(n_strikes: int, seed: int = 0):
@@ -78,33 +82,28 @@ def read_log(path: Path) -> float:
     return time.perf_counter() - start
 
 
-def scene_rows(scene: str, repeats: int):
-    """Yield ``(compression, median simulate s, median ingest s, log MB)`` of a preset, "none"
-    first, each as soon as it is measured."""
-    import functools
-
-    import sim.pipeline
+def scene_rows(scene: str, repeats: int, compressions):
+    """Yield ``(compression, median simulate s, median ingest s, log MB)`` of a preset, in the
+    order of ``compressions``, each as soon as it is measured."""
     from recon import api
     from recon.registration.ingest import ingest_to_file
 
     with tempfile.TemporaryDirectory() as tmp:
-        for compression in COMPRESSIONS:
-            # the simulator writes with the writer's default; substitute one per compression
-            sim.pipeline.StrikeLogWriter = functools.partial(StrikeLogWriter,
-                                                             compression=compression)
-            path, cloud = Path(tmp) / f"{compression}.h5", Path(tmp) / "cloud.h5"
+        for compression in compressions:
+            path, cloud = Path(tmp) / "log.h5", Path(tmp) / "cloud.h5"
             w, r = [], []
             for _ in range(repeats):
+                path.unlink(missing_ok=True)
                 start = time.perf_counter()
-                api.simulate(scene, path, seed=0)
+                api.simulate(scene, path, seed=0, compression=compression)
                 w.append(time.perf_counter() - start)
+                cloud.unlink(missing_ok=True)
                 start = time.perf_counter()
                 ingest_to_file(path, cloud)
                 r.append(time.perf_counter() - start)
             size = path.stat().st_size / 1e6
             path.unlink()
             yield compression, statistics.median(w), statistics.median(r), size
-    sim.pipeline.StrikeLogWriter = StrikeLogWriter
 
 
 def main() -> None:
@@ -112,31 +111,42 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="200 k strikes, one repeat")
     parser.add_argument("--scene", help="simulate and ingest this preset instead")
     parser.add_argument("--repeats", type=int, default=3, help="repeats with --scene")
+    parser.add_argument("--compressions", default=",".join(COMPRESSIONS),
+                        help="comma-separated filters to measure, the first the baseline "
+                             "(default: %(default)s)")
     args = parser.parse_args()
+    compressions = args.compressions.split(",")
+    for name in compressions:
+        compression_filters(name)
     if args.scene:
         print(f"recon simulate {args.scene} and recon ingest; median of {args.repeats}; ratios "
-              "against 'none' measured in this run")
+              f"against {compressions[0]!r} (x) and lzf (x lzf) measured in this run")
         print(f"{'compression':<12}{'simulate s':>11}{'ingest s':>10}{'size MB':>9}"
-              f"{'simulate x':>11}{'ingest x':>9}{'size x':>8}", flush=True)
-        base = None
-        for name, w, r, s in scene_rows(args.scene, args.repeats):
-            base = base or (w, r, s)
-            print(f"{name:<12}{w:11.2f}{r:10.2f}{s:9.1f}{w / base[0]:11.2f}{r / base[1]:9.2f}"
-                  f"{s / base[2]:8.2f}", flush=True)
+              f"{'simulate x':>11}{'ingest x':>9}{'size x':>8}{'sim x lzf':>10}"
+              f"{'ingest x lzf':>13}", flush=True)
+        rows = []
+        for row in scene_rows(args.scene, args.repeats, compressions):
+            rows.append(row)
+            name, w, r, s = row
+            base = rows[0]
+            lzf = next((x for x in rows if x[0] == "lzf"), None)
+            vs_lzf = (f"{w / lzf[1]:10.2f}{r / lzf[2]:13.2f}" if lzf else f"{'':10}{'':13}")
+            print(f"{name:<12}{w:11.2f}{r:10.2f}{s:9.1f}{w / base[1]:11.2f}{r / base[2]:9.2f}"
+                  f"{s / base[3]:8.2f}{vs_lzf}", flush=True)
         return
     n_strikes, repeats = (200_000, 1) if args.quick else (10_000_000, 3)
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for compression in COMPRESSIONS:
+        for compression in compressions:
             path = Path(tmp) / f"{compression}.h5"
             w = [write_log(path, n_strikes, compression) for _ in range(repeats)]
             r = [read_log(path) for _ in range(repeats)]
             rows[compression] = (statistics.median(w), statistics.median(r),
                                  path.stat().st_size / 1e6)
             path.unlink()
-    base_w, base_r, base_s = rows["none"]
+    base_w, base_r, base_s = rows[compressions[0]]
     print(f"strike log, {n_strikes:,} strikes ({n_strikes // STRIKES_PER_SHOT:,} shots) with "
-          f"truth; median of {repeats}; ratios against 'none' measured in this run")
+          f"truth; median of {repeats}; ratios against {compressions[0]!r} measured in this run")
     print(f"{'compression':<12}{'write s':>9}{'read s':>9}{'size MB':>9}{'write x':>9}"
           f"{'read x':>8}{'size x':>8}{'Mstrikes/s write':>18}")
     for name, (w, r, s) in rows.items():

@@ -22,6 +22,9 @@ def register(sub) -> None:
         p, truth_required=False,
         truth_help="truth mesh file, or a strike log with an embedded truth mesh (default: "
                    "CLOUD itself when it is a log with truth)")
+    p.add_argument("--truth-units", choices=("km", "m"),
+                   help="units of a truth mesh file (default: km for .tab, .icq, .bds/.dsk; m for "
+                        "OBJ, PLY, STL)")
     p.add_argument("--variant", choices=("weighted", "feature"), default="weighted",
                    help="weighted: every truth edge by length x dihedral angle (the paper's "
                         "metric); feature: only edges sharper than the feature angle (default: "
@@ -51,6 +54,7 @@ def run(args) -> int:
     truth = api.default_truth(args.test) if args.truth is None else args.truth
     with tqdm(total=3, desc="edges", unit="stage", disable=None, leave=False, delay=1.0) as bar:
         result = api.edges(args.test, truth=truth, truth_scale=args.truth_scale,
+                           truth_units=args.truth_units,
                            output=args.output, seed=args.seed, title=args.title,
                            edge_options=options, progress=lambda stage: bar.update(1))
     report, counts = result["report"], result["counts"]

@@ -97,9 +97,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_altimetry)
 
     p = sub.add_parser("truth", help="export the truth mesh embedded in a strike log",
-                       description="Write the log's /truth/mesh as a binary PLY.")
+                       description="Write the log's /truth/mesh as a binary PLY (metres, with "
+                                   "its frame and source), a PDS vertex/plate table or a SPICE "
+                                   "DSK type 2 kernel (km; body RECON_TARGET, frame "
+                                   "RECON_TARGET_FIXED).")
     p.add_argument("log", help="strike log (.h5) with a truth group")
-    p.add_argument("-o", "--output", required=True, type=Path, help="mesh to write (.ply)")
+    p.add_argument("-o", "--output", required=True, type=Path,
+                   help="mesh to write: .ply, .tab (PDS vertex/plate table) or .bds/.dsk (DSK)")
+    p.add_argument("--units", choices=("km", "m"),
+                   help="units of a .tab's coordinates (default: km, as PDS publishes shape "
+                        "models; .ply is always m and a DSK km)")
     p.set_defaults(func=run_truth)
 
 
@@ -224,7 +231,7 @@ def run_truth(args) -> int:
 
     with StrikeLog(args.log) as log:
         truth = log.truth_mesh()
-    write_mesh(args.output, truth, source=Path(args.log).name)
+    write_mesh(args.output, truth, source=Path(args.log).name, units=args.units)
     print(f"wrote truth mesh ({truth.n_vertices} vertices, {truth.n_faces} faces) to "
           f"{args.output}")
     return 0

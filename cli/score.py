@@ -33,14 +33,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "and F-score at tau, coverage and the edge metric of TEST "
                                    "against TRUTH (definitions: metrics/score.py).")
     p.add_argument("test", type=Path,
-                   help="point cloud (.ply .las .laz .h5), mesh (.ply .obj .stl .off) or strike "
-                        "log (.h5, registered on the fly)")
+                   help="point cloud (.ply .las .laz .h5 .xyz .xyzn .csv ...), mesh (.ply .obj "
+                        ".stl .off) or strike log (.h5, registered on the fly)")
     p.add_argument("--truth", type=Path,
                    help="truth mesh file, or a strike log with an embedded truth mesh (default: "
                         "TEST itself when it is a log with truth)")
     p.add_argument("--truth-scale", type=float, default=1.0,
-                   help="factor applied to a truth mesh file's coordinates, e.g. 1000 for a "
-                        "model in km (default: %(default)s)")
+                   help="factor applied to a truth mesh file's coordinates after --truth-units "
+                        "(default: %(default)s)")
+    p.add_argument("--truth-units", choices=("km", "m"),
+                   help="units of a truth mesh file (default: km for PDS tables .tab, ICQ .icq "
+                        "and SPICE DSK .bds/.dsk, which is always km; m for OBJ, PLY, STL)")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--tau", type=float, help="threshold of precision/recall/coverage [m]")
     group.add_argument("--tau-fraction", type=float,
@@ -69,12 +72,16 @@ def run(args) -> int:
             tqdm(total=stages, desc="score", unit="stage", disable=None, leave=False,
                  delay=1.0) as bar:
         warnings.simplefilter("always")
-        report = api.score(args.test, truth=truth, truth_scale=args.truth_scale, tau=args.tau,
+        report = api.score(args.test, truth=truth, truth_scale=args.truth_scale,
+                           truth_units=args.truth_units, tau=args.tau,
                            tau_fraction=args.tau_fraction, seed=args.seed,
                            edges=not args.no_edges, edge_options={"variant": args.edge_variant},
                            progress=lambda stage: bar.update(1))
+    from metrics.errors import FrameAssumedWarning
+
     for w in caught:
-        print(f"recon score: warning: {w.message}", file=sys.stderr)
+        kind = "note" if issubclass(w.category, FrameAssumedWarning) else "warning"
+        print(f"recon score: {kind}: {w.message}", file=sys.stderr)
     result = report.to_dict()
     result |= {"test": str(args.test), "truth": str(truth)}
     if args.json:

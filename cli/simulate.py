@@ -36,6 +36,10 @@ def register(subparsers) -> None:
     parser.add_argument("--live", action="store_true",
                         help="write in HDF5 SWMR mode so that `recon ingest LOG --follow` reads "
                              "the strikes while they are written")
+    parser.add_argument("--compression", metavar="lzf|gzip[:LEVEL]|none",
+                        help="filter of the log's datasets: gzip (deflate with shuffle, which "
+                             "every HDF5 tool reads; the default), gzip:LEVEL (0-9), lzf "
+                             "(h5py's own filter, unreadable by other HDF5 tools) or none")
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                         help="show a progress bar (default: on a terminal, after 2 s)")
@@ -67,7 +71,8 @@ def run(args) -> int:
     from recon import api
 
     summary = api.simulate(args.scene, args.output, seed=args.seed, overrides=args.overrides,
-                           progress=args.progress, live=args.live).summary
+                           progress=args.progress, live=args.live,
+                           compression=args.compression).summary
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

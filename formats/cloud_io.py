@@ -16,8 +16,10 @@ name                   dtype      meaning
 ``nx``, ``ny``, ``nz`` float64    unit normal
 =====================  =========  ==============================================================
 
-Every file written says its frame (``body`` or ``inertial``), units (metres), source log and the
-recon version (``formats.geometry.file_metadata``), and reading gives the cloud that frame back.
+Every file written says its frame (``body``, ``inertial`` or ``unknown``), units (metres), source
+log and the recon version (``formats.geometry.file_metadata``), and the units of every attribute
+column; reading gives the cloud that frame back. Files that record no frame (those of other
+tools, text, PCD, E57) are read in the frame ``unknown``.
 
 Formats written
 ---------------
@@ -28,13 +30,14 @@ Formats written
     with zero offset; every point return 1 of 1; ``time`` in ``gps_time`` (seconds since the start
     of the campaign, not GPS time); ``beam`` in ``point_source_id``; ``azimuth`` in ``scan_angle``
     (0.006 degree steps); every attribute but ``time`` and ``beam`` also as a described
-    extra-bytes dimension (lossless). The frame, as a WKT ``LOCAL_CS`` in metres (global encoding
-    WKT bit set), and ``file_metadata`` as JSON in the VLR ``recon``/1. Intensity stays 0: a
-    strike log records no return amplitude.
+    extra-bytes dimension (lossless), its description ending in its unit (``range [m]``). The
+    frame, as a WKT ``LOCAL_CS`` in metres (global encoding WKT bit set), and ``file_metadata``
+    with the unit of every attribute (``units_of``) as JSON in the VLR ``recon``/1. Intensity
+    stays 0: a strike log records no return amplitude.
 ``.h5``   HDF5 with root attributes ``format = "recon-point-cloud"``, ``format_version = 1`` and
     ``file_metadata``; dataset ``points`` (n, 3) float64 and one (n,) dataset per attribute under
-    ``attributes/``, each with a ``units`` attribute (and ``frame`` on coordinates), chunked and
-    resizable.
+    ``attributes/``, each with a ``units`` attribute (``unknown`` for an attribute recon does not
+    know; ``frame`` too on coordinates), chunked and resizable.
 
 Formats read as well
 --------------------
@@ -42,6 +45,10 @@ Formats read as well
     separated by spaces, tabs or commas; ``#`` and ``//`` lines are comments, and a comment line
     naming every column (CloudCompare's ``//X Y Z Nx Ny Nz``) names them. Other columns are kept
     as ``column_N`` (1-based), e.g. a HELIOS++ ``.xyz``'s intensity and GPS time.
+``.xyzn``  text, exactly x y z nx ny nz per line (Open3D's point-with-normal format).
+``.csv``  comma-separated with a header row naming the columns, ``x``, ``y``, ``z`` among them
+    (any case, any order), ``nx``, ``ny``, ``nz`` read as normals and every other column kept
+    under its name; a file whose first row is numbers is read as ``.xyz``.
 ``.pcd``  through Open3D's tensor reader (positions, normals and every scalar field).
 ``.e57``  through pye57 (libE57Format), every scan merged in the file's frame with its pose
     applied; intensity kept.
@@ -59,13 +66,13 @@ import numpy as np
 
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
-from formats.geometry import NORMAL_ATTRIBUTES, Cloud, file_metadata, frame_of
+from formats.geometry import NORMAL_ATTRIBUTES, UNKNOWN, Cloud, file_metadata, frame_of
 from formats.hdf5_check import check_hdf5, trust
 from formats.paths import check_source
 from formats.ply import PlyWriter, binary_vertex_layout, read_ply
 
 WRITE_SUFFIXES = (".ply", ".las", ".laz", ".h5")
-TEXT_SUFFIXES = (".xyz", ".asc", ".txt")
+TEXT_SUFFIXES = (".xyz", ".asc", ".txt", ".xyzn", ".csv")
 CLOUD_SUFFIXES = (*WRITE_SUFFIXES, *TEXT_SUFFIXES, ".pcd", ".e57")
 CLOUD_FORMAT_NAME = "recon-point-cloud"
 CLOUD_FORMAT_VERSION = 1
@@ -73,18 +80,19 @@ CLOUD_FORMAT_VERSION = 1
 LAS_SCALE_M = 1e-4
 # LAS 1.4 scan_angle: int16 in steps of 0.006 degrees, -30000..30000 (ASPRS R15, point format 6).
 LAS_SCAN_ANGLE_STEP_DEG = 0.006
-# Units and a description (LAS extra-bytes descriptions hold 32 characters) of known attributes.
+# Units and a description of known attributes; a LAS extra-bytes description (32 characters)
+# is the description and the unit in brackets (``_las_description``).
 ATTRIBUTE_INFO = {
-    "time": ("s", "shot time since start [s]"),
+    "time": ("s", "shot time since start"),
     "et": ("s", "ET, TDB s past J2000"),
-    "shot": ("1", "shot index in the source log"),
-    "beam": ("1", "beam index in the source log"),
-    "range": ("m", "measured range [m]"),
-    "azimuth": ("rad", "measured azimuth in S [rad]"),
-    "elevation": ("rad", "measured elevation in S [rad]"),
-    "view_x": ("m", "sensor x, cloud frame [m]"),
-    "view_y": ("m", "sensor y, cloud frame [m]"),
-    "view_z": ("m", "sensor z, cloud frame [m]"),
+    "shot": ("1", "shot index in source log"),
+    "beam": ("1", "beam index in source log"),
+    "range": ("m", "measured range"),
+    "azimuth": ("rad", "measured azimuth in S"),
+    "elevation": ("rad", "measured elevation in S"),
+    "view_x": ("m", "sensor x, cloud frame"),
+    "view_y": ("m", "sensor y, cloud frame"),
+    "view_z": ("m", "sensor z, cloud frame"),
     "nx": ("1", "unit normal x"),
     "ny": ("1", "unit normal y"),
     "nz": ("1", "unit normal z"),
@@ -98,11 +106,23 @@ _LAS_WKT = ('LOCAL_CS["recon {frame} frame ({long})",LOCAL_DATUM["{long}",0],'
             'UNIT["metre",1,AUTHORITY["EPSG","9001"]],AXIS["X",OTHER],AXIS["Y",OTHER],'
             'AXIS["Z",OTHER]]')
 _FRAME_NAMES = {"body": "target body frame B, origin at the target centre",
-                "inertial": "target-centred inertial frame I"}
+                "inertial": "target-centred inertial frame I",
+                UNKNOWN: "frame not recorded by the source"}
 _LAS_VLR_USER, _LAS_VLR_RECORD = "recon", 1
 # Attribute -> the standard LAS dimension that holds it exactly (not repeated as extra bytes).
 _LAS_STANDARD = {"time": "gps_time", "beam": "point_source_id"}
 _CHUNK_ROWS = 65_536
+
+
+def units_of(name: str) -> str:
+    """The unit of attribute ``name`` (``ATTRIBUTE_INFO``), ``"unknown"`` for others."""
+    return ATTRIBUTE_INFO.get(name, (UNKNOWN, ""))[0]
+
+
+def _las_description(name: str) -> str:
+    """A LAS extra-bytes description (at most 32 characters) that ends in the unit."""
+    unit = f" [{units_of(name)}]"
+    return ATTRIBUTE_INFO.get(name, ("", name))[1][:32 - len(unit)] + unit
 
 
 def _suffix(path: Path, allowed: tuple[str, ...] = CLOUD_SUFFIXES) -> str:
@@ -158,8 +178,7 @@ class _H5Cloud(AtomicWriter):
         self._datasets = [points]
         for name, dtype in dtypes.items():
             ds = g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(rows,))
-            if name in ATTRIBUTE_INFO:
-                ds.attrs["units"] = ATTRIBUTE_INFO[name][0]
+            ds.attrs["units"] = units_of(name)
             if name in _FRAMED:
                 ds.attrs["frame"] = metadata["frame"]
             self._datasets.append(ds)
@@ -209,8 +228,7 @@ class _LasCloud(AtomicWriter):
         header.global_encoding.wkt = True
         header.system_identifier = "recon strike-log registration"
         header.generating_software = f"recon {metadata['recon_version']}"[:32]
-        extra = [laspy.ExtraBytesParams(name=k, type=v,
-                                        description=ATTRIBUTE_INFO.get(k, ("", k))[1][:32])
+        extra = [laspy.ExtraBytesParams(name=k, type=v, description=_las_description(k))
                  for k, v in dtypes.items() if k not in _LAS_STANDARD]
         if extra:
             header.add_extra_dims(extra)
@@ -218,7 +236,8 @@ class _LasCloud(AtomicWriter):
         header.vlrs.append(WktCoordinateSystemVlr(
             _LAS_WKT.format(frame=frame, long=_FRAME_NAMES[frame])))
         described = metadata | {"dimensions": {v: k for k, v in _LAS_STANDARD.items()
-                                               if k in dtypes}}
+                                               if k in dtypes},
+                                "attribute_units": {k: units_of(k) for k in dtypes}}
         if "azimuth" in dtypes:
             described["dimensions"]["scan_angle"] = (
                 f"azimuth in steps of {LAS_SCAN_ANGLE_STEP_DEG} deg")
@@ -428,15 +447,16 @@ def _las_metadata(path: Path, header) -> dict:
     return {}
 
 
-def _text_columns(path: Path) -> tuple[list[str] | None, str | None]:
-    """The column names a comment line gives (or None) and the delimiter of a text cloud.
+def _text_columns(path: Path) -> tuple[list[str] | None, str | None, int]:
+    """The column names a comment line or a CSV header row gives (or None), the delimiter of
+    a text cloud and the number of header rows to skip.
 
     Raises
     ------
     MeshFormatError
         The file has no data line (empty, or comments only).
     """
-    names = None
+    names, delimiter, header = None, None, 0
     with open(path, encoding="utf-8", errors="replace") as fh:
         for line in fh:
             text = line.strip()
@@ -447,15 +467,34 @@ def _text_columns(path: Path) -> tuple[list[str] | None, str | None]:
                 if words[:3] and [w.lower() for w in words[:3]] == ["x", "y", "z"]:
                     names = [w.lower() for w in words]
                 continue
-            return names, "," if "," in text else None
-    raise MeshFormatError(f"{path}: holds no points (no line of numbers)")
+            delimiter = "," if "," in text else None
+            first = text.split(delimiter)
+            if path.suffix.lower() == ".csv" and not all(_is_number(w) for w in first):
+                names, header = [w.strip().strip('"').lower() for w in first], 1
+                missing = [k for k in "xyz" if k not in names]
+                if missing or len(set(names)) != len(names):
+                    raise MeshFormatError(
+                        f"{path}: the header row must name columns x, y and z once each "
+                        f"(found {', '.join(names)[:200]})")
+            break
+        else:
+            raise MeshFormatError(f"{path}: holds no points (no line of numbers)")
+    return names, delimiter, header
+
+
+def _is_number(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
 
 
 def _read_text(path: Path) -> Cloud:
-    names, delimiter = _text_columns(path)
+    names, delimiter, header = _text_columns(path)
     try:
         table = np.loadtxt(path, comments=("#", "//"), delimiter=delimiter, ndmin=2,
-                           dtype=np.float64)
+                           dtype=np.float64, skiprows=_header_line(path) if header else 0)
     except ValueError as exc:
         raise MeshFormatError(f"{path}: not a text point cloud of numbers "
                               f"({str(exc).splitlines()[0]})") from None
@@ -464,11 +503,26 @@ def _read_text(path: Path) -> Cloud:
     n_columns = table.shape[1]
     if n_columns < 3:
         raise MeshFormatError(f"{path}: needs at least 3 columns (x y z), found {n_columns}")
+    if path.suffix.lower() == ".xyzn" and n_columns != 6:
+        raise MeshFormatError(f"{path}: an .xyzn file has 6 columns (x y z nx ny nz), found "
+                              f"{n_columns}")
+    if header and len(names) != n_columns:
+        raise MeshFormatError(f"{path}: the header names {len(names)} columns but the rows "
+                              f"hold {n_columns}")
     if names is None or len(names) != n_columns:
         names = ["x", "y", "z"] + (list(NORMAL_ATTRIBUTES) if n_columns == 6 else
                                    [f"column_{i + 1}" for i in range(3, n_columns)])
     columns = dict(zip(names, table.T, strict=True))
-    return Cloud(np.stack([columns.pop(k) for k in "xyz"], axis=1), columns)
+    return Cloud(np.stack([columns.pop(k) for k in "xyz"], axis=1), columns, frame=UNKNOWN)
+
+
+def _header_line(path: Path) -> int:
+    """Lines up to and including a CSV's header row (blank and comment lines before it)."""
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for number, line in enumerate(fh, 1):
+            if line.strip() and not line.strip().startswith(("#", "//")):
+                return number
+    return 0
 
 
 # PCD header keys in the order the format (PCL's PCD v0.7) puts them.
@@ -575,7 +629,7 @@ def _read_pcd(path: Path) -> Cloud:
             attributes[name] = values[:, 0]
         else:
             attributes.update({f"{name}_{i}": v for i, v in enumerate(values.T)})
-    return Cloud(points, attributes)
+    return Cloud(points, attributes, frame=UNKNOWN)
 
 
 def _read_e57(path: Path) -> Cloud:
@@ -597,7 +651,7 @@ def _read_e57(path: Path) -> Cloud:
     attributes = {}
     if all("intensity" in s for s in scans):
         attributes["intensity"] = np.concatenate([s["intensity"] for s in scans])
-    return Cloud(points.astype(np.float64), attributes)
+    return Cloud(points.astype(np.float64), attributes, frame=UNKNOWN)
 
 
 Blocks = Callable[[], Iterator[tuple[np.ndarray, np.ndarray | None]]]

@@ -2,7 +2,9 @@
 
 Both carry their frame and units, so a cloud registered in the inertial frame is never scored
 silently against a body-frame truth. Coordinates are float64 metres; the frame is ``"body"`` (the
-target body frame B of formats/SPEC.md, the default) or ``"inertial"`` (I).
+target body frame B of formats/SPEC.md, the default), ``"inertial"`` (I) or ``"unknown"``: read
+from a file that records no frame (a text cloud, an OBJ, a PDS table), which recon says when it
+uses such geometry with a known frame rather than assuming one silently.
 
 Functions across recon accept these types and the plain data they wrap: an ``(n, 3)`` array for
 a cloud, a ``(vertices, faces)`` tuple or any object with ``vertices`` and ``faces`` attributes
@@ -20,8 +22,11 @@ import numpy as np
 
 from formats.errors import MeshFormatError
 
-Frame = Literal["body", "inertial"]
+Frame = Literal["body", "inertial", "unknown"]
+# The frames recon registers strikes into; geometry read from files may also be UNKNOWN.
 FRAMES: tuple[str, ...] = ("body", "inertial")
+UNKNOWN = "unknown"
+GEOMETRY_FRAMES: tuple[str, ...] = (*FRAMES, UNKNOWN)
 # Every length in recon is in metres (formats/SPEC.md); a mesh file in km is scaled on reading.
 UNITS = "m"
 
@@ -42,8 +47,8 @@ def xyz_array(values, what: str, *, error: type[Exception] = MeshFormatError) ->
 
 
 def _frame(frame: str, what: str) -> str:
-    if frame not in FRAMES:
-        raise MeshFormatError(f"{what} frame must be one of {FRAMES}, got {frame!r}")
+    if frame not in GEOMETRY_FRAMES:
+        raise MeshFormatError(f"{what} frame must be one of {GEOMETRY_FRAMES}, got {frame!r}")
     return frame
 
 
@@ -54,7 +59,7 @@ def file_metadata(frame: str, *, source=None) -> dict[str, str]:
 
     Parameters
     ----------
-    frame : {"body", "inertial"}
+    frame : {"body", "inertial", "unknown"}
     source : str or Path, optional
         The strike log (or other file) the geometry was made from.
 
@@ -72,8 +77,8 @@ def file_metadata(frame: str, *, source=None) -> dict[str, str]:
 
 
 def frame_of(metadata: Mapping[str, str], where) -> Frame:
-    """The frame a file's metadata (``file_metadata``) names; ``"body"`` when it names none, as
-    in files of other tools.
+    """The frame a file's metadata (``file_metadata``) names; ``"unknown"`` when it names none,
+    as in files of other tools.
 
     Raises
     ------
@@ -84,10 +89,10 @@ def frame_of(metadata: Mapping[str, str], where) -> Frame:
     units = metadata.get("units", UNITS)
     if units != UNITS:
         raise MeshFormatError(f"{where}: file says units {units!r}; recon reads metres ({UNITS!r})")
-    frame = metadata.get("frame", "body")
-    if frame not in FRAMES:
+    frame = metadata.get("frame", UNKNOWN)
+    if frame not in GEOMETRY_FRAMES:
         raise MeshFormatError(f"{where}: file says frame {frame!r}, expected one of "
-                              f"{', '.join(FRAMES)}")
+                              f"{', '.join(GEOMETRY_FRAMES)}")
     return frame
 
 
@@ -102,8 +107,9 @@ class Cloud:
         see formats/cloud_io.py); any others are kept as they are.
     normals : (n, 3) array_like, optional
         Per-point normals, stored as the ``nx``, ``ny``, ``nz`` attributes.
-    frame : {"body", "inertial"}
-        Frame of ``points`` (and of the view points).
+    frame : {"body", "inertial", "unknown"}
+        Frame of ``points`` (and of the view points); ``"unknown"`` for points read from a
+        file that records none.
     units : str
         Always ``"m"``; recorded so that files and reports can say it.
 
@@ -190,7 +196,7 @@ class Mesh:
     vertices : (n_vertices, 3) array_like, metres
     faces : (n_faces, 3) array_like of int, rows of ``vertices``, counter-clockwise seen from
         outside (outward normals)
-    frame : {"body", "inertial"}
+    frame : {"body", "inertial", "unknown"}
     units : str
         Always ``"m"``.
 

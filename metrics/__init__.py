@@ -23,7 +23,7 @@ from metrics.edges import (
     feature_edges,
     surface_variation,
 )
-from metrics.errors import MetricsInputError, ScaleMismatchWarning
+from metrics.errors import FrameAssumedWarning, MetricsInputError, ScaleMismatchWarning
 from metrics.inputs import Cloud, Mesh
 from metrics.sampling import sample_surface
 from metrics.score import ScoreReport, Truth, score
@@ -31,6 +31,7 @@ from metrics.score import ScoreReport, Truth, score
 __all__ = [
     "Cloud",
     "EdgeReport",
+    "FrameAssumedWarning",
     "Mesh",
     "MeshDistance",
     "MetricsInputError",

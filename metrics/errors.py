@@ -16,3 +16,8 @@ class ScaleMismatchWarning(UserWarning):
 
     The usual cause is a model in kilometres scored against one in metres.
     """
+
+
+class FrameAssumedWarning(UserWarning):
+    """Test or truth records no frame (``"unknown"``: a file of another tool), so it is compared
+    as if in the other's frame. The CLI prints it as one line on stderr."""

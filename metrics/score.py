@@ -58,11 +58,12 @@ from functools import cached_property
 import numpy as np
 
 from formats import interrupt
+from formats.geometry import UNKNOWN
 from metrics import defaults
 from metrics.distance import MeshDistance
 from metrics.edges import EdgeReport, check_options, edge_report, resolve_length
 from metrics.edges_stream import EdgeStream
-from metrics.errors import MetricsInputError, ScaleMismatchWarning
+from metrics.errors import FrameAssumedWarning, MetricsInputError, ScaleMismatchWarning
 from metrics.inputs import (
     Cloud,
     Mesh,
@@ -427,7 +428,7 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
     setup = _Setup(truth, tau=tau, tau_fraction=tau_fraction, n_truth_samples=n_truth_samples,
                    n_test_samples=defaults.TEST_MESH_SAMPLES, coverage_points=coverage_points,
                    seed=seed, edge_options=edge_options)
-    setup.check_frame(frame)
+    setup.check_frame(frame, name)
     if edges:  # the options now; the point count against k once it is known
         check_options(np.iinfo(np.int64).max, setup.diagonal, **setup.edge_options)
         edge_stream = EdgeStream(setup.mesh, **setup.edge_options)
@@ -521,10 +522,24 @@ class _Setup:
     def distance(self) -> MeshDistance:
         return self.prepared.distance
 
-    def check_frame(self, frame: str) -> None:
-        if frame != self.mesh.frame:
-            raise MetricsInputError(f"test is in the {frame} frame but truth in the "
-                                    f"{self.mesh.frame} frame: register both in one frame")
+    def check_frame(self, frame: str, name: str = "test") -> None:
+        """Refuse two different known frames; when either is ``"unknown"`` (a file that
+        records none), go on and say so (``FrameAssumedWarning``)."""
+        truth = self.mesh.frame
+        if frame == truth != UNKNOWN:
+            return
+        if frame == truth:
+            note = f"neither {name} nor the truth records its frame; compared as given"
+        elif frame == UNKNOWN:
+            note = (f"{name} records no frame (unknown); compared as if in the truth's {truth} "
+                    "frame")
+        elif truth == UNKNOWN:
+            note = (f"the truth records no frame (unknown); compared as if in the {frame} frame "
+                    f"of {name}")
+        else:
+            raise MetricsInputError(f"{name} is in the {frame} frame but truth in the "
+                                    f"{truth} frame: register both in one frame")
+        warnings.warn(note, FrameAssumedWarning, stacklevel=3)
 
     def check_edges(self, n_points: int) -> None:
         k = self.edge_options.get("k", defaults.EDGE_K)

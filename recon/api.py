@@ -52,7 +52,8 @@ class SimulatedLog(os.PathLike):
 
 
 def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
-             progress: bool | None = None, live: bool = False) -> SimulatedLog:
+             progress: bool | None = None, live: bool = False,
+             compression: str | None = None) -> SimulatedLog:
     """Simulate a campaign and write its strike log.
 
     Parameters
@@ -70,15 +71,21 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
     live : bool
         Write the log in HDF5 SWMR mode, so that ``recon ingest LOG --follow`` (and
         ``formats.strike_log.follow``) read the strikes as they arrive.
+    compression : str, optional
+        Filter of the log's datasets: ``"gzip"`` or ``"gzip:LEVEL"`` (deflate with shuffle,
+        LEVEL 0-9, readable by every HDF5 tool; the default), ``"lzf"`` (with shuffle, readable
+        only where h5py's lzf filter is installed) or ``"none"``.
 
     Returns
     -------
     SimulatedLog
     """
     import sim
+    from formats.strike_log import DEFAULT_COMPRESSION
 
     summary = sim.simulate(sim.load_scene(str(scene), list(overrides)), output, seed=seed,
-                           progress=progress, live=live)
+                           progress=progress, live=live,
+                           compression=compression or DEFAULT_COMPRESSION)
     return SimulatedLog(Path(summary["path"]), summary)
 
 
@@ -125,13 +132,14 @@ def load(value, *, name: str = "input", points_only: bool = False) -> Cloud | Me
     return Cloud.of(value, name)
 
 
-def truth_of(value, *, scale: float = 1.0) -> Mesh:
-    """The truth mesh named by ``value``: a ``Mesh`` or ``(vertices, faces)``, a mesh file (its
-    coordinates times ``scale``), or a strike log with its embedded truth mesh."""
+def truth_of(value, *, scale: float = 1.0, units: str | None = None) -> Mesh:
+    """The truth mesh named by ``value``: a ``Mesh`` or ``(vertices, faces)``, a mesh file (in
+    ``units``, default the format's, then times ``scale``), or a strike log with its embedded
+    truth mesh."""
     if isinstance(value, str | os.PathLike):
         from recon.inputs import load_truth
 
-        return load_truth(value, scale=scale)
+        return load_truth(value, scale=scale, units=units)
     return Mesh.of(value, "truth")
 
 
@@ -152,7 +160,8 @@ def default_truth(test):
     return test
 
 
-def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
+def score(test, *, truth, truth_scale: float = 1.0, truth_units: str | None = None,
+          tau: float | None = None,
           tau_fraction: float | None = None, edges: bool = True, seed: int | None = 0,
           progress=None, **options):
     """Score a cloud or a mesh against the truth mesh (``metrics.score``).
@@ -163,6 +172,8 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
     truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
     truth_scale : float
         Factor on a truth mesh file's coordinates (e.g. 1000 for km).
+    truth_units : {"km", "m"}, optional
+        Units of a truth mesh file (default: the format's; km for PDS tables, ICQ and DSK).
     tau, tau_fraction, edges, seed, progress, **options
         As ``metrics.score``.
 
@@ -172,7 +183,7 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
     """
     from metrics.score import score as score_against
 
-    truth = truth_of(truth, scale=truth_scale)
+    truth = truth_of(truth, scale=truth_scale, units=truth_units)
     options = {"tau": tau, "tau_fraction": tau_fraction, "edges": edges, "seed": seed,
                "progress": progress} | options
     if isinstance(test, str | os.PathLike):
@@ -208,8 +219,9 @@ def score(test, *, truth, truth_scale: float = 1.0, tau: float | None = None,
     return score_against(load(test, name="test"), truth, **options)
 
 
-def edges(test, *, truth, output, truth_scale: float = 1.0, seed: int = 0,
-          title: str | None = None, edge_options: dict | None = None, progress=None) -> dict:
+def edges(test, *, truth, output, truth_scale: float = 1.0, truth_units: str | None = None,
+          seed: int = 0, title: str | None = None, edge_options: dict | None = None,
+          progress=None) -> dict:
     """The edge points of a cloud against the truth, written as a PLY and the paper's picture
     (``recon.edge_pictures``): ``recon edges``.
 
@@ -219,7 +231,7 @@ def edges(test, *, truth, output, truth_scale: float = 1.0, seed: int = 0,
     truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
     output : str or Path
         Directory for edges.ply, edges.png and edges.json.
-    truth_scale, seed, title, edge_options, progress
+    truth_scale, truth_units, seed, title, edge_options, progress
         As ``api.score`` and ``recon.edge_pictures.edge_pictures``.
 
     Returns
@@ -229,8 +241,9 @@ def edges(test, *, truth, output, truth_scale: float = 1.0, seed: int = 0,
     """
     from recon.edge_pictures import edge_pictures
 
-    return edge_pictures(load(test, name="test"), truth_of(truth, scale=truth_scale), output,
-                         seed=seed, title=title, edge_options=edge_options, progress=progress)
+    truth_mesh = truth_of(truth, scale=truth_scale, units=truth_units)
+    return edge_pictures(load(test, name="test"), truth_mesh, output, seed=seed, title=title,
+                         edge_options=edge_options, progress=progress)
 
 
 def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None = None,

@@ -69,7 +69,7 @@ def run_demo(output, *, scene: str = DEMO_SCENE, method: str = DEMO_METHOD,
     with StrikeLog(log) as reader:
         reader.validate()
         truth = reader.truth_mesh()
-    write_mesh(files["truth"], truth)
+    write_mesh(files["truth"], truth, source=files["log"].name)
 
     start = _step(say, "ingest: register strikes into the target body frame")
     cloud = api.ingest(log, output=files["cloud"])
@@ -77,7 +77,7 @@ def run_demo(output, *, scene: str = DEMO_SCENE, method: str = DEMO_METHOD,
 
     start = _step(say, f"reconstruct with {method}")
     surface = api.reconstruct(cloud, method=method, seed=seed, isolate=True)
-    write_mesh(files["surface"], surface)
+    write_mesh(files["surface"], surface, source=files["cloud"].name)
     say(f"  {surface.n_faces:,} faces in {time.perf_counter() - start:.1f} s")
 
     start = _step(say, "score cloud and surface against the truth mesh")

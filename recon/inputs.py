@@ -1,8 +1,9 @@
 """Open what a user hands a command: a point cloud, a mesh, or a strike log.
 
 ``.h5`` files are told apart by their root ``format`` attribute (a strike log or a recon point
-cloud); a ``.ply`` with faces is a mesh, without faces a cloud; ``.obj``, ``.stl``, ``.off`` and
-glTF are meshes; ``.las``/``.laz`` are clouds. A strike log given as a cloud is registered into
+cloud); a ``.ply`` with faces is a mesh, without faces a cloud; ``.obj``, ``.stl``, ``.off``,
+glTF and the planetary shape models (``.tab``, ``.icq``, ``.bds``, ``.dsk``) are meshes;
+``.las``/``.laz`` are clouds. A strike log given as a cloud is registered into
 the body frame on the fly (``recon.registration.ingest``); given as a truth, its embedded truth
 mesh is used.
 """
@@ -94,7 +95,7 @@ def load_cloud(path) -> Cloud:
     return geometry
 
 
-def load_truth(path, *, scale: float = 1.0) -> Mesh:
+def load_truth(path, *, scale: float = 1.0, units: str | None = None) -> Mesh:
     """The truth mesh from a mesh file or from a strike log's ``/truth/mesh``.
 
     Parameters
@@ -102,6 +103,8 @@ def load_truth(path, *, scale: float = 1.0) -> Mesh:
     path : str or Path
     scale : float
         Factor applied to a mesh file's coordinates (e.g. 1000 for km); logs are in metres.
+    units : {"km", "m"}, optional
+        Units of a mesh file's coordinates (default: the format's, ``formats.mesh_io``).
     """
     path = check_source(path, MeshFormatError)
     if is_strike_log(path):
@@ -114,5 +117,5 @@ def load_truth(path, *, scale: float = 1.0) -> Mesh:
         raise MeshFormatError(f"{path}: is not a mesh (truth must be a mesh file or a strike "
                               "log with truth)")
     else:
-        mesh = read_mesh(path, scale=scale)
+        mesh = read_mesh(path, scale=scale, units=units)
     return as_mesh(mesh, f"truth {path}")   # degenerate or far-off truths, named by file

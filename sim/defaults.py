@@ -107,11 +107,16 @@ SCHEMA: dict[str, dict[str, Key]] = {
         # machine; its facets are ~0.023 m off the exact ellipsoid.
         "subdivisions": Key(5, "int", "", "ellipsoid resolution: 20 * 4**n faces",
                             minimum=0, maximum=MAX_SUBDIVISIONS),
-        "path": Key(None, "str", "", "mesh file (OBJ, PLY, STL) for kind = mesh"),
-        # Public asteroid shape models (Gaskell's Itokawa and Eros, radar Bennu) are in km:
-        # then scale = 1000.
-        "scale": Key(1.0, "number", "m per file unit", "mesh coordinates times scale = metres",
-                     **POSITIVE),
+        "path": Key(None, "str", "", "mesh file for kind = mesh: OBJ, PLY, STL, PDS table .tab, "
+                                     "ICQ .icq or SPICE DSK .bds/.dsk"),
+        # Units of the mesh file: PDS tables, ICQ and DSK are published in km (DSK always),
+        # the 3D formats read as metres (formats/mesh_io.py, default_units).
+        "units": Key(None, "str", "", "units of the mesh file (default: km for .tab, .icq, "
+                                      ".bds, .dsk; m otherwise)", choices=("km", "m")),
+        # An OBJ shape model in km (Gaskell's Itokawa and Eros, radar Bennu as OBJ) is read with
+        # units = "km" or scale = 1000.
+        "scale": Key(1.0, "number", "", "factor on the mesh coordinates after the unit "
+                                        "conversion", **POSITIVE),
         "center": Key(False, "bool", "", "move the mesh's volume centroid to the origin"),
         # Generated targets: every dimension drawn from this seed (same seed, same mesh).
         "seed": Key(0, "int", "", "shape seed of a generated target", minimum=0),
@@ -316,6 +321,7 @@ ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     ("target", "subdivisions"): ("target", "kind", ("ellipsoid",)),
     ("target", "path"): ("target", "kind", ("mesh",)),
     ("target", "scale"): ("target", "kind", ("mesh",)),
+    ("target", "units"): ("target", "kind", ("mesh",)),
     ("target", "center"): ("target", "kind", ("mesh",)),
     ("target", "seed"): ("target", "kind", GENERATED_KINDS),
     ("target", "size"): ("target", "kind", SIZED_KINDS),

@@ -208,7 +208,7 @@ def target_mesh(target: dict) -> tuple[np.ndarray, np.ndarray, str]:
             "" if size is None else f",size={size:g}")
     try:
         vertices, faces = targets.load_mesh(target["path"], target["scale"],
-                                            center=target["center"])
+                                            center=target["center"], units=target.get("units"))
     except MeshFormatError as exc:
         hint = ("" if Path(target["path"]).is_absolute() else
                 " (a preset's mesh is looked up in the current directory and the directories "

@@ -34,6 +34,7 @@ from formats.atomic import check_space
 from formats.paths import check_destination
 from formats.spice import SpiceError
 from formats.strike_log import (
+    DEFAULT_COMPRESSION,
     LOG_SUFFIXES,
     SensorErrors,
     SensorInfo,
@@ -42,6 +43,7 @@ from formats.strike_log import (
     StrikeLogWriter,
     TruthStrikes,
     angles_to_directions,
+    compression_filters,
     directions_to_angles,
 )
 from sim import noise, pose_errors
@@ -433,7 +435,7 @@ def sensor_info(plan: Plan) -> SensorInfo:
 
 def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
              backend: str = DEFAULT_BACKEND, workers: int | None = None,
-             live: bool = False) -> dict:
+             live: bool = False, compression: str = DEFAULT_COMPRESSION) -> dict:
     """Simulate ``scene`` and write its strike log to ``path``.
 
     Parameters
@@ -454,6 +456,9 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
     live : bool
         Write the log in HDF5 SWMR mode, readable while it is written
         (``formats.strike_log.follow``).
+    compression : str
+        Filter of the log's datasets: ``"gzip"``, ``"gzip:LEVEL"`` (0-9), ``"lzf"`` or
+        ``"none"`` (``formats.StrikeLogWriter``; default deflate, which every HDF5 tool reads).
 
     Returns
     -------
@@ -472,18 +477,20 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
     if Path(path).suffix.lower() not in LOG_SUFFIXES:
         raise SceneError(f"{path}: a strike log is an HDF5 file; name it "
                          f"{' or '.join(LOG_SUFFIXES)}")
+    compression_filters(compression)   # a bad name fails before the ray casting
     check_destination(path, SceneError)
     check_space(path, scene.cost.disk_bytes, SceneError)
     start = time.perf_counter()
     plan = make_plan(scene, seed=seed, backend=backend)
     try:
         return _simulate(plan, path, progress=progress, backend=backend, workers=workers,
-                         live=live, start=start)
+                         live=live, compression=compression, start=start)
     finally:
         close_plan(plan)
 
 
-def _simulate(plan: Plan, path, *, progress, backend, workers, live, start) -> dict:
+def _simulate(plan: Plan, path, *, progress, backend, workers, live, compression,
+              start) -> dict:
     """:func:`simulate` once its plan is made (``start``: ``perf_counter`` at its start)."""
     scene, seed = plan.scene, plan.seed
     strikes = rays = 0
@@ -494,7 +501,7 @@ def _simulate(plan: Plan, path, *, progress, backend, workers, live, start) -> d
                               truth_mesh=(scene.vertices, scene.faces),
                               expected_shots=scene.n_shots,
                               expected_strikes=scene.n_shots * plan.pattern.n_beams,
-                              live=live) as log:
+                              live=live, compression=compression) as log:
         if scene.epoch_et is not None:
             log.write_epoch(scene.epoch_et)
         closed_loop = scene["attitude.mode"] == "gaps"

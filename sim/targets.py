@@ -10,7 +10,7 @@ counter-clockwise seen from outside (outward normals).
   closed, outward-oriented parts (boxes, spheres, cylinders) that touch or overlap, as in many
   spacecraft models (the shared ``hst_7.7k.obj`` is 173 closed parts). A few faces of a part lie
   inside another part (under the sphere and where masts meet the bus); they are never hit;
-- :func:`load_mesh`: any OBJ, PLY or STL file, scaled to metres.
+- :func:`load_mesh`: any mesh file recon reads (OBJ, PLY, STL, PDS table, ICQ, DSK), in metres.
 """
 
 from __future__ import annotations
@@ -243,16 +243,21 @@ def rso_b(segments: int = RSO_SEGMENTS) -> Mesh:
 # --------------------------------------------------------------------------- user meshes
 
 
-def load_mesh(path, scale: float = 1.0, *, center: bool = False) -> Mesh:
-    """Read a triangle mesh (OBJ, PLY, STL) and scale it to metres.
+def load_mesh(path, scale: float = 1.0, *, center: bool = False,
+              units: str | None = None) -> Mesh:
+    """Read a triangle mesh (OBJ, PLY, STL, PDS table, ICQ, DSK) in metres: the target's shape,
+    whose coordinates define the body frame B.
 
     Parameters
     ----------
     path : str or Path
     scale : float, > 0
-        Metres per file unit (1000 for shape models in km, as most public asteroid models are).
+        Factor after the unit conversion (e.g. 1000 for an OBJ model in km read as metres).
     center : bool
         Translate the mesh so its volume centroid (vertex mean for an open mesh) is the origin.
+    units : {"km", "m"}, optional
+        Units of the file (default: km for PDS tables, ICQ and DSK, metres otherwise;
+        formats.mesh_io.read_mesh).
 
     Returns
     -------
@@ -265,7 +270,7 @@ def load_mesh(path, scale: float = 1.0, *, center: bool = False) -> Mesh:
         The file is missing, unreadable or has no triangles, or ``scale`` is not positive
         (formats.mesh_io.read_mesh).
     """
-    vertices, faces = read_mesh(path, scale=scale)
+    vertices, faces = read_mesh(path, scale=scale, units=units)
     vertices = np.asarray(vertices, np.float64)
     faces = np.asarray(faces, np.int64)
     if center:

@@ -8,6 +8,7 @@ log being written.
 from formats.strike_log.reader import LiveStrikeLog, StrikeLog, follow
 from formats.strike_log.schema import (
     COMPRESSIONS,
+    DEFAULT_COMPRESSION,
     FORMAT_NAME,
     FORMAT_VERSION,
     LIVE_COMMITTED,
@@ -23,6 +24,7 @@ from formats.strike_log.schema import (
     StrikeChunk,
     TruthStrikes,
     angles_to_directions,
+    compression_filters,
     directions_to_angles,
     estimate_log_bytes,
     sigma_from_sigma3,
@@ -31,6 +33,7 @@ from formats.strike_log.writer import StrikeLogWriter
 
 __all__ = [
     "COMPRESSIONS",
+    "DEFAULT_COMPRESSION",
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "LIVE_COMMITTED",
@@ -49,6 +52,7 @@ __all__ = [
     "StrikeLogWriter",
     "TruthStrikes",
     "angles_to_directions",
+    "compression_filters",
     "directions_to_angles",
     "estimate_log_bytes",
     "follow",

@@ -27,17 +27,45 @@ LIVE_COMMITTED = "live_committed"
 QUATERNION_NORM_TOLERANCE = 1e-6
 # Rows handed out per chunk by StrikeLog.iter_chunks: 2**20 strikes is ~100 MB of derived arrays.
 READ_CHUNK_ROWS = 1 << 20
-# Storage filters (SPEC.md, Storage; docs/decisions.md): lzf + shuffle by default, Fletcher-32
-# checksums always; gzip saves a little more and doubles the simulate time.
-DEFAULT_COMPRESSION = "lzf"
-COMPRESSIONS = {"none": {}, "lzf": {"compression": "lzf", "shuffle": True},
-                "gzip": {"compression": "gzip", "compression_opts": 4, "shuffle": True}}
+# Storage filters (SPEC.md, Storage; docs/decisions.md): deflate (gzip) + shuffle by default,
+# the filters every HDF5 build has, so that h5dump, HDFView, MATLAB and IDL read every dataset;
+# lzf (h5py's own filter) on request; Fletcher-32 checksums always. The level is the fastest that
+# kept simulate time within 1.3x of lzf on the demo and asteroid-lidar logs (docs/decisions.md).
+COMPRESSIONS = ("none", "lzf", "gzip")
+GZIP_LEVEL = 1
+DEFAULT_COMPRESSION = f"gzip:{GZIP_LEVEL}"
+
+
+def compression_filters(spec: str, where: str | None = None) -> dict:
+    """The h5py filter keywords of a compression named ``none``, ``lzf``, ``gzip`` or
+    ``gzip:LEVEL`` (LEVEL 0-9; plain ``gzip`` is level ``GZIP_LEVEL``), shuffle included.
+
+    Raises
+    ------
+    StrikeLogError
+        Any other name; the message names ``where`` (the log, when given) and the allowed
+        forms.
+    """
+    name, colon, level = str(spec).partition(":")
+    if name == "none" and not colon:
+        return {}
+    if name == "lzf" and not colon:
+        return {"compression": "lzf", "shuffle": True}
+    if name == "gzip" and (not colon or (level.isdigit() and 0 <= int(level) <= 9)):
+        return {"compression": "gzip", "compression_opts": int(level or GZIP_LEVEL),
+                "shuffle": True}
+    prefix = f"{where}: " if where else ""
+    raise StrikeLogError(f"{prefix}compression must be one of none, lzf, gzip or gzip:LEVEL "
+                         f"(LEVEL 0-9), got {spec!r}")
+
+
 # Per-strike float64 measurements, noise down to their last bits: lzf keeps 80-85 % of their
 # bytes at 10x the CPU of storing them (44-48 ns a value against 4-5, measured on an
-# asteroid-lidar log), which made it 4/5 of the simulator's time. Under "lzf" they are stored
-# unfiltered (Fletcher-32 only); the angle offsets too when an angle error or pulse dilation
-# fills them (without one they are zeros, which lzf stores in 1 % of the bytes, cheaply).
-LZF_UNFILTERED = frozenset({"strikes/range", "truth/point", "truth/range"})
+# asteroid-lidar log), which made it 4/5 of the simulator's time; deflate costs more still.
+# Under any compression they are stored unfiltered (Fletcher-32 only); the angle offsets too
+# when an angle error or pulse dilation fills them (without one they are zeros, which either
+# filter stores in 1 % of the bytes, cheaply).
+UNFILTERED_COLUMNS = frozenset({"strikes/range", "truth/point", "truth/range"})
 NOISY_ANGLE_COLUMNS = frozenset({"strikes/azimuth_offset", "strikes/elevation_offset"})
 
 _PATTERNS = ("single", "cross", "zigzag", "grid", "custom")

@@ -20,16 +20,15 @@ from formats.strike_log.schema import (
     _STRIKE_FIELDS,
     _TRUTH_SHOT_FIELDS,
     _TRUTH_STRIKE_FIELDS,
-    COMPRESSIONS,
     DATASET_UNITS,
     DEFAULT_COMPRESSION,
     FORMAT_NAME,
     FORMAT_VERSION,
     LIVE_COMMITTED,
-    LZF_UNFILTERED,
     NOISY_ANGLE_COLUMNS,
     SHOT_CHUNK_ROWS,
     STRIKE_CHUNK_ROWS,
+    UNFILTERED_COLUMNS,
     SensorErrors,
     SensorInfo,
     Shots,
@@ -39,6 +38,7 @@ from formats.strike_log.schema import (
     _check_sensor,
     _check_shot_rows,
     _check_strike_rows,
+    compression_filters,
     mesh_checksum,
 )
 from formats.version import __version__
@@ -55,10 +55,10 @@ def _chunk_rows(expected: int | None, largest: int) -> int:
 
 def _filters(compression: str, name: str, noisy_angles: bool) -> dict:
     """h5py filter keywords of dataset ``name`` (e.g. ``strikes/range``): Fletcher-32 always,
-    ``compression`` except, under lzf, on the noisy float64 strike columns (schema.py)."""
-    skip = name in LZF_UNFILTERED or (noisy_angles and name in NOISY_ANGLE_COLUMNS)
-    chosen = {} if compression == "lzf" and skip else COMPRESSIONS[compression]
-    return {"fletcher32": True} | chosen
+    ``compression`` (schema.compression_filters) except on the noisy float64 strike columns
+    (schema.UNFILTERED_COLUMNS, and the angle offsets when ``noisy_angles``)."""
+    skip = name in UNFILTERED_COLUMNS or (noisy_angles and name in NOISY_ANGLE_COLUMNS)
+    return {"fletcher32": True} | ({} if skip else compression_filters(compression))
 
 
 class StrikeLogWriter(AtomicWriter):
@@ -83,8 +83,10 @@ class StrikeLogWriter(AtomicWriter):
         Truth mesh in metres, body frame. When given, the log has a ``/truth`` group and every
         ``write_shots`` and ``write_strikes`` call must carry the truth arrays too.
     producer, producer_version : str, optional
-    compression : {"none", "lzf", "gzip"}, optional
-        Filter for the chunked datasets (default lzf with shuffle; SPEC.md, Storage, says why).
+    compression : str, optional
+        Filter for the chunked datasets: ``"gzip"`` or ``"gzip:LEVEL"`` (deflate, LEVEL 0-9,
+        with shuffle; readable by every HDF5 tool), ``"lzf"`` (with shuffle; h5py only) or
+        ``"none"``. Default ``DEFAULT_COMPRESSION`` (SPEC.md, Storage, says why).
     expected_shots, expected_strikes : int, optional
         How many rows the log will hold (at most); chunks are no longer than that, so a small log
         is not padded to the default chunk sizes. Appending beyond it stays possible.
@@ -108,9 +110,7 @@ class StrikeLogWriter(AtomicWriter):
                  expected_strikes: int | None = None, live: bool = False):
         where = str(path)
         _check_sensor(sensor, where)
-        if compression not in COMPRESSIONS:
-            raise StrikeLogError(f"{where}: compression must be one of "
-                                 f"{', '.join(COMPRESSIONS)}, got {compression!r}")
+        compression_filters(compression, where)   # refuse a bad name before making a file
         super().__init__(path, suffix=LIVE_SUFFIX if live else "")
         self.sensor = sensor
         self.has_truth = truth_mesh is not None

@@ -112,7 +112,7 @@ def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: di
 def reconstruct_to_file(cloud: Cloud, prepared: MethodInput, output, *, run: Run,
                         limits: Limits | None = None, isolate: bool = True,
                         on_wait: Callable[[str], None] | None = None,
-                        heldout=None) -> dict[str, Any]:
+                        heldout=None, source=None) -> dict[str, Any]:
     """Reconstruct a prepared cloud with ``run``, write the mesh, and summarise.
 
     Parameters
@@ -148,7 +148,8 @@ def reconstruct_to_file(cloud: Cloud, prepared: MethodInput, output, *, run: Run
                           **limits.kwargs())
     surface.info["estimate"] = estimate_of(surface, cloud, heldout=heldout,
                                            seed=prepared.seed).to_dict()
-    write_mesh(output, Mesh(surface.vertices, surface.faces, frame=cloud.frame))
+    write_mesh(output, Mesh(surface.vertices, surface.faces, frame=cloud.frame),
+               source=None if source is None else Path(source).name)
     return {"n_points": len(prepared.points), "spacing_m": prepared.spacing,
             "noise_m": prepared.noise, "view_points": cloud.view_points is not None,
             "method": run.method, "params": surface.params, "label": run.label,
@@ -190,4 +191,4 @@ def reconstruct_input(input, output, *, method: str | Run = "poisson",
     cloud, prepared = load_prepared(input, preparation)
     return {"input": str(input)} | reconstruct_to_file(cloud, prepared, Path(output), run=run,
                                                        limits=limits, isolate=isolate,
-                                                       on_wait=on_wait)
+                                                       on_wait=on_wait, source=input)

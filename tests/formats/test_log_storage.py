@@ -7,8 +7,13 @@ import h5py
 import numpy as np
 import pytest
 
-from formats import StrikeLog
-from formats.strike_log.schema import COMPRESSIONS, DATASET_UNITS, DEFAULT_COMPRESSION
+from formats import StrikeLog, StrikeLogError
+from formats.strike_log.schema import (
+    DATASET_UNITS,
+    DEFAULT_COMPRESSION,
+    GZIP_LEVEL,
+    compression_filters,
+)
 from tests.conftest import write_sphere_log
 
 
@@ -37,7 +42,7 @@ def test_spec_states_the_dataset_attributes():
 
     text = files("formats").joinpath("SPEC.md").read_text(encoding="utf-8")
     assert "**`units`**" in text and "**`frame`**" in text
-    assert "lzf with the shuffle filter" in text
+    assert "deflate (gzip) with the shuffle filter" in text
 
 
 def test_small_simulated_log_is_sized_to_its_content(tmp_path):
@@ -49,9 +54,11 @@ def test_small_simulated_log_is_sized_to_its_content(tmp_path):
         n_shots, n_strikes = int(f.attrs["n_shots"]), int(f.attrs["n_strikes"])
         assert f["shots/time"].chunks == (n_shots,)
         assert f["strikes/range"].chunks[0] <= n_strikes * 5  # at most the pulses fired
-        assert f["strikes/shot"].compression == DEFAULT_COMPRESSION == "lzf"
+        assert f["strikes/shot"].compression == "gzip"
+        assert f["strikes/shot"].compression_opts == GZIP_LEVEL
+        assert DEFAULT_COMPRESSION == f"gzip:{GZIP_LEVEL}"
         assert f["strikes/shot"].shuffle and f["strikes/shot"].fletcher32
-        # The noisy float64 columns: checksummed, not compressed (schema.LZF_UNFILTERED).
+        # The noisy float64 columns: checksummed, not compressed (schema.UNFILTERED_COLUMNS).
         for name in ("strikes/range", "truth/point", "truth/range"):
             assert f[name].compression is None and f[name].fletcher32, name
         payload = sum(ds.size * ds.dtype.itemsize for ds in _datasets(f).values())
@@ -67,7 +74,46 @@ def test_chunks_split_the_expected_rows_evenly(tmp_path):
     assert _chunk_rows(7_740, 65_536) == 7_740
     assert _chunk_rows(77_400, 65_536) == 38_700      # two full chunks, not 1.7
     assert _chunk_rows(0, 16_384) == 1
-    assert COMPRESSIONS[DEFAULT_COMPRESSION] == {"compression": "lzf", "shuffle": True}
+
+
+@pytest.mark.parametrize(("spec", "expected"), [
+    ("none", {}),
+    ("lzf", {"compression": "lzf", "shuffle": True}),
+    ("gzip", {"compression": "gzip", "compression_opts": GZIP_LEVEL, "shuffle": True}),
+    ("gzip:9", {"compression": "gzip", "compression_opts": 9, "shuffle": True}),
+    ("gzip:0", {"compression": "gzip", "compression_opts": 0, "shuffle": True}),
+])
+def test_compression_names(spec, expected):
+    assert compression_filters(spec) == expected
+
+
+@pytest.mark.parametrize("spec", ["zstd", "gzip:10", "gzip:", "gzip:-1", "lzf:3", "none:1", ""])
+def test_bad_compression_names_are_refused(spec):
+    with pytest.raises(StrikeLogError, match=r"compression must be one of none, lzf, gzip or "
+                                             r"gzip:LEVEL \(LEVEL 0-9\), got"):
+        compression_filters(spec)
+
+
+def test_simulate_refuses_a_bad_compression_before_writing(tmp_path, capsys):
+    from cli.main import main
+
+    assert main(["simulate", "asteroid-cross", "-o", str(tmp_path / "x.h5"),
+                 "--compression", "gzip:12"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "gzip:LEVEL (LEVEL 0-9), got 'gzip:12'" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_simulate_writes_the_compression_asked(tmp_path):
+    from cli.main import main
+
+    assert main(["simulate", "asteroid-cross", "-o", str(tmp_path / "x.h5"),
+                 "--compression", "lzf", "--set", "time.duration=600"]) == 0
+    with h5py.File(tmp_path / "x.h5") as f:
+        assert f["shots/time"].compression == "lzf"
+        assert f["strikes/range"].compression is None
+    with StrikeLog(tmp_path / "x.h5") as log:
+        log.validate()
 
 
 def test_appending_beyond_the_expected_rows_works(tmp_path):
@@ -85,29 +131,33 @@ def test_appending_beyond_the_expected_rows_works(tmp_path):
         np.testing.assert_array_equal(log.strikes()[2][len(strikes[2]):], strikes[2])
 
 
-
+@pytest.mark.parametrize("compression", ["lzf", "gzip"])
 @pytest.mark.parametrize("angle_error", [0.0, 1e-3])
-def test_lzf_skips_the_angle_offsets_only_when_they_hold_noise(tmp_path, angle_error):
+def test_filters_skip_the_angle_offsets_only_when_they_hold_noise(tmp_path, angle_error,
+                                                                  compression):
     from formats import StrikeLogWriter
     from formats.strike_log import SensorErrors, SensorInfo
 
     sensor = SensorInfo("custom", np.array([[0.0, 0.0, 1.0]]), range_min=1.0, range_max=1e3,
                         field_of_view=(0.0, 0.0, 0.0, 0.0), reports_angles=True,
                         errors=SensorErrors(azimuth_sigma3=angle_error))
-    with StrikeLogWriter(tmp_path / "log.h5", sensor=sensor, target="t") as log:
+    with StrikeLogWriter(tmp_path / "log.h5", sensor=sensor, target="t",
+                         compression=compression) as log:
         log.write_shots([0.0], [[1e3, 0.0, 0.0]], [[0.0, 0.0, 0.0, 1.0]], [[0.0, 0.0, 0.0, 1.0]])
         log.write_strikes([0], [0], [900.0], azimuth_offset=[0.0], elevation_offset=[0.0])
     with h5py.File(tmp_path / "log.h5") as f:
-        expected = None if angle_error else "lzf"
+        expected = None if angle_error else compression
         assert f["strikes/azimuth_offset"].compression == expected
         assert f["strikes/elevation_offset"].compression == expected
-        assert f["strikes/beam"].compression == "lzf"
+        assert f["strikes/beam"].compression == compression
         assert f["strikes/range"].compression is None
         assert all(f[name].fletcher32 for name in ("strikes/azimuth_offset", "strikes/range"))
 
 
-def test_gzip_compresses_every_column():
+def test_noisy_columns_are_checksummed_only_under_every_compression():
     from formats.strike_log.writer import _filters
 
-    assert _filters("gzip", "strikes/range", True)["compression"] == "gzip"
+    for compression in ("none", "lzf", "gzip", "gzip:9"):
+        assert _filters(compression, "strikes/range", True) == {"fletcher32": True}
+    assert _filters("gzip:6", "strikes/shot", False)["compression_opts"] == 6
     assert _filters("none", "strikes/shot", False) == {"fletcher32": True}
