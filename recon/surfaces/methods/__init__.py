@@ -47,6 +47,7 @@ BUILTIN_MODULES = (
     "recon.surfaces.methods.rimls",
     "recon.surfaces.methods.apss",
     "recon.surfaces.methods.delaunay_balls",
+    "recon.surfaces.methods.visibility",
 )
 
 # What a default costs: each listed method's fit time [s] at its defaults, isolated as ``recon
@@ -104,6 +105,10 @@ class MethodInput:
         range error and its lateral (angle, pose) error projected on the normal. None when the
         cloud carries no error model; methods that can weight points (``weighted``) use
         ``1 / sigma^2``.
+    view_points : (n, 3) float64, metres, body frame, optional
+        Sensor position each point was seen from (the cloud's ``view_x/y/z``): the segment from
+        it to the point crossed empty space (the ``visibility`` method uses these rays). None
+        for a cloud without view points.
     """
 
     points: np.ndarray
@@ -113,6 +118,7 @@ class MethodInput:
     seed: int = 0
     neighbours: np.ndarray | None = None
     sigma: np.ndarray | None = None
+    view_points: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
