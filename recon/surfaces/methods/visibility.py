@@ -64,7 +64,7 @@ from recon.surfaces.methods.plane import project_to_planes
 DENOISE_NOISE = 0.1
 # Neighbours and robust rounds of the denoising projection: the ``plane`` method's defaults.
 DENOISE_K, DENOISE_ITERATIONS = 30, 2
-DENOISE_ORDER = 2
+DENOISE_ORDER = 1
 # Jitter of the triangulated positions, spacings: far below any feature, far above rounding
 # (1e-5 x a 1 m spacing is 10 um, against ~1e-13 m double precision at 1 km).
 JITTER = 1e-5
@@ -75,6 +75,11 @@ MIN_SIGMA = 1e-3
 # Smallest |cos(incidence)| when turning the normal uncertainty into one along the ray (the
 # uncertainty module's own cap).
 MIN_COS = uncertainty.MIN_COS
+# Inside parts smaller than this many cubes of the spacing (or of the median sigma, if larger)
+# are dropped: smaller than what the sampling or the noise resolves (a regular cell of edge 2
+# spacings holds 0.94), they are slivers between strikes and blobs of noise. On the RSO-A cross
+# LRF cloud of one rotation (0.1 m noise): 52 of 73 pieces, 0.5 % of the faces.
+MIN_PART_VOLUME = 1.0
 # Capacities are integers in units of 1 / CAPACITY_UNITS of one ray's weight.
 CAPACITY_UNITS = 1000
 # Crossings buffered before they are summed per facet (bounds the walk's memory).
@@ -305,9 +310,11 @@ def facet_quality(points: np.ndarray, simplices: np.ndarray, neighbors: np.ndarr
     a, b, c = (points[triples[..., i]] for i in range(3))
     normal = np.cross(b - a, c - a)
     normal /= np.maximum(np.linalg.norm(normal, axis=2, keepdims=True), 1e-300)
+    apex = points[simplices]                                                 # (m, 4, 3)
+    side = np.sign(np.einsum("mki,mki->mk", apex - a, normal))     # towards the cell
     with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.abs(np.einsum("mki,mki->mk", centre[:, None, :] - a, normal)) / radius[:, None]
-    cos = np.clip(np.nan_to_num(cos, nan=0.0, posinf=0.0), 0.0, 1.0)
+        cos = side * np.einsum("mki,mki->mk", centre[:, None, :] - a, normal) / radius[:, None]
+    cos = np.clip(np.nan_to_num(cos, nan=-1.0, posinf=-1.0, neginf=-1.0), -1.0, 1.0)
     other = np.where(neighbors >= 0, np.maximum(neighbors, 0), 0)
     # The neighbour's cosine for the same facet: its facet that faces this cell.
     back = np.argmax(neighbors[other] == np.arange(len(simplices))[:, None, None], axis=2)
@@ -363,6 +370,23 @@ def min_cut_outside(neighbors: np.ndarray, capacity: np.ndarray, source: np.ndar
     outside = np.zeros(m + 2, dtype=bool)
     outside[reached] = True
     return outside[:m]
+
+
+def drop_small_parts(tri: Cells, inside: np.ndarray, min_volume: float) -> np.ndarray:
+    """``inside`` without its parts (cells joined by facets) of less than ``min_volume`` m^3."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    cell, facet = np.nonzero(inside[:, None] & (tri.neighbors >= 0))
+    other = tri.neighbors[cell, facet]
+    joined = inside[other]
+    m = len(inside)
+    graph = coo_matrix((np.ones(joined.sum()), (cell[joined], other[joined])), shape=(m, m))
+    _, part = connected_components(graph, directed=False)
+    with np.errstate(invalid="ignore"):
+        volume = np.nan_to_num(np.abs(1.0 / (6.0 * np.linalg.det(tri.inverse))))
+    size = np.bincount(part[inside], volume[inside], minlength=m)
+    return inside & (size[part] >= min_volume)
 
 
 def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
@@ -451,9 +475,11 @@ def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
     capacity = np.maximum(1, np.round(CAPACITY_UNITS * weight)).astype(np.int64)
     outside = min_cut_outside(neighbors, np.minimum(capacity, _INT32_MAX),
                               CAPACITY_UNITS * free, CAPACITY_UNITS * held)
-    inside = ~outside
+    resolved = max(cloud.spacing, float(np.median(scale)))
+    inside = drop_small_parts(tri, ~outside, MIN_PART_VOLUME * resolved**3)
     if not inside.any():
-        raise MethodFailed("visibility: the minimum cut left no cell inside")
+        raise MethodFailed("visibility: the minimum cut left no cell inside (the surface-quality "
+                           f"cost outweighs the rays: lower beta={beta:g})")
 
     # Facets of inside cells whose neighbour is outside (or beyond the convex hull).
     across = np.where(neighbors >= 0, outside[np.maximum(neighbors, 0)], True)
@@ -471,7 +497,12 @@ METHOD = register(Method(
     summary="Delaunay cells labelled by the sensor-to-strike rays (Labatut et al. 2009, soft "
             "visibility), a minimum cut; needs view points",
     params={
-        "beta": Param(1.0, float, "weight of the surface-quality cost per facet, in rays",
+        # 0.1: on 3000 strikes of a unit sphere with 2 cm range noise the surface is the
+        # smooth hull of the denoised strikes (area -1.1 %, mean accuracy 6.5 mm) where beta 0
+        # zigzags through the noise layer (9.5 mm); on the RSO-A cross LRF cloud of one
+        # rotation (7,494 strikes) Chamfer 0.55 m (beta 0: 0.53, beta 1: 0.65, parts of
+        # the sparse tracks cut away; beta 3 leaves almost nothing).
+        "beta": Param(0.1, float, "weight of the surface-quality cost per facet, in rays",
                       minimum=0.0),
         "sigma": Param(None, float, "soft-visibility scale, spacings (default: each strike's "
                        "recorded uncertainty along its beam, else the noise scale)",
@@ -484,4 +515,4 @@ METHOD = register(Method(
         "max_steps": Param(256, int, "cells each ray walks through at most (bounds the cost: "
                            "points x max_steps)", minimum=1),
     },
-    grid=({"beta": 4.0}, {"denoise": True})))
+    grid=({"beta": 0.0}, {"beta": 1.0})))
