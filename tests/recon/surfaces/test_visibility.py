@@ -25,8 +25,9 @@ SENSOR_DIRECTIONS = np.concatenate([np.eye(3), -np.eye(3), _DIAGONALS])
 
 
 PLATE = (2.0, 2.0, 0.02)
-# Two 1 m cubes with a 0.4 m gap between them along x: the convex hull fills the gap.
-GAP = 0.4
+# Two 1 m cubes with a 1 m gap between them along x: the convex hull fills the gap; the
+# diagonal sensors see the facing sides through it.
+GAP = 1.0
 
 
 def shape(name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -126,8 +127,9 @@ def winding(vertices: np.ndarray, faces: np.ndarray, query: np.ndarray) -> np.nd
     return 2.0 * np.arctan2(det, dot).sum(axis=1) / (4.0 * np.pi)
 
 
-# Bounds: Chamfer and Hausdorff in spacings of the cloud (a Delaunay surface through the
-# strikes cuts corners and chords by up to about one spacing).
+# Bounds: in spacings of the cloud (a Delaunay surface through the strikes cuts corners and
+# chords by up to about one spacing) plus, with noise, a fraction of the noise for the mean
+# (Chamfer) and three sigmas for the worst point (Hausdorff).
 @pytest.mark.parametrize("name, n, noise", [
     ("sphere", 3000, 0.0), ("sphere", 3000, 0.02), ("box", 3000, 0.0), ("box", 3000, 0.01)])
 def test_closed_shapes_are_recovered_closed_and_close(name, n, noise):
@@ -136,7 +138,7 @@ def test_closed_shapes_are_recovered_closed_and_close(name, n, noise):
     assert closed(faces)
     report = score((vertices, faces), truth, **FAST_SCORE)
     assert report.chamfer_m < 0.1 * cloud.spacing + 0.3 * noise, report.chamfer_m
-    assert report.hausdorff_m < 1.2 * cloud.spacing, report.hausdorff_m
+    assert report.hausdorff_m < 1.2 * cloud.spacing + 3.0 * noise, report.hausdorff_m
     assert volume(vertices, faces) == pytest.approx(volume(*truth), rel=0.03)
 
 
@@ -164,23 +166,27 @@ def test_rays_carve_the_gap_the_convex_hull_fills():
     assert closed(faces)
     gap = np.array([[0.0, y, z] for y in (-0.3, 0.0, 0.3) for z in (-0.3, 0.0, 0.3)])
     assert np.all(np.abs(winding(vertices, faces, gap)) < 1e-6)       # outside: carved
-    centres = np.array([[-0.7, 0.0, 0.0], [0.7, 0.0, 0.0]])
+    centres = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     assert np.all(np.abs(winding(vertices, faces, centres) - 1.0) < 1e-6)
     assert volume(vertices, faces) == pytest.approx(volume(*truth), rel=0.05)
 
 
 def test_range_noise_along_the_rays_does_not_crumple_the_surface():
     """Noise of 2 cm along the rays: the surface lies well within the noise of the truth and
-    its area is the sphere's (a surface through the noisy strikes would be rougher and
-    larger)."""
+    its area is the sphere's; the same method without denoising, through the noisy strikes,
+    is rougher and larger."""
     noise = 0.02
     truth = shape("sphere")
-    vertices, faces, _ = reconstruct(truth, 3000, noise=noise)
-    report = score((vertices, faces), truth, **FAST_SCORE)
-    assert report.accuracy_mean_m < 0.5 * noise, report.accuracy_mean_m
-    a, b, c = (vertices[faces[:, i]] for i in range(3))
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
-    assert area == pytest.approx(4.0 * np.pi, rel=0.03)
+    areas = {}
+    for denoise in (None, False):
+        vertices, faces, _ = reconstruct(truth, 6000, noise=noise, denoise=denoise)
+        a, b, c = (vertices[faces[:, i]] for i in range(3))
+        areas[denoise] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
+        if denoise is None:
+            report = score((vertices, faces), truth, **FAST_SCORE)
+            assert report.accuracy_mean_m < 0.5 * noise, report.accuracy_mean_m
+    assert areas[None] == pytest.approx(4.0 * np.pi, rel=0.05)
+    assert areas[False] > areas[None] * 1.03       # through the raw strikes: crumpled
 
 
 def test_same_seed_same_bytes_and_the_seed_matters():
