@@ -483,11 +483,12 @@ def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
     resolved = max(cloud.spacing, float(np.median(scale)))
     inside = drop_small_parts(tri, ~outside, MIN_PART_VOLUME * resolved**3)
     if not inside.any():
-        raise MethodFailed("visibility: the minimum cut left no cell inside (the surface-quality "
-                           f"cost outweighs the rays: lower beta={beta:g})")
+        hint = f" (the surface-quality cost outweighs the rays: lower beta={beta:g})" if beta \
+            else ""
+        raise MethodFailed(f"visibility: the minimum cut left no cell inside{hint}")
 
-    # Facets of inside cells whose neighbour is outside (or beyond the convex hull).
-    across = np.where(neighbors >= 0, outside[np.maximum(neighbors, 0)], True)
+    # Facets of inside cells whose neighbour is not inside (or beyond the convex hull).
+    across = np.where(neighbors >= 0, ~inside[np.maximum(neighbors, 0)], True)
     keep_cell, keep_face = np.nonzero(inside[:, None] & across)
     faces = simplices[keep_cell][np.arange(len(keep_cell))[:, None], _FACETS[keep_face]]
     apex = jittered[simplices[keep_cell, keep_face]]               # inside, opposite the face
