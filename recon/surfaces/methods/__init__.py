@@ -61,9 +61,9 @@ DEFAULT_FIT_S: dict[str, tuple[float, float]] = {
     "ball-pivoting": (3.6, 0.56), "ball-pivoting-meshlab": (58.5, 4.0),
     "alpha-shape": (45.3, 9.7), "rimls": (39.1, 10.3), "apss": (34.2, 8.7),
     "delaunay-balls": (38.9, 11.2),
-    # Measured beside Poisson at load average 20 (the same benchmark, --methods visibility):
-    # 178 s and 67 s, 19.8 and 11.4 times Poisson's 9.0 and 5.9 s there; entered as those
-    # ratios times Poisson's times above.
+    # Measured beside Poisson with other jobs running (the same benchmark, --methods
+    # visibility): 178 s and 67 s, 19.8 and 11.4 times Poisson's 9.0 and 5.9 s there; entered
+    # as those ratios times Poisson's times above (docs/decisions.md).
     "visibility": (37.6, 13.7),
 }
 COST_SOURCE = "benchmarks/bench_methods.py, a shared 2-core machine"
