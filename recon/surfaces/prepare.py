@@ -172,6 +172,7 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
         1-sigma error along the beam: range and pose knowledge), else the median local-plane
         scatter. The recorded value is the better one: on a single-beam track the local plane
         contains the beam and reads a scatter far below the range noise.
+        With ``view_points`` when given (they travel with the cloud into isolated runs).
     """
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
@@ -180,6 +181,11 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
         raise InputError(f"need at least {MIN_POINTS} points to reconstruct, got {len(points)}")
     if not np.all(np.isfinite(points)):
         raise InputError("points contain NaN or Inf")
+    if view_points is not None:
+        view_points = np.asarray(view_points, dtype=np.float64)
+        if view_points.shape != points.shape:
+            raise InputError(f"view_points must match points {points.shape}, got "
+                             f"{view_points.shape}")
     planes = local_planes(points, k=k)
     if normals is None:
         normals = orient(planes.normals, points, view_points=view_points, fallback=fallback, k=k)
@@ -195,13 +201,13 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
     noise = float(np.median(planes.noise))
     if uncertainty is not None and all(key in uncertainty for key in SIGMA_COLUMNS):
         if view_points is not None:
-            sigma = normal_sigma(normals, np.asarray(view_points, dtype=np.float64), points,
-                                 uncertainty)
+            sigma = normal_sigma(normals, view_points, points, uncertainty)
         along = np.asarray(uncertainty["sigma_along"], dtype=np.float64)
         if along.any():
             noise = float(np.median(along))
     return MethodInput(points=points, normals=normals, spacing=spacing, noise=noise,
-                       seed=int(seed), neighbours=planes.neighbours, sigma=sigma)
+                       seed=int(seed), neighbours=planes.neighbours, sigma=sigma,
+                       view_points=view_points)
 
 
 def _check_voxel(voxel: float | None, name: str) -> None:

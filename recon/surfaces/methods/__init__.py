@@ -47,6 +47,7 @@ BUILTIN_MODULES = (
     "recon.surfaces.methods.rimls",
     "recon.surfaces.methods.apss",
     "recon.surfaces.methods.delaunay_balls",
+    "recon.surfaces.methods.visibility",
 )
 
 # What a default costs: each listed method's fit time [s] at its defaults, isolated as ``recon
@@ -60,6 +61,10 @@ DEFAULT_FIT_S: dict[str, tuple[float, float]] = {
     "ball-pivoting": (3.6, 0.56), "ball-pivoting-meshlab": (58.5, 4.0),
     "alpha-shape": (45.3, 9.7), "rimls": (39.1, 10.3), "apss": (34.2, 8.7),
     "delaunay-balls": (38.9, 11.2),
+    # Measured beside Poisson with other jobs running (the same benchmark, --methods
+    # visibility): 178 s and 67 s, 19.8 and 11.4 times Poisson's 9.0 and 5.9 s there; entered
+    # as those ratios times Poisson's times above (docs/decisions.md).
+    "visibility": (37.6, 13.7),
 }
 COST_SOURCE = "benchmarks/bench_methods.py, a shared 2-core machine"
 
@@ -104,6 +109,10 @@ class MethodInput:
         range error and its lateral (angle, pose) error projected on the normal. None when the
         cloud carries no error model; methods that can weight points (``weighted``) use
         ``1 / sigma^2``.
+    view_points : (n, 3) float64, metres, body frame, optional
+        Sensor position each point was seen from (the cloud's ``view_x/y/z``): the segment from
+        it to the point crossed empty space (the ``visibility`` method uses these rays). None
+        for a cloud without view points.
     """
 
     points: np.ndarray
@@ -113,6 +122,7 @@ class MethodInput:
     seed: int = 0
     neighbours: np.ndarray | None = None
     sigma: np.ndarray | None = None
+    view_points: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,234 @@
+"""The ``visibility`` method: Delaunay cells labelled by the sensor-to-strike rays.
+
+Each shape is sampled uniformly by area and each sample is seen from one of 14 sensor
+positions around it (the 6 axis and 8 diagonal directions) that faces it, so every strike
+carries a real ray; range noise moves the strike along its ray, as a rangefinder's does, and is
+recorded as the cloud's ``sigma_along`` column. Distances to the truth are measured by
+``metrics.score`` against the exact mesh.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from metrics import Mesh, sample_surface, score
+from recon.surfaces.methods import MethodFailed, ParameterError, bind
+from recon.surfaces.methods.visibility import NoViewPoints
+from recon.surfaces.prepare import prepare
+from recon.surfaces.uncertainty import COLUMNS
+from tests.recon.conftest import FAST_SCORE
+
+# Sensor directions: the 6 axes and the 8 diagonals, unit length.
+_DIAGONALS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) / 3**0.5
+SENSOR_DIRECTIONS = np.concatenate([np.eye(3), -np.eye(3), _DIAGONALS])
+
+
+PLATE = (2.0, 2.0, 0.02)
+# Two 1 m cubes with a 1 m gap between them along x: the convex hull fills the gap; the
+# diagonal sensors see the facing sides through it.
+GAP = 1.0
+
+
+def shape(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Truth mesh (vertices, faces) of a test shape, metres."""
+    import trimesh
+
+    if name == "sphere":
+        mesh = trimesh.creation.icosphere(subdivisions=5, radius=1.0)
+    elif name == "box":
+        mesh = trimesh.creation.box(extents=(2.0, 1.0, 0.5))
+    elif name == "plate":
+        mesh = trimesh.creation.box(extents=PLATE)
+    else:  # "two boxes"
+        shift = 0.5 + GAP / 2
+        mesh = trimesh.util.concatenate([
+            trimesh.creation.box(extents=(1.0, 1.0, 1.0)).apply_translation((x, 0.0, 0.0))
+            for x in (-shift, shift)])
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def scan(truth, n: int, *, noise: float = 0.0, seed: int = 0, distance: float = 5.0):
+    """Strikes on ``truth`` seen from the sensors facing them, with range noise along the ray.
+
+    Returns
+    -------
+    points, view_points : (n, 3) float64, metres
+    columns : dict of str to (n,) float64
+        The uncertainty columns ingest writes: ``sigma_along`` = ``noise``, the others zero.
+    """
+    vertices, faces = truth
+    points, face = sample_surface(Mesh(vertices, faces), n, seed=seed)
+    a, b, c = (vertices[faces[face, i]] for i in range(3))
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    sensors = distance * SENSOR_DIRECTIONS
+    beam = sensors[None, :, :] - points[:, None, :]                              # (n, 14, 3)
+    facing = np.einsum("nsi,ni->ns", beam, normal) / np.linalg.norm(beam, axis=2) > 0.3
+    facing &= ~occluded(truth, points, sensors)
+    rng = np.random.default_rng(seed)
+    pick = np.argmax(facing * rng.random(facing.shape), axis=1)   # a random facing sensor
+    view = sensors[pick]
+    ray = points - view
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    points = points + ray * rng.normal(0.0, noise, (n, 1))
+    columns = {key: np.zeros(n) for key in COLUMNS} | {"sigma_along": np.full(n, noise)}
+    return points, view, columns
+
+
+def occluded(truth, points: np.ndarray, sensors: np.ndarray) -> np.ndarray:
+    """(n, s) bool: the segment from each point to each sensor meets the truth on its way."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(*truth, process=False)
+    beam = (sensors[None, :, :] - points[:, None, :]).reshape(-1, 3)
+    reach = np.linalg.norm(beam, axis=1)
+    start = np.repeat(points, len(sensors), axis=0) + 1e-6 * beam / reach[:, None]
+    hit, ray, _ = mesh.ray.intersects_location(start, beam / reach[:, None],
+                                               multiple_hits=False)
+    blocked = np.zeros(len(beam), dtype=bool)
+    blocked[ray[np.linalg.norm(hit - start[ray], axis=1) < reach[ray]]] = True
+    return blocked.reshape(len(points), len(sensors))
+
+
+def reconstruct(truth, n: int, *, noise: float = 0.0, seed: int = 0, **params):
+    points, view, columns = scan(truth, n, noise=noise, seed=seed)
+    cloud = prepare(points, view_points=view, uncertainty=columns, seed=seed)
+    run = bind("visibility", params)
+    vertices, faces = run.method_spec().run(cloud, **run.params)
+    return vertices, faces, cloud
+
+
+def closed(faces: np.ndarray) -> bool:
+    """Every edge borders faces of both orientations equally often: a closed, consistently
+    oriented surface (the boundary of a union of cells; an edge where two inside cells touch
+    has four faces and stays balanced)."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    forward, count = np.unique(directed, axis=0, return_counts=True)
+    lookup = dict(zip(map(tuple, forward), count, strict=True))
+    return all(lookup.get((b, a), 0) == c for (a, b), c in zip(map(tuple, forward), count,
+                                                                 strict=True))
+
+
+def volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Enclosed volume of a closed, outward-oriented mesh (divergence theorem), m^3."""
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def winding(vertices: np.ndarray, faces: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Winding number of a closed mesh around each query point (q,): 1 inside, 0 outside
+    (Van Oosterom and Strackee's solid angle of each triangle, summed)."""
+    a, b, c = (vertices[faces[:, i]][None] - query[:, None] for i in range(3))
+    la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+    det = np.einsum("qfi,qfi->qf", a, np.cross(b, c))
+    dot = (la * lb * lc + np.einsum("qfi,qfi->qf", a, b) * lc
+           + np.einsum("qfi,qfi->qf", b, c) * la + np.einsum("qfi,qfi->qf", c, a) * lb)
+    return 2.0 * np.arctan2(det, dot).sum(axis=1) / (4.0 * np.pi)
+
+
+# Bounds: in spacings of the cloud (a Delaunay surface through the strikes cuts corners and
+# chords by up to about one spacing) plus, with noise, a fraction of the noise for the mean
+# (Chamfer) and three sigmas for the worst point (Hausdorff).
+@pytest.mark.parametrize("name, n, noise", [
+    ("sphere", 3000, 0.0), ("sphere", 3000, 0.02), ("box", 3000, 0.0), ("box", 3000, 0.01)])
+def test_closed_shapes_are_recovered_closed_and_close(name, n, noise):
+    truth = shape(name)
+    vertices, faces, cloud = reconstruct(truth, n, noise=noise)
+    assert closed(faces)
+    report = score((vertices, faces), truth, **FAST_SCORE)
+    assert report.chamfer_m < 0.1 * cloud.spacing + 0.3 * noise, report.chamfer_m
+    assert report.hausdorff_m < 1.2 * cloud.spacing + 3.0 * noise, report.hausdorff_m
+    assert volume(vertices, faces) == pytest.approx(volume(*truth), rel=0.03)
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.002])
+def test_thin_plate_keeps_both_sides_apart(noise):
+    """2 m x 2 m x 2 cm, seen from above and below (spacing ~3 cm, more than the thickness):
+    closed (no hole), and its volume is the plate's (a merged sheet would enclose none)."""
+    truth = shape("plate")
+    vertices, faces, cloud = reconstruct(truth, 4000, noise=noise)
+    assert cloud.spacing > PLATE[2]
+    assert closed(faces)
+    assert volume(vertices, faces) == pytest.approx(np.prod(PLATE), rel=0.15)
+    grid = np.stack(np.meshgrid(np.linspace(-0.9, 0.9, 7), np.linspace(-0.9, 0.9, 7)),
+                    axis=-1).reshape(-1, 2)
+    mid, above = (np.column_stack([grid, np.full(len(grid), z)]) for z in (0.0, 0.03))
+    assert np.all(np.abs(winding(vertices, faces, mid) - 1.0) < 1e-6)
+    assert np.all(np.abs(winding(vertices, faces, above)) < 1e-6)
+    report = score((vertices, faces), truth, **FAST_SCORE)
+    assert report.hausdorff_m < cloud.spacing, report.hausdorff_m
+
+
+def test_rays_carve_the_gap_the_convex_hull_fills():
+    truth = shape("two boxes")
+    vertices, faces, _ = reconstruct(truth, 6000)
+    assert closed(faces)
+    gap = np.array([[0.0, y, z] for y in (-0.3, 0.0, 0.3) for z in (-0.3, 0.0, 0.3)])
+    assert np.all(np.abs(winding(vertices, faces, gap)) < 1e-6)       # outside: carved
+    centres = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    assert np.all(np.abs(winding(vertices, faces, centres) - 1.0) < 1e-6)
+    assert volume(vertices, faces) == pytest.approx(volume(*truth), rel=0.05)
+
+
+def test_range_noise_along_the_rays_does_not_crumple_the_surface():
+    """Noise of 2 cm along the rays: the surface lies well within the noise of the truth and
+    its area is the sphere's; the same method without denoising, through the noisy strikes,
+    is rougher and larger."""
+    noise = 0.02
+    truth = shape("sphere")
+    areas = {}
+    for denoise in (None, False):
+        vertices, faces, _ = reconstruct(truth, 6000, noise=noise, denoise=denoise)
+        a, b, c = (vertices[faces[:, i]] for i in range(3))
+        areas[denoise] = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
+        if denoise is None:
+            report = score((vertices, faces), truth, **FAST_SCORE)
+            assert report.accuracy_mean_m < 0.5 * noise, report.accuracy_mean_m
+    assert areas[None] == pytest.approx(4.0 * np.pi, rel=0.05)
+    assert areas[False] > areas[None] * 1.03       # through the raw strikes: crumpled
+
+
+def test_same_seed_same_bytes_and_the_seed_matters():
+    truth = shape("box")
+    first = reconstruct(truth, 1500, noise=0.01, seed=3)
+    again = reconstruct(truth, 1500, noise=0.01, seed=3)
+    assert first[0].tobytes() == again[0].tobytes()
+    assert first[1].tobytes() == again[1].tobytes()
+    other = reconstruct(truth, 1500, noise=0.01, seed=4)
+    assert first[0].tobytes() != other[0].tobytes()
+
+
+def test_a_cloud_without_view_points_is_refused():
+    points, _, _ = scan(shape("sphere"), 500)
+    cloud = prepare(points)
+    run = bind("visibility")
+    with pytest.raises(NoViewPoints, match="visibility: the cloud has no view points"):
+        run.method_spec().run(cloud, **run.params)
+    assert issubclass(NoViewPoints, MethodFailed)
+
+
+@pytest.mark.parametrize("params, message", [
+    ({"max_steps": 0}, "max_steps must be >= 1"),
+    ({"beta": -1.0}, "beta must be >= 0"),
+    ({"sigma": -0.5}, "sigma must be >= 0"),
+    ({"behind": "far"}, "behind must be a float"),
+])
+def test_bad_parameters_are_named_before_any_work(params, message):
+    with pytest.raises(ParameterError, match=message):
+        bind("visibility", params)
+
+
+def test_view_points_reach_the_isolated_worker_through_the_api():
+    """``recon.api.reconstruct`` on a Cloud with ``view_x/y/z``: preparation keeps them and the
+    isolated worker receives them (else the method would refuse the cloud)."""
+    from formats.geometry import Cloud
+    from recon import api
+
+    points, view, _ = scan(shape("sphere"), 1500)
+    cloud = Cloud(points, {"view_x": view[:, 0], "view_y": view[:, 1], "view_z": view[:, 2]})
+    surface = api.reconstruct(cloud, method="visibility")
+    assert surface.method == "visibility"
+    assert closed(surface.faces)
+    assert volume(surface.vertices, surface.faces) == pytest.approx(4.0 / 3.0 * np.pi,
+                                                                    rel=0.05)
