@@ -26,10 +26,14 @@ Schedulers
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import math
 import os
 import re
+import socket
+import struct
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -42,6 +46,13 @@ RESULTS_NAME = "results.jsonl"
 FINGERPRINT_NAME = "sweep.json"
 # Seconds to wait for an existing Dask scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
+# Seconds to open a TCP connection to a scheduler address, and then to receive its greeting: a
+# Dask server sends its handshake as soon as it accepts a connection (distributed/comm/core.py,
+# ``Listener.on_connection``), in well under a second on a network that can run a sweep.
+PROBE_CONNECT_S = 5.0
+PROBE_GREETING_S = 5.0
+# Largest handshake accepted: Dask's is about 100 bytes (a small msgpack mapping).
+PROBE_MAX_BYTES = 1 << 16
 # A Dask scheduler address: ``host:port`` or ``protocol://host:port`` with one of Dask's comms.
 SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
 # Where a local cluster listens: this machine only. Its scheduler and dashboard (HTTP, no
@@ -65,6 +76,93 @@ def check_scheduler(scheduler, error: type[Exception] = SweepError):
     return scheduler
 
 
+def _host_port(address: str) -> tuple[str, int]:
+    rest = address.split("://", 1)[-1]
+    host, _, port = rest.rpartition(":")
+    return host.strip("[]"), int(port)
+
+
+def probe_scheduler(scheduler: str, error: type[Exception] = SweepError) -> None:
+    """Refuse, in one line and within seconds, a ``tcp://`` address where no Dask scheduler
+    answers: a closed port, a server of another protocol (HTTP waits for a request and sends
+    nothing; Dask would wait for its greeting forever), or one that sends something else (Dask
+    would read its first 8 bytes as a frame length and try to allocate exabytes).
+
+    Reads the greeting a Dask server sends on accepting a connection: an 8-byte little-endian
+    length, then that many bytes of msgpack with the keys of Dask's handshake. Other comms
+    (``tls://``, ``ws://``, ``ucx://``) are left to Dask.
+    """
+    if "://" in scheduler and not scheduler.startswith("tcp://"):
+        return
+    host, port = _host_port(scheduler)
+    where = f"--scheduler {scheduler}"
+    try:
+        conn = socket.create_connection((host, port), timeout=PROBE_CONNECT_S)
+    except TimeoutError:
+        raise error(f"{where}: cannot connect (no answer in {PROBE_CONNECT_S:g} s)") from None
+    except OSError as exc:
+        raise error(f"{where}: cannot connect ({exc.strerror or exc})") from None
+    with conn:
+        conn.settimeout(PROBE_GREETING_S)
+        try:
+            head = _receive(conn, 8)
+            size = struct.unpack("<Q", head)[0] if len(head) == 8 else 0
+            body = _receive(conn, size) if 0 < size <= PROBE_MAX_BYTES else b""
+        except TimeoutError:
+            raise error(f"{where}: not a Dask scheduler (it sent no Dask greeting in "
+                        f"{PROBE_GREETING_S:g} s)") from None
+        except OSError as exc:
+            raise error(f"{where}: cannot connect ({exc.strerror or exc})") from None
+    if len(body) != size or b"pickle-protocol" not in body:
+        raise error(f"{where}: not a Dask scheduler (it answered with something other than "
+                    "Dask's protocol)")
+
+
+def _receive(conn: socket.socket, n: int) -> bytes:
+    """Up to ``n`` bytes from ``conn`` (fewer when it closes)."""
+    data = b""
+    while len(data) < n:
+        chunk = conn.recv(min(n - len(data), 65536))
+        if not chunk:
+            break
+        data += chunk
+    return data
+
+
+def connect(scheduler: str, error: type[Exception] = SweepError):
+    """A ``distributed.Client`` of the existing scheduler at ``scheduler``.
+
+    Raises
+    ------
+    error
+        One line, within seconds, when no Dask scheduler answers there (``probe_scheduler``)
+        or Dask cannot connect in ``CONNECT_TIMEOUT_S``.
+    """
+    from distributed import Client
+
+    probe_scheduler(scheduler, error)
+    try:
+        with quiet_dask():
+            return Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+    except Exception as exc:  # Dask raises many types on a peer that is not a scheduler
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise error(f"--scheduler {scheduler}: cannot connect ({text})") from None
+
+
+@contextlib.contextmanager
+def quiet_dask():
+    """Within the block, every log message is dropped: while a cluster connects or shuts down,
+    Dask logs what is noise to the user (a worker closing its comm as the cluster stops logs a
+    CommClosedError with its traceback); what matters reaches the caller as an exception or a
+    failed case's record."""
+    previous = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logging.disable(previous)
+
+
 def local_cluster(n_workers: int):
     """A ``LocalCluster`` of single-threaded worker processes on the loopback interface, its
     dashboard on a free loopback port (the default 8787 may be taken by another cluster)."""
@@ -74,7 +172,7 @@ def local_cluster(n_workers: int):
 
     return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                         host=LOCAL_HOST, dashboard_address=f"{LOCAL_HOST}:0",
-                        silence_logs=logging.ERROR)
+                        silence_logs=logging.CRITICAL)
 
 
 def default_workers() -> int:
@@ -267,10 +365,7 @@ def _execute_dask(func, cases, pending, shared, scheduler, workers):
             cluster = local_cluster(workers)
             client = Client(cluster)
         else:
-            try:
-                client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
-            except (OSError, TimeoutError, ValueError) as exc:
-                raise SweepError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+            client = connect(scheduler)
         # A one-element list scatters the value whole (a tuple would be split).
         remote = {name: client.scatter([value], broadcast=True)[0]
                   for name, value in shared.items()}
@@ -294,7 +389,8 @@ def _execute_dask(func, cases, pending, shared, scheduler, workers):
         cluster = client = None
         raise
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        with quiet_dask():
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
