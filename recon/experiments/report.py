@@ -191,9 +191,11 @@ def csv_table(path: Path, *, columns: tuple[str, ...] | None = None,
     Raises
     ------
     ReportError
-        Not UTF-8 text, or not a CSV table (a NUL byte, a field over csv's size limit).
+        Not UTF-8 text, or not a CSV table (NUL bytes, a field over csv's size limit).
     """
     text = _read_text(path)
+    if "\x00" in text:
+        raise ReportError(f"{path}: not a readable CSV table (binary: it holds NUL bytes)")
     try:
         rows = list(csv.reader(io.StringIO(text, newline="")))
     except csv.Error as exc:
