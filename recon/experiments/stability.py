@@ -51,10 +51,17 @@ from pathlib import Path
 import numpy as np
 
 from formats import sigma_from_sigma3
+from formats.atomic import write_text_atomically
 from formats.errors import ReconError
 from recon.experiments import charts
 from recon.experiments.cases import SWEEP_THREADS, score_options, variants, write_csv
-from recon.experiments.sweep import check_scheduler, default_workers, run_sweep, to_jsonable
+from recon.experiments.sweep import (
+    SweepError,
+    check_scheduler,
+    default_workers,
+    run_sweep,
+    to_jsonable,
+)
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
@@ -328,7 +335,8 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
                              "timeout_s": timeout_s, "memory_mb": memory_mb,
                              "score_options": score_options},
                      fingerprint=ident, scheduler=scheduler, n_workers=n_workers,
-                     resume=resume, on_result=keep, desc="stability")
+                     resume=resume, on_result=keep, desc="stability",
+                     outputs=("stability.csv", "stability.json"))
     records = []
     order = {run.key: i for i, run in enumerate(runs)}  # method by method, as before
     for key, case in sorted(cases.items(), key=lambda item: order[item[1]["run"].key]):
@@ -384,7 +392,8 @@ def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
                                                   if r["method"] == m]))
                                 for m in dict.fromkeys(r["method"] for r in records)}}
     json_path = out_dir / "stability.json"
-    json_path.write_text(json.dumps(to_jsonable(summary), indent=2) + "\n")
+    write_text_atomically(json_path, json.dumps(to_jsonable(summary), indent=2) + "\n",
+                          error=SweepError)
     pngs = []
     for method in dict.fromkeys(r["method"] for r in records):
         mine = [r for r in records if r["method"] == method]

@@ -34,13 +34,15 @@ import os
 import re
 import socket
 import struct
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from formats.atomic import write_text_atomically
 from formats.errors import ReconError
+from formats.paths import check_destination, output_directory
 
 RESULTS_NAME = "results.jsonl"
 FINGERPRINT_NAME = "sweep.json"
@@ -61,7 +63,8 @@ LOCAL_HOST = "127.0.0.1"
 
 
 class SweepError(ReconError, ValueError):
-    """A sweep cannot start: bad scheduler, unreachable cluster, or a mismatched resume."""
+    """A sweep cannot start or finish: bad scheduler, unreachable cluster, a mismatched or
+    damaged resume, or an output that cannot be written."""
 
 
 def check_scheduler(scheduler, error: type[Exception] = SweepError):
@@ -199,17 +202,36 @@ def to_jsonable(value: Any) -> Any:
 
 
 def read_results(path) -> dict[str, dict]:
-    """The finished results of a ``results.jsonl``, by key (a torn last line is ignored)."""
+    """The finished results of a ``results.jsonl``, by key (a torn last line is ignored).
+
+    Raises
+    ------
+    SweepError
+        The file cannot be read, or a line other than the last is not UTF-8 text (not a file
+        a sweep wrote).
+    """
     path = Path(path)
     done: dict[str, dict] = {}
     if not path.exists():
         return done
-    for line in path.read_text().splitlines():
+    try:
+        lines = path.read_bytes().splitlines()
+    except OSError as exc:
+        raise SweepError(f"--resume: {path}: cannot be read ({exc.strerror})") from None
+    for number, raw in enumerate(lines, 1):
+        try:
+            line = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            if number == len(lines):   # a torn last line may end inside a character
+                continue
+            raise SweepError(f"--resume: {path}: line {number} is not UTF-8 text (not a "
+                             "results file of recon; use a new output directory or drop "
+                             "--resume)") from None
         try:
             record = json.loads(line)
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, RecursionError):
             continue
-        if isinstance(record, dict) and "key" in record:
+        if isinstance(record, dict) and isinstance(record.get("key"), str):
             done[record["key"]] = record
     return done
 
@@ -227,20 +249,26 @@ def _check_fingerprint(out_dir: Path, fingerprint: Mapping | None, resume: bool)
     file = out_dir / FINGERPRINT_NAME
     current = to_jsonable(dict(fingerprint or {}))
     if resume and file.exists():
-        previous = json.loads(file.read_text())
+        try:
+            previous = json.loads(file.read_bytes().decode("utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+            previous = None
+        if not isinstance(previous, dict):
+            raise SweepError(f"--resume: {file} is damaged (not a JSON object); use a new "
+                             "output directory or drop --resume")
         if previous != current:
             changed = sorted(k for k in set(previous) | set(current)
                              if previous.get(k) != current.get(k))
             raise SweepError(f"--resume: {out_dir} holds a sweep with different "
                              f"{', '.join(changed)}; use a new output directory or drop --resume")
-    file.write_text(json.dumps(current, indent=2) + "\n")
+    write_text_atomically(file, json.dumps(current, indent=2) + "\n", error=SweepError)
 
 
 def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]], out_dir, *,
               shared: Mapping[str, Any] | None = None, fingerprint: Mapping | None = None,
               scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
-              on_result: Callable[[str, dict], dict] | None = None, desc: str = "runs"
-              ) -> dict[str, dict]:
+              on_result: Callable[[str, dict], dict] | None = None, desc: str = "runs",
+              outputs: Sequence[str] = ()) -> dict[str, dict]:
     """Run ``func(**shared, **case)`` for every case, streaming results to ``out_dir``.
 
     Parameters
@@ -268,6 +296,10 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
         written (e.g. to save a mesh and drop its arrays); the record must be JSON-able.
     desc : str
         Progress-bar label.
+    outputs : sequence of str
+        Names of the files the caller writes into ``out_dir`` after the sweep: checked with
+        the sweep's own before any work (one that is a directory is refused then, not after
+        the runs).
 
     Returns
     -------
@@ -276,11 +308,10 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
     """
     from tqdm import tqdm
 
-    out_dir = Path(out_dir)
     check_scheduler(scheduler)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise SweepError(f"{out_dir}: is not a directory (the output of a sweep is one)")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = output_directory(out_dir, SweepError)
+    for name in (RESULTS_NAME, FINGERPRINT_NAME, *outputs):
+        check_destination(out_dir / name, SweepError)
     if n_workers is not None and n_workers < 1:
         raise SweepError(f"workers must be >= 1, got {n_workers}")
     _check_fingerprint(out_dir, fingerprint, resume)
