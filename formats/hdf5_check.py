@@ -156,6 +156,18 @@ def _verdict(path: Path, cpu_s: int) -> str:
     return report[1:].decode(errors="replace")
 
 
+def is_hdf5(path, error: type[Exception]) -> bool:
+    """Whether ``path`` starts as an HDF5 file; ``error("PATH: cannot be read (why)")`` when
+    it cannot be opened (no permission), where h5py raises an OSError with HDF5's message."""
+    import h5py
+
+    try:
+        return bool(h5py.is_hdf5(path))
+    except OSError as exc:
+        reason = os.strerror(exc.errno) if exc.errno else str(exc).splitlines()[0]
+        raise error(f"{path}: cannot be read ({reason})") from None
+
+
 def _key(path: Path) -> tuple:
     st = path.stat()
     return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)

@@ -261,7 +261,8 @@ def make_case(seed: int, inputs: dict, directory: Path, kind: str | None = None)
     rng = random.Random(seed)
     directory.mkdir(parents=True, exist_ok=True)
     out = directory / "out.ply"
-    kind = kind or rng.choice(FIRST_KINDS + HOSTILE_KINDS)
+    drawn = rng.choice(FIRST_KINDS + HOSTILE_KINDS)   # drawn always: same stream after it
+    kind = kind or drawn
     if kind in HOSTILE_KINDS:
         from tests.fuzz.hostile import MAKERS
 
