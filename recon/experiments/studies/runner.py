@@ -251,7 +251,8 @@ def execute(study: str, cases: Mapping[str, Mapping], out_dir, *, size: str,
         drop_failed(out_dir)
     return run_sweep(func, cases, out_dir, shared=shared,
                      fingerprint=fingerprint(study, size, cases), scheduler=scheduler,
-                     n_workers=n_workers, resume=resume, desc=f"study {study}")
+                     n_workers=n_workers, resume=resume, desc=f"study {study}",
+                     outputs=(RESULTS_CSV, SUMMARY_JSON))
 
 
 # --------------------------------------------------------------------------- tables
