@@ -156,3 +156,11 @@ def test_the_report_never_replaces_a_file_it_reads(tmp_path):
 
         write_report(study, study / "summary.json")
     assert (study / "summary.json").read_bytes() == before
+
+
+def test_an_output_name_too_long_is_one_line(tmp_path, capsys):
+    study = _study(tmp_path / "study")
+    long = tmp_path / ("a" * 5000 + ".html")
+    assert main(["report", str(study), "-o", str(long)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot be written (File name too long)" in err[0]
