@@ -430,7 +430,8 @@ def write_report(directory, output) -> Path:
             raise ReportError(f"-o {output}: is a directory; give an .html file")
         inside = output.exists() and output.resolve().is_relative_to(Path(directory).resolve())
     except OSError as exc:   # a name too long, a loop of links
-        raise ReportError(f"-o {output}: cannot be written ({exc.strerror or exc})") from None
+        shown = str(output) if len(str(output)) < 200 else f"{str(output)[:120]}..."
+        raise ReportError(f"-o {shown}: cannot be written ({exc.strerror or exc})") from None
     if inside and output.suffix.lower() not in (".html", ".htm"):
         raise ReportError(f"-o {output}: is one of the files of {directory} the report reads; "
                           "give an .html file")
