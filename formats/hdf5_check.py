@@ -135,6 +135,7 @@ def _forked(path: Path, cpu_s: int) -> tuple[bytes, int]:
 def _spawned(path: Path, cpu_s: int) -> tuple[bytes, int]:
     """Walk in a fresh interpreter; its report and the signal that ended it (0: none)."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    # OSError: the interpreter cannot be started (check_hdf5 says so in one line).
     done = subprocess.run([sys.executable, "-c", "import sys; from formats.hdf5_check import "
                            "_limit_cpu, _report; _limit_cpu(int(sys.argv[2])); "
                            "sys.stdout.buffer.write(_report(sys.argv[1]))", str(path),
@@ -195,6 +196,10 @@ def check_hdf5(path, error: type[Exception], *, cpu_s: int | None = None) -> Non
     path = Path(path)
     key = _key(path)
     if key not in _VERDICTS:
-        _VERDICTS[key] = _verdict(path, CHECK_CPU_S if cpu_s is None else int(cpu_s))
+        try:
+            _VERDICTS[key] = _verdict(path, CHECK_CPU_S if cpu_s is None else int(cpu_s))
+        except OSError as exc:   # no verdict on the file: not cached
+            raise error(f"{path}: cannot check its HDF5 structure (cannot start "
+                        f"{sys.executable}: {exc.strerror or exc})") from None
     if _VERDICTS[key]:
         raise error(f"{path}: {_VERDICTS[key]}")
