@@ -15,7 +15,7 @@ import signal
 import sys
 
 from cli import options
-from formats import interrupt, paths
+from formats import interrupt, paths, scratch
 from formats.atomic import DiskFull
 from formats.errors import ReconError
 from formats.version import __version__
@@ -133,6 +133,11 @@ def _leave_now(status: int, *, at_once: bool = False) -> int:
     for child in children:
         with contextlib.suppress(psutil.Error):
             child.kill()
+    # The interpreter's clean-up is skipped: remove the scratch directories (a worker's jobs,
+    # a study case's log) of this process and of the children just killed (a killed process
+    # writes nothing more; waiting for them would let this process's threads restart helpers,
+    # such as multiprocessing's resource tracker, which then print tracebacks).
+    scratch.remove_owned(child.pid for child in children)
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(status)

@@ -119,11 +119,14 @@ def show_required(parser: argparse.ArgumentParser, *shown: str, alternatives: tu
 
 
 def _scheduler(text: str) -> str:
-    """argparse type of ``--scheduler``: checked before any work starts."""
-    from recon.experiments.sweep import SweepError, check_scheduler
+    """argparse type of ``--scheduler``: checked before any work starts (an address must answer
+    as a Dask scheduler)."""
+    from recon.experiments.sweep import SweepError, check_scheduler, probe_scheduler
 
     try:
-        return check_scheduler(text)
+        if check_scheduler(text) not in ("threads", "serial"):
+            probe_scheduler(text)
+        return text
     except SweepError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 

@@ -6,18 +6,21 @@ file can make the library loop forever or crash: a flipped bit in the size of a 
 object (where variable-length strings such as the root attributes live) hangs HDF5 2.0 in
 ``H5Aread`` (reproduced with single bit flips at the object-size fields of a log's global heap
 collection). No read of such a file can be guarded from inside the process, so
-:func:`check_hdf5` walks the whole structure in a child process with a time limit:
+:func:`check_hdf5` walks the whole structure in a child process whose CPU time is limited:
 
 - every link: external and user-defined links are refused;
 - every object's attributes, read in full (the global heap);
 - every dataset: external storage and virtual layouts are refused; the chunk index is walked
   and every chunk, or the contiguous block, must lie inside the file.
 
-A child that does not finish in ``CHECK_TIMEOUT_S`` or dies (HDF5 crashing on the damage) means
-a damaged file. The verdict is cached per file version (device, inode, size, mtime), so opening
-the same log again costs nothing, and a log recon itself wrote is trusted (``trust``). The walk
-reads metadata only: a 2.3 M-strike log of 164 MB takes about 0.1 s in a forked child, 0.9 s in a
-fresh interpreter (the path of multi-threaded processes), on a loaded 2-core machine.
+A child that uses ``CHECK_CPU_S`` seconds of CPU (the kernel stops it: ``RLIMIT_CPU``) or dies
+(HDF5 crashing on the damage) means a damaged file. No wall-clock limit decides: on a busy
+machine a valid file's walk waits for the processor (a fresh interpreter's took 15.9 s of wall
+time beside 25 busy processes) but its CPU time stays what it is on an idle one. The verdict is
+cached per file version (device, inode, size, mtime), so opening the same log again costs
+nothing, and a log recon itself wrote is trusted (``trust``). The walk reads metadata only: a
+2.3 M-strike log of 164 MB takes about 0.1 s in a forked child, 0.9 s in a fresh interpreter
+(the path of multi-threaded processes), interpreter start included.
 """
 
 from __future__ import annotations
@@ -28,12 +31,12 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
-# Seconds the structural walk may take: a valid log's takes milliseconds (metadata only), so
-# reaching this means HDF5 is looping on damage.
-CHECK_TIMEOUT_S = 10.0
+# CPU seconds the structural walk may use, interpreter start included: a valid log's takes
+# milliseconds of walking (metadata only) after about 1 s of start-up in a fresh interpreter,
+# so reaching this means HDF5 is looping on damage.
+CHECK_CPU_S = 10
 _VERDICTS: dict[tuple, str] = {}   # (dev, inode, size, mtime_ns) -> "" or the problem
 
 
@@ -86,6 +89,15 @@ def _walk(path: str, live: bool = False) -> str:
     return problems[0] if problems else ""
 
 
+def _limit_cpu(seconds: int) -> None:
+    """In the child: let the kernel stop it after ``seconds`` of CPU time (SIGXCPU, then
+    SIGKILL a second later), with no core file."""
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    resource.setrlimit(resource.RLIMIT_CPU, (seconds, seconds + 1))
+
+
 def _report(path: str, live: bool = False) -> bytes:
     """The walk's verdict as the child sends it: ``b"="`` then the problem (empty when none)."""
     try:
@@ -95,62 +107,69 @@ def _report(path: str, live: bool = False) -> bytes:
         return b"=" + f"damaged or unreadable HDF5 ({text})".encode()
 
 
-def _forked(path: Path, timeout: float, live: bool = False) -> bytes | None:
-    """Walk in a forked child; its report, or None when it did not finish in time."""
-    import select
-
+def _forked(path: Path, cpu_s: int, live: bool = False) -> tuple[bytes, int]:
+    """Walk in a forked child; its report and the signal that ended it (0: none)."""
     read, write = os.pipe()
     pid = os.fork()
     if pid == 0:   # the child: report and leave without running the parent's clean-up
         try:
             os.close(read)
+            _limit_cpu(cpu_s)
             os.write(write, _report(str(path), live))
         finally:
             os._exit(0)
     os.close(write)
     chunks = []
+    status = None
     try:
-        deadline = time.monotonic() + timeout
-        while True:
-            ready, _, _ = select.select([read], [], [], max(0.0, deadline - time.monotonic()))
-            if not ready:
-                return None
-            chunk = os.read(read, 65536)
-            if not chunk:
-                return b"".join(chunks)
+        while chunk := os.read(read, 65536):
             chunks.append(chunk)
+        _, status = os.waitpid(pid, 0)
     finally:
         os.close(read)
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
+        if status is None:   # interrupted: never leave the child behind
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+    return b"".join(chunks), os.WTERMSIG(status) if os.WIFSIGNALED(status) else 0
 
 
-def _spawned(path: Path, timeout: float, live: bool = False) -> bytes | None:
-    """Walk in a fresh interpreter; its report, or None when it did not finish in time."""
+def _spawned(path: Path, cpu_s: int, live: bool = False) -> tuple[bytes, int]:
+    """Walk in a fresh interpreter; its report and the signal that ended it (0: none)."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    try:
-        done = subprocess.run([sys.executable, "-c", "import sys; from formats.hdf5_check "
-                               "import _report; sys.stdout.buffer.write(_report(sys.argv[1], "
-                               "sys.argv[2] == 'live'))", str(path), "live" if live else ""],
-                              capture_output=True, timeout=timeout, env=env)
-    except subprocess.TimeoutExpired:
-        return None
-    return done.stdout
+    # OSError: the interpreter cannot be started (check_hdf5 says so in one line).
+    done = subprocess.run([sys.executable, "-c", "import sys; from formats.hdf5_check import "
+                           "_limit_cpu, _report; _limit_cpu(int(sys.argv[2])); "
+                           "sys.stdout.buffer.write(_report(sys.argv[1], sys.argv[3] == 'live'))",
+                           str(path), str(cpu_s), "live" if live else ""], capture_output=True,
+                          env=env)
+    return done.stdout, max(0, -done.returncode)
 
 
-def _verdict(path: Path, timeout: float, live: bool = False) -> str:
+def _verdict(path: Path, cpu_s: int, live: bool = False) -> str:
     # fork() copies only the calling thread, and locks other threads hold stay held in the
     # child: with threads running (a Dask worker), a fresh interpreter walks the file instead.
     # (multiprocessing would refuse inside a Dask worker: daemonic processes have no children.)
     single = threading.active_count() == 1 and hasattr(os, "fork")
-    report = (_forked if single else _spawned)(path, timeout, live)
-    if report is None:
-        return (f"damaged HDF5 structure (reading it did not finish in {timeout:g} s; "
-                "HDF5 loops on this damage)")
+    report, signum = (_forked if single else _spawned)(path, cpu_s, live)
+    if signum in (signal.SIGXCPU, signal.SIGKILL) and not report.startswith(b"="):
+        return (f"damaged HDF5 structure (reading it used {cpu_s} s of CPU time without "
+                "finishing; HDF5 loops on this damage)")
     if not report.startswith(b"="):
         return "damaged HDF5 structure (reading it crashed the HDF5 library)"
     return report[1:].decode(errors="replace")
+
+
+def is_hdf5(path, error: type[Exception]) -> bool:
+    """Whether ``path`` starts as an HDF5 file; ``error("PATH: cannot be read (why)")`` when
+    it cannot be opened (no permission), where h5py raises an OSError with HDF5's message."""
+    import h5py
+
+    try:
+        return bool(h5py.is_hdf5(path))
+    except OSError as exc:
+        reason = os.strerror(exc.errno) if exc.errno else str(exc).splitlines()[0]
+        raise error(f"{path}: cannot be read ({reason})") from None
 
 
 def _key(path: Path, live: bool = False) -> tuple:
@@ -165,7 +184,7 @@ def trust(path) -> None:
     _VERDICTS[_key(Path(path))] = ""
 
 
-def check_hdf5(path, error: type[Exception], *, timeout: float | None = None,
+def check_hdf5(path, error: type[Exception], *, cpu_s: int | None = None,
                live: bool = False) -> None:
     """Raise ``error("PATH: problem")`` unless ``path``'s HDF5 structure is safe to read.
 
@@ -175,14 +194,18 @@ def check_hdf5(path, error: type[Exception], *, timeout: float | None = None,
         An existing HDF5 file.
     error : exception class
         A ReconError subclass (``StrikeLogError``, ``MeshFormatError``).
-    timeout : float, seconds, optional
-        Limit of the structural walk (default ``CHECK_TIMEOUT_S``).
+    cpu_s : int, seconds, optional
+        CPU time the structural walk may use (default ``CHECK_CPU_S``).
     live : bool
         ``path`` is a live (SWMR) writer's temporary file: walk it as an SWMR reader.
     """
     path = Path(path)
     key = _key(path, live)
     if key not in _VERDICTS:
-        _VERDICTS[key] = _verdict(path, CHECK_TIMEOUT_S if timeout is None else timeout, live)
+        try:
+            _VERDICTS[key] = _verdict(path, CHECK_CPU_S if cpu_s is None else int(cpu_s), live)
+        except OSError as exc:   # no verdict on the file: not cached
+            raise error(f"{path}: cannot check its HDF5 structure (cannot start "
+                        f"{sys.executable}: {exc.strerror or exc})") from None
     if _VERDICTS[key]:
         raise error(f"{path}: {_VERDICTS[key]}")

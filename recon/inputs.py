@@ -17,7 +17,7 @@ from formats import StrikeLog
 from formats.cloud_io import CLOUD_SUFFIXES, cloud_from_ply_columns, read_cloud
 from formats.errors import MeshFormatError
 from formats.geometry import Cloud, Mesh
-from formats.hdf5_check import check_hdf5
+from formats.hdf5_check import check_hdf5, is_hdf5
 from formats.mesh_io import MESH_SUFFIXES, read_mesh
 from formats.paths import check_source
 from formats.ply import read_ply
@@ -37,7 +37,8 @@ def is_strike_log(path) -> bool:
     import h5py
 
     path = Path(path)
-    if path.suffix.lower() != ".h5" or not path.is_file() or not h5py.is_hdf5(path):
+    if (path.suffix.lower() != ".h5" or not path.is_file()
+            or not is_hdf5(path, MeshFormatError)):
         return False
     check_hdf5(path, MeshFormatError)
     try:

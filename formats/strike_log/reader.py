@@ -14,7 +14,7 @@ import numpy as np
 from formats.atomic import partial_pid, process_alive
 from formats.errors import StrikeLogError
 from formats.geometry import Mesh
-from formats.hdf5_check import check_hdf5
+from formats.hdf5_check import check_hdf5, is_hdf5
 from formats.paths import check_source
 from formats.strike_log.schema import (
     _ANGLE_FIELDS,
@@ -62,7 +62,7 @@ class StrikeLog:
     def __init__(self, path):
         self.path = check_source(path, StrikeLogError)
         where = self._where = str(self.path)
-        if not h5py.is_hdf5(self.path):
+        if not is_hdf5(self.path, StrikeLogError):
             raise StrikeLogError(f"{where}: not an HDF5 file")
         check_hdf5(self.path, StrikeLogError)   # no other files, no loops: formats/hdf5_check.py
         with _hdf5_errors(where):

@@ -21,7 +21,7 @@ import h5py
 
 from formats.atomic import LIVE_SUFFIX, partial_pid, process_alive
 from formats.errors import StrikeLogError
-from formats.hdf5_check import check_hdf5
+from formats.hdf5_check import check_hdf5, is_hdf5
 from formats.paths import check_destination, check_source
 from formats.strike_log.reader import LiveStrikeLog
 from formats.strike_log.schema import _SHOT_FIELDS, READ_CHUNK_ROWS
@@ -134,7 +134,7 @@ def recover(partial, output, *, chunk_rows: int = READ_CHUNK_ROWS,
     output = check_destination(output, StrikeLogError)
     if output.exists() and output.samefile(partial):
         raise StrikeLogError(f"{output}: is the partial log itself; name another output")
-    if not h5py.is_hdf5(partial):
+    if not is_hdf5(partial, StrikeLogError):
         raise StrikeLogError(f"{partial}: not an HDF5 file")
     check_hdf5(partial, StrikeLogError, live=True)
     with LiveStrikeLog(partial) as log:

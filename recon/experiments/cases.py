@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.atomic import write_atomically
+from formats.atomic import write_text_atomically
 from recon.experiments.sweep import SweepError, to_jsonable
 from recon.surfaces import methods
 from recon.surfaces.methods import Run
@@ -149,21 +149,20 @@ def pareto_front(time: np.ndarray, value: np.ndarray, *, minimize: bool = True) 
 
 def write_csv(records: list[dict], path) -> Path:
     """Write records as CSV: BASE_COLUMNS then every other column, sorted (params as JSON);
-    atomically (``formats.atomic.write_atomically``)."""
+    atomically (a destination that is a directory is one line)."""
     import csv
+    import io
 
     extra = sorted({k for r in records for k in r} - set(BASE_COLUMNS))
-
-    def write(temporary: Path) -> None:
-        with open(temporary, "w", newline="") as out:
-            writer = csv.writer(out)
-            writer.writerow([*BASE_COLUMNS, *extra])
-            for r in records:
-                row = []
-                for column in (*BASE_COLUMNS, *extra):
-                    value = r.get(column)
-                    if isinstance(value, (dict, list, tuple)):
-                        value = json.dumps(to_jsonable(value), sort_keys=True)
-                    row.append("" if value is None else value)
-                writer.writerow(row)
-    return write_atomically(path, write, error=SweepError)
+    out = io.StringIO(newline="")
+    writer = csv.writer(out)
+    writer.writerow([*BASE_COLUMNS, *extra])
+    for r in records:
+        row = []
+        for column in (*BASE_COLUMNS, *extra):
+            value = r.get(column)
+            if isinstance(value, (dict, list, tuple)):
+                value = json.dumps(to_jsonable(value), sort_keys=True)
+            row.append("" if value is None else value)
+        writer.writerow(row)
+    return write_text_atomically(path, out.getvalue(), error=SweepError)

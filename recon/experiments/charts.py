@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.atomic import write_atomically
+from formats.errors import ReconError
 from recon.experiments.cases import CHAMFER, FSCORE, pareto_front
 from recon.surfaces.isolation import FAILURE_KINDS
 
@@ -63,11 +65,17 @@ def preload() -> None:
     threading.Thread(target=_pyplot, name="recon-charts-preload", daemon=True).start()
 
 
+class ChartError(ReconError, OSError):
+    """A chart cannot be written (its destination is a directory, its disk is full...)."""
+
+
 def _save(fig, path) -> Path:
-    path = Path(path)
-    fig.savefig(path, dpi=DPI)
-    _pyplot().close(fig)
-    return path
+    """Write ``fig`` to ``path`` atomically: an interrupted or failed write (a full disk)
+    leaves the previous chart as it was."""
+    try:
+        return write_atomically(path, lambda tmp: fig.savefig(tmp, dpi=DPI), error=ChartError)
+    finally:
+        _pyplot().close(fig)
 
 
 def _plain_log_ticks(axis) -> None:

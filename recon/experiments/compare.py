@@ -51,7 +51,7 @@ from recon.experiments.cases import (
     variants,
     write_csv,
 )
-from recon.experiments.sweep import default_workers, run_sweep, to_jsonable
+from recon.experiments.sweep import SweepError, default_workers, run_sweep, to_jsonable
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
 from recon.surfaces.methods import MethodFailed, MethodInput, Run
 from recon.surfaces.prepare import Preparation
@@ -210,7 +210,8 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
                      fingerprint=ident, scheduler=scheduler, n_workers=n_workers, resume=resume,
                      on_result=lambda key, result: flatten(cases[key]["run"], result,
                                                            mesh_dir=mesh_dir),
-                     desc="compare")
+                     desc="compare", outputs=("results.csv", "results.json",
+                                              "speed_accuracy.png", "auto.json"))
     records = [done[key] for key in cases if key in done]
     estimate = full_grid_estimate(records, list(dict.fromkeys(run.method for run in runs)),
                                   workers=n_workers or default_workers())
@@ -240,9 +241,9 @@ def finish(records: list[dict], out_dir, *, title: str = "", extra: dict | None 
     csv_path = write_csv(ranked, out_dir / "results.csv")
     summary = {"runs": ranked, "pareto_chamfer": fronts[CHAMFER],
                "pareto_fscore": fronts[FSCORE], **(extra or {})}
-    json_path = out_dir / "results.json"
-    write_text_atomically(json_path, json.dumps(to_jsonable(summary), indent=2) + "\n",
-                          error=MethodFailed)
+    json_path = write_text_atomically(out_dir / "results.json",
+                                      json.dumps(to_jsonable(summary), indent=2) + "\n",
+                                      error=SweepError)
     png_path = charts.speed_accuracy(ranked, out_dir / "speed_accuracy.png", title=title)
     return {"records": ranked, "table": format_table(ranked),
             "pareto_chamfer": fronts[CHAMFER], "pareto_fscore": fronts[FSCORE],
@@ -327,10 +328,10 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
     """
     from recon.inputs import load_truth, walk_early
     from recon.surfaces.isolation import start_workers, warm_truth
-    from recon.surfaces.prepare import InputError, load_prepared
+    from recon.surfaces.prepare import load_prepared
 
     runs = variants(names, grid=grid)
-    out_dir = output_directory(out_dir, InputError)   # before any work
+    out_dir = output_directory(out_dir, SweepError)   # before any work: a read-only parent
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
         walk_early(input, truth)  # before the pool's launcher thread starts
@@ -364,7 +365,7 @@ def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
         report["auto"] = {"choice": choice.to_dict(), "agreement": verdict}
         write_text_atomically(out_dir / "auto.json",
                               json.dumps(to_jsonable(report["auto"]), indent=2) + "\n",
-                              error=MethodFailed)
+                              error=SweepError)
         report["auto_text"] = format_choice(choice) + "\n" + format_agreement(verdict)
     if not any(r.get("status") == "ok" for r in report["records"]):
         kinds = sorted({str(r.get("failure")) for r in report["records"]})

@@ -56,7 +56,13 @@ from formats.errors import ReconError
 from formats.paths import output_directory
 from recon.experiments import charts
 from recon.experiments.cases import SWEEP_THREADS, score_options, variants, write_csv
-from recon.experiments.sweep import check_scheduler, default_workers, run_sweep, to_jsonable
+from recon.experiments.sweep import (
+    SweepError,
+    check_scheduler,
+    default_workers,
+    run_sweep,
+    to_jsonable,
+)
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
@@ -330,7 +336,8 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
                              "timeout_s": timeout_s, "memory_mb": memory_mb,
                              "score_options": score_options},
                      fingerprint=ident, scheduler=scheduler, n_workers=n_workers,
-                     resume=resume, on_result=keep, desc="stability")
+                     resume=resume, on_result=keep, desc="stability",
+                     outputs=("stability.csv", "stability.json"))
     records = []
     order = {run.key: i for i, run in enumerate(runs)}  # method by method, as before
     for key, case in sorted(cases.items(), key=lambda item: order[item[1]["run"].key]):
@@ -387,7 +394,7 @@ def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
                                 for m in dict.fromkeys(r["method"] for r in records)}}
     json_path = out_dir / "stability.json"
     write_text_atomically(json_path, json.dumps(to_jsonable(summary), indent=2) + "\n",
-                          error=StabilityError)
+                          error=SweepError)
     pngs = []
     for method in dict.fromkeys(r["method"] for r in records):
         mine = [r for r in records if r["method"] == method]

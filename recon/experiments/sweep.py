@@ -26,22 +26,35 @@ Schedulers
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import math
 import os
 import re
-from collections.abc import Callable, Mapping
+import socket
+import struct
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from formats.atomic import write_text_atomically
 from formats.errors import ReconError
+from formats.paths import check_destination, output_directory
 
 RESULTS_NAME = "results.jsonl"
 FINGERPRINT_NAME = "sweep.json"
 # Seconds to wait for an existing Dask scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
+# Seconds to open a TCP connection to a scheduler address, and then to receive its greeting: a
+# Dask server sends its handshake as soon as it accepts a connection (distributed/comm/core.py,
+# ``Listener.on_connection``), in well under a second on a network that can run a sweep.
+PROBE_CONNECT_S = 5.0
+PROBE_GREETING_S = 5.0
+# Largest handshake accepted: Dask's is about 100 bytes (a small msgpack mapping).
+PROBE_MAX_BYTES = 1 << 16
 # A Dask scheduler address: ``host:port`` or ``protocol://host:port`` with one of Dask's comms.
 SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
 # Where a local cluster listens: this machine only. Its scheduler and dashboard (HTTP, no
@@ -50,7 +63,8 @@ LOCAL_HOST = "127.0.0.1"
 
 
 class SweepError(ReconError, ValueError):
-    """A sweep cannot start: bad scheduler, unreachable cluster, or a mismatched resume."""
+    """A sweep cannot start or finish: bad scheduler, unreachable cluster, a mismatched or
+    damaged resume, or an output that cannot be written."""
 
 
 def check_scheduler(scheduler, error: type[Exception] = SweepError):
@@ -65,16 +79,117 @@ def check_scheduler(scheduler, error: type[Exception] = SweepError):
     return scheduler
 
 
+def _host_port(address: str) -> tuple[str, int]:
+    rest = address.split("://", 1)[-1]
+    host, _, port = rest.rpartition(":")
+    return host.strip("[]"), int(port)
+
+
+def probe_scheduler(scheduler: str, error: type[Exception] = SweepError) -> None:
+    """Refuse, in one line and within seconds, a ``tcp://`` address where no Dask scheduler
+    answers: a closed port, a server of another protocol (HTTP waits for a request and sends
+    nothing; Dask would wait for its greeting forever), or one that sends something else (Dask
+    would read its first 8 bytes as a frame length and try to allocate exabytes).
+
+    Reads the greeting a Dask server sends on accepting a connection: an 8-byte little-endian
+    length, then that many bytes of msgpack with the keys of Dask's handshake. Other comms
+    (``tls://``, ``ws://``, ``ucx://``) are left to Dask.
+    """
+    if "://" in scheduler and not scheduler.startswith("tcp://"):
+        return
+    host, port = _host_port(scheduler)
+    where = f"--scheduler {scheduler}"
+    try:
+        conn = socket.create_connection((host, port), timeout=PROBE_CONNECT_S)
+    except TimeoutError:
+        raise error(f"{where}: cannot connect (no answer in {PROBE_CONNECT_S:g} s)") from None
+    except OSError as exc:
+        raise error(f"{where}: cannot connect ({exc.strerror or exc})") from None
+    with conn:
+        conn.settimeout(PROBE_GREETING_S)
+        try:
+            head = _receive(conn, 8)
+            size = struct.unpack("<Q", head)[0] if len(head) == 8 else 0
+            body = _receive(conn, size) if 0 < size <= PROBE_MAX_BYTES else b""
+        except TimeoutError:
+            raise error(f"{where}: not a Dask scheduler (it sent no Dask greeting in "
+                        f"{PROBE_GREETING_S:g} s)") from None
+        except OSError as exc:
+            raise error(f"{where}: cannot connect ({exc.strerror or exc})") from None
+    if len(body) != size or b"pickle-protocol" not in body:
+        raise error(f"{where}: not a Dask scheduler (it answered with something other than "
+                    "Dask's protocol)")
+
+
+def _receive(conn: socket.socket, n: int) -> bytes:
+    """Up to ``n`` bytes from ``conn`` (fewer when it closes)."""
+    data = b""
+    while len(data) < n:
+        chunk = conn.recv(min(n - len(data), 65536))
+        if not chunk:
+            break
+        data += chunk
+    return data
+
+
+def connect(scheduler: str, error: type[Exception] = SweepError):
+    """A ``distributed.Client`` of the existing scheduler at ``scheduler``.
+
+    Raises
+    ------
+    error
+        One line, within seconds, when no Dask scheduler answers there (``probe_scheduler``)
+        or Dask cannot connect in ``CONNECT_TIMEOUT_S``.
+    """
+    from distributed import Client
+
+    probe_scheduler(scheduler, error)
+    try:
+        with quiet_dask():
+            return Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+    except Exception as exc:  # Dask raises many types on a peer that is not a scheduler
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise error(f"--scheduler {scheduler}: cannot connect ({text})") from None
+
+
+@contextlib.contextmanager
+def quiet_dask():
+    """Within the block, every log message is dropped: while a cluster connects or shuts down,
+    Dask logs what is noise to the user (a worker closing its comm as the cluster stops logs a
+    CommClosedError with its traceback); what matters reaches the caller as an exception or a
+    failed case's record."""
+    previous = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logging.disable(previous)
+
+
+# Loggers of a local cluster's worker processes kept to critical messages (``local_cluster``).
+_WORKER_LOGGERS = ("distributed", "asyncio", "tornado")
+
+
 def local_cluster(n_workers: int):
     """A ``LocalCluster`` of single-threaded worker processes on the loopback interface, its
-    dashboard on a free loopback port (the default 8787 may be taken by another cluster)."""
+    dashboard on a free loopback port (the default 8787 may be taken by another cluster).
+
+    Its worker processes log only what is critical: as the cluster stops, a worker whose comm
+    the scheduler closed logs a CommClosedError with its traceback (seen once in six quick
+    studies), noise on a run that succeeded. Their logging is set up from Dask's configuration
+    when they start, which they read from the environment (``DASK_LOGGING__NAME``); a value the
+    user set is kept.
+    """
     import logging
 
     from distributed import LocalCluster
 
+    for name in _WORKER_LOGGERS:
+        os.environ.setdefault(f"DASK_LOGGING__{name.upper()}", "critical")
+
     return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                         host=LOCAL_HOST, dashboard_address=f"{LOCAL_HOST}:0",
-                        silence_logs=logging.ERROR)
+                        silence_logs=logging.CRITICAL)
 
 
 def default_workers() -> int:
@@ -101,17 +216,36 @@ def to_jsonable(value: Any) -> Any:
 
 
 def read_results(path) -> dict[str, dict]:
-    """The finished results of a ``results.jsonl``, by key (a torn last line is ignored)."""
+    """The finished results of a ``results.jsonl``, by key (a torn last line is ignored).
+
+    Raises
+    ------
+    SweepError
+        The file cannot be read, or a line other than the last is not UTF-8 text (not a file
+        a sweep wrote).
+    """
     path = Path(path)
     done: dict[str, dict] = {}
     if not path.exists():
         return done
-    for line in path.read_text().splitlines():
+    try:
+        lines = path.read_bytes().splitlines()
+    except OSError as exc:
+        raise SweepError(f"--resume: {path}: cannot be read ({exc.strerror})") from None
+    for number, raw in enumerate(lines, 1):
+        try:
+            line = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            if number == len(lines):   # a torn last line may end inside a character
+                continue
+            raise SweepError(f"--resume: {path}: line {number} is not UTF-8 text (not a "
+                             "results file of recon; use a new output directory or drop "
+                             "--resume)") from None
         try:
             record = json.loads(line)
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, RecursionError):
             continue
-        if isinstance(record, dict) and "key" in record:
+        if isinstance(record, dict) and isinstance(record.get("key"), str):
             done[record["key"]] = record
     return done
 
@@ -129,20 +263,26 @@ def _check_fingerprint(out_dir: Path, fingerprint: Mapping | None, resume: bool)
     file = out_dir / FINGERPRINT_NAME
     current = to_jsonable(dict(fingerprint or {}))
     if resume and file.exists():
-        previous = json.loads(file.read_text())
+        try:
+            previous = json.loads(file.read_bytes().decode("utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+            previous = None
+        if not isinstance(previous, dict):
+            raise SweepError(f"--resume: {file} is damaged (not a JSON object); use a new "
+                             "output directory or drop --resume")
         if previous != current:
             changed = sorted(k for k in set(previous) | set(current)
                              if previous.get(k) != current.get(k))
             raise SweepError(f"--resume: {out_dir} holds a sweep with different "
                              f"{', '.join(changed)}; use a new output directory or drop --resume")
-    file.write_text(json.dumps(current, indent=2) + "\n")
+    write_text_atomically(file, json.dumps(current, indent=2) + "\n", error=SweepError)
 
 
 def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]], out_dir, *,
               shared: Mapping[str, Any] | None = None, fingerprint: Mapping | None = None,
               scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
-              on_result: Callable[[str, dict], dict] | None = None, desc: str = "runs"
-              ) -> dict[str, dict]:
+              on_result: Callable[[str, dict], dict] | None = None, desc: str = "runs",
+              outputs: Sequence[str] = ()) -> dict[str, dict]:
     """Run ``func(**shared, **case)`` for every case, streaming results to ``out_dir``.
 
     Parameters
@@ -170,6 +310,10 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
         written (e.g. to save a mesh and drop its arrays); the record must be JSON-able.
     desc : str
         Progress-bar label.
+    outputs : sequence of str
+        Names of the files the caller writes into ``out_dir`` after the sweep: checked with
+        the sweep's own before any work (one that is a directory is refused then, not after
+        the runs).
 
     Returns
     -------
@@ -178,11 +322,10 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
     """
     from tqdm import tqdm
 
-    out_dir = Path(out_dir)
     check_scheduler(scheduler)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise SweepError(f"{out_dir}: is not a directory (the output of a sweep is one)")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = output_directory(out_dir, SweepError)
+    for name in (RESULTS_NAME, FINGERPRINT_NAME, *outputs):
+        check_destination(out_dir / name, SweepError)
     if n_workers is not None and n_workers < 1:
         raise SweepError(f"workers must be >= 1, got {n_workers}")
     _check_fingerprint(out_dir, fingerprint, resume)
@@ -267,10 +410,7 @@ def _execute_dask(func, cases, pending, shared, scheduler, workers):
             cluster = local_cluster(workers)
             client = Client(cluster)
         else:
-            try:
-                client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
-            except (OSError, TimeoutError, ValueError) as exc:
-                raise SweepError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+            client = connect(scheduler)
         # A one-element list scatters the value whole (a tuple would be split).
         remote = {name: client.scatter([value], broadcast=True)[0]
                   for name, value in shared.items()}
@@ -294,7 +434,8 @@ def _execute_dask(func, cases, pending, shared, scheduler, workers):
         cluster = client = None
         raise
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        with quiet_dask():
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()

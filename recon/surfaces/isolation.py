@@ -58,6 +58,7 @@ from typing import Any
 
 import numpy as np
 
+from formats import scratch
 from formats.errors import ReconError
 from recon.surfaces.checks import SurfaceRejected, check_surface, watertight
 from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
@@ -381,8 +382,8 @@ class _Worker:
         if threads:
             for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
                 env[name] = str(int(threads))
-        self.dir = tempfile.TemporaryDirectory(prefix="recon-worker-")
-        self.log = Path(self.dir.name) / "output.log"
+        self.dir = scratch.make("recon-worker-")
+        self.log = self.dir / "output.log"
         self.threads = threads
         self.runs = 0
         with open(self.log, "wb") as out:
@@ -421,7 +422,7 @@ class _Worker:
                 stream.close()
             except OSError:
                 pass
-        self.dir.cleanup()
+        scratch.remove(self.dir)
 
 
 _LAUNCHER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recon-isolation")
@@ -470,7 +471,7 @@ def warm_truth(truth: tuple[np.ndarray, np.ndarray], score_options: dict | None 
     with _POOL_LOCK:
         workers = [w for w in _IDLE.get(threads, []) if w.alive()]
     for worker in workers:
-        jobdir = Path(tempfile.mkdtemp(prefix=_WARM_PREFIX, dir=worker.dir.name))
+        jobdir = Path(tempfile.mkdtemp(prefix=_WARM_PREFIX, dir=worker.dir))
         (jobdir / "job.pkl").write_bytes(job)
         try:
             worker.send(jobdir)
@@ -558,8 +559,7 @@ def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None,
            "truth_key": None if truth is None else _truth_key(truth),
            "memory_mb": limits.memory_mb, "sys_path": [p for p in sys.path if p]}
     base = {"method": run.method, "params": run.params}
-    with tempfile.TemporaryDirectory(prefix="recon-run-") as tmp:
-        jobdir = Path(tmp)
+    with scratch.directory("recon-run-") as jobdir:
         (jobdir / "job.pkl").write_bytes(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
         start = time.perf_counter()
         worker = _take(threads)

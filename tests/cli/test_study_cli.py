@@ -101,6 +101,7 @@ def test_real_subprocess_on_a_local_dask_cluster(tmp_path):
                            str(out), "--size", "tiny", "--workers", "2"],
                           capture_output=True, text=True, timeout=240)
     assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stderr.strip() == ""   # nothing of Dask's start-up or shut-down
     assert "Fig. 7" in done.stdout
     summary = json.loads((out / "summary.json").read_text())
     assert summary["n_failed"] == 0 and (out / "score_vs_rotations.png").stat().st_size > 10_000

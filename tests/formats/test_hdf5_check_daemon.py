@@ -12,7 +12,7 @@ from formats.hdf5_check import _verdict
 
 
 def _verdict_as_daemon(path, result) -> None:
-    result.put(_verdict(path, 10.0))
+    result.put(_verdict(path, 10))
 
 
 def _run_in_daemon(path) -> str:

@@ -1,5 +1,7 @@
 """Seeded fuzz cases for the `recon` command: damaged logs, PLY/OBJ/LAS files, scenes and
-argument values, each with what must happen (issue 13).
+argument values, and the hostile kinds of tests/fuzz/hostile.py (outputs that are inputs, report
+directories, lying headers, unreadable files, scheduler addresses, bounds), each with what must
+happen.
 
 ``make_inputs(dir)`` writes the valid inputs every case starts from; ``make_case(seed, inputs,
 dir)`` damages one of them (or picks a hostile value) and returns a ``Case``: the command line
@@ -8,17 +10,23 @@ and whether it must fail. ``judge`` sorts a finished run into one of ``OUTCOMES`
 - ``clean``: exit 1, stderr one line ``recon CMD: error: ...`` (after argparse's usage lines)
   naming the damaged file or the key, and no output or partial file left;
 - ``ok``: exit 0 on input that may be valid (a flipped bit in unused bytes, a valid value);
-- ``traceback``: a traceback, a crash (killed by a signal) or any other exit status;
+- ``traceback``: a traceback or an exit status other than 0 and 1;
+- ``crash``: killed by a signal (the kernel's OOM killer, SIGSEGV, SIGABRT);
 - ``messy``: exit 1 but not one clear line naming the file or key, or an output left behind;
 - ``wrong``: exit 0 on input that must fail;
-- ``hang``: no exit within the time limit (the runner's business).
+- ``hang``: no exit within the time limit (the runner's business);
+- ``data loss``: a file the case protects (its input) changed or went;
+- ``escape``: the run opened a file under the ``secrets`` directory (seen by strace,
+  tests/fuzz/runner.py), or printed or wrote what one holds.
 
-``tests/fuzz/test_fuzz.py`` runs a few tens of cases in-process in CI; ``benchmarks/fuzz.py``
-runs hundreds through real processes and prints the counts.
+``tests/fuzz/test_fuzz.py`` runs a few tens of cases in CI (the first kinds in-process, every
+hostile kind through a real process); ``benchmarks/fuzz.py`` runs a thousand or more through
+real processes and prints the counts.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import random
 import shutil
@@ -27,7 +35,23 @@ from pathlib import Path
 
 import numpy as np
 
-OUTCOMES = ("clean", "ok", "traceback", "messy", "wrong", "hang")
+OUTCOMES = ("clean", "ok", "traceback", "crash", "messy", "wrong", "hang", "data loss",
+            "escape")
+# The kinds of case, each as likely as its count here: the first ones damage files and values,
+# the hostile ones (tests/fuzz/hostile.py) attack outputs, reports, headers, permissions,
+# schedulers and bounds.
+FIRST_KINDS = ("flip_log", "flip_log", "mutate_log", "mutate_log", "file", "file", "scene",
+               "scene", "args", "path")
+HOSTILE_KINDS = ("same_io", "same_io", "report", "report", "lying", "lying", "unreadable",
+                 "unreadable", "scheduler", "bounds", "bounds")
+
+
+def digest(path: Path) -> str | None:
+    """SHA-256 of a file's bytes (None when it is missing or not a file)."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 @dataclass
@@ -45,6 +69,10 @@ class Case:
         One of these (a file name or a key) must appear in the error line.
     output : Path or None
         Must not exist after a failure (nor any ``.partial`` file beside it).
+    protect : list of Path
+        Inputs that must be the same bytes after the run (their digests are taken now).
+    user : str or None
+        Run as this user (``nobody``: file modes apply, as they do not to root).
     """
 
     name: str
@@ -53,6 +81,21 @@ class Case:
     names: tuple[str, ...]
     output: Path | None = None
     files: list[Path] = field(default_factory=list)
+    protect: list[Path] = field(default_factory=list)
+    user: str | None = None
+    digests: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.digests = {path: digest(path) for path in self.protect}
+
+    @property
+    def kind(self) -> str:
+        return self.name.split(":")[0]
+
+    @property
+    def hostile(self) -> bool:
+        """A kind of tests/fuzz/hostile.py (run through a real process in CI)."""
+        return self.kind in HOSTILE_KINDS
 
 
 def make_inputs(directory: Path) -> dict[str, Path]:
@@ -79,9 +122,12 @@ def make_inputs(directory: Path) -> dict[str, Path]:
     write_cloud(directory / "cloud.ply", cloud)
     write_cloud(directory / "cloud.las", cloud)
     (directory / "scene.toml").write_text('[sensor]\npattern = "cross"\n[time]\nduration = 600\n')
+    from tests.fuzz.hostile import _study_dir, make_secrets
+
     return {"log": log, "truth_ply": directory / "truth.ply", "truth_obj": directory / "truth.obj",
             "cloud_ply": directory / "cloud.ply", "cloud_las": directory / "cloud.las",
-            "scene": directory / "scene.toml"}
+            "scene": directory / "scene.toml", "study": _study_dir(directory / "study"),
+            "secrets": make_secrets(directory.parent / "secrets")}
 
 
 # --------------------------------------------------------------------------- damage
@@ -208,13 +254,19 @@ def _special_path(kind: str, directory: Path) -> Path:
     return path
 
 
-def make_case(seed: int, inputs: dict[str, Path], directory: Path) -> Case:
-    """Case number ``seed`` (the same seed gives the same case), its files in ``directory``."""
+def make_case(seed: int, inputs: dict, directory: Path, kind: str | None = None) -> Case:
+    """Case number ``seed`` (the same seed gives the same case), its files in ``directory``;
+    of ``kind`` when given (else drawn from ``FIRST_KINDS + HOSTILE_KINDS``). The hostile
+    kinds need ``inputs["servers"]`` (tests/fuzz/runner.py's ``servers``)."""
     rng = random.Random(seed)
     directory.mkdir(parents=True, exist_ok=True)
     out = directory / "out.ply"
-    kind = rng.choice(["flip_log", "flip_log", "mutate_log", "mutate_log", "file", "file",
-                       "scene", "scene", "args", "path"])
+    drawn = rng.choice(FIRST_KINDS + HOSTILE_KINDS)   # drawn always: same stream after it
+    kind = kind or drawn
+    if kind in HOSTILE_KINDS:
+        from tests.fuzz.hostile import MAKERS
+
+        return MAKERS[kind](rng, inputs, directory)
     if kind in ("flip_log", "mutate_log"):
         bad = directory / "bad.h5"
         how, must = (_damaged_copy(inputs["log"], bad, rng) if kind == "flip_log"
@@ -301,10 +353,19 @@ def make_case(seed: int, inputs: dict[str, Path], directory: Path) -> Case:
 # --------------------------------------------------------------------------- verdict
 
 
-def judge(case: Case, status: int | None, err: str) -> str:
-    """The outcome of ``case`` that exited with ``status`` (None: killed at the time limit)."""
+def judge(case: Case, status: int | None, err: str, *, opened=(), secrets: Path | None = None
+          ) -> str:
+    """The outcome of ``case`` that exited with ``status`` (None: killed at the time limit;
+    negative: killed by that signal), having opened the files ``opened`` (what strace saw;
+    empty when not traced); ``secrets`` is the directory no case may read."""
     if status is None:
         return "hang"
+    if status < 0:
+        return "crash"
+    if any(digest(path) != before for path, before in case.digests.items()):
+        return "data loss"
+    if secrets is not None and _escaped(case, err, opened, Path(secrets)):
+        return "escape"
     if "Traceback" in err or status not in (0, 1):
         return "traceback"
     if status == 0:
@@ -323,3 +384,23 @@ def judge(case: Case, status: int | None, err: str) -> str:
     if parent is not None and any(".partial" in p.name for p in parent.iterdir()):
         return "messy"
     return "clean"
+
+
+def _escaped(case: Case, err: str, opened, secrets: Path) -> bool:
+    """The run opened a file under ``secrets`` (through any link), or its error or output
+    shows what one holds."""
+    from tests.fuzz.hostile import SECRET
+
+    root = secrets.resolve()
+    for path in opened:
+        try:
+            if Path(os.path.realpath(path)).is_relative_to(root):
+                return True
+        except (OSError, ValueError):
+            continue
+    if SECRET in err:
+        return True
+    output = case.output
+    if output is not None and output.is_file() and output.stat().st_size < 50_000_000:
+        return SECRET.encode() in output.read_bytes()
+    return False

@@ -38,8 +38,6 @@ STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "meth
            "closed-loop", "pointing")
 # ``recon study all`` writes this beside the study directories.
 INDEX_JSON = "index.json"
-# Seconds allowed to reach an existing scheduler before the study starts.
-CONNECT_TIMEOUT_S = 10
 
 __all__ = ["SIZES", "STUDIES", "StudyError", "describe", "get", "names", "run", "run_all"]
 
@@ -76,17 +74,15 @@ def check_scheduler(scheduler: str | None, *, connect: bool = True) -> str | Non
         Not ``threads``, ``serial`` or an address, or nothing answers at the address.
     """
     from recon.experiments.sweep import check_scheduler as check_address
+    from recon.experiments.sweep import connect as connect_client
+    from recon.experiments.sweep import quiet_dask
 
     if check_address(scheduler, StudyError) in (None, "threads", "serial"):
         return scheduler
     if connect:
-        from distributed import Client
-
-        try:
-            with Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s"):
-                pass
-        except (OSError, TimeoutError) as exc:
-            raise StudyError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+        client = connect_client(scheduler, StudyError)
+        with quiet_dask():
+            client.close()
     return scheduler
 
 

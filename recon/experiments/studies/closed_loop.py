@@ -18,13 +18,12 @@ even nadir pointing turns to follow a 25 h orbit).
 from __future__ import annotations
 
 import math
-import tempfile
 import time
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import numpy as np
 
+from formats import scratch
 from recon.experiments import charts
 from recon.experiments.studies import runner
 from recon.experiments.studies.runner import claim
@@ -148,8 +147,8 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, prefixes_s: Seq
     start = time.perf_counter()
     the_scene = sim.load_scene(scene, list(overrides))
     truth = (the_scene.vertices, the_scene.faces)
-    with tempfile.TemporaryDirectory(prefix="recon-closed-loop-") as tmp:
-        log_path = Path(tmp) / "run.h5"
+    with scratch.directory("recon-closed-loop-") as tmp:
+        log_path = tmp / "run.h5"
         summary = sim.simulate(the_scene, log_path, seed=seed, progress=False, workers=1)
         with StrikeLog(log_path) as log:
             shots = log.shots()

@@ -34,13 +34,13 @@ from __future__ import annotations
 
 import itertools
 import math
-import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from formats import scratch
 from formats.atomic import write_text_atomically
 from recon.experiments import charts
 from recon.experiments.studies import runner
@@ -203,8 +203,8 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, max_points: int
     the_scene = sim.load_scene(scene, list(overrides))
     truth = (the_scene.vertices, the_scene.faces)
     clouds, refined = {}, {}
-    with tempfile.TemporaryDirectory(prefix="recon-pointing-") as tmp:
-        log = Path(tmp) / "run.h5"
+    with scratch.directory("recon-pointing-") as tmp:
+        log = tmp / "run.h5"
         sim.simulate(the_scene, log, seed=seed, progress=False, workers=1)
         with StrikeLog(log) as opened:
             true_points = opened.truth_strikes().point

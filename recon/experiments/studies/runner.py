@@ -22,7 +22,6 @@ import hashlib
 import io
 import json
 import math
-import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -30,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from formats import scratch
 from formats.atomic import write_text_atomically
 from formats.errors import ReconError
 
@@ -127,8 +127,8 @@ def simulate_cloud(scene: str, overrides: Sequence[str] = (), *, seed: int = 0,
     from recon.registration.ingest import ingest
 
     the_scene = sim.load_scene(scene, list(overrides))
-    with tempfile.TemporaryDirectory(prefix="recon-study-") as tmp:
-        log = Path(tmp) / "run.h5"
+    with scratch.directory("recon-study-") as tmp:
+        log = tmp / "run.h5"
         summary = sim.simulate(the_scene, log, seed=seed, progress=False, workers=sim_workers)
         cloud = ingest(log)
     summary = dict(summary, spin_period_s=float(the_scene["target.spin_period"]))
@@ -251,7 +251,8 @@ def execute(study: str, cases: Mapping[str, Mapping], out_dir, *, size: str,
         drop_failed(out_dir)
     return run_sweep(func, cases, out_dir, shared=shared,
                      fingerprint=fingerprint(study, size, cases), scheduler=scheduler,
-                     n_workers=n_workers, resume=resume, desc=f"study {study}")
+                     n_workers=n_workers, resume=resume, desc=f"study {study}",
+                     outputs=(RESULTS_CSV, SUMMARY_JSON))
 
 
 # --------------------------------------------------------------------------- tables
