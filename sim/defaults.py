@@ -240,7 +240,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "dilation_half_angle_mrad": Key(0.6, "number", "mrad", "beam-spread cone half-angle",
                                         minimum=0.0, maximum=MAX_HALF_ANGLE_MRAD,
                                         exclusive_maximum=True),
-        "dilation_subrays": Key(30, "int", "", "sub-rays m in the beam-spread cone", minimum=1),
+        # At most 10,000 sub-rays (the paper uses 30): a shot casts 1 + m rays per beam.
+        "dilation_subrays": Key(30, "int", "", "sub-rays m in the beam-spread cone", minimum=1,
+                                maximum=10_000),
         # Pose knowledge (sim/pose_errors.py), off by default; the paper leaves it open. Scales
         # a mission engineer would quote: Hayabusa2's LIDAR misalignment gave 0.4 m of error at
         # 1 km (0.02 deg); star trackers know attitude to a few arcseconds; relative navigation

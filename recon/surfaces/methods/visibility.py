@@ -517,11 +517,12 @@ METHOD = register(Method(
         # 3000 strikes of a unit sphere with 2 cm noise beta 0.1 is smoother (mean accuracy
         # 6.5 mm against 9.5 mm).
         "beta": Param(0.0, float, "weight of the surface-quality cost per facet, in rays",
-                      minimum=0.0),
+                      minimum=0.0, maximum=100.0),
         "sigma": Param(None, float, "soft-visibility scale in spacings; auto: each strike's "
-                       "recorded uncertainty along its beam, else the noise scale", minimum=0.0),
+                       "recorded uncertainty along its beam, else the noise scale", minimum=0.0,
+                       maximum=100.0),
         "behind": Param(1.0, float, "the cell held inside lies this many sigma behind each "
-                        "strike", minimum=0.0),
+                        "strike", minimum=0.0, maximum=100.0),
         "denoise": Param(None, bool, "project onto robust local planes first (default: when "
                          "the noise exceeds a quarter of the spacing)"),
         "weighted": Param(True, bool, "weight the denoising by the recorded error model"),
@@ -529,6 +530,6 @@ METHOD = register(Method(
         # cells to leave the hull (at 32, 24 % and 15 % would stop early); twice that for
         # deeper concavities.
         "max_steps": Param(256, int, "cells each ray walks through at most (bounds the cost: "
-                           "points x max_steps)", minimum=1),
+                           "points x max_steps)", minimum=1, maximum=4096),
     },
     grid=({"beta": 0.1}, {"beta": 1.0})))

@@ -209,9 +209,9 @@ def test_a_cloud_without_view_points_is_refused():
 
 
 @pytest.mark.parametrize("params, message", [
-    ({"max_steps": 0}, "max_steps must be >= 1"),
-    ({"beta": -1.0}, "beta must be >= 0"),
-    ({"sigma": -0.5}, "sigma must be >= 0"),
+    ({"max_steps": 0}, "max_steps must be from 1 to 4096"),
+    ({"beta": -1.0}, "beta must be from 0 to 100"),
+    ({"sigma": -0.5}, "sigma must be from 0 to 100"),
     ({"behind": "far"}, "behind must be a float"),
 ])
 def test_bad_parameters_are_named_before_any_work(params, message):
