@@ -11,6 +11,7 @@ import argparse
 import contextlib
 import importlib
 import os
+import shutil
 import signal
 import sys
 
@@ -54,8 +55,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def size_progress_bars() -> None:
+    """Give the progress bars a size when the terminal reports none.
+
+    Some pseudo-terminals (CI runners, ``script``) report 0 rows or 0 columns; tqdm then draws
+    nothing at all (0 rows) or a bar of no width. The sizes ``shutil`` falls back to (the
+    ``LINES``/``COLUMNS`` variables, else 24 x 80) go to tqdm's ``TQDM_NROWS``/``TQDM_NCOLS``
+    defaults, which every bar of this process and its workers reads; sizes a user set win.
+    tqdm reads them when it is imported: call this first (``main`` does, before any command
+    module is imported).
+    """
+    try:
+        size = os.get_terminal_size(sys.stderr.fileno())
+    except (OSError, ValueError, AttributeError):
+        return  # not a terminal: the bars stay off
+    fallback = shutil.get_terminal_size()
+    if size.lines == 0:
+        os.environ.setdefault("TQDM_NROWS", str(fallback.lines or 24))
+    if size.columns == 0:
+        os.environ.setdefault("TQDM_NCOLS", str(fallback.columns or 80))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``recon`` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
+    size_progress_bars()
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:

@@ -17,7 +17,8 @@ from cli.options import (
 
 # The CLI's defaults are the library's (recon/surfaces/isolation.py says where each comes from);
 # they are repeated here only as help text, so that ``recon --help`` need not import numpy.
-TIMEOUT_HELP = "wall-clock limit of each method run, seconds (default: 600)"
+TIMEOUT_HELP = ("wall-clock limit of each method run, seconds (default: 600); a method at its "
+                "defaults whose predicted time exceeds it is declined at once")
 MEMORY_HELP = "address-space limit of each method run, MiB (default: 8192; 0: none)"
 # What the defaults cost, as benchmarks/bench_methods.py measured it (the slowest method of
 # recon/surfaces/methods DEFAULT_FIT_S, which --list-methods prints per method).

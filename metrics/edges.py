@@ -501,25 +501,30 @@ def dihedral_edges(truth) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _dihedral_edges(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """``dihedral_edges`` of a mesh already validated."""
+    """``dihedral_edges`` of a mesh already validated.
+
+    Each edge is one int64 key (``low * n + high``, n vertices); one stable sort of the keys
+    groups an edge's faces, in face order (the row-wise ``np.unique`` it replaces gave the same
+    groups and order at twice the cost).
+    """
     normals = face_normals(mesh.vertices, mesh.faces)
     edges = np.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    owner = np.repeat(np.arange(len(mesh.faces)), 3)
-    _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
-    order = np.argsort(inverse, kind="stable")
-    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    key = edges[:, 0] * (int(edges.max(initial=0)) + 1) + edges[:, 1]
+    order = np.argsort(key, kind="stable")
+    owner = order // 3  # the face of each sorted edge
+    key = key[order]
+    first = np.concatenate([[True], key[1:] != key[:-1]])
+    start = np.flatnonzero(first)
+    counts = np.diff(np.append(start, len(key)))
     # Compare every face of an edge with the first face of that edge: exact for manifold edges
     # (two faces); for non-manifold ones it takes the pairs involving the first face.
-    first_face = owner[order][np.repeat(start, counts)]
-    other_face = owner[order]
-    cos = np.einsum("ij,ij->i", normals[first_face], normals[other_face])
-    cos = np.where(first_face != other_face, cos, 1.0)
-    least = np.full(len(counts), np.inf)
-    np.minimum.at(least, inverse[order], cos)
+    first_face = owner[start][np.cumsum(first) - 1]
+    cos = np.einsum("ij,ij->i", normals[first_face], normals[owner])
+    cos = np.where(first_face != owner, cos, 1.0)
+    least = np.minimum.reduceat(cos, start) if len(start) else cos[:0]
     interior = counts >= 2
     angle = np.degrees(np.arccos(np.clip(least[interior], -1.0, 1.0)))
-    return edges[order][start][interior], angle
+    return edges[order[start]][interior], angle
 
 
 def feature_edges(truth, *, angle_deg: float = defaults.FEATURE_ANGLE_DEG) -> np.ndarray:

@@ -195,9 +195,10 @@ def score(test, *, truth, truth_scale: float = 1.0, truth_units: str | None = No
         from metrics import defaults
         from metrics.score import score_stream
         from recon.inputs import is_strike_log
-        from recon.registration.ingest import iter_points
 
         if is_strike_log(test):
+            from recon.registration.ingest import iter_points
+
             return score_stream(lambda: iter_points(test), truth, name=f"test {test}",
                                 **options)
         streamed = stream_cloud(test, defaults.STREAM_BLOCK)

@@ -23,7 +23,6 @@ from formats.paths import check_source
 from formats.ply import read_ply
 from formats.strike_log import FORMAT_NAME
 from metrics.inputs import as_mesh
-from recon.registration.ingest import ingest, ingest_points
 
 
 def is_strike_log(path) -> bool:
@@ -74,6 +73,9 @@ def load_geometry(path, *, points_only: bool = False) -> Cloud | Mesh:
     path = check_source(path, MeshFormatError)
     suffix = path.suffix.lower()
     if is_strike_log(path):
+        # scipy's Rotation, which ingest needs, is imported only when a log is read.
+        from recon.registration.ingest import ingest, ingest_points
+
         return Cloud(ingest_points(path)) if points_only else ingest(path)
     if suffix == ".ply":
         columns, faces, metadata = read_ply(path)

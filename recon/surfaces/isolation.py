@@ -61,7 +61,7 @@ import numpy as np
 from formats import scratch
 from formats.errors import ReconError
 from recon.surfaces.checks import SurfaceRejected, check_surface, watertight
-from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, predicted_fit_s
 
 # Defaults of every isolated run, also the CLI's.
 # 600 s: several times the slowest method's default run on 2e5 points (pymeshlab ball pivoting
@@ -528,7 +528,9 @@ def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None,
         Keyword arguments of ``metrics.score``.
     timeout_s : float
         Wall-clock limit of the method's own run, seconds (a worker's start-up and the job's
-        loading are limited separately by ``START_TIMEOUT_S``).
+        loading are limited separately by ``START_TIMEOUT_S``). A run whose predicted time
+        (``recon.surfaces.methods.predicted_fit_s``) exceeds it is declined at once: a
+        ``timeout`` failure whose reason starts with "declined", no process started.
     memory_mb : int or None
         Address space the method may add to its worker's, MiB (None: unlimited).
     threads : int, optional
@@ -555,10 +557,17 @@ def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None,
     """
     run = bind(run, params)
     limits = Limits(timeout_s, memory_mb)
+    base = {"method": run.method, "params": run.params}
+    predicted = predicted_fit_s(run, len(cloud.points))
+    if predicted is not None and predicted > timeout_s:
+        return base | {"status": "failed", "failure": "timeout", "process_time_s": 0.0,
+                       "predicted_s": predicted,
+                       "reason": f"declined: predicted {predicted:.2g} s on "
+                                 f"{len(cloud.points)} points, over the {timeout_s:g} s limit "
+                                 "(raise the time limit to run it)"}
     job = {"run": run, "cloud": cloud, "truth": truth, "score_options": score_options,
            "truth_key": None if truth is None else _truth_key(truth),
            "memory_mb": limits.memory_mb, "sys_path": [p for p in sys.path if p]}
-    base = {"method": run.method, "params": run.params}
     with scratch.directory("recon-run-") as jobdir:
         (jobdir / "job.pkl").write_bytes(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
         start = time.perf_counter()

@@ -175,6 +175,31 @@ def test_dihedral_edges_match_trimesh_adjacency(fandisk):
     assert angle == pytest.approx([expected[tuple(e)] for e in edges], abs=1e-5)  # arccos near 1
 
 
+def test_dihedral_edges_match_a_per_edge_loop_on_shuffled_non_manifold_meshes():
+    """Grouping by edge, written another way: a dict from each sorted vertex pair to its faces
+    in face order, the largest angle between the first face and each other one."""
+    rng = np.random.default_rng(0)
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    faces = np.asarray(sphere.faces, dtype=np.int64)
+    faces = rng.permutation(np.concatenate([faces[rng.random(len(faces)) < 0.9], faces[:4],
+                                            faces[:2, ::-1]]))
+    mesh = trimesh.Trimesh(sphere.vertices, faces, process=False)
+    normals = mesh.face_normals
+    by_edge: dict[tuple[int, int], list[int]] = {}
+    for f, face in enumerate(faces):
+        for a, b in ((face[0], face[1]), (face[1], face[2]), (face[2], face[0])):
+            by_edge.setdefault((min(a, b), max(a, b)), []).append(f)
+    expected = {}
+    for edge, owners in sorted(by_edge.items()):
+        if len(owners) >= 2:
+            cos = [1.0 if g == owners[0] else float(normals[owners[0]] @ normals[g])
+                   for g in owners]
+            expected[edge] = np.degrees(np.arccos(np.clip(min(cos), -1.0, 1.0)))
+    edges, angle = dihedral_edges((np.asarray(sphere.vertices), faces))
+    assert [tuple(e) for e in edges] == list(expected)
+    assert angle == pytest.approx(list(expected.values()), abs=1e-9)
+
+
 def weighted_missed_reference(points, mesh, tolerance, edge_points=None, feature_deg=30.0,
                               per_edge=400):
     """MER of the weighted metric, written another way: trimesh's face adjacency for the edges

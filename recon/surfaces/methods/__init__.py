@@ -67,6 +67,8 @@ DEFAULT_FIT_S: dict[str, tuple[float, float]] = {
     "visibility": (37.6, 13.7),
 }
 COST_SOURCE = "benchmarks/bench_methods.py, a shared 2-core machine"
+# Points of the two clouds ``DEFAULT_FIT_S`` was measured on.
+COST_POINTS = (336_333, 77_400)
 
 # How a parameter's type reads in an error message: (one value, several values).
 _TYPE_NAMES = {int: ("an integer", "integers"), float: ("a number", "numbers"),
@@ -441,6 +443,26 @@ def listing() -> str:
         for overrides in spec.grid:
             lines.append(f"    grid: {' '.join(f'{k}={v}' for k, v in overrides.items())}")
     return "\n".join(lines)
+
+
+def predicted_fit_s(run: Run, n_points: int) -> float | None:
+    """What ``run`` is expected to take on ``n_points`` points, seconds, from ``DEFAULT_FIT_S``.
+
+    A power law ``t = t_m (n / n_m)^p`` from the larger measured cloud ``m`` not above ``n``
+    (the smaller one below it), the exponent ``p`` from the two measured times (at least 1: no
+    method is sublinear). Known only for a listed method at its defaults; None otherwise.
+
+    Parameters
+    ----------
+    run : Run
+    n_points : int
+    """
+    if run.method not in DEFAULT_FIT_S or run.params != get(run.method).defaults:
+        return None
+    (t_big, t_small), (n_big, n_small) = DEFAULT_FIT_S[run.method], COST_POINTS
+    exponent = max(1.0, math.log(t_big / t_small) / math.log(n_big / n_small))
+    t_m, n_m = (t_big, n_big) if n_points >= n_big else (t_small, n_small)
+    return t_m * (max(int(n_points), 1) / n_m) ** exponent
 
 
 def bind(method: str | Run, params: Mapping[str, Any] | None = None) -> Run:

@@ -8,15 +8,23 @@ sphere as circumsphere), small alphas return nothing; on noisy clouds they leave
 layer. Hence the automatic alpha: the smallest of 1.5, 3, 6, ... x spacing whose shape uses at
 least ``min_used`` of the points as vertices (a surface through the samples uses nearly all of
 them). The Delaunay step runs in qhull, which can crash the process (a failure reported
-upstream).
+upstream) and stalls on noise-free planar or spherical samples unless they are perturbed first
+(``_backends.general_position``).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from recon.surfaces.methods import Method, MethodInput, Param, register
-from recon.surfaces.methods._backends import open3d_arrays, open3d_cloud, with_triangles
+from recon.surfaces.methods._backends import (
+    general_position,
+    open3d_arrays,
+    open3d_cloud,
+    with_triangles,
+)
 
 # First automatic alpha, in spacings, doubled each step: 3 x the nearest-neighbour distance (the
 # alpha measured on the paper's ellipsoid with open3d 0.20: 0.29 m Chamfer at 5e4 points), which
@@ -43,7 +51,8 @@ def run(cloud: MethodInput, *, alpha: float | None, min_used: float
     """
     import open3d as o3d
 
-    pcd = open3d_cloud(cloud)
+    points = general_position(cloud.points, cloud.spacing, cloud.seed)
+    pcd = open3d_cloud(replace(cloud, points=points))
     tetra, index = o3d.geometry.TetraMesh.create_from_point_cloud(pcd)
     diagonal = float(np.linalg.norm(np.ptp(cloud.points, axis=0)))
     if alpha is None:

@@ -14,8 +14,10 @@ recipe on scipy's qhull Delaunay triangulation:
    plane (``plane.project_to_planes``, 30 neighbours, weighted by each strike's recorded
    uncertainty with ``weighted``), so the pockets between noisy samples shrink. On clean
    clouds it would only add the plane's curvature bias.
-2. **Delaunay** tetrahedralisation (qhull), each tetrahedron's circumcentre ``c`` (its Voronoi
-   vertex) and radius ``r``.
+2. **Delaunay** tetrahedralisation (qhull) of the points in general position
+   (``_backends.general_position``: a seeded offset of 1e-4 spacings, without which noise-free
+   or denoised, hence coplanar, samples stall qhull for minutes), each tetrahedron's
+   circumcentre ``c`` (its Voronoi vertex) and radius ``r``.
 3. **Big balls**, ``r > kappa * spacing``, are labelled by the oriented normals of their four
    samples: a medial ball touches the surface where it is tangent, so ``n_i . (c - p_i) / r``
    is near -1 for an inner ball and +1 for an outer one. Balls whose mean lies beyond
@@ -39,6 +41,7 @@ import numpy as np
 
 from recon.surfaces import uncertainty
 from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from recon.surfaces.methods._backends import general_position
 from recon.surfaces.methods.plane import project_to_planes
 
 # Mean n . (c - p) / r beyond which a big ball is a seed: its four samples agree that the ball
@@ -148,6 +151,7 @@ def run(cloud: MethodInput, *, kappa: float, denoise: bool | None, weighted: boo
             points, normals, k=DENOISE_K, iterations=DENOISE_ITERATIONS,
             neighbours=cloud.neighbours,
             weights=uncertainty.weights(cloud.sigma if weighted else None, len(points)))
+    points = general_position(points, cloud.spacing, cloud.seed)
     try:
         tri = Delaunay(points)
     except QhullError as exc:

@@ -204,3 +204,22 @@ def test_limits_take_the_defaults_and_name_the_options():
         Limits.from_options(memory_limit=-1)
     with pytest.raises(LimitError, match="timeout_s must be positive, got -1"):
         Limits(-1.0)
+
+
+def test_a_run_predicted_over_its_limit_is_declined_without_a_process(cloud):
+    from recon.surfaces import isolation, methods
+
+    run = methods.bind("alpha-shape")
+    lidar_s, lrf_s = methods.DEFAULT_FIT_S["alpha-shape"]
+    # The measured times at the measured sizes, a power law between them.
+    assert methods.predicted_fit_s(run, methods.COST_POINTS[0]) == pytest.approx(lidar_s)
+    assert methods.predicted_fit_s(run, methods.COST_POINTS[1]) == pytest.approx(lrf_s)
+    predicted = methods.predicted_fit_s(run, len(cloud.points))
+    exponent = np.log(lidar_s / lrf_s) / np.log(336_333 / 77_400)
+    assert predicted == pytest.approx(lrf_s * (3000 / 77_400) ** max(1.0, exponent))
+    assert methods.predicted_fit_s(methods.bind("alpha-shape", {"alpha": 1.5}), 10**9) is None
+    isolation.shutdown_workers()
+    result = run_isolated(run, cloud, timeout_s=predicted / 2)
+    assert result["status"] == "failed" and result["failure"] == "timeout"
+    assert result["reason"].startswith(f"declined: predicted {predicted:.2g} s on 3000 points")
+    assert not isolation._IDLE.get(None) and not isolation._BUSY  # no worker was started
