@@ -158,7 +158,7 @@ def test_compare_input_walks_its_hdf5_files_before_starting_workers(tmp_path, mo
         events.append("start workers")
         raise Started
 
-    def verdict(path, timeout):
+    def verdict(path, cpu_s, live=False):
         events.append(f"walk {path.name}")
         return ""
 
