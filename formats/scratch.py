@@ -22,20 +22,12 @@ import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+from formats.atomic import process_alive
+
 # Directories this process made and has not removed yet.
 _MINE: set[Path] = set()
 # A scratch directory's name: a recon prefix, its owner's process id, mkdtemp's random tail.
 _NAME = re.compile(r"^(recon-[a-z]+(?:-[a-z]+)*-)(\d+)-[A-Za-z0-9_]+$")
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:   # someone else's process
-        return True
-    return True
 
 
 def _owned(pids: Iterable[int], prefix: str | None = None) -> Iterator[Path]:
@@ -63,7 +55,7 @@ def remove_stale(prefix: str) -> list[Path]:
         for entry in os.scandir(tempfile.gettempdir()):
             match = _NAME.match(entry.name)
             if (match and match.group(1) == prefix and entry.is_dir(follow_symlinks=False)
-                    and not _alive(int(match.group(2)))):
+                    and not process_alive(int(match.group(2)))):
                 stale.append(Path(entry.path))
     for path in stale:
         remove(path)

@@ -102,9 +102,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         # Paper, "Model: Tri-Axial Ellipsoid": 143.75, 86.25 and 287.50 m along x, y and z.
         "semi_axes": Key([143.75, 86.25, 287.5], "vec3", "m", "ellipsoid semi-axes along x, y, z",
                          **POSITIVE),
-        # Icosphere subdivisions: 20 * 4**5 = 20,480 faces, the mesh size at which ray casting
-        # was measured at 6.5 M rays/s with embreex 4.4 (9.9 M with open3d 0.20) on a 2-core
-        # machine; its facets are ~0.023 m off the exact ellipsoid.
+        # Icosphere subdivisions: 20 * 4**5 = 20,480 faces, the mesh size of the ray-casting
+        # benchmark (benchmarks/bench_simulate.py); its facets are ~0.023 m off the exact
+        # ellipsoid.
         "subdivisions": Key(5, "int", "", "ellipsoid resolution: 20 * 4**n faces",
                             minimum=0, maximum=MAX_SUBDIVISIONS),
         "path": Key(None, "str", "", "mesh file for kind = mesh: OBJ, PLY, STL, PDS table .tab, "

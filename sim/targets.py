@@ -23,8 +23,8 @@ from formats.mesh_io import read_mesh
 # Paper, "Model: Tri-Axial Ellipsoid": semi-axes along x, y and z [m].
 ASTEROID_SEMI_AXES = (143.75, 86.25, 287.5)
 # Segments around round parts of the RSOs: 32 keeps the chord error of a 1 m radius below 5 mm
-# and the whole RSO near 1,200 triangles, the size of the box-and-panels mesh whose ray casting
-# was measured at 11.8 M rays/s with embreex 4.4 on a 2-core machine.
+# and the whole RSO near 1,200 triangles, the size of the box-and-panels mesh of the ray-casting
+# benchmark (benchmarks/bench_simulate.py).
 RSO_SEGMENTS = 32
 
 

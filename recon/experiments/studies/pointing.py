@@ -491,7 +491,7 @@ def _claim_coupling(requirement: Sequence[dict], size: str) -> dict:
 
 def _claim_refinement(requirement: Sequence[dict]) -> dict:
     text = ("Self-calibration from the strikes (recon ingest --refine) relaxes the pointing "
-            "requirement (issue 15, not the paper's).")
+            "requirement (recon's own target, not the paper's).")
     parts, changes = [], []
     for r in (r for r in requirement if r["pose"] == "un-refined" and r["complete"]):
         other = next((o for o in requirement if o["pose"] == "refined"
@@ -504,12 +504,12 @@ def _claim_refinement(requirement: Sequence[dict]) -> dict:
         parts.append(f"{r['target']} range {r['range_sigma3']:g} m: {_requirement_text(r)} -> "
                      f"{_requirement_text(other)}")
     if not changes:
-        return claim("pointing-refine", "issue 15", text, "-",
+        return claim("pointing-refine", "self-calibration", text, "-",
                      "; ".join(parts) or "no refined cells", "not tested",
                      "tested only where the recorded poses fail within the tested errors")
     verdict = ("not reproduced" if -1 in changes or 1 not in changes
                else "reproduced" if all(c == 1 for c in changes) else "partly")
-    return claim("pointing-refine", "issue 15", text, "-",
+    return claim("pointing-refine", "self-calibration", text, "-",
                  "pointing requirement, recorded -> self-calibrated poses: " + "; ".join(parts),
                  verdict,
                  f"{_RULE} (the self-calibrated cells against the same reference); where the "
