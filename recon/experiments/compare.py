@@ -87,7 +87,7 @@ def flatten(run: Run, result: dict, *, mesh_dir: Path | None) -> dict:
     if result.get("status") == "ok" and mesh_dir is not None:
         mesh_dir.mkdir(parents=True, exist_ok=True)
         path = mesh_dir / f"{_slug(run.label, run.key)}.ply"
-        write_mesh(path, result["vertices"], result["faces"])
+        write_mesh(path, result["vertices"], result["faces"], source=f"recon compare: {run.label}")
         record["mesh"] = str(Path(mesh_dir.name) / path.name)
     record.update(result.get("scores") or {})
     return record
