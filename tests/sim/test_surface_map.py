@@ -29,7 +29,7 @@ def _plate_beams(side: float, n: int = 9):
     <= 1: origins, directions, ranges."""
     x, y = np.meshgrid(np.linspace(-0.95, 0.95, n), np.linspace(-0.95, 0.95, n))
     targets = np.column_stack([x.ravel(), y.ravel(), np.full(n * n, 0.1)])
-    origins = targets + [0.3, -0.2, 30.0 * side]
+    origins = targets + np.array([0.3, -0.2, 30.0 * side])
     line = targets - origins
     ranges = np.linalg.norm(line, axis=1)
     return origins, line / ranges[:, None], ranges
@@ -42,9 +42,9 @@ def test_a_plate_seen_from_one_side_is_a_frontier_until_its_other_side_is_struck
     assert set(unpack(struck)[:, 2]) == {0}              # z = 0.1 lies in voxel layer 0
     # Every struck voxel of the plate is still a frontier: the layer below it is unknown.
     np.testing.assert_array_equal(plate.surface_frontier(), struck)
-    below = pack(unpack(struck) - [0, 0, 1])
+    below = pack(unpack(struck) - np.array([0, 0, 1]))
     assert member(below, plate.frontier()).all()
-    assert not member(pack(unpack(struck) + [0, 0, 1]), plate.frontier()).any()   # carved
+    assert not member(pack(unpack(struck) + np.array([0, 0, 1])), plate.frontier()).any()   # carved
     # Struck from below too: no voxel of the plate keeps unknown space under it.
     plate.add(*_plate_beams(-1), margin=2.0)
     np.testing.assert_array_equal(plate.occupied, struck)
