@@ -334,7 +334,7 @@ PROGRESS_DELAY_S = 2.0
 # fraction of the diagonal of the strikes' bounding box, just above the coverage metric's tau of
 # 1 % of the truth's diagonal (metrics/defaults.py): one strike per voxel of surface then leaves
 # almost no surface point farther than tau from a strike.
-GAP_VOXEL_FRACTION = 0.011
+GAP_VOXEL_FRACTION = 0.013
 # ... and at least the beam's angular step at the target's range: 0.05 deg is 0.22 m at 250 m,
 # the tau of the paper's 20 m satellite, so the first few strikes (all within a metre of each
 # other) do not make a map of millimetre voxels.
