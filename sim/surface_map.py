@@ -164,7 +164,9 @@ class SurfaceMap:
         first = np.cumsum(samples) - samples
         along = enter[ray] + (np.arange(samples.sum()) - first[ray] + 0.5) * spacing
         points = origins[ray] + along[:, None] * directions[ray]
-        self.free = np.union1d(self.free, self.keys_of(points))
+        crossed = np.unique(self.keys_of(points))
+        crossed = crossed[~member(crossed, self.free)]
+        self.free = np.insert(self.free, np.searchsorted(self.free, crossed), crossed)
 
     def frontier(self) -> np.ndarray:
         """Sorted keys (m,) of the unknown voxels sharing a face with an occupied voxel."""
