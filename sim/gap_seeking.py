@@ -8,9 +8,10 @@ target's spin and its own orbit.
 
 What it keeps: a voxel map in the target body frame B (sim/surface_map.py) of the voxels struck
 (occupied, with the side they were seen from) and those the beams crossed (free), from every
-recorded beam, struck or not. Its voxel edge is ``GAP_VOXEL_FRACTION`` of the diagonal of the
-strikes' bounding box (about the coverage metric's tau), at least ``GAP_VOXEL_MIN_DEG`` seen from
-the target's range; when that edge drifts by more than ``GAP_VOXEL_REBUILD`` as the box grows,
+recorded beam, struck or not. Its voxel edge is ``GAP_VOXEL_FRACTION`` of the target's size
+seen so far (the diagonal of the strikes' bounding box, or twice the farthest strike from the
+target's centre if more: the first strikes on a large body already tell its scale), which is
+about the coverage metric's tau, and at least ``GAP_VOXEL_MIN_DEG`` seen from the target's range; when that edge drifts by more than ``GAP_VOXEL_REBUILD`` as the box grows,
 the map is rebuilt from every beam so far.
 
 The **frontier** is the unknown voxels next to a struck one: surface continuing into space no
@@ -144,12 +145,13 @@ class GapSeeker:
         self._hi = np.full(3, -np.inf)
         self.n_strikes = 0
         self._range_sum = 0.0
+        self._radius = 0.0                                   # farthest strike from the centre
 
     # ------------------------------------------------------------------ the map
 
     def voxel_size(self) -> float:
         """The voxel edge [m] the strikes so far call for (module docstring)."""
-        diagonal = float(np.linalg.norm(self._hi - self._lo))
+        diagonal = max(float(np.linalg.norm(self._hi - self._lo)), 2.0 * self._radius)
         distance = self._range_sum / self.n_strikes
         return max(GAP_VOXEL_FRACTION * diagonal,
                    distance * math.tan(math.radians(GAP_VOXEL_MIN_DEG)))
@@ -171,6 +173,7 @@ class GapSeeker:
             self._hi = np.maximum(self._hi, end.max(axis=0))
             self.n_strikes += int(hit.sum())
             self._range_sum += float(ranges[hit].sum())
+            self._radius = max(self._radius, float(np.sqrt((end * end).sum(axis=1)).max()))
         if self.n_strikes == 0:
             return
         size = self.voxel_size()
