@@ -11,8 +11,9 @@ What it keeps: a voxel map in the target body frame B (sim/surface_map.py) of th
 recorded beam, struck or not. Its voxel edge is ``GAP_VOXEL_FRACTION`` of the target's size
 seen so far (the diagonal of the strikes' bounding box, or twice the farthest strike from the
 target's centre if more: the first strikes on a large body already tell its scale), which is
-about the coverage metric's tau, and at least ``GAP_VOXEL_MIN_DEG`` seen from the target's range; when that edge drifts by more than ``GAP_VOXEL_REBUILD`` as the box grows,
-the map is rebuilt from every beam so far.
+about the coverage metric's tau, and at least ``GAP_VOXEL_MIN_DEG`` seen from the target's
+range; when that edge drifts by more than ``GAP_VOXEL_REBUILD`` as the target is seen, the map is
+rebuilt from every beam so far.
 
 The **frontier** is the unknown voxels next to a struck one: surface continuing into space no
 beam has examined, including the far side of a thin plate seen from one side. Every interval the
