@@ -138,17 +138,18 @@ class SurfaceMap:
         hit = np.isfinite(ranges)
         if hit.any():
             end = origins[hit] + ranges[hit, None] * directions[hit]
-            keys = self.keys_of(end)
-            toward = -directions[hit]
-            all_keys = np.concatenate([self.occupied, keys])
-            new, inverse = np.unique(all_keys, return_inverse=True)
-            count = np.zeros(len(new), dtype=np.int64)
-            view = np.zeros((len(new), 3))
-            count[inverse[:len(self.occupied)]] = self.count
-            view[inverse[:len(self.occupied)]] = self.view
-            np.add.at(count, inverse[len(self.occupied):], 1)
-            np.add.at(view, inverse[len(self.occupied):], toward)
-            self.occupied, self.count, self.view = new, count, view
+            keys, inverse = np.unique(self.keys_of(end), return_inverse=True)
+            count = np.bincount(inverse, minlength=len(keys))
+            view = np.stack([np.bincount(inverse, weights=-directions[hit, i],
+                                         minlength=len(keys)) for i in range(3)], axis=1)
+            known = member(keys, self.occupied)
+            row = np.searchsorted(self.occupied, keys[known])
+            self.count[row] += count[known]
+            self.view[row] += view[known]
+            at = np.searchsorted(self.occupied, keys[~known])
+            self.occupied = np.insert(self.occupied, at, keys[~known])
+            self.count = np.insert(self.count, at, count[~known])
+            self.view = np.insert(self.view, at, view[~known], axis=0)
             self._mesh = None
         if not len(self.occupied):
             return

@@ -40,6 +40,7 @@ def test_a_plate_seen_from_one_side_is_a_frontier_until_its_other_side_is_struck
     plate.add(*_plate_beams(+1), margin=2.0)
     struck = plate.occupied
     assert set(unpack(struck)[:, 2]) == {0}              # z = 0.1 lies in voxel layer 0
+    assert (plate.view[:, 2] > 0).all() and plate.count.sum() == 81     # seen from above
     # Every struck voxel of the plate is still a frontier: the layer below it is unknown.
     np.testing.assert_array_equal(plate.surface_frontier(), struck)
     below = pack(unpack(struck) - np.array([0, 0, 1]))
@@ -48,6 +49,7 @@ def test_a_plate_seen_from_one_side_is_a_frontier_until_its_other_side_is_struck
     # Struck from below too: no voxel of the plate keeps unknown space under it.
     plate.add(*_plate_beams(-1), margin=2.0)
     np.testing.assert_array_equal(plate.occupied, struck)
+    assert plate.count.sum() == 162 and np.allclose(plate.view[:, 2], 0)   # from both sides
     assert not member(below, plate.frontier()).any()
     inner = np.abs(unpack(struck)[:, :2] + 0.5).max(axis=1) < 3      # away from the plate's rim
     assert not member(struck[inner], plate.surface_frontier()).any()
