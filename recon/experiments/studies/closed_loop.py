@@ -37,14 +37,14 @@ HOUR = 3600.0
 # (preset, overrides, label). The generated satellites (sim/procedural.py) are made inside the
 # study from their seeds, at RSO-A's orbit (250 m, 85 deg).
 TARGETS = {
-    "asteroid-85": ("asteroid-lrf", ("orbit.inclination_deg=85",), "asteroid, 85 deg"),
-    "asteroid-60": ("asteroid-lrf", ("orbit.inclination_deg=60",), "asteroid, 60 deg"),
     "rso-a": ("rso-a-lrf", (), "RSO-A, 85 deg"),
     "rso-b": ("rso-b-lrf", (), "RSO-B, 85 deg"),
     "satellite-1": ("rso-a-lrf", ("target.kind=satellite", "target.seed=1"),
                     "generated satellite (seed 1), 85 deg"),
     "satellite-2": ("rso-a-lrf", ("target.kind=satellite", "target.seed=2"),
                     "generated satellite (seed 2), 85 deg"),
+    "asteroid-85": ("asteroid-lrf", ("orbit.inclination_deg=85",), "asteroid, 85 deg"),
+    "asteroid-60": ("asteroid-lrf", ("orbit.inclination_deg=60",), "asteroid, 60 deg"),
 }
 # The paper's fixed sinusoidal slews: 2 deg (its choice at 85 deg) and 5 deg (at 60 deg). Every
 # target takes both, and gap-seeking is held against the better of the two.
