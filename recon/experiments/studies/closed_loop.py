@@ -62,7 +62,7 @@ TARGET_SPEEDUP, TARGET_FROM_HOURS = 2.0, 24.0
 _HOURS_FIXED = (12, 24, 48, 72, 96, 120, 144, 192, 240, 288, 336, 384, 430)
 _HOURS_RSO = (12, 24, 48, 72, 96, 129)
 _HOURS_GAPS = (4, 8, 12, 16, 20, 24, 30, 36, 48, 60, 72, 96)
-_QUICK = (4, 8, 12)
+_QUICK = (4, 8)
 PLAN = {
     # Fixed laws run 100 rotations (asteroid) or the paper's 129 h (spacecraft); gap-seeking 96 h.
     "full": {"hours": {"nadir": _HOURS_FIXED, "slew-2": _HOURS_FIXED, "slew-5": _HOURS_FIXED,
@@ -73,7 +73,7 @@ PLAN = {
              "overrides": (), "score": runner.CURVE_SCORE},
     "quick": {"hours": {law: _QUICK for law in LAWS},
               "rso_hours": {law: _QUICK for law in LAWS},
-              "surface_at": (12,), "methods": ("poisson",),
+              "surface_at": (8,), "methods": ("poisson",),
               "overrides": ("target.subdivisions=4",),
               "score": {"n_truth_samples": 20_000, "coverage_points": 40_000}},
     "tiny": {"hours": {law: (0.5, 1) for law in LAWS},
