@@ -377,16 +377,27 @@ CHUNKS_IN_FLIGHT = 3
 # runs longer than a couple of seconds").
 PROGRESS_DELAY_S = 2.0
 
-# Gap-seeking law (sim/gap_seeking.py). Directions of its body-frame map: 2**15 cells are 1.1 deg
-# apart, finer than the footprint below seen from the centre of the paper's asteroid (6.7 m at
-# 288 m, 1.3 deg), so a strike always marks the cells it covers.
-GAP_CELLS = 1 << 15
-# The footprint a strike is taken to cover, as a fraction of the diagonal of the strikes' bounding
-# box: the 1 % of the coverage metric's tau (metrics/defaults.py), the sampling the law aims for.
-GAP_FOOTPRINT_FRACTION = 0.01
-# Cells are aimed at only when the proxy surface faces the chaser within this incidence: beyond
-# it a single-beam strike lands far from where it was aimed on any surface the proxy misjudges.
-GAP_MAX_INCIDENCE_DEG = 75.0
-# "The most valuable unobserved region": unstruck area within this angle (from the target
-# centre) of a cell, the goal when no gap is within one step of slew.
-GAP_REGION_DEG = 8.0
+# Gap-seeking law (sim/gap_seeking.py) and its voxel map (sim/surface_map.py). Voxel edge: this
+# fraction of the diagonal of the strikes' bounding box, just above the coverage metric's tau of
+# 1 % of the truth's diagonal (metrics/defaults.py): one strike per voxel of surface then leaves
+# almost no surface point farther than tau from a strike.
+GAP_VOXEL_FRACTION = 0.013
+# ... and at least the beam's angular step at the target's range: 0.05 deg is 0.22 m at 250 m,
+# the tau of the paper's 20 m satellite, so the first few strikes (all within a metre of each
+# other) do not make a map of millimetre voxels.
+GAP_VOXEL_MIN_DEG = 0.05
+# The map is rebuilt from every recorded beam when the voxel edge above drifts from the map's by
+# more than this factor (the strikes' box grows as the target is seen).
+GAP_VOXEL_REBUILD = 1.25
+# Misses and beam paths are traversed within the occupied voxels' box grown by this fraction of
+# its diagonal: space farther from the target holds nothing to plan for.
+GAP_MARGIN_FRACTION = 0.25
+# Frontier voxels the planner weighs per interval; beyond this it takes an even subset (every
+# k-th key), bounding the planner's cost on large maps.
+GAP_MAX_CANDIDATES = 8192
+# Planning horizon in replanning intervals: a frontier voxel visible now but predicted hidden
+# this far ahead is worth GAP_URGENT_WEIGHT times one that stays visible.
+GAP_HORIZON_INTERVALS = 3
+GAP_URGENT_WEIGHT = 2.0
+# A strike is expected to settle the frontier voxels within this many voxel edges of its aim.
+GAP_CLAIM_VOXELS = 1.5

@@ -1,39 +1,36 @@
-"""The gap-seeking attitude law: aim the boresight at what the chaser has not yet struck.
+"""The gap-seeking attitude law: aim the boresight at what the chaser has not yet seen.
 
 A closed loop (``attitude.mode = "gaps"``): the pipeline (sim/pipeline.py) simulates one
 replanning interval at a time, asks :meth:`GapSeeker.command` for the boresight of every shot of
 the next interval, and hands back what the log records of it (:meth:`GapSeeker.observe`). The law
-sees only those recorded strikes, never the truth, and knows the target's spin and its own orbit.
+sees only those recorded shots and strikes, never the truth, and knows its sensor's beams, the
+target's spin and its own orbit.
 
-What it keeps, in the target body frame B:
+What it keeps: a voxel map in the target body frame B (sim/surface_map.py) of the voxels struck
+(occupied, with the side they were seen from) and those the beams crossed (free), from every
+recorded beam, struck or not. Its voxel edge is ``GAP_VOXEL_FRACTION`` of the target's size
+seen so far (the diagonal of the strikes' bounding box, or twice the farthest strike from the
+target's centre if more: the first strikes on a large body already tell its scale), which is
+about the coverage metric's tau, and at least ``GAP_VOXEL_MIN_DEG`` seen from the target's
+range; when that edge drifts by more than ``GAP_VOXEL_REBUILD`` as the target is seen, the map is
+rebuilt from every beam so far.
 
-- **a map of directions** from the target centre, ``GAP_CELLS`` cells of a Fibonacci sphere, each
-  counting the strikes whose footprint (``GAP_FOOTPRINT_FRACTION`` of the strikes' extent)
-  covers it: a cell with no strike is a gap;
-- **a proxy surface**: a centred quadric ``p^T A p = 1`` fitted to the mean strike of every struck
-  cell (a sphere of their median radius while the fit is not an ellipsoid), which gives each gap a
-  point ``r(u) u`` to aim at, a normal and an area.
-
-Every interval it predicts, shot by shot, where the chaser is in B (its orbit and the known spin),
-which gaps face it within ``GAP_MAX_INCIDENCE_DEG`` and lie within ``attitude.max_offset_deg`` of
-the nominal boresight (when no gap is in view during the interval, the least-struck cells in
-view take their place, so the beam densifies the sparsest surface instead of idling), and turns
-the boresight by at most ``max_rate * step``:
-
-1. onto the nearest such gap within that reach (so the beam sweeps a gap shot by shot at about
-   one footprint per shot, the cheapest slew that covers new ground), marking its footprint as
-   expected so the next shot moves on;
-2. else toward the most valuable gap region: the unstruck area within ``GAP_REGION_DEG`` of a cell,
-   divided by the shots needed to get there;
-3. else (nothing of the target in view within the limits) it holds its offset, which costs no
-   slew.
+The **frontier** is the unknown voxels next to a struck one: surface continuing into space no
+beam has examined, including the far side of a thin plate seen from one side. Every interval the
+law predicts, from its orbit and the known spin, where the chaser is in B at the interval's
+start, middle and end and ``GAP_HORIZON_INTERVALS`` intervals later, and which frontier voxels a
+beam from there would reach before striking a struck voxel (Embree on a mesh of the struck
+voxels' exposed faces, :meth:`SurfaceMap.visible`). Then, shot by shot, among the voxels visible
+at that shot and within ``attitude.max_offset_deg`` of the nominal boresight, it aims at the one
+of most value per unit slew: value 1, or ``GAP_URGENT_WEIGHT`` when the voxel is predicted hidden
+at the horizon (see it now or wait), divided by the turn (at least one shot's reach,
+``max_rate * step``, so every voxel within reach is equally cheap and the nearest wins). Within
+reach the boresight goes onto it and the voxels within ``GAP_CLAIM_VOXELS`` of it count as
+settled for the rest of the interval; beyond, the boresight turns toward it at the rate limit.
+With no visible frontier the boresight holds its offset (no slew).
 
 The commanded attitude is the nominal one (sim/motion.py) turned by the smallest rotation that
 takes the nominal boresight ``+z`` onto the commanded one, and is recorded like any other.
-
-The map assumes a target that is star-shaped about its centre (every direction meets the surface
-once); on a satellite with thin panels both faces of a panel fall in the same cells, so the law
-takes a panel's second face as seen when its first is.
 """
 
 from __future__ import annotations
@@ -41,35 +38,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from formats.strike_log import StrikeChunk
 from sim.defaults import (
-    GAP_CELLS,
-    GAP_FOOTPRINT_FRACTION,
-    GAP_MAX_INCIDENCE_DEG,
-    GAP_REGION_DEG,
+    GAP_CLAIM_VOXELS,
+    GAP_HORIZON_INTERVALS,
+    GAP_MARGIN_FRACTION,
+    GAP_MAX_CANDIDATES,
+    GAP_URGENT_WEIGHT,
+    GAP_VOXEL_FRACTION,
+    GAP_VOXEL_MIN_DEG,
+    GAP_VOXEL_REBUILD,
 )
-
-# Fewest struck cells for the quadric fit (6 unknowns, with margin); a sphere before that.
-MIN_FIT_CELLS = 30
-# The quadric's radii are trusted within this factor of the struck radii (else a sphere).
-FIT_RADIUS_SLACK = 2.0
-# Coarse cells (6.3 deg apart) on which the value of gap regions is summed.
-REGION_CELLS = 1024
-# Lowest cosine between a cell's direction and its proxy normal used for its area.
-MIN_AREA_COSINE = 0.2
-
-
-def fibonacci_directions(n: int) -> np.ndarray:
-    """``n`` unit vectors (n, 3) spread evenly over the sphere (Fibonacci lattice)."""
-    k = np.arange(n, dtype=np.float64) + 0.5
-    z = 1.0 - 2.0 * k / n
-    phi = math.pi * (3.0 - math.sqrt(5.0)) * k
-    rho = np.sqrt(1.0 - z * z)
-    return np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
+from sim.surface_map import SurfaceMap
 
 
 def turn_from_boresight(boresight: np.ndarray) -> np.ndarray:
@@ -96,6 +78,43 @@ def body_points(chunk: StrikeChunk) -> np.ndarray:
     return Rotation.from_quat(shots.target_attitude[row]).inv().apply(inertial)
 
 
+def recorded_beams(chunk: StrikeChunk, beams: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every beam of every shot of ``chunk``, from what the log records, in B.
+
+    Parameters
+    ----------
+    chunk : StrikeChunk
+        The strikes of shots ``chunk.shot_offset ..`` and those shots (``chunk.shots``).
+    beams : (b, 3) float64, unit vectors, sensor frame: the sensor's beam directions
+
+    Returns
+    -------
+    origins : (m, 3) float64, metres, B: the recorded sensor position of each beam
+    directions : (m, 3) float64, unit vectors, B: measured for strikes, nominal for misses
+    ranges : (m,) float64, metres: recorded range, inf for a beam that struck nothing
+    """
+    shots, b = chunk.shots, len(beams)
+    n = len(shots.time)
+    to_body = Rotation.from_quat(shots.target_attitude).inv()
+    sensor = Rotation.from_quat(shots.sensor_attitude)
+    origin = to_body.apply(shots.sensor_position)
+    row = chunk.shot - chunk.shot_offset
+    missed = np.ones(n * b, dtype=bool)
+    missed[row * b + chunk.beam] = False
+    miss = np.flatnonzero(missed)
+    miss_row, miss_beam = miss // b, miss % b
+    directions = np.concatenate([
+        to_body[row].apply(sensor[row].apply(chunk.direction)) if len(row) else
+        np.zeros((0, 3)),
+        to_body[miss_row].apply(sensor[miss_row].apply(beams[miss_beam])) if len(miss) else
+        np.zeros((0, 3))])
+    origins = np.concatenate([origin[row], origin[miss_row]])
+    ranges = np.concatenate([np.asarray(chunk.range, dtype=np.float64),
+                             np.full(len(miss), np.inf)])
+    return origins, directions, ranges
+
+
 class GapSeeker:
     """The gap-seeking law of one run (see the module docstring).
 
@@ -111,86 +130,60 @@ class GapSeeker:
         ``poses(t) -> (position (n, 3) [m, I], target Rotation B->I, nominal (n, 3, 3) sending
         nominal-sensor vectors to I)`` at times ``t`` (n,) [s]: the chaser's knowledge of its
         orbit and of the target's spin.
+    beams : (b, 3) float64, unit vectors, sensor frame
+        The sensor's beam directions (misses are recorded as shots without strikes).
     """
 
-    def __init__(self, *, step: float, max_rate: float, max_offset: float, poses):
+    def __init__(self, *, step: float, max_rate: float, max_offset: float, poses,
+                 beams: np.ndarray):
         self.step, self.max_rate, self.max_offset = step, max_rate, max_offset
         self._poses = poses
-        self.cells = fibonacci_directions(GAP_CELLS)
-        self._tree = cKDTree(self.cells)
-        self.hits = np.zeros(GAP_CELLS, dtype=np.int64)      # strikes covering each cell
-        self._radius_sum = np.zeros(GAP_CELLS)               # of the strikes in each cell
-        self._in_cell = np.zeros(GAP_CELLS, dtype=np.int64)
+        self.beams = np.asarray(beams, dtype=np.float64).reshape(-1, 3)
+        self.boresight = np.array([0.0, 0.0, 1.0])           # commanded, nominal frame
+        self.map: SurfaceMap | None = None
+        self._origins, self._directions, self._ranges = [], [], []
         self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
         self._hi = np.full(3, -np.inf)
-        self.boresight = np.array([0.0, 0.0, 1.0])           # commanded, nominal frame
-        # Regions on a coarse grid: each cell's region is that of its nearest coarse cell.
-        coarse = fibonacci_directions(REGION_CELLS)
-        self._parent = cKDTree(coarse).query(self.cells)[1]
-        chord = 2.0 * math.sin(math.radians(GAP_REGION_DEG) / 2.0)
-        pairs = cKDTree(coarse).query_pairs(chord, output_type="ndarray")
-        i = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(REGION_CELLS)])
-        j = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(REGION_CELLS)])
-        self._region = csr_matrix((np.ones(len(i)), (i, j)), shape=(REGION_CELLS,) * 2)
         self.n_strikes = 0
+        self._range_sum = 0.0
+        self._radius = 0.0                                   # farthest strike from the centre
 
     # ------------------------------------------------------------------ the map
 
-    @property
-    def footprint(self) -> float:
-        """Radius [m] a strike is taken to cover: a fraction of the strikes' extent."""
-        if self.n_strikes == 0:
-            return 0.0
-        return GAP_FOOTPRINT_FRACTION * float(np.linalg.norm(self._hi - self._lo))
+    def voxel_size(self) -> float:
+        """The voxel edge [m] the strikes so far call for (module docstring)."""
+        diagonal = max(float(np.linalg.norm(self._hi - self._lo)), 2.0 * self._radius)
+        distance = self._range_sum / self.n_strikes
+        return max(GAP_VOXEL_FRACTION * diagonal,
+                   distance * math.tan(math.radians(GAP_VOXEL_MIN_DEG)))
 
-    def _mark(self, points: np.ndarray, counts: np.ndarray) -> None:
-        """Add 1 to ``counts`` of every cell within the footprint of each point (n, 3) [m, B]."""
-        radius = np.linalg.norm(points, axis=1)
-        ok = radius > 0
-        points, radius = points[ok], radius[ok]
-        if not len(points):
-            return
-        u = points / radius[:, None]
-        # Chord on the unit sphere of the footprint seen from the centre, and the nearest cell.
-        chord = np.minimum(self.footprint / radius, 2.0)
-        for members in self._tree.query_ball_point(u, chord, return_sorted=False):
-            counts[members] += 1
-        counts[self._tree.query(u)[1]] += 1
+    def _margin(self) -> float:
+        return GAP_MARGIN_FRACTION * float(np.linalg.norm(self._hi - self._lo))
 
     def observe(self, chunk: StrikeChunk) -> None:
-        """Add recorded strikes (a block as ``StrikeLog.iter_chunks`` yields) to the map."""
-        if not len(chunk.range):
+        """Add the recorded shots and strikes of an interval (a block as
+        ``StrikeLog.iter_chunks`` yields, with all its shots) to the map."""
+        origins, directions, ranges = recorded_beams(chunk, self.beams)
+        self._origins.append(origins)
+        self._directions.append(directions)
+        self._ranges.append(ranges)
+        hit = np.isfinite(ranges)
+        if hit.any():
+            end = origins[hit] + ranges[hit, None] * directions[hit]
+            self._lo = np.minimum(self._lo, end.min(axis=0))
+            self._hi = np.maximum(self._hi, end.max(axis=0))
+            self.n_strikes += int(hit.sum())
+            self._range_sum += float(ranges[hit].sum())
+            self._radius = max(self._radius, float(np.sqrt((end * end).sum(axis=1)).max()))
+        if self.n_strikes == 0:
             return
-        points = body_points(chunk)
-        self._lo = np.minimum(self._lo, points.min(axis=0))
-        self._hi = np.maximum(self._hi, points.max(axis=0))
-        self.n_strikes += len(points)
-        radius = np.linalg.norm(points, axis=1)
-        cell = self._tree.query(points / radius[:, None])[1]
-        np.add.at(self._radius_sum, cell, radius)
-        np.add.at(self._in_cell, cell, 1)
-        self._mark(points, self.hits)
-
-    def proxy(self) -> tuple[np.ndarray, np.ndarray]:
-        """The proxy surface over every cell: points (c, 3) [m, B] and unit normals (c, 3)."""
-        struck = self._in_cell > 0
-        radius = self._radius_sum[struck] / self._in_cell[struck]
-        u = self.cells[struck]
-        sphere = float(np.median(radius))
-        if struck.sum() >= MIN_FIT_CELLS:
-            p = u * radius[:, None]
-            design = np.stack([p[:, 0] ** 2, p[:, 1] ** 2, p[:, 2] ** 2, 2 * p[:, 0] * p[:, 1],
-                               2 * p[:, 0] * p[:, 2], 2 * p[:, 1] * p[:, 2]], axis=1)
-            a = np.linalg.lstsq(design, np.ones(len(p)), rcond=None)[0]
-            quadric = np.array([[a[0], a[3], a[4]], [a[3], a[1], a[5]], [a[4], a[5], a[2]]])
-            if np.linalg.eigvalsh(quadric).min() > 0:
-                r = 1.0 / np.sqrt(np.einsum("ci,ij,cj->c", self.cells, quadric, self.cells))
-                if (r.min() > radius.min() / FIT_RADIUS_SLACK
-                        and r.max() < radius.max() * FIT_RADIUS_SLACK):
-                    points = self.cells * r[:, None]
-                    normals = points @ quadric
-                    return points, normals / np.linalg.norm(normals, axis=1, keepdims=True)
-        return self.cells * sphere, self.cells.copy()
+        size = self.voxel_size()
+        if self.map is None or abs(math.log(size / self.map.size)) > math.log(GAP_VOXEL_REBUILD):
+            self.map = SurfaceMap(size)
+            self.map.add(*(np.concatenate(a) for a in (self._origins, self._directions,
+                                                        self._ranges)), margin=self._margin())
+        else:
+            self.map.add(origins, directions, ranges, margin=self._margin())
 
     # ------------------------------------------------------------------ the plan
 
@@ -202,58 +195,48 @@ class GapSeeker:
         (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame
         (the attitude offset the pipeline applies).
         """
+        t = np.asarray(t, dtype=np.float64)
         n = len(t)
         out = np.empty((n, 3))
-        if self.n_strikes == 0:                  # nothing seen yet: nadir, or hold
-            out[:] = self.boresight
+        out[:] = self.boresight
+        if self.map is None:                     # nothing seen yet: nadir, or hold
             return turn_from_boresight(out)
-        points, normals = self.proxy()
-        position, target, nominal = self._poses(np.asarray(t, dtype=np.float64))
+        keys = self.map.frontier()
+        if len(keys) > GAP_MAX_CANDIDATES:
+            keys = keys[::-(-len(keys) // GAP_MAX_CANDIDATES)]
+        if not len(keys):                        # the map is complete: hold
+            return turn_from_boresight(out)
+        centres = self.map.centres(keys)
+        horizon = t[-1] + GAP_HORIZON_INTERVALS * (t[-1] - t[0] + self.step)
+        samples = sorted({0, n // 2, n - 1})
+        position, target, nominal = self._poses(np.append(t, horizon))
         m_ib = target.as_matrix().transpose(0, 2, 1)
         chaser = np.einsum("nij,nj->ni", m_ib, position)              # B
         to_nominal = np.matmul(m_ib, nominal).transpose(0, 2, 1)       # sends B to nominal
-        cos_incidence = math.cos(math.radians(GAP_MAX_INCIDENCE_DEG))
-
-        def in_view(cells: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-            """Which ``cells`` shot ``k`` can aim at, and their aim directions (nominal)."""
-            aim = points[cells] - chaser[k]
-            aim /= np.sqrt(np.einsum("ci,ci->c", aim, aim))[:, None]
-            faces = -np.einsum("ci,ci->c", aim, normals[cells]) >= cos_incidence
-            aim_n = aim @ to_nominal[k].T
-            return faces & (aim_n[:, 2] >= math.cos(self.max_offset)), aim_n
-
-        # Cells in view during the interval (at its start, middle or end), and of those the
-        # least struck: gaps while there are any, else the sparsest cells.
-        every = np.arange(GAP_CELLS)
-        seen = np.zeros(GAP_CELLS, dtype=bool)
-        for k in sorted({0, n // 2, n - 1}):
-            seen |= in_view(every, k)[0]
-        level = int(self.hits[seen].min()) if seen.any() else 0
-        gap = seen & (self.hits <= level)
-        cosine = np.maximum(np.einsum("ci,ci->c", self.cells, normals), MIN_AREA_COSINE)
-        area = np.linalg.norm(points, axis=1) ** 2 * (4.0 * math.pi / GAP_CELLS) / cosine
-        unstruck = np.bincount(self._parent, weights=np.where(gap, area, 0.0),
-                               minlength=REGION_CELLS)
-        region = (self._region @ unstruck)[self._parent]
+        seen = {k: self.map.visible(chaser[k], centres) for k in [*samples, n]}
+        weight = np.where(seen[n], 1.0, GAP_URGENT_WEIGHT)
+        nearest = np.asarray(samples)[np.abs(np.arange(n)[:, None] - np.asarray(samples)
+                                             ).argmin(axis=1)]
         reach = self.max_rate * self.step
-        expected = np.zeros(GAP_CELLS, dtype=np.int64)
-        candidates = np.flatnonzero(gap)
+        cos_offset = math.cos(self.max_offset)
+        claim = (GAP_CLAIM_VOXELS * self.map.size) ** 2
+        settled = np.zeros(len(keys), dtype=bool)
         for k in range(n):
-            b = self.boresight
-            open_ = candidates[self.hits[candidates] + expected[candidates] <= level]
-            ok, aim_n = in_view(open_, k)
+            open_ = np.flatnonzero(seen[nearest[k]] & ~settled)
+            aim = centres[open_] - chaser[k]
+            aim /= np.linalg.norm(aim, axis=1, keepdims=True)
+            aim_n = aim @ to_nominal[k].T
+            ok = aim_n[:, 2] >= cos_offset
             if ok.any():
-                aim_n, cells = aim_n[ok], open_[ok]
-                turn = np.arccos(np.clip(aim_n @ b, -1.0, 1.0))
-                near = turn <= reach
-                if near.any():
-                    pick = np.flatnonzero(near)[np.argmin(turn[near])]
+                open_, aim_n = open_[ok], aim_n[ok]
+                turn = np.arccos(np.clip(aim_n @ self.boresight, -1.0, 1.0))
+                pick = np.argmax(weight[open_] / np.maximum(turn, reach) - 1e-9 * turn)
+                if turn[pick] <= reach:
                     self.boresight = aim_n[pick]
-                    self._mark(points[cells[pick]][None], expected)
+                    gap = centres - centres[open_[pick]]
+                    settled |= np.einsum("ci,ci->c", gap, gap) <= claim
                 else:
-                    worth = region[cells] / np.ceil(turn / reach)
-                    goal = aim_n[np.argmax(worth)]
-                    self.boresight = _turn_toward(b, goal, reach)
+                    self.boresight = _turn_toward(self.boresight, aim_n[pick], reach)
             out[k] = self.boresight
         return turn_from_boresight(out)
 

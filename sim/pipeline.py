@@ -414,7 +414,7 @@ def iter_closed_loop(plan: Plan) -> Iterator[Chunk]:
     attitude = plan.scene.values["attitude"]
     law = GapSeeker(step=plan.step, max_rate=math.radians(attitude["max_rate_deg_s"]),
                     max_offset=math.radians(attitude["max_offset_deg"]),
-                    poses=lambda t: poses(plan, t))
+                    poses=lambda t: poses(plan, t), beams=plan.pattern.directions)
     size = max(1, round(attitude["replan_s"] / plan.step))
     for index, first in enumerate(range(0, plan.scene.n_shots, size)):
         stop = min(first + size, plan.scene.n_shots)

@@ -835,8 +835,8 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path
 
 def coverage_and_effort(panels: Sequence[Mapping], path, *, title: str,
                         levels: Sequence[float] = ()) -> Path:
-    """Coverage against time (top row) and the total slew angle (bottom row), a column per
-    target, a line per attitude law.
+    """Coverage against time (top) and the total slew angle (below it) per target, at most
+    three targets to a row, a line per attitude law.
 
     Parameters
     ----------
@@ -847,10 +847,16 @@ def coverage_and_effort(panels: Sequence[Mapping], path, *, title: str,
         Coverage levels drawn as dotted lines (the hours-to-level thresholds).
     """
     plt = _pyplot()
-    fig, axes = plt.subplots(2, len(panels), figsize=(4.6 * len(panels), 7.4), squeeze=False,
-                             constrained_layout=True)
-    for column, panel in enumerate(panels):
-        top, bottom = axes[0, column], axes[1, column]
+    columns = min(len(panels), 3)
+    rows = -(-len(panels) // columns)
+    fig, axes = plt.subplots(2 * rows, columns, figsize=(4.6 * columns, 7.0 * rows),
+                             squeeze=False, constrained_layout=True)
+    for index in range(len(panels), rows * columns):
+        axes[2 * (index // columns), index % columns].set_visible(False)
+        axes[2 * (index // columns) + 1, index % columns].set_visible(False)
+    for index, panel in enumerate(panels):
+        row, column = divmod(index, columns)
+        top, bottom = axes[2 * row, column], axes[2 * row + 1, column]
         for curve in panel["curves"]:
             style = {"marker": "o", "ms": 3.0, "lw": 1.6} | dict(curve.get("style", {}))
             top.plot(curve["x"], curve["coverage"], label=curve["label"], **style)

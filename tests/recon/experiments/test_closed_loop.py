@@ -28,17 +28,32 @@ def _record(hours, coverage, slew, law="gaps"):
 
 def test_hours_to_a_level_interpolates_and_the_verdict_follows_the_target():
     records = {"asteroid-60 gaps": _record([10, 20, 30], [0.5, 0.9, 1.0], [100, 200, 300]),
-               "asteroid-60 slew": _record([50, 100], [0.6, 0.8], [1000, 2000], law="slew")}
+               "asteroid-60 slew-2": _record([50, 100], [0.6, 0.8], [1000, 2000], law="slew-2"),
+               "asteroid-60 slew-5": _record([50, 100], [0.5, 0.7], [3000, 6000], law="slew-5")}
     assert closed_loop.hours_to(records, "asteroid-60 gaps", 0.95) == pytest.approx(25.0)
     assert closed_loop.hours_to(records, "asteroid-60 gaps", 0.4) == 10.0
-    assert closed_loop.hours_to(records, "asteroid-60 slew", 0.95) is None
+    assert closed_loop.hours_to(records, "asteroid-60 slew-2", 0.95) is None
     assert closed_loop.effort_at(records, "asteroid-60 gaps", 25.0) == pytest.approx(250.0)
+    # Neither slew reaches 95 %: the better is the one of higher final coverage, counted at its
+    # last time, 100 h and 2000 deg.
+    assert closed_loop.best_slew(records, "asteroid-60") == "asteroid-60 slew-2"
     result = closed_loop._claim_target(records, "asteroid-60")
-    # never reached by the slew: counted at its last time, 100 h and 2000 deg
     assert result["verdict"] == "reproduced"
-    assert ">= 4.0x sooner" in result["ours"] and "(0.12x at most)" in result["ours"]
-    records["asteroid-60 slew"] = _record([10, 20], [0.9, 0.96], [10, 20], law="slew")
-    assert closed_loop._claim_target(records, "asteroid-60")["verdict"] == "not reproduced"
+    assert ">= 4.0x sooner" in result["ours"] and "2 deg slew" in result["ours"]
+    # A slew reaching 95 % first is the better one; 2x sooner fails here.
+    records["asteroid-60 slew-5"] = _record([10, 20], [0.9, 0.96], [10, 20], law="slew-5")
+    assert closed_loop.best_slew(records, "asteroid-60") == "asteroid-60 slew-5"
+    assert closed_loop._claim_target(records, "asteroid-60")["verdict"] == "partly"
+    # Equal at 30 h is not below; below at a common time after 24 h, and 1.5x sooner only:
+    # not reproduced.
+    records["asteroid-60 slew-5"] = _record([10, 30], [0.9, 1.0], [10, 20], law="slew-5")
+    assert closed_loop.shortfalls(records, "asteroid-60 gaps", "asteroid-60 slew-5") == []
+    records["asteroid-60 gaps"] = _record([10, 20, 30], [0.5, 0.96, 0.97], [100, 200, 300])
+    records["asteroid-60 slew-5"] = _record([10, 30], [0.5, 0.99], [10, 20], law="slew-5")
+    assert closed_loop.shortfalls(records, "asteroid-60 gaps", "asteroid-60 slew-5") == [
+        (30.0, 0.97, 0.99)]
+    result = closed_loop._claim_target(records, "asteroid-60")
+    assert result["verdict"] == "not reproduced" and "below it at 30 h" in result["ours"]
 
 
 @pytest.mark.parametrize("size", ["tiny", "quick", "full"])

@@ -1,0 +1,97 @@
+"""The voxel map of the gap-seeking law: keys, free space, frontier, predicted visibility."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.raycast import EmbreeBackend, ExactHits
+from sim.surface_map import SurfaceMap, clip_to_box, member, pack, unpack
+from sim.targets import box, combine
+
+
+def test_keys_round_trip_and_membership():
+    index = np.array([[0, 0, 0], [-5, 7, 1_000_000], [-1_000_000, -1, 3]])
+    np.testing.assert_array_equal(unpack(pack(index)), index)
+    table = np.sort(pack(index[:2]))
+    np.testing.assert_array_equal(member(pack(index), table), [True, True, False])
+    enter, leave = clip_to_box(np.array([[-5.0, 0.5, 0.5], [-5.0, 5.0, 0.5]]),
+                               np.array([[1.0, 0, 0], [1.0, 0, 0]]), np.zeros(3), np.ones(3))
+    np.testing.assert_allclose(enter[0], 5.0)
+    np.testing.assert_allclose(leave[0], 6.0)
+    assert enter[1] >= leave[1]                          # passes beside the box
+    with pytest.raises(ValueError, match="size must be positive, got 0"):
+        SurfaceMap(0)
+
+
+def _plate_beams(side: float, n: int = 9):
+    """Beams from 30 m above (side +1) or below (-1) onto a grid of the plate z = 0.1, |x|, |y|
+    <= 1: origins, directions, ranges."""
+    x, y = np.meshgrid(np.linspace(-0.95, 0.95, n), np.linspace(-0.95, 0.95, n))
+    targets = np.column_stack([x.ravel(), y.ravel(), np.full(n * n, 0.1)])
+    origins = targets + np.array([0.3, -0.2, 30.0 * side])
+    line = targets - origins
+    ranges = np.linalg.norm(line, axis=1)
+    return origins, line / ranges[:, None], ranges
+
+
+def test_a_plate_seen_from_one_side_is_a_frontier_until_its_other_side_is_struck():
+    plate = SurfaceMap(0.25)
+    plate.add(*_plate_beams(+1), margin=2.0)
+    struck = plate.occupied
+    assert set(unpack(struck)[:, 2]) == {0}              # z = 0.1 lies in voxel layer 0
+    assert (plate.view[:, 2] > 0).all() and plate.count.sum() == 81     # seen from above
+    # Every struck voxel of the plate is still a frontier: the layer below it is unknown.
+    np.testing.assert_array_equal(plate.surface_frontier(), struck)
+    below = pack(unpack(struck) - np.array([0, 0, 1]))
+    assert member(below, plate.frontier()).all()
+    assert not member(pack(unpack(struck) + np.array([0, 0, 1])), plate.frontier()).any()   # carved
+    # Struck from below too: no voxel of the plate keeps unknown space under it.
+    plate.add(*_plate_beams(-1), margin=2.0)
+    np.testing.assert_array_equal(plate.occupied, struck)
+    assert plate.count.sum() == 162 and np.allclose(plate.view[:, 2], 0)   # from both sides
+    assert not member(below, plate.frontier()).any()
+    inner = np.abs(unpack(struck)[:, :2] + 0.5).max(axis=1) < 3      # away from the plate's rim
+    assert not member(struck[inner], plate.surface_frontier()).any()
+
+
+def _sphere(n: int) -> np.ndarray:
+    """``n`` unit vectors (n, 3) spread over the sphere (Fibonacci lattice)."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * k
+    return np.column_stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z])
+
+
+def _bus_and_boom():
+    """A 2 m bus, a 0.2 m boom along +x and a 0.5 m box at its end (x 4 .. 4.5)."""
+    return combine(box([-1, -1, -1], [1, 1, 1]), box([1, -0.1, -0.1], [4, 0.1, 0.1]),
+                   box([4, -0.25, -0.25], [4.5, 0.25, 0.25]))
+
+
+def test_a_boom_behind_the_bus_is_predicted_hidden_from_the_far_side():
+    vertices, faces = _bus_and_boom()
+    # Strikes from 60 m all around, each beam at a random point of the bounding box.
+    rng = np.random.default_rng(0)
+    sides = np.repeat(_sphere(400), 20, axis=0)
+    aim = rng.uniform([-1, -1, -1], [4.5, 1, 1], (len(sides), 3))
+    origins = aim + 60.0 * sides
+    directions = (aim - origins) / 60.0
+    caster, exact = EmbreeBackend(vertices, faces), ExactHits(vertices, faces)
+    face, u, v = caster.first_hit_uv(origins.astype(np.float32), directions.astype(np.float32))
+    hit = face >= 0
+    ranges = np.full(len(origins), np.inf)
+    ranges[hit] = exact.refine(origins[hit], directions[hit], face[hit], u[hit], v[hit],
+                               scale=70.0)[0]
+    seen = SurfaceMap(0.2)
+    seen.add(origins, directions, ranges, margin=1.0)
+    end_box = seen.occupied[unpack(seen.occupied)[:, 0] >= 20]       # x >= 4 m
+    assert len(end_box) > 20
+    centres = seen.centres(end_box)
+    # From the far side (-x, behind the bus) every voxel of the end box is predicted hidden;
+    # from the +x side its near face is predicted struck, from the side (+y) its +y face.
+    assert not seen.visible(np.array([-60.0, 0.0, 0.0]), centres).any()
+    near = seen.visible(np.array([60.0, 0.0, 0.0]), centres)
+    np.testing.assert_array_equal(near, unpack(end_box)[:, 0] == unpack(end_box)[:, 0].max())
+    side = seen.visible(np.array([0.0, 60.0, 0.0]), centres)
+    assert side.any() and not side[unpack(end_box)[:, 1] < unpack(end_box)[:, 1].max()].any()
