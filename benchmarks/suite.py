@@ -584,7 +584,7 @@ def _prediction_lines(summaries: list[dict], pred: dict) -> list[str]:
 
 def _visibility_lines(summaries: list[dict]) -> list[str]:
     """The visibility method per cloud: Pareto fronts, its best run against the best run."""
-    lines = ["", f"## The `{VISIBILITY}` method against the other methods", ""]
+    lines = [f"## The `{VISIBILITY}` method against the other methods", ""]
     present = [s for s in summaries if s["visibility"]["present"]]
     if not present:
         return [*lines, f"Not measured in this run: {summaries[0]['visibility']['note']}."
@@ -719,8 +719,10 @@ def main(argv=None) -> int:
         {"clouds": summaries, "totals": totals_by["all"], "held_out": list(HELD_OUT),
          "totals_held_out": totals_by["held_out"], "totals_tuned": totals_by["tuned"],
          "prediction": pred}, indent=2, default=str) + "\n")
-    command = "python benchmarks/suite.py" + (" --quick" if args.quick else "") + (
-        f" --doc {args.doc}" if args.doc is not None else "")
+    command = " ".join(["python benchmarks/suite.py", *(["--quick"] if args.quick else []),
+                        *(["--held-out"] if args.held_out and not args.clouds else []),
+                        *(["--clouds", *args.clouds] if args.clouds else []),
+                        *(["--doc", str(args.doc)] if args.doc is not None else [])])
     text = markdown(summaries, totals_by, pred, command=command)
     (args.out / "summary.md").write_text(text)
     made = [charts.choice_vs_ranking(summaries, args.out / "auto-suite.png",
