@@ -99,7 +99,8 @@ def _generated(kind: str, seed: int, size: float | None = None) -> list[str]:
 
 
 def _mesh(name: str, scale: float) -> list[str]:
-    return ["target.kind=mesh", f"target.path={MESHES / name}", f"target.scale={scale:g}",
+    """Overrides of a real model; ``simulate`` adds its ``target.path`` (``--meshes``)."""
+    return ["target.kind=mesh", f"target.scale={scale:g}",
             "target.center=true"]
 
 
@@ -216,7 +217,8 @@ ESTIMATORS = ("recon.surfaces.judge:estimate", "recon.surfaces.auto:estimate",
 VISIBILITY = "visibility"
 
 
-def simulate(cloud: SuiteCloud, out: Path, *, quick: bool = False) -> Path:
+def simulate(cloud: SuiteCloud, out: Path, *, quick: bool = False, meshes: Path = MESHES
+             ) -> Path:
     """The cloud's strike log under ``out/logs`` (simulated once, seed 0)."""
     import sim
 
@@ -224,6 +226,8 @@ def simulate(cloud: SuiteCloud, out: Path, *, quick: bool = False) -> Path:
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
         overrides = [*cloud.overrides, QUICK_ROTATIONS] if quick else list(cloud.overrides)
+        if cloud.mesh:
+            overrides.append(f"target.path={meshes / cloud.mesh}")
         sim.simulate(sim.load_scene(cloud.preset, overrides), path, seed=0, progress=False)
     return path
 
@@ -301,7 +305,7 @@ def compare_cloud(cloud: SuiteCloud, args):
     from recon.registration.ingest import ingest
     from recon.surfaces.prepare import prepare
 
-    log = simulate(cloud, args.out, quick=args.quick)
+    log = simulate(cloud, args.out, quick=args.quick, meshes=args.meshes)
     points = ingest(log)
     with StrikeLog(log) as reader:
         truth = reader.truth_mesh()
@@ -684,6 +688,9 @@ def main(argv=None) -> int:
     parser.add_argument("--doc", type=Path, default=None,
                         help="write the table here (e.g. docs/auto-suite.md) and the chart "
                              "beside it in figures/")
+    parser.add_argument("--meshes", type=Path, default=MESHES,
+                        help="folder of the real shape models (default: the shared folder "
+                             "beside the checkout)")
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--scheduler", default="threads")
     parser.add_argument("--workers", type=int, default=None)
@@ -693,9 +700,10 @@ def main(argv=None) -> int:
 
     names = args.clouds or (list(HELD_OUT) if args.held_out else
                             list(QUICK_CLOUDS) if args.quick else list(CLOUDS))
-    missing = [n for n in names if CLOUDS[n].mesh and not (MESHES / CLOUDS[n].mesh).exists()]
+    missing = [n for n in names if CLOUDS[n].mesh and not (args.meshes / CLOUDS[n].mesh).exists()]
     if missing:
-        print(f"suite: shared meshes not found under {MESHES} for {', '.join(missing)}",
+        print(f"suite: shared meshes not found under {args.meshes} for {', '.join(missing)} "
+              "(give their folder with --meshes)",
               file=sys.stderr)
         return 1
     args.out.mkdir(parents=True, exist_ok=True)
