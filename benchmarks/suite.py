@@ -7,8 +7,9 @@
 
 Every cloud is a short campaign of a preset scene (``sim/presets``) simulated with seed 0 and
 ingested: the paper's asteroid seen by a single-beam LRF with slew, a 5-beam cross and a
-scanning LIDAR; RSO-A and RSO-B; real shape models (``MESHES``, the shared folder beside the
-checkout: Itokawa, Eros, comet 67P, the Hubble Space Telescope) imaged by the same sensors; and
+scanning LIDAR; RSO-A and RSO-B; real shape models (``--meshes``, by default ``MESHES``, the
+shared folder beside the checkout: Itokawa, Eros, comet 67P, the Hubble Space Telescope) imaged
+by the same sensors; and
 generated bodies (sim/procedural.py, from seeds fixed here): three satellites (bus, dish, boom
 with a box, thin panels), one per sensor, a faceted polyhedron at two scales and a cratered,
 non-convex asteroid. Each is noise-free or carries the paper's errors (Table 1: LRF 0.3 m range
@@ -22,7 +23,7 @@ Per cloud (``run_cloud``):
 1. ``recon.experiments.compare.compare`` runs every listed method at its defaults and its grid,
    plus the unweighted twin of each method that weights points by the recorded error model
    (``WEIGHTED_METHODS``, ``weighted=false``), isolated, scored against the simulator's truth;
-   its meshes are kept under ``DIR/meshes``;
+   its meshes are kept under ``DIR/meshes`` (about 50 MB a cloud) for the estimate;
 2. ``-m auto``'s choose (``CHOOSERS``) picks a run without the truth (its ladder, its reason);
 3. the agreement: auto's F-score against the best (within ``F_TOLERANCE``), its Chamfer
    distance against the best (within ``CHAMFER_TOLERANCE``), and against the median run;
