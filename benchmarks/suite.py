@@ -474,7 +474,8 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
             "spacing_m": prepared.spacing, "noise_m": prepared.noise,
             "auto": {"label": choice.label, "reason": choice.reason, "key": choice.run.key,
                      "fits": sum(c["status"] != "skipped" for c in choice.candidates),
-                     "predicted": predicted["runs"].get(choice.run.key),
+                     # The estimate of its run, else one the choice carries itself.
+                     "predicted": predicted["runs"].get(choice.run.key) or prediction(choice),
                      "chamfer_m": truth.get(choice.run.key)},
             "predicted": {"estimator": predicted["estimator"], "note": predicted["note"],
                           "runs": [{"key": k, "truth_m": truth[k], "predicted_m": p["chamfer_m"],
