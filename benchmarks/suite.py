@@ -742,9 +742,9 @@ def main(argv=None) -> int:
                                              title="Truth-free predicted Chamfer against the "
                                                    "truth"))
     if args.doc is not None:
-        args.doc.write_text(text)
         figures = args.doc.parent / "figures"
-        figures.mkdir(exist_ok=True)
+        figures.mkdir(parents=True, exist_ok=True)
+        args.doc.write_text(text)
         for chart in made:
             (figures / chart.name).write_bytes(chart.read_bytes())
     print(json.dumps({"totals": totals_by, "prediction": pred}, indent=2))
