@@ -11,6 +11,9 @@ counter-clockwise seen from outside (outward normals).
   spacecraft models (the shared ``hst_7.7k.obj`` is 173 closed parts). A few faces of a part lie
   inside another part (under the sphere and where masts meet the bus); they are never hit;
 - :func:`load_mesh`: any OBJ, PLY or STL file, scaled to metres.
+
+Seeded, generated targets (satellites, faceted polyhedra, cratered asteroids) are built from
+these primitives in sim/procedural.py.
 """
 
 from __future__ import annotations
