@@ -431,7 +431,8 @@ def visibility(report: dict) -> dict:
     if not mine:
         ran = any(r.get("method") == VISIBILITY for r in report["records"])
         return {"present": False, "note": f"{VISIBILITY}: "
-                + ("every run failed" if ran else "not a registered method here")}
+                + ("every run failed" if ran else "no run of it here (not a registered "
+                                                   "method, or not among --methods)")}
     fronts = {m: {p["label"] for p in report[f"pareto_{m}"]} for m in ("chamfer", "fscore")}
     best_c = min(mine, key=lambda r: r[CHAMFER_KEY])
     best_f = max(mine, key=lambda r: r.get("fscore") or 0.0)
