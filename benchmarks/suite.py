@@ -7,8 +7,9 @@
 
 Every cloud is a short campaign of a preset scene (``sim/presets``) simulated with seed 0 and
 ingested: the paper's asteroid seen by a single-beam LRF with slew, a 5-beam cross and a
-scanning LIDAR; RSO-A and RSO-B; real shape models (``MESHES``, the shared folder beside the
-checkout: Itokawa, Eros, comet 67P, the Hubble Space Telescope) imaged by the same sensors; and
+scanning LIDAR; RSO-A and RSO-B; real shape models (``--meshes``, by default ``MESHES``, the
+shared folder beside the checkout: Itokawa, Eros, comet 67P, the Hubble Space Telescope) imaged
+by the same sensors; and
 generated bodies (sim/procedural.py, from seeds fixed here): three satellites (bus, dish, boom
 with a box, thin panels), one per sensor, a faceted polyhedron at two scales and a cratered,
 non-convex asteroid. Each is noise-free or carries the paper's errors (Table 1: LRF 0.3 m range
@@ -22,7 +23,7 @@ Per cloud (``run_cloud``):
 1. ``recon.experiments.compare.compare`` runs every listed method at its defaults and its grid,
    plus the unweighted twin of each method that weights points by the recorded error model
    (``WEIGHTED_METHODS``, ``weighted=false``), isolated, scored against the simulator's truth;
-   its meshes are kept under ``DIR/meshes``;
+   its meshes are kept under ``DIR/meshes`` (about 50 MB a cloud) for the estimate;
 2. ``-m auto``'s choose (``CHOOSERS``) picks a run without the truth (its ladder, its reason);
 3. the agreement: auto's F-score against the best (within ``F_TOLERANCE``), its Chamfer
    distance against the best (within ``CHAMFER_TOLERANCE``), and against the median run;
@@ -99,7 +100,8 @@ def _generated(kind: str, seed: int, size: float | None = None) -> list[str]:
 
 
 def _mesh(name: str, scale: float) -> list[str]:
-    return ["target.kind=mesh", f"target.path={MESHES / name}", f"target.scale={scale:g}",
+    """Overrides of a real model; ``simulate`` adds its ``target.path`` (``--meshes``)."""
+    return ["target.kind=mesh", f"target.scale={scale:g}",
             "target.center=true"]
 
 
@@ -216,7 +218,8 @@ ESTIMATORS = ("recon.surfaces.judge:estimate", "recon.surfaces.auto:estimate",
 VISIBILITY = "visibility"
 
 
-def simulate(cloud: SuiteCloud, out: Path, *, quick: bool = False) -> Path:
+def simulate(cloud: SuiteCloud, out: Path, *, quick: bool = False, meshes: Path = MESHES
+             ) -> Path:
     """The cloud's strike log under ``out/logs`` (simulated once, seed 0)."""
     import sim
 
@@ -224,6 +227,8 @@ def simulate(cloud: SuiteCloud, out: Path, *, quick: bool = False) -> Path:
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
         overrides = [*cloud.overrides, QUICK_ROTATIONS] if quick else list(cloud.overrides)
+        if cloud.mesh:
+            overrides.append(f"target.path={meshes / cloud.mesh}")
         sim.simulate(sim.load_scene(cloud.preset, overrides), path, seed=0, progress=False)
     return path
 
@@ -301,7 +306,7 @@ def compare_cloud(cloud: SuiteCloud, args):
     from recon.registration.ingest import ingest
     from recon.surfaces.prepare import prepare
 
-    log = simulate(cloud, args.out, quick=args.quick)
+    log = simulate(cloud, args.out, quick=args.quick, meshes=args.meshes)
     points = ingest(log)
     with StrikeLog(log) as reader:
         truth = reader.truth_mesh()
@@ -426,7 +431,8 @@ def visibility(report: dict) -> dict:
     if not mine:
         ran = any(r.get("method") == VISIBILITY for r in report["records"])
         return {"present": False, "note": f"{VISIBILITY}: "
-                + ("every run failed" if ran else "not a registered method here")}
+                + ("every run failed" if ran else "no run of it here (not a registered "
+                                                   "method, or not among --methods)")}
     fronts = {m: {p["label"] for p in report[f"pareto_{m}"]} for m in ("chamfer", "fscore")}
     best_c = min(mine, key=lambda r: r[CHAMFER_KEY])
     best_f = max(mine, key=lambda r: r.get("fscore") or 0.0)
@@ -469,7 +475,8 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
             "spacing_m": prepared.spacing, "noise_m": prepared.noise,
             "auto": {"label": choice.label, "reason": choice.reason, "key": choice.run.key,
                      "fits": sum(c.status != "skipped" for c in choice.candidates),
-                     "predicted": predicted["runs"].get(choice.run.key),
+                     # The estimate of its run, else one the choice carries itself.
+                     "predicted": predicted["runs"].get(choice.run.key) or prediction(choice),
                      "chamfer_m": truth.get(choice.run.key)},
             "predicted": {"estimator": predicted["estimator"], "note": predicted["note"],
                           "runs": [{"key": k, "truth_m": truth[k], "predicted_m": p["chamfer_m"],
@@ -584,7 +591,7 @@ def _prediction_lines(summaries: list[dict], pred: dict) -> list[str]:
 
 def _visibility_lines(summaries: list[dict]) -> list[str]:
     """The visibility method per cloud: Pareto fronts, its best run against the best run."""
-    lines = ["", f"## The `{VISIBILITY}` method against the other methods", ""]
+    lines = [f"## The `{VISIBILITY}` method against the other methods", ""]
     present = [s for s in summaries if s["visibility"]["present"]]
     if not present:
         return [*lines, f"Not measured in this run: {summaries[0]['visibility']['note']}."
@@ -684,6 +691,9 @@ def main(argv=None) -> int:
     parser.add_argument("--doc", type=Path, default=None,
                         help="write the table here (e.g. docs/auto-suite.md) and the chart "
                              "beside it in figures/")
+    parser.add_argument("--meshes", type=Path, default=MESHES,
+                        help="folder of the real shape models (default: the shared folder "
+                             "beside the checkout)")
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--scheduler", default="threads")
     parser.add_argument("--workers", type=int, default=None)
@@ -693,9 +703,10 @@ def main(argv=None) -> int:
 
     names = args.clouds or (list(HELD_OUT) if args.held_out else
                             list(QUICK_CLOUDS) if args.quick else list(CLOUDS))
-    missing = [n for n in names if CLOUDS[n].mesh and not (MESHES / CLOUDS[n].mesh).exists()]
+    missing = [n for n in names if CLOUDS[n].mesh and not (args.meshes / CLOUDS[n].mesh).exists()]
     if missing:
-        print(f"suite: shared meshes not found under {MESHES} for {', '.join(missing)}",
+        print(f"suite: shared meshes not found under {args.meshes} for {', '.join(missing)} "
+              "(give their folder with --meshes)",
               file=sys.stderr)
         return 1
     args.out.mkdir(parents=True, exist_ok=True)
@@ -719,8 +730,10 @@ def main(argv=None) -> int:
         {"clouds": summaries, "totals": totals_by["all"], "held_out": list(HELD_OUT),
          "totals_held_out": totals_by["held_out"], "totals_tuned": totals_by["tuned"],
          "prediction": pred}, indent=2, default=str) + "\n")
-    command = "python benchmarks/suite.py" + (" --quick" if args.quick else "") + (
-        f" --doc {args.doc}" if args.doc is not None else "")
+    command = " ".join(["python benchmarks/suite.py", *(["--quick"] if args.quick else []),
+                        *(["--held-out"] if args.held_out and not args.clouds else []),
+                        *(["--clouds", *args.clouds] if args.clouds else []),
+                        *(["--doc", str(args.doc)] if args.doc is not None else [])])
     text = markdown(summaries, totals_by, pred, command=command)
     (args.out / "summary.md").write_text(text)
     made = [charts.choice_vs_ranking(summaries, args.out / "auto-suite.png",
@@ -730,9 +743,9 @@ def main(argv=None) -> int:
                                              title="Truth-free predicted Chamfer against the "
                                                    "truth"))
     if args.doc is not None:
-        args.doc.write_text(text)
         figures = args.doc.parent / "figures"
-        figures.mkdir(exist_ok=True)
+        figures.mkdir(parents=True, exist_ok=True)
+        args.doc.write_text(text)
         for chart in made:
             (figures / chart.name).write_bytes(chart.read_bytes())
     print(json.dumps({"totals": totals_by, "prediction": pred}, indent=2))

@@ -121,8 +121,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         # Generated targets: every dimension drawn from this seed (same seed, same mesh).
         "seed": Key(0, "int", "", "shape seed of a generated target", minimum=0),
         # Absent: 5.7 m for a polyhedron, 500 m for a cratered asteroid (sim/procedural.py).
-        "size": Key(None, "number", "m", "longest extent of a generated polyhedron or "
-                    "cratered asteroid", **POSITIVE),
+        "size": Key(None, "number", "m", "longest extent of a generated polyhedron (none: "
+                    "5.7) or cratered asteroid (none: 500)", **POSITIVE),
         # Paper: "a period of rotation of 15480 seconds, or 4.3 hours"; inf: not spinning.
         "spin_period": Key(15480.0, "number", "s", "spin period (inf: no spin)", **POSITIVE,
                            finite=False),

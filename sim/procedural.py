@@ -24,7 +24,7 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from formats.geometry import Mesh
-from sim.targets import RSO_SEGMENTS, _frame, box, combine, cylinder, icosphere
+from sim.targets import RSO_SEGMENTS, axis_frame, box, combine, cylinder, icosphere
 
 # --------------------------------------------------------------------------- ranges
 # Satellite ranges (metres): small to medium spacecraft, the scale of the paper's RSOs (5 m bus,
@@ -278,7 +278,7 @@ def satellite(seed: int = 0, *, segments: int = RSO_SEGMENTS) -> Mesh:
     parts.append(cylinder(d.dish_mount, dish_axis, d.mast_radius,
                           d.mast_length + d.dish_thickness / 2, segments))
     parts.append(_placed(dish(d.dish_radius, d.dish_depth, d.dish_thickness,
-                              segments=segments), _frame(dish_axis),
+                              segments=segments), axis_frame(dish_axis),
                          np.asarray(d.dish_mount) + d.mast_length * dish_axis))
     boom_axis = np.asarray(d.boom_face, np.float64)
     parts.append(cylinder(d.boom_mount, boom_axis, d.boom_radius, d.boom_length, segments))

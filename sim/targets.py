@@ -11,6 +11,9 @@ counter-clockwise seen from outside (outward normals).
   spacecraft models (the shared ``hst_7.7k.obj`` is 173 closed parts). A few faces of a part lie
   inside another part (under the sphere and where masts meet the bus); they are never hit;
 - :func:`load_mesh`: any mesh file recon reads (OBJ, PLY, STL, PDS table, ICQ, DSK), in metres.
+
+Seeded, generated targets (satellites, faceted polyhedra, cratered asteroids) are built from
+these primitives in sim/procedural.py.
 """
 
 from __future__ import annotations
@@ -118,7 +121,7 @@ def box(lo, hi) -> Mesh:
     return Mesh(v, _orient_outward(v, f, (lo + hi) / 2.0))
 
 
-def _frame(axis) -> np.ndarray:
+def axis_frame(axis) -> np.ndarray:
     """A right-handed orthonormal basis (3, 3) whose third column is ``axis``."""
     w = np.asarray(axis, np.float64) / np.linalg.norm(axis)
     helper = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
@@ -150,7 +153,7 @@ def sphere(centre, radius: float, segments: int = RSO_SEGMENTS) -> Mesh:
 
 def cylinder(base, axis, radius: float, length: float, segments: int = RSO_SEGMENTS) -> Mesh:
     """Closed cylinder [m] from the centre of its base along ``axis`` for ``length``."""
-    frame = _frame(axis)
+    frame = axis_frame(axis)
     phi = 2.0 * np.pi * np.arange(segments) / segments
     circle = np.stack([radius * np.cos(phi), radius * np.sin(phi), np.zeros(segments)], axis=1)
     top = circle + np.array([0.0, 0.0, length])

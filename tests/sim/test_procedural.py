@@ -145,3 +145,11 @@ def test_scene_keys_of_generated_targets_are_checked(tmp_path):
         run_scene(tmp_path, "rso-a-cross", "target.kind=polyhedron", "target.seed=-2")
     with pytest.raises(SceneError, match=r'target\.seed is only used when target\.kind is '):
         run_scene(tmp_path, "rso-a-cross", "target.seed=2")
+
+
+def test_the_size_key_states_the_generators_defaults():
+    from sim.defaults import SCHEMA
+
+    text = SCHEMA["target"]["size"].help
+    assert f"none: {procedural.DEFAULT_POLYHEDRON_SIZE_M:g})" in text
+    assert f"none: {procedural.DEFAULT_ASTEROID_SIZE_M:g})" in text

@@ -122,7 +122,7 @@ def test_visibility_on_the_front_or_not_and_against_the_best():
     assert not v["on_front_chamfer"] and not v["on_front_f"]
     absent = suite.visibility({"records": records[:2], "pareto_chamfer": [],
                                "pareto_fscore": []})
-    assert not absent["present"] and "not a registered method" in absent["note"]
+    assert not absent["present"] and "no run of it here" in absent["note"]
 
 
 def fake_estimate(mesh, cloud):
