@@ -78,8 +78,8 @@ PLAN = {
     "tiny": {"duration": {("ellipsoid", "LIDAR"): rotations(0.25),
                           ("ellipsoid", "cross LRF"): rotations(0.5),
                           ("ellipsoid", "zigzag LRF"): rotations(0.5),
-                          ("rso-a", "LIDAR"): 2 * HOUR, ("rso-a", "cross LRF"): 4.3 * HOUR,
-                          ("rso-a", "zigzag LRF"): 4.3 * HOUR},
+                          ("rso-a", "LIDAR"): 2 * HOUR, ("rso-a", "cross LRF"): runner.ROTATION_H * HOUR,
+                          ("rso-a", "zigzag LRF"): runner.ROTATION_H * HOUR},
              "seeds": (0,), "overrides": {"ellipsoid": ("target.subdivisions=3",)},
              "score": {"n_truth_samples": 4000, "coverage_points": 8000}},
 }

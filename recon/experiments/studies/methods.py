@@ -56,7 +56,7 @@ PLAN = {
               "max_points": 8000, "overrides": {},
               "score": {"n_truth_samples": 20_000, "n_test_samples": 20_000,
                         "coverage_points": 40_000}},
-    "tiny": {"duration": {"rso-a": 4.3 * HOUR, "asteroid": rotations(0.5)},
+    "tiny": {"duration": {"rso-a": runner.ROTATION_H * HOUR, "asteroid": rotations(0.5)},
              "targets": ("rso-a",), "scenarios": ("none", "stochastic"),
              "methods": ("convex-hull",), "grid": False, "max_points": 1500, "overrides": {},
              "score": {"n_truth_samples": 3000, "n_test_samples": 3000,
