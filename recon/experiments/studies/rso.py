@@ -23,14 +23,12 @@ import numpy as np
 
 from recon.experiments import charts
 from recon.experiments.studies import runner
-from recon.experiments.studies.runner import claim
+from recon.experiments.studies.runner import ROTATION_H, claim
 
 NAME = "rso"
 TITLE = "RSO-A and RSO-B against the asteroid over time; mid-run inclination change (Figs. 16-18)"
 
 HOUR = 3600.0
-# One rotation of the targets, hours; the plans' hours below are multiples of it.
-ROTATION_H = runner.ROTATION_H
 # Targets of Fig. 16: key -> (preset, label, colour).
 TARGETS = {
     "rso-a": ("rso-a-lrf", "RSO-A, single-beam LRF (250 m)", "tab:blue"),
@@ -46,6 +44,7 @@ LIDAR = ("sensor.pattern=grid", "sensor.field_of_view_deg=[6.0, 6.0]",
 SLEW_AXES = {"x": ("[1, 0, 0]", "slew across track: along the longest (panel) axis", "tab:green"),
              "y": ("[0, 1, 0]", "slew along track: along the spin axis (short)", "tab:orange")}
 SLEW_AMPLITUDE_DEG = 2.0  # the paper's slew at 85 deg; RSO-A spans +-2.3 deg at 250 m
+# Hours of the plans; one rotation is ROTATION_H.
 PLAN = {
     "full": {"hours": (ROTATION_H, 8.6, 12.9, 21.5, 43.0, 64.5, 86.0, 107.5, 129.0),
              "lidar_hours": (ROTATION_H, 8.6, 21.5, 43.0, 129.0),
@@ -139,7 +138,8 @@ def finish(records: dict, out_dir, size: str) -> dict:
                          metrics=RELATIVE_METRICS,
                          title="Single-beam LRF at 85 deg: RSO-A, RSO-B and the asteroid over "
                                "surveillance time (paper Fig. 16)",
-                         x_label=f"surveillance time [h] (log scale; one rotation = {ROTATION_H:g} h)")
+                         x_label=f"surveillance time [h] (log scale; one rotation = "
+                                 f"{ROTATION_H:g} h)")
     files.append("score_vs_time.png")
 
     change = change_table(records, plan)
@@ -202,8 +202,8 @@ def change_table(records: dict, plan: dict) -> list[dict]:
 
 
 def _claim_one_rotation(records, plan) -> dict:
-    text = (f"After one RSO rotation ({ROTATION_H:g} h), the edge detection finds most of the large edges "
-            "of each RSO and some of the smaller ones (Figs. 16, 17).")
+    text = (f"After one RSO rotation ({ROTATION_H:g} h), the edge detection finds most of the "
+            "large edges of each RSO and some of the smaller ones (Figs. 16, 17).")
     parts, verdicts = [], []
     for key in ("rso-a", "rso-b"):
         if key not in records:
@@ -230,12 +230,12 @@ def _claim_one_rotation(records, plan) -> dict:
                      "no data", "not tested")
     verdict = ("reproduced" if all(v == "reproduced" for v in verdicts) else
                "not reproduced" if all(v == "not reproduced" for v in verdicts) else "partly")
-    return claim("rso-one-rotation", "Figs. 16, 17", text, f"most large edges found after {ROTATION_H:g} h",
-                 "; ".join(parts), verdict,
+    return claim("rso-one-rotation", "Figs. 16, 17", text,
+                 f"most large edges found after {ROTATION_H:g} h", "; ".join(parts), verdict,
                  f"most edges = less than {MOST_EDGES:.0%} of the truth's feature-edge length "
-                 f"(edges sharper than 30 deg) missed by the edge points; reproduced at {ROTATION_H:g} h, "
-                 "partly later within the run. The lower thresholds show whether the default "
-                 "decides it.")
+                 "(edges sharper than 30 deg) missed by the edge points; reproduced at "
+                 f"{ROTATION_H:g} h, partly later within the run. The lower thresholds show "
+                 "whether the default decides it.")
 
 
 def _claim_slew_axis(records) -> dict:
@@ -317,7 +317,8 @@ def _claim_lidar(records) -> dict:
     verdict = ("reproduced" if len(hits) == len(reach) else "partly" if hits
                else "not reproduced")
     return claim("rso-lidar", "Fig. 16 (left)", text, "LRF approaches the LIDAR, slowly", ours,
-                 verdict, f"reference = the LIDAR after one rotation ({ROTATION_H:g} h); reproduced when "
+                 verdict, f"reference = the LIDAR after one rotation ({ROTATION_H:g} h); "
+                          "reproduced when "
                           "the LRF reaches its edge score, F-score and coverage within the run;"
                           " partly when some.")
 
