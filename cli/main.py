@@ -136,7 +136,8 @@ def _leave_now(status: int, *, at_once: bool = False) -> int:
     not a caller of ``main(argv)``), end it and exit at once.
 
     The interpreter's own shutdown after a run that loaded Open3D, h5py and a few hundred MB
-    of arrays took 1.5-3 s with two other busy processes on two cores, past the 2 s bound.
+    of arrays can take longer than the 2 s bound (docs/decisions.md, "Measurements behind the
+    defaults").
 
     Every writer has already dropped its temporary file while the interrupt unwound the stack,
     so nothing is left to finish; waiting would only let a cluster that was still starting

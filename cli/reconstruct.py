@@ -24,7 +24,7 @@ MEMORY_HELP = "address-space limit of each method run, MiB (default: 8192; 0: no
 # recon/surfaces/methods DEFAULT_FIT_S, which --list-methods prints per method).
 COST_HELP = ("At their defaults the methods fit a 336k-point asteroid LIDAR cloud in at most "
              "59 s each (ball-pivoting-meshlab; Open3D Poisson 1.9 s) and a 77k-point LRF "
-             "cloud in at most 14 s, on a shared 2-core machine (benchmarks/bench_methods.py).")
+             "cloud in at most 14 s (benchmarks/bench_methods.py).")
 
 
 def _add_input_options(p: argparse.ArgumentParser) -> None:

@@ -15,8 +15,8 @@ collection). No read of such a file can be guarded from inside the process, so
 
 A child that uses ``CHECK_CPU_S`` seconds of CPU (the kernel stops it: ``RLIMIT_CPU``) or dies
 (HDF5 crashing on the damage) means a damaged file. No wall-clock limit decides: on a busy
-machine a valid file's walk waits for the processor (a fresh interpreter's took 15.9 s of wall
-time beside 25 busy processes) but its CPU time stays what it is on an idle one. The verdict is
+machine a valid file's walk waits for the processor (docs/decisions.md gives a measured case) but
+its CPU time stays what it is on an idle one. The verdict is
 cached per file version (device, inode, size, mtime), so opening the same log again costs
 nothing, and a log recon itself wrote is trusted (``trust``). The walk reads metadata only: a
 2.3 M-strike log of 164 MB takes about 0.1 s in a forked child, 0.9 s in a fresh interpreter

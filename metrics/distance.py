@@ -60,11 +60,11 @@ How a query works
 
 The set-up is a few vectorised passes over the faces (edge slopes, rays) and, on a second thread,
 over the vertices (cones, fans) and then the slow path's tables: about 1.5 us of CPU per face
-(0.22 s for a 150k-face surface, idle machine; the per-(face, ring face) analysis it replaced
-took 11 us), written with row gathers by ``np.take`` and column-by-column products (numpy's
-fancy indexing and its reductions over a length-3 axis cost 4x more). The fast path's test reads
-a 15-column row per point and the 6 bounds of the point's side of ``t0`` (a second table, one
-row per face and side), with a quick corner test from precomputed coefficients; the full corner
+(0.22 s for a 150k-face surface; docs/decisions.md, "Measurements behind the defaults"),
+written with row gathers by ``np.take`` and column-by-column products (numpy's fancy indexing
+and its reductions over a length-3 axis cost 4x more). The fast path's test reads a 15-column row
+per point and the 6 bounds of the point's side of ``t0`` (a second table, one row per face and
+side), with a quick corner test from precomputed coefficients; the full corner
 test (a third table) runs for the 1-2 % of points the quick one rejects. At query time nothing is
 computed per (point, ring face) pair except for the points off the fast path. ``metrics.score``
 sets up a test mesh on a second thread while its samples are scored against the truth.

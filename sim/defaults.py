@@ -279,9 +279,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
     # raise them with --set limits.KEY=VALUE. The largest preset, asteroid-lidar-noise (15
     # rotations of a 32 x 32 grid), casts 2.4e7 rays, needs ~0.5 GB and writes up to ~1.8 GB.
     "limits": {
-        # 1e10 rays: about 30 min at the 6.5 M rays/s measured with embreex on 2 cores.
+        # 1e10 rays: about 30 min at the 6.5 M rays/s benchmarks/bench_simulate.py measured
+        # with embreex (docs/decisions.md, "Measurements behind the defaults").
         "rays": Key(1e10, "number", "rays", "most rays a run may cast", **POSITIVE),
-        # Half of the 24 GiB development machine, and of most workstations' memory.
+        # 8 GiB: half of a 16 GiB workstation's memory (docs/decisions.md, "Measurements
+        # behind the defaults").
         "memory_mb": Key(8192.0, "number", "MiB", "most memory a run may need", **POSITIVE),
         # 20 GB: ten times the largest preset's log.
         "disk_mb": Key(20000.0, "number", "MB", "largest log a run may write", **POSITIVE),

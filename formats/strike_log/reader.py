@@ -256,7 +256,7 @@ class StrikeLog:
         the previous block's last shot); return the pairs to carry into the next block."""
         n_beams = self.sensor.n_beams
         pairs = np.concatenate([carried, shot * n_beams + beam])
-        ordered = np.sort(pairs)   # np.unique is ~200x slower than a sort (numpy 2.4, 1e6 rows)
+        ordered = np.sort(pairs)   # np.unique is ~200x slower than a sort (1e6 rows)
         if np.any(ordered[1:] == ordered[:-1]):
             raise StrikeLogError(f"{self._where}: a (shot, beam) pair appears twice near "
                                  f"strike {start}")

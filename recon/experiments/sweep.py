@@ -193,7 +193,7 @@ def local_cluster(n_workers: int):
 
 
 def default_workers() -> int:
-    """Worker count of a local sweep: the usable cores (2 on the development machine)."""
+    """Worker count of a local sweep: the usable cores."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not Linux

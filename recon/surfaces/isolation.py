@@ -65,18 +65,18 @@ from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, predict
 
 # Defaults of every isolated run, also the CLI's.
 # 600 s: several times the slowest method's default run on 2e5 points (pymeshlab ball pivoting
-# with automatic radius took 155 s, measured on a 2-core, 24 GiB machine with pymeshlab 2025.7),
-# so a limit hit means a runaway.
+# with automatic radius took 155 s; docs/decisions.md, "Measurements behind the defaults"), so a
+# limit hit means a runaway.
 DEFAULT_TIMEOUT_S = 600.0
 # 8 GiB of address space on top of the warm worker's own (~1.4 GB of virtual memory after
-# importing Open3D and pymeshlab, measured with open3d 0.20): two runs (one per core) must fit a
-# 2-core, 24 GiB machine with room for the Dask workers.
+# importing Open3D and pymeshlab): two runs at once (one per core of the development
+# workstation, docs/decisions.md) must leave room for the Dask workers.
 DEFAULT_MEMORY_MB = 8192
 # Time allowed for checking and scoring a finished mesh, seconds (the method's own limit does
 # not include it): metrics.score of a 2e5-face mesh with its default 2e5 samples per side takes
-# a few seconds here; a limit hit means a runaway.
+# a few seconds; a limit hit means a runaway.
 DEFAULT_SCORE_TIMEOUT_S = 600.0
-# Time a worker may take to start (interpreter and imports: 3 s idle, 8 s at load 6 here) plus
+# Time a worker may take to start (interpreter and imports: 3 to 8 s, docs/decisions.md) plus
 # a job's loading, seconds; a limit hit means a broken installation, not a slow method.
 START_TIMEOUT_S = 300.0
 # Runs a worker does before it is replaced (Open3D's Poisson crashes after hundreds of calls in

@@ -14,7 +14,7 @@ import numpy as np
 
 from recon.experiments import charts
 from recon.experiments.studies import runner
-from recon.experiments.studies.runner import claim, rotations
+from recon.experiments.studies.runner import ROTATION_H, claim, rotations
 
 NAME = "duration"
 TITLE = "Score against imaging time, 10 to 100 rotations at 85 deg (paper Fig. 7)"
@@ -30,7 +30,7 @@ PLAN = {
 }
 # Paper: the LIDAR reached its score in 21.5 h = 5 rotations; the LRF approached it in ~172 h.
 LIDAR_REFERENCE_ROTATIONS = 5.0
-PAPER_LRF_ROTATIONS = 172.0 / 4.3
+PAPER_LRF_ROTATIONS = 172.0 / ROTATION_H
 # "Levels out": the first duration after which 10 more rotations add less than this to the
 # coverage (area fraction) and to the F-score. Our threshold: 2 % of the area per 1.7 days.
 LEVEL_GAIN = 0.02
@@ -89,7 +89,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
                                "style": {"color": "tab:red"}})
     charts.metric_panels(curves, out_dir / "score_vs_rotations.png",
                          title="Asteroid: score against imaging time (paper Fig. 7)",
-                         x_label="target rotations (4.3 h each)", references=references)
+                         x_label=f"target rotations ({ROTATION_H:g} h each)", references=references)
     claims = [_claim_level(records), _claim_lidar(records, lidar)]
     return {"claims": claims, "files": ["score_vs_rotations.png"], "extra": {}}
 

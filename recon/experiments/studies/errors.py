@@ -23,7 +23,7 @@ import numpy as np
 
 from recon.experiments import charts
 from recon.experiments.studies import runner
-from recon.experiments.studies.runner import claim, rotations
+from recon.experiments.studies.runner import ROTATION_H, claim, rotations
 
 NAME = "errors"
 TITLE = "Error models on the ellipsoid and RSO-A (paper Tables 1 and 2)"
@@ -78,8 +78,8 @@ PLAN = {
     "tiny": {"duration": {("ellipsoid", "LIDAR"): rotations(0.25),
                           ("ellipsoid", "cross LRF"): rotations(0.5),
                           ("ellipsoid", "zigzag LRF"): rotations(0.5),
-                          ("rso-a", "LIDAR"): 2 * HOUR, ("rso-a", "cross LRF"): 4.3 * HOUR,
-                          ("rso-a", "zigzag LRF"): 4.3 * HOUR},
+                          ("rso-a", "LIDAR"): 2 * HOUR, ("rso-a", "cross LRF"): ROTATION_H * HOUR,
+                          ("rso-a", "zigzag LRF"): ROTATION_H * HOUR},
              "seeds": (0,), "overrides": {"ellipsoid": ("target.subdivisions=3",)},
              "score": {"n_truth_samples": 4000, "coverage_points": 8000}},
 }

@@ -20,7 +20,7 @@ import numpy as np
 
 from recon.experiments import charts
 from recon.experiments.studies import runner
-from recon.experiments.studies.runner import claim, rotations
+from recon.experiments.studies.runner import ROTATION_H, claim, rotations
 
 NAME = "inclination"
 TITLE = "Score against inclination; coverage maps at 85 and 90 deg (paper Figs. 7a and 8)"
@@ -93,7 +93,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
         for metric, _, _ in charts.METRICS:
             y[metric] = [(runner.at(records, k, rotations(r)) or {}).get(metric, np.nan)
                          for k in keys]
-        curves.append({"label": f"after {r:g} rotations ({r * 4.3:g} h)", "x": incs, "y": y,
+        curves.append({"label": f"after {r:g} rotations ({r * ROTATION_H:g} h)", "x": incs, "y": y,
                        "style": style})
     charts.metric_panels(curves, out_dir / "score_vs_inclination.png",
                          title="Asteroid, single-beam LRF: score against orbit inclination",
@@ -143,7 +143,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
         charts.metric_panels(
             curves, out_dir / "gaps_vs_rotations.png",
             title="Do longer runs fill the gaps? Asteroid, single-beam LRF",
-            x_label="target rotations (4.3 h each)",
+            x_label=f"target rotations ({ROTATION_H:g} h each)",
             metrics=(("uncovered_fraction", "uncovered fraction of the area", True),
                      ("cap_coverage", f"coverage of |latitude| > {CAP_LATITUDE_DEG:g} deg",
                       False)))
@@ -186,7 +186,7 @@ def _periods(records, plan, out_dir) -> dict:
         curves, out_dir / "coverage_vs_orbit_period.png", logx=True,
         title=f"Asteroid, single-beam LRF, {map_at:g} rotations: score against the orbit "
               "period (not given in the paper)",
-        x_label="orbit period of the chaser [h] (the target spins every 4.3 h)",
+        x_label=f"orbit period of the chaser [h] (the target spins every {ROTATION_H:g} h)",
         note="" if ours is None else f"our default orbit period: {ours / 3600:.1f} h "
                                      "(2000 kg/m^3 asteroid at 750 m)")
     return out

@@ -31,7 +31,7 @@ from formats.atomic import write_text_atomically
 from recon.experiments import charts
 from recon.experiments.studies import runner
 from recon.experiments.studies.errors import DILATION, LRF_STOCHASTIC, ORIGIN
-from recon.experiments.studies.runner import claim, rotations
+from recon.experiments.studies.runner import ROTATION_H, claim, rotations
 
 NAME = "methods"
 TITLE = ("Surface methods on noisy RSO-A and asteroid clouds, speed against accuracy "
@@ -56,14 +56,14 @@ PLAN = {
               "max_points": 8000, "overrides": {},
               "score": {"n_truth_samples": 20_000, "n_test_samples": 20_000,
                         "coverage_points": 40_000}},
-    "tiny": {"duration": {"rso-a": 4.3 * HOUR, "asteroid": rotations(0.5)},
+    "tiny": {"duration": {"rso-a": ROTATION_H * HOUR, "asteroid": rotations(0.5)},
              "targets": ("rso-a",), "scenarios": ("none", "stochastic"),
              "methods": ("convex-hull",), "grid": False, "max_points": 1500, "overrides": {},
              "score": {"n_truth_samples": 3000, "n_test_samples": 3000,
                        "coverage_points": 6000}},
 }
 # Limits of each isolated method run: a full-size run of the slowest method (pymeshlab ball
-# pivoting, ~60 s on 75,000 points here) well inside; a hang costs at most this.
+# pivoting, ~60 s on 75,000 points; docs/decisions.md) well inside; a hang costs at most this.
 TIMEOUT_S = 300.0
 # "Usable": the best surface of a noisy cloud keeps this fraction of the noise-free F-score.
 USABLE_F_FRACTION = 0.8

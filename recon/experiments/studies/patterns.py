@@ -14,7 +14,7 @@ import numpy as np
 
 from recon.experiments import charts
 from recon.experiments.studies import runner
-from recon.experiments.studies.runner import claim, rotations
+from recon.experiments.studies.runner import ROTATION_H, claim, rotations
 
 NAME = "patterns"
 TITLE = "Single-beam, cross, zigzag and LIDAR grid on the asteroid, strike counts (Figs. 11, 12)"
@@ -76,7 +76,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
     charts.metric_panels(curves, out_dir / "score_vs_rotations.png", logx=True,
                          title="Asteroid at 85 deg: score against time for each beam pattern "
                                "(paper Figs. 11, 12)",
-                         x_label="target rotations (4.3 h each, log scale)")
+                         x_label=f"target rotations ({ROTATION_H:g} h each, log scale)")
     files.append("score_vs_rotations.png")
 
     strikes = strike_counts(records)
@@ -85,7 +85,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
                          "paper": [s["paper"] or np.nan for s in strikes.values()]},
                 out_dir / "strikes.png", ylabel="strikes",
                 title=f"Strikes after {STRIKES_AT_ROTATIONS:g} rotations "
-                      f"({STRIKES_AT_ROTATIONS * 4.3:g} h) at 85 deg (paper Fig. 11)")
+                      f"({STRIKES_AT_ROTATIONS * ROTATION_H:g} h) at 85 deg (paper Fig. 11)")
     files.append("strikes.png")
 
     panels = []

@@ -23,7 +23,7 @@ import numpy as np
 
 from recon.experiments import charts
 from recon.experiments.studies import runner
-from recon.experiments.studies.runner import claim
+from recon.experiments.studies.runner import ROTATION_H, claim
 
 NAME = "rso"
 TITLE = "RSO-A and RSO-B against the asteroid over time; mid-run inclination change (Figs. 16-18)"
@@ -44,21 +44,22 @@ LIDAR = ("sensor.pattern=grid", "sensor.field_of_view_deg=[6.0, 6.0]",
 SLEW_AXES = {"x": ("[1, 0, 0]", "slew across track: along the longest (panel) axis", "tab:green"),
              "y": ("[0, 1, 0]", "slew along track: along the spin axis (short)", "tab:orange")}
 SLEW_AMPLITUDE_DEG = 2.0  # the paper's slew at 85 deg; RSO-A spans +-2.3 deg at 250 m
+# Hours of the plans; one rotation is ROTATION_H.
 PLAN = {
-    "full": {"hours": (4.3, 8.6, 12.9, 21.5, 43.0, 64.5, 86.0, 107.5, 129.0),
-             "lidar_hours": (4.3, 8.6, 21.5, 43.0, 129.0),
+    "full": {"hours": (ROTATION_H, 8.6, 12.9, 21.5, 43.0, 64.5, 86.0, 107.5, 129.0),
+             "lidar_hours": (ROTATION_H, 8.6, 21.5, 43.0, 129.0),
              "change_to": (76.0, 78.0, 80.0, 82.0, 84.0, 85.0, 86.0, 88.0, 90.0, 92.0, 94.0),
              "leg_hours": 43.0, "leg_prefixes": (0.5, 0.75, 1.0), "targets": tuple(TARGETS),
-             "thresholds": (5e-5, 5e-6, 5e-7), "threshold_hours": (4.3, 43.0, 129.0),
-             "slew_hours": (4.3, 21.5, 43.0, 129.0), "score": runner.CURVE_SCORE},
-    "quick": {"hours": (4.3, 8.6, 21.5, 43.0), "lidar_hours": (4.3, 21.5),
+             "thresholds": (5e-5, 5e-6, 5e-7), "threshold_hours": (ROTATION_H, 43.0, 129.0),
+             "slew_hours": (ROTATION_H, 21.5, 43.0, 129.0), "score": runner.CURVE_SCORE},
+    "quick": {"hours": (ROTATION_H, 8.6, 21.5, 43.0), "lidar_hours": (ROTATION_H, 21.5),
               "change_to": (76.0, 85.0, 94.0), "leg_hours": 43.0, "leg_prefixes": (1.0,),
               "targets": ("rso-a", "rso-b", "asteroid"), "thresholds": (5e-6,),
-              "threshold_hours": (4.3, 43.0), "slew_hours": (4.3, 43.0),
+              "threshold_hours": (ROTATION_H, 43.0), "slew_hours": (ROTATION_H, 43.0),
               "score": runner.CURVE_SCORE},
-    "tiny": {"hours": (2.15, 4.3), "lidar_hours": (2.15,), "change_to": (80.0, 85.0),
-             "leg_hours": 4.3, "leg_prefixes": (1.0,), "targets": ("rso-a",),
-             "thresholds": (5e-6,), "threshold_hours": (4.3,), "slew_hours": (4.3,),
+    "tiny": {"hours": (2.15, ROTATION_H), "lidar_hours": (2.15,), "change_to": (80.0, 85.0),
+             "leg_hours": ROTATION_H, "leg_prefixes": (1.0,), "targets": ("rso-a",),
+             "thresholds": (5e-6,), "threshold_hours": (ROTATION_H,), "slew_hours": (ROTATION_H,),
              "score": {"n_truth_samples": 4000, "coverage_points": 8000}},
 }
 # The one-rotation claim: "most of the large edges" = missed edge rate below this.
@@ -137,7 +138,8 @@ def finish(records: dict, out_dir, size: str) -> dict:
                          metrics=RELATIVE_METRICS,
                          title="Single-beam LRF at 85 deg: RSO-A, RSO-B and the asteroid over "
                                "surveillance time (paper Fig. 16)",
-                         x_label="surveillance time [h] (log scale; one rotation = 4.3 h)")
+                         x_label=f"surveillance time [h] (log scale; one rotation = "
+                                 f"{ROTATION_H:g} h)")
     files.append("score_vs_time.png")
 
     change = change_table(records, plan)
@@ -165,7 +167,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
             out_dir / "slew_axis.png", logx=True, metrics=RELATIVE_METRICS,
             title=f"RSO-A, single-beam LRF at 85 deg: {SLEW_AMPLITUDE_DEG:g} deg slew about "
                   "either axis (paper: slew along the longest axis)",
-            x_label="surveillance time [h] (log scale; one rotation = 4.3 h)")
+            x_label=f"surveillance time [h] (log scale; one rotation = {ROTATION_H:g} h)")
         files.append("slew_axis.png")
     claims = [_claim_one_rotation(records, plan), _claim_rso_vs_asteroid(records),
               _claim_lidar(records), _claim_change(change), _claim_slew_axis(records)]
@@ -200,8 +202,8 @@ def change_table(records: dict, plan: dict) -> list[dict]:
 
 
 def _claim_one_rotation(records, plan) -> dict:
-    text = ("After one RSO rotation (4.3 h), the edge detection finds most of the large edges "
-            "of each RSO and some of the smaller ones (Figs. 16, 17).")
+    text = (f"After one RSO rotation ({ROTATION_H:g} h), the edge detection finds most of the "
+            "large edges of each RSO and some of the smaller ones (Figs. 16, 17).")
     parts, verdicts = [], []
     for key in ("rso-a", "rso-b"):
         if key not in records:
@@ -212,7 +214,7 @@ def _claim_one_rotation(records, plan) -> dict:
                      f"{mer[-1]:.0%} at {xs[-1]:g} h; below {MOST_EDGES:.0%} "
                      + (f"from {first:g} h" if first is not None else
                         f"not within {xs[-1]:g} h"))
-        verdicts.append("reproduced" if mer[0] < MOST_EDGES and np.isclose(xs[0], 4.3) else
+        verdicts.append("reproduced" if mer[0] < MOST_EDGES and np.isclose(xs[0], ROTATION_H) else
                         "partly" if first is not None else "not reproduced")
     # Is it the edge-point threshold? The same RSO-A run with thresholds down to 1/1000.
     for threshold in plan["thresholds"]:
@@ -224,16 +226,16 @@ def _claim_one_rotation(records, plan) -> dict:
                          + ", ".join(f"{m:.0%} at {x:g} h" for x, m in zip(xs, mer, strict=True))
                          + f" (false-edge rate at the end {fer[-1]:.3f})")
     if not verdicts:
-        return claim("rso-one-rotation", "Figs. 16, 17", text, "most edges after 4.3 h",
+        return claim("rso-one-rotation", "Figs. 16, 17", text, f"most edges after {ROTATION_H:g} h",
                      "no data", "not tested")
     verdict = ("reproduced" if all(v == "reproduced" for v in verdicts) else
                "not reproduced" if all(v == "not reproduced" for v in verdicts) else "partly")
-    return claim("rso-one-rotation", "Figs. 16, 17", text, "most large edges found after 4.3 h",
-                 "; ".join(parts), verdict,
+    return claim("rso-one-rotation", "Figs. 16, 17", text,
+                 f"most large edges found after {ROTATION_H:g} h", "; ".join(parts), verdict,
                  f"most edges = less than {MOST_EDGES:.0%} of the truth's feature-edge length "
-                 "(edges sharper than 30 deg) missed by the edge points; reproduced at 4.3 h, "
-                 "partly later within the run. The lower thresholds show whether the default "
-                 "decides it.")
+                 "(edges sharper than 30 deg) missed by the edge points; reproduced at "
+                 f"{ROTATION_H:g} h, partly later within the run. The lower thresholds show "
+                 "whether the default decides it.")
 
 
 def _claim_slew_axis(records) -> dict:
@@ -315,7 +317,8 @@ def _claim_lidar(records) -> dict:
     verdict = ("reproduced" if len(hits) == len(reach) else "partly" if hits
                else "not reproduced")
     return claim("rso-lidar", "Fig. 16 (left)", text, "LRF approaches the LIDAR, slowly", ours,
-                 verdict, "reference = the LIDAR after one rotation (4.3 h); reproduced when "
+                 verdict, f"reference = the LIDAR after one rotation ({ROTATION_H:g} h); "
+                          "reproduced when "
                           "the LRF reaches its edge score, F-score and coverage within the run;"
                           " partly when some.")
 

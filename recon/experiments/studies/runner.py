@@ -39,6 +39,8 @@ SIZES = ("tiny", "quick", "full")
 
 # The paper's asteroid and RSOs spin every 15480 s (4.3 h); the unit of its time axes.
 ROTATION_S = 15480.0
+# The same in hours, as the paper's time axes and the studies' labels give it.
+ROTATION_H = ROTATION_S / 3600.0
 
 # Score options of the curves (many prefixes per case): a quarter of metrics.score's default
 # truth samples (200,000) and coverage lattice (400,000). On the 100-rotation asteroid cloud this

@@ -14,7 +14,7 @@ import numpy as np
 
 from recon.experiments import charts
 from recon.experiments.studies import runner
-from recon.experiments.studies.runner import claim, rotations
+from recon.experiments.studies.runner import ROTATION_H, claim, rotations
 
 NAME = "slew"
 TITLE = "Slew against no slew at 85 and 60 deg; score against slew amplitude (paper Figs. 9, 10)"
@@ -82,7 +82,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
         charts.metric_panels(curves, out_dir / name,
                              title=f"Asteroid, single-beam LRF at {inc:g} deg: slew against "
                                    f"none (paper Fig. 9{'a' if inc == 85 else 'b'})",
-                             x_label="target rotations (4.3 h each)")
+                             x_label=f"target rotations ({ROTATION_H:g} h each)")
         files.append(name)
     sweep = amplitude_table(records, plan)
     curves = [{"label": f"{inc:g} deg inclination", "x": [row["slew_deg"] for row in rows],

@@ -13,9 +13,9 @@ from recon.surfaces.methods import MethodFailed, MethodInput
 # cloud alpha-shape and delaunay-balls hit recon compare's 600 s limit, and scipy's Delaunay of
 # half its points took 74 s CPU (1.3 s perturbed); on 10,000 noise-free samples of a sphere it
 # took 18 s CPU (0.2 s perturbed by 1e-6 or 1e-3 spacings). On the whole cloud a perturbation
-# of 1e-4, 1e-6 and 1e-8 spacings took 2.5, 3.3 and 3.5 s CPU (scipy 1.17 and Open3D 0.20's
-# qhull alike). 1e-4 spacings is far below any precision a score states (0.5 % of the smallest
-# Chamfer distance measured, delaunay-balls on 6000 noise-free samples of a box).
+# of 1e-4, 1e-6 and 1e-8 spacings took 2.5, 3.3 and 3.5 s CPU (scipy's and Open3D's qhull
+# alike; docs/decisions.md). 1e-4 spacings is far below any precision a score states (0.5 %
+# of the smallest Chamfer distance measured, delaunay-balls on 6000 noise-free samples of a box).
 JITTER_SPACINGS = 1e-4
 
 

@@ -27,7 +27,7 @@ from recon.surfaces.methods._backends import (
 )
 
 # First automatic alpha, in spacings, doubled each step: 3 x the nearest-neighbour distance (the
-# alpha measured on the paper's ellipsoid with open3d 0.20: 0.29 m Chamfer at 5e4 points), which
+# alpha measured on the paper's ellipsoid: 0.29 m Chamfer at 5e4 points; docs/decisions.md), which
 # is ~1.5 x our area spacing on uniform samples.
 AUTO_START = 1.5
 

@@ -44,7 +44,7 @@ METHOD = register(Method(
     summary="Open3D ball pivoting through the points, radii in multiples of the spacing",
     params={
         # 0.5, 1, 2 x spacing: 1, 2, 4 x the nearest-neighbour distance, which ran in 0.8 s on 5e4
-        # points (open3d 0.20, 2-core machine); on uniform samples our area spacing is ~2 x that
+        # points (docs/decisions.md); on uniform samples our area spacing is ~2 x that
         # distance.
         # Up to 50 spacings: a ball that wide touches thousands of points per pivot.
         "radii": Param((0.5, 1.0, 2.0), float, "ball radii / spacing", minimum=0.01,

@@ -2,8 +2,8 @@
 
 The algorithm of ``ball-pivoting`` in MeshLab's implementation, with one ball radius (in units
 of the spacing) and MeshLab's clustering of close vertices. With the radius left to
-MeshLab's automatic guess it took 155 s on 2e5 points (pymeshlab 2025.7 on a 2-core, 24 GiB
-machine; 3.9 s on 5e4 points: 4x the points, 40x the time), so the default
+MeshLab's automatic guess it took 155 s on 2e5 points (3.9 s on 5e4 points: 4x the points, 40x
+the time; docs/decisions.md, "Measurements behind the defaults"), so the default
 radius is ours: 1.5 x spacing, or ``NOISE_RADIUS`` x the noise when that is larger
 (``_backends.above_noise``). A ball smaller than the noise band falls into it and pivots
 through the scatter: on RSO-A's LRF cloud (77,400 points, noise 0.035 m at 0.048 m spacing) a

@@ -26,7 +26,7 @@ from recon.surfaces.methods._backends import open3d_arrays, open3d_cloud
 # Deepest octree accepted (Poisson and screened Poisson). A depth-d octree fills its finest level
 # on a surface with about 4**d samples (4**14 = 2.7e8, beyond any cloud recon makes): deeper
 # levels add memory, not detail. Open3D's Poisson on 20,000 points of a unit sphere peaked at
-# 0.38 GB at depth 10, 0.63 GB at 12 and 0.92 GB at 14 (open3d 0.20); depth 100 ran out of
+# 0.38 GB at depth 10, 0.63 GB at 12 and 0.92 GB at 14 (docs/decisions.md); depth 100 ran out of
 # memory (23 GB) before returning.
 MAX_DEPTH = 14
 
@@ -86,8 +86,8 @@ METHOD = register(Method(
     summary="Open3D Poisson reconstruction, low-density vertices trimmed",
     params={
         # depth 8: best Chamfer at 5e4-2e5 points of the paper's ellipsoid with 0.3 m noise
-        # (0.092 / 0.058 m; depth 10 fits the noise there: 0.094 / 0.089 m), measured on a
-        # 2-core, 24 GiB machine with open3d 0.20.
+        # (0.092 / 0.058 m; depth 10 fits the noise there: 0.094 / 0.089 m; docs/decisions.md,
+        # "Measurements behind the defaults").
         "depth": Param(8, int, "octree depth (grid of up to 2**depth cells)", minimum=1,
                        maximum=MAX_DEPTH),
         # 1.1: Kazhdan's and Open3D's default; at 4 the points span a quarter of the cube and

@@ -10,8 +10,8 @@ the vertex quality, so a grazing, uncertain strike pulls on the indicator functi
 head-on one.
 
 MeshLab's solver runs ``OMP_NUM_THREADS`` threads (default 1): with its default of 2 it took 10 s
-instead of 1.2 s on 6000 points here while another process kept the second core busy (OpenMP
-threads spin-waiting on a shared core).
+instead of 1.2 s on 6000 points while another process kept a core busy (OpenMP threads
+spin-waiting on a busy core; docs/decisions.md, "Measurements behind the defaults").
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ METHOD = register(Method(
     summary="MeshLab screened Poisson (pymeshlab), low-density vertices trimmed",
     params={
         # depth 8: best Chamfer of the methods measured (0.086 m at 5e4 points of the paper's
-        # ellipsoid, 0.3 m noise; pymeshlab 2025.7 on a 2-core, 24 GiB machine).
+        # ellipsoid, 0.3 m noise; docs/decisions.md, "Measurements behind the defaults").
         "depth": Param(8, int, "octree depth", minimum=1, maximum=MAX_DEPTH),
         # 4 and 1.5: MeshLab's defaults (print_filter_parameter_list). The bounds: a weight of
         # 1000 already makes the surface interpolate the points (250 x the default), and nodes
