@@ -14,6 +14,7 @@ from cli.main import build_parser, main
 @pytest.fixture
 def captured(monkeypatch):
     """Replace compare_input and stability_input by recorders of the arguments they get."""
+    import cli.main
     import recon.experiments.compare
     import recon.experiments.stability
 
@@ -26,6 +27,9 @@ def captured(monkeypatch):
 
         return fake
 
+    # main() ends the process at once after an interrupt when children are alive (warm
+    # workers that earlier tests in this process left): here it must only return the status.
+    monkeypatch.setattr(cli.main, "_leave_now", lambda status, at_once=False: status)
     monkeypatch.setattr(recon.experiments.compare, "compare_input", record("compare"))
     monkeypatch.setattr(recon.experiments.stability, "stability_input", record("stability"))
     return calls
