@@ -12,7 +12,10 @@ data were corrected. Here, repeatedly until the corrections stop moving the poin
    estimate (none at first);
 2. compare each point with the consensus of the other passes around it: the centroid of its
    nearest points taken ``PAIR_GAP_STEPS`` shots or more away (never its own track), along the
-   normal of the local plane of the consensus cloud, ``r = n . (p - c)``;
+   normal of the local plane of the consensus cloud, ``r = n . (p - c)``, where that plane faces
+   the point's sensor (``MIN_FACING``; a neighbourhood not much wider than the range noise has
+   its least-squares normal across the beam, and residuals along it reward smearing surfaces
+   along the line of sight);
 3. take a robust Gauss-Newton step on every parameter (Huber-weighted least squares; the point
    and the centroid both move with the parameters; a weak prior holds at zero what the data
    cannot see).
@@ -374,7 +377,8 @@ def _consensus(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: floa
     that belong to other passes (``gap`` seconds or more away), saw the surface from the same side
     as the point (so the two faces of a thin panel stay apart) and lie within
     ``PAIR_DISTANCE_FACTOR`` times the median distance to the nearest such point; the normal is
-    that of the least-squares plane of all ``NEIGHBOURS`` (the consensus cloud). The residual is
+    that of the least-squares plane of all ``NEIGHBOURS`` (the consensus cloud), which must face
+    the point's sensor by at least ``MIN_FACING`` (cosine). The residual is
     ``n . (p_i - c_i)``: the centroid surrounds the point, so an error of the normal barely
     matters. Both the point and the centroid move with the parameters.
 
