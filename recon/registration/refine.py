@@ -91,13 +91,13 @@ MIN_ROWS = 50
 # Other-pass neighbours farther than this multiple of the median distance to the nearest one are
 # left out of the consensus (the local plane no longer describes them).
 PAIR_DISTANCE_FACTOR = 3.0
-# The local plane must face the strike's sensor: its normal at most acos(MIN_FACING) = 60 deg
-# from the line of sight. On the generated satellites at 250 m, 32 neighbours span ~0.25 m, not
+# The local plane must face the strike's sensor: its normal at most acos(MIN_FACING) = 72.5
+# deg from the line of sight. On the generated satellites at 250 m, 32 neighbours span ~0.25 m, not
 # much more than the 0.1 m (1 sigma) range noise along the beam, and where the noise dominates,
 # the least-squares normal lies across the beam: residuals along it ignore the range and measure
 # sideways offsets, which a runaway misalignment (a 0.5 deg one "corrected" to -2.15 deg on
 # satellite seed 1) reduces by smearing surfaces into curtains along the line of sight.
-MIN_FACING = 0.5
+MIN_FACING = 0.3
 # Weak priors (1 sigma) that hold parameters the data cannot see at zero: a degree of attitude,
 # 10 m of position, 0.1 % of the spin rate; each far above what the data resolve when they can.
 PRIOR_ATTITUDE_RAD = math.radians(1.0)
