@@ -82,3 +82,16 @@ def test_refining_never_makes_a_misaligned_rso_worse(tmp_path):
 def test_the_noisy_log_is_not_made_worse(noisy):
     result = refine(noisy, max_points=5000)
     assert _point_error(noisy, result.correction) <= _point_error(noisy) + 1e-9
+
+
+def test_a_generated_satellite_is_not_smeared_into_curtains(tmp_path):
+    """Generated satellite seed 1 flown as RSO-A with a 0.5 deg misalignment: neighbourhoods
+    smaller than the range noise have normals across the beam, and the fit ran to a -2.15 deg
+    misalignment that the held-out strikes "confirmed" (mean point error 2.17 -> 11.17 m)."""
+    path = tmp_path / "satellite.h5"
+    sim.simulate(sim.load_scene("rso-a-lrf", ['target.kind="satellite"', "target.seed=1",
+                                              "errors.range_sigma3=0.3",
+                                              "errors.boresight_misalignment_deg=[0.3, 0.4, 0]"]),
+                 path, seed=0, progress=False)
+    result = refine(path)
+    assert _point_error(path, result.correction) <= _point_error(path) + 1e-9
