@@ -23,7 +23,8 @@ def test_cost_of_a_preset_is_what_the_run_does(tmp_path):
 
 
 @pytest.mark.parametrize("overrides, limit", [
-    (["errors.dilation_alpha=0.1", "errors.dilation_subrays=1000000000"], "limits.rays"),
+    (["errors.dilation_alpha=0.1", "errors.dilation_subrays=10000", "time.rotations=1000"],
+     "limits.rays"),
     (["sensor.pattern=grid", "sensor.resolution=[100000, 100000]"], "limits.rays"),
     (["time.step=1e-6", "time.duration=1e6"], "limits.rays"),
     (["sensor.pattern=grid", "sensor.resolution=[5000, 5000]", "time.duration=10",
