@@ -66,7 +66,14 @@ import numpy as np
 
 from formats.atomic import AtomicWriter
 from formats.errors import MeshFormatError
-from formats.geometry import NORMAL_ATTRIBUTES, UNKNOWN, Cloud, file_metadata, frame_of
+from formats.geometry import (
+    NORMAL_ATTRIBUTES,
+    UNKNOWN,
+    Cloud,
+    check_extent,
+    file_metadata,
+    frame_of,
+)
 from formats.hdf5_check import check_hdf5, trust
 from formats.paths import check_source
 from formats.ply import PlyWriter, binary_vertex_layout, read_ply
@@ -325,7 +332,8 @@ def read_cloud(path) -> Cloud:
     cloud, ``.xyz``/``.asc``/``.txt``, ``.pcd``, ``.e57``).
 
     A PLY mesh is read as the cloud of its vertices. Files that record no frame (those of other
-    tools) are read as body-frame clouds.
+    tools) are read in the frame ``"unknown"``. Coordinates beyond ``MAX_COORDINATE_M`` are
+    refused.
     """
     path = Path(path)
     kind = _suffix(path)
@@ -335,7 +343,9 @@ def read_cloud(path) -> Cloud:
         return cloud_from_ply_columns(path, columns, metadata)
     readers = {".h5": _read_h5, ".pcd": _read_pcd, ".e57": _read_e57}
     readers |= dict.fromkeys(TEXT_SUFFIXES, _read_text)
-    return readers.get(kind, _read_las)(path)
+    cloud = readers.get(kind, _read_las)(path)
+    check_extent(cloud.points, path)
+    return cloud
 
 
 def cloud_from_ply_columns(path, columns: dict[str, np.ndarray],
@@ -352,6 +362,7 @@ def cloud_from_ply_columns(path, columns: dict[str, np.ndarray],
     for name, values in columns.items():
         short = name.removeprefix(_PLY_SCALAR_PREFIX)
         attributes[short if short and short not in columns else name] = values
+    check_extent(points, path)
     return Cloud(points, attributes, frame=frame_of(metadata or {}, path))
 
 

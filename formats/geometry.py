@@ -35,6 +35,21 @@ NORMAL_ATTRIBUTES = ("nx", "ny", "nz")
 VIEW_ATTRIBUTES = ("view_x", "view_y", "view_z")
 
 
+# Farthest coordinate recon reads or computes with [m]: 1e15 m (6,700 au) is beyond every scene
+# recon simulates (sim/defaults.py, MAX_MAGNITUDE), and squared distances of such points stay far
+# inside float64 (beyond about 1e154 m they overflow, and KD-tree queries return no neighbours).
+MAX_COORDINATE_M = 1e15
+
+
+def check_extent(points: np.ndarray, where, *, error: type[Exception] = MeshFormatError) -> None:
+    """Refuse ``points`` (n, 3) [m] with a coordinate beyond ``MAX_COORDINATE_M``, naming
+    ``where`` (the file)."""
+    reach = float(np.abs(points).max()) if len(points) else 0.0
+    if not reach <= MAX_COORDINATE_M:
+        raise error(f"{where}: coordinates reach {reach:.3g} m, beyond {MAX_COORDINATE_M:g} m "
+                    "(not metres?)")
+
+
 def xyz_array(values, what: str, *, error: type[Exception] = MeshFormatError) -> np.ndarray:
     """``values`` as an (n, 3) float64 array, or ``error`` with a message naming ``what``."""
     try:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.errors import MeshFormatError
-from formats.geometry import UNKNOWN, Mesh, file_metadata, frame_of
+from formats.geometry import UNKNOWN, Mesh, check_extent, file_metadata, frame_of
 from formats.paths import check_source
 from formats.ply import read_ply, read_ply_metadata, write_ply
 from formats.shape_models import (
@@ -106,7 +106,9 @@ def read_mesh(path, *, scale: float = 1.0, units: str | None = None) -> Mesh:
         raise MeshFormatError(f"{path}: has no triangles (a point cloud, not a mesh?)")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshFormatError(f"{path}: faces index vertices that do not exist")
-    return Mesh(vertices * factor, faces, frame=frame)
+    vertices = vertices * factor
+    check_extent(vertices, path)
+    return Mesh(vertices, faces, frame=frame)
 
 
 def _stated_units(path: Path, suffix: str) -> str | None:

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from formats.errors import ReconError
+from formats.geometry import check_extent
 
 Fallback = Literal["centroid", "propagate"]
 FALLBACKS = ("centroid", "propagate")
@@ -62,6 +63,7 @@ def _check_points(points: np.ndarray, name: str = "points") -> np.ndarray:
         raise NormalsError(f"{name} must be (n, 3), got {points.shape}")
     if not np.all(np.isfinite(points)):
         raise NormalsError(f"{name} contain NaN or Inf")
+    check_extent(points, name, error=NormalsError)
     return points
 
 

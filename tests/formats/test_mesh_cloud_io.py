@@ -181,3 +181,24 @@ def test_hdf5_cloud_points_of_the_wrong_shape_are_one_line(tmp_path):
         with pytest.raises(MeshFormatError, match=r"flat\.h5: /points has shape \(10, 2\), "
                                                   r"expected \(n, 3\)"):
             read(path)
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".xyz", ".h5"])
+def test_coordinates_beyond_reach_are_refused_naming_the_file(tmp_path, suffix):
+    """Finite but absurd coordinates (a damaged or mis-scaled file) overflow squared distances
+    and leave KD-tree queries without neighbours: refused on reading, with the file named."""
+    points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1e200, 0.0]])
+    path = tmp_path / f"far{suffix}"
+    if suffix == ".xyz":
+        np.savetxt(path, points)
+    else:
+        write_cloud(path, Cloud(points))
+    with pytest.raises(MeshFormatError, match=rf"far\{suffix}: coordinates reach 1e\+200 m"):
+        read_cloud(path)
+
+
+def test_a_mesh_beyond_reach_is_refused(tmp_path):
+    path = tmp_path / "far.ply"
+    write_mesh(path, np.array([[0.0, 0, 0], [1e20, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+    with pytest.raises(MeshFormatError, match=r"far\.ply: coordinates reach 1e\+20 m"):
+        read_mesh(path)

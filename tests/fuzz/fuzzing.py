@@ -309,7 +309,7 @@ def make_case(seed: int, inputs: dict, directory: Path, kind: str | None = None)
         key, values = rng.choice(_BAD_SCENE)
         overrides = [f"{key}={rng.choice(values)}"]
         if rng.random() < 0.3:
-            overrides.append("{}={}".format(*rng.choice(_OK_SCENE)))
+            overrides.append("{}={}".format(*rng.choice([o for o in _OK_SCENE if o[0] != key])))
         args = ["simulate", inputs["scene"], "-o", log]
         for o in overrides:
             args += ["--set", o]
