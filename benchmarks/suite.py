@@ -361,7 +361,8 @@ def prediction(result) -> dict | None:
 
     Reads the predicted Chamfer from ``predicted_chamfer_m``, ``chamfer_m`` or ``chamfer``
     (a nested ``estimate`` mapping or object too), the band from ``predicted_band_m``,
-    ``chamfer_band_m`` or ``band`` (a pair), or from ``chamfer_lo_m`` and ``chamfer_hi_m``.
+    ``chamfer_band_m`` or ``band`` (a pair), or from ``chamfer_low_m`` and ``chamfer_high_m``
+    (``recon.surfaces.judge.Estimate``) or ``chamfer_lo_m`` and ``chamfer_hi_m``.
     """
     if result is None:
         return None
@@ -373,7 +374,8 @@ def prediction(result) -> dict | None:
         return None
     band = _field(result, "predicted_band_m", "chamfer_band_m", "band")
     if band is None:
-        lo, hi = _field(result, "chamfer_lo_m"), _field(result, "chamfer_hi_m")
+        lo = _field(result, "chamfer_low_m", "chamfer_lo_m")
+        hi = _field(result, "chamfer_high_m", "chamfer_hi_m")
         band = (lo, hi) if lo is not None and hi is not None else (value, value)
     lo, hi = sorted(float(b) for b in band)
     return {"chamfer_m": float(value), "lo_m": lo, "hi_m": hi}
@@ -397,8 +399,9 @@ def predict_runs(records: list[dict], cloud, out_dir: Path) -> dict:
     from formats.mesh_io import read_mesh
 
     estimate, spec = hook(ESTIMATORS)
-    digest = (hashlib.sha1(inspect.getsource(estimate).encode()).hexdigest()
-              if estimate is not None else None)
+    # The cache holds what ``prediction`` read of the estimates: both sources key it.
+    digest = (hashlib.sha1((inspect.getsource(estimate) + inspect.getsource(prediction))
+                           .encode()).hexdigest() if estimate is not None else None)
     cache_path = out_dir / "predicted.json"
     cache = json.loads(cache_path.read_text()) if cache_path.exists() else {}
     cached = cache.get("runs", {}) if cache.get("digest") == digest and digest else {}
