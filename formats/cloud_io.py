@@ -343,8 +343,14 @@ def read_cloud(path) -> Cloud:
         return cloud_from_ply_columns(path, columns, metadata)
     readers = {".h5": _read_h5, ".pcd": _read_pcd, ".e57": _read_e57}
     readers |= dict.fromkeys(TEXT_SUFFIXES, _read_text)
-    cloud = readers.get(kind, _read_las)(path)
+    return _within_reach(readers.get(kind, _read_las)(path), path)
+
+
+def _within_reach(cloud: Cloud, path) -> Cloud:
+    """``cloud``, once its points and view points are found within ``MAX_COORDINATE_M``."""
     check_extent(cloud.points, path)
+    if cloud.view_points is not None:
+        check_extent(cloud.view_points, f"{path}: view points")
     return cloud
 
 
@@ -362,8 +368,7 @@ def cloud_from_ply_columns(path, columns: dict[str, np.ndarray],
     for name, values in columns.items():
         short = name.removeprefix(_PLY_SCALAR_PREFIX)
         attributes[short if short and short not in columns else name] = values
-    check_extent(points, path)
-    return Cloud(points, attributes, frame=frame_of(metadata or {}, path))
+    return _within_reach(Cloud(points, attributes, frame=frame_of(metadata or {}, path)), path)
 
 
 @contextlib.contextmanager
