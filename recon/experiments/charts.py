@@ -823,6 +823,8 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path
         ax.set_ylim(lo, hi)
     ax.set_xscale("log")
     ax.set_yscale("log")
+    _plain_log_ticks(ax.xaxis)
+    _plain_log_ticks(ax.yaxis)
     ax.set_xlabel("true Chamfer distance [m]")
     ax.set_ylabel("predicted Chamfer distance, without the truth [m]")
     ax.grid(True, which="both", alpha=0.3)
