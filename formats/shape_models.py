@@ -29,7 +29,6 @@ default (``DEFAULT_UNITS``); a file in metres is read with ``units="m"``.
 from __future__ import annotations
 
 import re
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +36,7 @@ import numpy as np
 from formats.atomic import write_atomically
 from formats.errors import MeshFormatError
 from formats.paths import check_source
+from formats.spice import LOCK, TARGET_FRAME, TARGET_FRAME_ID, TARGET_ID
 
 # Units of the planetary formats when the caller states none: DSK is km by definition (NAIF DSK
 # Required Reading); PDS SBN shape-model tables and SPC's ICQ files are published in km.
@@ -45,11 +45,8 @@ SHAPE_SUFFIXES = tuple(DEFAULT_UNITS)
 DSK_SUFFIXES = (".bds", ".dsk")
 METRES_PER = {"m": 1.0, "km": 1000.0}
 
-# Identities of the target in the SPICE kernels recon writes: body RECON_TARGET (-998, a
-# spacecraft-range code no natural body uses) and its body-fixed frame RECON_TARGET_FIXED, ID
-# 1499902 in the range 1400000-2000000 that the SPICE Frames Required Reading leaves to users.
-TARGET_ID = -998
-TARGET_FRAME, TARGET_FRAME_ID = "RECON_TARGET_FIXED", 1499902
+# The target's identities (body RECON_TARGET and its frame RECON_TARGET_FIXED) are those of the
+# kernels recon writes (formats/spice.py).
 SURFACE_ID = 1
 # DSK type 2 spatial index (NAIF dskmi2): fine voxels 5 plates across and coarse voxels of 4^3
 # fine ones, the values of NAIF's own dskw02 example. The integer index starts with a fixed part
@@ -63,8 +60,6 @@ DSK_LIST_PER_PLATE = 16
 # Inertial frames built into SPICE have IDs 1-21 (J2000, ECLIPJ2000, ...; Frames Required
 # Reading); a DSK segment in one of them is read as inertial, any other frame as the body frame.
 SPICE_INERTIAL_IDS = range(1, 22)
-# The SPICE toolkit has one global state and is not thread-safe.
-_SPICE = threading.Lock()
 
 
 def units_factor(units: str, where) -> float:
@@ -286,7 +281,7 @@ def _spice_call(path, call, what: str):
     import spiceypy
     from spiceypy.utils.exceptions import SpiceyError
 
-    with _SPICE:
+    with LOCK:   # the toolkit's one global state, shared with formats/spice.py
         try:
             return call(spiceypy)
         except SpiceyError as exc:
