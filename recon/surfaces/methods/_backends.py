@@ -44,6 +44,38 @@ def general_position(points: np.ndarray, spacing: float, seed: int) -> np.ndarra
     return points + offset
 
 
+# Vertices of facet j of a Delaunay cell: the facet opposite vertex j, across which
+# ``scipy.spatial.Delaunay.neighbors[:, j]`` lies.
+CELL_FACETS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+
+
+def boundary_faces(points: np.ndarray, simplices: np.ndarray, neighbors: np.ndarray,
+                   inside: np.ndarray) -> np.ndarray:
+    """The facets between inside cells and the rest (cells not inside, or beyond the convex
+    hull), wound counter-clockwise seen from outside.
+
+    Parameters
+    ----------
+    points : (n, 3) float64, metres
+        The points the cells were built on.
+    simplices, neighbors : (m, 4) int
+        ``scipy.spatial.Delaunay`` cells and their neighbours (-1 beyond the hull).
+    inside : (m,) bool
+
+    Returns
+    -------
+    (k, 3) int, indices into ``points``
+    """
+    across = np.where(neighbors >= 0, ~inside[np.maximum(neighbors, 0)], True)
+    keep_cell, keep_face = np.nonzero(inside[:, None] & across)
+    faces = simplices[keep_cell[:, None], CELL_FACETS[keep_face]]
+    apex = points[simplices[keep_cell, keep_face]]                 # inside, opposite the face
+    p, q, r = (points[faces[:, i]] for i in range(3))
+    inward = np.einsum("ij,ij->i", np.cross(q - p, r - p), apex - p) > 0
+    faces[inward] = faces[inward][:, ::-1]
+    return faces
+
+
 def open3d_cloud(cloud: MethodInput):
     """An ``open3d.geometry.PointCloud`` with the cloud's points and oriented normals."""
     import open3d as o3d

@@ -41,7 +41,7 @@ import numpy as np
 
 from recon.surfaces import uncertainty
 from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
-from recon.surfaces.methods._backends import general_position
+from recon.surfaces.methods._backends import CELL_FACETS, boundary_faces, general_position
 from recon.surfaces.methods.plane import project_to_planes
 
 # Mean n . (c - p) / r beyond which a big ball is a seed: its four samples agree that the ball
@@ -171,8 +171,7 @@ def run(cloud: MethodInput, *, kappa: float, denoise: bool | None, weighted: boo
         raise MethodFailed(f"delaunay-balls: no inner Delaunay ball is bigger than {kappa:g} x "
                            f"spacing ({kappa * cloud.spacing:.3g} m); lower kappa")
 
-    triples = np.stack([simplices[:, [1, 2, 3]], simplices[:, [0, 2, 3]],
-                        simplices[:, [0, 1, 3]], simplices[:, [0, 1, 2]]], axis=1)  # (m, 4, 3)
+    triples = simplices[:, CELL_FACETS]                                                 # (m, 4, 3)
     a, b, c = (points[triples[..., i]] for i in range(3))
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=2)                        # (m, 4)
     units = np.maximum(1, np.round(AREA_UNITS * area / cloud.spacing**2)).astype(np.int64)
@@ -184,16 +183,9 @@ def run(cloud: MethodInput, *, kappa: float, denoise: bool | None, weighted: boo
     label = min_cut_labels(len(simplices), pairs, units[cell[once], face[once]], inside,
                            outside, hull_cell, units[hull_cell, hull_face])
 
-    # Faces of inside cells whose neighbour is outside (or the hull's exterior).
-    across = np.where(neighbors >= 0, ~label[np.maximum(neighbors, 0)], True)
-    keep_cell, keep_face = np.nonzero(label[:, None] & across)
-    faces = triples[keep_cell, keep_face]
+    faces = boundary_faces(points, simplices, neighbors, label)
     if len(faces) == 0:
         raise MethodFailed("delaunay-balls: the minimum cut left no surface")
-    apex = points[simplices[keep_cell, keep_face]]                 # inside, opposite the face
-    p, q, r = (points[faces[:, i]] for i in range(3))
-    inward = np.einsum("ij,ij->i", np.cross(q - p, r - p), apex - p) > 0
-    faces[inward] = faces[inward][:, ::-1]
     return points, faces
 
 

@@ -62,6 +62,7 @@ import numpy as np
 
 from recon.surfaces import uncertainty
 from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from recon.surfaces.methods._backends import CELL_FACETS, boundary_faces
 from recon.surfaces.methods.plane import project_to_planes
 
 # Automatic denoising above this noise / spacing. Measured with beta 0: on 3000 strikes of the
@@ -315,7 +316,7 @@ def facet_quality(points: np.ndarray, simplices: np.ndarray, neighbors: np.ndarr
     from recon.surfaces.methods.delaunay_balls import circumspheres
 
     centre, radius = circumspheres(points, simplices)
-    triples = simplices[:, _FACETS]                                          # (m, 4, 3)
+    triples = simplices[:, CELL_FACETS]                                          # (m, 4, 3)
     a, b, c = (points[triples[..., i]] for i in range(3))
     normal = np.cross(b - a, c - a)
     normal /= np.maximum(np.linalg.norm(normal, axis=2, keepdims=True), 1e-300)
@@ -329,10 +330,6 @@ def facet_quality(points: np.ndarray, simplices: np.ndarray, neighbors: np.ndarr
     back = np.argmax(neighbors[other] == np.arange(len(simplices))[:, None, None], axis=2)
     across = np.where(neighbors >= 0, cos[other, back], 1.0)
     return 1.0 - np.minimum(cos, across)
-
-
-# Vertices of facet j of a cell (the facet opposite vertex j).
-_FACETS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
 
 
 def min_cut_outside(neighbors: np.ndarray, capacity: np.ndarray, source: np.ndarray,
@@ -493,15 +490,7 @@ def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
             else ""
         raise MethodFailed(f"visibility: the minimum cut left no cell inside{hint}")
 
-    # Facets of inside cells whose neighbour is not inside (or beyond the convex hull).
-    across = np.where(neighbors >= 0, ~inside[np.maximum(neighbors, 0)], True)
-    keep_cell, keep_face = np.nonzero(inside[:, None] & across)
-    faces = simplices[keep_cell][np.arange(len(keep_cell))[:, None], _FACETS[keep_face]]
-    apex = jittered[simplices[keep_cell, keep_face]]               # inside, opposite the face
-    p, q, r = (jittered[faces[:, i]] for i in range(3))
-    inward = np.einsum("ij,ij->i", np.cross(q - p, r - p), apex - p) > 0
-    faces[inward] = faces[inward][:, ::-1]
-    return vertices, faces
+    return vertices, boundary_faces(jittered, simplices, neighbors, inside)
 
 
 METHOD = register(Method(
