@@ -78,3 +78,15 @@ def sphere_log(tmp_path):
     path = tmp_path / "sphere.h5"
     write_sphere_log(path)
     return path
+
+
+def registration_error(path, correction=None) -> float:
+    """Mean distance [m] of a log's strikes registered with ``correction`` (a refinement's, or
+    the recorded poses) from their true hit points (the log's truth)."""
+    from formats import StrikeLog
+    from recon.registration.ingest import ingest
+
+    with StrikeLog(path) as log:
+        truth = log.truth_strikes().point
+    return float(np.linalg.norm(ingest(path, correction=correction).points - truth, axis=1)
+                 .mean())

@@ -10,9 +10,9 @@ import pytest
 
 import sim
 from cli.main import main
-from formats import StrikeLog
 from recon.registration.ingest import ingest
 from recon.registration.refine import refine
+from tests.conftest import registration_error
 
 # Four of the paper's 15,480 s rotations: 6,192 single-beam strikes, short enough for a fit to
 # explain range noise.
@@ -22,14 +22,6 @@ SHORT = "time.duration=61920"
 def _simulate(path, scene, *overrides):
     sim.simulate(sim.load_scene(scene, [SHORT, *overrides]), path, seed=0, progress=False)
     return path
-
-
-def _point_error(path, correction=None) -> float:
-    """Mean distance of the registered points from their true hit points [m]."""
-    with StrikeLog(path) as log:
-        truth = log.truth_strikes().point
-    return float(np.linalg.norm(ingest(path, correction=correction).points - truth, axis=1)
-                 .mean())
 
 
 @pytest.fixture(scope="module")
@@ -76,12 +68,12 @@ def test_refining_never_makes_a_misaligned_rso_worse(tmp_path):
     path = _simulate(tmp_path / "rso.h5", "rso-a-lrf", "errors.range_sigma3=0.3",
                      "errors.boresight_misalignment_deg=[0.3, 0.4, 0]")
     result = refine(path, max_points=5000)
-    assert _point_error(path, result.correction) <= _point_error(path) + 1e-9
+    assert registration_error(path, result.correction) <= registration_error(path) + 1e-9
 
 
 def test_the_noisy_log_is_not_made_worse(noisy):
     result = refine(noisy, max_points=5000)
-    assert _point_error(noisy, result.correction) <= _point_error(noisy) + 1e-9
+    assert registration_error(noisy, result.correction) <= registration_error(noisy) + 1e-9
 
 
 def test_a_generated_satellite_is_not_smeared_into_curtains(tmp_path):
@@ -94,4 +86,4 @@ def test_a_generated_satellite_is_not_smeared_into_curtains(tmp_path):
                                               "errors.boresight_misalignment_deg=[0.3, 0.4, 0]"]),
                  path, seed=0, progress=False)
     result = refine(path)
-    assert _point_error(path, result.correction) <= _point_error(path) + 1e-9
+    assert registration_error(path, result.correction) <= registration_error(path) + 1e-9

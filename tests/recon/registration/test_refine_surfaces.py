@@ -7,9 +7,9 @@ import pytest
 import trimesh
 
 import sim
-from formats import StrikeLog
 from recon.registration.ingest import ingest
 from recon.registration.refine import refine
+from tests.conftest import registration_error
 
 MISALIGNMENT_DEG = np.array([0.03, 0.04, 0.0])
 # A 6 x 6 m plate 5 cm thick in the body x-z plane, spinning about z: each face in turn faces the
@@ -30,14 +30,6 @@ def _plate_log(tmp_path, *overrides):
     return path
 
 
-def _point_error(path, correction=None) -> float:
-    """Mean distance of the registered points from their true hit points [m]."""
-    with StrikeLog(path) as log:
-        truth = log.truth_strikes().point
-    return float(np.linalg.norm(ingest(path, correction=correction).points - truth, axis=1)
-                 .mean())
-
-
 @pytest.fixture(scope="module")
 def plate_logs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("plate")
@@ -56,7 +48,7 @@ def test_a_misaligned_thin_plate_seen_from_both_sides_is_corrected_in_part(plate
     assert result.check_z > 3.0
     along = np.degrees(result.correction.misalignment[0, 1])
     assert 0.0 < along <= 1.25 * MISALIGNMENT_DEG[1]
-    assert _point_error(posed, result.correction) < 0.9 * _point_error(posed)
+    assert registration_error(posed, result.correction) < 0.9 * registration_error(posed)
 
 
 def test_a_plate_without_pose_error_is_left_byte_identical(plate_logs):
