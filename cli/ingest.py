@@ -15,6 +15,18 @@ class IngestOptionError(ReconError, ValueError):
     """Options of ``recon ingest`` that do not go together."""
 
 
+def _add_epoch(parser, prefix: str = "") -> None:
+    """``--epoch-utc`` / ``--epoch-et``: the epoch of a log's time 0 (``prefix`` says where it
+    applies)."""
+    epoch = parser.add_mutually_exclusive_group()
+    epoch.add_argument("--epoch-utc", metavar="UTC",
+                       help=f"{prefix}UTC of the log's time 0, e.g. 2019-02-13T01:00:00 "
+                            "(default: the log's own epoch when its scene was SPICE-driven, "
+                            "else the J2000 epoch)")
+    epoch.add_argument("--epoch-et", type=float, metavar="ET",
+                       help=f"{prefix}the same as TDB seconds past J2000")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ingest", help="register a strike log (or read altimetry) into a point "
                                       "cloud",
@@ -69,13 +81,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frame", choices=("body", "inertial"),
                    help="text: frame of positions and attitudes (default: body); kernels hold "
                         "both frames")
-    epoch = p.add_mutually_exclusive_group()
-    epoch.add_argument("--epoch-utc", metavar="UTC",
-                       help="kernels: UTC of the log's time 0, e.g. 2019-02-13T01:00:00 "
-                            "(default: the log's own epoch when its scene was SPICE-driven, "
-                            "else the J2000 epoch)")
-    epoch.add_argument("--epoch-et", type=float, metavar="ET",
-                       help="kernels: the same as TDB seconds past J2000")
+    _add_epoch(p, "kernels: ")
     p.set_defaults(func=run_trajectory)
 
     p = sub.add_parser("altimetry", help="export a strike log as a mission's altimetry product",
@@ -88,12 +94,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, type=Path, metavar="PRODUCT",
                    help="OLA Level-2 label to write (.xml, with the .dat table beside it) or "
                         "Hayabusa2 LIDAR Level-2 CSV (.csv)")
-    epoch = p.add_mutually_exclusive_group()
-    epoch.add_argument("--epoch-utc", metavar="UTC",
-                       help="UTC of the log's time 0 (default: the log's own epoch when its "
-                            "scene was SPICE-driven, else the J2000 epoch)")
-    epoch.add_argument("--epoch-et", type=float, metavar="ET",
-                       help="the same as TDB seconds past J2000")
+    _add_epoch(p)
     p.set_defaults(func=run_altimetry)
 
     p = sub.add_parser("truth", help="export the truth mesh embedded in a strike log",
