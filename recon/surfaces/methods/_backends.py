@@ -76,6 +76,43 @@ def boundary_faces(points: np.ndarray, simplices: np.ndarray, neighbors: np.ndar
     return faces
 
 
+def source_side(n_nodes: int, rows: np.ndarray, cols: np.ndarray, capacity: np.ndarray,
+                source: int, sink: int) -> np.ndarray:
+    """The nodes on the source side of a minimum ``source``-``sink`` cut of a directed graph:
+    scipy's Dinic maximum flow, then a breadth-first search of the residual graph.
+
+    Parameters
+    ----------
+    n_nodes : int
+    rows, cols : (e,) int
+        Edges ``rows[i] -> cols[i]`` (repeats add up).
+    capacity : (e,) int
+        Their capacities (integers: scipy's maximum flow takes int32; larger sums are capped).
+    source, sink : int
+
+    Returns
+    -------
+    (n_nodes,) bool
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order, maximum_flow
+
+    # maximum_flow needs every reverse edge present (zero capacity is fine) and int32 data.
+    graph = coo_matrix((np.concatenate([capacity, np.zeros_like(capacity)]).astype(np.int64),
+                        (np.concatenate([rows, cols]), np.concatenate([cols, rows]))),
+                       shape=(n_nodes, n_nodes)).tocsr()
+    graph.sum_duplicates()
+    graph.data = np.minimum(graph.data, np.iinfo(np.int32).max).astype(np.int32)
+    flow = maximum_flow(graph, source, sink, method="dinic").flow
+    residual = (graph - flow).tocsr()
+    residual.data = (residual.data > 0).astype(np.int32)
+    residual.eliminate_zeros()
+    reached = breadth_first_order(residual, source, directed=True, return_predecessors=False)
+    side = np.zeros(n_nodes, dtype=bool)
+    side[reached] = True
+    return side
+
+
 def open3d_cloud(cloud: MethodInput):
     """An ``open3d.geometry.PointCloud`` with the cloud's points and oriented normals."""
     import open3d as o3d

@@ -41,7 +41,12 @@ import numpy as np
 
 from recon.surfaces import uncertainty
 from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
-from recon.surfaces.methods._backends import CELL_FACETS, boundary_faces, general_position
+from recon.surfaces.methods._backends import (
+    CELL_FACETS,
+    boundary_faces,
+    general_position,
+    source_side,
+)
 from recon.surfaces.methods.plane import project_to_planes
 
 # Mean n . (c - p) / r beyond which a big ball is a seed: its four samples agree that the ball
@@ -91,9 +96,6 @@ def min_cut_labels(n_cells: int, pairs: np.ndarray, capacity: np.ndarray, inside
     (n_cells,) bool
         True on the source (inside) side of the minimum cut.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import breadth_first_order, maximum_flow
-
     source, sink = n_cells, n_cells + 1
     seed_in, seed_out = np.flatnonzero(inside), np.flatnonzero(outside)
     rows = np.concatenate([pairs[:, 0], pairs[:, 1], np.full(len(seed_in), source), seed_out,
@@ -102,21 +104,7 @@ def min_cut_labels(n_cells: int, pairs: np.ndarray, capacity: np.ndarray, inside
                            np.full(len(boundary), sink)])
     caps = np.concatenate([capacity, capacity, np.full(len(seed_in), SEED_CAPACITY),
                            np.full(len(seed_out), SEED_CAPACITY), boundary_capacity])
-    # maximum_flow needs every reverse edge present (zero capacity is fine) and int32 data.
-    rows, cols = np.concatenate([rows, cols]), np.concatenate([cols, rows])
-    caps = np.concatenate([caps, np.zeros_like(caps)])
-    graph = coo_matrix((caps.astype(np.int64), (rows, cols)),
-                       shape=(n_cells + 2, n_cells + 2)).tocsr()
-    graph.sum_duplicates()
-    graph.data = np.minimum(graph.data, np.iinfo(np.int32).max).astype(np.int32)
-    flow = maximum_flow(graph, source, sink, method="dinic").flow
-    residual = (graph - flow).tocsr()
-    residual.data = (residual.data > 0).astype(np.int32)
-    residual.eliminate_zeros()
-    reached = breadth_first_order(residual, source, directed=True, return_predecessors=False)
-    label = np.zeros(n_cells + 2, dtype=bool)
-    label[reached] = True
-    return label[:n_cells]
+    return source_side(n_cells + 2, rows, cols, caps, source, sink)[:n_cells]
 
 
 def run(cloud: MethodInput, *, kappa: float, denoise: bool | None, weighted: bool

@@ -62,7 +62,7 @@ import numpy as np
 
 from recon.surfaces import uncertainty
 from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
-from recon.surfaces.methods._backends import CELL_FACETS, boundary_faces
+from recon.surfaces.methods._backends import CELL_FACETS, boundary_faces, source_side
 from recon.surfaces.methods.plane import project_to_planes
 
 # Automatic denoising above this noise / spacing. Measured with beta 0: on 3000 strikes of the
@@ -350,9 +350,6 @@ def min_cut_outside(neighbors: np.ndarray, capacity: np.ndarray, source: np.ndar
     (m,) bool
         True outside.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import breadth_first_order, maximum_flow
-
     m = len(neighbors)
     s, t = m, m + 1
     cells = np.repeat(np.arange(m), 4)
@@ -361,21 +358,7 @@ def min_cut_outside(neighbors: np.ndarray, capacity: np.ndarray, source: np.ndar
     cols = np.concatenate([cells, np.arange(m), np.full(m, t)])
     caps = np.concatenate([capacity.ravel(), source, sink])
     used = caps > 0
-    rows, cols, caps = rows[used], cols[used], caps[used]
-    # maximum_flow needs each reverse edge present (zero capacity is fine) and int32 data.
-    graph = coo_matrix((np.concatenate([caps, np.zeros_like(caps)]),
-                        (np.concatenate([rows, cols]), np.concatenate([cols, rows]))),
-                       shape=(m + 2, m + 2)).tocsr()
-    graph.sum_duplicates()
-    graph.data = np.minimum(graph.data, _INT32_MAX).astype(np.int32)
-    flow = maximum_flow(graph, s, t, method="dinic").flow
-    residual = (graph - flow).tocsr()
-    residual.data = (residual.data > 0).astype(np.int32)
-    residual.eliminate_zeros()
-    reached = breadth_first_order(residual, s, directed=True, return_predecessors=False)
-    outside = np.zeros(m + 2, dtype=bool)
-    outside[reached] = True
-    return outside[:m]
+    return source_side(m + 2, rows[used], cols[used], caps[used], s, t)[:m]
 
 
 def drop_small_parts(tri: Cells, inside: np.ndarray, min_volume: float) -> np.ndarray:
