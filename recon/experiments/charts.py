@@ -37,6 +37,19 @@ OUTCOME_COLOURS = {"ok": "#4daf4a", "timeout": "#984ea3", "crash": "#e41a1c",
                    "memory": "#ff7f00", "error": "#377eb8", "empty": "#a65628",
                    "degenerate": "#f781bf", "score": "#999999", "task": "#333333",
                    "collapse": "#ffd92f"}
+# Marker and colour of each surface method, the same in every chart whatever its rank (a reader
+# learns them once); plane and planes, poisson and screened-poisson well apart.
+METHOD_STYLES = {
+    "convex-hull": ("o", "#7f7f7f"), "ellipsoid": ("s", "#bcbd22"),
+    "planes": ("D", "#2ca02c"), "plane": ("v", "#d62728"),
+    "poisson": ("^", "#1f77b4"), "screened-poisson": ("<", "#17becf"),
+    "ball-pivoting": (">", "#ff7f0e"), "ball-pivoting-meshlab": ("P", "#8c564b"),
+    "alpha-shape": ("X", "#9467bd"), "rimls": ("*", "#e377c2"), "apss": ("h", "#393b79"),
+    "delaunay-balls": ("p", "#111111"), "visibility": ("8", "#e7ba52"),
+}
+# Styles of methods not listed above (test methods), picked by a checksum of the name.
+EXTRA_MARKERS = ("d", "H", "1", "2", "3", "4")
+EXTRA_COLOURS = ("#843c39", "#637939", "#5254a3", "#ad494a", "#8ca252", "#7b4173")
 # Points drawn per class in an edge picture (a seeded subsample beyond): 3D scatter cost grows
 # with the count, and 60,000 grey points already fill a 6-inch panel.
 MAX_DRAWN = 60_000
@@ -229,16 +242,16 @@ def _metric_axis(ax, curves: Sequence[Mapping], key: str, label: str, lower: boo
     ax.grid(True, which="both", alpha=0.3)
 
 
-def _shared_legend(fig, axes, *, ncol: int = 4) -> None:
-    """One legend below the panels with every label of ``axes`` once."""
+def _shared_legend(fig, axes, *, ncol: int = 4, loc: str = "outside lower center") -> None:
+    """One legend (below the panels by default) with every label of ``axes`` once."""
     handles, labels = [], []
     for ax in axes:
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), ncol),
-               fontsize=8.5, frameon=False)
+    fig.legend(handles, labels, loc=loc, ncol=min(len(labels), ncol), fontsize=8.5,
+               frameon=False)
 
 
 def grouped_bars(groups: Sequence[str], scenarios: Sequence[str], values: Mapping, path, *,
@@ -560,58 +573,125 @@ def heatmaps(rows: Sequence[str], cols: Sequence[str], panels: Sequence[Mapping]
     return _save(fig, path)
 
 
+def method_style(name: str) -> dict:
+    """The marker and colour of surface method ``name``, the same in every chart.
+
+    Parameters
+    ----------
+    name : str
+        A method name (``recon methods``); one not in ``METHOD_STYLES`` (a test method) gets a
+        fixed style from a checksum of its name.
+
+    Returns
+    -------
+    dict
+        ``marker`` and ``color``, matplotlib keyword arguments.
+    """
+    import zlib
+
+    if name in METHOD_STYLES:
+        marker, colour = METHOD_STYLES[name]
+    else:
+        code = zlib.crc32(name.encode("utf-8"))
+        marker = EXTRA_MARKERS[code % len(EXTRA_MARKERS)]
+        colour = EXTRA_COLOURS[(code // len(EXTRA_MARKERS)) % len(EXTRA_COLOURS)]
+    return {"marker": marker, "color": colour}
+
+
+# Offsets of the Pareto-front labels from their points, in points, taken in turn so that
+# neighbouring labels go to different sides; a thin line joins each label to its marker.
+LABEL_OFFSETS = ((14, 14), (14, -18), (-14, 16), (-14, -18))
+
+
 def speed_accuracy(records: list[dict], path, *, title: str = "") -> Path:
-    """Write the speed-accuracy chart: time vs Chamfer and vs F-score, Pareto fronts labelled."""
+    """Write the speed-accuracy chart (``speed_accuracy_figure``) to ``path``."""
+    return _save(speed_accuracy_figure(records, title=title), path)
+
+
+def speed_accuracy_figure(records: list[dict], *, title: str = ""):
+    """Wall time against Chamfer distance (left) and F-score (right), one marker per run in
+    its method's style (``method_style``), the Pareto fronts dashed and their runs labelled, a
+    line joining each label to its own marker.
+
+    Parameters
+    ----------
+    records : list of dict
+        Runs of ``recon compare``: ``method``, ``label``, ``status``, ``wall_time_s`` [s],
+        ``chamfer_m`` [m], ``fscore`` and optionally ``failure``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     plt = _pyplot()
     ok = [r for r in records if r.get("status") == "ok" and r.get(CHAMFER) is not None
           and r.get("wall_time_s")]
-    names = list(dict.fromkeys(r["method"] for r in records))
-    markers = "osD^v<>PX*hp8"
-    colours = plt.get_cmap("tab10")
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.6), constrained_layout=True)
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5.6), constrained_layout=True)
     for ax, metric, minimize, ylabel in (
             (axes[0], CHAMFER, True, "Chamfer distance [m] (lower is better)"),
             (axes[1], FSCORE, False, "F-score (higher is better)")):
-        for i, name in enumerate(names):
-            runs = [r for r in ok if r["method"] == name and r.get(metric) is not None]
-            if runs:
-                ax.scatter([r["wall_time_s"] for r in runs], [r[metric] for r in runs],
-                           marker=markers[i % len(markers)], color=colours(i % 10), s=55,
-                           label=name, edgecolors="black", linewidths=0.5, zorder=3)
         runs = [r for r in ok if r.get(metric) is not None]
-        if runs:
-            t = np.array([r["wall_time_s"] for r in runs])
-            v = np.array([r[metric] for r in runs], dtype=float)
-            front = pareto_front(t, v, minimize=minimize)
-            ax.step(t[front], v[front], where="post", color="0.3", lw=1.2, ls="--", zorder=2,
-                    label="Pareto front")
-            for j, i in enumerate(front):
-                ax.annotate(runs[i]["label"], (t[i], v[i]), textcoords="offset points",
-                            xytext=(6, 8 if j % 2 == 0 else -12), fontsize=7.5, color="0.15")
-        if ok:
-            ax.set_xscale("log")
-            _plain_log_ticks(ax.xaxis)
-        if metric == CHAMFER and ok:
-            ax.set_yscale("log")
-            _plain_log_ticks(ax.yaxis)
-        elif runs:
-            ax.set_ylim(max(0.0, min(r[metric] for r in runs) - 0.05), 1.02)
-        if not ok:
-            ax.text(0.5, 0.5, "every run failed: nothing to place", ha="center", va="center",
-                    transform=ax.transAxes, color="firebrick")
-            ax.set_xticks([])
-            ax.set_yticks([])
-        ax.set_xlabel("wall time of the method [s] (log)")
-        ax.set_ylabel(ylabel)
-        ax.grid(True, which="both", alpha=0.3)
+        _method_markers(ax, runs, metric)
+        _pareto_labels(ax, runs, metric, minimize)
+        _speed_axes(ax, runs, metric, ylabel)
     if ok:
-        axes[1].legend(fontsize=8, loc="best", framealpha=0.85)
+        _shared_legend(fig, axes, ncol=1, loc="outside right upper")
     failed = [r for r in records if r.get("status") != "ok"]
     if failed:
         text = "failed: " + "; ".join(f"{r['label']} ({r.get('failure')})" for r in failed)
         fig.text(0.01, 0.005, text[:260], fontsize=7, color="firebrick", va="bottom")
     fig.suptitle(title or "speed against accuracy", fontsize=11)
-    return _save(fig, path)
+    return fig
+
+
+def _method_markers(ax, runs: list[dict], metric: str) -> None:
+    """One scatter per method, in its fixed style, labelled with the method's name."""
+    for name in dict.fromkeys(r["method"] for r in runs):
+        mine = [r for r in runs if r["method"] == name]
+        ax.scatter([r["wall_time_s"] for r in mine], [r[metric] for r in mine], s=55,
+                   label=name, edgecolors="black", linewidths=0.5, zorder=3,
+                   **method_style(name))
+
+
+def _pareto_labels(ax, runs: list[dict], metric: str, minimize: bool) -> None:
+    """The Pareto front of ``runs`` as a dashed step line, each of its runs labelled: the
+    label's anchor is the run's own point, joined to the text by a thin line."""
+    if not runs:
+        return
+    t = np.array([r["wall_time_s"] for r in runs], dtype=float)
+    v = np.array([r[metric] for r in runs], dtype=float)
+    front = pareto_front(t, v, minimize=minimize)
+    ax.step(t[front], v[front], where="post", color="0.3", lw=1.2, ls="--", zorder=2,
+            label="Pareto front")
+    for j, i in enumerate(front):
+        ax.annotate(runs[i]["label"], (t[i], v[i]), textcoords="offset points",
+                    xytext=LABEL_OFFSETS[j % len(LABEL_OFFSETS)], fontsize=7.5, color="0.15",
+                    ha="left" if LABEL_OFFSETS[j % len(LABEL_OFFSETS)][0] > 0 else "right",
+                    va="center", zorder=5,
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none",
+                          "alpha": 0.75},
+                    arrowprops={"arrowstyle": "-", "color": "0.35", "lw": 0.7,
+                                "shrinkA": 0, "shrinkB": 4})
+
+
+def _speed_axes(ax, runs: list[dict], metric: str, ylabel: str) -> None:
+    """Scales, limits and labels of one speed-accuracy panel (a note when nothing ran)."""
+    if runs:
+        ax.set_xscale("log")
+        _plain_log_ticks(ax.xaxis)
+        if metric == CHAMFER:
+            ax.set_yscale("log")
+            _plain_log_ticks(ax.yaxis)
+        else:
+            ax.set_ylim(max(0.0, min(r[metric] for r in runs) - 0.05), 1.02)
+    else:
+        ax.text(0.5, 0.5, "every run failed: nothing to place", ha="center", va="center",
+                transform=ax.transAxes, color="firebrick")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    ax.set_xlabel("wall time of the method [s] (log)")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, which="both", alpha=0.3)
 
 
 def _cells(records, noise, density, outliers, value):

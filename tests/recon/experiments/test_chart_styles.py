@@ -1,0 +1,78 @@
+"""Every method keeps its marker and colour from chart to chart whatever its rank, and every
+label of the speed-accuracy chart is anchored on its own run's marker."""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.colors import to_rgba
+
+from recon.experiments import charts
+from recon.experiments.cases import CHAMFER, FSCORE
+
+
+def _records(order, seed):
+    rng = np.random.default_rng(seed)
+    out = []
+    for rank, method in enumerate(order):
+        for depth in (6, 8):
+            out.append({"method": method, "label": f"{method} depth={depth}", "status": "ok",
+                        "wall_time_s": float(rng.uniform(0.05, 20.0)),
+                        CHAMFER: float(0.01 * (rank + 1) * rng.uniform(0.5, 1.5)),
+                        FSCORE: float(rng.uniform(0.2, 0.99))})
+    return out
+
+
+def _styles(fig):
+    """{method: (face colour, marker path vertices)} of the scatters of every panel."""
+    out = {}
+    for ax in fig.axes:
+        for collection in ax.collections:
+            name = collection.get_label()
+            if name.startswith("_"):
+                continue
+            colour = tuple(np.round(collection.get_facecolor()[0], 6))
+            shape = collection.get_paths()[0].vertices.round(6).tobytes()
+            assert out.setdefault(name, (colour, shape)) == (colour, shape), name
+    return out
+
+
+def test_a_method_keeps_its_style_across_charts_and_methods_differ():
+    methods = ["plane", "planes", "delaunay-balls", "screened-poisson", "poisson",
+               "ball-pivoting"]
+    first = charts.speed_accuracy_figure(_records(methods, 0))
+    second = charts.speed_accuracy_figure(_records(methods[::-1], 1))
+    a, b = _styles(first), _styles(second)
+    assert set(a) == set(b) == set(methods)
+    assert a == b
+    assert len({colour for colour, _ in a.values()}) == len(methods)
+    assert len({(colour, shape) for colour, shape in a.values()}) == len(methods)
+    for name, (colour, _) in a.items():
+        assert colour == tuple(np.round(to_rgba(charts.method_style(name)["color"]), 6))
+    charts._pyplot().close("all")
+
+
+def test_every_registered_method_has_its_own_style():
+    from recon.surfaces.methods import available
+
+    styles = [tuple(charts.method_style(name).values()) for name in available()]
+    assert len(set(styles)) == len(styles)
+    assert len({colour for _, colour in styles}) == len(styles)
+    assert charts.method_style("some-test-method") == charts.method_style("some-test-method")
+
+
+def test_labels_are_anchored_on_their_own_markers():
+    records = _records(["plane", "delaunay-balls", "screened-poisson", "planes"], 3)
+    fig = charts.speed_accuracy_figure(records)
+    by_label = {r["label"]: r for r in records}
+    labelled = 0
+    for ax, metric in zip(fig.axes[:2], (CHAMFER, FSCORE), strict=True):
+        points = {c.get_label(): {tuple(p) for p in np.asarray(c.get_offsets()).round(9)}
+                  for c in ax.collections}
+        for text in ax.texts:
+            run = by_label[text.get_text()]
+            anchor = tuple(np.round(text.xy, 9))
+            assert anchor == (round(run["wall_time_s"], 9), round(run[metric], 9))
+            assert anchor in points[run["method"]]   # the marker of the run's own method
+            labelled += 1
+    assert labelled >= 2
+    charts._pyplot().close(fig)
