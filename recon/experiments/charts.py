@@ -84,9 +84,14 @@ class ChartError(ReconError, OSError):
 
 def _save(fig, path) -> Path:
     """Write ``fig`` to ``path`` atomically: an interrupted or failed write (a full disk)
-    leaves the previous chart as it was."""
+    leaves the previous chart as it was. The PNG carries the chart's title (its ``Title``
+    text chunk), which ``recon report`` shows as the picture's alt text."""
+    title = fig.get_suptitle() or next((ax.get_title() for ax in fig.axes if ax.get_title()),
+                                       "")
+    metadata = {"Title": " ".join(title.split())} if title else {}
     try:
-        return write_atomically(path, lambda tmp: fig.savefig(tmp, dpi=DPI), error=ChartError)
+        return write_atomically(path, lambda tmp: fig.savefig(tmp, dpi=DPI, metadata=metadata),
+                                error=ChartError)
     finally:
         _pyplot().close(fig)
 
