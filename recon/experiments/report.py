@@ -557,8 +557,8 @@ def kind(directory: Path) -> str:
         return "compare"
     if (directory / "stability.json").is_file():
         return "stability"
-    raise ReportError(f"{directory}: not a study, comparison or stability directory (no "
-                      "summary.json, index.json, results.json or stability.json)")
+    raise ReportError(f"{directory}: not a study or comparison directory, nor a stability "
+                      "run (no summary.json, index.json, results.json or stability.json)")
 
 
 def _study_dirs(directory: Path) -> list[Path]:
