@@ -195,6 +195,7 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, max_points: int
     """
     import sim
     from formats import StrikeLog
+    from recon.experiments import progress
     from recon.registration.ingest import ingest
     from recon.registration.refine import RefineError, refine
     from recon.surfaces.prepare import prepare
@@ -205,13 +206,15 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, max_points: int
     clouds, refined = {}, {}
     with scratch.directory("recon-pointing-") as tmp:
         log = tmp / "run.h5"
-        sim.simulate(the_scene, log, seed=seed, progress=False, workers=1)
+        # Progress: simulation 0-0.3, self-calibration 0.3-0.5, the surfaces the rest.
+        sim.simulate(the_scene, log, seed=seed, progress=progress.within(0.0, 0.3), workers=1)
         with StrikeLog(log) as opened:
             true_points = opened.truth_strikes().point
         clouds["un-refined"] = ingest(log)
         began = time.perf_counter()
         try:
-            result = refine(log, max_points=refine_points, seed=seed)
+            result = refine(log, max_points=refine_points, seed=seed,
+                            progress=progress.within(0.3, 0.5))
         except RefineError as exc:
             refined = {"error": str(exc)}
         else:
@@ -230,9 +233,10 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, max_points: int
             continue
         point_error[pose] = _point_error(cloud.points, true_points)
         prepared = prepare(cloud.points[pick], view_points=cloud.view_points[pick], seed=seed)
-        runs += [{"pose": pose, **surface_scores(prepared, method, truth, seed=seed,
-                                                 score_options=score_options)}
-                 for method in methods]
+        for method in methods:
+            progress.step(len(runs), 2 * len(POSES) * len(methods))
+            runs.append({"pose": pose, **surface_scores(prepared, method, truth, seed=seed,
+                                                        score_options=score_options)})
     return {"status": "ok", "tags": dict(tags), "scene": scene, "overrides": list(overrides),
             "seed": seed, "strikes": n, "points": len(pick), "refine": refined,
             "point_error_m": point_error, "runs": runs,
