@@ -123,9 +123,21 @@ def _spans(lines, factor: float) -> bool:
     return bool(y.size) and y.max() > factor * y.min()
 
 
+def _wrap(text: str, width_in: float, fontsize: float) -> str:
+    """``text`` broken into lines that fit ``width_in`` inches at ``fontsize`` points (an
+    average character is about 0.55 em wide)."""
+    import textwrap
+
+    columns = max(20, int(width_in * 72 / (0.55 * fontsize)))
+    return "\n".join(textwrap.fill(line, columns) for line in text.split("\n"))
+
+
 def _title(fig, title: str, note: str = "") -> None:
-    """The figure's title, with an optional second line of small print (assumptions)."""
-    fig.suptitle(title + (f"\n{note}" if note else ""), fontsize=11.5 if note else 12)
+    """The figure's title, with optional small print under it (assumptions), both wrapped to
+    the figure's width."""
+    size = 11.5 if note else 12
+    fig.suptitle(_wrap(title + (f"\n{note}" if note else ""), fig.get_figwidth() * 0.95, size),
+                 fontsize=size)
 
 
 def _better(lower: bool) -> str:
@@ -546,8 +558,10 @@ def heatmaps(rows: Sequence[str], cols: Sequence[str], panels: Sequence[Mapping]
     from matplotlib.colors import LogNorm, Normalize
 
     plt = _pyplot()
-    fig, axes = plt.subplots(len(panels), 1, figsize=(3.5 + 1.25 * len(cols),
-                                                      (1.6 + 0.4 * len(rows)) * len(panels)),
+    # At least 8.5 x 3.4 inches a panel: room for its title and its colour bar's label.
+    width = max(8.5, 3.5 + 1.25 * len(cols))
+    fig, axes = plt.subplots(len(panels), 1, figsize=(width, max(3.4, 1.6 + 0.4 * len(rows))
+                                                      * len(panels)),
                              squeeze=False, constrained_layout=True)
     for ax, panel in zip(axes.flat, panels, strict=True):
         values = np.asarray(panel["values"], dtype=float)
@@ -570,8 +584,10 @@ def heatmaps(rows: Sequence[str], cols: Sequence[str], panels: Sequence[Mapping]
         ax.set_xticks(np.arange(len(cols)), cols, rotation=30, ha="right", fontsize=8)
         ax.set_yticks(np.arange(len(rows)), rows, fontsize=8)
         better = _better(bool(panel.get("lower_better")))
-        ax.set_title(f"{panel['title']} ({better})", fontsize=10)
-        bar = fig.colorbar(image, ax=ax, shrink=0.85, label=panel.get("label", ""))
+        ax.set_title(_wrap(f"{panel['title']} ({better})", width * 0.7, 10), fontsize=10)
+        bar = fig.colorbar(image, ax=ax, shrink=0.85)
+        bar.set_label(_wrap(panel.get("label", ""), 0.85 * ax.figure.get_figheight()
+                            / len(panels), 10), fontsize=10)
         if isinstance(norm, LogNorm):
             _plain_log_ticks(bar.ax.yaxis)
     _title(fig, title, note)

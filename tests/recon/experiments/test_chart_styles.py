@@ -76,3 +76,35 @@ def test_labels_are_anchored_on_their_own_markers():
             labelled += 1
     assert labelled >= 2
     charts._pyplot().close(fig)
+
+
+def _texts_outside(fig) -> list[str]:
+    """The visible texts of ``fig`` (titles, labels, colour-bar labels) not wholly inside it."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    box = fig.bbox
+    from matplotlib.text import Text
+
+    texts = [t for t in fig.findobj(Text) if t.get_visible() and t.get_text()]
+    out = []
+    for t in texts:
+        e = t.get_window_extent(renderer)
+        if e.x0 < box.x0 - 1 or e.x1 > box.x1 + 1 or e.y0 < box.y0 - 1 or e.y1 > box.y1 + 1:
+            out.append(t.get_text())
+    return out
+
+
+def test_a_narrow_heatmap_shows_its_titles_and_colour_bars_whole(tmp_path, monkeypatch):
+    drawn = []
+    monkeypatch.setattr(charts, "_save", lambda fig, path: drawn.append(fig))
+    values = np.array([[0.02, 1.5], [0.3, np.nan], [0.9, 0.05]])
+    charts.heatmaps(["plane", "planes", "poisson"], ["rso-a-stochastic", "asteroid-none"], [
+        {"title": "Chamfer distance [m]; colour: ratio to the condition's best",
+         "values": values, "colour": values / np.nanmin(values, axis=0),
+         "label": "Chamfer / best Chamfer of the condition", "lower_better": True, "log": True},
+        {"title": "F-score at τ", "values": 1 - values, "label": "F-score"}],
+        tmp_path / "h.png", title="Best run of each method per condition (x: failed)",
+        note="rso-a: 1.2x1.2 deg cross LRF; asteroid: 10x10 deg cross LRF; τ = 1 % of the "
+             "truth's bounding-box diagonal")
+    assert _texts_outside(drawn[0]) == []
+    charts._pyplot().close(drawn[0])
