@@ -50,6 +50,8 @@ METHOD_STYLES = {
 # Styles of methods not listed above (test methods), picked by a checksum of the name.
 EXTRA_MARKERS = ("d", "H", "1", "2", "3", "4")
 EXTRA_COLOURS = ("#843c39", "#637939", "#5254a3", "#ad494a", "#8ca252", "#7b4173")
+# The missed gentle edges of an edge picture (often tens of thousands): thin, light, faint.
+GENTLE_EDGE_STYLE = {"colors": "#f5a142", "linewidths": 0.25, "alpha": 0.3, "zorder": 1}
 # Points drawn per class in an edge picture (a seeded subsample beyond): 3D scatter cost grows
 # with the count, and 60,000 grey points already fill a 6-inch panel.
 MAX_DRAWN = 60_000
@@ -125,10 +127,10 @@ def _spans(lines, factor: float) -> bool:
 
 def _wrap(text: str, width_in: float, fontsize: float) -> str:
     """``text`` broken into lines that fit ``width_in`` inches at ``fontsize`` points (an
-    average character is about 0.55 em wide)."""
+    average character is about half an em wide)."""
     import textwrap
 
-    columns = max(20, int(width_in * 72 / (0.55 * fontsize)))
+    columns = max(20, int(width_in * 72 / (0.5 * fontsize)))
     return "\n".join(textwrap.fill(line, columns) for line in text.split("\n"))
 
 
@@ -455,12 +457,14 @@ def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_f
     missed_feature : (a, 2, 3) float64, metres
         Truth feature edges not reconstructed (black).
     missed_gentle : (b, 2, 3) float64, metres
-        Gentler truth edges not reconstructed: the unsampled triangulation (orange).
+        Gentler truth edges not reconstructed: the unsampled triangulation (faint orange,
+        behind the points).
     title, note : str
     seed : int
         Seed of the subsample drawn when a class has more than ``MAX_DRAWN`` points.
     views : sequence of (elevation, azimuth) degrees
     """
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import MaxNLocator
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
@@ -475,22 +479,25 @@ def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_f
         if len(index) > MAX_DRAWN:
             index = np.sort(rng.choice(index, MAX_DRAWN, replace=False))
         drawn[value] = (points[index], int((label == value).sum()))
-    lines = ((missed_gentle, "#ff9f1c", 0.5, "missed gentle truth edges"),
-             (missed_feature, "black", 1.3, "missed feature edges"))
-    fig = plt.figure(figsize=(12, 6.2), constrained_layout=True)
+    # Gentle edges are many (every unsampled triangle edge): thin and faint, behind the points,
+    # so they read as a shade over the blind spots; missed feature edges stand out in black.
+    lines = ((missed_gentle, GENTLE_EDGE_STYLE, "missed gentle truth edges"),
+             (missed_feature, {"colors": "black", "linewidths": 1.3, "zorder": 3},
+              "missed feature edges"))
+    fig = plt.figure(figsize=_edge_figure_size(lo, hi, len(views)), constrained_layout=True)
     for i, (elevation, azimuth) in enumerate(views):
         ax = fig.add_subplot(1, len(views), i + 1, projection="3d")
-        for segments, colour, width, text in lines:
+        ax.computed_zorder = False   # draw in the order given: gentle edges first
+        for segments, style, text in lines:
             segments = np.asarray(segments, dtype=float).reshape(-1, 2, 3)
             if len(segments):
-                ax.add_collection3d(Line3DCollection(
-                    segments, colors=colour, linewidths=width,
-                    label=f"{text} ({len(segments):,})"))
+                ax.add_collection3d(Line3DCollection(segments, label=f"{text} ({len(segments):,})",
+                                                     **style))
         for value, text, colour, size in classes:
             p, total = drawn[value]
             if total:
                 ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=size, c=colour, depthshade=False,
-                           linewidths=0, label=f"{text} ({total:,})")
+                           linewidths=0, label=f"{text} ({total:,})", zorder=2)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_zlim(lo[2], hi[2])
@@ -503,10 +510,24 @@ def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_f
             axis.set_label_text(f"{name} [m]")
         if i == 0:
             handles, texts = ax.get_legend_handles_labels()
-    fig.legend(handles, texts, loc="outside lower center", ncol=len(texts), fontsize=9,
-               markerscale=5, frameon=False)
+    legend = fig.legend(handles, texts, loc="outside lower center", ncol=len(texts),
+                        fontsize=9, markerscale=5, frameon=False)
+    for handle in legend.legend_handles:   # a faint, thin line is hard to see in a key
+        if isinstance(handle, Line2D):
+            handle.set_color(handle.get_color()[:3] if np.ndim(handle.get_color()) else
+                             handle.get_color())
+            handle.set_linewidth(max(handle.get_linewidth(), 2.0))
     _title(fig, title, note)
     return _save(fig, path)
+
+
+def _edge_figure_size(lo: np.ndarray, hi: np.ndarray, n_views: int) -> tuple[float, float]:
+    """Width and height [in] of an edge picture: each panel as wide as the body looks from the
+    side (its horizontal diagonal against its height), so a tall body leaves no empty band."""
+    extent = np.maximum(hi - lo, 1e-9 * (hi - lo).max())
+    ratio = float(np.clip(np.hypot(extent[0], extent[1]) / extent[2], 0.55, 1.6))
+    panel = 5.6
+    return n_views * panel * max(ratio, 0.75) + 0.6, panel + 1.1
 
 
 def bars(labels: Sequence[str], values: Mapping[str, Sequence[float]], path, *, title: str,
