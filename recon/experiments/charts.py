@@ -484,7 +484,8 @@ def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_f
     lines = ((missed_gentle, GENTLE_EDGE_STYLE, "missed gentle truth edges"),
              (missed_feature, {"colors": "black", "linewidths": 1.3, "zorder": 3},
               "missed feature edges"))
-    fig = plt.figure(figsize=_edge_figure_size(lo, hi, len(views)), constrained_layout=True)
+    size, zoom = _edge_figure_size(lo, hi, len(views))
+    fig = plt.figure(figsize=size, constrained_layout=True)
     for i, (elevation, azimuth) in enumerate(views):
         ax = fig.add_subplot(1, len(views), i + 1, projection="3d")
         ax.computed_zorder = False   # draw in the order given: gentle edges first
@@ -501,7 +502,7 @@ def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_f
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_zlim(lo[2], hi[2])
-        ax.set_box_aspect(np.maximum(hi - lo, 1e-9 * (hi - lo).max()), zoom=0.9)
+        ax.set_box_aspect(np.maximum(hi - lo, 1e-9 * (hi - lo).max()), zoom=zoom)
         ax.view_init(elev=elevation, azim=azimuth)
         ax.set_title(f"view from elevation {elevation:g} deg, azimuth {azimuth:g} deg",
                      fontsize=9.5)
@@ -521,13 +522,29 @@ def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_f
     return _save(fig, path)
 
 
-def _edge_figure_size(lo: np.ndarray, hi: np.ndarray, n_views: int) -> tuple[float, float]:
-    """Width and height [in] of an edge picture: each panel as wide as the body looks from the
-    side (its horizontal diagonal against its height), so a tall body leaves no empty band."""
+def _edge_figure_size(lo: np.ndarray, hi: np.ndarray, n_views: int
+                      ) -> tuple[tuple[float, float], float]:
+    """Size of an edge picture and the zoom of its 3D panels.
+
+    Each panel is shaped as the body looks from the side (its horizontal diagonal against its
+    height), so neither a tall body nor a flat one leaves an empty band, with room above for the
+    title and below for the legend. matplotlib fits a 3D box into the panel's shorter side
+    whatever its shape; the zoom enlarges a long box into the longer side.
+
+    Returns
+    -------
+    (width, height) : inches
+    zoom : float
+        ``Axes3D.set_box_aspect``'s zoom.
+    """
     extent = np.maximum(hi - lo, 1e-9 * (hi - lo).max())
-    ratio = float(np.clip(np.hypot(extent[0], extent[1]) / extent[2], 0.55, 1.6))
-    panel = 5.6
-    return n_views * panel * max(ratio, 0.75) + 0.6, panel + 1.1
+    ratio = float(np.hypot(extent[0], extent[1]) / extent[2])
+    if ratio >= 1.0:   # wide: full-width panels, as tall as the body needs
+        width, height = 6.0, float(np.clip(6.0 / ratio, 3.0, 6.0))
+    else:              # tall: full-height panels, as wide as the body needs
+        width, height = float(np.clip(5.6 * ratio, 4.2, 5.6)), 5.6
+    zoom = 0.9 * float(np.sqrt(max(width, height) / min(width, height)))
+    return (n_views * width + 0.6, height + 1.6), zoom
 
 
 def bars(labels: Sequence[str], values: Mapping[str, Sequence[float]], path, *, title: str,
