@@ -876,49 +876,58 @@ def choice_vs_ranking(summaries: Sequence[Mapping], path, *, title: str) -> Path
     plt = _pyplot()
     fig, axes = plt.subplots(2, 1, figsize=(max(8.0, 0.75 * len(summaries) + 3), 8.5),
                              sharex=True, constrained_layout=True)
-    x = np.arange(len(summaries))
-    marked = {"f_ratio": False, "chamfer_ratio": False}
     for ax, key, ratio, lower in ((axes[0], FSCORE, "f_ratio", False),
                                   (axes[1], CHAMFER, "chamfer_ratio", True)):
         for i, s in enumerate(summaries):
-            values = np.array([r[key] for r in s["ranking"] if r.get(key) is not None], float)
-            if not values.size:
-                continue
-            best = values.min() if lower else values.max()
-            rel = values / best if best > 0 else np.full_like(values, np.nan)
-            ax.scatter(np.full(rel.size, i), rel, s=14, color="0.55", alpha=0.7, zorder=2,
-                       label="a run" if i == 0 else None)
-            ax.hlines(np.median(rel), i - 0.3, i + 0.3, color="0.2", lw=1.6, zorder=3,
-                      label="median run" if i == 0 else None)
-            v = s["verdict"]
-            if not v.get("failed"):
-                ax.scatter([i], [v[ratio]], marker="*", s=180, color="crimson",
-                           edgecolors="black", linewidths=0.6, zorder=4,
-                           label="auto's choice" if i == 0 else None)
-            seen = s.get("visibility") or {}
-            if seen.get("present"):
-                ax.scatter([i + 0.18], [seen[ratio]], marker="D", s=40, color="tab:blue",
-                           edgecolors="black", linewidths=0.5, zorder=4,
-                           label="visibility method (its best run)" if not marked[ratio]
-                           else None)
-                marked[ratio] = True
-        band = 0.95 if not lower else 1.10
-        ax.axhline(band, color="crimson", ls=":", lw=1.2,
-                   label="target: within 5% of the best F" if not lower else
-                   "target: within 10% of the best Chamfer")
-        if lower:
-            ax.set_yscale("log")
-            _plain_log_ticks(ax.yaxis)
-            ax.set_ylabel("Chamfer / best Chamfer")
-        else:
-            ax.set_ylabel("F-score / best F-score")
-        ax.set_title(f"{'Chamfer distance' if lower else 'F-score'} relative to the truth's best"
-                     f" run ({_better(lower)})", fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8, loc="lower left" if not lower else "upper left")
-    axes[1].set_xticks(x, [s["cloud"] for s in summaries], rotation=35, ha="right", fontsize=8)
+            _ranking_column(ax, i, s, key, ratio, lower)
+        _ranking_axis(ax, lower)
+    axes[1].set_xticks(np.arange(len(summaries)), [s["cloud"] for s in summaries], rotation=35,
+                       ha="right", fontsize=8)
     _title(fig, title)
     return _save(fig, path)
+
+
+def _ranking_column(ax, i: int, summary: Mapping, key: str, ratio: str, lower: bool) -> None:
+    """Cloud ``i`` of ``choice_vs_ranking``: its runs, their median, auto's choice and the
+    visibility method's best run, each relative to the best run; legend labels once."""
+    values = np.array([r[key] for r in summary["ranking"] if r.get(key) is not None], float)
+    if not values.size:
+        return
+    best = values.min() if lower else values.max()
+    rel = values / best if best > 0 else np.full_like(values, np.nan)
+    labelled = {text for text in ax.get_legend_handles_labels()[1]}
+
+    def once(text):
+        return None if text in labelled else text
+
+    ax.scatter(np.full(rel.size, i), rel, s=14, color="0.55", alpha=0.7, zorder=2,
+               label=once("a run"))
+    ax.hlines(np.median(rel), i - 0.3, i + 0.3, color="0.2", lw=1.6, zorder=3,
+              label=once("median run"))
+    verdict = summary["verdict"]
+    if not verdict.get("failed"):
+        ax.scatter([i], [verdict[ratio]], marker="*", s=180, color="crimson",
+                   edgecolors="black", linewidths=0.6, zorder=4, label=once("auto's choice"))
+    seen = summary.get("visibility") or {}
+    if seen.get("present"):
+        ax.scatter([i + 0.18], [seen[ratio]], marker="D", s=40, color="tab:blue",
+                   edgecolors="black", linewidths=0.5, zorder=4,
+                   label=once("visibility method (its best run)"))
+
+
+def _ranking_axis(ax, lower: bool) -> None:
+    """The target band, scale, labels and legend of one ``choice_vs_ranking`` panel."""
+    ax.axhline(1.10 if lower else 0.95, color="crimson", ls=":", lw=1.2,
+               label="target: within 10% of the best Chamfer" if lower else
+               "target: within 5% of the best F")
+    if lower:
+        ax.set_yscale("log")
+        _plain_log_ticks(ax.yaxis)
+    ax.set_ylabel("Chamfer / best Chamfer" if lower else "F-score / best F-score")
+    ax.set_title(f"{'Chamfer distance' if lower else 'F-score'} relative to the truth's best"
+                 f" run ({_better(lower)})", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left" if lower else "lower left")
 
 
 def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path:

@@ -108,3 +108,19 @@ def test_a_narrow_heatmap_shows_its_titles_and_colour_bars_whole(tmp_path, monke
              "truth's bounding-box diagonal")
     assert _texts_outside(drawn[0]) == []
     charts._pyplot().close(drawn[0])
+
+
+def test_choice_vs_ranking_labels_each_mark_once(tmp_path, monkeypatch):
+    drawn = []
+    monkeypatch.setattr(charts, "_save", lambda fig, path: drawn.append(fig))
+    runs = [{CHAMFER: c, FSCORE: f} for c, f in ((0.1, 0.9), (0.2, 0.8), (0.4, 0.6))]
+    summaries = [
+        {"cloud": "first (auto failed)", "ranking": runs, "verdict": {"failed": True}},
+        {"cloud": "second", "ranking": runs, "verdict": {"f_ratio": 0.97, "chamfer_ratio": 1.2},
+         "visibility": {"present": True, "f_ratio": 0.9, "chamfer_ratio": 1.5}}]
+    charts.choice_vs_ranking(summaries, tmp_path / "c.png", title="auto against the ranking")
+    for ax in drawn[0].axes:
+        labels = ax.get_legend_handles_labels()[1]
+        assert len(labels) == len(set(labels)) == 5, labels
+        assert "auto's choice" in labels    # labelled though the first cloud has none
+    charts._pyplot().close(drawn[0])
