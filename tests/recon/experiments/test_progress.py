@@ -97,3 +97,26 @@ def test_watcher_counts_finished_cases_and_running_fractions(tmp_path, monkeypat
     assert sorted(p.name for p in tmp_path.iterdir()) == [progress._file(tmp_path, "c").name]
     progress.step(1, 2)   # outside ``reporting``: goes nowhere, no error
     assert len(list(tmp_path.iterdir())) == 1
+
+
+# ``study all`` over two (stand-in) studies: the overall bar counts them, naming the current one.
+ALL = """
+import sys, tempfile, time
+import cli.main
+cli.main.size_progress_bars()
+from recon.experiments import studies
+
+def fake(name, out_dir, **options):
+    time.sleep(0.3)
+    return {"title": name, "wall_time_s": 0.3, "n_cases": 1, "n_failed": 0, "claims": []}
+
+studies.run = fake
+studies.run_all(tempfile.mkdtemp(), size="tiny", scheduler="serial", only=["duration", "slew"])
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux pseudo-terminals")
+def test_study_all_has_an_overall_bar():
+    drawn = _on_zero_size_pty(ALL)
+    assert re.search(r"studies: +50%\|[^|]*\| 1/2 .*slew", drawn), drawn
+    assert re.search(r"studies: +100%\|[^|]*\| 2/2", drawn), drawn
