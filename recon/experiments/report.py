@@ -77,6 +77,8 @@ HEADERS = {
 }
 # Unit suffixes of keys, and how a header shows them.
 UNITS = (("_deg", "deg"), ("_mb", "MB"), ("_m", "m"), ("_s", "s"), ("_h", "h"))
+# Levels of tables within tables in the summary's further data.
+MAX_DEPTH = 3
 # Table rows of the summary's further data (a list longer than this is cut, saying so).
 MAX_DATA_ROWS = 60
 
@@ -342,7 +344,10 @@ def _value_text(value) -> str:
         return ", ".join(_value_text(v) for v in value)
     if isinstance(value, dict) and all(not isinstance(v, list | dict) for v in value.values()):
         return "; ".join(f"{header(k)}: {_value_text(v)}" for k, v in value.items())
-    return json.dumps(_rounded(value), ensure_ascii=False)
+    try:
+        return json.dumps(_rounded(value), ensure_ascii=False)
+    except RecursionError:
+        return "(nested too deeply to show; see the file)"
 
 
 def _rounded(value):
@@ -374,10 +379,11 @@ def _records_table(rows: list) -> str:
     return "".join(parts)
 
 
-def data_table(data: dict) -> str:
+def data_table(data: dict, depth: int = 0) -> str:
     """A JSON object as a readable table: a row per key with its value (numbers to
     ``TABLE_DIGITS`` significant digits); a list of objects or an object of objects becomes a
-    table of its own under the key's name."""
+    table of its own under the key's name, an object holding more a table in its cell (to
+    ``MAX_DEPTH`` levels; deeper, compact JSON)."""
     simple, nested = [], []
     for key, value in data.items():
         if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
@@ -386,8 +392,11 @@ def data_table(data: dict) -> str:
                                                         for v in value.values()):
             nested.append((key, _records_table([{"": k, **v} for k, v in value.items()])))
         else:
-            simple.append(f"<tr><th title=\"{_e(key)}\">{_e(header(key))}</th>"
-                          f"{_cell(value)}</tr>")
+            cell = (f"<td>{data_table(value, depth + 1)}</td>" if depth < MAX_DEPTH
+                    and isinstance(value, dict)
+                    and any(isinstance(v, dict | list) for v in value.values())
+                    else _cell(value))
+            simple.append(f"<tr><th title=\"{_e(key)}\">{_e(header(key))}</th>{cell}</tr>")
     parts = [f"<table>{''.join(simple)}</table>"] if simple else []
     parts += [f"<p><b>{_e(header(key))}</b></p>{table}" for key, table in nested]
     return "".join(parts)
@@ -485,11 +494,11 @@ def compare_section(directory: Path, *, level: int = 2, heading: bool = True) ->
     parts = [f'<h{level} id="{_anchor(directory.name)}">Method comparison: '
              f"{_e(directory.name)}</h{level}>"][:int(heading)]
     results = read_json(directory, "results.json")
-    for metric in ("chamfer", "fscore"):
+    for metric, name in (("chamfer", "Chamfer distance"), ("fscore", "F-score")):
         front = _field(results, f"pareto_{metric}", (list, dict), [],
                        directory / "results.json")
         if front:
-            parts.append(f"<p><b>Pareto front (time against {metric}):</b> " + ", ".join(
+            parts.append(f"<p><b>Pareto front (time against {name}):</b> " + ", ".join(
                 f"{_e(r.get('label'))} ({_seconds(r.get('wall_time_s'), '.2g')} s)"
                 for r in front) + "</p>")
     for png in _charts(directory):

@@ -123,3 +123,17 @@ def test_no_tracker_numbers_in_user_facing_text():
             if pattern.search(line):
                 found.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()}")
     assert not found, "\n".join(found)
+
+
+def test_deeply_nested_summary_data_is_one_line_not_a_traceback(tmp_path):
+    study = _study(tmp_path / "quick", "quick")
+    summary = json.loads((study / "summary.json").read_text())
+    deep = 0.123456
+    for _ in range(470):   # 940 levels: Python's parser reads it, a recursive walk may not
+        deep = {"a": [deep]}
+    summary["nested"] = {"x": {"y": {"z": {"w": {"v": 1.23456}}}}}
+    summary["deep"] = deep
+    (study / "summary.json").write_text(json.dumps(summary))
+    page = render(study)
+    assert "(nested too deeply to show; see the file)" in page
+    assert "{&quot;v&quot;: 1.235}" in page   # tables three levels down, then compact JSON
