@@ -4,6 +4,7 @@ on a pseudo-terminal of 0 x 0 too (where tqdm alone draws nothing)."""
 from __future__ import annotations
 
 import fcntl
+import itertools
 import os
 import pty
 import re
@@ -120,3 +121,14 @@ def test_study_all_has_an_overall_bar():
     drawn = _on_zero_size_pty(ALL)
     assert re.search(r"studies: +50%\|[^|]*\| 1/2 .*slew", drawn), drawn
     assert re.search(r"studies: +100%\|[^|]*\| 2/2", drawn), drawn
+
+
+def test_simulate_reports_its_shot_blocks_to_a_callable(tmp_path):
+    import sim
+
+    scene = sim.load_scene("asteroid-lrf", ["time.duration=200", "target.subdivisions=2"])
+    calls = []
+    sim.simulate(scene, tmp_path / "run.h5", seed=0, progress=lambda done, total:
+                 calls.append((done, total)))
+    assert calls and calls[-1] == (scene.n_shots, scene.n_shots)
+    assert all(b[0] > a[0] for a, b in itertools.pairwise(calls))
