@@ -657,9 +657,10 @@ def method_style(name: str) -> dict:
     return {"marker": marker, "color": colour}
 
 
-# Offsets of the Pareto-front labels from their points, in points, taken in turn so that
-# neighbouring labels go to different sides; a thin line joins each label to its marker.
-LABEL_OFFSETS = ((14, 14), (14, -18), (-14, 16), (-14, -18))
+# Offsets of the Pareto-front labels from their points, in points, tried in turn until the label
+# covers no other label or marker; a thin line joins each label to its marker.
+LABEL_OFFSETS = ((14, 14), (14, -18), (-14, 16), (-14, -18), (30, 34), (30, -38), (-30, 36),
+                 (-30, -38), (0, 48), (0, -50))
 
 
 def speed_accuracy(records: list[dict], path, *, title: str = "") -> Path:
@@ -686,20 +687,24 @@ def speed_accuracy_figure(records: list[dict], *, title: str = ""):
     ok = [r for r in records if r.get("status") == "ok" and r.get(CHAMFER) is not None
           and r.get("wall_time_s")]
     fig, axes = plt.subplots(1, 2, figsize=(14, 5.6), constrained_layout=True)
+    fronts = []
     for ax, metric, minimize, ylabel in (
             (axes[0], CHAMFER, True, "Chamfer distance [m] (lower is better)"),
             (axes[1], FSCORE, False, "F-score (higher is better)")):
         runs = [r for r in ok if r.get(metric) is not None]
         _method_markers(ax, runs, metric)
-        _pareto_labels(ax, runs, metric, minimize)
+        fronts.append((ax, runs, _pareto_front(ax, runs, metric, minimize), metric))
         _speed_axes(ax, runs, metric, ylabel)
     if ok:
         _shared_legend(fig, axes, ncol=1, loc="outside right upper")
+    fig.suptitle(title or "speed against accuracy", fontsize=11)
+    fig.draw_without_rendering()   # the layout, so that labels can be placed apart
+    for ax, runs, front, metric in fronts:
+        _pareto_labels(ax, runs, front, metric)
     failed = [r for r in records if r.get("status") != "ok"]
     if failed:
         text = "failed: " + "; ".join(f"{r['label']} ({r.get('failure')})" for r in failed)
         fig.text(0.01, 0.005, text[:260], fontsize=7, color="firebrick", va="bottom")
-    fig.suptitle(title or "speed against accuracy", fontsize=11)
     return fig
 
 
@@ -712,25 +717,56 @@ def _method_markers(ax, runs: list[dict], metric: str) -> None:
                    **method_style(name))
 
 
-def _pareto_labels(ax, runs: list[dict], metric: str, minimize: bool) -> None:
-    """The Pareto front of ``runs`` as a dashed step line, each of its runs labelled: the
-    label's anchor is the run's own point, joined to the text by a thin line."""
+def _pareto_front(ax, runs: list[dict], metric: str, minimize: bool) -> list[int]:
+    """Draw the Pareto front of ``runs`` as a dashed step line; return its runs' indices."""
     if not runs:
-        return
+        return []
     t = np.array([r["wall_time_s"] for r in runs], dtype=float)
     v = np.array([r[metric] for r in runs], dtype=float)
     front = pareto_front(t, v, minimize=minimize)
     ax.step(t[front], v[front], where="post", color="0.3", lw=1.2, ls="--", zorder=2,
             label="Pareto front")
-    for j, i in enumerate(front):
-        ax.annotate(runs[i]["label"], (t[i], v[i]), textcoords="offset points",
-                    xytext=LABEL_OFFSETS[j % len(LABEL_OFFSETS)], fontsize=7.5, color="0.15",
-                    ha="left" if LABEL_OFFSETS[j % len(LABEL_OFFSETS)][0] > 0 else "right",
-                    va="center", zorder=5,
-                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none",
-                          "alpha": 0.75},
-                    arrowprops={"arrowstyle": "-", "color": "0.35", "lw": 0.7,
-                                "shrinkA": 0, "shrinkB": 4})
+    return [int(i) for i in front]
+
+
+def _pareto_labels(ax, runs: list[dict], front: list[int], metric: str) -> None:
+    """Label each run of the Pareto front: the label's anchor is the run's own point, joined to
+    the text by a thin line; the text goes to the first of ``LABEL_OFFSETS`` where it stays
+    inside the panel and covers no label placed before and no marker (the figure's layout must
+    be drawn)."""
+    from matplotlib.text import Text
+
+    renderer = ax.figure.canvas.get_renderer()
+    markers = np.concatenate([c.get_offset_transform().transform(c.get_offsets())
+                              for c in ax.collections] or [np.empty((0, 2))])
+    taken = []
+    for i in front:
+        point = (runs[i]["wall_time_s"], runs[i][metric])
+        for offset in LABEL_OFFSETS:
+            label = ax.annotate(
+                runs[i]["label"], point, textcoords="offset points", xytext=offset,
+                fontsize=7.5, color="0.15", ha="left" if offset[0] > 0 else "right",
+                va="center", zorder=5,
+                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.75},
+                arrowprops={"arrowstyle": "-", "color": "0.35", "lw": 0.7, "shrinkA": 0,
+                            "shrinkB": 4})
+            label.set_in_layout(False)   # the layout stays as the placement saw it
+            label.update_positions(renderer)
+            box = Text.get_window_extent(label, renderer).padded(2)   # the text, not its line
+            inside = (box.x0 >= ax.bbox.x0 and box.x1 <= ax.bbox.x1 and box.y0 >= ax.bbox.y0
+                      and box.y1 <= ax.bbox.y1)
+            if (inside and not _covers(box, taken, markers)) or offset == LABEL_OFFSETS[-1]:
+                break
+            label.remove()
+        taken.append(box)
+
+
+def _covers(box, boxes: list, points: np.ndarray, radius: float = 6.0) -> bool:
+    """Whether display box ``box`` overlaps any of ``boxes`` or comes within ``radius``
+    (pixels: a marker's size) of any of ``points``."""
+    inside = ((points[:, 0] >= box.x0 - radius) & (points[:, 0] <= box.x1 + radius)
+              & (points[:, 1] >= box.y0 - radius) & (points[:, 1] <= box.y1 + radius))
+    return bool(inside.any()) or any(box.overlaps(other) for other in boxes)
 
 
 def _speed_axes(ax, runs: list[dict], metric: str, ylabel: str) -> None:
