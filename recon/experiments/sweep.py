@@ -5,7 +5,8 @@ A sweep is one function applied to many cases (``{key: keyword arguments}``) plu
 object per line, appended and flushed as each case finishes, so an interrupted sweep keeps what it
 finished; ``resume=True`` skips the keys already there. A ``sweep.json`` beside it records the
 sweep's fingerprint (input and settings); resuming with a different one is refused, so results
-of different inputs never mix.
+of different inputs never mix. The progress bar counts finished cases plus the fractions the
+running ones report (``recon.experiments.progress``) and redraws every second.
 
 Schedulers
 ----------
