@@ -10,7 +10,7 @@ writes into the directory ``output``:
   variation) and ``drop`` (its fall when the point leaves its neighbourhood);
 - ``edges.png``: two opposite views of the cloud, detected edge points in blue, false ones in
   red, the truth's missed feature edges in black and its missed gentler edges (the unsampled
-  triangulation: blind spots) in orange;
+  triangulation: blind spots) as a faint orange shade behind the points;
 - ``edges.json``: the edge report's scalars and what was written.
 
 Every file appears only once complete (written under a temporary name and renamed), so an

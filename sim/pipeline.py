@@ -446,9 +446,10 @@ def simulate(scene: Scene, path, *, seed: int, progress: bool | None = None,
         Destination ``.h5``; written under a temporary name and moved into place when complete.
     seed : int, >= 0
         Seed of every error model; the same seed gives the same datasets.
-    progress : bool or None
+    progress : bool, None or callable
         Show a progress bar (None: only on a terminal, and only once the run has lasted
-        ``PROGRESS_DELAY_S``).
+        ``PROGRESS_DELAY_S``); a callable is called as ``progress(shots_done, shots_total)``
+        after each block of shots instead (no bar).
     backend : {"embree", "open3d"}
         Ray-casting backend (sim/raycast.py).
     workers : int, optional
@@ -493,9 +494,11 @@ def _simulate(plan: Plan, path, *, progress, backend, workers, live, compression
               start) -> dict:
     """:func:`simulate` once its plan is made (``start``: ``perf_counter`` at its start)."""
     scene, seed = plan.scene, plan.seed
-    strikes = rays = 0
+    strikes = rays = shots = 0
+    report = progress if callable(progress) else None
     bar = tqdm(total=scene.n_shots, unit="shot", desc=f"simulate {scene.name}",
-               delay=PROGRESS_DELAY_S, disable=None if progress is None else not progress)
+               delay=PROGRESS_DELAY_S,
+               disable=None if progress is None else report is not None or not progress)
     with bar, StrikeLogWriter(path, sensor=sensor_info(plan), target=scene.target,
                               scene=scene.to_toml(), seed=seed,
                               truth_mesh=(scene.vertices, scene.faces),
@@ -518,6 +521,9 @@ def _simulate(plan: Plan, path, *, progress, backend, workers, live, compression
             strikes += len(chunk.shot)
             rays += chunk.rays
             bar.update(len(chunk.time))
+            shots += len(chunk.time)
+            if report is not None:
+                report(shots, scene.n_shots)
     wall = time.perf_counter() - start
     change = plan.orbit.maneuver_time
     return {"path": str(path), "scene": scene.name, "target": scene.target,

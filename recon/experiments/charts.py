@@ -37,6 +37,21 @@ OUTCOME_COLOURS = {"ok": "#4daf4a", "timeout": "#984ea3", "crash": "#e41a1c",
                    "memory": "#ff7f00", "error": "#377eb8", "empty": "#a65628",
                    "degenerate": "#f781bf", "score": "#999999", "task": "#333333",
                    "collapse": "#ffd92f"}
+# Marker and colour of each surface method, the same in every chart whatever its rank (a reader
+# learns them once); plane and planes, poisson and screened-poisson well apart.
+METHOD_STYLES = {
+    "convex-hull": ("o", "#7f7f7f"), "ellipsoid": ("s", "#bcbd22"),
+    "planes": ("D", "#2ca02c"), "plane": ("v", "#d62728"),
+    "poisson": ("^", "#1f77b4"), "screened-poisson": ("<", "#17becf"),
+    "ball-pivoting": (">", "#ff7f0e"), "ball-pivoting-meshlab": ("P", "#8c564b"),
+    "alpha-shape": ("X", "#9467bd"), "rimls": ("*", "#e377c2"), "apss": ("h", "#393b79"),
+    "delaunay-balls": ("p", "#111111"), "visibility": ("8", "#e7ba52"),
+}
+# Styles of methods not listed above (test methods), picked by a checksum of the name.
+EXTRA_MARKERS = ("d", "H", "1", "2", "3", "4")
+EXTRA_COLOURS = ("#843c39", "#637939", "#5254a3", "#ad494a", "#8ca252", "#7b4173")
+# The missed gentle edges of an edge picture (often tens of thousands): thin, light, faint.
+GENTLE_EDGE_STYLE = {"colors": "#f5a142", "linewidths": 0.25, "alpha": 0.3, "zorder": 1}
 # Points drawn per class in an edge picture (a seeded subsample beyond): 3D scatter cost grows
 # with the count, and 60,000 grey points already fill a 6-inch panel.
 MAX_DRAWN = 60_000
@@ -71,9 +86,14 @@ class ChartError(ReconError, OSError):
 
 def _save(fig, path) -> Path:
     """Write ``fig`` to ``path`` atomically: an interrupted or failed write (a full disk)
-    leaves the previous chart as it was."""
+    leaves the previous chart as it was. The PNG carries the chart's title (its ``Title``
+    text chunk), which ``recon report`` shows as the picture's alt text."""
+    title = fig.get_suptitle() or next((ax.get_title() for ax in fig.axes if ax.get_title()),
+                                       "")
+    metadata = {"Title": " ".join(title.split())} if title else {}
     try:
-        return write_atomically(path, lambda tmp: fig.savefig(tmp, dpi=DPI), error=ChartError)
+        return write_atomically(path, lambda tmp: fig.savefig(tmp, dpi=DPI, metadata=metadata),
+                                error=ChartError)
     finally:
         _pyplot().close(fig)
 
@@ -105,9 +125,21 @@ def _spans(lines, factor: float) -> bool:
     return bool(y.size) and y.max() > factor * y.min()
 
 
+def _wrap(text: str, width_in: float, fontsize: float) -> str:
+    """``text`` broken into lines that fit ``width_in`` inches at ``fontsize`` points (an
+    average character is about half an em wide)."""
+    import textwrap
+
+    columns = max(20, int(width_in * 72 / (0.5 * fontsize)))
+    return "\n".join(textwrap.fill(line, columns) for line in text.split("\n"))
+
+
 def _title(fig, title: str, note: str = "") -> None:
-    """The figure's title, with an optional second line of small print (assumptions)."""
-    fig.suptitle(title + (f"\n{note}" if note else ""), fontsize=11.5 if note else 12)
+    """The figure's title, with optional small print under it (assumptions), both wrapped to
+    the figure's width."""
+    size = 11.5 if note else 12
+    fig.suptitle(_wrap(title + (f"\n{note}" if note else ""), fig.get_figwidth() * 0.95, size),
+                 fontsize=size)
 
 
 def _better(lower: bool) -> str:
@@ -229,16 +261,16 @@ def _metric_axis(ax, curves: Sequence[Mapping], key: str, label: str, lower: boo
     ax.grid(True, which="both", alpha=0.3)
 
 
-def _shared_legend(fig, axes, *, ncol: int = 4) -> None:
-    """One legend below the panels with every label of ``axes`` once."""
+def _shared_legend(fig, axes, *, ncol: int = 4, loc: str = "outside lower center") -> None:
+    """One legend (below the panels by default) with every label of ``axes`` once."""
     handles, labels = [], []
     for ax in axes:
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), ncol),
-               fontsize=8.5, frameon=False)
+    fig.legend(handles, labels, loc=loc, ncol=min(len(labels), ncol), fontsize=8.5,
+               frameon=False)
 
 
 def grouped_bars(groups: Sequence[str], scenarios: Sequence[str], values: Mapping, path, *,
@@ -425,12 +457,14 @@ def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_f
     missed_feature : (a, 2, 3) float64, metres
         Truth feature edges not reconstructed (black).
     missed_gentle : (b, 2, 3) float64, metres
-        Gentler truth edges not reconstructed: the unsampled triangulation (orange).
+        Gentler truth edges not reconstructed: the unsampled triangulation (faint orange,
+        behind the points).
     title, note : str
     seed : int
         Seed of the subsample drawn when a class has more than ``MAX_DRAWN`` points.
     views : sequence of (elevation, azimuth) degrees
     """
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import MaxNLocator
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
@@ -445,26 +479,30 @@ def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_f
         if len(index) > MAX_DRAWN:
             index = np.sort(rng.choice(index, MAX_DRAWN, replace=False))
         drawn[value] = (points[index], int((label == value).sum()))
-    lines = ((missed_gentle, "#ff9f1c", 0.5, "missed gentle truth edges"),
-             (missed_feature, "black", 1.3, "missed feature edges"))
-    fig = plt.figure(figsize=(12, 6.2), constrained_layout=True)
+    # Gentle edges are many (every unsampled triangle edge): thin and faint, behind the points,
+    # so they read as a shade over the blind spots; missed feature edges stand out in black.
+    lines = ((missed_gentle, GENTLE_EDGE_STYLE, "missed gentle truth edges"),
+             (missed_feature, {"colors": "black", "linewidths": 1.3, "zorder": 3},
+              "missed feature edges"))
+    size, zoom = _edge_figure_size(lo, hi, len(views))
+    fig = plt.figure(figsize=size, constrained_layout=True)
     for i, (elevation, azimuth) in enumerate(views):
         ax = fig.add_subplot(1, len(views), i + 1, projection="3d")
-        for segments, colour, width, text in lines:
+        ax.computed_zorder = False   # draw in the order given: gentle edges first
+        for segments, style, text in lines:
             segments = np.asarray(segments, dtype=float).reshape(-1, 2, 3)
             if len(segments):
-                ax.add_collection3d(Line3DCollection(
-                    segments, colors=colour, linewidths=width,
-                    label=f"{text} ({len(segments):,})"))
+                ax.add_collection3d(Line3DCollection(segments, label=f"{text} ({len(segments):,})",
+                                                     **style))
         for value, text, colour, size in classes:
             p, total = drawn[value]
             if total:
                 ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=size, c=colour, depthshade=False,
-                           linewidths=0, label=f"{text} ({total:,})")
+                           linewidths=0, label=f"{text} ({total:,})", zorder=2)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_zlim(lo[2], hi[2])
-        ax.set_box_aspect(np.maximum(hi - lo, 1e-9 * (hi - lo).max()), zoom=0.9)
+        ax.set_box_aspect(np.maximum(hi - lo, 1e-9 * (hi - lo).max()), zoom=zoom)
         ax.view_init(elev=elevation, azim=azimuth)
         ax.set_title(f"view from elevation {elevation:g} deg, azimuth {azimuth:g} deg",
                      fontsize=9.5)
@@ -473,10 +511,40 @@ def edge_points(points: np.ndarray, label: np.ndarray, path, *, bounds, missed_f
             axis.set_label_text(f"{name} [m]")
         if i == 0:
             handles, texts = ax.get_legend_handles_labels()
-    fig.legend(handles, texts, loc="outside lower center", ncol=len(texts), fontsize=9,
-               markerscale=5, frameon=False)
+    legend = fig.legend(handles, texts, loc="outside lower center", ncol=len(texts),
+                        fontsize=9, markerscale=5, frameon=False)
+    for handle in legend.legend_handles:   # a faint, thin line is hard to see in a key
+        if isinstance(handle, Line2D):
+            handle.set_color(handle.get_color()[:3] if np.ndim(handle.get_color()) else
+                             handle.get_color())
+            handle.set_linewidth(max(handle.get_linewidth(), 2.0))
     _title(fig, title, note)
     return _save(fig, path)
+
+
+def _edge_figure_size(lo: np.ndarray, hi: np.ndarray, n_views: int
+                      ) -> tuple[tuple[float, float], float]:
+    """Size of an edge picture and the zoom of its 3D panels.
+
+    Each panel is shaped as the body looks from the side (its horizontal diagonal against its
+    height), so neither a tall body nor a flat one leaves an empty band, with room above for the
+    title and below for the legend. matplotlib fits a 3D box into the panel's shorter side
+    whatever its shape; the zoom enlarges a long box into the longer side.
+
+    Returns
+    -------
+    (width, height) : inches
+    zoom : float
+        ``Axes3D.set_box_aspect``'s zoom.
+    """
+    extent = np.maximum(hi - lo, 1e-9 * (hi - lo).max())
+    ratio = float(np.hypot(extent[0], extent[1]) / extent[2])
+    if ratio >= 1.0:   # wide: full-width panels, as tall as the body needs
+        width, height = 6.0, float(np.clip(6.0 / ratio, 3.0, 6.0))
+    else:              # tall: full-height panels, as wide as the body needs
+        width, height = float(np.clip(5.6 * ratio, 4.2, 5.6)), 5.6
+    zoom = 0.9 * float(np.sqrt(max(width, height) / min(width, height)))
+    return (n_views * width + 0.6, height + 1.6), zoom
 
 
 def bars(labels: Sequence[str], values: Mapping[str, Sequence[float]], path, *, title: str,
@@ -528,8 +596,10 @@ def heatmaps(rows: Sequence[str], cols: Sequence[str], panels: Sequence[Mapping]
     from matplotlib.colors import LogNorm, Normalize
 
     plt = _pyplot()
-    fig, axes = plt.subplots(len(panels), 1, figsize=(3.5 + 1.25 * len(cols),
-                                                      (1.6 + 0.4 * len(rows)) * len(panels)),
+    # At least 8.5 x 3.4 inches a panel: room for its title and its colour bar's label.
+    width = max(8.5, 3.5 + 1.25 * len(cols))
+    fig, axes = plt.subplots(len(panels), 1, figsize=(width, max(3.4, 1.6 + 0.4 * len(rows))
+                                                      * len(panels)),
                              squeeze=False, constrained_layout=True)
     for ax, panel in zip(axes.flat, panels, strict=True):
         values = np.asarray(panel["values"], dtype=float)
@@ -552,66 +622,171 @@ def heatmaps(rows: Sequence[str], cols: Sequence[str], panels: Sequence[Mapping]
         ax.set_xticks(np.arange(len(cols)), cols, rotation=30, ha="right", fontsize=8)
         ax.set_yticks(np.arange(len(rows)), rows, fontsize=8)
         better = _better(bool(panel.get("lower_better")))
-        ax.set_title(f"{panel['title']} ({better})", fontsize=10)
-        bar = fig.colorbar(image, ax=ax, shrink=0.85, label=panel.get("label", ""))
+        ax.set_title(_wrap(f"{panel['title']} ({better})", width * 0.7, 10), fontsize=10)
+        bar = fig.colorbar(image, ax=ax, shrink=0.85)
+        bar.set_label(_wrap(panel.get("label", ""), 0.85 * ax.figure.get_figheight()
+                            / len(panels), 10), fontsize=10)
         if isinstance(norm, LogNorm):
             _plain_log_ticks(bar.ax.yaxis)
     _title(fig, title, note)
     return _save(fig, path)
 
 
+def method_style(name: str) -> dict:
+    """The marker and colour of surface method ``name``, the same in every chart.
+
+    Parameters
+    ----------
+    name : str
+        A method name (``recon methods``); one not in ``METHOD_STYLES`` (a test method) gets a
+        fixed style from a checksum of its name.
+
+    Returns
+    -------
+    dict
+        ``marker`` and ``color``, matplotlib keyword arguments.
+    """
+    import zlib
+
+    if name in METHOD_STYLES:
+        marker, colour = METHOD_STYLES[name]
+    else:
+        code = zlib.crc32(name.encode("utf-8"))
+        marker = EXTRA_MARKERS[code % len(EXTRA_MARKERS)]
+        colour = EXTRA_COLOURS[(code // len(EXTRA_MARKERS)) % len(EXTRA_COLOURS)]
+    return {"marker": marker, "color": colour}
+
+
+# Offsets of the Pareto-front labels from their points, in points, tried in turn until the label
+# covers no other label or marker; a thin line joins each label to its marker.
+LABEL_OFFSETS = ((14, 14), (14, -18), (-14, 16), (-14, -18), (30, 34), (30, -38), (-30, 36),
+                 (-30, -38), (0, 48), (0, -50))
+
+
 def speed_accuracy(records: list[dict], path, *, title: str = "") -> Path:
-    """Write the speed-accuracy chart: time vs Chamfer and vs F-score, Pareto fronts labelled."""
+    """Write the speed-accuracy chart (``speed_accuracy_figure``) to ``path``."""
+    return _save(speed_accuracy_figure(records, title=title), path)
+
+
+def speed_accuracy_figure(records: list[dict], *, title: str = ""):
+    """Wall time against Chamfer distance (left) and F-score (right), one marker per run in
+    its method's style (``method_style``), the Pareto fronts dashed and their runs labelled, a
+    line joining each label to its own marker.
+
+    Parameters
+    ----------
+    records : list of dict
+        Runs of ``recon compare``: ``method``, ``label``, ``status``, ``wall_time_s`` [s],
+        ``chamfer_m`` [m], ``fscore`` and optionally ``failure``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     plt = _pyplot()
     ok = [r for r in records if r.get("status") == "ok" and r.get(CHAMFER) is not None
           and r.get("wall_time_s")]
-    names = list(dict.fromkeys(r["method"] for r in records))
-    markers = "osD^v<>PX*hp8"
-    colours = plt.get_cmap("tab10")
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.6), constrained_layout=True)
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5.6), constrained_layout=True)
+    fronts = []
     for ax, metric, minimize, ylabel in (
             (axes[0], CHAMFER, True, "Chamfer distance [m] (lower is better)"),
             (axes[1], FSCORE, False, "F-score (higher is better)")):
-        for i, name in enumerate(names):
-            runs = [r for r in ok if r["method"] == name and r.get(metric) is not None]
-            if runs:
-                ax.scatter([r["wall_time_s"] for r in runs], [r[metric] for r in runs],
-                           marker=markers[i % len(markers)], color=colours(i % 10), s=55,
-                           label=name, edgecolors="black", linewidths=0.5, zorder=3)
         runs = [r for r in ok if r.get(metric) is not None]
-        if runs:
-            t = np.array([r["wall_time_s"] for r in runs])
-            v = np.array([r[metric] for r in runs], dtype=float)
-            front = pareto_front(t, v, minimize=minimize)
-            ax.step(t[front], v[front], where="post", color="0.3", lw=1.2, ls="--", zorder=2,
-                    label="Pareto front")
-            for j, i in enumerate(front):
-                ax.annotate(runs[i]["label"], (t[i], v[i]), textcoords="offset points",
-                            xytext=(6, 8 if j % 2 == 0 else -12), fontsize=7.5, color="0.15")
-        if ok:
-            ax.set_xscale("log")
-            _plain_log_ticks(ax.xaxis)
-        if metric == CHAMFER and ok:
-            ax.set_yscale("log")
-            _plain_log_ticks(ax.yaxis)
-        elif runs:
-            ax.set_ylim(max(0.0, min(r[metric] for r in runs) - 0.05), 1.02)
-        if not ok:
-            ax.text(0.5, 0.5, "every run failed: nothing to place", ha="center", va="center",
-                    transform=ax.transAxes, color="firebrick")
-            ax.set_xticks([])
-            ax.set_yticks([])
-        ax.set_xlabel("wall time of the method [s] (log)")
-        ax.set_ylabel(ylabel)
-        ax.grid(True, which="both", alpha=0.3)
+        _method_markers(ax, runs, metric)
+        fronts.append((ax, runs, _pareto_front(ax, runs, metric, minimize), metric))
+        _speed_axes(ax, runs, metric, ylabel)
     if ok:
-        axes[1].legend(fontsize=8, loc="best", framealpha=0.85)
+        _shared_legend(fig, axes, ncol=1, loc="outside right upper")
+    fig.suptitle(title or "speed against accuracy", fontsize=11)
+    fig.draw_without_rendering()   # the layout, so that labels can be placed apart
+    for ax, runs, front, metric in fronts:
+        _pareto_labels(ax, runs, front, metric)
     failed = [r for r in records if r.get("status") != "ok"]
     if failed:
         text = "failed: " + "; ".join(f"{r['label']} ({r.get('failure')})" for r in failed)
         fig.text(0.01, 0.005, text[:260], fontsize=7, color="firebrick", va="bottom")
-    fig.suptitle(title or "speed against accuracy", fontsize=11)
-    return _save(fig, path)
+    return fig
+
+
+def _method_markers(ax, runs: list[dict], metric: str) -> None:
+    """One scatter per method, in its fixed style, labelled with the method's name."""
+    for name in dict.fromkeys(r["method"] for r in runs):
+        mine = [r for r in runs if r["method"] == name]
+        ax.scatter([r["wall_time_s"] for r in mine], [r[metric] for r in mine], s=55,
+                   label=name, edgecolors="black", linewidths=0.5, zorder=3,
+                   **method_style(name))
+
+
+def _pareto_front(ax, runs: list[dict], metric: str, minimize: bool) -> list[int]:
+    """Draw the Pareto front of ``runs`` as a dashed step line; return its runs' indices."""
+    if not runs:
+        return []
+    t = np.array([r["wall_time_s"] for r in runs], dtype=float)
+    v = np.array([r[metric] for r in runs], dtype=float)
+    front = pareto_front(t, v, minimize=minimize)
+    ax.step(t[front], v[front], where="post", color="0.3", lw=1.2, ls="--", zorder=2,
+            label="Pareto front")
+    return [int(i) for i in front]
+
+
+def _pareto_labels(ax, runs: list[dict], front: list[int], metric: str) -> None:
+    """Label each run of the Pareto front: the label's anchor is the run's own point, joined to
+    the text by a thin line; the text goes to the first of ``LABEL_OFFSETS`` where it stays
+    inside the panel and covers no label placed before and no marker (the figure's layout must
+    be drawn)."""
+    from matplotlib.text import Text
+
+    renderer = ax.figure.canvas.get_renderer()
+    markers = np.concatenate([c.get_offset_transform().transform(c.get_offsets())
+                              for c in ax.collections] or [np.empty((0, 2))])
+    taken = []
+    for i in front:
+        point = (runs[i]["wall_time_s"], runs[i][metric])
+        for offset in LABEL_OFFSETS:
+            label = ax.annotate(
+                runs[i]["label"], point, textcoords="offset points", xytext=offset,
+                fontsize=7.5, color="0.15", ha="left" if offset[0] > 0 else "right",
+                va="center", zorder=5,
+                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.75},
+                arrowprops={"arrowstyle": "-", "color": "0.35", "lw": 0.7, "shrinkA": 0,
+                            "shrinkB": 4})
+            label.set_in_layout(False)   # the layout stays as the placement saw it
+            label.update_positions(renderer)
+            box = Text.get_window_extent(label, renderer).padded(2)   # the text, not its line
+            inside = (box.x0 >= ax.bbox.x0 and box.x1 <= ax.bbox.x1 and box.y0 >= ax.bbox.y0
+                      and box.y1 <= ax.bbox.y1)
+            if (inside and not _covers(box, taken, markers)) or offset == LABEL_OFFSETS[-1]:
+                break
+            label.remove()
+        taken.append(box)
+
+
+def _covers(box, boxes: list, points: np.ndarray, radius: float = 6.0) -> bool:
+    """Whether display box ``box`` overlaps any of ``boxes`` or comes within ``radius``
+    (pixels: a marker's size) of any of ``points``."""
+    inside = ((points[:, 0] >= box.x0 - radius) & (points[:, 0] <= box.x1 + radius)
+              & (points[:, 1] >= box.y0 - radius) & (points[:, 1] <= box.y1 + radius))
+    return bool(inside.any()) or any(box.overlaps(other) for other in boxes)
+
+
+def _speed_axes(ax, runs: list[dict], metric: str, ylabel: str) -> None:
+    """Scales, limits and labels of one speed-accuracy panel (a note when nothing ran)."""
+    if runs:
+        ax.set_xscale("log")
+        _plain_log_ticks(ax.xaxis)
+        if metric == CHAMFER:
+            ax.set_yscale("log")
+            _plain_log_ticks(ax.yaxis)
+        else:
+            ax.set_ylim(max(0.0, min(r[metric] for r in runs) - 0.05), 1.02)
+    else:
+        ax.text(0.5, 0.5, "every run failed: nothing to place", ha="center", va="center",
+                transform=ax.transAxes, color="firebrick")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    ax.set_xlabel("wall time of the method [s] (log)")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, which="both", alpha=0.3)
 
 
 def _cells(records, noise, density, outliers, value):
@@ -737,49 +912,58 @@ def choice_vs_ranking(summaries: Sequence[Mapping], path, *, title: str) -> Path
     plt = _pyplot()
     fig, axes = plt.subplots(2, 1, figsize=(max(8.0, 0.75 * len(summaries) + 3), 8.5),
                              sharex=True, constrained_layout=True)
-    x = np.arange(len(summaries))
-    marked = {"f_ratio": False, "chamfer_ratio": False}
     for ax, key, ratio, lower in ((axes[0], FSCORE, "f_ratio", False),
                                   (axes[1], CHAMFER, "chamfer_ratio", True)):
         for i, s in enumerate(summaries):
-            values = np.array([r[key] for r in s["ranking"] if r.get(key) is not None], float)
-            if not values.size:
-                continue
-            best = values.min() if lower else values.max()
-            rel = values / best if best > 0 else np.full_like(values, np.nan)
-            ax.scatter(np.full(rel.size, i), rel, s=14, color="0.55", alpha=0.7, zorder=2,
-                       label="a run" if i == 0 else None)
-            ax.hlines(np.median(rel), i - 0.3, i + 0.3, color="0.2", lw=1.6, zorder=3,
-                      label="median run" if i == 0 else None)
-            v = s["verdict"]
-            if not v.get("failed"):
-                ax.scatter([i], [v[ratio]], marker="*", s=180, color="crimson",
-                           edgecolors="black", linewidths=0.6, zorder=4,
-                           label="auto's choice" if i == 0 else None)
-            seen = s.get("visibility") or {}
-            if seen.get("present"):
-                ax.scatter([i + 0.18], [seen[ratio]], marker="D", s=40, color="tab:blue",
-                           edgecolors="black", linewidths=0.5, zorder=4,
-                           label="visibility method (its best run)" if not marked[ratio]
-                           else None)
-                marked[ratio] = True
-        band = 0.95 if not lower else 1.10
-        ax.axhline(band, color="crimson", ls=":", lw=1.2,
-                   label="target: within 5% of the best F" if not lower else
-                   "target: within 10% of the best Chamfer")
-        if lower:
-            ax.set_yscale("log")
-            _plain_log_ticks(ax.yaxis)
-            ax.set_ylabel("Chamfer / best Chamfer")
-        else:
-            ax.set_ylabel("F-score / best F-score")
-        ax.set_title(f"{'Chamfer distance' if lower else 'F-score'} relative to the truth's best"
-                     f" run ({_better(lower)})", fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8, loc="lower left" if not lower else "upper left")
-    axes[1].set_xticks(x, [s["cloud"] for s in summaries], rotation=35, ha="right", fontsize=8)
+            _ranking_column(ax, i, s, key, ratio, lower)
+        _ranking_axis(ax, lower)
+    axes[1].set_xticks(np.arange(len(summaries)), [s["cloud"] for s in summaries], rotation=35,
+                       ha="right", fontsize=8)
     _title(fig, title)
     return _save(fig, path)
+
+
+def _ranking_column(ax, i: int, summary: Mapping, key: str, ratio: str, lower: bool) -> None:
+    """Cloud ``i`` of ``choice_vs_ranking``: its runs, their median, auto's choice and the
+    visibility method's best run, each relative to the best run; legend labels once."""
+    values = np.array([r[key] for r in summary["ranking"] if r.get(key) is not None], float)
+    if not values.size:
+        return
+    best = values.min() if lower else values.max()
+    rel = values / best if best > 0 else np.full_like(values, np.nan)
+    labelled = {text for text in ax.get_legend_handles_labels()[1]}
+
+    def once(text):
+        return None if text in labelled else text
+
+    ax.scatter(np.full(rel.size, i), rel, s=14, color="0.55", alpha=0.7, zorder=2,
+               label=once("a run"))
+    ax.hlines(np.median(rel), i - 0.3, i + 0.3, color="0.2", lw=1.6, zorder=3,
+              label=once("median run"))
+    verdict = summary["verdict"]
+    if not verdict.get("failed"):
+        ax.scatter([i], [verdict[ratio]], marker="*", s=180, color="crimson",
+                   edgecolors="black", linewidths=0.6, zorder=4, label=once("auto's choice"))
+    seen = summary.get("visibility") or {}
+    if seen.get("present"):
+        ax.scatter([i + 0.18], [seen[ratio]], marker="D", s=40, color="tab:blue",
+                   edgecolors="black", linewidths=0.5, zorder=4,
+                   label=once("visibility method (its best run)"))
+
+
+def _ranking_axis(ax, lower: bool) -> None:
+    """The target band, scale, labels and legend of one ``choice_vs_ranking`` panel."""
+    ax.axhline(1.10 if lower else 0.95, color="crimson", ls=":", lw=1.2,
+               label="target: within 10% of the best Chamfer" if lower else
+               "target: within 5% of the best F")
+    if lower:
+        ax.set_yscale("log")
+        _plain_log_ticks(ax.yaxis)
+    ax.set_ylabel("Chamfer / best Chamfer" if lower else "F-score / best F-score")
+    ax.set_title(f"{'Chamfer distance' if lower else 'F-score'} relative to the truth's best"
+                 f" run ({_better(lower)})", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left" if lower else "lower left")
 
 
 def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path:

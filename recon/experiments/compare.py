@@ -68,8 +68,11 @@ def run_case(*, run: Run, cloud: MethodInput, truth, timeout_s: float, memory_mb
 
     ``run`` goes to the isolated child as it is; the worker itself never looks the method up.
     """
+    from recon.experiments.progress import isolated_stage
+
     return run_isolated(run, cloud, truth=truth, score_options=score_options,
-                        timeout_s=timeout_s, memory_mb=memory_mb, threads=SWEEP_THREADS)
+                        timeout_s=timeout_s, memory_mb=memory_mb, threads=SWEEP_THREADS,
+                        on_wait=isolated_stage)
 
 
 def flatten(run: Run, result: dict, *, mesh_dir: Path | None) -> dict:

@@ -1,17 +1,23 @@
-"""``recon report``: one self-contained HTML page of a study, of all studies, or of a comparison.
+"""``recon report``: one self-contained HTML page of a study, of all studies, of a comparison or
+of a stability run.
 
-The page needs nothing but itself: charts are embedded as base64 ``data:`` URIs, the style is
-inline, links point only inside the page. It shows, per study directory (``recon study``), the
-paper's claims with our numbers and verdicts, the charts, the CSV tables and the rest of
-``summary.json``; for ``recon study all`` the index of studies first; for a ``recon compare``
-directory the ranked runs, the Pareto fronts and the speed-against-accuracy chart.
+The page needs nothing but itself: charts are embedded as base64 ``data:`` URIs (their alt text
+the chart's own title), the style is inline, links point only inside the page. It shows, per
+study directory (``recon study``), the paper's claims with our numbers and verdicts, the charts,
+the CSV tables and the rest of ``summary.json`` as tables (numbers to 4 significant digits,
+columns under readable headers); for ``recon study all`` the index of studies first; for a
+``recon compare`` directory the ranked runs, the Pareto fronts and the speed-against-accuracy
+chart; for a ``recon stability`` directory the failure rates, the maps and every cell.
+
+A reduced run (``--quick``) cannot refute a claim: its "not reproduced" verdicts read "not
+tested" on the page, with what the run found beside them.
 
 The directory may come from anyone: the report reads only inside it. Every file it reads
-(``summary.json``, ``index.json``, ``results.json``, the files ``summary.json`` lists, the
-charts beside them) is resolved and must lie under DIR: a listed name that is absolute, climbs
-with ``..`` or is a symbolic link leaving DIR is refused, as is a damaged file (JSON of the
-wrong shape, a CSV that is binary or not UTF-8, a chart that is not a PNG), with one line
-naming the file and what is wrong.
+(``summary.json``, ``index.json``, ``results.json``, ``stability.json``, the files
+``summary.json`` lists, the charts beside them) is resolved and must lie under DIR: a listed
+name that is absolute, climbs with ``..`` or is a symbolic link leaving DIR is refused, as is a
+damaged file (JSON of the wrong shape, a CSV that is binary or not UTF-8, a chart that is not a
+PNG), with one line naming the file and what is wrong.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ COMPARE_COLUMNS = ("label", "status", "failure", "wall_time_s", "peak_memory_mb"
                    "watertight", "chamfer_m", "fscore", "coverage", "edge_score", "reason")
 # summary.json keys shown elsewhere in a study's section (not repeated in "more data").
 _SHOWN = {"study", "title", "size", "claims", "files", "failures", "n_cases", "n_failed",
-          "wall_time_s"}
+          "wall_time_s", "case_wall_time_s"}
 VERDICT_COLOURS = {"reproduced": "#d9f2d9", "partly": "#fff2cc", "not reproduced": "#f8d7d7",
                    "not tested": "#e8e8e8"}
 STYLE = """
@@ -51,13 +57,59 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; }
 .scroll { overflow: auto; max-height: 32em; border: 1px solid #eee; }
 img { max-width: 100%; border: 1px solid #ddd; margin: 0.5em 0; }
 .meta { color: #555; font-size: 0.9em; }
-pre { background: #f7f7f7; padding: 0.6em; overflow: auto; font-size: 0.8em; max-height: 30em; }
 nav ul { columns: 2; }
 """
 
 
+# Column headers a reader knows, by key; other keys read as words with their unit in brackets
+# (``header``).
+HEADERS = {
+    "wall_time_s": "wall time [s]", "process_time_s": "CPU time [s]",
+    "load_time_s": "load time [s]", "score_time_s": "scoring time [s]",
+    "case_wall_time_s": "worker time [s]", "peak_memory_mb": "peak memory [MB]",
+    "n_faces": "faces", "n_points": "points", "n_cases": "cases", "n_failed": "failed",
+    "watertight": "watertight", "chamfer_m": "Chamfer distance [m]", "fscore": "F-score",
+    "edge_score": "edge score", "coverage": "coverage", "tau_m": "τ [m]",
+    "accuracy_mean_m": "accuracy, mean [m]", "completeness_mean_m": "completeness, mean [m]",
+    "hausdorff_m": "Hausdorff distance [m]", "noise_sigma3_m": "range noise, 3 sigma [m]",
+    "false_edge_rate": "false-edge rate", "missed_edge_rate": "missed-edge rate",
+    "feature_missed_rate": "feature edges missed", "n_edge_points": "edge points",
+}
+# Unit suffixes of keys, and how a header shows them.
+UNITS = (("_deg", "deg"), ("_mb", "MB"), ("_m", "m"), ("_s", "s"), ("_h", "h"))
+# Levels of tables within tables in the summary's further data.
+MAX_DEPTH = 3
+# Table rows of the summary's further data (a list longer than this is cut, saying so).
+MAX_DATA_ROWS = 60
+
+
+def header(key: str) -> str:
+    """A column header for ``key``: ``wall_time_s`` -> "wall time [s]"."""
+    if key in HEADERS:
+        return HEADERS[key]
+    words, unit = key, ""
+    for suffix, name in UNITS:
+        if key.endswith(suffix) and len(key) > len(suffix):
+            words, unit = key[: -len(suffix)], f" [{name}]"
+            break
+    if words.startswith("n_"):
+        words = "number of " + words[2:]
+    return words.replace("_", " ") + unit
+
+
+def verdict_shown(verdict, size) -> tuple[str, str]:
+    """The verdict the page shows and a note under it, by the page's rule: a reduced run
+    (``size`` not ``full``) cannot refute a claim, so its "not reproduced" reads "not tested"
+    (what it found in the note)."""
+    verdict = str(verdict)
+    if size != "full" and verdict == "not reproduced":
+        return "not tested", "reduced run: not reproduced at this size"
+    return verdict, ""
+
+
 class ReportError(ReconError, ValueError):
-    """The input is not a study or comparison directory, or the report cannot be written."""
+    """The input is not a study, comparison or stability directory, or the report cannot be
+    written."""
 
 
 # The first bytes of every PNG file (the PNG specification, section 5.2).
@@ -175,13 +227,33 @@ def _shown(value: str) -> str:
     return value if not math.isfinite(number) else f"{number:.{TABLE_DIGITS}g}"
 
 
+def png_title(raw: bytes) -> str:
+    """The ``Title`` text of a PNG file (recon's charts carry their title there), or "": a
+    ``tEXt`` (Latin-1) or uncompressed ``iTXt`` (UTF-8) chunk (PNG specification, 11.3.4)."""
+    at = len(PNG_SIGNATURE)
+    while at + 8 <= len(raw):
+        length = int.from_bytes(raw[at:at + 4], "big")
+        kind = raw[at + 4:at + 8]
+        keyword, _, text = raw[at + 8:at + 8 + length].partition(b"\x00")
+        if kind == b"tEXt" and keyword == b"Title":
+            return text.decode("latin-1").strip()
+        if kind == b"iTXt" and keyword == b"Title" and text[:1] == b"\x00":  # uncompressed
+            return text[2:].split(b"\x00", 2)[-1].decode("utf-8", "replace").strip()
+        if kind in (b"IDAT", b"IEND"):   # text chunks of interest come before the image data
+            return ""
+        at += 12 + length
+    return ""
+
+
 def image(path: Path, alt: str) -> str:
-    """An ``<img>`` with the PNG embedded as a data URI (refused unless it is a PNG)."""
+    """An ``<img>`` with the PNG embedded as a data URI (refused unless it is a PNG); its alt
+    text is the chart's own title when the file carries one, else ``alt``."""
     raw = _read_bytes(path)
     if not raw.startswith(PNG_SIGNATURE):
         raise ReportError(f"{path}: not a PNG image")
     data = base64.b64encode(raw).decode("ascii")
-    return f'<img alt="{_e(alt)}" src="data:image/png;base64,{data}">'
+    text = " ".join((png_title(raw) or alt).split())
+    return f'<img alt="{_e(text)}" src="data:image/png;base64,{data}">'
 
 
 def csv_table(path: Path, *, columns: tuple[str, ...] | None = None,
@@ -202,12 +274,13 @@ def csv_table(path: Path, *, columns: tuple[str, ...] | None = None,
         raise ReportError(f"{path}: not a readable CSV table ({exc})") from None
     if not rows:
         return f"<p class=meta>{_e(path.name)} is empty.</p>"
-    header, body = rows[0], rows[1:]
-    keep = list(range(len(header)))
+    names, body = rows[0], rows[1:]
+    keep = list(range(len(names)))
     if columns:
-        keep = [i for i, name in enumerate(header) if name in columns] or keep
+        keep = [i for i, name in enumerate(names) if name in columns] or keep
     parts = ["<div class=scroll><table><tr>"
-             + "".join(f"<th>{_e(header[i])}</th>" for i in keep) + "</tr>"]
+             + "".join(f"<th title=\"{_e(names[i])}\">{_e(header(names[i]))}</th>"
+                      for i in keep) + "</tr>"]
     for row in body[:max_rows]:
         cells = []
         for i in keep:
@@ -222,17 +295,20 @@ def csv_table(path: Path, *, columns: tuple[str, ...] | None = None,
     return "".join(parts)
 
 
-def claims_table(claims: list[dict]) -> str:
-    """The paper's claims with our numbers and the verdict, coloured by verdict."""
+def claims_table(claims: list[dict], size="full") -> str:
+    """The paper's claims with our numbers and the verdict (``verdict_shown``: by the run's
+    ``size``), coloured by verdict."""
     if not claims:
         return "<p class=meta>No claims checked.</p>"
     parts = ["<table><tr><th>figure</th><th>claim of the paper</th><th>paper</th>"
              "<th>ours</th><th>verdict</th><th>rule</th></tr>"]
     for c in claims:
-        colour = VERDICT_COLOURS.get(str(c.get("verdict")), "#fff")
+        verdict, note = verdict_shown(c.get("verdict"), size)
+        colour = VERDICT_COLOURS.get(verdict, "#fff")
+        note = f"<br><span class=meta>{_e(note)}</span>" if note else ""
         parts.append(f"<tr><td>{_e(c.get('figure'))}</td><td>{_e(c.get('claim'))}</td>"
                      f"<td>{_e(c.get('paper'))}</td><td>{_e(c.get('ours'))}</td>"
-                     f"<td style=\"background:{colour}\"><b>{_e(c.get('verdict'))}</b></td>"
+                     f"<td style=\"background:{colour}\"><b>{_e(verdict)}</b>{note}</td>"
                      f"<td class=meta>{_e(c.get('rule'))}</td></tr>")
     parts.append("</table>")
     return "".join(parts)
@@ -255,6 +331,104 @@ def _anchor(text: str) -> str:
     return "".join(ch if ch.isalnum() else "-" for ch in text.lower())
 
 
+def _value_text(value) -> str:
+    """A JSON value as table text: non-integer numbers to ``TABLE_DIGITS`` significant
+    digits, lists of scalars joined by commas, anything else as compact rounded JSON."""
+    if isinstance(value, bool) or value is None:
+        return "" if value is None else str(value).lower()
+    if isinstance(value, float):
+        return f"{value:.{TABLE_DIGITS}g}" if math.isfinite(value) else str(value)
+    if isinstance(value, int | str):
+        return str(value)
+    if isinstance(value, list) and all(not isinstance(v, list | dict) for v in value):
+        return ", ".join(_value_text(v) for v in value)
+    if isinstance(value, dict) and all(not isinstance(v, list | dict) for v in value.values()):
+        return "; ".join(f"{header(k)}: {_value_text(v)}" for k, v in value.items())
+    try:
+        return json.dumps(_rounded(value), ensure_ascii=False)
+    except RecursionError:
+        return "(nested too deeply to show; see the file)"
+
+
+def _rounded(value):
+    """``value`` with every float rounded to ``TABLE_DIGITS`` significant digits."""
+    if isinstance(value, float) and math.isfinite(value):
+        return float(f"{value:.{TABLE_DIGITS}g}")
+    if isinstance(value, dict):
+        return {k: _rounded(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_rounded(v) for v in value]
+    return value
+
+
+def _cell(value) -> str:
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    return f"<td{' class=num' if number else ''}>{_e(_value_text(value))}</td>"
+
+
+def _records_table(rows: list) -> str:
+    """A list of JSON objects as one table, a column per key (at most ``MAX_DATA_ROWS``)."""
+    columns = list(dict.fromkeys(k for row in rows for k in row))
+    parts = ["<div class=scroll><table><tr>" + "".join(
+        f"<th title=\"{_e(k)}\">{_e(header(k))}</th>" for k in columns) + "</tr>"]
+    for row in rows[:MAX_DATA_ROWS]:
+        parts.append("<tr>" + "".join(_cell(row.get(k)) for k in columns) + "</tr>")
+    parts.append("</table></div>")
+    if len(rows) > MAX_DATA_ROWS:
+        parts.append(f"<p class=meta>First {MAX_DATA_ROWS} of {len(rows)} rows.</p>")
+    return "".join(parts)
+
+
+def data_table(data: dict, depth: int = 0) -> str:
+    """A JSON object as a readable table: a row per key with its value (numbers to
+    ``TABLE_DIGITS`` significant digits); a list of objects or an object of objects becomes a
+    table of its own under the key's name, an object holding more a table in its cell (to
+    ``MAX_DEPTH`` levels; deeper, compact JSON)."""
+    simple, nested = [], []
+    for key, value in data.items():
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            nested.append((key, _records_table(value)))
+        elif isinstance(value, dict) and value and all(isinstance(v, dict)
+                                                        for v in value.values()):
+            nested.append((key, _records_table([{"": k, **v} for k, v in value.items()])))
+        else:
+            cell = (f"<td>{data_table(value, depth + 1)}</td>" if depth < MAX_DEPTH
+                    and isinstance(value, dict)
+                    and any(isinstance(v, dict | list) for v in value.values())
+                    else _cell(value))
+            simple.append(f"<tr><th title=\"{_e(key)}\">{_e(header(key))}</th>{cell}</tr>")
+    parts = [f"<table>{''.join(simple)}</table>"] if simple else []
+    parts += [f"<p><b>{_e(header(key))}</b></p>{table}" for key, table in nested]
+    return "".join(parts)
+
+
+def _study_meta(summary: dict, name: str, directory: Path) -> str:
+    wall = _seconds(summary.get("wall_time_s"), ".0f")
+    work = _seconds(summary.get("case_wall_time_s"), ".0f")
+    text = (f"<p class=meta>study <b>{_e(name)}</b>, size <b>{_e(summary.get('size'))}</b>"
+            f", {_e(summary.get('n_cases'))} cases ({_e(summary.get('n_failed'))} failed)"
+            + (f"; last run {wall} s" if wall else "")
+            + (f" (cases: {work} s of worker time, resumed ones included)" if work else "")
+            + f"; directory {_e(directory)}</p>")
+    if summary.get("size") != "full":
+        text += ("<p class=meta>A reduced run (shorter runs than the paper's) cannot refute a "
+                 "claim: a claim it does not reproduce, or cannot test, reads 'not tested', "
+                 "with what it found beside it; see the full run for the verdicts.</p>")
+    return text
+
+
+def _chart_images(directory: Path, files: list[Path], what: str, level: int) -> list[str]:
+    """The charts ``files`` lists, then the other PNG files of ``directory``, embedded."""
+    root = directory.resolve()
+    pngs = [f for f in files if f.suffix == ".png" and f.is_file()]
+    pngs += sorted(p for p in _charts(directory) if p not in pngs)
+    if not pngs:
+        return []
+    return [f"<h{level}>Charts</h{level}>"] + [
+        f"<p class=meta>{_e(png.relative_to(root))}</p>"
+        + image(png, f"{what}: {png.stem.replace('_', ' ')}") for png in pngs]
+
+
 def study_section(directory: Path, *, level: int = 2, heading: bool = True) -> str:
     """The section of one study directory (``summary.json`` and the files it lists); without
     its ``heading`` when the page's title already says it."""
@@ -264,38 +438,54 @@ def study_section(directory: Path, *, level: int = 2, heading: bool = True) -> s
     failures = _field(summary, "failures", (list, dict), [], source)
     listed = _field(summary, "files", (list, str), [], source)
     name = str(summary.get("study", directory.name))
-    parts = [f'<h{level} id="{_anchor(name)}">{_e(summary.get("title", name))}</h{level}>'
-             ][:int(heading)]
-    wall = _seconds(summary.get("wall_time_s"), ".0f")
-    work = _seconds(summary.get("case_wall_time_s"), ".0f")
-    parts.append(f"<p class=meta>study <b>{_e(name)}</b>, size <b>{_e(summary.get('size'))}</b>"
-                 f", {_e(summary.get('n_cases'))} cases ({_e(summary.get('n_failed'))} failed)"
-                 + (f"; last run {wall} s" if wall else "")
-                 + (f" (cases: {work} s of worker time, resumed ones included)" if work else "")
-                 + f"; directory {_e(directory)}</p>")
-    if summary.get("size") != "full":
-        parts.append("<p class=meta>A reduced run: claims it cannot test say 'not tested'; "
-                     "see the full run for the verdicts.</p>")
-    parts.append(f"<h{level + 1}>Claims</h{level + 1}>" + claims_table(claims))
+    title = summary.get("title", name)
+    parts = [f'<h{level} id="{_anchor(name)}">{_e(title)}</h{level}>'][:int(heading)]
+    parts.append(_study_meta(summary, name, directory))
+    parts.append(f"<h{level + 1}>Claims</h{level + 1}>"
+                 + claims_table(claims, summary.get("size")))
     if failures:
         parts.append(f"<h{level + 1}>Failed cases</h{level + 1}><ul>" + "".join(
             f"<li>{_e(f.get('key'))}: {_e(f.get('reason'))}</li>" for f in failures)
             + "</ul>")
-    root = directory.resolve()
     files = [member(directory, f, source) for f in listed]
-    pngs = [f for f in files if f.suffix == ".png" and f.is_file()]
-    pngs += sorted(p for p in _charts(directory) if p not in pngs)
-    if pngs:
-        parts.append(f"<h{level + 1}>Charts</h{level + 1}>")
-        for png in pngs:
-            parts.append(f"<p class=meta>{_e(png.relative_to(root))}</p>"
-                         + image(png, png.stem))
+    parts += _chart_images(directory, files, f"chart of {title}", level + 1)
     for table in (f for f in files if f.suffix == ".csv" and f.is_file()):
         parts.append(f"<h{level + 1}>{_e(table.name)}</h{level + 1}>" + csv_table(table))
     more = {k: v for k, v in summary.items() if k not in _SHOWN}
     if more:
-        parts.append(f"<details><summary>more data (summary.json)</summary><pre>"
-                     f"{_e(json.dumps(more, indent=1))}</pre></details>")
+        parts.append(f"<details><summary>more data (summary.json)</summary>{data_table(more)}"
+                     "</details>")
+    return "\n".join(parts)
+
+
+# Columns of ``recon stability``'s stability.csv shown (the file has every score).
+STABILITY_COLUMNS = ("method", "noise_sigma3_m", "density", "outliers", "status", "failure",
+                     "wall_time_s", "n_faces", "chamfer_m", "fscore", "coverage")
+
+
+def stability_section(directory: Path, *, level: int = 2, heading: bool = True) -> str:
+    """The section of a ``recon stability`` directory (``stability.json``, its maps and
+    ``stability.csv``; ``heading``: as for ``study_section``)."""
+    source = directory / "stability.json"
+    data = read_json(directory, "stability.json")
+    rates = _field(data, "failure_rate", dict, {}, source)
+    parts = [f'<h{level} id="{_anchor(directory.name)}">Stability: '
+             f"{_e(directory.name)}</h{level}>"][:int(heading)]
+    grid = ", ".join(f"{header(k)}: {_value_text(data.get(k))}"
+                     for k in ("noise_sigma3_m", "density", "outliers") if k in data)
+    parts.append(f"<p class=meta>Grid: {_e(grid)}. A cell fails on a crash, a timeout, an "
+                 "empty or degenerate mesh, or an accuracy collapse (Chamfer distance over "
+                 f"{_e(_value_text(data.get('collapse_ratio')))} times the method's clean "
+                 "cell's, plus the cell's noise).</p>")
+    if rates:
+        parts.append(f"<h{level + 1}>Failure rate per method</h{level + 1}>" + _records_table(
+            [{"method": m, "failed cells": f"{r:.0%}" if isinstance(r, _NUMBER) else r}
+             for m, r in rates.items()]))
+    parts += _chart_images(directory, [], "stability map", level + 1)
+    table = member(directory, "stability.csv", directory)
+    if table.is_file():
+        parts.append(f"<h{level + 1}>Every cell</h{level + 1}>"
+                     + csv_table(table, columns=STABILITY_COLUMNS))
     return "\n".join(parts)
 
 
@@ -304,15 +494,15 @@ def compare_section(directory: Path, *, level: int = 2, heading: bool = True) ->
     parts = [f'<h{level} id="{_anchor(directory.name)}">Method comparison: '
              f"{_e(directory.name)}</h{level}>"][:int(heading)]
     results = read_json(directory, "results.json")
-    for metric in ("chamfer", "fscore"):
+    for metric, name in (("chamfer", "Chamfer distance"), ("fscore", "F-score")):
         front = _field(results, f"pareto_{metric}", (list, dict), [],
                        directory / "results.json")
         if front:
-            parts.append(f"<p><b>Pareto front (time against {metric}):</b> " + ", ".join(
+            parts.append(f"<p><b>Pareto front (time against {name}):</b> " + ", ".join(
                 f"{_e(r.get('label'))} ({_seconds(r.get('wall_time_s'), '.2g')} s)"
                 for r in front) + "</p>")
     for png in _charts(directory):
-        parts.append(image(png, png.stem))
+        parts.append(image(png, f"speed against accuracy of the methods on {directory.name}"))
     table = member(directory, "results.csv", directory)
     if table.is_file():
         parts.append(f"<h{level + 1}>Runs, ranked by Chamfer</h{level + 1}>"
@@ -320,8 +510,7 @@ def compare_section(directory: Path, *, level: int = 2, heading: bool = True) ->
     extra = {k: v for k, v in results.items() if k not in ("runs", "pareto_chamfer",
                                                            "pareto_fscore")}
     if extra:
-        parts.append(f"<details><summary>input</summary><pre>{_e(json.dumps(extra, indent=1))}"
-                     "</pre></details>")
+        parts.append(f"<details><summary>input</summary>{data_table(extra)}</details>")
     return "\n".join(parts)
 
 
@@ -339,7 +528,7 @@ def index_section(directory: Path, studies: list[Path]) -> str:
         entry = entry if isinstance(entry, dict) else {}
         counts: dict[str, int] = {}
         for c in _field(summary, "claims", (list, dict), [], study / "summary.json"):
-            verdict = str(c.get("verdict"))
+            verdict = verdict_shown(c.get("verdict"), summary.get("size"))[0]
             counts[verdict] = counts.get(verdict, 0) + 1
         wall = _seconds(summary.get("wall_time_s", entry.get("wall_time_s")), ".0f")
         work = _seconds(summary.get("case_wall_time_s"), ".0f")
@@ -360,7 +549,7 @@ def index_section(directory: Path, studies: list[Path]) -> str:
 
 
 def kind(directory: Path) -> str:
-    """``study``, ``all`` or ``compare``.
+    """``study``, ``all``, ``compare`` or ``stability``.
 
     Raises
     ------
@@ -375,8 +564,10 @@ def kind(directory: Path) -> str:
         return "all"
     if (directory / "results.json").is_file():
         return "compare"
-    raise ReportError(f"{directory}: not a study or comparison directory (no summary.json, "
-                      "index.json or results.json)")
+    if (directory / "stability.json").is_file():
+        return "stability"
+    raise ReportError(f"{directory}: not a study or comparison directory, nor a stability "
+                      "run (no summary.json, index.json, results.json or stability.json)")
 
 
 def _study_dirs(directory: Path) -> list[Path]:
@@ -401,6 +592,9 @@ def render(directory) -> str:
     elif what == "compare":
         title = f"Method comparison: {directory.name}"
         body.append(compare_section(directory, level=1, heading=False))
+    elif what == "stability":
+        title = f"Stability: {directory.name}"
+        body.append(stability_section(directory, level=1, heading=False))
     else:
         title = "Reproducing the paper's studies"
         studies = _study_dirs(directory)

@@ -219,8 +219,11 @@ def run_cell(*, run: Run, clouds: dict, source: str, truth, noise_key: str,
                                           seed=seed))
     if isinstance(cloud, dict):
         return {"method": run.method, "params": run.params, **cloud}
+    from recon.experiments.progress import isolated_stage
+
     result = run_isolated(run, cloud, truth=truth, score_options=score_options,
-                          timeout_s=timeout_s, memory_mb=memory_mb, threads=SWEEP_THREADS)
+                          timeout_s=timeout_s, memory_mb=memory_mb, threads=SWEEP_THREADS,
+                          on_wait=isolated_stage)
     result.pop("vertices", None)
     result.pop("faces", None)
     result["n_points"] = len(cloud.points)

@@ -5,7 +5,8 @@ A sweep is one function applied to many cases (``{key: keyword arguments}``) plu
 object per line, appended and flushed as each case finishes, so an interrupted sweep keeps what it
 finished; ``resume=True`` skips the keys already there. A ``sweep.json`` beside it records the
 sweep's fingerprint (input and settings); resuming with a different one is refused, so results
-of different inputs never mix.
+of different inputs never mix. The progress bar counts finished cases plus the fractions the
+running ones report (``recon.experiments.progress``) and redraws every second.
 
 Schedulers
 ----------
@@ -40,9 +41,11 @@ from typing import Any
 
 import numpy as np
 
+from formats import scratch
 from formats.atomic import write_text_atomically
 from formats.errors import ReconError
 from formats.paths import check_destination, output_directory
+from recon.experiments import progress
 
 RESULTS_NAME = "results.jsonl"
 FINGERPRINT_NAME = "sweep.json"
@@ -334,8 +337,10 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
     _rewrite(path, list(done.values()))
     pending = [key for key in cases if key not in done]
     shared = dict(shared or {})
-    with open(path, "a") as stream, tqdm(total=len(cases), initial=len(done), desc=desc,
-                                          unit="run", disable=None, leave=False) as bar:
+    with open(path, "a") as stream, scratch.directory("recon-progress-") as channel, \
+            tqdm(total=len(cases), initial=len(done), desc=desc, unit="runs", disable=None,
+                 leave=False, bar_format=progress.BAR_FORMAT) as bar, \
+            progress.Watcher(bar, channel, finished=len(done)) as watcher:
 
         def record(key: str, result: dict) -> None:
             result = dict(result)
@@ -346,11 +351,11 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
             stream.flush()
             os.fsync(stream.fileno())
             done[key] = result
-            bar.update(1)
+            watcher.done(key)
 
         if pending:
             for key, result in iterate(func, cases, pending, shared=shared, scheduler=scheduler,
-                                       n_workers=n_workers):
+                                       n_workers=n_workers, channel=channel):
                 record(key, result)
     return {key: done[key] for key in cases if key in done}
 
@@ -360,19 +365,24 @@ def _failed_task(exc: BaseException) -> dict:
             "reason": f"task failed: {type(exc).__name__}: {exc}"}
 
 
-def _call(func, shared, case) -> dict:
+def _call(func, shared, case, report=(None, "")) -> dict:
+    """``func(**shared, **case)``, its ``progress.step`` calls reported to ``report``
+    (channel directory or None, case key)."""
     try:
-        return func(**shared, **case)
+        with progress.reporting(*report):
+            return func(**shared, **case)
     except Exception as exc:  # the sweep goes on; the record says what went wrong
         return _failed_task(exc)
 
 
 def iterate(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
             keys: list[str] | None = None, *, shared: Mapping[str, Any] | None = None,
-            scheduler: str | None = None, n_workers: int | None = None):
+            scheduler: str | None = None, n_workers: int | None = None, channel=None):
     """Yield ``(key, func(**shared, **cases[key]))`` as cases finish, nothing written to disk.
 
-    ``keys`` selects the cases (default: all); the other arguments are ``run_sweep``'s.
+    ``keys`` selects the cases (default: all); ``channel`` is the directory the cases report
+    their progress into (``recon.experiments.progress``; None: nowhere); the other arguments
+    are ``run_sweep``'s.
     """
     check_scheduler(scheduler)
     pending = list(cases) if keys is None else list(keys)
@@ -380,13 +390,14 @@ def iterate(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
     workers = n_workers or default_workers()
     if scheduler == "serial":
         for key in pending:
-            yield key, _call(func, shared, cases[key])
+            yield key, _call(func, shared, cases[key], (channel, key))
         return
     if scheduler == "threads":
         from concurrent.futures import ThreadPoolExecutor, as_completed
 
         with ThreadPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(_call, func, shared, cases[key]): key for key in pending}
+            futures = {pool.submit(_call, func, shared, cases[key], (channel, key)): key
+                       for key in pending}
             try:
                 for future in as_completed(futures):
                     yield futures[future], future.result()
@@ -398,10 +409,10 @@ def iterate(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
                 kill_running()
                 raise
         return
-    yield from _execute_dask(func, cases, pending, shared, scheduler, workers)
+    yield from _execute_dask(func, cases, pending, shared, scheduler, workers, channel)
 
 
-def _execute_dask(func, cases, pending, shared, scheduler, workers):
+def _execute_dask(func, cases, pending, shared, scheduler, workers, channel):
     from distributed import Client, as_completed
 
     cluster = client = None
@@ -414,8 +425,8 @@ def _execute_dask(func, cases, pending, shared, scheduler, workers):
         # A one-element list scatters the value whole (a tuple would be split).
         remote = {name: client.scatter([value], broadcast=True)[0]
                   for name, value in shared.items()}
-        futures = {client.submit(_call, func, remote, cases[key], pure=False): key
-                   for key in pending}
+        futures = {client.submit(_call, func, remote, cases[key], (channel, key), pure=False):
+                   key for key in pending}
         try:
             for future in as_completed(futures):
                 key = futures[future]

@@ -160,9 +160,13 @@ def run_all(out_dir, *, size: str = "full", scheduler: str | None = None,
         get(name)
     out_dir = check_output(out_dir)
     check_scheduler(scheduler)
+    from tqdm import tqdm
+
     start = time.perf_counter()
     index = {"size": size, "studies": {}, "wall_time_s": None}
     cluster = None
+    # The overall bar, one step per study, above each study's own bar of its cases.
+    overall = tqdm(total=len(chosen), desc="studies", unit="study", disable=None)
     try:
         if scheduler is None:
             from recon.experiments.sweep import default_workers, local_cluster
@@ -172,8 +176,10 @@ def run_all(out_dir, *, size: str = "full", scheduler: str | None = None,
         else:
             address = scheduler
         for name in chosen:
+            overall.set_postfix_str(name)
             summary = run(name, out_dir / name, size=size, scheduler=address, resume=resume,
                           n_workers=n_workers, checked=True)
+            overall.update(1)
             verdicts = {}
             for c in summary.get("claims", []):
                 verdicts[c["verdict"]] = verdicts.get(c["verdict"], 0) + 1
@@ -184,6 +190,7 @@ def run_all(out_dir, *, size: str = "full", scheduler: str | None = None,
             index["wall_time_s"] = time.perf_counter() - start
             write_text_atomically(out_dir / INDEX_JSON, json.dumps(index, indent=2) + "\n")
     finally:
+        overall.close()
         if cluster is not None:
             cluster.close()
     index["wall_time_s"] = time.perf_counter() - start

@@ -156,21 +156,24 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, prefixes_s: Seq
     """Simulate one (target, law), then score every prefix and its slew effort (Dask task)."""
     import sim
     from formats import StrikeLog
+    from recon.experiments import progress
     from recon.registration.ingest import ingest
 
     start = time.perf_counter()
     the_scene = sim.load_scene(scene, list(overrides))
     truth = (the_scene.vertices, the_scene.faces)
     with scratch.directory("recon-closed-loop-") as tmp:
-        log_path = tmp / "run.h5"
-        summary = sim.simulate(the_scene, log_path, seed=seed, progress=False, workers=1)
+        log_path = tmp / "run.h5"   # progress: the simulation half, the prefixes the other
+        summary = sim.simulate(the_scene, log_path, seed=seed, workers=1,
+                               progress=progress.within(0.0, 0.5))
         with StrikeLog(log_path) as log:
             shots = log.shots()
         cloud = ingest(log_path)
     effort = slew_effort(shots.sensor_attitude)
     shot_time = cloud.attributes["time"]
     rows = []
-    for t in prefixes_s:
+    for index, t in enumerate(prefixes_s):
+        progress.step(len(prefixes_s) + index, 2 * len(prefixes_s))
         mask = shot_time < t
         n = int(mask.sum())
         done = shots.time < t

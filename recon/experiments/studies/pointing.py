@@ -67,6 +67,11 @@ SCORES = ("fscore", "chamfer_m", "edge_score", "precision", "recall", "coverage"
 LOWER_BETTER = {"fscore": False, "chamfer_m": True, "edge_score": True}
 # Panels of the chart, one column each: (key, label, lower is better). The mean point error of
 # the registered cloud (not a surface score) shows the pointing error's own size.
+# How the chart draws each pose: self-calibrated as large open squares over the recorded poses'
+# small dots, so a cell where refining changed nothing still shows both (a dot in a square).
+POSE_STYLES = {"un-refined": {"ls": "-", "marker": "o", "ms": 3.5, "zorder": 3},
+               "refined": {"ls": "--", "marker": "s", "ms": 8.5, "mfc": "none", "mew": 1.4,
+                           "zorder": 4}}
 CHART_METRICS = (("fscore", "F-score at τ", False),
                  ("chamfer_m", "Chamfer distance [m]", True),
                  ("edge_score", "edge score (paper's metric)", True),
@@ -195,6 +200,7 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, max_points: int
     """
     import sim
     from formats import StrikeLog
+    from recon.experiments import progress
     from recon.registration.ingest import ingest
     from recon.registration.refine import RefineError, refine
     from recon.surfaces.prepare import prepare
@@ -205,13 +211,15 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, max_points: int
     clouds, refined = {}, {}
     with scratch.directory("recon-pointing-") as tmp:
         log = tmp / "run.h5"
-        sim.simulate(the_scene, log, seed=seed, progress=False, workers=1)
+        # Progress: simulation 0-0.3, self-calibration 0.3-0.5, the surfaces the rest.
+        sim.simulate(the_scene, log, seed=seed, progress=progress.within(0.0, 0.3), workers=1)
         with StrikeLog(log) as opened:
             true_points = opened.truth_strikes().point
         clouds["un-refined"] = ingest(log)
         began = time.perf_counter()
         try:
-            result = refine(log, max_points=refine_points, seed=seed)
+            result = refine(log, max_points=refine_points, seed=seed,
+                            progress=progress.within(0.3, 0.5))
         except RefineError as exc:
             refined = {"error": str(exc)}
         else:
@@ -230,9 +238,10 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, max_points: int
             continue
         point_error[pose] = _point_error(cloud.points, true_points)
         prepared = prepare(cloud.points[pick], view_points=cloud.view_points[pick], seed=seed)
-        runs += [{"pose": pose, **surface_scores(prepared, method, truth, seed=seed,
-                                                 score_options=score_options)}
-                 for method in methods]
+        for method in methods:
+            progress.step(len(runs), 2 * len(POSES) * len(methods))
+            runs.append({"pose": pose, **surface_scores(prepared, method, truth, seed=seed,
+                                                        score_options=score_options)})
     return {"status": "ok", "tags": dict(tags), "scene": scene, "overrides": list(overrides),
             "seed": seed, "strikes": n, "points": len(pick), "refine": refined,
             "point_error_m": point_error, "runs": runs,
@@ -411,10 +420,8 @@ def _chart(cells: Sequence[dict], out_dir: Path, size: str) -> list[str]:
                     "x": [c["pointing_deg"] for c in got],
                     "y": {m: [np.nan if c[m] is None else c[m] for c in got]
                           for m, _, _ in CHART_METRICS},
-                    "style": {"color": RANGE_COLOURS[i % len(RANGE_COLOURS)],
-                              "ls": "-" if pose == "un-refined" else "--",
-                              "marker": "o" if pose == "un-refined" else "s",
-                              "mfc": "none" if pose == "refined" else None}})
+                    "style": {"color": RANGE_COLOURS[i % len(RANGE_COLOURS)]}
+                    | POSE_STYLES[pose]})
         rows.append({"title": TARGETS[target][0], "curves": curves})
     if not any(row["curves"] for row in rows):
         return []
@@ -423,9 +430,10 @@ def _chart(cells: Sequence[dict], out_dir: Path, size: str) -> list[str]:
         x_label="pointing error [deg]", legend_columns=len(POSES),
         title="Pointing knowledge (boresight misalignment) against LRF range noise: best of "
               "plane and Poisson surfaces",
-        note=f"{plan['rotations']} rotations, seed 0; solid: recorded poses, dashed: "
-             "self-calibrated (recon ingest --refine); τ = 1 % of the truth's bounding-box "
-             "diagonal; the last column is the registered cloud's, not a surface's")
+        note=f"{plan['rotations']} rotations, seed 0; solid, dots: recorded poses; dashed, "
+             "open squares: self-calibrated (recon ingest --refine), a dot in a square where "
+             "refining changed nothing; τ = 1 % of the truth's bounding-box diagonal; the last "
+             "column is the registered cloud's, not a surface's")
     return ["pointing.png"]
 
 

@@ -114,8 +114,9 @@ def scene_case(scene: str, overrides: Sequence[str] = (), *, prefixes_s: Sequenc
 
 
 def simulate_cloud(scene: str, overrides: Sequence[str] = (), *, seed: int = 0,
-                   sim_workers: int | None = None):
-    """Simulate a scene into a temporary log, ingest it and delete the log.
+                   sim_workers: int | None = None, progress=False):
+    """Simulate a scene into a temporary log, ingest it and delete the log (``progress``:
+    ``sim.simulate``'s, e.g. a case's ``recon.experiments.progress.within``).
 
     Returns
     -------
@@ -131,7 +132,8 @@ def simulate_cloud(scene: str, overrides: Sequence[str] = (), *, seed: int = 0,
     the_scene = sim.load_scene(scene, list(overrides))
     with scratch.directory("recon-study-") as tmp:
         log = tmp / "run.h5"
-        summary = sim.simulate(the_scene, log, seed=seed, progress=False, workers=sim_workers)
+        summary = sim.simulate(the_scene, log, seed=seed, progress=progress,
+                               workers=sim_workers)
         cloud = ingest(log)
     summary = dict(summary, spin_period_s=float(the_scene["target.spin_period"]))
     return cloud, (the_scene.vertices, the_scene.faces), summary
@@ -172,15 +174,19 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, prefixes_s: Seq
         scores, or ``scored`` False when too few points) and ``wall_time_s``.
     """
     from metrics.score import Truth
+    from recon.experiments import progress
 
     start = time.perf_counter()
-    cloud, truth, summary = simulate_cloud(scene, overrides, seed=seed, sim_workers=sim_workers)
+    # Progress: the simulation the first half, the prefixes scored the second.
+    cloud, truth, summary = simulate_cloud(scene, overrides, seed=seed, sim_workers=sim_workers,
+                                           progress=progress.within(0.0, 0.5))
     truth = Truth(truth)  # built once, reused by every prefix's score
     spin = float(summary["spin_period_s"])
     shot_time = cloud.attributes["time"]
     rng = np.random.default_rng([seed, 2])
     rows = []
-    for t in prefixes_s:
+    for index, t in enumerate(prefixes_s):
+        progress.step(len(prefixes_s) + index, 2 * len(prefixes_s))
         mask = shot_time < t
         n = int(mask.sum())
         row: dict[str, Any] = {"time_s": t, "hours": t / 3600.0,
