@@ -522,7 +522,7 @@ def check_seed(seed: int) -> int:
     from sim.defaults import MAX_SEED
 
     if not 0 <= seed <= MAX_SEED:
-        raise ApiError(f"--seed must be >= 0 and at most {MAX_SEED}, got {seed}")
+        raise ApiError(f"seed must be >= 0 and at most {MAX_SEED}, got {seed}")
     return seed
 
 
@@ -858,7 +858,9 @@ def _bind(method: str, params):
     """A method's ``Run``: ``params`` as a dict or as ``KEY=VALUE`` strings (``--param``)."""
     from recon.surfaces import methods
 
-    if params and not isinstance(params, Mapping):
+    if not params:
+        return methods.bind(method)
+    if not isinstance(params, Mapping):
         return methods.parse_run(method, list(params))
     return methods.bind(method, params)
 
@@ -1290,7 +1292,7 @@ def study_all(output, *, size: str = "full", scheduler: str | None = None,
 
 def _check_workers(n_workers: int | None) -> None:
     if n_workers is not None and n_workers < 1:
-        raise ApiError(f"--workers must be >= 1, got {n_workers}")
+        raise ApiError(f"n_workers must be >= 1, got {n_workers}")
 
 
 def report(directory, output) -> Path:
