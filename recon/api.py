@@ -1296,8 +1296,8 @@ def _check_workers(n_workers: int | None) -> None:
 
 
 def report(directory, output) -> Path:
-    """Write one self-contained HTML page of a ``study`` (one or all), ``compare`` or
-    ``stability`` directory (``recon report``); return its path."""
+    """Write one self-contained HTML page of a ``study`` (one or all) or ``compare`` directory
+    (``recon report``); return its path."""
     from recon.experiments.report import write_report
 
     return write_report(directory, output)
@@ -1320,8 +1320,9 @@ def demo(output, *, scene: str | None = None, method: str | None = None,
     say : callable
         Called with one line per step as the demo goes.
     """
-    from recon import demo as pipeline
+    import importlib
 
+    pipeline = importlib.import_module("recon.demo")   # recon.demo: the module, not this verb
     result = pipeline.run_demo(output, scene=scene or pipeline.DEMO_SCENE,
                                method=method or pipeline.DEMO_METHOD, overrides=overrides,
                                say=say)
