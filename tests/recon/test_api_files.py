@@ -86,7 +86,7 @@ def test_trimesh_clouds_and_meshes_are_taken():
 def test_an_open3d_object_that_is_no_cloud_or_mesh_is_named():
     import open3d as o3d
 
-    with pytest.raises(api.ApiError, match="open3d.*VoxelGrid is neither a point cloud nor"):
+    with pytest.raises(api.ApiError, match=r"open3d.*VoxelGrid is neither a point cloud nor"):
         api.load(o3d.geometry.VoxelGrid())
 
 
@@ -138,6 +138,6 @@ def test_save_writes_meshes_and_clouds_and_refuses_an_input(tmp_path):
     with protecting([path]), pytest.raises(api.ApiError, match="is an input of this run"):
         api.save(Mesh(*sphere_mesh(1)), path)
     assert path.read_bytes() == before
-    with pytest.raises(api.ApiError, match="units apply to .tab meshes"):
+    with pytest.raises(api.ApiError, match=r"units apply to \.tab meshes"):
         api.save(cloud, tmp_path / "c.ply", units="km")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cloud.h5", "sphere.ply"]
