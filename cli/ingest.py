@@ -8,7 +8,6 @@ import argparse
 from pathlib import Path
 
 from cli.options import UsageError
-from formats.atomic import write_text_atomically
 
 
 def _add_epoch(parser, prefix: str = "") -> None:
@@ -130,6 +129,7 @@ def _refine(args):
 
     from tqdm import tqdm
 
+    from formats.atomic import write_text_atomically
     from recon import api
 
     with tqdm(unit="iteration", disable=None, leave=False, desc="refine") as bar:
