@@ -27,12 +27,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args) -> int:
-    from recon.demo import format_scores, run_demo
+    from recon import api
 
-    result = run_demo(args.output, scene=args.scene, method=args.method,
+    result = api.demo(args.output, scene=args.scene, method=args.method,
                       overrides=args.overrides, say=lambda text: print(text, flush=True))
     print()
-    print(format_scores(result["scores"]))
-    files = list(result["files"].values())
+    print(result.table())
+    files = list(result.files.values())
     print(f"\nwrote {', '.join(str(f) for f in files[:-1])} and {files[-1]}")
     return 0

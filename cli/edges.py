@@ -57,15 +57,14 @@ def run(args) -> int:
                            truth_units=args.truth_units,
                            output=args.output, seed=args.seed, title=args.title,
                            edge_options=options, progress=lambda stage: bar.update(1))
-    report, counts = result["report"], result["counts"]
+    report, counts = result.report, result.counts
     if args.json:
-        print(json.dumps({"edge": report.to_dict(), "counts": counts,
-                          "files": {k: str(v) for k, v in result["files"].items()}}, indent=2))
+        print(json.dumps(result.to_dict(), indent=2))
         return 0
     print(f"{args.test} against {truth}: edge score {report.score:.4g} ({report.variant})")
     print(f"  {counts['true_edge_points']:,} detected edge points near a feature edge, "
           f"{counts['false_edge_points']:,} false, {counts['surface_points']:,} surface points")
     print(f"  missed truth edges: {counts['missed_feature_edges']:,} feature, "
           f"{counts['missed_gentle_edges']:,} gentle")
-    print(f"wrote {', '.join(str(p) for p in result['files'].values())}")
+    print(f"wrote {', '.join(str(p) for p in result.files.values())}")
     return 0

@@ -7,12 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from formats.atomic import write_text_atomically
-from formats.errors import ReconError
-
-
-class IngestOptionError(ReconError, ValueError):
-    """Options of ``recon ingest`` that do not go together."""
+from cli.options import UsageError
 
 
 def _add_epoch(parser, prefix: str = "") -> None:
@@ -111,50 +106,57 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_truth)
 
 
+def _check_ingest_options(args) -> None:
+    """Refuse options of ``recon ingest`` that do not go together."""
+    if not args.timeout > 0:
+        raise UsageError(f"--timeout must be a positive number of seconds, got {args.timeout:g}")
+    if args.follow and args.refine:
+        raise UsageError("--follow and --refine do not go together: refinement needs the "
+                         "whole log (run ingest --refine once the log is complete)")
+    for given, flag in ((args.refine_interval is not None, "--refine-interval"),
+                        (args.refine_json is not None, "--refine-json"),
+                        (args.refine_spin, "--refine-spin")):
+        if given and not args.refine:
+            raise UsageError(f"{flag} needs --refine")
+    if args.refine_json is not None and not args.refine_json.parent.is_dir():
+        raise UsageError(f"--refine-json {args.refine_json}: directory "
+                         f"{args.refine_json.parent} does not exist")
+
+
+def _refine(args):
+    """``--refine``: estimate the pose-knowledge errors, print them (and write them)."""
+    import json
+
+    from tqdm import tqdm
+
+    from formats.atomic import write_text_atomically
+    from recon import api
+
+    with tqdm(unit="iteration", disable=None, leave=False, desc="refine") as bar:
+        def step(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(1)
+
+        refinement = api.refine(args.log, interval=args.refine_interval, spin=args.refine_spin,
+                                progress=step)
+    for line in refinement.lines():
+        print(line)
+    if args.refine_json is not None:
+        write_text_atomically(args.refine_json, json.dumps(refinement.to_dict(), indent=2) + "\n",
+                              error=UsageError)
+        print(f"wrote the estimates to {args.refine_json}")
+    return refinement
+
+
 def run_ingest(args) -> int:
     from tqdm import tqdm
 
-    from recon.registration.altimetry import is_altimetry
-    from recon.registration.ingest import ingest_following, ingest_to_file
+    from recon import api
 
-    if is_altimetry(args.log):
+    if api.is_altimetry(args.log):
         return _ingest_altimetry(args)
-    correction = None
-    if not args.timeout > 0:
-        raise IngestOptionError(f"--timeout must be a positive number of seconds, got "
-                                f"{args.timeout:g}")
-    if args.follow and args.refine:
-        raise IngestOptionError("--follow and --refine do not go together: refinement needs the "
-                                "whole log (run ingest --refine once the log is complete)")
-    if args.refine_interval is not None and not args.refine:
-        raise IngestOptionError("--refine-interval needs --refine")
-    if args.refine_json is not None and not args.refine:
-        raise IngestOptionError("--refine-json needs --refine")
-    if args.refine_spin and not args.refine:
-        raise IngestOptionError("--refine-spin needs --refine")
-    if args.refine_json is not None and not args.refine_json.parent.is_dir():
-        raise IngestOptionError(f"--refine-json {args.refine_json}: directory "
-                                f"{args.refine_json.parent} does not exist")
-    if args.refine:
-        import json
-
-        from recon.registration.refine import refine
-
-        with tqdm(unit="iteration", disable=None, leave=False, desc="refine") as bar:
-            def step(done: int, total: int) -> None:
-                bar.total = total
-                bar.update(1)
-
-            refinement = refine(args.log, interval=args.refine_interval, spin=args.refine_spin,
-                                progress=step)
-        for line in refinement.lines():
-            print(line)
-        if args.refine_json is not None:
-            write_text_atomically(args.refine_json,
-                                  json.dumps(refinement.to_dict(), indent=2) + "\n",
-                                  error=IngestOptionError)
-            print(f"wrote the estimates to {args.refine_json}")
-        correction = refinement.correction
+    _check_ingest_options(args)
+    refinement = _refine(args) if args.refine else None
     with tqdm(unit="strike", unit_scale=True, disable=None, leave=False,
               desc="ingest (following)" if args.follow else "ingest") as bar:
         def advance(done: int, total: int) -> None:
@@ -162,30 +164,30 @@ def run_ingest(args) -> int:
             bar.update(done)
 
         if args.follow:
-            summary = ingest_following(args.log, args.output, frame=args.frame,
-                                       progress=advance, timeout_s=args.timeout)
+            result = api.follow(args.log, args.output, frame=args.frame, progress=advance,
+                                timeout_s=args.timeout)
         else:
-            summary = ingest_to_file(args.log, args.output, frame=args.frame, progress=advance,
-                                     correction=correction)
-    print(f"wrote {summary['n_points']} points ({args.frame} frame"
-          + (", refined poses" if correction is not None else "") + f") to {args.output}")
+            result = api.ingest_file(args.log, args.output, frame=args.frame, progress=advance,
+                                     refinement=refinement)
+    print(f"wrote {result.n_points} points ({args.frame} frame"
+          + (", refined poses" if result.refined else "") + f") to {args.output}")
     return 0
 
 
 def _ingest_altimetry(args) -> int:
     """``recon ingest PRODUCT``: a mission's altimetry, already in the body frame."""
-    from recon.registration.altimetry import ingest_altimetry
+    from recon import api
 
     given = [name for name, on in (("--refine", args.refine), ("--follow", args.follow),
                                    ("--frame inertial", args.frame != "body")) if on]
     if given:
-        raise IngestOptionError(f"{args.log}: {', '.join(given)} apply to strike logs; an "
-                                "altimetry product is read as its body-frame returns")
-    summary = ingest_altimetry(args.log, args.output)
-    dropped = summary["dropped"]
-    print(f"read {summary['n_points']} returns of {summary['product']} {args.log}; dropped "
+        raise UsageError(f"{args.log}: {', '.join(given)} apply to strike logs; an "
+                         "altimetry product is read as its body-frame returns")
+    result = api.ingest_altimetry(args.log, args.output)
+    dropped = result.dropped
+    print(f"read {result.n_points} returns of {result.product} {args.log}; dropped "
           + (", ".join(f"{n} {why}" for why, n in dropped.items()) if dropped else "none"))
-    print(f"wrote {summary['n_points']} points (body frame) to {args.output}")
+    print(f"wrote {result.n_points} points (body frame) to {args.output}")
     return 0
 
 
@@ -198,31 +200,30 @@ def _epoch(args) -> float | None:
 
 
 def run_altimetry(args) -> int:
-    from recon.registration.altimetry import export_altimetry
+    from recon import api
 
-    summary = export_altimetry(args.log, args.output, epoch_et=_epoch(args))
-    extra = (f" and {summary['n_no_return']} no-return rows" if summary["n_no_return"] else "")
-    print(f"wrote {summary['n_returns']} returns{extra} ({summary['product']}) to "
-          + ", ".join(summary["written"]))
+    result = api.export_altimetry(args.log, args.output, epoch_et=_epoch(args))
+    extra = f" and {result.n_no_return} no-return rows" if result.n_no_return else ""
+    print(f"wrote {result.n_returns} returns{extra} ({result.product}) to "
+          + ", ".join(str(p) for p in result.written))
     return 0
 
 
 def run_trajectory(args) -> int:
-    from recon.registration.trajectory import KERNEL_SUFFIXES, export_kernel, export_trajectory
+    from recon import api
 
-    if args.output.suffix.lower() in KERNEL_SUFFIXES:
+    if api.is_kernel(args.output):
         if args.frame is not None:
-            raise IngestOptionError("--frame is for text trajectories: an SPK is in J2000 (the "
-                                    "log's inertial frame) and a CK holds the body frame too")
-        summary = export_kernel(args.log, args.output, epoch_et=_epoch(args))
-        print(f"wrote {summary['n_shots']} poses from ET {summary['epoch_et']:.6f} to "
-              + ", ".join(summary["written"]))
+            raise UsageError("--frame is for text trajectories: an SPK is in J2000 (the "
+                             "log's inertial frame) and a CK holds the body frame too")
+        result = api.trajectory(args.log, args.output, epoch_et=_epoch(args))
+        print(f"wrote {result.n_shots} poses from ET {result.epoch_et:.6f} to "
+              + ", ".join(str(p) for p in result.written))
         return 0
     if args.epoch_utc is not None or args.epoch_et is not None:
-        raise IngestOptionError("--epoch-utc and --epoch-et are for kernels (.bsp, .bc)")
-    frame = args.frame or "body"
-    summary = export_trajectory(args.log, args.output, frame=frame)
-    print(f"wrote {summary['n_shots']} poses ({frame} frame) to {args.output}")
+        raise UsageError("--epoch-utc and --epoch-et are for kernels (.bsp, .bc)")
+    result = api.trajectory(args.log, args.output, frame=args.frame or "body")
+    print(f"wrote {result.n_shots} poses ({result.frame} frame) to {args.output}")
     return 0
 
 

@@ -16,10 +16,6 @@ import signal
 import sys
 
 from cli import options
-from formats import interrupt, paths, scratch
-from formats.atomic import DiskFull
-from formats.errors import ReconError
-from formats.version import __version__
 
 # Subcommand modules, in the order `recon --help` lists them: the pipeline's order.
 COMMAND_MODULES = (
@@ -35,6 +31,21 @@ COMMAND_MODULES = (
 )
 
 
+class _Version(argparse.Action):
+    """``--version``: prints recon's installed version (looked up only when asked: reading the
+    package metadata is a fair share of ``recon --help``'s start)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                 help="show recon's version and exit"):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from formats.version import __version__
+
+        print(f"recon {__version__}")
+        parser.exit()
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse that exits with status 1 (not 2) on a usage error, like every other user error."""
 
@@ -48,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="recon",
         description="Simulate LRF and LIDAR imaging of space objects, register the strikes into "
                     "the target body frame, reconstruct surfaces and score them against truth.")
-    parser.add_argument("--version", action="version", version=f"recon {__version__}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
@@ -80,10 +91,14 @@ def main(argv: list[str] | None = None) -> int:
     """Run ``recon`` with ``argv`` (default: ``sys.argv[1:]``); return the exit status."""
     size_progress_bars()
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(argv)   # --help and usage errors end here, before any import below
     if args.command is None:
         parser.print_help()
         return 1
+    from formats import interrupt, paths
+    from formats.atomic import DiskFull
+    from formats.errors import ReconError
+
     try:
         with interrupt.handled(), paths.protecting(options.inputs_of(args)):
             _check_outputs(args)
@@ -119,12 +134,16 @@ def main(argv: list[str] | None = None) -> int:
 def _check_outputs(args) -> None:
     """Refuse, before any work, an output that is an existing file the command reads (the
     writers refuse it again, with the files of output directories, as they open)."""
+    from formats import paths
+
     for output in options.outputs_of(args):
         if os.path.isfile(output):
             paths.check_destination(output, options.UsageError)
 
 
 def _interrupted(args, signum: int, argv) -> int:
+    from formats import interrupt
+
     print(f"recon {args.command}: interrupted ({signal.Signals(signum).name}); outputs "
           "left as they were", file=sys.stderr)
     return _leave_now(interrupt.EXIT_STATUS.get(signum, 130), at_once=argv is None)
@@ -148,6 +167,8 @@ def _leave_now(status: int, *, at_once: bool = False) -> int:
     import threading
 
     import psutil
+
+    from formats import scratch
 
     children = psutil.Process().children(recursive=True)
     busy = [t for t in threading.enumerate()

@@ -121,18 +121,16 @@ def show_required(parser: argparse.ArgumentParser, *shown: str, alternatives: tu
 def _scheduler(text: str) -> str:
     """argparse type of ``--scheduler``: checked before any work starts (an address must answer
     as a Dask scheduler)."""
-    from recon.experiments.sweep import SweepError, check_scheduler, probe_scheduler
+    from recon import api
 
     try:
-        if check_scheduler(text) not in ("threads", "serial"):
-            probe_scheduler(text)
-        return text
-    except SweepError as exc:
+        return api.check_scheduler(text)
+    except ReconError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def add_sweep_options(parser, *, resume_help: str, default: str) -> None:
-    """``--scheduler``, ``--workers`` and ``--resume`` (recon.experiments.sweep's schedulers).
+    """``--scheduler``, ``--workers`` and ``--resume`` (``recon.api.check_scheduler``'s values).
 
     Parameters
     ----------
@@ -148,7 +146,6 @@ def add_sweep_options(parser, *, resume_help: str, default: str) -> None:
     parser.add_argument("--workers", type=int, metavar="N",
                         help="local workers (default: one per core)")
     parser.add_argument("--resume", action="store_true", help=resume_help)
-
 
 
 

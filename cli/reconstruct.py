@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from cli.options import (
+    UsageError,
     add_command,
     add_list_option,
     add_sweep_options,
@@ -146,25 +147,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _positional(args, list_dest: str, positional_dest: str, what: str) -> None:
     """Reclaim the positional from a list option that swallowed it; refuse when it is absent."""
-    from recon.surfaces.prepare import InputError
-
     reclaim_positional(args, list_dest, positional_dest)
     if getattr(args, positional_dest) is None:
-        raise InputError(f"{args.command} needs {what}")
+        raise UsageError(f"{args.command} needs {what}")
 
 
-def _limits(args):
-    from recon.surfaces.isolation import Limits
+def _preparation(args) -> dict:
+    """The preparation options of the api's verbs."""
+    return {"remove_outliers": args.remove_outliers, "voxel": args.voxel,
+            "normals_k": args.normals_k, "orient": args.orient, "seed": args.seed}
 
-    return Limits.from_options(args.timeout, args.memory_limit)
 
-
-def _preparation(args):
-    from recon.surfaces.prepare import Preparation
-
-    return Preparation.from_options(remove_outliers=args.remove_outliers, voxel=args.voxel,
-                                    normals_k=args.normals_k, orient=args.orient,
-                                    seed=args.seed)
+def _limits(args) -> dict:
+    return {"timeout": args.timeout, "memory_limit": args.memory_limit}
 
 
 class _StageBar:
@@ -190,10 +185,8 @@ class _StageBar:
             self.bar.close()
 
 
-def _print_json(value) -> None:
-    from recon.experiments.sweep import to_jsonable
-
-    print(json.dumps(to_jsonable(value), indent=2, default=str))
+def _print_json(value: dict) -> None:
+    print(json.dumps(value, indent=2, default=str))
 
 
 def _estimate_line(estimate: dict) -> str:
@@ -208,93 +201,86 @@ def _estimate_line(estimate: dict) -> str:
 
 
 def run_reconstruct(args) -> int:
-    from recon.surfaces import methods
-    from recon.surfaces.prepare import InputError
+    from recon import api
 
     if args.list_methods:
-        print(methods.listing())
+        print(api.method_listing())
         return 0
     reclaim_positional(args, "auto_methods", "input")
     if not args.input or args.output is None:
-        raise InputError("reconstruct needs INPUT and -o MESH.ply (or --list-methods)")
+        raise UsageError("reconstruct needs INPUT and -o MESH.ply (or --list-methods)")
     if args.output.suffix.lower() != ".ply":
-        raise InputError(f"-o must name a .ply file, got {args.output}")
+        raise UsageError(f"-o must name a .ply file, got {args.output}")
     auto = args.method == "auto"
     if auto and args.param:
-        raise InputError("--param cannot be combined with -m auto")
+        raise UsageError("--param cannot be combined with -m auto")
     if not 0 < args.holdout <= 0.5:   # checked even when unused: a bad value is a mistake
-        raise InputError(f"--holdout must be in (0, 0.5], got {args.holdout}")
-    run = None if auto else methods.parse_run(args.method, args.param)
-    options = {"preparation": _preparation(args), "limits": _limits(args),
-               "isolate": not args.in_process}
+        raise UsageError(f"--holdout must be in (0, 0.5], got {args.holdout}")
     with _StageBar(args.method) as bar:
-        if auto:
-            from recon.surfaces.auto import choose_and_reconstruct
-
-            summary = choose_and_reconstruct(args.input, args.output,
-                                             methods=args.auto_methods,
-                                             holdout=args.holdout, on_wait=bar,
-                                             say=None if args.json else print, **options)
-        else:
-            from recon.surfaces.reconstruct import reconstruct_input
-
-            summary = reconstruct_input(args.input, args.output, method=run, on_wait=bar,
-                                        **options)
+        result = api.reconstruct_file(
+            args.input, args.output, method=args.method, params=args.param,
+            auto_methods=args.auto_methods, holdout=args.holdout, isolate=not args.in_process,
+            on_wait=bar, say=None if args.json else print, **_preparation(args), **_limits(args))
     if args.json:
-        _print_json(summary)
+        _print_json(result.to_dict())
     else:
-        print(f"{summary['method']}: {summary['n_faces']} faces "
-              f"({'watertight' if summary['watertight'] else 'open'}) in "
-              f"{summary['wall_time_s']:.2f} s; wrote {args.output}")
-        print(_estimate_line(summary["estimate"]))
+        surface = result.surface
+        print(f"{surface.method}: {surface.n_faces} faces "
+              f"({'watertight' if surface.info['watertight'] else 'open'}) in "
+              f"{surface.info['wall_time_s']:.2f} s; wrote {args.output}")
+        print(_estimate_line(result.estimate))
     return 0
 
 
 def run_compare(args) -> int:
-    from recon.experiments.compare import compare_input, format_full_grid
+    from recon import api
 
     _positional(args, "methods", "input", "INPUT (a point cloud or strike log)")
-    report = compare_input(args.input, args.truth, args.output, names=args.methods,
-                           grid="defaults" if args.no_grid else args.grid,
-                           truth_scale=args.truth_scale, preparation=_preparation(args),
-                           limits=_limits(args), samples=args.samples, auto=args.auto,
-                           scheduler=args.scheduler, n_workers=args.workers,
-                           resume=args.resume, keep_meshes=not args.no_meshes,
-                           say=None if args.json else print)
+    result = api.compare(args.input, truth=args.truth, output=args.output, methods=args.methods,
+                         grid="defaults" if args.no_grid else args.grid,
+                         truth_scale=args.truth_scale, samples=args.samples, auto=args.auto,
+                         scheduler=args.scheduler, n_workers=args.workers, resume=args.resume,
+                         keep_meshes=not args.no_meshes, say=None if args.json else print,
+                         **_preparation(args), **_limits(args))
     if args.json:
-        _print_json({k: v for k, v in report.items() if k not in ("table", "auto_text")})
+        _print_json(result.to_dict())
         return 0
-    print(report["table"])
-    for metric, front in (("Chamfer", report["pareto_chamfer"]),
-                          ("F-score", report["pareto_fscore"])):
+    print(result.table)
+    for metric, front in (("Chamfer", result.pareto_chamfer),
+                          ("F-score", result.pareto_fscore)):
         print(f"Pareto front (time vs {metric}): " + ", ".join(
             f"{r['label']} ({r['wall_time_s']:.2g} s)" for r in front))
-    print(format_full_grid(report["full_grid"]))
+    print(result.full_grid_text)
     if args.auto:
-        print(report["auto_text"])
-    print(f"wrote {report['csv']}, {report['json']}, {report['png']}")
+        print(result.auto_text)
+    print(f"wrote {result.csv}, {result.json}, {result.png}")
     return 0
 
 
+def _levels(values: list[str], name: str) -> tuple[float, ...]:
+    """Grid levels from the command line's ``--NAME`` items."""
+    try:
+        return tuple(float(v) for v in values)
+    except ValueError:
+        raise UsageError(f"--{name} must be comma-separated numbers, got "
+                         f"{','.join(values)!r}") from None
+
+
 def run_stability(args) -> int:
-    from recon.experiments.stability import stability_input
+    from recon import api
 
     _positional(args, "methods", "source", "SOURCE (a scene, point cloud or strike log)")
-    report = stability_input(args.source, args.output, truth=args.truth,
-                             truth_scale=args.truth_scale, overrides=args.overrides,
-                             names=args.methods, noise=",".join(args.noise),
-                             density=",".join(args.density), outliers=",".join(args.outliers),
-                             seed=args.seed,
-                             limits=_limits(args), samples=args.samples,
-                             scheduler=args.scheduler, n_workers=args.workers,
-                             resume=args.resume)
+    result = api.stability(args.source, output=args.output, truth=args.truth,
+                           truth_scale=args.truth_scale, overrides=args.overrides,
+                           methods=args.methods, noise=_levels(args.noise, "noise"),
+                           density=_levels(args.density, "density"),
+                           outliers=_levels(args.outliers, "outliers"), seed=args.seed,
+                           samples=args.samples, scheduler=args.scheduler,
+                           n_workers=args.workers, resume=args.resume, **_limits(args))
     if args.json:
-        _print_json({"csv": str(report["csv"]), "json": str(report["json"]),
-                     "pngs": [str(p) for p in report["pngs"]],
-                     "failure_rate": report["failure_rate"]})
+        _print_json(result.to_dict())
         return 0
-    for method, rate in report["failure_rate"].items():
+    for method, rate in result.failure_rate.items():
         print(f"{method:<24} failed in {rate:6.1%} of the cells")
-    print(f"wrote {report['csv']}, {report['json']} and {len(report['pngs'])} charts to "
-          f"{args.output}")
+    print(f"wrote {result.csv}, {result.json} and {len(result.pngs)} charts to {args.output}")
     return 0

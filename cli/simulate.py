@@ -48,13 +48,13 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    import sim
+    from recon import api
 
     if args.keys:
-        _print_keys()
+        _print_keys(api.scene_keys())
         return 0
     if args.list:
-        presets = sim.list_presets()
+        presets = api.presets()
         if args.json:
             print(json.dumps([{"name": n, "description": d} for n, d in presets], indent=2))
         else:
@@ -64,12 +64,10 @@ def run(args) -> int:
         return 0
     if args.scene is None or args.output is None:
         args.parser.error("SCENE and -o LOG.h5 are required (or --list, --keys)")
-    from sim.defaults import MAX_SEED
-
-    if not 0 <= args.seed <= MAX_SEED:
-        args.parser.error(f"--seed must be >= 0 and at most {MAX_SEED}, got {args.seed}")
-    from recon import api
-
+    try:
+        api.check_seed(args.seed)
+    except api.ApiError as exc:
+        args.parser.error(f"--{exc}")   # "--seed must be ..."
     summary = api.simulate(args.scene, args.output, seed=args.seed, overrides=args.overrides,
                            progress=args.progress, live=args.live,
                            compression=args.compression).summary
@@ -82,14 +80,10 @@ def run(args) -> int:
     return 0
 
 
-def _print_keys() -> None:
+def _print_keys(schema: dict) -> None:
     """The scene schema: ``[section]`` then ``key = default  unit  meaning`` per line."""
-    from sim.defaults import SCHEMA
-    from sim.scene import toml_value
-
-    for section, keys in SCHEMA.items():
+    for section, keys in schema.items():
         print(f"[{section}]")
-        for name, key in keys.items():
-            default = "(none)" if key.default is None else toml_value(key.default)
-            unit = f"[{key.unit}]" if key.unit else ""
-            print(f"  {name + ' = ' + default:<46s} {unit:<19s} {key.help}")
+        for name, default, unit, meaning in keys:
+            unit = f"[{unit}]" if unit else ""
+            print(f"  {name + ' = ' + default:<46s} {unit:<19s} {meaning}")

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from cli.options import add_command, add_sweep_options, show_required
+from cli.options import UsageError, add_command, add_sweep_options, show_required
 
 # Repeated from recon/experiments/studies/__init__.py (STUDIES) so that ``recon --help`` imports
 # nothing.
@@ -55,33 +55,23 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_study(args) -> int:
-    from recon.experiments import studies
+    from recon import api
 
     if args.list:
-        for name, title in studies.describe():
+        for name, title in api.studies():
             print(f"{name:<12} {title}")
         print(f"{'all':<12} every study above, into DIR/NAME/")
         return 0
     if args.name is None or args.output is None:
-        raise studies.StudyError("NAME and -o DIR are required (or --list)")
+        raise UsageError("NAME and -o DIR are required (or --list)")
     if args.workers is not None and args.workers < 1:
-        raise studies.StudyError(f"--workers must be >= 1, got {args.workers}")
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
     size = args.size or ("quick" if args.quick else "full")
     options = {"size": size, "scheduler": args.scheduler, "resume": args.resume,
                "n_workers": args.workers}
     if args.name == "all":
-        index = studies.run_all(args.output, **options)
-        if args.json:
-            print(json.dumps(index, indent=2))
-            return 0
-        for name, entry in index["studies"].items():
-            verdicts = ", ".join(f"{n} {v}" for v, n in sorted(entry["verdicts"].items()))
-            print(f"{name:<12} {entry['wall_time_s']:7.1f} s  {verdicts}"
-                  + (f"  ({entry['n_failed']} cases failed)" if entry["n_failed"] else ""))
-        print(f"all studies: {index['wall_time_s']:.1f} s; wrote {args.output}/NAME/ and "
-              f"{args.output / studies.INDEX_JSON}")
-        return 0
-    summary = studies.run(args.name, args.output, **options)
+        return _print_all(args, api.study_all(args.output, **options))
+    summary = api.study(args.name, args.output, **options)
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
@@ -97,9 +87,24 @@ def run_study(args) -> int:
     return 0
 
 
-def run_report(args) -> int:
-    from recon.experiments.report import write_report
+def _print_all(args, result) -> int:
+    """What ``recon study all`` prints: a line per study, then the total."""
+    index = result.index
+    if args.json:
+        print(json.dumps(index, indent=2))
+        return 0
+    for name, entry in index["studies"].items():
+        verdicts = ", ".join(f"{n} {v}" for v, n in sorted(entry["verdicts"].items()))
+        print(f"{name:<12} {entry['wall_time_s']:7.1f} s  {verdicts}"
+              + (f"  ({entry['n_failed']} cases failed)" if entry["n_failed"] else ""))
+    print(f"all studies: {index['wall_time_s']:.1f} s; wrote {args.output}/NAME/ and "
+          f"{result.index_path}")
+    return 0
 
-    path = write_report(args.input, args.output)
+
+def run_report(args) -> int:
+    from recon import api
+
+    path = api.report(args.input, args.output)
     print(f"wrote {path}")
     return 0

@@ -1,18 +1,25 @@
 """Registration of strike logs, surface reconstruction and the experiments that compare methods.
 
 The folders follow the pipeline: ``registration/`` (strikes into the body frame), ``surfaces/``
-(reconstruction methods, normals, one method run safely), ``experiments/`` (compare, stability,
-the automatic choice, sweeps, charts, reports, the paper's studies). ``recon.api`` is the public
-API in one screen; its verbs are also importable from here (``from recon import simulate``), loaded
-on first use so that importing a subpackage stays light.
+(reconstruction methods, normals, one method run safely, the automatic choice and the truth-free
+judgement), ``experiments/`` (compare, stability, sweeps, charts, reports, the paper's studies).
+``recon.api`` is the public API; its verbs are also importable from here (``from recon import
+simulate``) and listed by ``dir(recon)``, loaded on first use so that importing a subpackage (or
+starting ``recon --help``) stays light.
 """
 
-_API = ("simulate", "ingest", "reconstruct", "score", "compare", "edges")
-__all__ = list(_API)
+# The verbs of recon.api (its __all__ without the result classes, and without ``demo``: here
+# that name is the module recon.demo; a test keeps them equal).
+VERBS = ("check_scheduler", "check_seed", "compare", "default_truth", "edges",
+         "export_altimetry", "follow", "ingest", "ingest_altimetry", "ingest_file",
+         "is_altimetry", "is_kernel", "load", "method_listing", "presets", "reconstruct",
+         "reconstruct_file", "refine", "report", "save", "scene_keys", "score", "simulate",
+         "stability", "studies", "study", "study_all", "trajectory", "truth_of")
+__all__ = list(VERBS)
 
 
 def __getattr__(name: str):
-    if name in _API:
+    if name in VERBS:
         from recon import api
 
         return getattr(api, name)
@@ -20,4 +27,4 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *_API})
+    return sorted({*globals(), *VERBS})

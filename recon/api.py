@@ -5,32 +5,61 @@
 >>> cloud = api.ingest(log)                                      # body-frame Cloud
 >>> surface = api.reconstruct(cloud, method="auto")              # Surface (a Mesh)
 >>> report = api.score(surface, truth=log)                       # metrics.ScoreReport
->>> pictures = api.edges(cloud, truth=log, output="edges")        # edge points: PLY + PNG
->>> table = api.compare(cloud, truth=log, output="cmp")          # every method, speed x accuracy
+>>> api.save(surface, "surface.ply")                             # atomic; never over an input
+>>> pictures = api.edges(cloud, truth=log, output="edges")        # EdgesResult: PLY + PNG
+>>> table = api.compare(cloud, truth=log, output="cmp")          # CompareResult
 
-Every verb takes recon's own types (``formats.geometry.Cloud`` and ``Mesh``, a strike log path)
-or the plain data they wrap, and returns recon's types. Files are read once per call. The policy
-the command line applies (which truth a log implies, what ``auto`` decides, what a comparison
-writes) lives here and in the modules these verbs call, so a script gets what ``recon`` prints.
-Bad input raises a ``formats.errors.ReconError`` subclass with a one-line message.
+Every verb takes recon's own types (``formats.geometry.Cloud`` and ``Mesh``, a strike log path),
+the plain data they wrap, or Open3D and trimesh point clouds and meshes, and returns recon's
+types or a result dataclass (``ReconstructResult``, ``CompareResult``, ``StabilityResult``...).
+Files are read once per call and written atomically: a file appears only when complete, and a
+verb refuses to write over one of its own inputs. The ``recon`` command calls these verbs and
+nothing else of recon, so a script gets what ``recon`` prints: the policy (which truth a log
+implies, what ``auto`` decides, what a comparison writes) lives here and in the modules these
+verbs call. Bad input raises a ``formats.errors.ReconError`` subclass with a one-line message.
+
+Importing this module is light (no numpy, h5py or Open3D): each verb imports what it needs.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from formats.errors import ReconError
-from formats.geometry import Cloud, Frame, Mesh
 
-__all__ = ["SimulatedLog", "compare", "edges", "ingest", "reconstruct", "score", "simulate"]
+if TYPE_CHECKING:
+    from formats.geometry import Cloud, Frame, Mesh
+    from metrics import ScoreReport
+    from recon.registration.refine import Refinement
+    from recon.surfaces.reconstruct import Surface
+
+__all__ = [
+    "AltimetryExport", "AltimetryResult", "ApiError", "CompareResult", "DemoResult",
+    "EdgesResult", "IngestResult", "ReconstructResult", "SimulatedLog", "StabilityResult",
+    "StudiesResult", "TrajectoryResult",
+    "check_scheduler", "check_seed", "compare", "default_truth", "demo", "edges",
+    "export_altimetry", "follow", "ingest", "ingest_altimetry", "ingest_file", "is_altimetry",
+    "is_kernel", "load", "method_listing", "presets", "reconstruct", "reconstruct_file",
+    "refine", "report", "save", "scene_keys", "score", "simulate", "stability", "studies",
+    "study", "study_all", "trajectory", "truth_of",
+]
 
 
 class ApiError(ReconError, ValueError):
     """A public API call got an argument it cannot use."""
+
+
+def _jsonable(value):
+    from recon.experiments.sweep import to_jsonable
+
+    return to_jsonable(value)
+
+
+# ------------------------------------------------------------------------------ results
 
 
 @dataclass(frozen=True)
@@ -51,6 +80,405 @@ class SimulatedLog(os.PathLike):
         return str(self.path)
 
 
+@dataclass(frozen=True)
+class IngestResult:
+    """A registered cloud written to a file (``ingest_file``, ``follow``).
+
+    Attributes
+    ----------
+    n_points : int
+    frame : {"body", "inertial"}
+    output : Path
+    refined : bool
+        Registered with the poses a refinement corrected.
+    """
+
+    n_points: int
+    frame: str
+    output: Path
+    refined: bool = False
+
+
+@dataclass(frozen=True)
+class AltimetryResult:
+    """A mission's altimetry product read into a body-frame cloud file (``ingest_altimetry``).
+
+    Attributes
+    ----------
+    n_points : int
+    dropped : dict of str -> int
+        Flagged rows dropped, by reason.
+    product : str
+        What the product is (e.g. OSIRIS-REx OLA Level 2).
+    output : Path
+    """
+
+    n_points: int
+    dropped: dict
+    product: str
+    output: Path
+
+
+@dataclass(frozen=True)
+class AltimetryExport:
+    """A strike log written as a mission's altimetry product (``export_altimetry``).
+
+    Attributes
+    ----------
+    n_returns, n_no_return : int
+        Rows of strikes, and (OLA) of pulses that struck nothing.
+    product : str
+    written : tuple of Path
+    """
+
+    n_returns: int
+    n_no_return: int
+    product: str
+    written: tuple
+
+
+@dataclass(frozen=True)
+class TrajectoryResult:
+    """A log's recorded poses written as text or SPICE kernels (``trajectory``).
+
+    Attributes
+    ----------
+    n_shots : int
+    frame : {"body", "inertial"} or None
+        Of a text trajectory (kernels hold both frames: None).
+    epoch_et : float or None
+        ET [s, TDB past J2000] of the log's time 0 in a kernel (None for text).
+    written : tuple of Path
+    """
+
+    n_shots: int
+    frame: str | None
+    epoch_et: float | None
+    written: tuple
+
+
+@dataclass(frozen=True)
+class ReconstructResult:
+    """One reconstruction of a cloud, and the mesh file written (``reconstruct_file``).
+
+    Attributes
+    ----------
+    surface : recon.surfaces.reconstruct.Surface
+        The mesh with its method, resolved parameters and run ``info`` (``wall_time_s``,
+        ``watertight``, ``peak_memory_mb`` when isolated, ``estimate``, and ``auto``).
+    input : str or None
+        The file read (None for data in memory).
+    output : Path or None
+        The mesh written.
+    n_points : int
+        Points after preparation.
+    spacing_m, noise_m : float
+        Their typical spacing and noise, metres.
+    view_points : bool
+        Whether the cloud had view points (sensor positions).
+    label : str
+        The run (method and parameters) in words.
+    """
+
+    surface: Surface
+    input: str | None
+    output: Path | None
+    n_points: int
+    spacing_m: float
+    noise_m: float
+    view_points: bool
+    label: str
+
+    @property
+    def estimate(self) -> dict:
+        """The truth-free predicted Chamfer distance and F-score with their band."""
+        return self.surface.info["estimate"]
+
+    @property
+    def auto(self) -> dict | None:
+        """``method="auto"``'s candidates, choice and reason, or None."""
+        return self.surface.info.get("auto")
+
+    def to_dict(self) -> dict:
+        """A JSON-ready summary (what ``recon reconstruct --json`` prints)."""
+        info = {k: v for k, v in self.surface.info.items() if k != "auto"}
+        auto = {} if self.auto is None else {"auto": self.auto}
+        return _jsonable({
+            "input": self.input, **auto, "n_points": self.n_points,
+            "spacing_m": self.spacing_m, "noise_m": self.noise_m,
+            "view_points": self.view_points, "method": self.surface.method,
+            "params": self.surface.params, "label": self.label,
+            "output": None if self.output is None else str(self.output),
+            "n_vertices": self.surface.n_vertices, "n_faces": self.surface.n_faces, **info})
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    """Every method on one cloud, scored against the truth (``compare``).
+
+    Attributes
+    ----------
+    records : list of dict
+        One per run, ranked by Chamfer (failures last, with their reasons); the columns of
+        results.csv.
+    table : str
+        The ranking as text.
+    pareto_chamfer, pareto_fscore : list of dict
+        The runs on the time-against-accuracy Pareto fronts (``label``, ``wall_time_s``, ...).
+    full_grid : dict
+        The full parameter grid's remaining runs and their estimated time.
+    csv, json, png : Path
+        results.csv, results.json and speed_accuracy.png.
+    auto : dict or None
+        With ``auto=True``: ``choice`` and ``agreement`` (where the choice ranks on the truth).
+    auto_text : str or None
+        The candidates table and the agreement line.
+    """
+
+    records: list
+    table: str
+    pareto_chamfer: list
+    pareto_fscore: list
+    full_grid: dict
+    csv: Path
+    json: Path
+    png: Path
+    auto: dict | None = None
+    auto_text: str | None = None
+
+    @property
+    def full_grid_text(self) -> str:
+        """One line: how long the full grid would take."""
+        from recon.experiments.compare import format_full_grid
+
+        return format_full_grid(self.full_grid)
+
+    def to_dict(self) -> dict:
+        """A JSON-ready summary without the text (what ``recon compare --json`` prints)."""
+        auto = {} if self.auto is None else {"auto": self.auto}
+        return _jsonable({"records": self.records, "pareto_chamfer": self.pareto_chamfer,
+                          "pareto_fscore": self.pareto_fscore, "csv": self.csv,
+                          "json": self.json, "png": self.png, "full_grid": self.full_grid,
+                          **auto})
+
+
+@dataclass(frozen=True)
+class StabilityResult:
+    """Every method over noise x density x outliers (``stability``).
+
+    Attributes
+    ----------
+    records : list of dict
+        One per (method, cell).
+    csv, json : Path
+        stability.csv and stability.json.
+    pngs : list of Path
+        Per method, its failure map and accuracy heatmap.
+    failure_rate : dict of str -> float
+        Per method, the fraction of cells where it failed.
+    """
+
+    records: list
+    csv: Path
+    json: Path
+    pngs: list
+    failure_rate: dict
+
+    def to_dict(self) -> dict:
+        """A JSON-ready summary without the records (what ``recon stability --json`` prints)."""
+        return {"csv": str(self.csv), "json": str(self.json),
+                "pngs": [str(p) for p in self.pngs], "failure_rate": self.failure_rate}
+
+
+@dataclass(frozen=True)
+class EdgesResult:
+    """The edge points of a cloud against the truth, written (``edges``).
+
+    Attributes
+    ----------
+    report : metrics.EdgeReport
+    counts : dict of str -> int
+        Surface, true and false edge points; missed feature and gentle truth edges.
+    files : dict of str -> Path
+        ``ply``, ``png`` and ``json``.
+    """
+
+    report: Any
+    counts: dict
+    files: dict
+
+    def to_dict(self) -> dict:
+        """A JSON-ready summary (what ``recon edges --json`` prints)."""
+        return {"edge": self.report.to_dict(), "counts": self.counts,
+                "files": {k: str(v) for k, v in self.files.items()}}
+
+
+@dataclass(frozen=True)
+class StudiesResult:
+    """Every study run (``study_all``).
+
+    Attributes
+    ----------
+    index : dict
+        ``size``, ``studies`` (per study: ``wall_time_s``, ``n_cases``, ``n_failed``,
+        ``verdicts``), ``wall_time_s``: the content of ``index_path``.
+    index_path : Path
+    """
+
+    index: dict
+    index_path: Path
+
+
+@dataclass(frozen=True)
+class DemoResult:
+    """The end-to-end demo's files and scores (``demo``).
+
+    Attributes
+    ----------
+    files : dict of str -> Path
+        ``log``, ``cloud``, ``truth``, ``surface``, ``scores``.
+    simulation : dict
+        The simulator's summary.
+    scores : dict of str -> metrics.ScoreReport
+        ``cloud`` and ``surface``.
+    n_faces : int
+    """
+
+    files: dict
+    simulation: dict
+    scores: dict
+    n_faces: int
+
+    def table(self) -> str:
+        """The scores as a table: one row per score, one column per scored geometry."""
+        from recon.demo import format_scores
+
+        return format_scores(self.scores)
+
+
+# ------------------------------------------------------------------------------ data in
+
+
+def _from_library(value):
+    """An Open3D or trimesh point cloud or mesh as a ``Cloud`` or ``Mesh`` (anything else is
+    returned as it is). Told apart by their types' modules, so neither library is imported."""
+    module = type(value).__module__ or ""
+    if not module.startswith(("open3d", "trimesh")):
+        return value
+    import numpy as np
+
+    from formats.geometry import Cloud, Mesh
+
+    if module.startswith("open3d"):
+        if hasattr(value, "triangles"):
+            return Mesh(np.asarray(value.vertices), np.asarray(value.triangles))
+        if hasattr(value, "points"):
+            normals = np.asarray(value.normals) if value.has_normals() else None
+            return Cloud(np.asarray(value.points), normals=normals)
+    elif hasattr(value, "vertices"):
+        if getattr(value, "faces", None) is not None and len(value.faces):
+            return Mesh(np.asarray(value.vertices), np.asarray(value.faces))
+        return Cloud(np.asarray(value.vertices))
+    raise ApiError(f"{type(value).__module__}.{type(value).__name__} is neither a point cloud "
+                   "nor a triangle mesh")
+
+
+def load(value, *, name: str = "input", points_only: bool = False) -> Cloud | Mesh:
+    """A ``Cloud`` or ``Mesh`` from recon's types, plain arrays, Open3D or trimesh objects, or
+    a file (cloud, mesh or log).
+
+    A strike log is ingested into a body-frame cloud (``points_only``: without its per-point
+    attributes).
+    """
+    from formats.geometry import Cloud, Mesh
+
+    value = _from_library(value)
+    if isinstance(value, Cloud | Mesh):
+        return value
+    if isinstance(value, str | os.PathLike):
+        from recon.inputs import load_geometry
+
+        return load_geometry(value, points_only=points_only)
+    if isinstance(value, tuple | list) or hasattr(value, "faces"):
+        return Mesh.of(value, name)
+    return Cloud.of(value, name)
+
+
+def truth_of(value, *, scale: float = 1.0, units: str | None = None) -> Mesh:
+    """The truth mesh named by ``value``: a ``Mesh``, ``(vertices, faces)``, an Open3D or trimesh
+    mesh, a mesh file (in ``units``, default the format's, then times ``scale``), or a strike
+    log with its embedded truth mesh."""
+    from formats.geometry import Mesh
+
+    if isinstance(value, str | os.PathLike):
+        from recon.inputs import load_truth
+
+        return load_truth(value, scale=scale, units=units)
+    return Mesh.of(_from_library(value), "truth")
+
+
+def default_truth(test):
+    """The truth a test input implies on its own: a strike log's embedded truth mesh.
+
+    Raises
+    ------
+    ApiError
+        ``test`` is not a strike log, so the truth must be given.
+    """
+    from formats.paths import check_source
+    from recon.inputs import is_strike_log
+
+    check_source(test, ApiError)
+    if not is_strike_log(test):
+        raise ApiError(f"{test}: is not a strike log with truth; give --truth")
+    return test
+
+
+def _inputs(*values) -> list:
+    """The values that name files (for ``formats.paths.protecting``)."""
+    return [v for v in values if isinstance(v, str | os.PathLike)]
+
+
+def save(geometry, path, *, source=None, units: str | None = None) -> Path:
+    """Write a mesh or a point cloud; the suffix of ``path`` picks the format.
+
+    The file appears only when complete (``formats.atomic``), and a file that the running
+    command reads is refused (``formats.paths.check_destination``).
+
+    Parameters
+    ----------
+    geometry : Mesh, Surface, Cloud, (n, 3) array, (vertices, faces), Open3D or trimesh object
+    path : str or Path
+        A mesh as .ply, .tab (PDS vertex/plate table) or .bds/.dsk (SPICE DSK); a cloud as
+        .ply, .las, .laz or .h5.
+    source : str or Path, optional
+        The file the geometry was made from, recorded in the file's header.
+    units : {"km", "m"}, optional
+        Of a .tab mesh (default km).
+
+    Returns
+    -------
+    Path
+    """
+    from formats.cloud_io import write_cloud
+    from formats.geometry import Cloud, Mesh
+    from formats.mesh_io import write_mesh
+    from formats.paths import check_destination
+
+    geometry = load(geometry, name="geometry")
+    check_destination(path, ApiError)
+    name = None if source is None else Path(source).name
+    if isinstance(geometry, Mesh):
+        return write_mesh(path, Mesh(geometry.vertices, geometry.faces, frame=geometry.frame),
+                          source=name, units=units)
+    if units is not None:
+        raise ApiError(f"{path}: units apply to .tab meshes, not to clouds")
+    return write_cloud(path, Cloud.of(geometry), source=name)
+
+
+# ------------------------------------------------------------------------------ simulate
+
+
 def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
              progress: bool | None = None, live: bool = False,
              compression: str | None = None) -> SimulatedLog:
@@ -59,7 +487,7 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
     Parameters
     ----------
     scene : str or Path
-        A preset name (``recon simulate --list``) or a scene TOML file.
+        A preset name (``presets()``) or a scene TOML file.
     output : str or Path
         The ``.h5`` strike log to write (atomically: it appears only when complete).
     seed : int, >= 0
@@ -69,8 +497,8 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
     progress : bool or None
         Progress bar (None: on a terminal only).
     live : bool
-        Write the log in HDF5 SWMR mode, so that ``recon ingest LOG --follow`` (and
-        ``formats.strike_log.follow``) read the strikes as they arrive.
+        Write the log in HDF5 SWMR mode, so that ``follow`` (``recon ingest LOG --follow``)
+        reads the strikes as they arrive.
     compression : str, optional
         Filter of the log's datasets: ``"gzip"`` or ``"gzip:LEVEL"`` (deflate with shuffle,
         LEVEL 0-9, readable by every HDF5 tool; the default), ``"lzf"`` (with shuffle, readable
@@ -87,6 +515,35 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
                            progress=progress, live=live,
                            compression=compression or DEFAULT_COMPRESSION)
     return SimulatedLog(Path(summary["path"]), summary)
+
+
+def check_seed(seed: int) -> int:
+    """``seed`` if the simulator takes it (0 to ``sim.defaults.MAX_SEED``), else ``ApiError``."""
+    from sim.defaults import MAX_SEED
+
+    if not 0 <= seed <= MAX_SEED:
+        raise ApiError(f"seed must be >= 0 and at most {MAX_SEED}, got {seed}")
+    return seed
+
+
+def presets() -> list[tuple[str, str]]:
+    """``(name, description)`` of every scene preset."""
+    import sim
+
+    return sim.list_presets()
+
+
+def scene_keys() -> dict[str, list[tuple[str, str, str, str]]]:
+    """The scene schema: per section, ``(key, default as TOML, unit, meaning)`` of every key."""
+    from sim.defaults import SCHEMA
+    from sim.scene import toml_value
+
+    return {section: [(name, "(none)" if key.default is None else toml_value(key.default),
+                       key.unit, key.help) for name, key in keys.items()]
+            for section, keys in SCHEMA.items()}
+
+
+# ------------------------------------------------------------------------------ registration
 
 
 def ingest(log, *, frame: Frame = "body", output=None,
@@ -110,66 +567,201 @@ def ingest(log, *, frame: Frame = "body", output=None,
         (n, 3) metres in ``frame`` with ``time``, ``shot``, ``beam``, ``range`` and the view
         points (sensor positions) as attributes.
     """
+    from formats.paths import check_destination, protecting
     from recon.registration.ingest import ingest as register_log
 
-    return register_log(log, frame=frame, output=output, progress=progress)
+    with protecting(_inputs(log)):
+        if output is not None:
+            check_destination(output, ApiError)
+        return register_log(log, frame=frame, output=output, progress=progress)
 
 
-def load(value, *, name: str = "input", points_only: bool = False) -> Cloud | Mesh:
-    """A ``Cloud`` or ``Mesh`` from recon's types, plain arrays or a file (cloud, mesh or log).
+def ingest_file(log, output, *, frame: Frame = "body", refinement: Refinement | None = None,
+                progress: Callable[[int, int], None] | None = None) -> IngestResult:
+    """Register a strike log into a cloud file in bounded memory (``recon ingest``).
 
-    A strike log is ingested into a body-frame cloud (``points_only``: without its per-point
-    attributes).
+    Parameters
+    ----------
+    log : str, Path or SimulatedLog
+    output : str or Path
+        .ply, .las, .laz or .h5; it appears only when every block was read, checked and written.
+    frame : {"body", "inertial"}
+    refinement : Refinement, optional
+        Register with the poses it corrects (``refine``).
+    progress : callable, optional
+        Called as ``progress(strikes_in_block, total_strikes)`` after each block.
     """
-    if isinstance(value, Cloud | Mesh):
-        return value
-    if isinstance(value, str | os.PathLike):
-        from recon.inputs import load_geometry
+    from formats.paths import check_destination, protecting
+    from recon.registration.ingest import ingest_to_file
 
-        return load_geometry(value, points_only=points_only)
-    if isinstance(value, tuple | list) or hasattr(value, "faces"):
-        return Mesh.of(value, name)
-    return Cloud.of(value, name)
-
-
-def truth_of(value, *, scale: float = 1.0, units: str | None = None) -> Mesh:
-    """The truth mesh named by ``value``: a ``Mesh`` or ``(vertices, faces)``, a mesh file (in
-    ``units``, default the format's, then times ``scale``), or a strike log with its embedded
-    truth mesh."""
-    if isinstance(value, str | os.PathLike):
-        from recon.inputs import load_truth
-
-        return load_truth(value, scale=scale, units=units)
-    return Mesh.of(value, "truth")
+    correction = None if refinement is None else refinement.correction
+    with protecting(_inputs(log)):
+        check_destination(output, ApiError)
+        summary = ingest_to_file(log, output, frame=frame, progress=progress,
+                                 correction=correction)
+    return IngestResult(summary["n_points"], frame, Path(output), refined=correction is not None)
 
 
-def default_truth(test):
-    """The truth a test input implies on its own: a strike log's embedded truth mesh.
+def follow(log, output, *, frame: Frame = "body", timeout_s: float = 60.0,
+           progress: Callable[[int, int], None] | None = None) -> IngestResult:
+    """Register a strike log while ``simulate(..., live=True)`` writes it; write the cloud once
+    the log is complete (``recon ingest --follow``).
 
-    Raises
-    ------
-    ApiError
-        ``test`` is not a strike log, so the truth must be given.
+    Parameters
+    ----------
+    log : str or Path
+        The log's final path.
+    output : str or Path
+        .ply, .las, .laz or .h5.
+    frame : {"body", "inertial"}
+    timeout_s : float, seconds
+        Give up after this long without a writer or new strikes.
+    progress : callable, optional
+        Called as ``progress(strikes_in_block, strikes_committed_so_far)`` after each block.
     """
-    from formats.paths import check_source
-    from recon.inputs import is_strike_log
+    from formats.paths import check_destination
+    from recon.registration.ingest import ingest_following
 
-    check_source(test, ApiError)
-    if not is_strike_log(test):
-        raise ApiError(f"{test}: is not a strike log with truth; give --truth")
-    return test
+    if not timeout_s > 0:
+        raise ApiError(f"timeout_s must be a positive number of seconds, got {timeout_s:g}")
+    check_destination(output, ApiError)
+    summary = ingest_following(log, output, frame=frame, progress=progress, timeout_s=timeout_s)
+    return IngestResult(summary["n_points"], frame, Path(output))
+
+
+def refine(log, *, interval: float | None = None, spin: bool = False, seed: int = 0,
+           progress: Callable[[int, int], None] | None = None) -> Refinement:
+    """Estimate a log's pose-knowledge errors (boresight misalignment, position bias; with
+    ``interval`` also slowly varying ones; with ``spin`` a spin-rate correction) from the
+    agreement of its passes (``recon ingest --refine``).
+
+    Parameters
+    ----------
+    log : str, Path or SimulatedLog
+    interval : float, optional, seconds
+        Knot spacing of slowly varying errors (None: constant errors only).
+    spin : bool
+    seed : int
+    progress : callable, optional
+        Called as ``progress(iteration, max_iterations)``.
+
+    Returns
+    -------
+    recon.registration.refine.Refinement
+        The estimates with their uncertainties (``lines()``, ``to_dict()``); pass it to
+        ``ingest_file(..., refinement=)``.
+    """
+    from recon.registration.refine import refine as estimate
+
+    return estimate(log, interval=interval, spin=spin, seed=seed, progress=progress)
+
+
+def is_altimetry(path) -> bool:
+    """Whether ``path`` is a mission's altimetry product (an OLA Level-2 label or a Hayabusa2
+    LIDAR Level-2 CSV) rather than a strike log."""
+    from recon.registration.altimetry import is_altimetry as is_product
+
+    return is_product(path)
+
+
+def ingest_altimetry(product, output) -> AltimetryResult:
+    """Read a mission's altimetry product into a body-frame cloud file (flagged returns are
+    dropped and counted).
+
+    Parameters
+    ----------
+    product : str or Path
+        OSIRIS-REx OLA Level-2 label (.xml) or Hayabusa2 LIDAR Level-2 CSV (.csv).
+    output : str or Path
+        .ply, .las, .laz or .h5.
+    """
+    from formats.paths import check_destination, protecting
+    from recon.registration.altimetry import ingest_altimetry as read_product
+
+    with protecting(_inputs(product)):
+        check_destination(output, ApiError)
+        summary = read_product(product, output)
+    return AltimetryResult(summary["n_points"], summary["dropped"], summary["product"],
+                           Path(summary["output"]))
+
+
+def export_altimetry(log, output, *, epoch_et: float | None = None) -> AltimetryExport:
+    """Write a strike log as a mission's altimetry product: OLA Level 2 (``.xml`` label with its
+    ``.dat`` table) or Hayabusa2 LIDAR Level 2 (``.csv``).
+
+    Parameters
+    ----------
+    log : str, Path or SimulatedLog
+    output : str or Path
+    epoch_et : float, optional
+        ET [s, TDB past J2000] of the log's time 0 (default: the log's own, else 0).
+    """
+    from formats.paths import check_destination, protecting
+    from recon.registration.altimetry import export_altimetry as write_product
+
+    with protecting(_inputs(log)):
+        check_destination(output, ApiError)
+        summary = write_product(log, output, epoch_et=epoch_et)
+    return AltimetryExport(summary["n_returns"], summary["n_no_return"], summary["product"],
+                           tuple(Path(p) for p in summary["written"]))
+
+
+def is_kernel(path) -> bool:
+    """Whether ``trajectory`` writes ``path`` as SPICE kernels (.bsp SPK, .bc CK)."""
+    from recon.registration.trajectory import KERNEL_SUFFIXES
+
+    return Path(path).suffix.lower() in KERNEL_SUFFIXES
+
+
+def trajectory(log, output, *, frame: str | None = None, epoch_et: float | None = None
+               ) -> TrajectoryResult:
+    """Write a log's recorded sensor poses: one line per shot (.txt, .csv) or SPICE kernels
+    (.bsp: an SPK, .bc: a CK, each with its frames kernel; a CK with its clock kernel).
+
+    Parameters
+    ----------
+    log : str, Path or SimulatedLog
+    output : str or Path
+    frame : {"body", "inertial"}, optional
+        Of a text trajectory (default body); kernels hold both frames.
+    epoch_et : float, optional
+        Kernels: ET [s, TDB past J2000] of the log's time 0 (default: the log's own, else 0).
+    """
+    from formats.paths import check_destination, protecting
+    from recon.registration.trajectory import export_kernel, export_trajectory
+
+    kernel = is_kernel(output)
+    if kernel and frame is not None:
+        raise ApiError("frame is for text trajectories: an SPK is in J2000 (the log's inertial "
+                       "frame) and a CK holds the body frame too")
+    if not kernel and epoch_et is not None:
+        raise ApiError("epoch_et is for kernels (.bsp, .bc)")
+    with protecting(_inputs(log)):
+        check_destination(output, ApiError)
+        if kernel:
+            summary = export_kernel(log, output, epoch_et=epoch_et)
+            return TrajectoryResult(summary["n_shots"], None, summary["epoch_et"],
+                                    tuple(Path(p) for p in summary["written"]))
+        summary = export_trajectory(log, output, frame=frame or "body")
+    return TrajectoryResult(summary["n_shots"], summary["frame"], None,
+                            (Path(summary["output"]),))
+
+
+# ------------------------------------------------------------------------------ scoring
 
 
 def score(test, *, truth, truth_scale: float = 1.0, truth_units: str | None = None,
           tau: float | None = None,
           tau_fraction: float | None = None, edges: bool = True, seed: int | None = 0,
-          progress=None, **options):
+          progress=None, **options) -> ScoreReport:
     """Score a cloud or a mesh against the truth mesh (``metrics.score``).
 
     Parameters
     ----------
-    test : Cloud, Mesh, Surface, (n, 3) array, (vertices, faces), or a file (cloud, mesh or log)
-    truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
+    test : Cloud, Mesh, Surface, (n, 3) array, (vertices, faces), Open3D or trimesh object, or
+        a file (cloud, mesh or log)
+    truth : Mesh, (vertices, faces), Open3D or trimesh mesh, a mesh file or a strike log with
+        truth
     truth_scale : float
         Factor on a truth mesh file's coordinates (e.g. 1000 for km).
     truth_units : {"km", "m"}, optional
@@ -187,80 +779,117 @@ def score(test, *, truth, truth_scale: float = 1.0, truth_units: str | None = No
     options = {"tau": tau, "tau_fraction": tau_fraction, "edges": edges, "seed": seed,
                "progress": progress} | options
     if isinstance(test, str | os.PathLike):
-        # A file is scored block by block (metrics.score.score_stream): a strike log as it is
-        # registered and a binary PLY, HDF5 or LAS cloud as it is read, in memory flat in
-        # their size; another cloud file read whole, without per-point arrays beside it.
-        # Errors name the file.
-        from formats.cloud_io import stream_cloud
-        from metrics import defaults
-        from metrics.score import score_stream
-        from recon.inputs import is_strike_log
-
-        if is_strike_log(test):
-            from recon.registration.ingest import iter_points
-
-            return score_stream(lambda: iter_points(test), truth, name=f"test {test}",
-                                **options)
-        streamed = stream_cloud(test, defaults.STREAM_BLOCK)
-        if streamed is not None:
-            frame, blocks = streamed
-            return score_stream(blocks, truth, name=f"test {test}", frame=frame, **options)
-        geometry = load(test, name="test", points_only=True)
-        if isinstance(geometry, Cloud):
-            points, normals = geometry.points, geometry.normals
-            step = defaults.STREAM_BLOCK
-            return score_stream(
-                lambda: ((points[i:i + step], None if normals is None else normals[i:i + step])
-                         for i in range(0, len(points), step)), truth, name=f"test {test}",
-                frame=geometry.frame, **options)
-        from metrics.inputs import as_test
-
-        as_test(geometry, f"test {test}")
-        return score_against(geometry, truth, **options)
+        return _score_file(test, truth, options)
     return score_against(load(test, name="test"), truth, **options)
+
+
+def _score_file(test, truth: Mesh, options: dict) -> ScoreReport:
+    """Score a file block by block (``metrics.score.score_stream``): a strike log as it is
+    registered and a binary PLY, HDF5 or LAS cloud as it is read, in memory flat in their size;
+    another cloud file read whole, without per-point arrays beside it. Errors name the file."""
+    from formats.cloud_io import stream_cloud
+    from formats.geometry import Cloud
+    from metrics import defaults
+    from metrics.score import score as score_against
+    from metrics.score import score_stream
+    from recon.inputs import is_strike_log
+
+    if is_strike_log(test):
+        from recon.registration.ingest import iter_points
+
+        return score_stream(lambda: iter_points(test), truth, name=f"test {test}", **options)
+    streamed = stream_cloud(test, defaults.STREAM_BLOCK)
+    if streamed is not None:
+        frame, blocks = streamed
+        return score_stream(blocks, truth, name=f"test {test}", frame=frame, **options)
+    geometry = load(test, name="test", points_only=True)
+    if isinstance(geometry, Cloud):
+        points, normals = geometry.points, geometry.normals
+        step = defaults.STREAM_BLOCK
+        return score_stream(
+            lambda: ((points[i:i + step], None if normals is None else normals[i:i + step])
+                     for i in range(0, len(points), step)), truth, name=f"test {test}",
+            frame=geometry.frame, **options)
+    from metrics.inputs import as_test
+
+    as_test(geometry, f"test {test}")
+    return score_against(geometry, truth, **options)
 
 
 def edges(test, *, truth, output, truth_scale: float = 1.0, truth_units: str | None = None,
           seed: int = 0, title: str | None = None, edge_options: dict | None = None,
-          progress=None) -> dict:
+          progress=None) -> EdgesResult:
     """The edge points of a cloud against the truth, written as a PLY and the paper's picture
     (``recon.edge_pictures``): ``recon edges``.
 
     Parameters
     ----------
-    test : Cloud, (n, 3) array, Mesh, or a file (cloud, mesh or log)
+    test : Cloud, (n, 3) array, Mesh, Open3D or trimesh object, or a file (cloud, mesh or log)
     truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
     output : str or Path
         Directory for edges.ply, edges.png and edges.json.
     truth_scale, truth_units, seed, title, edge_options, progress
-        As ``api.score`` and ``recon.edge_pictures.edge_pictures``.
+        As ``score`` and ``recon.edge_pictures.edge_pictures``.
 
     Returns
     -------
-    dict
-        ``report`` (``metrics.EdgeReport``), ``files``, ``counts``.
+    EdgesResult
     """
     from recon.edge_pictures import edge_pictures
 
     truth_mesh = truth_of(truth, scale=truth_scale, units=truth_units)
-    return edge_pictures(load(test, name="test"), truth_mesh, output, seed=seed, title=title,
-                         edge_options=edge_options, progress=progress)
+    result = edge_pictures(load(test, name="test"), truth_mesh, output, seed=seed, title=title,
+                           edge_options=edge_options, progress=progress)
+    return EdgesResult(result["report"], result["counts"], result["files"])
 
 
-def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None = None,
+# ------------------------------------------------------------------------------ surfaces
+
+
+def method_listing() -> str:
+    """The reconstruction methods, their parameters with defaults, grids and what each default
+    costs, as text (``recon reconstruct --list-methods``)."""
+    from recon.surfaces import methods
+
+    return methods.listing()
+
+
+def _bind(method: str, params):
+    """A method's ``Run``: ``params`` as a dict or as ``KEY=VALUE`` strings (``--param``)."""
+    from recon.surfaces import methods
+
+    if not params:
+        return methods.bind(method)
+    if not isinstance(params, Mapping):
+        return methods.parse_run(method, list(params))
+    return methods.bind(method, params)
+
+
+def _preparation(remove_outliers: bool, voxel: float | None, normals_k: int | None,
+                 orient: str, seed: int):
+    from recon.surfaces.normals import DEFAULT_K
+    from recon.surfaces.prepare import Preparation
+
+    return Preparation.from_options(remove_outliers=remove_outliers, voxel=voxel,
+                                    normals_k=DEFAULT_K if normals_k is None else normals_k,
+                                    orient=orient, seed=seed)
+
+
+def reconstruct(cloud, *, method: str = "poisson", params: Mapping[str, Any] | None = None,
                 remove_outliers: bool = False, voxel: float | None = None,
                 normals_k: int | None = None, orient: str = "centroid", seed: int = 0,
                 isolate: bool = True,
                 timeout: float | None = None, memory_limit: int | None = None,
-                auto_methods: Sequence[str] | None = None, holdout: float | None = None):
+                auto_methods: Sequence[str] | None = None, holdout: float | None = None,
+                output=None) -> Surface:
     """Reconstruct a surface mesh from a point cloud with one method, or ``method="auto"``.
 
     Parameters
     ----------
-    cloud : Cloud, (n, 3) array, or a cloud file or strike log
+    cloud : Cloud, (n, 3) array, Open3D or trimesh point cloud, or a cloud file or strike log
     method : str
-        A registered method (``recon reconstruct --list-methods``) or ``"auto"``: chosen without
-        the truth, its choice and reason in ``surface.info["auto"]``.
+        A registered method (``method_listing()``) or ``"auto"``: chosen without the truth, its
+        choice and reason in ``surface.info["auto"]``.
     params : dict, optional
         Overrides of the method's defaults (not with ``"auto"``).
     remove_outliers, voxel, normals_k, orient, seed
@@ -271,6 +900,8 @@ def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None
         Run the method in its own process with ``timeout`` [s] and ``memory_limit`` [MiB].
     auto_methods, holdout
         Candidates and held-out fraction of ``method="auto"``.
+    output : str or Path, optional
+        Also write the mesh there (``save``: atomically, never over the input).
 
     Returns
     -------
@@ -280,60 +911,420 @@ def reconstruct(cloud, *, method: str = "poisson", params: dict[str, Any] | None
         (``recon.surfaces.judge.estimate``; for ``"auto"`` from the chosen candidate's held-out
         passes).
     """
-    from recon.surfaces.auto import HOLDOUT_FRACTION, choose_for
+    return _reconstruct(cloud, output, method=method, params=params,
+                        preparation=(remove_outliers, voxel, normals_k, orient, seed),
+                        timeout=timeout, memory_limit=memory_limit, isolate=isolate,
+                        auto_methods=auto_methods, holdout=holdout).surface
+
+
+def reconstruct_file(input, output, *, method: str = "poisson",
+                     params: Mapping[str, Any] | Sequence[str] | None = None,
+                     remove_outliers: bool = False, voxel: float | None = None,
+                     normals_k: int | None = None, orient: str = "centroid", seed: int = 0,
+                     isolate: bool = True, timeout: float | None = None,
+                     memory_limit: int | None = None, auto_methods: Sequence[str] | None = None,
+                     holdout: float | None = None,
+                     on_wait: Callable[[str], None] | None = None,
+                     say: Callable[[str], None] | None = None) -> ReconstructResult:
+    """``reconstruct`` from a cloud file or strike log to a mesh file (``recon reconstruct``).
+
+    Parameters
+    ----------
+    input : str or Path (or anything ``reconstruct`` takes)
+    output : str or Path
+        Mesh to write (.ply, .tab, .bds/.dsk); checked before any work.
+    params : dict, or sequence of ``KEY=VALUE`` str, optional
+    on_wait : callable, optional
+        Called with the isolated run's stage while waiting.
+    say : callable, optional
+        ``method="auto"``: called with the candidates table and the reason once chosen.
+    method, remove_outliers, voxel, normals_k, orient, seed, isolate, timeout, memory_limit,
+    auto_methods, holdout
+        As ``reconstruct``.
+
+    Returns
+    -------
+    ReconstructResult
+    """
+    return _reconstruct(input, output, method=method, params=params,
+                        preparation=(remove_outliers, voxel, normals_k, orient, seed),
+                        timeout=timeout, memory_limit=memory_limit, isolate=isolate,
+                        auto_methods=auto_methods, holdout=holdout, on_wait=on_wait, say=say)
+
+
+def _reconstruct(source, output, *, method: str, params, preparation: tuple, timeout,
+                 memory_limit, isolate: bool, auto_methods, holdout, on_wait=None, say=None
+                 ) -> ReconstructResult:
+    """The one reconstruction policy: check the options and the output before any work,
+    prepare, choose (``auto``), fit, predict the accuracy, write. ``preparation``: the
+    arguments of ``_preparation``."""
+    from formats.paths import check_destination, protecting
+    from recon.surfaces.auto import HOLDOUT_FRACTION, choose_for, format_choice
     from recon.surfaces.isolation import Limits
-    from recon.surfaces.methods import bind
-    from recon.surfaces.prepare import Preparation, load_prepared
+    from recon.surfaces.prepare import load_prepared
     from recon.surfaces.reconstruct import estimate_of
     from recon.surfaces.reconstruct import reconstruct as run_method
 
-    preparation = Preparation(remove_outliers=remove_outliers, voxel=voxel, fallback=orient,
-                              seed=seed, **({} if normals_k is None else {"k": normals_k}))
+    holdout = HOLDOUT_FRACTION if holdout is None else holdout
+    if not 0 < holdout <= 0.5:   # checked even when unused: a bad value is a mistake
+        raise ApiError(f"holdout must be in (0, 0.5], got {holdout}")
+    auto = method == "auto"
+    if auto and params:
+        raise ApiError("params cannot be combined with method='auto'")
+    run = None if auto else _bind(method, params)
+    preparation = _preparation(*preparation)
     limits = Limits.from_options(timeout, memory_limit)
-    choice = None
-    if method == "auto":
-        if params:
-            raise ApiError("params cannot be combined with method='auto'")
-        run = None
-    else:
-        run = bind(method, params)
-    cloud, prepared = load_prepared(cloud, preparation)
-    if run is None:
-        choice = choose_for(cloud, methods=auto_methods, preparation=preparation, limits=limits,
-                            holdout=HOLDOUT_FRACTION if holdout is None else holdout)
-        run = choice.run
-    surface = run_method(prepared, method=run, isolate=isolate, **limits.kwargs())
-    surface.frame = cloud.frame  # so that scoring against a truth in another frame is refused
-    surface.info["estimate"] = estimate_of(
-        surface, cloud, heldout=None if choice is None else choice.chosen.heldout,
-        seed=seed).to_dict()
-    if choice is not None:
-        surface.info["auto"] = choice.to_dict()
-    return surface
+    with protecting(_inputs(source)):
+        if output is not None:
+            check_destination(output, ApiError)   # before the work, not after it
+        cloud, prepared = load_prepared(_from_library(source), preparation)
+        choice = None
+        if auto:
+            choice = choose_for(cloud, methods=auto_methods, preparation=preparation,
+                                limits=limits, holdout=holdout)
+            run = choice.run
+            if say is not None:
+                say(format_choice(choice))
+        surface = run_method(prepared, method=run, isolate=isolate, on_wait=on_wait,
+                             **limits.kwargs())
+        surface.frame = cloud.frame  # so that scoring against a truth in another frame is refused
+        surface.info["estimate"] = estimate_of(
+            surface, cloud, heldout=None if choice is None else choice.chosen.heldout,
+            seed=preparation.seed).to_dict()
+        if choice is not None:
+            surface.info["auto"] = choice.to_dict()
+        named = isinstance(source, str | os.PathLike)
+        if output is not None:
+            save(surface, output, source=source if named else None)
+    return ReconstructResult(surface, str(source) if named else None,
+                             None if output is None else Path(output), len(prepared.points),
+                             prepared.spacing, prepared.noise, cloud.view_points is not None,
+                             run.label)
 
 
-def compare(cloud, *, truth, output, methods: Sequence[str] | None = None, **options) -> dict:
+# ------------------------------------------------------------------------------ experiments
+
+
+def check_scheduler(scheduler: str | None, *, probe: bool = True) -> str | None:
+    """A scheduler value for ``compare``, ``stability`` and ``study``: None, ``"threads"``,
+    ``"serial"`` or a Dask address (``tcp://host:port``) where, with ``probe``, a Dask
+    scheduler answers. Returned as it is; otherwise ``recon.experiments.sweep.SweepError``."""
+    from recon.experiments.sweep import check_scheduler as check_value
+    from recon.experiments.sweep import probe_scheduler
+
+    if check_value(scheduler) not in (None, "threads", "serial") and probe:
+        probe_scheduler(scheduler)
+    return scheduler
+
+
+def _name(source, *, full: bool = True) -> str:
+    """A file's path (or, not ``full``, its name) for fingerprints and titles; in-memory data is
+    named by its type."""
+    if not isinstance(source, str | os.PathLike):
+        return type(source).__name__
+    return str(source) if full else Path(source).name
+
+
+def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
+            grid: str = "defaults", truth_scale: float = 1.0, remove_outliers: bool = False,
+            voxel: float | None = None, normals_k: int | None = None, orient: str = "centroid",
+            seed: int = 0, timeout: float | None = None, memory_limit: int | None = None,
+            samples: int | None = None, auto: bool = False, scheduler: str | None = None,
+            n_workers: int | None = None, resume: bool = False, keep_meshes: bool = True,
+            say: Callable[[str], None] | None = None) -> CompareResult:
     """Run every method on one cloud (at its defaults; ``grid="full"`` adds the parameter
     grids), each isolated, and score each surface against the truth: the speed against
     accuracy comparison of ``recon compare``.
 
     Parameters
     ----------
-    cloud : Cloud, (n, 3) array, or a cloud file or strike log
-    truth : Mesh, (vertices, faces), a mesh file or a strike log with truth
+    cloud : Cloud, (n, 3) array, Open3D or trimesh point cloud, or a cloud file or strike log
+    truth : Mesh, (vertices, faces), Open3D or trimesh mesh, a mesh file or a strike log with
+        truth
     output : str or Path
-        Directory for results.csv, results.json, speed_accuracy.png and the meshes.
+        Directory for results.csv, results.json, speed_accuracy.png, the meshes (unless
+        ``keep_meshes=False``) and, with ``auto``, auto.json.
     methods : sequence of str, optional
         Methods to run (default: all).
-    **options
-        As ``recon.experiments.compare.compare_input``: ``grid``, ``auto``, ``preparation``,
-        ``limits``, ``samples``, ``scheduler``, ``n_workers``, ``resume``, ``keep_meshes``.
+    grid : {"defaults", "full"}
+    truth_scale : float
+        Factor on a truth mesh file's coordinates (e.g. 1000 for km).
+    remove_outliers, voxel, normals_k, orient, seed
+        Preparation, as ``reconstruct``.
+    timeout, memory_limit : float [s], int [MiB], optional
+        Of every isolated run.
+    samples : int, optional
+        Surface samples per side when scoring (default: metrics').
+    auto : bool
+        Also run ``method="auto"``'s choice (its ladder restricted to ``methods``) and record
+        where it ranks on the truth.
+    scheduler, n_workers, resume
+        ``check_scheduler``'s values, local workers, keep the runs ``output`` already holds.
+    say : callable, optional
+        Called with a one-line description of the inputs before the runs start.
+
+    Returns
+    -------
+    CompareResult
+
+    Raises
+    ------
+    MethodFailed
+        Every run failed (after results.csv and results.json record how).
+    """
+    import json
+
+    from formats.atomic import write_text_atomically
+    from formats.geometry import Mesh
+    from formats.paths import output_directory
+    from recon.experiments import compare as comparison
+    from recon.experiments.cases import SWEEP_THREADS, score_options, variants
+    from recon.experiments.sweep import SweepError, default_workers
+    from recon.inputs import load_truth, walk_early
+    from recon.surfaces.isolation import Limits, start_workers, warm_truth
+    from recon.surfaces.methods import MethodFailed
+    from recon.surfaces.prepare import load_prepared
+
+    preparation = _preparation(remove_outliers, voxel, normals_k, orient, seed)
+    limits = Limits.from_options(timeout, memory_limit)
+    runs = variants(methods, grid=grid)
+    output = output_directory(output, SweepError)   # before any work: a read-only parent
+    local = scheduler in (None, "threads")
+    if local:  # local workers import Open3D while the input loads
+        walk_early(*_inputs(cloud, truth))  # before the pool's launcher thread starts
+        start_workers(min(len(runs), n_workers or default_workers()), SWEEP_THREADS)
+    options = score_options(samples)
+    truth_mesh = (load_truth(truth, scale=truth_scale) if isinstance(truth, str | os.PathLike)
+                  else Mesh.of(_from_library(truth), "truth"))
+    if local:  # ... and make the truth ready for scoring while the cloud is prepared
+        warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
+    points, prepared = load_prepared(_from_library(cloud), preparation)
+    if say is not None:
+        say(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "
+            f"{prepared.noise:.3g} m), truth {len(truth_mesh[1])} faces -> {output}")
+    report = comparison.compare(
+        prepared, truth_mesh, output, runs=runs, scheduler=scheduler, n_workers=n_workers,
+        resume=resume, keep_meshes=keep_meshes, title=_name(cloud, full=False),
+        score_options=options,
+        fingerprint={"input": _name(cloud), "truth": _name(truth), "voxel": preparation.voxel,
+                     "remove_outliers": preparation.remove_outliers,
+                     "normals_k": preparation.k},
+        **limits.kwargs())
+    agreement = None
+    if auto:
+        agreement = _auto_agreement(points, report["records"], methods, preparation, limits)
+        write_text_atomically(output / "auto.json",
+                              json.dumps(_jsonable(agreement[0]), indent=2) + "\n",
+                              error=SweepError)
+    if not any(r.get("status") == "ok" for r in report["records"]):
+        kinds = sorted({str(r.get("failure")) for r in report["records"]})
+        raise MethodFailed(f"every run failed ({len(report['records'])} runs: "
+                           f"{', '.join(kinds)}); the failures are in {report['csv']}")
+    return CompareResult(report["records"], report["table"], report["pareto_chamfer"],
+                         report["pareto_fscore"], report["full_grid"], report["csv"],
+                         report["json"], report["png"],
+                         *(agreement if agreement is not None else (None, None)))
+
+
+def _auto_agreement(cloud: Cloud, records: list, methods, preparation, limits
+                    ) -> tuple[dict, str]:
+    """``method="auto"``'s choice on the prepared cloud and where it ranks among the compared
+    runs: (``{"choice", "agreement"}``, the candidates table and the agreement line)."""
+    from recon.experiments.compare import agreement, format_agreement
+    from recon.surfaces.auto import choose_for, format_choice
+
+    choice = choose_for(cloud, methods=methods, preparation=preparation, limits=limits)
+    verdict = agreement(records, choice.run.key)
+    return ({"choice": choice.to_dict(), "agreement": verdict},
+            format_choice(choice) + "\n" + format_agreement(verdict))
+
+
+def stability(source, *, output, truth=None, truth_scale: float = 1.0,
+              overrides: Sequence[str] = (), methods: Sequence[str] | None = None,
+              noise: Sequence[float] | None = None, density: Sequence[float] | None = None,
+              outliers: Sequence[float] | None = None, seed: int = 0,
+              timeout: float | None = None, memory_limit: int | None = None,
+              samples: int | None = None, scheduler: str | None = None,
+              n_workers: int | None = None, resume: bool = False) -> StabilityResult:
+    """Where each method fails, over range noise x point density x outlier fraction
+    (``recon stability``).
+
+    A scene (a preset name or a ``.toml`` file) is simulated once per noise level with that
+    range error, and its truth is the scene's target. A cloud or a log is degraded per cell;
+    its truth is ``truth``, else a log's own truth mesh (a plain cloud needs ``truth``).
+
+    Parameters
+    ----------
+    source : str or Path
+        Scene preset name, scene ``.toml``, point cloud or strike log.
+    output : str or Path
+        Directory for stability.csv, stability.json and the charts.
+    truth : str or Path, optional
+        Truth mesh file or strike log with truth; overrides the source's own.
+    truth_scale : float
+        Factor on a truth mesh file's coordinates.
+    overrides : sequence of str
+        ``KEY=VALUE`` scene overrides (scenes only).
+    methods : sequence of str, optional
+        Methods, each at its defaults (default: all listed).
+    noise, density, outliers : sequence of float, optional
+        Grid levels: range noise (3 sigma, metres), fractions of the points kept, outlier
+        fractions (default: ``recon.experiments.stability``'s).
+    seed : int
+    timeout, memory_limit : float [s], int [MiB], optional
+    samples : int, optional
+        Surface samples per side when scoring.
+    scheduler, n_workers, resume
+        As ``compare``.
+
+    Returns
+    -------
+    StabilityResult
+    """
+    from formats.paths import output_directory
+    from recon.experiments import stability as sweep
+    from recon.experiments.cases import SWEEP_THREADS, score_options, variants
+    from recon.experiments.sweep import check_scheduler as check_value
+    from recon.experiments.sweep import default_workers
+    from recon.inputs import walk_early
+    from recon.surfaces.isolation import Limits, start_workers, warm_truth
+
+    variants(methods, grid=False)  # unknown names fail before anything is simulated or read
+    limits = Limits.from_options(timeout, memory_limit)
+    options = score_options(samples)
+    check_value(scheduler)
+    output = output_directory(output, sweep.StabilityError)   # before any work
+    local = scheduler in (None, "threads")
+    if local:  # local workers import Open3D while the input loads
+        walk_early(*_inputs(source, truth))  # before the pool's launcher thread starts
+        start_workers(n_workers or default_workers(), SWEEP_THREADS)
+    levels = {name: tuple(default if given is None else given)
+              for name, given, default in (("noise", noise, sweep.DEFAULT_NOISE),
+                                           ("density", density, sweep.DEFAULT_DENSITY),
+                                           ("outliers", outliers, sweep.DEFAULT_OUTLIERS))}
+    clouds, truth_mesh = _stability_clouds(source, output, truth, truth_scale, overrides,
+                                           levels["noise"], seed)
+    if local:  # the workers make the truth ready for scoring while the first cell is prepared
+        warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
+    report = sweep.stability(output, clouds=clouds, truth=truth_mesh, names=methods, seed=seed,
+                             scheduler=scheduler, n_workers=n_workers, resume=resume,
+                             score_options=options,
+                             fingerprint={"source": str(source), "overrides": list(overrides),
+                                          "truth": str(truth)},
+                             **levels, **limits.kwargs())
+    return StabilityResult(report["records"], report["csv"], report["json"], report["pngs"],
+                           report["failure_rate"])
+
+
+def _stability_clouds(source, output: Path, truth, truth_scale: float, overrides, noise,
+                      seed: int):
+    """The clouds a stability sweep degrades and their truth mesh: a cloud or log file as it
+    is, or a scene simulated once per noise level."""
+    from recon.experiments import stability as sweep
+    from recon.inputs import is_strike_log, load_cloud, load_truth
+
+    path = Path(source)
+    if path.is_file() and path.suffix.lower() != ".toml":
+        if overrides:
+            raise sweep.StabilityError("--set applies to scenes only, not to a cloud or a log")
+        cloud = load_cloud(path)
+        if truth is not None:
+            truth_mesh = load_truth(truth, scale=truth_scale)
+        elif is_strike_log(path):
+            truth_mesh = load_truth(path)
+        else:
+            raise sweep.StabilityError(f"{path}: a cloud needs --truth")
+        return {"base": (cloud.points, cloud.view_points, False)}, truth_mesh
+    clouds, truth_mesh = sweep.simulate_levels(str(source), noise, output, overrides=overrides,
+                                               seed=seed)
+    if truth is not None:
+        truth_mesh = load_truth(truth, scale=truth_scale)
+    return clouds, truth_mesh
+
+
+def studies() -> list[tuple[str, str]]:
+    """``(name, title)`` of every study of the paper, in its order."""
+    from recon.experiments import studies as registry
+
+    return registry.describe()
+
+
+def study(name: str, output, *, size: str = "full", scheduler: str | None = None,
+          resume: bool = False, n_workers: int | None = None) -> dict:
+    """Run one of the paper's studies into ``output`` (``recon study NAME``).
+
+    Parameters
+    ----------
+    name : str
+        One of ``studies()``.
+    output : str or Path
+        Directory (created) for results.csv, summary.json and the charts.
+    size : {"full", "quick", "tiny"}
+        As in the paper, reduced for CI, or tiny for tests.
+    scheduler, n_workers, resume
+        As ``compare`` (default: a local Dask cluster).
 
     Returns
     -------
     dict
-        ``records`` (ranked), ``table``, the Pareto fronts and the paths written.
+        The study's summary, as written to ``output/summary.json``: ``title``, ``claims``
+        (each with the paper's claim, ours and a verdict), ``n_cases``, ``n_failed``,
+        ``failures``, ``files``, ``wall_time_s``.
     """
-    from recon.experiments.compare import compare_input
+    from recon.experiments import studies as registry
 
-    return compare_input(cloud, truth, output, names=methods, **options)
+    _check_workers(n_workers)
+    return registry.run(name, output, size=size, scheduler=scheduler, resume=resume,
+                        n_workers=n_workers)
+
+
+def study_all(output, *, size: str = "full", scheduler: str | None = None,
+              resume: bool = False, n_workers: int | None = None) -> StudiesResult:
+    """Run every study into ``output/NAME/`` and write ``output/index.json``
+    (``recon study all``); arguments as ``study``."""
+    from recon.experiments import studies as registry
+
+    _check_workers(n_workers)
+    index = registry.run_all(output, size=size, scheduler=scheduler, resume=resume,
+                             n_workers=n_workers)
+    return StudiesResult(index, Path(output) / registry.INDEX_JSON)
+
+
+def _check_workers(n_workers: int | None) -> None:
+    if n_workers is not None and n_workers < 1:
+        raise ApiError(f"n_workers must be >= 1, got {n_workers}")
+
+
+def report(directory, output) -> Path:
+    """Write one self-contained HTML page of a ``study`` (one or all) or ``compare`` directory
+    (``recon report``); return its path."""
+    from recon.experiments.report import write_report
+
+    return write_report(directory, output)
+
+
+def demo(output, *, scene: str | None = None, method: str | None = None,
+         overrides: Sequence[str] = (), say: Callable[[str], None] = lambda text: None
+         ) -> DemoResult:
+    """The whole pipeline on a built-in scene (``recon demo``): simulate, validate, ingest,
+    reconstruct, and score cloud and surface against the truth, every file in ``output``.
+
+    Parameters
+    ----------
+    output : str or Path
+        Directory (created) for strikes.h5, cloud.ply, truth.ply, surface.ply, scores.json.
+    scene, method : str, optional
+        Preset name or scene file, reconstruction method (default: ``recon.demo``'s).
+    overrides : sequence of str
+        ``section.key=value`` scene overrides.
+    say : callable
+        Called with one line per step as the demo goes.
+    """
+    import importlib
+
+    pipeline = importlib.import_module("recon.demo")   # recon.demo: the module, not this verb
+    result = pipeline.run_demo(output, scene=scene or pipeline.DEMO_SCENE,
+                               method=method or pipeline.DEMO_METHOD, overrides=overrides,
+                               say=say)
+    return DemoResult(result["files"], result["simulation"], result["scores"],
+                      result["n_faces"])

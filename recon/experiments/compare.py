@@ -18,25 +18,23 @@ thread per core or on Dask (``recon.experiments.sweep``) and streams to
 - ``DIR/meshes/*.ply``: the meshes (unless ``keep_meshes=False``);
 
 and the ranked table (by Chamfer, failures last with their reasons) is returned as text.
-``compare`` takes a prepared cloud and a truth mesh; ``compare_input`` takes the files, and with
-``auto=True`` also writes ``DIR/auto.json``: where ``-m auto``'s choice ranks on the truth.
+``compare`` takes a prepared cloud and a truth mesh; ``recon.api.compare`` takes what a user
+names (files, or data in memory), and with ``auto=True`` also writes ``DIR/auto.json``: where
+``-m auto``'s choice ranks on the truth (``agreement``).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import os
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from formats.atomic import write_text_atomically
-from formats.geometry import Mesh
-from formats.paths import output_directory
 from recon.experiments import charts
 from recon.experiments.cases import (
     BASE_COLUMNS,
@@ -47,14 +45,12 @@ from recon.experiments.cases import (
     full_grid_estimate,
     pareto_front,
     rank,
-    score_options,
     variants,
     write_csv,
 )
 from recon.experiments.sweep import SweepError, default_workers, run_sweep, to_jsonable
-from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
-from recon.surfaces.methods import MethodFailed, MethodInput, Run
-from recon.surfaces.prepare import Preparation
+from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_isolated
+from recon.surfaces.methods import MethodInput, Run
 
 
 def _slug(label: str, key: str) -> str:
@@ -275,103 +271,3 @@ def format_agreement(verdict: dict) -> str:
             f"{'yes' if verdict['same_run'] else 'no'}, same method: "
             f"{'yes' if verdict['same_method'] else 'no'}, Chamfer ratio to the best: "
             f"{verdict['chamfer_ratio']:.3g}")
-
-
-def _name(source, *, full: bool = True) -> str:
-    """A file's path (or, not ``full``, its name) for fingerprints and titles; in-memory data is
-    named by its type."""
-    if not isinstance(source, str | os.PathLike):
-        return type(source).__name__
-    return str(source) if full else Path(source).name
-
-
-def compare_input(input, truth, out_dir, *, names: Sequence[str] | None = None,
-                  grid: bool | str = "defaults", truth_scale: float = 1.0,
-                  preparation: Preparation | None = None, limits: Limits | None = None,
-                  samples: int | None = None, auto: bool = False,
-                  scheduler: str | None = None, n_workers: int | None = None,
-                  resume: bool = False, keep_meshes: bool = True,
-                  say: Callable[[str], None] | None = None) -> dict:
-    """``recon compare``: read the input and the truth, prepare, compare, optionally check auto.
-
-    Parameters
-    ----------
-    input : str or Path
-        Point cloud or strike log (``recon.inputs.load_cloud``).
-    truth : str or Path
-        Truth mesh file, or a strike log with its truth mesh (``recon.inputs.load_truth``).
-    out_dir : str or Path
-    names, grid
-        The runs (``recon.experiments.cases.variants``), resolved before anything is read.
-    truth_scale : float
-        Factor on a truth mesh file's coordinates (e.g. 1000 for km).
-    preparation : Preparation, optional
-    limits : Limits, optional
-        Of every isolated run.
-    samples : int, optional
-        Surface samples per side when scoring (``recon.experiments.cases.score_options``).
-    auto : bool
-        Also run ``-m auto``'s choice (``recon.surfaces.auto.choose``: its ladder, restricted
-        to ``names``) and record where it ranks on the truth: ``DIR/auto.json``.
-    scheduler, n_workers, resume, keep_meshes
-        See ``compare``.
-    say : callable, optional
-        Called with a one-line description of the inputs before the runs start.
-
-    Returns
-    -------
-    dict
-        ``compare``'s report; with ``auto`` also ``auto`` (``choice`` and ``agreement``, as
-        written to auto.json) and ``auto_text`` (the candidates table and the agreement line).
-
-    Raises
-    ------
-    MethodFailed
-        Every run failed (after results.csv and results.json record how).
-    """
-    from recon.inputs import load_truth, walk_early
-    from recon.surfaces.isolation import start_workers, warm_truth
-    from recon.surfaces.prepare import load_prepared
-
-    runs = variants(names, grid=grid)
-    out_dir = output_directory(out_dir, SweepError)   # before any work: a read-only parent
-    local = scheduler in (None, "threads")
-    if local:  # local workers import Open3D while the input loads
-        walk_early(input, truth)  # before the pool's launcher thread starts
-        start_workers(min(len(runs), n_workers or default_workers()), SWEEP_THREADS)
-    options = score_options(samples)
-    preparation = preparation or Preparation()
-    limits = limits or Limits()
-    truth_mesh = (load_truth(truth, scale=truth_scale) if isinstance(truth, str | os.PathLike)
-                  else Mesh.of(truth, "truth"))
-    if local:  # ... and make the truth ready for scoring while the cloud is prepared
-        warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
-    cloud, prepared = load_prepared(input, preparation)
-    if say is not None:
-        say(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "
-            f"{prepared.noise:.3g} m), truth {len(truth_mesh[1])} faces -> {out_dir}")
-    report = compare(prepared, truth_mesh, out_dir, runs=runs, scheduler=scheduler,
-                     n_workers=n_workers, resume=resume, keep_meshes=keep_meshes,
-                     title=_name(input, full=False), score_options=options,
-                     fingerprint={"input": _name(input), "truth": _name(truth),
-                                  "voxel": preparation.voxel,
-                                  "remove_outliers": preparation.remove_outliers,
-                                  "normals_k": preparation.k},
-                     **limits.kwargs())
-    if auto:
-        from recon.surfaces.auto import choose, format_choice
-
-        choice = choose(cloud.points, view_points=cloud.view_points,
-                        uncertainty=cloud.attributes, methods=names, seed=preparation.seed,
-                        k=preparation.k, fallback=preparation.fallback, **limits.kwargs())
-        verdict = agreement(report["records"], choice.run.key)
-        report["auto"] = {"choice": choice.to_dict(), "agreement": verdict}
-        write_text_atomically(out_dir / "auto.json",
-                              json.dumps(to_jsonable(report["auto"]), indent=2) + "\n",
-                              error=SweepError)
-        report["auto_text"] = format_choice(choice) + "\n" + format_agreement(verdict)
-    if not any(r.get("status") == "ok" for r in report["records"]):
-        kinds = sorted({str(r.get("failure")) for r in report["records"]})
-        raise MethodFailed(f"every run failed ({len(report['records'])} runs: "
-                           f"{', '.join(kinds)}); the failures are in {report['csv']}")
-    return report

@@ -4,8 +4,8 @@ Every cell of the grid is a degraded copy of one cloud (or one simulated scene);
 runs on it isolated (``recon.surfaces.isolation``), so a crash, a timeout, an empty or degenerate
 mesh is recorded as that cell's failure and the sweep goes on. Results stream to
 ``DIR/results.jsonl`` on Dask (``recon.experiments.sweep``; ``resume`` skips finished cells).
-``stability_input`` starts from what a user names (a scene, a cloud or a log) and decides the
-truth; ``stability`` from clouds and a truth mesh. Finishing writes
+``stability`` starts from clouds and a truth mesh (``recon.api.stability`` from what a user
+names: a scene, a cloud or a log, and decides the truth). Finishing writes
 
 - ``DIR/stability.csv`` and ``DIR/stability.json``: one row per (method, cell) with the status,
   failure kind and reason, time (the fit's, and the whole job's with its scoring), memory,
@@ -53,20 +53,16 @@ import numpy as np
 from formats import sigma_from_sigma3
 from formats.atomic import write_text_atomically
 from formats.errors import ReconError
-from formats.paths import output_directory
 from recon.experiments import charts
-from recon.experiments.cases import SWEEP_THREADS, score_options, variants, write_csv
+from recon.experiments.cases import SWEEP_THREADS, variants, write_csv
 from recon.experiments.sweep import (
     SweepError,
-    check_scheduler,
-    default_workers,
     run_sweep,
     to_jsonable,
 )
 from recon.surfaces.isolation import (
     DEFAULT_MEMORY_MB,
     DEFAULT_TIMEOUT_S,
-    Limits,
     run_isolated,
 )
 from recon.surfaces.methods import MethodInput, Run
@@ -245,6 +241,7 @@ def simulate_levels(scene: str, noise: Sequence[float], out_dir, *, overrides=()
     from formats import StrikeLog
     from recon.registration.ingest import ingest
 
+    noise = _check_levels("noise", noise, 0.0, None)   # before simulating anything
     logs = Path(out_dir) / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     clouds, truth = {}, None
@@ -408,95 +405,3 @@ def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
                                         noise=noise, density=density, outliers=outliers))
     return {"records": records, "csv": csv_path, "json": json_path, "pngs": pngs,
             "failure_rate": summary["failure_rate"]}
-
-
-def parse_levels(text: str, name: str) -> tuple[float, ...]:
-    """Grid levels from the command line's comma-separated ``--NAME`` text."""
-    try:
-        return tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise StabilityError(f"--{name} must be comma-separated numbers, got {text!r}") from None
-
-
-def stability_input(source, out_dir, *, truth=None, truth_scale: float = 1.0,
-                    overrides: Sequence[str] = (), names: Sequence[str] | None = None,
-                    noise: Sequence[float] | str = DEFAULT_NOISE,
-                    density: Sequence[float] | str = DEFAULT_DENSITY,
-                    outliers: Sequence[float] | str = DEFAULT_OUTLIERS, seed: int = 0,
-                    limits: Limits | None = None, samples: int | None = None,
-                    scheduler: str | None = None, n_workers: int | None = None,
-                    resume: bool = False) -> dict:
-    """``recon stability`` from what a user names: a scene, or a cloud or strike log file.
-
-    A scene (a preset name or a ``.toml`` file) is simulated once per noise level with that
-    range error (``simulate_levels``), and its truth is the scene's target. A cloud or a log is
-    degraded per cell; its truth is ``truth``, else a log's own truth mesh (a plain cloud
-    needs ``truth``).
-
-    Parameters
-    ----------
-    source : str or Path
-        Scene preset name, scene ``.toml``, point cloud or strike log.
-    out_dir : str or Path
-    truth : str or Path, optional
-        Truth mesh file or strike log with truth; overrides the source's own.
-    truth_scale : float
-        Factor on a truth mesh file's coordinates.
-    overrides : sequence of str
-        ``KEY=VALUE`` scene overrides (scenes only).
-    names : sequence of str, optional
-        Methods, each at its defaults (default: all listed).
-    noise, density, outliers : sequence of float, or str
-        Grid levels; text is comma-separated (``parse_levels``).
-    seed : int
-    limits : Limits, optional
-    samples : int, optional
-        Surface samples per side when scoring (``recon.experiments.cases.score_options``).
-    scheduler, n_workers, resume
-        See ``recon.experiments.sweep.run_sweep``.
-
-    Returns
-    -------
-    dict
-        ``stability``'s report.
-    """
-    from recon.inputs import is_strike_log, load_cloud, load_truth, walk_early
-    from recon.surfaces.isolation import start_workers, warm_truth
-
-    variants(names, grid=False)  # unknown names fail before anything is simulated or read
-    limits = limits or Limits()
-    options = score_options(samples)
-    check_scheduler(scheduler)
-    out_dir = output_directory(out_dir, StabilityError)   # before any work
-    local = scheduler in (None, "threads")
-    if local:  # local workers import Open3D while the input loads
-        walk_early(source, truth)  # before the pool's launcher thread starts
-        start_workers(n_workers or default_workers(), SWEEP_THREADS)
-    noise, density, outliers = (parse_levels(v, n) if isinstance(v, str) else tuple(v)
-                                for v, n in ((noise, "noise"), (density, "density"),
-                                             (outliers, "outliers")))
-    path = Path(source)
-    if path.is_file() and path.suffix.lower() != ".toml":
-        if overrides:
-            raise StabilityError("--set applies to scenes only, not to a cloud or a log")
-        cloud = load_cloud(path)
-        if truth is not None:
-            truth_mesh = load_truth(truth, scale=truth_scale)
-        elif is_strike_log(path):
-            truth_mesh = load_truth(path)
-        else:
-            raise StabilityError(f"{path}: a cloud needs --truth")
-        clouds = {"base": (cloud.points, cloud.view_points, False)}
-    else:
-        _check_levels("noise", noise, 0.0, None)  # before simulating anything
-        clouds, truth_mesh = simulate_levels(str(source), noise, out_dir, overrides=overrides,
-                                             seed=seed)
-        if truth is not None:
-            truth_mesh = load_truth(truth, scale=truth_scale)
-    if local:  # the workers make the truth ready for scoring while the first cell is prepared
-        warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
-    return stability(out_dir, clouds=clouds, truth=truth_mesh, names=names, noise=noise,
-                     density=density, outliers=outliers, seed=seed, scheduler=scheduler,
-                     n_workers=n_workers, resume=resume, score_options=options,
-                     fingerprint={"source": str(source), "overrides": list(overrides),
-                                  "truth": str(truth)}, **limits.kwargs())

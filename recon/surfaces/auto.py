@@ -33,15 +33,15 @@ visibility graph cut when that method is registered), then fine ones. The first
 ``ALWAYS_LEVELS`` levels always run; after that the search stops as soon as a level's best is
 not measurably better (by ``se``) than the best before it.
 
-The chosen run is then refitted on all points by the caller (``choose_and_reconstruct``,
-``recon.api.reconstruct``), and ``judge.estimate`` predicts its Chamfer distance and F-score
-from the chosen candidate's held-out residuals.
+The chosen run is then refitted on all points by the caller (``recon.api.reconstruct``), and
+``judge.estimate`` predicts its Chamfer distance and F-score from the chosen candidate's
+held-out residuals.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -49,12 +49,11 @@ import numpy as np
 
 from formats.errors import ReconError
 from formats.geometry import Cloud
-from formats.paths import check_destination
 from recon.surfaces import judge
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
 from recon.surfaces.methods import MethodFailed, MethodInput, Run
 from recon.surfaces.normals import DEFAULT_K, Fallback
-from recon.surfaces.prepare import InputError, Preparation
+from recon.surfaces.prepare import Preparation
 
 # Fraction of shots held out: 10% leaves the fit 90% of the density (a Poisson depth or a grid
 # cell chosen on 90% suits 100%).
@@ -570,54 +569,3 @@ def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
     return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
                   methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
                   fallback=preparation.fallback, **(limits or Limits()).kwargs())
-
-
-def choose_and_reconstruct(input, output, *, methods: Sequence[str] | None = None,
-                           holdout: float = HOLDOUT_FRACTION,
-                           preparation: Preparation | None = None, limits: Limits | None = None,
-                           isolate: bool = True, on_wait: Callable[[str], None] | None = None,
-                           say: Callable[[str], None] | None = None) -> dict:
-    """``recon reconstruct -m auto``: read and prepare the input, choose, refit on all points.
-
-    Parameters
-    ----------
-    input : str or Path
-        Point cloud or strike log (``recon.inputs.load_cloud``).
-    output : str or Path
-        Mesh to write (.ply).
-    methods : sequence of str, optional
-        Restrict the ladder to these methods (default: the whole ladder).
-    holdout : float
-        Fraction of shots held out (``choose``).
-    preparation : Preparation, optional
-        Cleaning, thinning and normals; its ``k``, ``fallback`` and ``seed`` serve the choice too.
-    limits : Limits, optional
-        Of every isolated fit.
-    isolate, on_wait
-        Of the final fit (``recon.surfaces.reconstruct.reconstruct_to_file``).
-    say : callable, optional
-        Called with the candidates table and the reason (``format_choice``) once chosen.
-
-    Returns
-    -------
-    dict
-        The summary of ``reconstruct_to_file`` (with its ``estimate``, here from the chosen
-        candidate's held-out residuals) with ``input`` and ``auto`` (``AutoChoice.to_dict()``).
-    """
-    from pathlib import Path
-
-    from recon.surfaces.prepare import load_prepared
-    from recon.surfaces.reconstruct import reconstruct_to_file
-
-    preparation = preparation or Preparation()
-    limits = limits or Limits()
-    check_destination(output, InputError)   # before the work, not after it
-    cloud, prepared = load_prepared(input, preparation)
-    choice = choose_for(cloud, methods=methods, holdout=holdout, preparation=preparation,
-                        limits=limits)
-    if say is not None:
-        say(format_choice(choice))
-    summary = reconstruct_to_file(cloud, prepared, Path(output), run=choice.run, limits=limits,
-                                  isolate=isolate, on_wait=on_wait,
-                                  heldout=choice.chosen.heldout)
-    return {"input": str(input), "auto": choice.to_dict()} | summary

@@ -11,16 +11,12 @@ The pipeline of ``recon reconstruct``:
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 from formats.geometry import Cloud, Mesh
-from formats.paths import check_destination
 from recon.surfaces.checks import check_surface, watertight
-from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
+from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_isolated
 from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
-from recon.surfaces.prepare import InputError, Preparation, load_prepared
 
 
 def estimate_of(surface: Mesh, cloud: Cloud, *, heldout=None, seed: int = 0):
@@ -107,88 +103,3 @@ def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: di
     vertices, faces = check_surface(vertices, faces, cloud.points, method=run.method)
     return Surface(vertices, faces, run.method, run.params,
                    {"wall_time_s": elapsed, "watertight": watertight(faces)})
-
-
-def reconstruct_to_file(cloud: Cloud, prepared: MethodInput, output, *, run: Run,
-                        limits: Limits | None = None, isolate: bool = True,
-                        on_wait: Callable[[str], None] | None = None,
-                        heldout=None, source=None) -> dict[str, Any]:
-    """Reconstruct a prepared cloud with ``run``, write the mesh, and summarise.
-
-    Parameters
-    ----------
-    cloud : Cloud
-        The prepared points before normals (``Preparation.apply``): says whether there were
-        view points.
-    prepared : MethodInput
-    output : str or Path
-        Mesh to write (.ply).
-    run : Run
-    limits : Limits, optional
-        Of the isolated run (default: ``Limits()``).
-    isolate : bool
-        Run in a child process (default) or in this one.
-    on_wait : callable, optional
-        Called with the isolated child's stage while waiting.
-    heldout : recon.surfaces.judge.HeldOut, optional
-        Held-out residuals of the same run (``-m auto``'s), for the estimate.
-
-    Returns
-    -------
-    dict
-        ``n_points``, ``spacing_m``, ``noise_m``, ``view_points``, ``method``, ``params``,
-        ``label``, ``output``, ``n_vertices``, ``n_faces``, ``wall_time_s``, ``watertight``,
-        ``estimate`` (``recon.surfaces.judge.Estimate.to_dict``: the truth-free predicted
-        Chamfer distance and F-score) and, isolated, ``peak_memory_mb``.
-    """
-    from formats.mesh_io import write_mesh
-
-    limits = limits or Limits()
-    surface = reconstruct(prepared, method=run, isolate=isolate, on_wait=on_wait,
-                          **limits.kwargs())
-    surface.info["estimate"] = estimate_of(surface, cloud, heldout=heldout,
-                                           seed=prepared.seed).to_dict()
-    write_mesh(output, Mesh(surface.vertices, surface.faces, frame=cloud.frame),
-               source=None if source is None else Path(source).name)
-    return {"n_points": len(prepared.points), "spacing_m": prepared.spacing,
-            "noise_m": prepared.noise, "view_points": cloud.view_points is not None,
-            "method": run.method, "params": surface.params, "label": run.label,
-            "output": str(output), "n_vertices": len(surface.vertices),
-            "n_faces": len(surface.faces), **surface.info}
-
-
-def reconstruct_input(input, output, *, method: str | Run = "poisson",
-                      params: dict | None = None, preparation: Preparation | None = None,
-                      limits: Limits | None = None, isolate: bool = True,
-                      on_wait: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """Read a cloud or a strike log, prepare it, reconstruct it with one method, write the mesh.
-
-    What ``recon reconstruct -m METHOD`` does (``-m auto``:
-    ``recon.surfaces.auto.choose_and_reconstruct``).
-
-    Parameters
-    ----------
-    input : str or Path
-        Point cloud (.ply, .las, .laz, .h5) or strike log (registered on the fly).
-    output : str or Path
-        Mesh to write (.ply).
-    method : str or Run
-        A ``Run``, or a registered name resolved once here with ``params``.
-    params : dict, optional
-    preparation : Preparation, optional
-    limits : Limits, optional
-    isolate : bool
-    on_wait : callable, optional
-        See ``reconstruct_to_file``.
-
-    Returns
-    -------
-    dict
-        ``input`` and ``reconstruct_to_file``'s summary.
-    """
-    run = bind(method, params)
-    check_destination(output, InputError)   # before the work, not after it
-    cloud, prepared = load_prepared(input, preparation)
-    return {"input": str(input)} | reconstruct_to_file(cloud, prepared, Path(output), run=run,
-                                                       limits=limits, isolate=isolate,
-                                                       on_wait=on_wait, source=input)

@@ -13,10 +13,9 @@ from cli.main import build_parser, main
 
 @pytest.fixture
 def captured(monkeypatch):
-    """Replace compare_input and stability_input by recorders of the arguments they get."""
+    """Replace api.compare and api.stability by recorders of the arguments they get."""
     import cli.main
-    import recon.experiments.compare
-    import recon.experiments.stability
+    from recon import api
 
     calls = {}
 
@@ -30,8 +29,8 @@ def captured(monkeypatch):
     # main() ends the process at once after an interrupt when children are alive (warm
     # workers that earlier tests in this process left): here it must only return the status.
     monkeypatch.setattr(cli.main, "_leave_now", lambda status, at_once=False: status)
-    monkeypatch.setattr(recon.experiments.compare, "compare_input", record("compare"))
-    monkeypatch.setattr(recon.experiments.stability, "stability_input", record("stability"))
+    monkeypatch.setattr(api, "compare", record("compare"))
+    monkeypatch.setattr(api, "stability", record("stability"))
     return calls
 
 
@@ -46,7 +45,7 @@ def test_method_lists_do_not_swallow_the_input(tmp_path, captured, methods):
     assert main(argv) == 130
     args, kwargs = captured["compare"]
     assert args[0] == "cloud.ply"
-    assert kwargs["names"] == ["convex-hull", "poisson"]
+    assert kwargs["methods"] == ["convex-hull", "poisson"]
 
 
 def test_input_before_the_list_and_missing_input(tmp_path, captured, capsys):
@@ -63,7 +62,7 @@ def test_level_lists_take_the_same_syntax(tmp_path, captured):
                      "-o", str(tmp_path)]) == 130
         args, kwargs = captured["stability"]
         assert args[0] == "scene.toml"
-        assert kwargs["noise"] == "0,0.5" and kwargs["density"] == "1,0.3,0.1"
+        assert kwargs["noise"] == (0, 0.5) and kwargs["density"] == (1, 0.3, 0.1)
 
 
 @pytest.mark.parametrize(("command", "required"), [

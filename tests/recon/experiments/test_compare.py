@@ -137,13 +137,13 @@ def test_score_options_sample_coverage_on_twice_the_samples():
         score_options(99)
 
 
-def test_compare_input_walks_its_hdf5_files_before_starting_workers(tmp_path, monkeypatch):
+def test_compare_walks_its_hdf5_files_before_starting_workers(tmp_path, monkeypatch):
     """A strike log's structure is walked before it is read (formats.hdf5_check): in a forked
     child while recon has one thread, else in a fresh interpreter (0.6 s of CPU). compare walks
     its files before the worker pool's launcher thread starts (the walk is kept)."""
     import recon.surfaces.isolation as isolation
     from formats import hdf5_check
-    from recon.experiments.compare import compare_input
+    from recon import api
     from tests.conftest import write_sphere_log
 
     log = tmp_path / "log.h5"
@@ -165,5 +165,5 @@ def test_compare_input_walks_its_hdf5_files_before_starting_workers(tmp_path, mo
     monkeypatch.setattr(isolation, "start_workers", start_workers)
     monkeypatch.setattr(hdf5_check, "_verdict", verdict)
     with pytest.raises(Started):
-        compare_input(log, log, tmp_path / "out", names=["convex-hull"])
+        api.compare(log, truth=log, output=tmp_path / "out", methods=["convex-hull"])
     assert events == ["walk log.h5", "start workers"]

@@ -127,14 +127,12 @@ def test_bad_levels_are_named(tmp_path, kwargs, match):
 def test_a_plain_cloud_needs_a_truth_and_takes_no_scene_overrides(tmp_path):
     from formats.cloud_io import write_cloud
     from formats.geometry import Cloud
-    from recon.experiments.stability import stability_input
+    from recon import api
 
     points, _, _ = sphere_points(200)
     path = tmp_path / "sphere.ply"
     write_cloud(path, Cloud(points))
     with pytest.raises(StabilityError, match=r"sphere\.ply: a cloud needs --truth"):
-        stability_input(path, tmp_path / "out", names=["convex-hull"])
+        api.stability(path, output=tmp_path / "out", methods=["convex-hull"])
     with pytest.raises(StabilityError, match="--set applies to scenes only"):
-        stability_input(path, tmp_path / "out", overrides=["x=1"])
-    with pytest.raises(StabilityError, match="--noise must be comma-separated numbers"):
-        stability_input(path, tmp_path / "out", noise="a,b")
+        api.stability(path, output=tmp_path / "out", overrides=["x=1"])
