@@ -395,19 +395,22 @@ def iterate(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
     if scheduler == "threads":
         from concurrent.futures import ThreadPoolExecutor, as_completed
 
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(_call, func, shared, cases[key], (channel, key)): key
-                       for key in pending}
-            try:
-                for future in as_completed(futures):
-                    yield futures[future], future.result()
-            except BaseException:  # Ctrl-C or a closed generator: stop the running children
-                from recon.surfaces.isolation import kill_running
+        from recon.surfaces.isolation import kill_running, resume_runs
 
-                for future in futures:
-                    future.cancel()
-                kill_running()
-                raise
+        try:
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                futures = {pool.submit(_call, func, shared, cases[key], (channel, key)): key
+                           for key in pending}
+                try:
+                    for future in as_completed(futures):
+                        yield futures[future], future.result()
+                except BaseException:  # Ctrl-C or a closed generator: stop the children
+                    for future in futures:
+                        future.cancel()
+                    kill_running()
+                    raise
+        finally:
+            resume_runs()
         return
     yield from _execute_dask(func, cases, pending, shared, scheduler, workers, channel)
 

@@ -429,6 +429,9 @@ _LAUNCHER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recon-isolatio
 _IDLE: dict[int | None, list[_Worker]] = {}
 _BUSY: set[_Worker] = set()
 _POOL_LOCK = threading.Lock()
+# Set by ``kill_running`` (an interrupted sweep): runs asked for until ``resume_runs`` start
+# nothing, so a sweep's threads finish their cases at once instead of starting the next fit.
+_STOPPED = threading.Event()
 
 
 def _take(threads: int | None) -> _Worker:
@@ -558,6 +561,8 @@ def run_isolated(run: Run | str, cloud: MethodInput, params: dict | None = None,
     run = bind(run, params)
     limits = Limits(timeout_s, memory_mb)
     base = {"method": run.method, "params": run.params}
+    if _STOPPED.is_set():
+        raise InterruptedError("the run was not started: the sweep is stopping")
     predicted = predicted_fit_s(run, len(cloud.points))
     if predicted is not None and predicted > timeout_s:
         return base | {"status": "failed", "failure": "timeout", "process_time_s": 0.0,
@@ -672,6 +677,8 @@ def _wait(worker: _Worker, jobdir: Path, timeout_s: float, score_timeout_s: floa
                     continue
                 return {"stage": stage, "timed_out": False, "status": status,
                         "peak_mb": peak, "running_s": None}
+            if _STOPPED.is_set():   # a worker that was starting when ``kill_running`` ran
+                raise InterruptedError("the run was stopped: the sweep is stopping")
             if now >= deadline:
                 _kill_group(pid)
                 worker.proc.wait()
@@ -687,13 +694,21 @@ def _wait(worker: _Worker, jobdir: Path, timeout_s: float, score_timeout_s: floa
 def kill_running() -> int:
     """SIGKILL every worker this process is waiting on (from any thread); returns how many.
 
-    Their waiting threads then report them as crashed; a sweep calls this when interrupted.
+    Their waiting threads then report them as crashed, and ``run_isolated`` starts nothing
+    more (it raises ``InterruptedError``) until ``resume_runs``; a sweep calls this when
+    interrupted.
     """
+    _STOPPED.set()
     with _POOL_LOCK:
         pids = [worker.proc.pid for worker in _BUSY]
     for pid in pids:
         _kill_group(pid)
     return len(pids)
+
+
+def resume_runs() -> None:
+    """Let ``run_isolated`` start runs again after ``kill_running``."""
+    _STOPPED.clear()
 
 
 def _kill_group(pid: int) -> None:

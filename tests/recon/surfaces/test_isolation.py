@@ -223,3 +223,35 @@ def test_a_run_predicted_over_its_limit_is_declined_without_a_process(cloud):
     assert result["status"] == "failed" and result["failure"] == "timeout"
     assert result["reason"].startswith(f"declined: predicted {predicted:.2g} s on 3000 points")
     assert not isolation._IDLE.get(None) and not isolation._BUSY  # no worker was started
+
+
+def test_a_stopped_sweep_kills_its_runs_and_starts_no_more_until_resumed(cloud):
+    """Ctrl-C on a sweep: the running fit dies at once, and the sweep's other threads start no
+    new fit (they would each run a whole case before the sweep could end)."""
+    import threading
+
+    from recon.surfaces.isolation import kill_running, resume_runs
+
+    results = {}
+
+    def hang():
+        try:
+            results["hang"] = run_isolated("test-hang", cloud, timeout_s=600)["failure"]
+        except InterruptedError:   # its worker was still starting when the sweep stopped
+            results["hang"] = "stopped"
+
+    waiting = threading.Thread(target=hang)
+    waiting.start()
+    try:
+        import time
+
+        time.sleep(3.0)   # the hang is running (or its worker still starting)
+        kill_running()
+        waiting.join(60)
+        assert not waiting.is_alive() and results["hang"] in ("crash", "stopped")
+        with pytest.raises(InterruptedError):
+            run_isolated("ball-pivoting", cloud)
+    finally:
+        resume_runs()
+        waiting.join(60)
+    assert run_isolated("convex-hull", cloud)["status"] == "ok"
