@@ -13,7 +13,9 @@ Per case: coverage (and every standard score) against time, the hours to 90 % an
 coverage (linear between scored times), the edge score and the F-score of the best of a few
 reconstructed surfaces at fixed times, and the slew effort: the total angle between the
 commanded attitudes of consecutive shots, read from the log (it includes the ~14 deg/h by which
-even nadir pointing turns to follow a 25 h orbit).
+even nadir pointing turns to follow a 25 h orbit). Per target: the coverage ceiling, the
+coverage of every truth point some direction sees from far away (``coverage_ceiling``), which no
+law can pass.
 """
 
 from __future__ import annotations
