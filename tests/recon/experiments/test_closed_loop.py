@@ -60,6 +60,9 @@ def test_hours_to_a_level_interpolates_and_the_verdict_follows_the_target():
     result = closed_loop._claim_target(records, "asteroid-60", 0.934)
     assert result["verdict"] == "partly" and "any law can reach here is 0.934" in result["ours"]
     assert "above what any law can reach" in result["rule"]
+    # A run that ends before 24 h cannot tell: not tested.
+    records["asteroid-60 gaps"] = _record([4, 8], [0.5, 0.7], [100, 200])
+    assert closed_loop._claim_target(records, "asteroid-60", 1.0)["verdict"] == "not tested"
 
 
 def test_the_coverage_ceiling_leaves_out_a_box_shut_inside_another():
