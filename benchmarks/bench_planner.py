@@ -12,7 +12,7 @@ milliseconds per shot and per replanning interval, the time per interval it may 
 10 % (the rest of the run unchanged), and the closed-loop run's time as a ratio to the fixed
 law's.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/bench_planner.py               # ~5 min here
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_planner.py
     PYTHONPATH=. .venv/bin/python benchmarks/bench_planner.py --hours 4 --targets rso-a
 """
 
