@@ -403,3 +403,20 @@ GAP_HORIZON_INTERVALS = 3
 GAP_URGENT_WEIGHT = 2.0
 # A strike is expected to settle the frontier voxels within this many voxel edges of its aim.
 GAP_CLAIM_VOXELS = 1.5
+# The frontier counts as exhausted after this many consecutive intervals with no frontier voxel
+# predicted visible within the offset limit. From then on the law also aims at the least-struck
+# surface voxels (strike count at most this quantile of the counts): a voxel 1.3 tau wide that
+# holds one strike can hold surface farther than tau from it, and a voxel an oblique beam
+# crossed beside a thin panel is marked free although part of the panel lies in it; neither is
+# frontier, and a fixed slew keeps closing such holes by sweeping. (Halving the voxel edge
+# instead was measured slower: docs/decisions.md.)
+GAP_IDLE_INTERVALS = 2
+GAP_RESIDUAL_QUANTILE = 0.25
+# The Embree scene of the map's faces is rebuilt only when the occupied voxels have grown by this
+# fraction since it was built; the voxels struck since go into a second, small scene rebuilt
+# every interval (sim/surface_map.py). A rebuild of the whole scene every interval cost about 60 %
+# of the planner's time.
+GAP_MESH_GROWTH = 0.1
+# A rebuilt map takes the recorded beams this many at a time (bounded memory: a miss crosses
+# a few hundred voxels).
+GAP_REBUILD_BEAMS = 4096

@@ -20,14 +20,22 @@ beam has examined, including the far side of a thin plate seen from one side. Ev
 law predicts, from its orbit and the known spin, where the chaser is in B at the interval's
 start, middle and end and ``GAP_HORIZON_INTERVALS`` intervals later, and which frontier voxels a
 beam from there would reach before striking a struck voxel (Embree on a mesh of the struck
-voxels' exposed faces, :meth:`SurfaceMap.visible`). Then, shot by shot, among the voxels visible
-at that shot and within ``attitude.max_offset_deg`` of the nominal boresight, it aims at the one
-of most value per unit slew: value 1, or ``GAP_URGENT_WEIGHT`` when the voxel is predicted hidden
-at the horizon (see it now or wait), divided by the turn (at least one shot's reach,
-``max_rate * step``, so every voxel within reach is equally cheap and the nearest wins). Within
-reach the boresight goes onto it and the voxels within ``GAP_CLAIM_VOXELS`` of it count as
-settled for the rest of the interval; beyond, the boresight turns toward it at the rate limit.
-With no visible frontier the boresight holds its offset (no slew).
+voxels' exposed faces, :meth:`SurfaceMap.visible`; all four positions in one cast). Then, shot by
+shot, among the voxels visible at that shot and within ``attitude.max_offset_deg`` of the
+nominal boresight, it aims at the one of most value per unit slew: value 1, or
+``GAP_URGENT_WEIGHT`` when the voxel is predicted hidden at the horizon (see it now or wait),
+divided by the turn (at least one shot's reach, ``max_rate * step``, so every voxel within reach
+is equally cheap and the nearest wins). Within reach the boresight goes onto it and the voxels
+within ``GAP_CLAIM_VOXELS`` of it count as settled for the rest of the interval; beyond, the
+boresight turns toward it at the rate limit.
+
+**When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
+to aim at) the least-struck surface voxels join the candidates for the rest of the run
+(``GAP_RESIDUAL_QUANTILE``): a voxel holding one strike can hold surface farther than the
+coverage tolerance from it, and a voxel an oblique beam crossed beside a thin panel is marked
+free although part of the panel lies in it. So the law keeps striking the surface it has seen
+least, where a fixed slew would keep sweeping, and never idles. With no candidate at all the
+boresight holds its offset (no slew).
 
 The commanded attitude is the nominal one (sim/motion.py) turned by the smallest rotation that
 takes the nominal boresight ``+z`` onto the commanded one, and is recorded like any other.
@@ -44,8 +52,11 @@ from formats.strike_log import StrikeChunk
 from sim.defaults import (
     GAP_CLAIM_VOXELS,
     GAP_HORIZON_INTERVALS,
+    GAP_IDLE_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
+    GAP_REBUILD_BEAMS,
+    GAP_RESIDUAL_QUANTILE,
     GAP_URGENT_WEIGHT,
     GAP_VOXEL_FRACTION,
     GAP_VOXEL_MIN_DEG,
@@ -147,6 +158,8 @@ class GapSeeker:
         self.n_strikes = 0
         self._range_sum = 0.0
         self._radius = 0.0                                   # farthest strike from the centre
+        self.residual = False                                # frontier exhausted
+        self._idle = 0                                       # intervals with nothing to aim at
 
     # ------------------------------------------------------------------ the map
 
@@ -179,11 +192,41 @@ class GapSeeker:
             return
         size = self.voxel_size()
         if self.map is None or abs(math.log(size / self.map.size)) > math.log(GAP_VOXEL_REBUILD):
-            self.map = SurfaceMap(size)
-            self.map.add(*(np.concatenate(a) for a in (self._origins, self._directions,
-                                                        self._ranges)), margin=self._margin())
+            self._rebuild(size)
         else:
             self.map.add(origins, directions, ranges, margin=self._margin())
+
+    def _rebuild(self, size: float) -> None:
+        """A new map of edge ``size`` [m] from every recorded beam: all strikes first (so the
+        region traversed is the whole target's), then the free space, a block at a time."""
+        self.map = SurfaceMap(size)
+        self._origins = [np.concatenate(self._origins)]
+        self._directions = [np.concatenate(self._directions)]
+        self._ranges = [np.concatenate(self._ranges)]
+        origins, directions, ranges = self._origins[0], self._directions[0], self._ranges[0]
+        self.map.strike(origins, directions, ranges)
+        for start in range(0, len(ranges), GAP_REBUILD_BEAMS):
+            block = slice(start, start + GAP_REBUILD_BEAMS)
+            self.map.carve(origins[block], directions[block], ranges[block],
+                           margin=self._margin())
+
+    def _candidates(self) -> np.ndarray:
+        """Sorted keys of the voxels worth a shot: the frontier, and once it is exhausted, the
+        least-struck surface voxels too; an even subset of at most ``GAP_MAX_CANDIDATES``."""
+        keys = self.map.frontier()
+        if self.residual:
+            few = self.map.count <= np.quantile(self.map.count, GAP_RESIDUAL_QUANTILE)
+            keys = np.union1d(keys, self.map.occupied[few])
+        if len(keys) > GAP_MAX_CANDIDATES:
+            keys = keys[::-(-len(keys) // GAP_MAX_CANDIDATES)]
+        return keys
+
+    def _after_interval(self, aimed: bool) -> None:
+        """Count intervals with nothing to aim at; after ``GAP_IDLE_INTERVALS`` of them in a
+        row the frontier is taken as exhausted and the least-struck surface voxels join it."""
+        self._idle = 0 if aimed else self._idle + 1
+        if self._idle >= GAP_IDLE_INTERVALS:
+            self.residual = True
 
     # ------------------------------------------------------------------ the plan
 
@@ -201,44 +244,63 @@ class GapSeeker:
         out[:] = self.boresight
         if self.map is None:                     # nothing seen yet: nadir, or hold
             return turn_from_boresight(out)
-        keys = self.map.frontier()
-        if len(keys) > GAP_MAX_CANDIDATES:
-            keys = keys[::-(-len(keys) // GAP_MAX_CANDIDATES)]
+        keys = self._candidates()
         if not len(keys):                        # the map is complete: hold
+            self._after_interval(False)
             return turn_from_boresight(out)
+        aim, ok, weight = self._predict(t, keys)
+        aimed = False
+        settled = np.zeros(len(keys), dtype=bool)
+        centres = self.map.centres(keys)
+        reach = self.max_rate * self.step
+        claim = (GAP_CLAIM_VOXELS * self.map.size) ** 2
+        for k in range(n):
+            open_ = np.flatnonzero(ok[k] & ~settled)
+            if len(open_):
+                aimed = True
+                turn = np.arccos(np.clip(aim[k, open_] @ self.boresight, -1.0, 1.0))
+                pick = np.argmax(weight[open_] / np.maximum(turn, reach) - 1e-9 * turn)
+                if turn[pick] <= reach:
+                    self.boresight = aim[k, open_[pick]]
+                    gap = centres - centres[open_[pick]]
+                    settled |= np.einsum("ci,ci->c", gap, gap) <= claim
+                else:
+                    self.boresight = _turn_toward(self.boresight, aim[k, open_[pick]], reach)
+            out[k] = self.boresight
+        self._after_interval(aimed)
+        return turn_from_boresight(out)
+
+    def _predict(self, t: np.ndarray, keys: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where the voxels ``keys`` (c,) lie from each shot at times ``t`` (n,) [s], and
+        which of them a beam is predicted to reach there (module docstring).
+
+        Returns
+        -------
+        aim : (n, c, 3) float64, unit vectors, nominal sensor frame: from the chaser at each
+            shot to each voxel's centre
+        ok : (n, c) bool: predicted visible at the nearest of the interval's start, middle and
+            end, and within ``max_offset`` of the nominal boresight
+        weight : (c,) float64: 1, or ``GAP_URGENT_WEIGHT`` for a voxel predicted hidden
+            ``GAP_HORIZON_INTERVALS`` intervals on
+        """
+        n = len(t)
         centres = self.map.centres(keys)
         horizon = t[-1] + GAP_HORIZON_INTERVALS * (t[-1] - t[0] + self.step)
-        samples = sorted({0, n // 2, n - 1})
+        samples = np.array(sorted({0, n // 2, n - 1}))
         position, target, nominal = self._poses(np.append(t, horizon))
         m_ib = target.as_matrix().transpose(0, 2, 1)
         chaser = np.einsum("nij,nj->ni", m_ib, position)              # B
         to_nominal = np.matmul(m_ib, nominal).transpose(0, 2, 1)       # sends B to nominal
-        seen = {k: self.map.visible(chaser[k], centres) for k in [*samples, n]}
-        weight = np.where(seen[n], 1.0, GAP_URGENT_WEIGHT)
-        nearest = np.asarray(samples)[np.abs(np.arange(n)[:, None] - np.asarray(samples)
-                                             ).argmin(axis=1)]
-        reach = self.max_rate * self.step
-        cos_offset = math.cos(self.max_offset)
-        claim = (GAP_CLAIM_VOXELS * self.map.size) ** 2
-        settled = np.zeros(len(keys), dtype=bool)
-        for k in range(n):
-            open_ = np.flatnonzero(seen[nearest[k]] & ~settled)
-            aim = centres[open_] - chaser[k]
-            aim /= np.linalg.norm(aim, axis=1, keepdims=True)
-            aim_n = aim @ to_nominal[k].T
-            ok = aim_n[:, 2] >= cos_offset
-            if ok.any():
-                open_, aim_n = open_[ok], aim_n[ok]
-                turn = np.arccos(np.clip(aim_n @ self.boresight, -1.0, 1.0))
-                pick = np.argmax(weight[open_] / np.maximum(turn, reach) - 1e-9 * turn)
-                if turn[pick] <= reach:
-                    self.boresight = aim_n[pick]
-                    gap = centres - centres[open_[pick]]
-                    settled |= np.einsum("ci,ci->c", gap, gap) <= claim
-                else:
-                    self.boresight = _turn_toward(self.boresight, aim_n[pick], reach)
-            out[k] = self.boresight
-        return turn_from_boresight(out)
+        at = np.append(samples, n)                                     # one cast for all
+        seen = self.map.visible(np.repeat(chaser[at], len(keys), axis=0),
+                                np.tile(centres, (len(at), 1))).reshape(len(at), len(keys))
+        weight = np.where(seen[-1], 1.0, GAP_URGENT_WEIGHT)
+        nearest = np.abs(np.arange(n)[:, None] - samples).argmin(axis=1)
+        aim = np.matmul(centres[None] - chaser[:n, None], to_nominal[:n].transpose(0, 2, 1))
+        aim /= np.sqrt(np.einsum("nci,nci->nc", aim, aim))[:, :, None]
+        ok = seen[nearest] & (aim[:, :, 2] >= math.cos(self.max_offset))
+        return aim, ok, weight
 
 
 def _turn_toward(b: np.ndarray, goal: np.ndarray, angle: float) -> np.ndarray:

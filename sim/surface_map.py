@@ -24,12 +24,17 @@ keeps the unknown voxels behind it, so it stays on the frontier until a beam fro
 strikes it; a solid body keeps its unknown interior, which :meth:`SurfaceMap.visible` predicts
 hidden once the surface around it is struck. :meth:`SurfaceMap.visible` predicts whether a
 planned beam reaches a voxel by casting it (Embree, sim/raycast.py) against a mesh of the
-exposed faces of the occupied voxels.
+exposed faces of the occupied voxels. Building that mesh costs more than the casts it serves, so
+it is kept in two parts: the faces of the voxels occupied when the map last grew by
+``GAP_MESH_GROWTH`` (sim/defaults.py), and those of the voxels struck since, rebuilt when they
+change.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from sim.defaults import GAP_MESH_GROWTH
 
 # Voxel indices are offset by 2**20 and packed in 21 bits each: +-1e6 voxels per axis.
 _BITS = 21
@@ -105,7 +110,10 @@ class SurfaceMap:
         self.count = np.zeros(0, dtype=np.int64)         # strikes per occupied voxel
         self.view = np.zeros((0, 3))                     # sum of unit vectors strike -> sensor
         self.free = np.zeros(0, dtype=np.int64)          # sorted keys (may include occupied)
-        self._mesh = None
+        self._mesh = None                                # faces of the voxels in _built
+        self._built = np.zeros(0, dtype=np.int64)
+        self._recent = None                              # faces of the voxels struck since
+        self._recent_voxels = 0
 
     def keys_of(self, points: np.ndarray) -> np.ndarray:
         """Keys (n,) of the voxels holding ``points`` (n, 3) [m, B]."""
@@ -124,7 +132,7 @@ class SurfaceMap:
     def add(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
             margin: float) -> None:
         """Add beams: each struck at ``origins + ranges * directions`` or, where ``ranges`` is
-        inf, struck nothing.
+        inf, struck nothing (:meth:`strike`, then :meth:`carve`).
 
         Parameters
         ----------
@@ -135,24 +143,35 @@ class SurfaceMap:
             Misses and the paths of strikes are traversed within the box of the occupied voxels
             grown by this much (space far from the target holds nothing to plan for).
         """
+        self.strike(origins, directions, ranges)
+        self.carve(origins, directions, ranges, margin=margin)
+
+    def strike(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray) -> None:
+        """Mark the voxels of the strikes occupied (arguments as :meth:`add`; misses ignored)."""
         hit = np.isfinite(ranges)
-        if hit.any():
-            end = origins[hit] + ranges[hit, None] * directions[hit]
-            keys, inverse = np.unique(self.keys_of(end), return_inverse=True)
-            count = np.bincount(inverse, minlength=len(keys))
-            view = np.stack([np.bincount(inverse, weights=-directions[hit, i],
-                                         minlength=len(keys)) for i in range(3)], axis=1)
-            known = member(keys, self.occupied)
-            row = np.searchsorted(self.occupied, keys[known])
-            self.count[row] += count[known]
-            self.view[row] += view[known]
-            at = np.searchsorted(self.occupied, keys[~known])
-            self.occupied = np.insert(self.occupied, at, keys[~known])
-            self.count = np.insert(self.count, at, count[~known])
-            self.view = np.insert(self.view, at, view[~known], axis=0)
-            self._mesh = None
+        if not hit.any():
+            return
+        end = origins[hit] + ranges[hit, None] * directions[hit]
+        keys, inverse = np.unique(self.keys_of(end), return_inverse=True)
+        count = np.bincount(inverse, minlength=len(keys))
+        view = np.stack([np.bincount(inverse, weights=-directions[hit, i],
+                                     minlength=len(keys)) for i in range(3)], axis=1)
+        known = member(keys, self.occupied)
+        row = np.searchsorted(self.occupied, keys[known])
+        self.count[row] += count[known]
+        self.view[row] += view[known]
+        at = np.searchsorted(self.occupied, keys[~known])
+        self.occupied = np.insert(self.occupied, at, keys[~known])
+        self.count = np.insert(self.count, at, count[~known])
+        self.view = np.insert(self.view, at, view[~known], axis=0)
+
+    def carve(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
+              margin: float) -> None:
+        """Mark the voxels the beams crossed before their strikes free (arguments as
+        :meth:`add`)."""
         if not len(self.occupied):
             return
+        hit = np.isfinite(ranges)
         lo, hi = self.bounds(margin)
         enter, leave = clip_to_box(origins, directions, lo, hi)
         leave = np.where(hit, np.minimum(leave, ranges - self.size), leave)
@@ -187,33 +206,49 @@ class SurfaceMap:
             near |= member(pack(index + step), frontier)
         return self.occupied[near]
 
-    def _faces(self):
-        """Embree caster of the exposed faces of the occupied voxels, with each triangle's
-        axis (t,) and plane coordinate (t,) [m, B] (cached until the next strike)."""
-        if self._mesh is None:
-            from sim.raycast import EmbreeBackend
+    def _mesh_of(self, keys: np.ndarray):
+        """Embree caster of the faces of the voxels ``keys`` (sorted, occupied) that no
+        occupied voxel covers, with each triangle's axis (t,) and plane coordinate (t,)
+        [m, B]; None when there is no such face."""
+        from sim.raycast import EmbreeBackend
 
-            index = unpack(self.occupied)
-            quads, axes, planes = [], [], []
-            unit = np.eye(3, dtype=np.int64)
-            for step in FACE_STEPS:
-                open_ = ~member(pack(index + step), self.occupied)
-                cell = index[open_]
-                axis = int(np.flatnonzero(step)[0])
-                side = cell[:, axis] + (step[axis] > 0)
-                u, v = unit[(axis + 1) % 3], unit[(axis + 2) % 3]
-                corner = cell.copy()
-                corner[:, axis] = side
-                quads.append(np.stack([corner, corner + u, corner + u + v, corner + v], axis=1))
-                axes.append(np.full(len(cell), axis))
-                planes.append(side * self.size)
-            quad = np.concatenate(quads).astype(np.float64) * self.size          # (q, 4, 3)
-            q = len(quad)
-            faces = np.arange(4 * q).reshape(q, 4)
-            triangles = np.concatenate([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]])
-            self._mesh = (EmbreeBackend(quad.reshape(-1, 3), triangles),
-                          np.tile(np.concatenate(axes), 2), np.tile(np.concatenate(planes), 2))
-        return self._mesh
+        index = unpack(keys)
+        quads, axes, planes = [], [], []
+        unit = np.eye(3, dtype=np.int64)
+        for step in FACE_STEPS:
+            cell = index[~member(pack(index + step), self.occupied)]
+            axis = int(np.flatnonzero(step)[0])
+            side = cell[:, axis] + (step[axis] > 0)
+            u, v = unit[(axis + 1) % 3], unit[(axis + 2) % 3]
+            corner = cell.copy()
+            corner[:, axis] = side
+            quads.append(np.stack([corner, corner + u, corner + u + v, corner + v], axis=1))
+            axes.append(np.full(len(cell), axis))
+            planes.append(side * self.size)
+        quad = np.concatenate(quads)                                    # (q, 4, 3) corners
+        if not len(quad):
+            return None
+        # Faces share their corners (embreex copies a scene element by element).
+        corner, faces = np.unique(pack(quad.reshape(-1, 3)), return_inverse=True)
+        faces = faces.reshape(-1, 4)
+        triangles = np.concatenate([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]])
+        return (EmbreeBackend(unpack(corner) * self.size, triangles),
+                np.tile(np.concatenate(axes), 2), np.tile(np.concatenate(planes), 2))
+
+    def _casters(self) -> list:
+        """The meshes that together hold every exposed face of the occupied voxels: one built
+        when the map last grew by ``GAP_MESH_GROWTH`` (rebuilding a BVH costs more than the
+        casts it serves) and one of the voxels struck since, rebuilt when they change. A face
+        of the first that a later strike covered lies between two occupied voxels, so it blocks
+        only beams that one of them blocks anyway."""
+        if self._mesh is None or len(self.occupied) > (1 + GAP_MESH_GROWTH) * len(self._built):
+            self._built = self.occupied
+            self._mesh = self._mesh_of(self.occupied)
+            self._recent, self._recent_voxels = None, len(self.occupied)
+        if self._recent_voxels != len(self.occupied):
+            self._recent = self._mesh_of(self.occupied[~member(self.occupied, self._built)])
+            self._recent_voxels = len(self.occupied)
+        return [m for m in (self._mesh, self._recent) if m is not None]
 
     def visible(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """Predict which beams from ``origins`` reach the voxels centred at ``targets`` before
@@ -231,16 +266,18 @@ class SurfaceMap:
         """
         if not len(self.occupied):
             return np.ones(len(targets), dtype=bool)
-        caster, axis, plane = self._faces()
         origins = np.broadcast_to(origins, targets.shape)
         line = targets - origins
         length = np.linalg.norm(line, axis=1)
         direction = line / length[:, None]
-        face = caster.first_hit(origins.astype(np.float32), direction.astype(np.float32))
-        hit = face >= 0
-        f = np.where(hit, face, 0)
-        a = axis[f]
         rows = np.arange(len(targets))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (plane[f] - origins[rows, a]) / direction[rows, a]
-        return ~hit | ~(t < length - BLOCK_SLACK * self.size)
+        seen = np.ones(len(targets), dtype=bool)
+        for caster, axis, plane in self._casters():
+            face = caster.first_hit(origins.astype(np.float32), direction.astype(np.float32))
+            hit = face >= 0
+            f = np.where(hit, face, 0)
+            a = axis[f]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (plane[f] - origins[rows, a]) / direction[rows, a]
+            seen &= ~hit | ~(t < length - BLOCK_SLACK * self.size)
+        return seen

@@ -125,3 +125,32 @@ def test_closed_loop_on_a_generated_satellite_gives_the_same_bytes_for_the_same_
         assert np.asarray(a[key]).tobytes() == np.asarray(b[key]).tobytes(), key
     boresight = _commanded_boresight(scene, tmp_path / "a.h5")[1]
     assert np.degrees(np.arccos(np.clip(boresight[:, 2], -1, 1))).max() > 0.5   # off nadir
+
+
+def test_an_exhausted_frontier_turns_the_law_to_the_least_struck_surface():
+    from sim.surface_map import SurfaceMap
+
+    law = GapSeeker(step=10.0, max_rate=math.radians(1), max_offset=math.radians(30),
+                    poses=None, beams=np.array([[0.0, 0.0, 1.0]]))
+    law.map = SurfaceMap(1.0)
+    # A 4 x 4 plate in layer z = 0 struck from above: once on the left half, three times on the
+    # right; the space above it carved, the layer below unknown (frontier).
+    x, y = np.meshgrid(np.arange(4) + 0.5, np.arange(4) + 0.5)
+    points = np.column_stack([x.ravel(), y.ravel(), np.full(16, 0.5)])
+    again = points[points[:, 0] > 2]
+    hits = np.concatenate([points, again, again])
+    origins = hits + np.array([0.0, 0.0, 20.0])
+    law.map.add(origins, np.tile([0.0, 0.0, -1.0], (len(hits), 1)), np.full(len(hits), 19.5),
+                margin=2.0)
+    frontier = law.map.frontier()
+    np.testing.assert_array_equal(law._candidates(), frontier)
+    law._after_interval(False)
+    law._after_interval(True)                     # something to aim at: the count starts again
+    law._after_interval(False)
+    assert not law.residual
+    law._after_interval(False)                    # two intervals in a row with nothing
+    assert law.residual
+    once = law.map.occupied[law.map.count == 1]
+    np.testing.assert_array_equal(law._candidates(), np.union1d(frontier, once))
+    assert len(once) == 8 and not np.isin(law.map.occupied[law.map.count == 3],
+                                          law._candidates()).any()

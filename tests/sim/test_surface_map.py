@@ -69,11 +69,13 @@ def _bus_and_boom():
                    box([4, -0.25, -0.25], [4.5, 0.25, 0.25]))
 
 
-def test_a_boom_behind_the_bus_is_predicted_hidden_from_the_far_side():
+def _beams_at_bus_and_boom(n_sides: int, seed: int):
+    """Beams from 60 m all around (20 from each of ``n_sides`` directions), each at a random
+    point of the bounding box of :func:`_bus_and_boom`: origins, directions, ranges (inf for a
+    miss)."""
     vertices, faces = _bus_and_boom()
-    # Strikes from 60 m all around, each beam at a random point of the bounding box.
-    rng = np.random.default_rng(0)
-    sides = np.repeat(_sphere(400), 20, axis=0)
+    rng = np.random.default_rng(seed)
+    sides = np.repeat(_sphere(n_sides), 20, axis=0)
     aim = rng.uniform([-1, -1, -1], [4.5, 1, 1], (len(sides), 3))
     origins = aim + 60.0 * sides
     directions = (aim - origins) / 60.0
@@ -83,6 +85,11 @@ def test_a_boom_behind_the_bus_is_predicted_hidden_from_the_far_side():
     ranges = np.full(len(origins), np.inf)
     ranges[hit] = exact.refine(origins[hit], directions[hit], face[hit], u[hit], v[hit],
                                scale=70.0)[0]
+    return origins, directions, ranges
+
+
+def test_a_boom_behind_the_bus_is_predicted_hidden_from_the_far_side():
+    origins, directions, ranges = _beams_at_bus_and_boom(400, seed=0)
     seen = SurfaceMap(0.2)
     seen.add(origins, directions, ranges, margin=1.0)
     end_box = seen.occupied[unpack(seen.occupied)[:, 0] >= 20]       # x >= 4 m
@@ -95,3 +102,18 @@ def test_a_boom_behind_the_bus_is_predicted_hidden_from_the_far_side():
     np.testing.assert_array_equal(near, unpack(end_box)[:, 0] == unpack(end_box)[:, 0].max())
     side = seen.visible(np.array([0.0, 60.0, 0.0]), centres)
     assert side.any() and not side[unpack(end_box)[:, 1] < unpack(end_box)[:, 1].max()].any()
+
+
+def test_a_map_grown_after_its_faces_were_built_predicts_as_one_built_at_once():
+    origins, directions, ranges = _beams_at_bus_and_boom(200, seed=1)
+    grown, whole = SurfaceMap(0.2), SurfaceMap(0.2)
+    whole.add(origins, directions, ranges, margin=1.0)
+    views = 60.0 * _sphere(12)
+    for part in np.array_split(np.arange(len(origins)), 4):      # faces built after each part
+        grown.add(origins[part], directions[part], ranges[part], margin=1.0)
+        grown.visible(views[0], grown.centres(grown.frontier()))
+    np.testing.assert_array_equal(grown.occupied, whole.occupied)
+    assert len(grown._casters()) == 2                           # the later strikes on their own
+    targets = whole.centres(whole.frontier())
+    for view in views:
+        np.testing.assert_array_equal(grown.visible(view, targets), whole.visible(view, targets))

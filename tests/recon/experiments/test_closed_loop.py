@@ -37,13 +37,13 @@ def test_hours_to_a_level_interpolates_and_the_verdict_follows_the_target():
     # Neither slew reaches 95 %: the better is the one of higher final coverage, counted at its
     # last time, 100 h and 2000 deg.
     assert closed_loop.best_slew(records, "asteroid-60") == "asteroid-60 slew-2"
-    result = closed_loop._claim_target(records, "asteroid-60")
+    result = closed_loop._claim_target(records, "asteroid-60", 1.0)
     assert result["verdict"] == "reproduced"
     assert ">= 4.0x sooner" in result["ours"] and "2 deg slew" in result["ours"]
     # A slew reaching 95 % first is the better one; 2x sooner fails here.
     records["asteroid-60 slew-5"] = _record([10, 20], [0.9, 0.96], [10, 20], law="slew-5")
     assert closed_loop.best_slew(records, "asteroid-60") == "asteroid-60 slew-5"
-    assert closed_loop._claim_target(records, "asteroid-60")["verdict"] == "partly"
+    assert closed_loop._claim_target(records, "asteroid-60", 1.0)["verdict"] == "partly"
     # Equal at 30 h is not below; below at a common time after 24 h, and 1.5x sooner only:
     # not reproduced.
     records["asteroid-60 slew-5"] = _record([10, 30], [0.9, 1.0], [10, 20], law="slew-5")
@@ -52,8 +52,28 @@ def test_hours_to_a_level_interpolates_and_the_verdict_follows_the_target():
     records["asteroid-60 slew-5"] = _record([10, 30], [0.5, 0.99], [10, 20], law="slew-5")
     assert closed_loop.shortfalls(records, "asteroid-60 gaps", "asteroid-60 slew-5") == [
         (30.0, 0.97, 0.99)]
-    result = closed_loop._claim_target(records, "asteroid-60")
+    result = closed_loop._claim_target(records, "asteroid-60", 1.0)
     assert result["verdict"] == "not reproduced" and "below it at 30 h" in result["ours"]
+    # Never 95 %, but never below the slew either: partly, and the ceiling is stated.
+    records["asteroid-60 gaps"] = _record([10, 20, 30], [0.5, 0.92, 0.93], [100, 200, 300])
+    records["asteroid-60 slew-5"] = _record([10, 30], [0.5, 0.92], [10, 20], law="slew-5")
+    result = closed_loop._claim_target(records, "asteroid-60", 0.934)
+    assert result["verdict"] == "partly" and "any law can reach here is 0.934" in result["ours"]
+    assert "above what any law can reach" in result["rule"]
+    # A run that ends before 24 h cannot tell: not tested.
+    records["asteroid-60 gaps"] = _record([4, 8], [0.5, 0.7], [100, 200])
+    assert closed_loop._claim_target(records, "asteroid-60", 1.0)["verdict"] == "not tested"
+
+
+def test_the_coverage_ceiling_leaves_out_a_box_shut_inside_another():
+    from sim.targets import box, combine
+
+    outer, inner = box([-5, -5, -5], [5, 5, 5]), box([-1, -1, -1], [1, 1, 1])
+    options = {"n_truth_samples": 4000, "coverage_points": 8000}
+    assert closed_loop.coverage_ceiling(*outer, seed=0, score_options=options) == 1.0
+    # 24 m^2 of 624 m^2 is shut in, 4 m from any surface seen from outside.
+    both = closed_loop.coverage_ceiling(*combine(outer, inner), seed=0, score_options=options)
+    assert both == pytest.approx(600 / 624, abs=0.01)
 
 
 @pytest.mark.parametrize("size", ["tiny", "quick", "full"])
