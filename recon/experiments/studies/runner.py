@@ -358,8 +358,16 @@ def claim(cid: str, figure: str, claim_text: str, paper: str, ours: str, verdict
 def write_summary(out_dir, *, study: str, title: str, size: str, records: Mapping[str, dict],
                   claims: Sequence[dict], files: Sequence[str], extra: Mapping | None = None,
                   wall_time_s: float | None = None) -> Path:
-    """Write ``summary.json``: what was run, the claims checked, the files, the failures."""
+    """Write ``summary.json``: what was run, the claims checked, the files, the failures.
+
+    A reduced run (``size`` not ``full``) cannot refute a claim: its "not reproduced" verdicts
+    are written as "not tested", with ``found`` saying what the reduced run saw.
+    """
     from recon.experiments.sweep import to_jsonable
+
+    if size != "full":
+        claims = [c | {"verdict": "not tested", "found": "not reproduced at this size"}
+                  if c["verdict"] == "not reproduced" else c for c in claims]
 
     done = ok(records)
     options = {json.dumps(r.get("score_options", {}), sort_keys=True) for r in done.values()}

@@ -417,3 +417,18 @@ def test_report_bad_inputs(tmp_path):
                                                        "files": []}))
     with pytest.raises(ReportError, match=r"is a directory; give an \.html file"):
         write_report(tmp_path, tmp_path)
+
+
+def test_a_reduced_runs_summary_reads_not_tested_where_it_did_not_reproduce(tmp_path):
+    from recon.experiments.studies.runner import claim, write_summary
+
+    claims = [claim("a", "Fig. 1", "c", "p", "o", "not reproduced"),
+              claim("b", "Fig. 2", "c", "p", "o", "reproduced")]
+    for size, expected in (("quick", ["not tested", "reproduced"]),
+                           ("full", ["not reproduced", "reproduced"])):
+        (tmp_path / size).mkdir()
+        path = write_summary(tmp_path / size, study="slew", title="t", size=size, records={},
+                             claims=claims, files=[])
+        summary = json.loads(path.read_text())
+        assert [c["verdict"] for c in summary["claims"]] == expected
+    assert summary["claims"][0].get("found") is None
