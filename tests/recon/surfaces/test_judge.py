@@ -21,43 +21,53 @@ def _through(points):
     return points, hull.simplices.astype(np.int64)
 
 
-def _judged(cloud, split, mesh):
+def _judged(cloud, folds, mesh, f=0):
+    """Fold ``f``'s tested strikes against ``mesh`` (held out), its training strikes (fitted),
+    and the held-out chi-square with its block standard error."""
     strikes = judge.Strikes.of(cloud)
     caster = judge.Caster(*mesh)
     options = {"tau": judge.tau_of(cloud.points), "noise": NOISE}
-    held = judge.check(strikes.take(split.test), caster, **options)
-    fit = judge.check(strikes.take(split.train), caster, fitted=True, **options)
-    return judge.block_mean_se(held.cost, split.block), held, fit
+    test = folds.test(f)
+    held = judge.check(strikes.take(test), caster, **options)
+    fit = judge.check(strikes.take(folds.train(f)), caster, fitted=True, **options)
+    return judge.block_mean_se(held.cost, folds.block[test]), held, fit
 
 
-def test_pass_split_holds_out_whole_runs_of_a_track(track_sphere):
+def test_pass_folds_deal_every_block_to_one_fold(track_sphere):
     cloud, _ = track_sphere
-    split = judge.pass_split(cloud, 0.1, seed=0)
+    folds = judge.pass_folds(cloud, 4, seed=0)
     shot = cloud.attributes["shot"].astype(np.int64)
     # The track moves far less than the noise a shot; the margin covers two noise lengths.
-    assert split.step_m < NOISE / 10
-    assert split.margin == pytest.approx(2 * NOISE / split.step_m, rel=0.35)
-    assert not set(split.train) & set(split.test)
-    gap = np.abs(shot[split.test][:, None] - shot[split.train][None, :]).min(axis=1)
-    assert gap.min() > split.margin
-    assert split.n_blocks >= 5 and len(np.unique(split.block)) == split.n_blocks
-    held = 1 - (len(split.train) / len(shot))
-    assert held == pytest.approx(0.1, abs=0.02)
-    again = judge.pass_split(cloud, 0.1, seed=0)
-    np.testing.assert_array_equal(again.test, split.test)
+    assert folds.step_m < NOISE / 10
+    assert folds.margin == pytest.approx(2 * NOISE / folds.step_m, rel=0.35)
+    assert folds.block_shots == 4 * folds.margin
+    # Every strike in one fold, the folds a quarter each, every block in a single fold.
+    assert np.bincount(folds.fold).tolist() == pytest.approx([len(shot) / 4] * 4, rel=0.05)
+    for f in range(4):
+        train, test = folds.train(f), folds.test(f)
+        assert not set(train) & set(test) and len(np.unique(folds.fold[folds.block == 7])) == 1
+        # No tested strike has a training strike within a margin of shots.
+        gap = np.abs(shot[test][:, None] - shot[train][None, :]).min(axis=1)
+        assert gap.min() > folds.margin
+    # Every strike held out once; the interiors of the blocks are tested.
+    assert sum(len(folds.test(f)) for f in range(4)) == folds.tested.sum()
+    assert folds.tested.mean() == pytest.approx(0.5, abs=0.05)
+    again = judge.pass_folds(cloud, 4, seed=0)
+    np.testing.assert_array_equal(again.fold, folds.fold)
 
 
 def test_a_surface_through_the_noise_scores_worse_than_the_truth(track_sphere):
     cloud, truth = track_sphere
-    split = judge.pass_split(cloud, 0.1, seed=0)
-    (truth_chi2, _), truth_held, truth_fit = _judged(cloud, split, truth)
-    (noisy_chi2, _), noisy_held, noisy_fit = _judged(cloud, split, _through(
-        cloud.points[split.train]))
+    folds = judge.pass_folds(cloud, 4, seed=0)
+    (truth_chi2, _), truth_held, truth_fit = _judged(cloud, folds, truth)
+    (noisy_chi2, _), noisy_held, noisy_fit = _judged(cloud, folds, _through(
+        cloud.points[folds.train(0)]))
     # At the truth the chi-square per strike is ~1; a surface through the training strikes'
     # noise adds its own error to the held-out strikes' and scores worse, by more than twice
     # the block-level standard error of the difference...
     assert 0.8 < truth_chi2 < 1.2
-    worse, se = judge.block_mean_se(noisy_held.cost - truth_held.cost, split.block)
+    block = folds.block[folds.test(0)]
+    worse, se = judge.block_mean_se(noisy_held.cost - truth_held.cost, block)
     assert noisy_chi2 > 1.2 and worse > 2 * se
     # ... while on its own training strikes it reads far below the noise.
     assert 0.9 < truth_fit.chi() < 1.1
@@ -66,10 +76,10 @@ def test_a_surface_through_the_noise_scores_worse_than_the_truth(track_sphere):
 
 def test_a_surface_cutting_the_beams_is_penalised(track_sphere):
     cloud, (vertices, faces) = track_sphere
-    split = judge.pass_split(cloud, 0.1, seed=0)
-    (truth_chi2, _), truth_held, _ = _judged(cloud, split, (vertices, faces))
-    (big_chi2, _), big, _ = _judged(cloud, split, (1.05 * vertices, faces))
-    (small_chi2, _), small, _ = _judged(cloud, split, (0.95 * vertices, faces))
+    folds = judge.pass_folds(cloud, 4, seed=0)
+    (truth_chi2, _), truth_held, _ = _judged(cloud, folds, (vertices, faces))
+    (big_chi2, _), big, _ = _judged(cloud, folds, (1.05 * vertices, faces))
+    (small_chi2, _), small, _ = _judged(cloud, folds, (0.95 * vertices, faces))
     # 0.5 m too large: it stands in the empty space every beam crossed.
     assert truth_held.violated.mean() < 0.01
     assert big.violated.mean() > 0.9
