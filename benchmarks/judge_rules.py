@@ -265,6 +265,9 @@ def estimate_all(args) -> None:
               f"predicted {e['chamfer_m']:.4g} [{e['chamfer_low_m']:.4g}, "
               f"{e['chamfer_high_m']:.4g}] {'in' if inside else 'OUT'} high/low {ratio:.3g}")
     overall = spearmanr(*np.array(pairs).T).statistic
+    ratio = np.array([t / p for p, t in pairs if p > 0])
+    print("true / predicted Chamfer over all runs, percentiles 5, 10, 25, 50, 75, 90, 95: "
+          + ", ".join(f"{q:.3g}" for q in np.percentile(ratio, [5, 10, 25, 50, 75, 90, 95])))
     print(f"Spearman over {len(pairs)} runs {overall:.3f}; within a cloud median "
           f"{np.nanmedian(within):.3f}; band holds auto's choice on {held}/{len(ratios)}; "
           f"high/low median {np.median(ratios):.3g}, "

@@ -3,23 +3,27 @@
 What a strike log knows besides its points is used (``recon.surfaces.judge``): when and by
 which beam each strike was taken, its sensor position, and its recorded error model. The rule:
 
-1. **Hold out whole passes** (``judge.pass_split``): ``holdout`` (10%) of the shots, in
-   contiguous time blocks spread over the log, each tested only in its interior, so no tested
-   strike has a training strike of its own track within two noise lengths. Prepare the rest
-   (normals, spacing, the recorded noise) and fit the candidates on it, each isolated like
-   ``recon compare``'s runs (a crash or a timeout only removes that candidate).
+1. **K-fold over time blocks** (``judge.pass_folds``): the log's time line is cut into blocks
+   of contiguous shots, dealt to ``1 / holdout`` folds (4 by default); each fold's blocks are
+   tested only in their interiors, so no tested strike has a training strike of its own track
+   within two noise lengths, and every strike is held out once. For each fold the other folds
+   are prepared (normals, spacing, the recorded noise) and every candidate is fitted on them,
+   each isolated like ``recon compare``'s runs (a crash or a timeout on any fold removes that
+   candidate).
 2. **Judge each candidate on the held-out strikes** (``judge.check``): each held-out beam is
    cast against the surface; the strike's cost is its capped chi-square, distance over its
    recorded 1-sigma error along the surface normal, squared, capped at the tolerance
    ``max(tau, 3 sigma)``. **A beam the surface cuts before its strike, or misses, costs the
-   full cap**: the ray evidence enters the statistic. The statistic ``chi2`` is the mean cost,
-   about 1 for the true surface; its standard error comes from the spread of the held-out
-   blocks' means. Reported beside it: ``chi_fit`` (the same on the training strikes: well below
+   full cap**: the ray evidence enters the statistic. The statistic ``chi2`` is the mean cost
+   over every fold's tested strikes, about 1 for the true surface; its standard error comes
+   from the spread of the held-out blocks' means. Reported beside it: ``chi_fit`` (the same on the training strikes: well below
    1 for a surface that follows the noise), and over all strikes the fraction of beams the
    surface cuts before their strike (``violated``) and of strikes with no surface within their
    tolerance (``holes``).
-3. **One standard error**: every candidate with ``chi2 <= chi2_best + se_best`` fits the
-   held-out passes as well as the best, to within what these passes can tell apart.
+3. **One paired standard error** (``paired_gaps``): every candidate tested on the same strikes
+   as the best, whose chi-square exceeds the best's by at most ``BAND_SES`` standard errors
+   of that difference (from the spread of the blocks' mean differences), fits the held-out
+   passes as well as the best, to within what these passes can tell apart.
 4. **Model size is the penalty**: among those, the fewest free parameters wins
    (``Method.parameter_count``: 9 for an ellipsoid, 3 per plane, 3 per vertex of a free mesh),
    then the lower ``chi2``. **Coverage**: when the strikes cover less than
@@ -31,7 +35,9 @@ which beam each strike was taken, its sensor position, and its recorded error mo
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
 visibility graph cut when that method is registered), then fine ones. The first
 ``ALWAYS_LEVELS`` levels always run; after that the search stops as soon as a level's best is
-not measurably better (by ``se``) than the best before it.
+not measurably better (by ``se``) than the best before it. The ladder leaves out the methods
+that cost the most for what they add on the suite's clouds (``delaunay-balls``,
+``screened-poisson``: a few seconds a fit, where the visibility cut and Poisson take one).
 
 The chosen run is then refitted on all points by the caller (``choose_and_reconstruct``,
 ``recon.api.reconstruct``), and ``judge.estimate`` predicts its Chamfer distance and F-score
@@ -257,9 +263,10 @@ class _Context:
 
 @dataclass(frozen=True)
 class Selection:
-    """``select``'s answer: the chosen index, the best's, the band's upper edge, whether closed
-    candidates came first, the candidates within the band, and the smallest of them whatever
-    its shape (the choice had closed candidates not come first)."""
+    """``select``'s answer: the chosen index, the best's, the band's upper edge (the largest
+    chi-square in it), whether closed candidates came first, the candidates within the band,
+    the smallest of them whatever its shape (the choice had closed candidates not come first),
+    and each scored candidate's chi-square above the best's with its paired standard error."""
 
     chosen: int
     best: int
@@ -267,6 +274,7 @@ class Selection:
     closed_first: bool
     eligible: tuple[int, ...]
     smallest: int
+    gaps: dict[int, tuple[float, float]]
 
 
 def closed(faces: np.ndarray) -> bool:
@@ -462,7 +470,7 @@ def select(candidates: list[Candidate], block: np.ndarray, *, coverage: float = 
     chosen = min(eligible, key=lambda i: (closed_first and not candidates[i].closed,
                                           candidates[i].n_params, candidates[i].chi2))
     smallest = min(eligible, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
-    return Selection(chosen, best, threshold, closed_first, eligible, smallest)
+    return Selection(chosen, best, threshold, closed_first, eligible, smallest, gaps)
 
 
 def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
@@ -470,7 +478,7 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
     what decided among the candidates in the band (only what the rule actually did)."""
     c, b = candidates[selection.chosen], candidates[selection.best]
     shape = "a closed" if c.closed else "an open"
-    se = b.chi2_se
+    band = f"within {BAND_SES:g} paired standard error(s) of the best"
     text = (f"chose {c.label}, {shape} surface ({c.n_params:,} parameters, {c.n_faces:,} "
             f"faces): held-out chi-square {c.chi2:.3g} per strike (1 = at the recorded noise), "
             f"{c.violated:.1%} of beams cut before their strike, {c.holes:.1%} of strikes in "
@@ -479,16 +487,16 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
     decided = selection.smallest != selection.chosen   # closed first changed the choice
     if selection.chosen == selection.best:
         text += ("; the lowest held-out statistic" + (
-            f"; the {others} other candidate(s) within one block standard error ({se:.2g}) "
+            f"; the {others} other candidate(s) {band} "
             + ("include a smaller open model" if decided else "are larger models")
-            if others else
-            f"; no other candidate is within one block standard error ({se:.2g})"))
+            if others else f"; no other candidate is {band}"))
     else:
         rule = ("the smallest closed model" if selection.closed_first and c.closed
                 else "the smallest model")
-        text += (f"; within one block standard error ({se:.2g}) of the best, {b.label} "
-                 f"({b.chi2:.3g}, {b.n_params:,} parameters); of the {others + 1} candidates "
-                 f"in that band it is {rule}")
+        gap, se = selection.gaps[selection.chosen]
+        text += (f"; {gap:.2g} +- {se:.2g} above the best, {b.label} ({b.chi2:.3g}, "
+                 f"{b.n_params:,} parameters), on the same held-out strikes: {band}; of the "
+                 f"{others + 1} candidates in that band it is {rule}")
     if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
         text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
                  "it follows part of the noise")
@@ -600,11 +608,11 @@ def format_choice(choice: AutoChoice) -> str:
             lines.append(f"{start} {c.chi2:>7.3g} {round(c.chi2_se, 9):>6.2g} {c.chi_fit:>7.2g} "
                          f"{c.violated:>6.1%} {c.holes:>6.1%} {c.n_params:>8d} {c.n_faces:>8d}")
     folds = choice.folds
-    lines.append(f"(chi2: held-out chi-square per strike, {folds.k} folds of "
+    lines.append(f"(chi2: held-out chi-square per strike over {folds.k} folds, "
                  f"{folds.n_blocks} blocks of {folds.block_shots} shots, "
-                 f"{int(folds.tested.sum())} strikes tested; chi fit: on "
-                 "the training strikes; cut: beams cut before their strike; * chosen, ~ within "
-                 "one block standard error of the best)")
+                 f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "
+                 "chi fit: on the training strikes; cut: beams cut before their strike; "
+                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best)")
     lines.append(choice.reason)
     return "\n".join(lines)
 

@@ -155,7 +155,8 @@ def test_the_reason_says_when_closed_models_were_preferred():
     reason = explain(candidates, selection, 0.6)
     assert "chose closed, a closed surface" in reason
     assert "closed candidates in the band were preferred" in reason
-    assert "within one block standard error (0.05) of the best, open" in reason
+    assert "0.02 +- 0.051 above the best, open (1, 5,000 parameters)" in reason
+    assert "within 1 paired standard error(s) of the best" in reason
 
 
 def test_the_reason_names_a_smaller_open_model_set_aside_for_the_best_closed_one():

@@ -153,3 +153,30 @@ def test_the_estimate_brackets_the_true_chamfer_on_a_noisy_track_log(track_spher
     # A surface 0.5 m out: every strike in a hole, every beam cut.
     out = judge.estimate((1.05 * vertices, faces), cloud)
     assert out.holes > 0.9 and out.violated > 0.9
+
+
+def _cloud(points, view):
+    return Cloud(points, dict(zip(("view_x", "view_y", "view_z"), view.T, strict=True)))
+
+
+def test_the_proxy_is_the_ellipsoid_of_a_sphere_and_the_carved_hull_of_a_dumbbell():
+    from metrics.inputs import face_areas
+
+    points, view, _ = sphere_points(3000, noise=0.005, seed=2)
+    cloud = _cloud(points, view)
+    strikes = judge.Strikes.of(cloud)
+    options = {"tau": judge.tau_of(points), "noise": 0.005}
+    sphere = judge.proxy(cloud, strikes, **options)
+    # The ellipsoid predicts held-out strikes at the noise; the hull's chords fall short.
+    assert sphere.name == "ellipsoid" and sphere.error_m < 0.01
+    assert not sphere.carved.any()
+    # Two spheres 6 radii apart: the hull bridges the gap, where beams to the inner sides
+    # pass; its faces there are carved, and no ellipsoid predicts both spheres.
+    twin, twin_view = np.vstack([points - [3, 0, 0], points + [3, 0, 0]]), np.vstack(
+        [view - [3, 0, 0], view + [3, 0, 0]])
+    cloud = _cloud(twin, twin_view)
+    dumbbell = judge.proxy(cloud, judge.Strikes.of(cloud), tau=judge.tau_of(twin), noise=0.005)
+    assert dumbbell.name == "convex hull"
+    area = face_areas(dumbbell.vertices, dumbbell.faces)
+    bridge = np.abs(dumbbell.vertices[dumbbell.faces].mean(axis=1)[:, 0]) < 2
+    assert area[dumbbell.carved & bridge].sum() > 0.5 * area[bridge].sum()
