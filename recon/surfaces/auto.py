@@ -16,9 +16,10 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    ``max(tau, 3 sigma)``. **A beam the surface cuts before its strike, or misses, costs the
    full cap**: the ray evidence enters the statistic. The statistic ``chi2`` is the mean cost
    over every fold's tested strikes, about 1 for the true surface; its standard error comes
-   from the spread of the held-out blocks' means. Reported beside it: ``chi_fit`` (the same on the training strikes: well below
-   1 for a surface that follows the noise), and over all strikes the fraction of beams the
-   surface cuts before their strike (``violated``) and of strikes with no surface within their
+   from the spread of the held-out blocks' means. Reported beside it: ``chi_fit`` (the same on
+   the training strikes: well below 1 for a surface that follows the noise), and over all
+   strikes (fold 0's surface) the fraction of beams the surface cuts before their strike
+   (``violated``) and of strikes with no surface within their
    tolerance (``holes``).
 3. **One paired standard error** (``paired_gaps``): every candidate tested on the same strikes
    as the best, whose chi-square exceeds the best's by at most ``BAND_SES`` standard errors

@@ -172,8 +172,9 @@ def test_the_proxy_is_the_ellipsoid_of_a_sphere_and_the_carved_hull_of_a_dumbbel
     assert not sphere.carved.any()
     # Two spheres 6 radii apart: the hull bridges the gap, where beams to the inner sides
     # pass; its faces there are carved, and no ellipsoid predicts both spheres.
-    twin, twin_view = np.vstack([points - [3, 0, 0], points + [3, 0, 0]]), np.vstack(
-        [view - [3, 0, 0], view + [3, 0, 0]])
+    shift = np.array([3.0, 0.0, 0.0])
+    twin = np.vstack([points - shift, points + shift])
+    twin_view = np.vstack([view - shift, view + shift])
     cloud = _cloud(twin, twin_view)
     dumbbell = judge.proxy(cloud, judge.Strikes.of(cloud), tau=judge.tau_of(twin), noise=0.005)
     assert dumbbell.name == "convex hull"
