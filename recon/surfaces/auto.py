@@ -27,10 +27,9 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    passes as well as the best, to within what these passes can tell apart.
 4. **Model size is the penalty**: among those, the fewest free parameters wins
    (``Method.parameter_count``: 9 for an ellipsoid, 3 per plane, 3 per vertex of a free mesh),
-   then the lower ``chi2``. **Coverage**: when the strikes cover less than
-   ``COMPLETE_COVERAGE`` of the best closed candidate's surface, closed candidates in the band
-   come first: where there are no strikes no open surface can be right, and a closed model is
-   the honest guess.
+   then the lower ``chi2``. Open and closed surfaces compete alike: on the suite's clouds,
+   preferring closed ones where the strikes cover little of the body chose worse surfaces
+   (docs/decisions.md). The coverage of the best closed candidate is reported.
 
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
@@ -69,20 +68,20 @@ HOLDOUT_FRACTION = 0.25
 # Fewest tested strikes for the standard error to mean anything.
 MIN_HELD_OUT = 30
 # The band: a candidate whose held-out chi-square exceeds the best's by at most this many
-# standard errors of the paired difference fits the held-out passes as well.
-BAND_SES = 1.0
-# Below this fraction of the best closed surface near a strike, coverage is incomplete and
-# closed candidates come first (module docstring, step 4). 0.9: a 10% unseen cap of the target.
-COMPLETE_COVERAGE = 0.9
+# standard errors of the paired difference fits the held-out passes as well (2: chosen on the
+# suite's 18 tuning clouds, docs/decisions.md).
+BAND_SES = 2.0
 # The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
-# level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson and the
-# visibility graph cut; level 3: the MLS and ball-pivoting surfaces. The runs come from
+# level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson, the
+# visibility graph cut and a wide-kernel APSS (the truth's best on a faceted body); level 3: the
+# MLS and ball-pivoting surfaces. The runs come from
 # ``benchmarks/suite.py``: the truth's best runs on its clouds are among them. A method that is
 # not registered (``visibility`` where it is not installed) is left out.
 LADDER: tuple[tuple[tuple[str, dict], ...], ...] = (
     (("ellipsoid", {}), ("planes", {}), ("convex-hull", {})),
     (("poisson", {"depth": 6}), ("plane", {"cell": 2.0})),
-    (("plane", {}), ("poisson", {"depth": 9}), ("visibility", {})),
+    (("plane", {}), ("poisson", {"depth": 9}), ("visibility", {}),
+     ("apss", {"filter_scale": 4})),
     (("rimls", {}), ("ball-pivoting", {})),
 )
 MAX_FITS = sum(len(level) for level in LADDER)
@@ -265,16 +264,13 @@ class _Context:
 @dataclass(frozen=True)
 class Selection:
     """``select``'s answer: the chosen index, the best's, the band's upper edge (the largest
-    chi-square in it), whether closed candidates came first, the candidates within the band,
-    the smallest of them whatever its shape (the choice had closed candidates not come first),
-    and each scored candidate's chi-square above the best's with its paired standard error."""
+    chi-square in it), the candidates within the band, and each scored candidate's chi-square
+    above the best's with its paired standard error."""
 
     chosen: int
     best: int
     threshold: float
-    closed_first: bool
     eligible: tuple[int, ...]
-    smallest: int
     gaps: dict[int, tuple[float, float]]
 
 
@@ -448,8 +444,7 @@ def paired_gaps(candidates: list[Candidate], best: int, block: np.ndarray
             for i, c in enumerate(candidates) if c.scored}
 
 
-def select(candidates: list[Candidate], block: np.ndarray, *, coverage: float = float("nan")
-           ) -> Selection:
+def select(candidates: list[Candidate], block: np.ndarray) -> Selection:
     """Steps 3 and 4 of the module docstring; ``block`` (k,) is the block of each tested
     strike, in the order of the candidates' ``cost``.
 
@@ -466,12 +461,8 @@ def select(candidates: list[Candidate], block: np.ndarray, *, coverage: float = 
     gaps = paired_gaps(candidates, best, block)
     eligible = tuple(i for i in scored if gaps[i][0] <= BAND_SES * gaps[i][1])
     threshold = max(candidates[i].chi2 for i in eligible)
-    closed_first = bool(coverage < COMPLETE_COVERAGE) and any(candidates[i].closed
-                                                             for i in eligible)
-    chosen = min(eligible, key=lambda i: (closed_first and not candidates[i].closed,
-                                          candidates[i].n_params, candidates[i].chi2))
-    smallest = min(eligible, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
-    return Selection(chosen, best, threshold, closed_first, eligible, smallest, gaps)
+    chosen = min(eligible, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
+    return Selection(chosen, best, threshold, eligible, gaps)
 
 
 def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
@@ -485,15 +476,13 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
             f"{c.violated:.1%} of beams cut before their strike, {c.holes:.1%} of strikes in "
             f"holes")
     others = len(selection.eligible) - 1
-    decided = selection.smallest != selection.chosen   # closed first changed the choice
     if selection.chosen == selection.best:
         text += ("; the lowest held-out statistic" + (
             f"; the {others} other candidate(s) {band} "
-            + ("include a smaller open model" if decided else "are larger models")
+            + "are larger models"
             if others else f"; no other candidate is {band}"))
     else:
-        rule = ("the smallest closed model" if selection.closed_first and c.closed
-                else "the smallest model")
+        rule = "the smallest model"
         gap, se = selection.gaps[selection.chosen]
         text += (f"; {gap:.2g} +- {se:.2g} above the best, {b.label} ({b.chi2:.3g}, "
                  f"{b.n_params:,} parameters), on the same held-out strikes: {band}; of the "
@@ -503,11 +492,6 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
                  "it follows part of the noise")
     if np.isfinite(coverage):
         text += f". The strikes cover {coverage:.0%} of the best closed surface"
-    if decided:
-        smaller = candidates[selection.smallest]
-        text += (f"; below the complete coverage, where no strike says where the surface is, "
-                 f"closed candidates in the band were preferred: the smaller {smaller.label} "
-                 f"({smaller.n_params:,} parameters) is open")
     return text
 
 
@@ -582,7 +566,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
                         n_workers=n_workers)
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
         else float("nan")
-    selection = select(table, context.block, coverage=coverage)
+    selection = select(table, context.block)
     for i, c in enumerate(table):
         c.eligible, c.chosen = i in selection.eligible, i == selection.chosen
     fitted = sum(c.status != "skipped" for c in table)
