@@ -88,9 +88,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="list the methods, their defaults and grids, and exit")
     add_list_option(p, "--auto-methods", metavar="METHOD",
                     help="restrict -m auto's candidate ladder to these methods (default: all)")
-    p.add_argument("--holdout", type=float, default=0.1,
-                   help="fraction of shots -m auto holds out, in whole passes "
-                        "(default: %(default)s)")
+    p.add_argument("--holdout", type=float, default=0.25,
+                   help="fraction of shots each of -m auto's folds holds out, in time blocks; "
+                        "1 / holdout folds (default: %(default)s, 4 folds)")
     p.add_argument("--in-process", action="store_true",
                    help="run the method in this process (no isolation; a crash ends recon)")
     _add_closing_options(p, preprocessing=True, sweep=False)

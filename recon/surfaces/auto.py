@@ -3,35 +3,41 @@
 What a strike log knows besides its points is used (``recon.surfaces.judge``): when and by
 which beam each strike was taken, its sensor position, and its recorded error model. The rule:
 
-1. **Hold out whole passes** (``judge.pass_split``): ``holdout`` (10%) of the shots, in
-   contiguous time blocks spread over the log, each tested only in its interior, so no tested
-   strike has a training strike of its own track within two noise lengths. Prepare the rest
-   (normals, spacing, the recorded noise) and fit the candidates on it, each isolated like
-   ``recon compare``'s runs (a crash or a timeout only removes that candidate).
+1. **K-fold over time blocks** (``judge.pass_folds``): the log's time line is cut into blocks
+   of contiguous shots, dealt to ``1 / holdout`` folds (4 by default); each fold's blocks are
+   tested only in their interiors, so no tested strike has a training strike of its own track
+   within two noise lengths, and every strike is held out once. For each fold the other folds
+   are prepared (normals, spacing, the recorded noise) and every candidate is fitted on them,
+   each isolated like ``recon compare``'s runs (a crash or a timeout on any fold removes that
+   candidate).
 2. **Judge each candidate on the held-out strikes** (``judge.check``): each held-out beam is
    cast against the surface; the strike's cost is its capped chi-square, distance over its
    recorded 1-sigma error along the surface normal, squared, capped at the tolerance
    ``max(tau, 3 sigma)``. **A beam the surface cuts before its strike, or misses, costs the
-   full cap**: the ray evidence enters the statistic. The statistic ``chi2`` is the mean cost,
-   about 1 for the true surface; its standard error comes from the spread of the held-out
-   blocks' means. Reported beside it: ``chi_fit`` (the same on the training strikes: well below
-   1 for a surface that follows the noise), and over all strikes the fraction of beams the
-   surface cuts before their strike (``violated``) and of strikes with no surface within their
+   full cap**: the ray evidence enters the statistic. The statistic ``chi2`` is the mean cost
+   over every fold's tested strikes, about 1 for the true surface; its standard error comes
+   from the spread of the held-out blocks' means. Reported beside it: ``chi_fit`` (the same on
+   the training strikes: well below 1 for a surface that follows the noise), and over all
+   strikes (fold 0's surface) the fraction of beams the surface cuts before their strike
+   (``violated``) and of strikes with no surface within their
    tolerance (``holes``).
-3. **One standard error**: every candidate with ``chi2 <= chi2_best + se_best`` fits the
-   held-out passes as well as the best, to within what these passes can tell apart.
+3. **One paired standard error** (``paired_gaps``): every candidate tested on the same strikes
+   as the best, whose chi-square exceeds the best's by at most ``BAND_SES`` standard errors
+   of that difference (from the spread of the blocks' mean differences), fits the held-out
+   passes as well as the best, to within what these passes can tell apart.
 4. **Model size is the penalty**: among those, the fewest free parameters wins
    (``Method.parameter_count``: 9 for an ellipsoid, 3 per plane, 3 per vertex of a free mesh),
-   then the lower ``chi2``. **Coverage**: when the strikes cover less than
-   ``COMPLETE_COVERAGE`` of the best closed candidate's surface, closed candidates in the band
-   come first: where there are no strikes no open surface can be right, and a closed model is
-   the honest guess.
+   then the lower ``chi2``. Open and closed surfaces compete alike: on the suite's clouds,
+   preferring closed ones where the strikes cover little of the body chose worse surfaces
+   (docs/decisions.md). The coverage of the best closed candidate is reported.
 
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
 visibility graph cut when that method is registered), then fine ones. The first
 ``ALWAYS_LEVELS`` levels always run; after that the search stops as soon as a level's best is
-not measurably better (by ``se``) than the best before it.
+not measurably better (by ``se``) than the best before it. The ladder leaves out the methods
+that cost the most for what they add on the suite's clouds (``delaunay-balls``,
+``screened-poisson``: a few seconds a fit, where the visibility cut and Poisson take one).
 
 The chosen run is then refitted on all points by the caller (``recon.api.reconstruct``), and
 ``judge.estimate`` predicts its Chamfer distance and F-score from the chosen candidate's
@@ -55,24 +61,26 @@ from recon.surfaces.methods import MethodFailed, MethodInput, Run
 from recon.surfaces.normals import DEFAULT_K, Fallback
 from recon.surfaces.prepare import Preparation
 
-# Fraction of shots held out: 10% leaves the fit 90% of the density (a Poisson depth or a grid
-# cell chosen on 90% suits 100%).
-HOLDOUT_FRACTION = 0.1
+# Fraction of shots each fold holds out: 20%, five folds (every strike held out once), each fit
+# on 80% of the density (a Poisson depth or a grid cell chosen on 80% suits 100%).
+HOLDOUT_FRACTION = 0.25
 # Fewest tested strikes for the standard error to mean anything.
 MIN_HELD_OUT = 30
-# Below this fraction of the best closed surface near a strike, coverage is incomplete and
-# closed candidates come first (module docstring, step 4). 0.9: a 10% unseen cap of the target.
-COMPLETE_COVERAGE = 0.9
+# The band: a candidate whose held-out chi-square exceeds the best's by at most this many
+# standard errors of the paired difference fits the held-out passes as well (2: chosen on the
+# suite's 18 tuning clouds, docs/decisions.md).
+BAND_SES = 2.0
 # The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
-# level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson and the
-# visibility graph cut; level 3: the MLS and ball-pivoting surfaces. The runs come from
+# level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson, the
+# visibility graph cut and a wide-kernel APSS (the truth's best on a faceted body); level 3: the
+# MLS and ball-pivoting surfaces. The runs come from
 # ``benchmarks/suite.py``: the truth's best runs on its clouds are among them. A method that is
 # not registered (``visibility`` where it is not installed) is left out.
 LADDER: tuple[tuple[tuple[str, dict], ...], ...] = (
     (("ellipsoid", {}), ("planes", {}), ("convex-hull", {})),
     (("poisson", {"depth": 6}), ("plane", {"cell": 2.0})),
-    (("plane", {}), ("delaunay-balls", {}), ("screened-poisson", {}), ("poisson", {"depth": 9}),
-     ("visibility", {})),
+    (("plane", {}), ("poisson", {"depth": 9}), ("visibility", {}),
+     ("apss", {"filter_scale": 4})),
     (("rimls", {}), ("ball-pivoting", {})),
 )
 MAX_FITS = sum(len(level) for level in LADDER)
@@ -140,6 +148,7 @@ class Candidate:
     eligible: bool = False
     chosen: bool = False
     heldout: judge.HeldOut | None = field(default=None, repr=False)
+    cost: np.ndarray | None = field(default=None, repr=False)
     mesh: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     @property
@@ -154,7 +163,7 @@ class Candidate:
         """The JSON-ready record: the attributes, with ``label``, ``method``, ``params`` and
         ``kind`` of the run (the residual arrays and the mesh left out)."""
         out = {f.name: getattr(self, f.name) for f in fields(self)
-               if f.name not in ("run", "heldout", "mesh")}
+               if f.name not in ("run", "heldout", "cost", "mesh")}
         return {"label": self.label, "method": self.run.method, "params": self.run.params,
                 "kind": self.run.kind} | out
 
@@ -177,8 +186,8 @@ class AutoChoice:
     coverage : float
         Fraction of the best closed candidate's surface near a strike (NaN when no closed
         candidate succeeded).
-    split : judge.Split
-        The held-out blocks.
+    folds : judge.Folds
+        The held-out blocks and their folds.
     noise_m, tau_m : float, metres
         The recorded noise length (or the local-plane scatter without one) and the tolerance
         floor.
@@ -189,7 +198,7 @@ class AutoChoice:
     candidates: list[Candidate]
     threshold: float
     coverage: float
-    split: judge.Split
+    folds: judge.Folds
     noise_m: float
     tau_m: float
 
@@ -210,41 +219,58 @@ class AutoChoice:
         return next(c for c in self.candidates if c.chosen)
 
     def to_dict(self) -> dict:
-        split = self.split
+        folds = self.folds
         return {"method": self.method, "params": self.params, "label": self.label,
                 "reason": self.reason, "threshold": self.threshold, "coverage": self.coverage,
                 "noise_m": self.noise_m, "tau_m": self.tau_m,
-                "split": {"n_train": len(split.train), "n_test": len(split.test),
-                          "n_blocks": split.n_blocks, "block_shots": split.block_shots,
-                          "margin_shots": split.margin, "step_m": split.step_m},
+                "folds": {"k": folds.k, "n_tested": int(folds.tested.sum()),
+                          "n_blocks": folds.n_blocks, "block_shots": folds.block_shots,
+                          "margin_shots": folds.margin, "step_m": folds.step_m},
                 "candidates": [c.to_dict() for c in self.candidates]}
 
 
 @dataclass(frozen=True)
-class _Context:
-    """What every candidate is fitted on and judged against."""
+class _Fold:
+    """One fold: the prepared training strikes, the tested strikes and their blocks, and a
+    subsample of the training strikes (for ``chi_fit``)."""
 
     prepared: MethodInput
     test: judge.Strikes
     block: np.ndarray
     train: judge.Strikes
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What every candidate is fitted on and judged against: the folds, a subsample of all
+    strikes (fold 0's surface against them: cuts and holes), tau and the noise length."""
+
+    folds: list[_Fold]
     checked: judge.Strikes
     tau: float
     noise: float
 
+    @property
+    def block(self) -> np.ndarray:
+        """The block of every tested strike, folds in order (each candidate's ``cost``)."""
+        return np.concatenate([f.block for f in self.folds])
+
+    @property
+    def prepared(self) -> MethodInput:
+        return self.folds[0].prepared
+
 
 @dataclass(frozen=True)
 class Selection:
-    """``select``'s answer: the chosen index, the best's, the band's upper edge, whether closed
-    candidates came first, the candidates within the band, and the smallest of them whatever
-    its shape (the choice had closed candidates not come first)."""
+    """``select``'s answer: the chosen index, the best's, the band's upper edge (the largest
+    chi-square in it), the candidates within the band, and each scored candidate's chi-square
+    above the best's with its paired standard error."""
 
     chosen: int
     best: int
     threshold: float
-    closed_first: bool
     eligible: tuple[int, ...]
-    smallest: int
+    gaps: dict[int, tuple[float, float]]
 
 
 def closed(faces: np.ndarray) -> bool:
@@ -290,25 +316,35 @@ def _columns(attributes: dict | None) -> dict[str, np.ndarray]:
     return {k: np.asarray(v) for k, v in (attributes or {}).items() if k in wanted}
 
 
-def _context(cloud: Cloud, split: judge.Split, *, k: int, fallback: Fallback, seed: int
-             ) -> _Context:
-    """Prepare the training strikes and gather the held-out ones (step 1)."""
+def _fold(cloud: Cloud, strikes: judge.Strikes, folds: judge.Folds, f: int, *, k: int,
+          fallback: Fallback, seed: int) -> _Fold:
+    """Prepare fold ``f``'s training strikes and gather its tested ones (step 1)."""
     from recon.surfaces.prepare import prepare
 
-    strikes = judge.Strikes.of(cloud)
-    train = cloud.subset(split.train)
+    rows = folds.train(f)
+    train = cloud.subset(rows)
     prepared = prepare(train.points, view_points=train.view_points, k=k, fallback=fallback,
                        seed=seed, uncertainty=train.attributes)
-    fit_rows = split.train[judge.subsample(len(split.train), judge.MAX_CHECKED, seed)]
+    test = folds.test(f)
+    fit_rows = rows[judge.subsample(len(rows), judge.MAX_CHECKED // folds.k, seed)]
+    return _Fold(prepared, strikes.take(test), folds.block[test], strikes.take(fit_rows))
+
+
+def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, seed: int
+             ) -> _Context:
+    """Every fold prepared (step 1)."""
+    strikes = judge.Strikes.of(cloud)
+    every = [_fold(cloud, strikes, folds, f, k=k, fallback=fallback, seed=seed)
+             for f in range(folds.k)]
     all_rows = judge.subsample(len(strikes), judge.MAX_CHECKED, seed)
-    return _Context(prepared=prepared, test=strikes.take(split.test), block=split.block,
-                    train=strikes.take(fit_rows), checked=strikes.take(all_rows),
-                    tau=judge.tau_of(cloud.points), noise=prepared.noise)
+    return _Context(folds=every, checked=strikes.take(all_rows), tau=judge.tau_of(cloud.points),
+                    noise=every[0].prepared.noise)
 
 
-def _fit_all(runs: list[Run], prepared: MethodInput, *, limits: Limits, n_workers: int | None,
-             desc: str) -> dict[str, dict]:
-    """Fit ``runs`` on ``prepared``, each in its own limited process, a few at a time."""
+def _fit_all(runs: list[Run], folds: list[_Fold], *, limits: Limits, n_workers: int | None,
+             desc: str) -> dict[str, list[dict]]:
+    """Fit every run on every fold, each fit in its own limited process, a few at a time.
+    Returns run key -> the ``run_isolated`` results, folds in order."""
     from concurrent.futures import ThreadPoolExecutor, as_completed
 
     from tqdm import tqdm
@@ -316,40 +352,54 @@ def _fit_all(runs: list[Run], prepared: MethodInput, *, limits: Limits, n_worker
     from recon.surfaces.isolation import run_isolated
 
     workers = n_workers or max(1, len(os.sched_getaffinity(0)))
-    results: dict[str, dict] = {}
+    results: dict[str, list] = {run.key: [None] * len(folds) for run in runs}
     with ThreadPoolExecutor(max_workers=workers) as pool, \
-            tqdm(total=len(runs), desc=desc, unit="fit", disable=None, leave=False) as bar:
-        futures = {pool.submit(run_isolated, run, prepared, threads=FIT_THREADS,
-                               **limits.kwargs()): run.key for run in runs}
+            tqdm(total=len(runs) * len(folds), desc=desc, unit="fit", disable=None,
+                 leave=False) as bar:
+        futures = {pool.submit(run_isolated, run, fold.prepared, threads=FIT_THREADS,
+                               **limits.kwargs()): (run.key, f)
+                   for run in runs for f, fold in enumerate(folds)}
         for future in as_completed(futures):
-            results[futures[future]] = future.result()
+            key, f = futures[future]
+            results[key][f] = future.result()
             bar.update(1)
     return results
 
 
-def judge_candidate(run: Run, level: int, result: dict, context: _Context) -> Candidate:
-    """Step 2 of the module docstring for one fitted run (``result`` of ``run_isolated``)."""
-    candidate = Candidate(run, level, status=result.get("status", "failed"),
-                          reason=result.get("reason", "") or "",
-                          fit_s=result.get("process_time_s"))
-    if candidate.status != "ok":
+def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
+                    ) -> Candidate:
+    """Step 2 of the module docstring for one run fitted on every fold (``run_isolated``
+    results, folds in order): a fold that failed fails the candidate."""
+    failed = next((r for r in results if r.get("status", "failed") != "ok"), None)
+    candidate = Candidate(run, level, status="ok" if failed is None else
+                          failed.get("status", "failed"),
+                          reason="" if failed is None else failed.get("reason", "") or "",
+                          fit_s=sum(r.get("process_time_s") or 0.0 for r in results))
+    if failed is not None:
         return candidate
-    vertices, faces = result["vertices"], result["faces"]
-    caster = judge.Caster(vertices, faces)
     options = {"tau": context.tau, "noise": context.noise}
-    held = judge.check(context.test, caster, **options)
-    everywhere = judge.check(context.checked, caster, **options)
-    chi2, se = judge.block_mean_se(held.cost, context.block)
+    held, fit = [], []
+    for result, fold in zip(results, context.folds, strict=True):
+        caster = judge.Caster(result["vertices"], result["faces"])
+        held.append(judge.check(fold.test, caster, **options))
+        fit.append(judge.check(fold.train, caster, fitted=True, **options))
+    cost = np.concatenate([h.cost for h in held])
+    distance = np.concatenate([h.distance for h in held])
+    tolerance = np.concatenate([h.tolerance for h in held])
+    chi2, se = judge.block_mean_se(cost, context.block)
+    vertices, faces = results[0]["vertices"], results[0]["faces"]
+    everywhere = judge.check(context.checked, judge.Caster(vertices, faces), **options)
     return replace(candidate, n_faces=len(faces),
                    n_params=run.method_spec().parameter_count(vertices, faces),
                    closed=closed(faces), chi2=chi2, chi2_se=se, chi_heldout=float(np.sqrt(chi2)),
-                   chi_fit=judge.check(context.train, caster, fitted=True, **options).chi(),
-                   heldout_mean_m=float(np.mean(np.minimum(held.distance, held.tolerance))),
-                   beam_misses=float(held.missed.mean()),
+                   chi_fit=float(np.sqrt(np.mean(np.concatenate([c.cost for c in fit])))),
+                   heldout_mean_m=float(np.mean(np.minimum(distance, tolerance))),
+                   beam_misses=float(np.mean(np.concatenate([h.missed for h in held]))),
                    violated=float(everywhere.violated.mean()),
                    holes=float(everywhere.hole.mean()),
-                   heldout=judge.HeldOut(held.distance, held.sigma_normal, context.block),
-                   mesh=(vertices, faces))
+                   heldout=judge.HeldOut(distance, np.concatenate([h.sigma_normal for h in held]),
+                                         context.block),
+                   cost=cost, mesh=(vertices, faces))
 
 
 def _best(candidates: list[Candidate]) -> Candidate | None:
@@ -370,7 +420,7 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
     candidates: list[Candidate] = []
     for depth, level in enumerate(levels):
         before = _best(candidates)
-        results = _fit_all(level, context.prepared, limits=limits, n_workers=n_workers,
+        results = _fit_all(level, context.folds, limits=limits, n_workers=n_workers,
                            desc=f"auto level {depth}")
         candidates += [judge_candidate(run, depth, results[run.key], context) for run in level]
         rest = levels[depth + 1:]
@@ -383,8 +433,19 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
     return candidates, ""
 
 
-def select(candidates: list[Candidate], *, coverage: float = float("nan")) -> Selection:
-    """Steps 3 and 4 of the module docstring.
+def paired_gaps(candidates: list[Candidate], best: int, block: np.ndarray
+                ) -> dict[int, tuple[float, float]]:
+    """Each scored candidate's held-out chi-square above the best's, measured on the same
+    tested strikes, and its standard error from the spread of the blocks' mean differences
+    (a paired comparison: what the blocks share, the two surfaces' common error, cancels)."""
+    reference = candidates[best].cost
+    return {i: judge.block_mean_se(c.cost - reference, block)
+            for i, c in enumerate(candidates) if c.scored}
+
+
+def select(candidates: list[Candidate], block: np.ndarray) -> Selection:
+    """Steps 3 and 4 of the module docstring; ``block`` (k,) is the block of each tested
+    strike, in the order of the candidates' ``cost``.
 
     Raises
     ------
@@ -396,14 +457,11 @@ def select(candidates: list[Candidate], *, coverage: float = float("nan")) -> Se
         raise MethodFailed("auto: every candidate failed: " + "; ".join(
             f"{c.label}: {c.reason}" for c in candidates if c.status != "skipped"))
     best = min(scored, key=lambda i: (candidates[i].chi2, candidates[i].n_params))
-    threshold = candidates[best].chi2 + candidates[best].chi2_se
-    eligible = tuple(i for i in scored if candidates[i].chi2 <= threshold)
-    closed_first = bool(coverage < COMPLETE_COVERAGE) and any(candidates[i].closed
-                                                             for i in eligible)
-    chosen = min(eligible, key=lambda i: (closed_first and not candidates[i].closed,
-                                          candidates[i].n_params, candidates[i].chi2))
-    smallest = min(eligible, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
-    return Selection(chosen, best, threshold, closed_first, eligible, smallest)
+    gaps = paired_gaps(candidates, best, block)
+    eligible = tuple(i for i in scored if gaps[i][0] <= BAND_SES * gaps[i][1])
+    threshold = max(candidates[i].chi2 for i in eligible)
+    chosen = min(eligible, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
+    return Selection(chosen, best, threshold, eligible, gaps)
 
 
 def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
@@ -411,35 +469,28 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
     what decided among the candidates in the band (only what the rule actually did)."""
     c, b = candidates[selection.chosen], candidates[selection.best]
     shape = "a closed" if c.closed else "an open"
-    se = b.chi2_se
+    band = f"within {BAND_SES:g} paired standard error(s) of the best"
     text = (f"chose {c.label}, {shape} surface ({c.n_params:,} parameters, {c.n_faces:,} "
             f"faces): held-out chi-square {c.chi2:.3g} per strike (1 = at the recorded noise), "
             f"{c.violated:.1%} of beams cut before their strike, {c.holes:.1%} of strikes in "
             f"holes")
     others = len(selection.eligible) - 1
-    decided = selection.smallest != selection.chosen   # closed first changed the choice
     if selection.chosen == selection.best:
         text += ("; the lowest held-out statistic" + (
-            f"; the {others} other candidate(s) within one block standard error ({se:.2g}) "
-            + ("include a smaller open model" if decided else "are larger models")
-            if others else
-            f"; no other candidate is within one block standard error ({se:.2g})"))
+            f"; the {others} other candidate(s) {band} "
+            + "are larger models"
+            if others else f"; no other candidate is {band}"))
     else:
-        rule = ("the smallest closed model" if selection.closed_first and c.closed
-                else "the smallest model")
-        text += (f"; within one block standard error ({se:.2g}) of the best, {b.label} "
-                 f"({b.chi2:.3g}, {b.n_params:,} parameters); of the {others + 1} candidates "
-                 f"in that band it is {rule}")
+        rule = "the smallest model"
+        gap, se = selection.gaps[selection.chosen]
+        text += (f"; {gap:.2g} +- {se:.2g} above the best, {b.label} ({b.chi2:.3g}, "
+                 f"{b.n_params:,} parameters), on the same held-out strikes: {band}; of the "
+                 f"{others + 1} candidates in that band it is {rule}")
     if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
         text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
                  "it follows part of the noise")
     if np.isfinite(coverage):
         text += f". The strikes cover {coverage:.0%} of the best closed surface"
-    if decided:
-        smaller = candidates[selection.smallest]
-        text += (f"; below the complete coverage, where no strike says where the surface is, "
-                 f"closed candidates in the band were preferred: the smaller {smaller.label} "
-                 f"({smaller.n_params:,} parameters) is open")
     return text
 
 
@@ -501,19 +552,20 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
         attributes |= dict(zip(("view_x", "view_y", "view_z"), np.asarray(view_points).T,
                                strict=True))
     cloud = Cloud(np.asarray(points, dtype=np.float64), attributes)
-    split = judge.pass_split(cloud, holdout, seed=seed)
-    if len(split.test) < MIN_HELD_OUT:
-        raise AutoError(f"auto needs at least {MIN_HELD_OUT} held-out points; {holdout:g} of "
-                        f"{len(cloud)} points in {split.n_blocks} blocks tests "
-                        f"{len(split.test)}")
+    folds = judge.pass_folds(cloud, max(2, round(1 / holdout)), seed=seed)
+    tested = min(len(folds.test(f)) for f in range(folds.k))
+    if tested < MIN_HELD_OUT:
+        raise AutoError(f"auto needs at least {MIN_HELD_OUT} held-out points a fold; "
+                        f"{len(cloud)} points in {folds.k} folds of {folds.n_blocks} blocks test "
+                        f"{tested} in the smallest fold")
     levels = ([[bind(*r) if isinstance(r, tuple) else bind(r) for r in candidates]]
               if candidates else ladder(methods))
-    context = _context(cloud, split, k=k, fallback=fallback, seed=seed)
+    context = _context(cloud, folds, k=k, fallback=fallback, seed=seed)
     table, note = climb(levels, context, limits=Limits(timeout_s=timeout_s, memory_mb=memory_mb),
                         n_workers=n_workers)
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
         else float("nan")
-    selection = select(table, coverage=coverage)
+    selection = select(table, context.block)
     for i, c in enumerate(table):
         c.eligible, c.chosen = i in selection.eligible, i == selection.chosen
     fitted = sum(c.status != "skipped" for c in table)
@@ -521,7 +573,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
               + f"; {fitted} candidate fit(s) of {len(table)}" + (f"; {note}" if note else "")
               + ".")
     return AutoChoice(table[selection.chosen].run, reason, table, selection.threshold,
-                      coverage, split, context.noise, context.tau)
+                      coverage, folds, context.noise, context.tau)
 
 
 def format_choice(choice: AutoChoice) -> str:
@@ -539,11 +591,12 @@ def format_choice(choice: AutoChoice) -> str:
         else:
             lines.append(f"{start} {c.chi2:>7.3g} {round(c.chi2_se, 9):>6.2g} {c.chi_fit:>7.2g} "
                          f"{c.violated:>6.1%} {c.holes:>6.1%} {c.n_params:>8d} {c.n_faces:>8d}")
-    split = choice.split
-    lines.append(f"(chi2: held-out chi-square per strike over {split.n_blocks} blocks of "
-                 f"{split.block_shots} shots, {len(split.test)} strikes tested; chi fit: on "
-                 "the training strikes; cut: beams cut before their strike; * chosen, ~ within "
-                 "one block standard error of the best)")
+    folds = choice.folds
+    lines.append(f"(chi2: held-out chi-square per strike over {folds.k} folds, "
+                 f"{folds.n_blocks} blocks of {folds.block_shots} shots, "
+                 f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "
+                 "chi fit: on the training strikes; cut: beams cut before their strike; "
+                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best)")
     lines.append(choice.reason)
     return "\n".join(lines)
 

@@ -5,15 +5,17 @@ shot, from a recorded sensor position, with a recorded 1-sigma error model
 (``recon.surfaces.uncertainty``). This module turns that into three truth-free judgements of a
 surface mesh:
 
-**Pass-blocked hold-out** (``pass_split``). Along a track consecutive strikes can be closer than
-the range noise, so a random held-out strike has a training neighbour with nearly the same
-noise offset, and a surface that follows the noise predicts it well. Here whole contiguous runs
-of shots (time blocks) are held out instead: ``n_blocks`` blocks spread over the log's time
-line, each of ``block_shots`` shots, and only each block's interior is tested, ``margin`` shots
-in from both ends, where ``margin`` is the number of shots the track takes to move
-``NOISE_LENGTHS`` recorded noise lengths. No tested strike then has a training strike of its
-own track within that distance; other passes over the same ground carry independent noise.
-A cloud without ``time``/``shot`` attributes is split in its stored order (one strike a shot).
+**K-fold hold-out over time blocks** (``pass_folds``). Along a track consecutive strikes can be
+closer than the range noise, so a random held-out strike has a training neighbour with nearly
+the same noise offset, and a surface that follows the noise predicts it well. Here the log's
+time line is cut into blocks of ``block_shots`` contiguous shots, and the blocks are dealt to
+``k`` folds; a surface fitted on the other folds is tested on each fold's blocks, only in
+their interiors, ``margin`` shots in from both ends, where ``margin`` is the number of shots
+the track takes to move ``NOISE_LENGTHS`` recorded noise lengths. No tested strike then has a
+training strike of its own track within that distance; other passes over the same ground
+carry independent noise. Every strike is held out once; the blocks, not the strikes, are the
+independent units of the standard errors (``block_mean_se``). A cloud without
+``time``/``shot`` attributes is cut in its stored order (one strike a shot).
 
 **Per-strike check against a mesh** (``check``). Each strike's beam, from its view point
 through the strike, is cast against the mesh (Open3D's Embree ray caster, batched):
@@ -54,6 +56,8 @@ with a band, for any surface (defined in ``estimate``'s docstring).
 
 from __future__ import annotations
 
+import hashlib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -87,6 +91,28 @@ SURFACE_SAMPLES = 20_000
 # COVERAGE_SPACINGS spacing): between the strikes of a uniformly sampled patch no point is
 # farther than about one spacing.
 COVERAGE_SPACINGS = 2.0
+# The truth's proxy where no strike is (``proxy``): folds of its hold-out, icosphere levels of
+# the ellipsoid (20 * 4**5 faces: 0.01% of the radius from the ellipsoid), clouds kept, and
+# the half-width of its band in its own held-out errors.
+PROXY_FOLDS = 4
+PROXY_SUBDIVISIONS = 5
+PROXY_CACHE = 4
+PROXY_SIGMAS = 2.0
+# The ellipsoid proxy is fitted to at most this many strikes (seeded subsample) in this many
+# robust rounds: 5 leave it within 1.2% of the 20-round fit with 5% outliers
+# (recon/surfaces/methods/ellipsoid.py), a proxy's band is wider.
+PROXY_POINTS = 3000
+PROXY_ITERATIONS = 5
+# The ellipsoid stands for unseen truth only when it predicts held-out passes to within this
+# fraction of tau: an ellipsoid that fits a satellite at the scale of its parts extends far
+# beyond them, where it stands for nothing.
+PROXY_FIT = 0.25
+# The Chamfer band (``estimate``), a split-conformal one: the central value times the 5th and
+# the 90th percentile of the true over the predicted Chamfer distance over the runs of the 18
+# tuning clouds of the auto suite (benchmarks/judge_rules.py estimate; docs/decisions.md). The
+# 5th, not the 10th, below: a surface whose error is below the noise's statistical floor reads
+# at that floor, so the estimate overstates the best surfaces, the ones auto chooses.
+BAND_BELOW, BAND_ABOVE = 0.34, 2.5
 # Mean over RMS of a Gaussian error, sqrt(2 / pi): the low edge of a mean from an RMS (a
 # constant offset has mean = RMS, the high edge).
 MEAN_OVER_RMS = float(np.sqrt(2.0 / np.pi))
@@ -146,36 +172,6 @@ def tau_of(points: np.ndarray) -> float:
     return TAU_FRACTION * float(np.linalg.norm(np.ptp(points, axis=0)))
 
 
-@dataclass(frozen=True)
-class Split:
-    """A pass-blocked hold-out (module docstring).
-
-    Attributes
-    ----------
-    train : (m,) int64
-        Indices of the strikes to fit on (every strike outside the held-out blocks).
-    test : (k,) int64
-        Indices of the tested strikes (the interiors of the held-out blocks).
-    block : (k,) int64
-        Held-out block of each tested strike, 0 .. n_blocks - 1.
-    n_blocks : int
-    block_shots : int
-        Length of a held-out block in shots.
-    margin : int
-        Shots left untested at each end of a block.
-    step_m : float
-        The track's motion a shot [m] (``_margin``).
-    """
-
-    train: np.ndarray
-    test: np.ndarray
-    block: np.ndarray
-    n_blocks: int
-    block_shots: int
-    margin: int
-    step_m: float
-
-
 def _shot_order(cloud: Cloud) -> tuple[np.ndarray, np.ndarray]:
     """Each strike's shot rank in time order, and its beam (0 when not recorded)."""
     attributes = cloud.attributes
@@ -224,47 +220,86 @@ def _margin(points: np.ndarray, rank: np.ndarray, beam: np.ndarray, noise: float
     return int(np.ceil(want / step)), step
 
 
-def pass_split(cloud: Cloud, holdout: float, *, noise: float | None = None, seed: int = 0
-               ) -> Split:
-    """Hold out whole runs of shots (module docstring).
+@dataclass(frozen=True)
+class Folds:
+    """A K-fold hold-out over time blocks (module docstring): every strike belongs to one block
+    and every block to one fold; fitting on the other folds, a fold's tested strikes (its
+    blocks' interiors) are predicted by a surface that never saw their track within a margin.
+
+    Attributes
+    ----------
+    fold : (n,) int64
+        Fold of each strike, 0 .. k - 1.
+    block : (n,) int64
+        Time block of each strike, 0 .. n_blocks - 1 (the units of the standard errors).
+    tested : (n,) bool
+        The strike lies in its block's interior, ``margin`` shots in from both ends.
+    k : int
+    n_blocks, block_shots, margin : int
+        Blocks, shots a block, shots left untested at each end.
+    step_m : float
+        The track's motion a shot [m] (``_margin``).
+    """
+
+    fold: np.ndarray
+    block: np.ndarray
+    tested: np.ndarray
+    k: int
+    n_blocks: int
+    block_shots: int
+    margin: int
+    step_m: float
+
+    def train(self, f: int) -> np.ndarray:
+        """Indices of the strikes fold ``f``'s surface is fitted on (every other fold)."""
+        return np.flatnonzero(self.fold != f)
+
+    def test(self, f: int) -> np.ndarray:
+        """Indices of fold ``f``'s tested strikes."""
+        return np.flatnonzero((self.fold == f) & self.tested)
+
+
+def pass_folds(cloud: Cloud, k: int, *, noise: float | None = None, seed: int = 0) -> Folds:
+    """Cut the time line into blocks and deal them to ``k`` folds (module docstring).
+
+    A block is ``BLOCK_MARGINS`` margins of shots long (at least one shot, at most a
+    ``k``-th of the log), a margin being the shots the track takes to move ``NOISE_LENGTHS``
+    recorded noise lengths; consecutive groups of ``k`` blocks go one to each fold in a seeded
+    order, so every fold samples the whole time line and every strike is held out once.
 
     Parameters
     ----------
     cloud : Cloud
         Metres; its ``shot`` (or ``time``) and ``beam`` attributes order the strikes.
-    holdout : float
-        Fraction of the shots held out, in (0, 0.5].
+    k : int
+        Folds, at least 2.
     noise : float, metres, optional
         Noise length of the margin (default: the recorded ``Strikes.noise``; 0 without one).
     seed : int
-        Seed of the blocks' places.
+        Seed of the deal.
 
     Returns
     -------
-    Split
+    Folds
     """
     rank, beam = _shot_order(cloud)
     n_shots = int(rank.max()) + 1 if len(rank) else 0
     if noise is None:
         noise = Strikes.of(cloud).noise() or 0.0
     margin, step = _margin(cloud.points, rank, beam, noise)
-    held = holdout * n_shots
-    block_shots = max(BLOCK_MARGINS * margin, 1)
-    n_blocks = max(MIN_BLOCKS, round(held / block_shots))
-    block_shots = max(1, min(block_shots, int(held // n_blocks)))
+    block_shots = int(min(max(BLOCK_MARGINS * margin, 1), max(n_shots // k, 1)))
     margin = min(margin, (block_shots - 1) // 2)
-    # One block in each of n_blocks equal strata of the time line, at a seeded place.
-    stratum = n_shots / n_blocks
-    room = np.maximum(np.floor(stratum - block_shots), 0.0)
-    offset = np.floor(np.random.default_rng(seed).random(n_blocks) * (room + 1))
-    start = (np.floor(np.arange(n_blocks) * stratum) + offset).astype(np.int64)
-    index = np.searchsorted(start, rank, side="right") - 1
-    position = rank - start[np.maximum(index, 0)]
-    inside = (index >= 0) & (position < block_shots)
-    tested = inside & (position >= margin) & (position < block_shots - margin)
-    test = np.flatnonzero(tested)
-    return Split(train=np.flatnonzero(~inside), test=test, block=index[test],
-                 n_blocks=n_blocks, block_shots=block_shots, margin=margin, step_m=float(step))
+    n_blocks = -(-n_shots // block_shots)
+    groups = -(-n_blocks // k)
+    rng = np.random.default_rng(seed)
+    deal = np.concatenate([rng.permutation(k) for _ in range(groups)])[:n_blocks]
+    block = rank // block_shots
+    position = rank - block * block_shots
+    length = np.minimum(block_shots, n_shots - block * block_shots)
+    tested = (position >= margin) & (position < length - margin)
+    return Folds(fold=deal[block].astype(np.int64), block=block.astype(np.int64), tested=tested,
+                 k=int(k), n_blocks=int(n_blocks), block_shots=block_shots, margin=int(margin),
+                 step_m=float(step))
 
 
 @dataclass(frozen=True)
@@ -328,7 +363,7 @@ class Caster:
         return self.scene.compute_distance(query).numpy().astype(np.float64)
 
     def beams(self, view: np.ndarray, points: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Cast each beam from ``view`` (n, 3) through ``points`` (n, 3).
 
         Returns
@@ -339,6 +374,8 @@ class Caster:
             Distance from the view point to the strike.
         cos_incidence : (n,) float64
             |cos| between the beam and the normal of the triangle hit (1 for a miss).
+        triangle : (n,) int64
+            The face first hit (-1 for a miss).
         """
         ray = points - view
         beam_range = np.linalg.norm(ray, axis=1)
@@ -354,7 +391,7 @@ class Caster:
         normal = np.cross(b - a, c - a)
         cos[hit] = np.abs(np.einsum("ij,ij->i", normal, direction[hit])) / \
             np.maximum(np.linalg.norm(normal, axis=1), 1e-300)
-        return t_hit, beam_range, cos
+        return t_hit, beam_range, cos, np.where(hit, triangle, -1)
 
 
 def check(strikes: Strikes, caster: Caster, *, tau: float, noise: float,
@@ -389,7 +426,7 @@ def check(strikes: Strikes, caster: Caster, *, tau: float, noise: float,
     violated = np.zeros(n, dtype=bool)
     missed = np.zeros(n, dtype=bool)
     if strikes.view is not None:
-        t_hit, beam_range, cos = caster.beams(strikes.view, strikes.points)
+        t_hit, beam_range, cos, _ = caster.beams(strikes.view, strikes.points)
         missed = ~np.isfinite(t_hit)
         if not fitted:
             residual = np.where(missed, distance, np.abs(t_hit - beam_range))
@@ -448,8 +485,9 @@ class Estimate:
     unsupported : float
         Fraction of the surface's area farther than the support reach from any strike.
     unseen : float
-        Fraction of the strikes' convex hull farther than the support reach from any strike
-        (the proxy of the truth no strike saw).
+        Fraction of the truth's proxy (``proxy``: the convex hull or the ellipsoid of the
+        strikes, less the faces a beam crossed) farther than the support reach from any strike:
+        the truth no strike saw.
     holes : float
         Area-weighted fraction of strikes with no surface within their tolerance.
     violated : float
@@ -485,8 +523,8 @@ class Estimate:
         return (f"predicted without the truth ({self.source}): Chamfer {self.chamfer_m:.3g} m "
                 f"[{self.chamfer_low_m:.3g}, {self.chamfer_high_m:.3g}], F-score@{self.tau_m:.3g}"
                 f" m {self.fscore:.3f} [{self.fscore_low:.3f}, {self.fscore_high:.3f}]; "
-                f"{self.unsupported:.0%} of the surface and {self.unseen:.0%} of the strikes' "
-                "hull are far from any strike, "
+                f"{self.unsupported:.0%} of the surface and {self.unseen:.0%} of the truth's "
+                "proxy are far from any strike, "
                 f"{self.holes:.1%} of strikes fall in holes, {self.violated:.1%} of beams "
                 "are cut before their strike")
 
@@ -538,25 +576,155 @@ def _f(p: float, r: float) -> float:
 
 
 @dataclass(frozen=True)
+class Proxy:
+    """The closed surface that stands for the truth where no strike is (``proxy``).
+
+    Attributes
+    ----------
+    vertices : (v, 3) float64, metres
+    faces : (f, 3) int64
+    name : str
+        ``"ellipsoid"`` or ``"convex hull"``.
+    chi2 : float
+        Its held-out chi-square per strike over the folds (the lower of the two won).
+    error_m : float, metres
+        Its RMS error on the held-out passes, the residuals deconvolved by the recorded noise.
+    gap_m : float, metres
+        Median distance of a held-out strike to the nearest training strike: the gap across
+        which ``error_m`` was measured.
+    growth : float
+        How its held-out error grows with that distance: ``error ~ distance^growth``, from
+        the held-out strikes beyond and within the median gap, in [0, 1].
+    carved : (f,) bool
+        Faces a recorded beam crossed before its strike (by more than the tolerance): empty
+        space, where the truth is not, whatever the proxy says (the hull across a concavity).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    name: str
+    chi2: float
+    error_m: float
+    gap_m: float
+    growth: float
+    carved: np.ndarray
+
+    def error_at(self, rho: np.ndarray) -> np.ndarray:
+        """The proxy's error [m] at ``rho`` metres from the nearest strike: ``error_m`` across
+        the gaps it was measured on, growing as ``(rho / gap_m)^growth`` beyond them."""
+        return self.error_m * np.maximum(1.0, rho / max(self.gap_m, 1e-12)) ** self.growth
+
+
+def _hull(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.spatial import ConvexHull
+
+    hull = ConvexHull(points)
+    return hull.points, hull.simplices.astype(np.int64)
+
+
+def _ellipsoid(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    from recon.surfaces.methods.ellipsoid import ellipsoid_mesh, fit_quadric
+
+    fit = points[subsample(len(points), PROXY_POINTS, 0)]
+    return ellipsoid_mesh(*fit_quadric(fit, iterations=PROXY_ITERATIONS), PROXY_SUBDIVISIONS)
+
+
+def _carved(strikes: Strikes, caster: Caster, *, tau: float, noise: float) -> np.ndarray:
+    """Faces of ``caster``'s surface that a beam crosses before its strike (``check``'s
+    violation), over a seeded subsample of ``MAX_CHECKED`` strikes."""
+    carved = np.zeros(len(caster.faces), dtype=bool)
+    if strikes.view is None:
+        return carved
+    sub = strikes.take(subsample(len(strikes), MAX_CHECKED, 0))
+    violated = check(sub, caster, tau=tau, noise=noise).violated
+    _, _, _, triangle = caster.beams(sub.view[violated], sub.points[violated])
+    carved[triangle[triangle >= 0]] = True
+    return carved
+
+
+def _growth(distance: np.ndarray, gap: np.ndarray) -> float:
+    """Exponent of ``RMS distance ~ gap^growth`` between the held-out strikes farther than the
+    median gap from the training strikes and the nearer ones, in [0, 1]. The distances hold
+    the noise, the same at both ends, so a surface that does not degrade away from its
+    strikes reads near 0 (the deconvolved errors, near 0 at both ends, give no stable ratio)."""
+    far = gap > np.median(gap)
+    g_far, g_near = np.median(gap[far]) if far.any() else 0.0, np.median(gap[~far])
+    if far.all() or not far.any() or g_near <= 0 or g_far <= g_near:
+        return 1.0
+    d_far, d_near = (np.sqrt(np.mean(distance[m] ** 2)) for m in (far, ~far))
+    if d_near <= 0:
+        return 1.0
+    return float(np.clip(np.log(max(d_far, 1e-300) / d_near) / np.log(g_far / g_near), 0, 1))
+
+
+_PROXIES: dict[str, Proxy] = {}
+
+
+def proxy(cloud: Cloud, strikes: Strikes, *, tau: float, noise: float) -> Proxy:
+    """The convex hull of the strikes or their least-squares ellipsoid, whichever predicts
+    held-out passes better (``PROXY_FOLDS`` folds of ``pass_folds``, chi-square per strike),
+    fitted on all strikes; the ellipsoid only when its held-out error is within ``PROXY_FIT``
+    tau. Kept for the last few clouds judged: every surface of one cloud
+    shares it."""
+    from scipy.spatial import cKDTree
+
+    from recon.surfaces.methods import MethodFailed
+
+    key = hashlib.sha1(np.ascontiguousarray(strikes.points).tobytes()).hexdigest()
+    if key in _PROXIES:
+        return _PROXIES[key]
+    folds = pass_folds(cloud, PROXY_FOLDS, noise=noise)
+    scored = []
+    for name, fit in (("convex hull", _hull), ("ellipsoid", _ellipsoid)):
+        try:
+            checks, gaps = [], []
+            for f in range(folds.k):
+                train, test = strikes.points[folds.train(f)], folds.test(f)
+                checks.append(check(strikes.take(test), Caster(*fit(train)), tau=tau,
+                                    noise=noise))
+                gaps.append(cKDTree(train).query(strikes.points[test], workers=-1)[0])
+            whole = fit(strikes.points)
+            carved = _carved(strikes, Caster(*whole), tau=tau, noise=noise)
+        except (MethodFailed, ValueError, RuntimeError, np.linalg.LinAlgError):
+            continue   # no ellipsoid through these strikes (or too few for a hull)
+        cost = np.concatenate([c.cost for c in checks])
+        excess = np.concatenate([np.minimum(c.distance, c.tolerance) ** 2 - c.sigma_normal**2
+                                 for c in checks])
+        gap = np.concatenate(gaps)
+        distance = np.concatenate([np.minimum(c.distance, c.tolerance) for c in checks])
+        scored.append(Proxy(*whole, name, float(np.mean(cost)),
+                            float(np.sqrt(max(np.mean(excess), 0.0))), float(np.median(gap)),
+                            _growth(distance, gap), carved))
+    trusted = [p for p in scored if p.name == "convex hull" or p.error_m <= PROXY_FIT * tau]
+    best = min(trusted, key=lambda p: p.chi2)
+    if len(_PROXIES) >= PROXY_CACHE:
+        _PROXIES.pop(next(iter(_PROXIES)))
+    _PROXIES[key] = best
+    return best
+
+
+@dataclass(frozen=True)
 class _Unsupported:
     """Samples of one surface far from every strike, measured against another surface:
     the fraction ``share`` of the first surface's area, and per far sample (m,) the distance
-    ``gap`` to the other surface and ``rho`` to the nearest strike [m]. The truth passes
-    through that strike, so near a far sample it lies within ``rho`` of it: the sample's
-    distance to the truth is within ``gap +- rho`` of its distance to the proxy, and (for
-    ``bounded``, a sample of the judged surface itself) at most ``rho``. Unseen truth (not
-    ``bounded``) may also lie beyond the strikes' hull, as far as the target's ``scale``: the
-    high edge is at least that."""
+    ``gap`` to the other surface, ``rho`` to the nearest strike and ``error`` the other
+    surface's own error there [m] (``Proxy.error_at``). The sample's distance to the truth is
+    ``gap`` within ``2 error``; and, for ``bounded`` (a sample of the judged surface itself), at
+    most ``rho``: the truth passes through that strike."""
 
     share: float
     gap: np.ndarray
     rho: np.ndarray
+    error: np.ndarray
     bounded: bool
-    scale: float
 
     def _range(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        high = self.rho if self.bounded else np.maximum(self.gap + self.rho, self.scale)
-        return np.minimum(self.gap, high), np.maximum(self.gap - self.rho, 0.0), high
+        high = self.gap + PROXY_SIGMAS * self.error
+        if self.bounded:
+            high = np.minimum(high, self.rho)
+        low = np.minimum(np.maximum(self.gap - PROXY_SIGMAS * self.error, 0.0), high)
+        central = np.hypot(self.gap, MEAN_OVER_RMS * self.error)
+        return np.minimum(central, high), low, high
 
     def mean(self) -> tuple[float, float, float]:
         """Mean distance to the truth: central, low, high."""
@@ -574,16 +742,20 @@ class _Unsupported:
 
 
 def _unsupported(vertices, faces, tree, reach: float, other: Caster, seed: int, *,
-                 bounded: bool, scale: float = 0.0) -> _Unsupported:
+                 bounded: bool, error: Callable[[np.ndarray], np.ndarray],
+                 carved: np.ndarray | None = None) -> _Unsupported:
     """Area samples of (vertices, faces) farther than ``reach`` from every strike (``tree``),
-    with their distances to the surface ``other``."""
+    with their distances to the surface ``other`` and its error there; samples on ``carved``
+    faces (f,) are dropped from the area (they stand for no truth)."""
     from metrics import Mesh, sample_surface
 
-    samples, _ = sample_surface(Mesh(vertices, faces), SURFACE_SAMPLES, seed=seed)
+    samples, face = sample_surface(Mesh(vertices, faces), SURFACE_SAMPLES, seed=seed)
+    if carved is not None and carved.any():
+        samples = samples[~carved[face]]
     rho, _ = tree.query(samples, workers=-1)
     far = rho > reach
-    return _Unsupported(float(far.mean()), other.distance(samples[far]) if far.any()
-                        else np.zeros(0), rho[far], bounded, scale)
+    gap = other.distance(samples[far]) if far.any() else np.zeros(0)
+    return _Unsupported(float(far.mean()), gap, rho[far], error(rho[far]), bounded)
 
 
 def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int = 0
@@ -611,15 +783,20 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     their mean distance ``D``. The mean error ``E`` is taken between ``MEAN_OVER_RMS`` times the
     RMS (a Gaussian error) and the RMS (a constant offset), central halfway.
 
-    **Where there are none** the truth is unknown; its proxy is the convex hull of the
-    strikes. The truth passes through every strike, so near a point ``rho`` from the nearest
-    strike it lies within ``rho`` of that point. The surface's area farther than the reach from
-    every strike (fraction ``u``) is as far from the truth as from the hull, ``G``, with band
-    ``[G - rho, rho]`` (never more than ``rho``); the hull's area farther than the reach from
-    every strike (fraction ``v``) stands for unseen truth, as far from the surface as the hull
-    is, ``H``, band from ``H - rho`` to the larger of ``H + rho`` and the bounding-box diagonal
-    of the strikes and the surface (the unseen truth may extend beyond the strikes' hull: a cap
-    struck on one side of a body says nothing of its far side). Then:
+    **Where there are none** the truth is unknown, and the estimate says so by standing a
+    proxy in for it (``proxy``): the convex hull of the strikes or their least-squares
+    ellipsoid, whichever predicts held-out passes better, less the faces a recorded beam crossed
+    before its strike (empty space: the hull across a satellite's concavity). Its error there is
+    measured, not assumed: its held-out RMS error across the gaps between passes, growing with
+    the distance to the nearest strike as its held-out residuals grow with the distance to the
+    nearest training strike (``Proxy.error_at``). The surface's area farther than the reach
+    from every strike (fraction ``u``) is as far from the truth as from the proxy, ``G``, band
+    ``G +- 2`` proxy errors and never more than the distance to the nearest strike (the truth
+    passes through it); the proxy's uncarved area farther than the reach from every strike
+    (fraction ``v``) stands for unseen truth, as far from the surface as the proxy is, ``H``,
+    band ``H +- 2`` proxy errors. What neither the hull nor the ellipsoid can stand for (a
+    crater's floor, the unseen side of a non-convex body) is outside what the strikes can say:
+    the band is then only as good as the proxy's held-out error says. Then:
 
     - accuracy (surface to truth) = ``(1 - u) E + u G``;
     - completeness (truth to surface) = ``(1 - v) ((1 - h) E + h D) + v H``;
@@ -628,12 +805,13 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
       ``(1 - v) (1 - h) P(|e| <= tau) + v P(H <= tau)``, with ``e`` Gaussian of the RMS error,
       F = 2PR / (P + R), tau 1% of the cloud's diagonal.
 
-    The band's edges take every part at its own edge: narrow where the strikes cover the
-    target, as wide as the target where they do not. The hull proxy of the central value is
-    good for convex and mildly concave bodies seen all round; across a deep concavity (between
-    a satellite's panels and its bus) it stands for truth that is not there, and on a body
-    struck on one side it misses the far side (the central value then favours surfaces that
-    hug the strikes).
+    The band of the F-score takes every part at its own edge. The band of the Chamfer distance
+    does not: taken so, it spans from 0 (a surface within the noise of its strikes) to the
+    target's size (unseen truth anywhere), true and useless. It is the central value times
+    ``BAND_BELOW`` and ``BAND_ABOVE``, the 5th and 90th percentiles of the true over the
+    predicted Chamfer distance measured on the runs of the auto suite's tuning clouds (a
+    split-conformal band: it holds the truth for 85% of surfaces like those, and says nothing
+    of surfaces unlike them).
 
     Parameters
     ----------
@@ -649,7 +827,7 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     -------
     Estimate
     """
-    from scipy.spatial import ConvexHull, cKDTree
+    from scipy.spatial import cKDTree
 
     vertices, faces = (np.asarray(a) for a in surface)
     strikes = Strikes.of(cloud)
@@ -684,14 +862,11 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
         rms = _error_band(result.distance**2, result.sigma_normal**2, kept / kept.sum(),
                           heldout=False)
     error = (rms[0] * 0.5 * (1 + MEAN_OVER_RMS), rms[1] * MEAN_OVER_RMS, rms[2])
-    hull = ConvexHull(strikes.points)
-    hull_faces = hull.simplices.astype(np.int64)
-    bare = _unsupported(vertices, faces, tree, reach, Caster(hull.points, hull_faces), seed,
-                        bounded=True)
-    both = np.vstack([strikes.points, vertices])
-    scale = float(np.linalg.norm(np.ptp(both, axis=0)))
-    unseen = _unsupported(hull.points, hull_faces, tree, reach, caster, seed, bounded=False,
-                          scale=scale)
+    truth = proxy(cloud, strikes, tau=tau, noise=noise)
+    bare = _unsupported(vertices, faces, tree, reach, Caster(truth.vertices, truth.faces), seed,
+                        bounded=True, error=truth.error_at)
+    unseen = _unsupported(truth.vertices, truth.faces, tree, reach, caster, seed,
+                          bounded=False, error=truth.error_at, carved=truth.carved)
     u, v = bare.share, unseen.share
     accuracy = [(1 - u) * e + u * g for e, g in zip(error, bare.mean(), strict=True)]
     completeness = [(1 - v) * ((1 - h) * e + h * hole_distance) + v * g
@@ -702,7 +877,8 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     recall = [(1 - v) * (1 - h) * p + v * q
               for p, q in zip(near, unseen.within(tau), strict=True)]
     fscore = [_f(p, r) for p, r in zip(precision, recall, strict=True)]
-    return Estimate(chamfer_m=chamfer[0], chamfer_low_m=chamfer[1], chamfer_high_m=chamfer[2],
+    return Estimate(chamfer_m=chamfer[0], chamfer_low_m=BAND_BELOW * chamfer[0],
+                    chamfer_high_m=BAND_ABOVE * chamfer[0],
                     fscore=fscore[0], fscore_low=fscore[1], fscore_high=fscore[2], tau_m=tau,
                     error_rms_m=float(rms[0]), unsupported=u, unseen=v, holes=h,
                     violated=float(result.violated.mean()), source=source)

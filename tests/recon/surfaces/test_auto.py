@@ -3,6 +3,8 @@ the best, and a reason that says truthfully what was chosen."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -85,81 +87,84 @@ def test_auto_on_a_noisy_track_log_chooses_the_sphere(track_sphere):
                                 ("ball-pivoting", {})], seed=0)
     assert choice.method == "ellipsoid", format_choice(choice)
     assert 0.8 < choice.chosen.chi2 < 1.2
-    assert choice.split.margin > 10 and choice.noise_m == pytest.approx(0.1)
+    assert choice.folds.margin > 10 and choice.noise_m == pytest.approx(0.1)
     others = [c for c in choice.candidates if c.scored and not c.chosen]
     assert all(c.chi2 > choice.chosen.chi2 + c.chi2_se for c in others)
     record = choice.to_dict()
-    assert record["split"]["margin_shots"] == choice.split.margin
+    assert record["folds"]["margin_shots"] == choice.folds.margin
+    assert record["folds"]["k"] == 4
     assert {"chi2", "chi2_se", "chi_fit", "violated", "holes"} <= set(record["candidates"][0])
 
 
+# The tested strikes of the selection tests: 8 blocks of 4. Candidate j's cost per strike is
+# its chi-square plus se sqrt(7) times column j + 1 of a Hadamard matrix (+-1 a block,
+# orthogonal to every other candidate's): its block standard error is se, and the paired
+# standard error of two candidates sqrt(se_1^2 + se_2^2).
+BLOCK = np.repeat(np.arange(8), 4)
+COLUMNS = itertools.cycle(range(1, 8))
+
+
 def _candidate(label, chi2, params, *, se=0.01, closed=True):
+    from scipy.linalg import hadamard
+
     from recon.surfaces.methods import bind
 
     run = bind("ellipsoid")
     run = type(run)(run.method, run.params, run.module, run.kind, label)
     if chi2 is None:
         return Candidate(run, 0, status="failed", reason="crashed")
+    cost = chi2 + se * np.sqrt(7) * hadamard(8)[:, next(COLUMNS)][BLOCK]
     return Candidate(run, 0, status="ok", n_params=params, n_faces=params, closed=closed,
                      chi2=chi2, chi2_se=se, chi_heldout=chi2**0.5, chi_fit=chi2**0.5,
-                     violated=0.0, holes=0.0)
+                     violated=0.0, holes=0.0, cost=cost)
 
 
-def test_select_takes_the_smallest_model_within_one_block_standard_error():
+def test_select_takes_the_smallest_model_within_two_paired_standard_errors():
     candidates = [_candidate("fine", 1.00, 100_000, se=0.05),
-                  _candidate("coarse", 1.04, 5_000),      # inside the band: smaller wins
-                  _candidate("tiny", 1.20, 9),            # outside the band
+                  _candidate("coarse", 1.04, 5_000),      # 0.04 above, paired se 0.051: in
+                  _candidate("tiny", 1.20, 9),            # 0.20 above: out
                   _candidate("crashed", None, 0)]
-    selection = select(candidates)
+    selection = select(candidates, BLOCK)
     assert candidates[selection.chosen].label == "coarse"
-    assert selection.threshold == pytest.approx(1.05)
+    assert selection.threshold == pytest.approx(1.04)
     assert set(selection.eligible) == {0, 1}
 
 
-def test_the_reason_says_an_open_choice_is_open_and_claims_no_closed_preference():
+def test_the_reason_says_an_open_choice_is_open():
     from recon.surfaces.auto import explain
 
     candidates = [_candidate("closed big", 1.3, 50_000),
                   _candidate("open", 1.0, 5_000, closed=False)]
-    selection = select(candidates, coverage=0.6)   # coverage incomplete, no closed in the band
-    assert candidates[selection.chosen].label == "open" and not selection.closed_first
+    selection = select(candidates, BLOCK)
+    assert candidates[selection.chosen].label == "open"
     reason = explain(candidates, selection, 0.6)
     assert "chose open, an open surface" in reason
     assert "preferred" not in reason and "closed candidates" not in reason
     assert "the lowest held-out statistic" in reason and "cover 60%" in reason
 
 
-def test_the_reason_says_when_closed_models_were_preferred():
+def test_open_and_closed_compete_alike_and_the_reason_names_the_paired_gap():
     from recon.surfaces.auto import explain
 
+    # The closed model is 0.02 above the best, within 2 paired standard errors (0.051), but
+    # larger: the smaller open model wins whatever the coverage.
     candidates = [_candidate("closed", 1.02, 50_000),
                   _candidate("open", 1.0, 5_000, se=0.05, closed=False)]
-    complete = select(candidates, coverage=0.95)
-    assert candidates[complete.chosen].label == "open"
-    selection = select(candidates, coverage=0.6)
-    assert candidates[selection.chosen].label == "closed" and selection.closed_first
-    reason = explain(candidates, selection, 0.6)
-    assert "chose closed, a closed surface" in reason
-    assert "closed candidates in the band were preferred" in reason
-    assert "within one block standard error (0.05) of the best, open" in reason
-
-
-def test_the_reason_names_a_smaller_open_model_set_aside_for_the_best_closed_one():
-    from recon.surfaces.auto import explain
-
-    candidates = [_candidate("closed best", 1.0, 50_000, se=0.05),
-                  _candidate("open small", 1.02, 500, closed=False)]
-    selection = select(candidates, coverage=0.5)
-    assert selection.chosen == selection.best == 0
-    reason = explain(candidates, selection, 0.5)
-    assert "the lowest held-out statistic" in reason and "larger models" not in reason
-    assert "include a smaller open model" in reason
-    assert "the smaller open small (500 parameters) is open" in reason
+    assert candidates[select(candidates, BLOCK).chosen].label == "open"
+    candidates = [_candidate("closed small", 1.02, 500),
+                  _candidate("open", 1.0, 5_000, se=0.05, closed=False)]
+    selection = select(candidates, BLOCK)
+    assert candidates[selection.chosen].label == "closed small"
+    reason = explain(candidates, selection, 0.3)
+    assert "chose closed small, a closed surface" in reason
+    assert "0.02 +- 0.051 above the best, open (1, 5,000 parameters)" in reason
+    assert "within 2 paired standard error(s) of the best" in reason
+    assert "the smallest model" in reason and "preferred" not in reason
 
 
 def test_select_fails_when_every_candidate_failed():
     with pytest.raises(MethodFailed, match="auto: every candidate failed: x: crashed"):
-        select([_candidate("x", None, 0)])
+        select([_candidate("x", None, 0)], BLOCK)
 
 
 @pytest.mark.parametrize("kwargs, match", [

@@ -1,0 +1,313 @@
+"""Offline harness of ``-m auto``'s choice rule and of the truth-free estimate, on a finished suite.
+
+    python benchmarks/judge_rules.py collect --suite benchmarks/out/suite --work /tmp/judge
+    python benchmarks/judge_rules.py rules   --suite benchmarks/out/suite --work /tmp/judge
+    python benchmarks/judge_rules.py estimate --suite benchmarks/out/suite --work /tmp/judge
+
+The auto suite (``benchmarks/suite.py``) leaves, per cloud, every compare run's true scores
+(``results.jsonl``), its mesh (``meshes/``) and the simulated strike log (``logs/``). This
+script reads them (never writes there) so that a choice rule or an estimate can be tried in
+seconds instead of a suite run:
+
+- ``collect``: per cloud, ``recon.surfaces.auto.choose`` fits a fixed, wide candidate set
+  (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
+  candidate, the held-out costs of every tested strike, their blocks and the per-candidate
+  figures (``WORK/folds/CLOUD.npz`` and ``.json``);
+- ``rules``: replays ``auto.select`` (and the ladder's stop) on those figures, restricted to
+  the ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best
+  F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the
+  median run;
+- ``estimate``: ``recon.surfaces.judge.estimate`` on every compare mesh (in-sample, as the
+  suite calls it), against its true Chamfer: Spearman over all runs and within each cloud, and
+  the band's coverage and width (high / low) for each cloud's run of auto's choice.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+F_TOLERANCE, CHAMFER_TOLERANCE = 0.05, 0.10
+# The ladder (recon.surfaces.auto.LADDER) and grid runs that the truth finds best on some suite
+# clouds, by the compare's labels: the rule may be tried on any subset without refitting.
+EXTRA = ("plane cell=0.5", "visibility beta=0.1", "poisson depth=7", "planes threshold=2",
+         "apss filter_scale=4")
+
+
+def records(suite: Path, cloud: str) -> list[dict]:
+    """The compare's successful, scored runs of ``cloud``."""
+    rows = [json.loads(line) for line in (suite / cloud / "results.jsonl").open()]
+    return [r for r in rows if r.get("status") == "ok" and r.get("chamfer_m") is not None]
+
+
+# The clouds the rules were tuned on: the suite's first 18. Others in the suite's output (held
+# out, added later) are never read here.
+TUNING = ("asteroid-slew-clean", "asteroid-slew-noisy", "asteroid-cross-noisy",
+          "asteroid-lidar-noisy", "rso-a-cross-clean", "rso-a-cross-noisy", "rso-b-cross-clean",
+          "rso-b-cross-noisy", "itokawa-cross-noisy", "eros-lidar-clean", "comet-cross-clean",
+          "hst-cross-noisy", "satellite-a-cross-noisy", "satellite-b-slew-noisy",
+          "satellite-c-lidar-noisy", "polyhedron-slew-noisy", "polyhedron-x3.5-slew-noisy",
+          "cratered-asteroid-slew-noisy")
+
+
+def clouds_of(suite: Path, names) -> list[str]:
+    """The tuning clouds (``TUNING``) with results in ``suite``, restricted to ``names``."""
+    return [c for c in TUNING if (suite / c / "results.jsonl").exists()
+            and (not names or c in names)]
+
+
+def load_cloud(suite: Path, cloud: str):
+    from recon.registration.ingest import ingest
+
+    return ingest(suite / "logs" / f"{cloud}.h5")
+
+
+def candidate_runs(rows: list[dict]) -> list:
+    """The ladder's runs and ``EXTRA``, bound with the compare's parameters where it ran them."""
+    from recon.surfaces import auto
+    from recon.surfaces.methods import bind
+
+    runs = [run for level in auto.ladder() for run in level]
+    keys = {run.key for run in runs}
+    for r in rows:
+        if r["label"] in EXTRA and r["key"] not in keys:
+            runs.append(bind(r["method"], r["params"]))
+            keys.add(r["key"])
+    return runs
+
+
+def collect(args) -> None:
+    from recon.surfaces import auto
+
+    out = args.work / "folds"
+    out.mkdir(parents=True, exist_ok=True)
+    for cloud in clouds_of(args.suite, args.clouds):
+        if (out / f"{cloud}.json").exists() and not args.force:
+            continue
+        rows = records(args.suite, cloud)
+        points = load_cloud(args.suite, cloud)
+        start = time.perf_counter()
+        choice = auto.choose(points.points, view_points=points.view_points,
+                             uncertainty=points.attributes, candidates=candidate_runs(rows),
+                             holdout=args.holdout, seed=0, n_workers=args.workers)
+        elapsed = time.perf_counter() - start
+        table = [c.to_dict() | {"key": c.run.key} for c in choice.candidates]
+        arrays = {f"cost/{c.run.key}": c.cost for c in choice.candidates if c.cost is not None}
+        folds = choice.folds
+        block = np.concatenate([folds.block[folds.test(f)] for f in range(folds.k)])
+        np.savez_compressed(out / f"{cloud}.npz", block=block, **arrays)
+        (out / f"{cloud}.json").write_text(json.dumps(
+            {"cloud": cloud, "seconds": elapsed, "auto": choice.to_dict() | {
+                "candidates": table}}, indent=1, default=str))
+        print(f"{cloud}: {len(table)} candidates in {elapsed:.0f} s", flush=True)
+
+
+def candidates_of(work: Path, cloud: str, extra: bool) -> tuple[list, np.ndarray, float]:
+    """The collected candidates of ``cloud`` as ``auto.Candidate`` (on the ladder's levels; with
+    ``extra``, the ``EXTRA`` runs join the level of their method's ladder run, else they are left
+    out), the tested strikes' blocks and the coverage."""
+    from dataclasses import fields
+
+    from recon.surfaces import auto
+    from recon.surfaces.methods import bind
+
+    data = json.loads((work / "folds" / f"{cloud}.json").read_text())["auto"]
+    arrays = np.load(work / "folds" / f"{cloud}.npz")
+    levels = {run.key: depth for depth, level in enumerate(auto.ladder()) for run in level}
+    method_level = {}
+    for depth, level in enumerate(auto.ladder()):
+        for run in level:
+            method_level.setdefault(run.method, depth)
+    names = {f.name for f in fields(auto.Candidate)} - {"run", "level", "heldout", "cost", "mesh"}
+    out = []
+    for row in data["candidates"]:
+        level = levels.get(row["key"])
+        if level is None:
+            if not extra:
+                continue
+            level = method_level.get(row["method"], len(auto.LADDER) - 1)
+        candidate = auto.Candidate(bind(row["method"], row["params"]), level,
+                                   **{k: row[k] for k in names if k in row})
+        candidate.cost = arrays.get(f"cost/{row['key']}")
+        out.append(candidate)
+    return out, arrays["block"], data["coverage"]
+
+
+def replay(candidates: list, block: np.ndarray, coverage: float):
+    """``auto``'s ladder and choice on collected candidates: the levels in order, stopping as
+    ``auto.climb`` does; returns the chosen candidate and the fitted ones."""
+    from recon.surfaces import auto
+
+    depth_of = sorted({c.level for c in candidates})
+    fitted: list = []
+    for n, depth in enumerate(depth_of):
+        before = auto._best(fitted)
+        fitted += [c for c in candidates if c.level == depth]
+        if n + 1 >= auto.ALWAYS_LEVELS and n + 1 < len(depth_of) and \
+                auto._stops(fitted, before, depth):
+            break
+    selection = auto.select(fitted, block)
+    return fitted[selection.chosen], fitted
+
+
+def verdict(rows: list[dict], key: str) -> dict:
+    """Where the run ``key`` stands against the truth (as ``benchmarks/suite.py`` judges)."""
+    best_c = min(r["chamfer_m"] for r in rows)
+    best_f = max(r.get("fscore") or 0.0 for r in rows)
+    median_c = statistics.median(r["chamfer_m"] for r in rows)
+    median_f = statistics.median(r.get("fscore") or 0.0 for r in rows)
+    mine = next((r for r in rows if r["key"] == key), None)
+    if mine is None:
+        return {"found": False}
+    f, c = mine.get("fscore") or 0.0, mine["chamfer_m"]
+    return {"found": True, "f_ratio": f / best_f, "c_ratio": c / best_c,
+            "ok": f >= (1 - F_TOLERANCE) * best_f and c <= (1 + CHAMFER_TOLERANCE) * best_c,
+            "median": c <= median_c and f >= median_f}
+
+
+def rules(args) -> None:
+    names = [c for c in clouds_of(args.suite, args.clouds)
+             if (args.work / "folds" / f"{c}.json").exists()]
+    good = median = 0
+    seconds = []
+    for cloud in names:
+        rows = records(args.suite, cloud)
+        candidates, block, coverage = candidates_of(args.work, cloud, args.extra)
+        chosen, fitted = replay(candidates, block, coverage)
+        v = verdict(rows, chosen.run.key)
+        good += v.get("ok", False)
+        median += v.get("median", False)
+        fit_s = sum(c.fit_s or 0.0 for c in fitted)
+        compare_s = json.loads((args.suite / cloud / "timing.json").read_text())["compare_s"]
+        # Load-free: the compare's own wall time of each fitted run, times the folds and
+        # their share of the strikes (a fit's time grows about linearly with the strikes).
+        wall = {r["key"]: r.get("wall_time_s") or 0.0 for r in rows}
+        folds = round(1 / args.holdout)
+        modelled = sum(wall.get(c.run.key, 0.0) for c in fitted) * (folds - 1)
+        seconds.append(modelled / compare_s)
+        print(f"{cloud:30} {chosen.label[:26]:26} F {v.get('f_ratio', 0):.3f} "
+              f"C {v.get('c_ratio', 0):6.3f} {'ok ' if v.get('ok') else 'NO '}"
+              f"{'' if v.get('median') else 'BELOW-MEDIAN '}fits {len(fitted)} "
+              f"fits {fit_s:.0f} s here; modelled auto/compare {modelled / compare_s:.3f}")
+    print(f"agreement {good}/{len(names)} = {good / max(len(names), 1):.0%}; not below the "
+          f"median {median}/{len(names)}; modelled auto/compare time: median "
+          f"{statistics.median(seconds):.3f}, worst {max(seconds):.3f}")
+
+
+def estimates(args, cloud: str, rows: list[dict]) -> dict[str, dict]:
+    """``judge.estimate`` of every run's mesh of ``cloud`` (cached in ``WORK/estimates``; a
+    cache is reused only for the same ``judge.py`` source but for the band's constants, which
+    do not move the central value: ``estimate_all`` applies them to it)."""
+    import hashlib
+    import inspect
+
+    from formats.geometry import Mesh
+    from formats.mesh_io import read_mesh
+    from recon.surfaces import judge
+
+    source = "".join(line for line in inspect.getsource(judge).splitlines(keepends=True)
+                     if not line.startswith("BAND_BELOW, BAND_ABOVE ="))
+    digest = hashlib.sha1(source.encode()).hexdigest()
+    path = args.work / "estimates" / f"{cloud}.json"
+    cache = json.loads(path.read_text()) if path.exists() else {}
+    runs = cache.get("runs", {}) if cache.get("digest") == digest else {}
+    wanted = [r for r in rows if r.get("mesh")]
+    if args.per_cloud:
+        wanted = [r for r in wanted if r["label"] in args.labels]
+    points = None
+    for r in wanted:
+        if r["key"] in runs:
+            continue
+        points = points or load_cloud(args.suite, cloud)
+        mesh = read_mesh(args.suite / cloud / r["mesh"])
+        runs[r["key"]] = judge.estimate(Mesh(mesh.vertices, mesh.faces), points).to_dict()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"digest": digest, "runs": runs}, default=float))
+    return runs
+
+
+def chosen_key(args, cloud: str) -> str:
+    """The run auto chooses on ``cloud``: replayed on the collected folds when there are
+    some, else the suite's own choice (``auto.json``)."""
+    if (args.work / "folds" / f"{cloud}.json").exists():
+        candidates, block, coverage = candidates_of(args.work, cloud, args.extra)
+        return replay(candidates, block, coverage)[0].run.key
+    data = json.loads((args.suite / cloud / "auto.json").read_text())
+    return next(f"{c['method']} {json.dumps(c['params'], sort_keys=True)}"
+                for c in data["candidates"] if c["chosen"])
+
+
+def estimate_all(args) -> None:
+    from scipy.stats import spearmanr
+
+    from recon.surfaces.judge import BAND_ABOVE, BAND_BELOW
+
+    pairs, within, held, ratios = [], [], 0, []
+    names = clouds_of(args.suite, args.clouds)
+    for cloud in names:
+        rows = records(args.suite, cloud)
+        runs = estimates(args, cloud, rows)
+        truth = {r["key"]: r["chamfer_m"] for r in rows}
+        keys = [k for k in runs if k in truth]
+        mine = [(runs[k]["chamfer_m"], truth[k]) for k in keys]
+        pairs += mine
+        rho = spearmanr(*np.array(mine).T).statistic if len(mine) > 2 else float("nan")
+        within.append(rho)
+        key = chosen_key(args, cloud)
+        e = runs.get(key)
+        if e is None:
+            print(f"{cloud:30} rho {rho:5.2f} (auto's choice not estimated)")
+            continue
+        low, high = BAND_BELOW * e["chamfer_m"], BAND_ABOVE * e["chamfer_m"]
+        inside = low <= truth[key] <= high
+        ratio = high / max(low, 1e-300)
+        held += inside
+        ratios.append(ratio)
+        print(f"{cloud:30} rho {rho:5.2f} n {len(mine):3d} | choice {truth[key]:.4g} m: "
+              f"predicted {e['chamfer_m']:.4g} [{low:.4g}, {high:.4g}] "
+              f"{'in' if inside else 'OUT'} high/low {ratio:.3g}")
+    overall = spearmanr(*np.array(pairs).T).statistic
+    ratio = np.array([t / p for p, t in pairs if p > 0])
+    print("true / predicted Chamfer over all runs, percentiles 5, 10, 25, 50, 75, 90, 95: "
+          + ", ".join(f"{q:.3g}" for q in np.percentile(ratio, [5, 10, 25, 50, 75, 90, 95]))
+          + f"; the band [{BAND_BELOW:g}, {BAND_ABOVE:g}] x predicted holds "
+          f"{np.mean((ratio >= BAND_BELOW) & (ratio <= BAND_ABOVE)):.0%} of all runs")
+    print(f"Spearman over {len(pairs)} runs {overall:.3f}; within a cloud median "
+          f"{np.nanmedian(within):.3f}; band holds auto's choice on {held}/{len(ratios)}; "
+          f"high/low median {np.median(ratios):.3g}, "
+          f"{np.mean(np.array(ratios) <= 4):.0%} at most 4")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("command", choices=("collect", "rules", "estimate"))
+    parser.add_argument("--suite", type=Path, required=True, help="a finished suite's --out")
+    parser.add_argument("--work", type=Path, required=True, help="where this script writes")
+    parser.add_argument("--clouds", nargs="*", help="only these clouds")
+    parser.add_argument("--holdout", type=float, default=0.25)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--force", action="store_true", help="collect again")
+    parser.add_argument("--per-cloud", action="store_true",
+                        help="estimate: only the runs named by --labels")
+    parser.add_argument("--labels", nargs="*", default=[
+        "ellipsoid", "planes", "convex-hull", "poisson depth=6", "plane cell=2", "plane",
+        "poisson depth=9", "visibility", "rimls", "ball-pivoting", *EXTRA, "delaunay-balls",
+        "screened-poisson"], help="estimate: the runs --per-cloud estimates")
+    parser.add_argument("--extra", action="store_true",
+                        help="rules: let the EXTRA runs join the ladder")
+    args = parser.parse_args(argv)
+    {"collect": collect, "rules": rules, "estimate": estimate_all}[args.command](args)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
