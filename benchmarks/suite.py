@@ -856,8 +856,10 @@ def write_report(summaries: list[dict], args: argparse.Namespace) -> dict:
     preds = {key: prediction_totals(group) for key, group in groups.items()}
     (args.out / "summary.json").write_text(json.dumps(
         {"clouds": summaries, "held_out": list(HELD_OUT), "tuning": list(TUNING),
-         "earlier_held_out": list(EARLIER_HELD_OUT), "totals": totals_by, "prediction": preds},
-        indent=2, default=str) + "\n")
+         "earlier_held_out": list(EARLIER_HELD_OUT), "totals": totals_by["all"],
+         "totals_tuning": totals_by["tuning"], "totals_held_out": totals_by["held_out"],
+         "prediction": preds["all"], "prediction_tuning": preds["tuning"],
+         "prediction_held_out": preds["held_out"]}, indent=2, default=str) + "\n")
     text = markdown(summaries, totals_by, preds, command=_command(args))
     (args.out / "summary.md").write_text(text)
     made = [charts.choice_vs_ranking(summaries, args.out / "auto-suite.png",

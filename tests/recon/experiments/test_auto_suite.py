@@ -216,6 +216,7 @@ def test_quick_suite_on_one_cloud(tmp_path):
     assert verdict["within_f"] and verdict["within_chamfer"], cloud["auto"]["reason"]
     assert cloud["weighting"]["ellipsoid"]["chamfer_weighted"] > 0
     assert summary["totals"]["within_both"] == pytest.approx(1.0)
+    assert summary["totals_tuning"]["n_clouds"] == 1 and summary["totals_held_out"]["n_clouds"] == 0
     text = doc.read_text()
     assert "asteroid-cross-noisy" in text and "| cloud | points | auto's choice" in text
     assert (doc.parent / "figures" / "auto-suite.png").stat().st_size > 10_000
