@@ -748,7 +748,8 @@ def markdown(summaries: list[dict], totals_by: dict, preds: dict, *, command: st
         f"against the simulator's truth ({SAMPLES:,} samples per side); `-m auto` chose without "
         "the truth. F: auto's F-score over the best run's; C: auto's Chamfer distance over the "
         "best's; rank among the successful runs (1 = best); cost: auto's wall time over the "
-        "compare's on the same cloud (wall clock on shared cores; fits: the summed process "
+        "compare's on the same cloud (wall clock on shared cores; a resumed suite times auto "
+        "anew and keeps the compare's time from the run that did it; fits: the summed process "
         "time of auto's isolated fits over the compare's runs, less sensitive to the load).",
         "",
         "**Held out** (marked * below): " + (", ".join(held) if held else "none in this run")
