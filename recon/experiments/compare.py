@@ -102,11 +102,16 @@ def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud) -
     -------
     dict
         ``predicted_chamfer_m``, ``predicted_chamfer_low_m``, ``predicted_chamfer_high_m``
-        (metres), ``predicted_fscore`` and ``predicted_by`` (``estimate_version``).
+        (metres), ``predicted_fscore`` and ``predicted_by`` (``estimate_version``); when the
+        estimate cannot judge these strikes (e.g. all in one plane), ``predicted_by`` and
+        ``prediction_failed`` (why) only: the run itself stands.
     """
     from recon.surfaces.judge import estimate
 
-    e = estimate((vertices, faces), strikes)
+    try:
+        e = estimate((vertices, faces), strikes)
+    except (ValueError, RuntimeError) as exc:   # e.g. strikes too flat for their hull
+        return {"predicted_by": estimate_version(), "prediction_failed": f"{exc}"[:200]}
     return {"predicted_chamfer_m": e.chamfer_m, "predicted_chamfer_low_m": e.chamfer_low_m,
             "predicted_chamfer_high_m": e.chamfer_high_m, "predicted_fscore": e.fscore,
             "predicted_by": estimate_version()}
