@@ -535,6 +535,12 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
                          "n_params": r.get("n_params")} for r in _ok(records)]}
 
 
+def _median(values) -> float:
+    """The median, NaN of nothing."""
+    values = list(values)
+    return statistics.median(values) if values else float("nan")
+
+
 def totals(summaries: list[dict]) -> dict:
     """The agreement fractions and the cost ratios over some clouds."""
     v = [s["verdict"] for s in summaries]
@@ -543,17 +549,14 @@ def totals(summaries: list[dict]) -> dict:
     def frac(test):
         return sum(bool(test(x)) for x in v) / n if n else float("nan")
 
-    def middle(values):
-        return statistics.median(values) if values else float("nan")
-
     ratios = [s["cost_ratio"] for s in summaries]
     fits = [s["fit_ratio"] for s in summaries]
     return {"n_clouds": n, "within_f": frac(lambda x: x.get("within_f")),
             "within_chamfer": frac(lambda x: x.get("within_chamfer")),
             "within_both": frac(lambda x: x.get("within_f") and x.get("within_chamfer")),
             "not_below_median": frac(lambda x: x.get("not_below_median")),
-            "cost_ratio_median": middle(ratios), "cost_ratio_max": max(ratios, default=math.nan),
-            "fit_ratio_median": middle(fits), "fit_ratio_max": max(fits, default=math.nan)}
+            "cost_ratio_median": _median(ratios), "cost_ratio_max": max(ratios, default=math.nan),
+            "fit_ratio_median": _median(fits), "fit_ratio_max": max(fits, default=math.nan)}
 
 
 def _spearman(truth: list[float], predicted: list[float]) -> float:
@@ -579,22 +582,17 @@ def prediction_totals(summaries: list[dict]) -> dict:
     per_cloud = [_spearman([r["truth_m"] for r in s["predicted"]["runs"]],
                            [r["predicted_m"] for r in s["predicted"]["runs"]])
                  for s in summaries]
-    per_cloud = [x for x in per_cloud if math.isfinite(x)]
     choices = [s["auto"] for s in summaries
                if s["auto"].get("predicted") and s["auto"].get("chamfer_m") is not None]
-    held = sum(c["predicted"]["lo_m"] <= c["chamfer_m"] <= c["predicted"]["hi_m"]
-               for c in choices)
+    held = [c["predicted"]["lo_m"] <= c["chamfer_m"] <= c["predicted"]["hi_m"] for c in choices]
     return {"n_runs": len(runs),
             "spearman": _spearman([r["truth_m"] for r in runs],
                                   [r["predicted_m"] for r in runs]),
-            "spearman_within_cloud_median": (statistics.median(per_cloud) if per_cloud
-                                             else float("nan")),
+            "spearman_within_cloud_median": _median(x for x in per_cloud if math.isfinite(x)),
             "n_choices": len(choices),
-            "band_holds_truth": held / len(choices) if choices else float("nan"),
-            "band_width_choices": (statistics.median(_width(c["predicted"]) for c in choices)
-                                   if choices else float("nan")),
-            "band_width_runs": (statistics.median(_width(r) for r in runs) if runs
-                                else float("nan"))}
+            "band_holds_truth": sum(held) / len(held) if held else float("nan"),
+            "band_width_choices": _median(_width(c["predicted"]) for c in choices),
+            "band_width_runs": _median(_width(r) for r in runs)}
 
 
 # The report's groups of clouds: every cloud, the tuning clouds, the held-out ones.
