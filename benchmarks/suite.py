@@ -663,7 +663,8 @@ def _visibility_summary(present: list[dict]) -> str:
     """Where the visibility method wins (its best run within ``WIN_RATIO`` of the best
     Chamfer) and where it loses, with its Chamfer and F-score ratios."""
     def cites(group):
-        return "; ".join(f"{s['cloud']} (C {s['visibility']['chamfer_ratio']:.2f}, F "
+        return "; ".join(f"{s['cloud']}{' *' if s['held_out'] else ''} (C "
+                         f"{s['visibility']['chamfer_ratio']:.2f}, F "
                          f"{s['visibility']['f_ratio']:.2f})" for s in group) or "none"
 
     ranked = sorted(present, key=lambda s: s["visibility"]["chamfer_ratio"])
@@ -677,7 +678,7 @@ def _visibility_summary(present: list[dict]) -> str:
             f"F-score) on {fronts}. **Wins** (its best run within {CHAMFER_TOLERANCE:.0%} of "
             f"the best Chamfer, {len(wins)} clouds): {cites(wins)}. **Loses** "
             f"({len(losses)} clouds, best to worst): {cites(losses)}. C and F: its best run's "
-            "Chamfer over the best run's and F-score over the best's.")
+            "Chamfer over the best run's and F-score over the best's; * held out.")
 
 
 def _visibility_lines(summaries: list[dict]) -> list[str]:
