@@ -200,9 +200,14 @@ def test_records_carry_the_estimate_of_their_mesh():
 def test_quick_suite_on_one_cloud(tmp_path):
     doc = tmp_path / "docs" / "auto-suite.md"
     doc.parent.mkdir()
-    status = suite.main(["--quick", "--clouds", "asteroid-cross-noisy", "--methods",
-                         "ellipsoid", "planes", "poisson", "--out", str(tmp_path / "out"),
-                         "--doc", str(doc), "--workers", "2"])
+    common = ["--quick", "--clouds", "asteroid-cross-noisy", "--methods", "ellipsoid", "planes",
+              "poisson", "--out", str(tmp_path / "out"), "--workers", "2"]
+    # The compares alone first (as for held-out clouds), then auto, the estimate and the
+    # report on them, resumed.
+    assert suite.main([*common, "--compare-only"]) == 0
+    assert (tmp_path / "out" / "asteroid-cross-noisy" / "results.json").is_file()
+    assert not (tmp_path / "out" / "summary.json").exists()
+    status = suite.main([*common, "--resume", "--doc", str(doc)])
     assert status == 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     (cloud,) = summary["clouds"]
