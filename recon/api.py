@@ -1109,7 +1109,7 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
         fingerprint={"input": _name(cloud), "truth": _name(truth), "voxel": preparation.voxel,
                      "remove_outliers": preparation.remove_outliers,
                      "normals_k": preparation.k},
-        **limits.kwargs())
+        strikes=points, **limits.kwargs())
     agreement = None
     if auto:
         agreement = _auto_agreement(points, report["records"], methods, preparation, limits)

@@ -16,6 +16,11 @@ thread per core or on Dask (``recon.experiments.sweep``) and streams to
 - ``DIR/speed_accuracy.png``: time (log axis) against Chamfer and against F-score, one marker
   per method, the Pareto front drawn and labelled;
 - ``DIR/meshes/*.ply``: the meshes (unless ``keep_meshes=False``);
+- with the strikes given (``strikes``), the truth-free prediction of every successful run
+  (``recon.surfaces.judge.estimate`` on its mesh, in-sample): ``predicted_chamfer_m``,
+  ``predicted_chamfer_low_m``, ``predicted_chamfer_high_m``, ``predicted_fscore`` and
+  ``predicted_by`` (``ESTIMATE_VERSION``: which estimate made them, so a reader can tell a
+  stale prediction from a current one);
 
 and the ranked table (by Chamfer, failures last with their reasons) is returned as text.
 ``compare`` takes a prepared cloud and a truth mesh; ``recon.api.compare`` takes what a user
@@ -35,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from formats.atomic import write_text_atomically
+from formats.geometry import Cloud
 from recon.experiments import charts
 from recon.experiments.cases import (
     BASE_COLUMNS,
@@ -71,9 +77,50 @@ def run_case(*, run: Run, cloud: MethodInput, truth, timeout_s: float, memory_mb
                         on_wait=isolated_stage)
 
 
-def flatten(run: Run, result: dict, *, mesh_dir: Path | None) -> dict:
+def estimate_version() -> str:
+    """Which truth-free estimate predicts: a digest of ``recon.surfaces.judge``'s source (its
+    ``estimate`` and everything it calls), 12 hex digits."""
+    import inspect
+
+    from recon.surfaces import judge
+
+    return hashlib.sha1(inspect.getsource(judge).encode()).hexdigest()[:12]
+
+
+def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud) -> dict:
+    """The truth-free prediction of one surface as record columns (``recon.surfaces.judge.
+    estimate``, in-sample: the fit saw every strike).
+
+    Parameters
+    ----------
+    vertices : (v, 3) float64, metres
+    faces : (f, 3) int
+    strikes : Cloud
+        The strikes with their view points and recorded uncertainty columns.
+
+    Returns
+    -------
+    dict
+        ``predicted_chamfer_m``, ``predicted_chamfer_low_m``, ``predicted_chamfer_high_m``
+        (metres), ``predicted_fscore`` and ``predicted_by`` (``estimate_version``); when the
+        estimate cannot judge these strikes (e.g. all in one plane), ``predicted_by`` and
+        ``prediction_failed`` (why) only: the run itself stands.
+    """
+    from recon.surfaces.judge import estimate
+
+    try:
+        e = estimate((vertices, faces), strikes)
+    except (ValueError, RuntimeError) as exc:   # e.g. strikes too flat for their hull
+        return {"predicted_by": estimate_version(), "prediction_failed": f"{exc}"[:200]}
+    return {"predicted_chamfer_m": e.chamfer_m, "predicted_chamfer_low_m": e.chamfer_low_m,
+            "predicted_chamfer_high_m": e.chamfer_high_m, "predicted_fscore": e.fscore,
+            "predicted_by": estimate_version()}
+
+
+def flatten(run: Run, result: dict, *, mesh_dir: Path | None, strikes: Cloud | None = None
+            ) -> dict:
     """A result of ``run_isolated`` for ``run`` as one flat record (mesh written, arrays
-    dropped)."""
+    dropped; with ``strikes``, the truth-free prediction columns, ``predicted_columns``)."""
     from formats.mesh_io import write_mesh
 
     record: dict[str, Any] = {"label": run.label, "method": run.method, "params": run.params,
@@ -88,6 +135,8 @@ def flatten(run: Run, result: dict, *, mesh_dir: Path | None) -> dict:
         path = mesh_dir / f"{_slug(run.label, run.key)}.ply"
         write_mesh(path, result["vertices"], result["faces"], source=f"recon compare: {run.label}")
         record["mesh"] = str(Path(mesh_dir.name) / path.name)
+    if result.get("status") == "ok" and strikes is not None:
+        record.update(predicted_columns(result["vertices"], result["faces"], strikes))
     record.update(result.get("scores") or {})
     return record
 
@@ -155,7 +204,8 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
             memory_mb: int | None = DEFAULT_MEMORY_MB,
             scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
             keep_meshes: bool = True, score_options: dict | None = None,
-            fingerprint: dict | None = None, title: str = "") -> dict:
+            fingerprint: dict | None = None, title: str = "", strikes: Cloud | None = None
+            ) -> dict:
     """Run, score and rank every method variant on one prepared cloud.
 
     Parameters
@@ -185,6 +235,9 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
         Extra identity of the input for ``--resume`` checks (e.g. the input path).
     title : str
         Chart title.
+    strikes : Cloud, optional
+        The strikes before preparation, with view points and recorded uncertainty: every
+        successful run's record then carries its truth-free prediction (``predicted_columns``).
 
     Returns
     -------
@@ -208,7 +261,7 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
                              "memory_mb": memory_mb, "score_options": score_options},
                      fingerprint=ident, scheduler=scheduler, n_workers=n_workers, resume=resume,
                      on_result=lambda key, result: flatten(cases[key]["run"], result,
-                                                           mesh_dir=mesh_dir),
+                                                           mesh_dir=mesh_dir, strikes=strikes),
                      desc="compare", outputs=("results.csv", "results.json",
                                               "speed_accuracy.png", "auto.json"))
     records = [done[key] for key in cases if key in done]

@@ -17,13 +17,14 @@ def _overrides(cloud) -> dict:
 
 def test_suite_defines_the_clouds_the_issue_asks_for():
     clouds = suite.CLOUDS.values()
-    assert len(suite.CLOUDS) >= 18
+    assert len(suite.CLOUDS) >= 24
     assert {"asteroid", "RSO-A", "RSO-B"} <= {c.target for c in clouds}
-    assert {"LRF + 2 deg slew", "cross", "LIDAR"} <= {c.sensor for c in clouds}
-    # Noisy single-beam, cross and LIDAR all appear.
-    assert {"LRF + 2 deg slew", "cross", "LIDAR"} <= {c.sensor for c in clouds
-                                                      if c.errors == "paper"}
-    assert len({c.mesh for c in clouds if c.mesh}) >= 4
+    # Noisy single-beam, cross and LIDAR all appear, among the tuning clouds and held out.
+    kinds = {"LRF + 2 deg slew", "cross", "LIDAR"}
+    for names in (suite.TUNING, suite.HELD_OUT):
+        assert kinds <= {suite.CLOUDS[n].sensor for n in names
+                         if suite.CLOUDS[n].errors == "paper"}
+    assert len({c.mesh for c in clouds if c.mesh}) >= 8
     assert {c.errors for c in clouds} == {"none", "paper"}
     assert {c.density for c in clouds} == {"dense", "sparse"}
     generated = {name: _overrides(c) for name, c in suite.CLOUDS.items()
@@ -32,42 +33,41 @@ def test_suite_defines_the_clouds_the_issue_asks_for():
     satellites = {o["target.seed"] for o in generated.values() if o["target.kind"] == "satellite"}
     assert len(satellites) >= 3 and kinds.count("cratered-asteroid") >= 1
     # One polyhedron at two scales: the same seed, sizes 3.5 times apart.
-    polyhedra = [o for o in generated.values() if o["target.kind"] == "polyhedron"]
-    assert len(polyhedra) == 2 and polyhedra[0]["target.seed"] == polyhedra[1]["target.seed"]
+    polyhedra = [o for o in generated.values() if o["target.kind"] == "polyhedron"
+                 and o["target.seed"] == str(suite.POLYHEDRON_SEED)]
     sizes = sorted(float(o["target.size"]) for o in polyhedra)
-    assert sizes[1] == pytest.approx(3.5 * sizes[0])
-    # At least six held-out clouds, listed, and the generated ones among them.
-    assert len(suite.HELD_OUT) >= 6 and set(generated) <= set(suite.HELD_OUT)
-    assert all(suite.CLOUDS[n].held_out for n in suite.HELD_OUT)
+    assert len(sizes) == 2 and sizes[1] == pytest.approx(3.5 * sizes[0])
+    # At least six held-out clouds, listed, apart from the tuning clouds; the earlier round's
+    # held-out clouds have been looked at and are tuning clouds now.
+    assert len(suite.HELD_OUT) >= 6 and all(suite.CLOUDS[n].held_out for n in suite.HELD_OUT)
+    assert not set(suite.HELD_OUT) & set(suite.TUNING)
+    assert set(suite.HELD_OUT) | set(suite.TUNING) == set(suite.CLOUDS)
+    assert set(suite.EARLIER_HELD_OUT) <= set(suite.TUNING)
+    # Held out: new generated bodies (no seed a tuning cloud uses) and new real models.
+    tuned_seeds = {(o["target.kind"], o["target.seed"]) for n, o in generated.items()
+                   if n in suite.TUNING}
+    assert not any((o["target.kind"], o["target.seed"]) in tuned_seeds
+                   for n, o in generated.items() if n in suite.HELD_OUT)
+    assert not ({suite.CLOUDS[n].mesh for n in suite.HELD_OUT if suite.CLOUDS[n].mesh}
+                & {suite.CLOUDS[n].mesh for n in suite.TUNING})
+    assert {suite.CLOUDS[n].mesh is None for n in suite.HELD_OUT} == {True, False}
 
 
 def test_every_generated_scene_loads():
     import sim
 
-    for name in suite.HELD_OUT:
-        cloud = suite.CLOUDS[name]
-        scene = sim.load_scene(cloud.preset, list(cloud.overrides))
-        assert scene.target.split(":")[0] in ("satellite", "polyhedron", "cratered-asteroid")
+    for name, cloud in suite.CLOUDS.items():
+        if cloud.mesh is None and "target.seed" in _overrides(cloud):
+            scene = sim.load_scene(cloud.preset, list(cloud.overrides))
+            assert scene.target.split(":")[0] in ("satellite", "polyhedron",
+                                                  "cratered-asteroid"), name
 
 
-class _Estimate:
-    chamfer_m = 0.2
-    chamfer_band_m = (0.3, 0.1)
-
-
-@pytest.mark.parametrize(("result", "expected"), [
-    ({"predicted_chamfer_m": 0.1, "predicted_band_m": [0.15, 0.05]},
-     {"chamfer_m": 0.1, "lo_m": 0.05, "hi_m": 0.15}),
-    ({"estimate": {"chamfer_m": 0.4, "chamfer_lo_m": 0.3, "chamfer_hi_m": 0.5}},
-     {"chamfer_m": 0.4, "lo_m": 0.3, "hi_m": 0.5}),
-    (_Estimate(), {"chamfer_m": 0.2, "lo_m": 0.1, "hi_m": 0.3}),
-    ({"chamfer_m": 0.7}, {"chamfer_m": 0.7, "lo_m": 0.7, "hi_m": 0.7}),
-    ({"chamfer_m": float("nan")}, None),
-    ({"fscore": 0.9}, None),
-    (None, None),
-])
-def test_prediction_reads_what_an_estimate_returns(result, expected):
-    assert suite.prediction(result) == expected
+def test_prediction_reads_a_records_columns():
+    assert suite.prediction({"predicted_chamfer_m": 0.1, "predicted_chamfer_low_m": 0.05,
+                             "predicted_chamfer_high_m": 0.15}) == \
+        {"chamfer_m": 0.1, "lo_m": 0.05, "hi_m": 0.15}
+    assert suite.prediction({"chamfer_m": 0.1}) is None
 
 
 def _summary(name, pairs, choice, *, held_out=False):
@@ -125,15 +125,17 @@ def test_visibility_on_the_front_or_not_and_against_the_best():
     assert not absent["present"] and "no run of it here" in absent["note"]
 
 
-def fake_estimate(mesh, cloud):
-    """A stand-in estimate for the hook: the mesh's largest extent over 100, and a band of
-    +-10 %."""
-    size = float(np.ptp(mesh.vertices, axis=0).max()) / 100.0
-    return {"chamfer_m": size, "chamfer_band_m": (0.9 * size, 1.1 * size)}
+def _fake_columns(vertices, faces, strikes):
+    """A stand-in prediction: the mesh's largest extent over 100, and a band of +-10 %."""
+    size = float(np.ptp(vertices, axis=0).max()) / 100.0
+    return {"predicted_chamfer_m": size, "predicted_chamfer_low_m": 0.9 * size,
+            "predicted_chamfer_high_m": 1.1 * size, "predicted_by": "v2"}
 
 
-def test_predict_runs_uses_the_estimate_hook_on_kept_meshes(tmp_path, monkeypatch):
+def test_predict_runs_reads_current_records_and_falls_back_on_kept_meshes(tmp_path,
+                                                                          monkeypatch):
     from formats.mesh_io import write_mesh
+    from recon.experiments import compare
     from sim import targets
 
     (tmp_path / "meshes").mkdir()
@@ -143,33 +145,69 @@ def test_predict_runs_uses_the_estimate_hook_on_kept_meshes(tmp_path, monkeypatc
         write_mesh(path, *targets.box([0, 0, 0], [edge, edge, edge]))
         records.append({"key": f"k{i}", "status": "ok", "chamfer_m": edge / 10,
                         "mesh": f"meshes/run{i}.ply"})
+    records[0] |= {"predicted_chamfer_m": 9.0, "predicted_chamfer_low_m": 8.0,
+                   "predicted_chamfer_high_m": 10.0, "predicted_by": "v1"}   # stale
     records.append({"key": "failed", "status": "failed"})
     records.append({"key": "given", "status": "ok", "chamfer_m": 1.0,
-                    "predicted_chamfer_m": 0.5, "predicted_band_m": [0.4, 0.6]})
-    monkeypatch.setattr(suite, "ESTIMATORS", ("no.such.module:estimate",
-                                              f"{__name__}:fake_estimate"))
+                    "predicted_chamfer_m": 0.5, "predicted_chamfer_low_m": 0.4,
+                    "predicted_chamfer_high_m": 0.6, "predicted_by": "v2"})
+    monkeypatch.setattr(compare, "estimate_version", lambda: "v2")
+    monkeypatch.setattr(compare, "predicted_columns", _fake_columns)
     out = suite.predict_runs(records, None, tmp_path)
-    assert out["estimator"] == f"{__name__}:fake_estimate" and out["note"] == ""
-    assert out["runs"]["k2"] == pytest.approx({"chamfer_m": 0.04, "lo_m": 0.036,
-                                               "hi_m": 0.044})
+    assert out["note"] == "" and out["from_records"] == 1 and out["from_meshes"] == 3
+    assert out["runs"]["k0"] == pytest.approx({"chamfer_m": 0.01, "lo_m": 0.009,
+                                               "hi_m": 0.011})
     assert out["runs"]["given"] == {"chamfer_m": 0.5, "lo_m": 0.4, "hi_m": 0.6}
     assert "failed" not in out["runs"]
-    # Cached beside the compare: the same estimator is not asked again.
+    # Cached beside the compare under the estimate's version: not computed again ...
     for r in records[:3]:
         (tmp_path / r["mesh"]).unlink()
     assert suite.predict_runs(records, None, tmp_path)["runs"] == out["runs"]
-    monkeypatch.setattr(suite, "ESTIMATORS", ("no.such.module:estimate",))
+    # ... until the estimate changes: then runs with neither record nor mesh are said missing.
+    monkeypatch.setattr(compare, "estimate_version", lambda: "v3")
     missing = suite.predict_runs(records, None, tmp_path)
-    assert missing["estimator"] is None and "no estimate function found" in missing["note"]
-    assert missing["runs"]["given"] is not None and missing["runs"]["k0"] is None
+    assert missing["runs"]["k0"] is None and missing["runs"]["given"] is None
+    assert "no predicted Chamfer for 4 of 4 runs" in missing["note"]
+
+
+def test_band_width_is_the_median_high_over_low():
+    rising = [(0.1, 1.0), (0.2, 2.0)]
+    summaries = [_summary("a", rising, (0.1, 0.1, 0.05, 0.2)),
+                 _summary("b", rising, (0.1, 0.1, 0.1, 1.0)),
+                 _summary("c", rising, (0.1, 0.1, 0.0, 1.0))]
+    out = suite.prediction_totals(summaries)
+    assert out["band_width_choices"] == pytest.approx(10.0)   # 4, 10 and inf
+    assert out["band_width_runs"] == pytest.approx(1.0)       # the runs' bands are points
+
+
+def test_records_carry_the_estimate_of_their_mesh():
+    from formats.geometry import Cloud
+    from recon.experiments.compare import estimate_version, predicted_columns
+    from sim import targets
+
+    vertices, faces = targets.box([-1.0, -1.0, -1.0], [1.0, 1.0, 1.0])
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-1, 1, (400, 3))
+    points[np.arange(400), rng.integers(0, 3, 400)] = rng.choice([-1.0, 1.0], 400)
+    columns = predicted_columns(vertices, faces, Cloud(points))
+    assert columns["predicted_by"] == estimate_version() and len(estimate_version()) == 12
+    assert columns["predicted_chamfer_low_m"] <= columns["predicted_chamfer_m"] \
+        <= columns["predicted_chamfer_high_m"]
+    far = predicted_columns(vertices * 3.0, faces, Cloud(points))
+    assert far["predicted_chamfer_m"] > columns["predicted_chamfer_m"] + 0.5
 
 
 def test_quick_suite_on_one_cloud(tmp_path):
     doc = tmp_path / "docs" / "auto-suite.md"
     doc.parent.mkdir()
-    status = suite.main(["--quick", "--clouds", "asteroid-cross-noisy", "--methods",
-                         "ellipsoid", "planes", "poisson", "--out", str(tmp_path / "out"),
-                         "--doc", str(doc), "--workers", "2"])
+    common = ["--quick", "--clouds", "asteroid-cross-noisy", "--methods", "ellipsoid", "planes",
+              "poisson", "--out", str(tmp_path / "out"), "--workers", "2"]
+    # The compares alone first (as for held-out clouds), then auto, the estimate and the
+    # report on them, resumed.
+    assert suite.main([*common, "--compare-only"]) == 0
+    assert (tmp_path / "out" / "asteroid-cross-noisy" / "results.json").is_file()
+    assert not (tmp_path / "out" / "summary.json").exists()
+    status = suite.main([*common, "--resume", "--doc", str(doc)])
     assert status == 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     (cloud,) = summary["clouds"]
@@ -183,11 +221,14 @@ def test_quick_suite_on_one_cloud(tmp_path):
     assert verdict["within_f"] and verdict["within_chamfer"], cloud["auto"]["reason"]
     assert cloud["weighting"]["ellipsoid"]["chamfer_weighted"] > 0
     assert summary["totals"]["within_both"] == pytest.approx(1.0)
+    assert summary["totals_tuning"]["n_clouds"] == 1 and summary["totals_held_out"]["n_clouds"] == 0
     text = doc.read_text()
     assert "asteroid-cross-noisy" in text and "| cloud | points | auto's choice" in text
     assert (doc.parent / "figures" / "auto-suite.png").stat().st_size > 10_000
-    # The estimate and visibility columns are there when their hooks are, else said missing.
-    estimate, _ = suite.hook(suite.ESTIMATORS)
-    assert (cloud["predicted"]["note"] == "") == (estimate is not None)
+    # Every run's prediction comes from the compare's records; auto's choice has its band.
+    assert cloud["predicted"]["note"] == ""
+    assert cloud["predicted"]["from_records"] == len(cloud["ranking"]) == 4
+    band = cloud["auto"]["predicted"]
+    assert band["lo_m"] <= band["chamfer_m"] <= band["hi_m"] and band["source"] == "held-out"
     assert cloud["visibility"]["present"] is False    # not among the methods asked for
     assert "## The `visibility` method" in text and "Held out" in text

@@ -167,3 +167,42 @@ def test_compare_walks_its_hdf5_files_before_starting_workers(tmp_path, monkeypa
     with pytest.raises(Started):
         api.compare(log, truth=log, output=tmp_path / "out", methods=["convex-hull"])
     assert events == ["walk log.h5", "start workers"]
+
+
+def test_compare_records_carry_the_truth_free_prediction(tmp_path, monkeypatch):
+    """Every successful run's record holds the estimate of its mesh, named by the estimate's
+    version (results.csv too); an estimate that cannot judge the strikes leaves the run
+    standing and says why."""
+    import csv
+    from types import SimpleNamespace
+
+    from recon.experiments.compare import compare_input, estimate_version
+    from recon.surfaces import judge
+    from tests.conftest import write_sphere_log
+
+    seen = []
+
+    def estimate(surface, cloud):
+        seen.append(len(cloud.points))
+        if len(seen) > 1:
+            raise RuntimeError("QH6154 the strikes are flat")
+        return SimpleNamespace(chamfer_m=0.2, chamfer_low_m=0.1, chamfer_high_m=0.4,
+                               fscore=0.8)
+
+    monkeypatch.setattr(judge, "estimate", estimate)
+    log = tmp_path / "log.h5"
+    write_sphere_log(log)
+    report = compare_input(log, log, tmp_path / "out", names=["plane"], n_workers=1)
+    (record,) = report["records"]
+    assert seen == [80]      # the strikes of the log, once per successful run
+    assert record["status"] == "ok" and record["predicted_by"] == estimate_version()
+    assert (record["predicted_chamfer_low_m"], record["predicted_chamfer_m"],
+            record["predicted_chamfer_high_m"], record["predicted_fscore"]) == (0.1, 0.2, 0.4,
+                                                                                 0.8)
+    with open(report["csv"], newline="") as f:
+        (row,) = csv.DictReader(f)
+    assert float(row["predicted_chamfer_m"]) == pytest.approx(0.2)
+    report = compare_input(log, log, tmp_path / "again", names=["plane"], n_workers=1)
+    (record,) = report["records"]
+    assert record["status"] == "ok" and "flat" in record["prediction_failed"]
+    assert record.get("predicted_chamfer_m") is None
