@@ -9,8 +9,9 @@ and ``int`` (int32) for every other integer (a value beyond int32 is refused on 
 The header's ``comment`` lines carry the file's metadata as ``comment KEY VALUE`` (e.g.
 ``comment frame body``, ``comment units m``); ``read_ply`` returns them as a dict.
 
-Reading accepts ASCII and binary PLY from any tool (Open3D, MeshLab, CloudCompare, trimesh)
-through trimesh's parser and keeps every vertex property.
+Reading accepts ASCII and binary PLY from any tool (Open3D, MeshLab, CloudCompare, trimesh) and
+keeps every vertex property: binary files of triangles (what these tools write) straight into
+numpy, any other file through trimesh's parser.
 """
 
 from __future__ import annotations
@@ -401,11 +402,14 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
     MeshFormatError
         A header, body or face that breaks the format, naming the file.
     """
-    from trimesh.exchange.ply import load_ply
-
     header = read_header(path)
     path = Path(path)
     check_body(path, header)
+    fixed = _read_fixed_binary(path, header)
+    if fixed is not None:
+        return (*fixed, header.metadata)
+    from trimesh.exchange.ply import load_ply
+
     try:
         with open(path, "rb") as fh:
             loaded = load_ply(fh, prefer_color="vertex")
@@ -426,6 +430,67 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
     faces = loaded.get("faces")
     faces = None if faces is None or len(faces) == 0 else np.asarray(faces, dtype=np.int64)
     return columns, faces, header.metadata
+
+
+def _fixed_record(properties, byte_order: str) -> np.dtype | None:
+    """The record dtype of an element whose lists all hold three items (a triangle's index
+    list) and whose other properties are scalars; None when another list makes records vary."""
+    fields = []
+    for name, kind in properties:
+        if not isinstance(kind, tuple):
+            fields.append((name, byte_order + kind))
+        elif name in _FACE_LISTS:
+            fields.append((name, [("count", byte_order + kind[0]),
+                                  ("items", byte_order + kind[1], (3,))]))
+        else:
+            return None
+    names = [name for name, _ in fields]
+    return np.dtype(fields) if len(set(names)) == len(names) else None
+
+
+def _read_fixed_binary(path: Path, header: PlyHeader):
+    """Vertex columns and triangles of a binary PLY whose every face is a triangle, read
+    straight into numpy (the files recon, Open3D, MeshLab and trimesh write); None for any
+    other file (ASCII, polygons, extra lists), which trimesh's parser reads.
+
+    Returns
+    -------
+    (columns, faces) or None
+        As ``read_ply``: columns dict of str to (n,) native-order arrays; faces (m, 3) int64
+        or None.
+    """
+    byte_order = _ENCODINGS[header.encoding]
+    names = [name for name, _, _ in header.elements]
+    if byte_order is None or "vertex" not in names or len(set(names)) != len(names):
+        return None
+    records = [(name, count, _fixed_record(properties, byte_order))
+               for name, count, properties in header.elements]
+    if any(dtype is None for _, _, dtype in records) or (
+            path.stat().st_size - header.offset
+            != sum(count * dtype.itemsize for _, count, dtype in records)):
+        return None
+    data = {}
+    with open(path, "rb") as fh:
+        fh.seek(header.offset)
+        for name, count, dtype in records:
+            data[name] = np.fromfile(fh, dtype=dtype, count=count)
+    face = data.get("face")
+    lists = [k for k in _FACE_LISTS if face is not None and k in (face.dtype.names or ())]
+    if face is not None and len(face) and not lists:
+        return None
+    if lists and np.any(face[lists[0]]["count"] != 3):
+        return None   # polygons of other sizes that happen to fill the same bytes
+    vertex = data["vertex"]
+    columns = {name: vertex[name].astype(vertex.dtype[name].newbyteorder("="))
+               for name in vertex.dtype.names}
+    if not lists or len(face) == 0:
+        return columns, None
+    faces = face[lists[0]]["items"].astype(np.int64)
+    if faces.min() < 0 or faces.max() >= len(vertex):
+        raise MeshFormatError(f"{path}: faces index vertices that do not exist (the file "
+                              f"has {len(vertex):,} vertices, indices run "
+                              f"{int(faces.min())}..{int(faces.max())})")
+    return columns, faces
 
 
 # PLY scalar types (both spellings) as numpy type codes, for reading any binary PLY.
