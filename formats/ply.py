@@ -448,6 +448,37 @@ def _fixed_record(properties, byte_order: str) -> np.dtype | None:
     return np.dtype(fields) if len(set(names)) == len(names) else None
 
 
+def _fixed_layout(path: Path, header: PlyHeader) -> list[tuple[str, int, np.dtype]] | None:
+    """``(name, count, record dtype)`` of each element of a binary PLY with a vertex element
+    whose records all have one size (``_fixed_record``) filling the body exactly; else None."""
+    byte_order = _ENCODINGS[header.encoding]
+    names = [name for name, _, _ in header.elements]
+    if byte_order is None or "vertex" not in names or len(set(names)) != len(names):
+        return None
+    layout = [(name, count, _fixed_record(properties, byte_order))
+              for name, count, properties in header.elements]
+    if any(dtype is None for _, _, dtype in layout):
+        return None
+    size = sum(count * dtype.itemsize for _, count, dtype in layout)
+    return layout if path.stat().st_size - header.offset == size else None
+
+
+def _triangles(path: Path, face: np.ndarray | None, n_vertices: int):
+    """The (m, 3) int64 triangles of a face element read by ``_fixed_layout``'s dtype (None
+    without faces), or False when its lists are not all triangles (trimesh reads those)."""
+    if face is None or len(face) == 0:
+        return None
+    lists = [k for k in _FACE_LISTS if k in (face.dtype.names or ())]
+    if not lists or np.any(face[lists[0]]["count"] != 3):
+        return False   # no index list, or polygons of other sizes filling the same bytes
+    faces = face[lists[0]]["items"].astype(np.int64)
+    if faces.min() < 0 or faces.max() >= n_vertices:
+        raise MeshFormatError(f"{path}: faces index vertices that do not exist (the file "
+                              f"has {n_vertices:,} vertices, indices run "
+                              f"{int(faces.min())}..{int(faces.max())})")
+    return faces
+
+
 def _read_fixed_binary(path: Path, header: PlyHeader):
     """Vertex columns and triangles of a binary PLY whose every face is a triangle, read
     straight into numpy (the files recon, Open3D, MeshLab and trimesh write); None for any
@@ -459,37 +490,20 @@ def _read_fixed_binary(path: Path, header: PlyHeader):
         As ``read_ply``: columns dict of str to (n,) native-order arrays; faces (m, 3) int64
         or None.
     """
-    byte_order = _ENCODINGS[header.encoding]
-    names = [name for name, _, _ in header.elements]
-    if byte_order is None or "vertex" not in names or len(set(names)) != len(names):
-        return None
-    records = [(name, count, _fixed_record(properties, byte_order))
-               for name, count, properties in header.elements]
-    if any(dtype is None for _, _, dtype in records) or (
-            path.stat().st_size - header.offset
-            != sum(count * dtype.itemsize for _, count, dtype in records)):
+    layout = _fixed_layout(path, header)
+    if layout is None:
         return None
     data = {}
     with open(path, "rb") as fh:
         fh.seek(header.offset)
-        for name, count, dtype in records:
+        for name, count, dtype in layout:
             data[name] = np.fromfile(fh, dtype=dtype, count=count)
-    face = data.get("face")
-    lists = [k for k in _FACE_LISTS if face is not None and k in (face.dtype.names or ())]
-    if face is not None and len(face) and not lists:
-        return None
-    if lists and np.any(face[lists[0]]["count"] != 3):
-        return None   # polygons of other sizes that happen to fill the same bytes
     vertex = data["vertex"]
+    faces = _triangles(path, data.get("face"), len(vertex))
+    if faces is False:
+        return None
     columns = {name: vertex[name].astype(vertex.dtype[name].newbyteorder("="))
                for name in vertex.dtype.names}
-    if not lists or len(face) == 0:
-        return columns, None
-    faces = face[lists[0]]["items"].astype(np.int64)
-    if faces.min() < 0 or faces.max() >= len(vertex):
-        raise MeshFormatError(f"{path}: faces index vertices that do not exist (the file "
-                              f"has {len(vertex):,} vertices, indices run "
-                              f"{int(faces.min())}..{int(faces.max())})")
     return columns, faces
 
 
