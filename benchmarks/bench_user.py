@@ -28,9 +28,10 @@ Cases (inputs made once in ``--work``, seed 0):
 - ``compare-rso-a``, ``compare-rso-b``: the default ``recon compare`` of the ``rso-a-lrf`` and
   ``rso-b-lrf`` presets (no floor; goal: every method finishes or declines, a few minutes).
 - ``study-quick``: ``recon study all --quick`` (no floor; goal under 3 minutes idle).
-- ``score-per-million``: the cost of each extra million points scored, ``recon score c4m.ply
-  --truth truth.ply --json`` less the same on c1m.ply (the truth's surface sampled 4 M / 1 M
-  times, seed 1, with Gaussian noise of 1/3 % of its diagonal, 1 sigma), divided by 3;
+- ``score-per-million``: the cost of each extra million points scored, ``recon score
+  noisy-4000000.ply --truth truth.ply --json`` less the same on noisy-1000000.ply (the truth's
+  surface sampled 4 M / 1 M times, seed 1, with Gaussian noise of 1/3 % of its diagonal, 1
+  sigma), divided by 3;
   ``score-per-million-no-edges`` the same with ``--no-edges``. Floor: the score floor on the
   same two clouds, differenced the same way.
 - ``simulate-lidar``: ``recon simulate asteroid-lidar --set time.rotations=2 -o X.h5 --seed 0``
@@ -174,7 +175,7 @@ def prepare_inputs(work: Path, *, rotations: int | None) -> dict[str, Path]:
 
 def million_clouds(work: Path, truth: Path) -> dict[int, Path]:
     """The per-million case's noisy clouds of the truth's surface, made once in ``work``."""
-    paths = {n: work / f"c{n // 1_000_000}m.ply" for n in MILLION_SIZES}
+    paths = {n: work / f"noisy-{n}.ply" for n in MILLION_SIZES}
     if all(p.exists() for p in paths.values()):
         return paths
     sys.path.insert(0, str(ROOT))
