@@ -28,6 +28,17 @@ Cases (inputs made once in ``--work``, seed 0):
 - ``compare-rso-a``, ``compare-rso-b``: the default ``recon compare`` of the ``rso-a-lrf`` and
   ``rso-b-lrf`` presets (no floor; goal: every method finishes or declines, a few minutes).
 - ``study-quick``: ``recon study all --quick`` (no floor; goal under 3 minutes idle).
+- ``score-per-million``: the cost of each extra million points scored, ``recon score
+  noisy-4000000.ply --truth truth.ply --json`` less the same on noisy-1000000.ply (the truth's
+  surface sampled 4 M / 1 M times, seed 1, with Gaussian noise of 1/3 % of its diagonal, 1
+  sigma), divided by 3;
+  ``score-per-million-no-edges`` the same with ``--no-edges``. Floor: the score floor on the
+  same two clouds, differenced the same way.
+- ``simulate-lidar``: ``recon simulate asteroid-lidar --set time.rotations=2 -o X.h5 --seed 0``
+  (3.17 M rays); floor: a fresh Python loading the very same rays (made once by
+  ``sim.pipeline.chunk_rays``, saved as .npy) and casting them with embreex, one call per core
+  at a time (the first-hit query only). The ratio printed is ours / floor, so the simulator's
+  share of raw Embree is its inverse.
 
 The demo scene is ``asteroid-lrf-slew`` (77,400 shots). ``--quick`` makes the demo inputs from
 10 rotations instead of 50 and runs the two surface score cases once.
@@ -55,6 +66,10 @@ RECON = ([str(Path(PYTHON).parent / "recon")] if (Path(PYTHON).parent / "recon")
          else [PYTHON, "-c", "import sys; from cli.main import main; sys.exit(main())"])
 DEMO_SCENE = "asteroid-lrf-slew"
 SAMPLES = 200_000  # metrics' default samples per side, what the floor samples too
+# The per-million case's clouds, and the noise on them as a fraction of the truth's diagonal.
+MILLION_SIZES = (1_000_000, 4_000_000)
+MILLION_NOISE = 0.01 / 3
+LIDAR = ("asteroid-lidar", "time.rotations=2")
 
 FLOOR_LIB = """
 import sys, numpy as np, open3d as o3d
@@ -84,6 +99,21 @@ test, truth, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
 mesh = o3d.io.read_triangle_mesh(test)
 print(score(mesh if len(mesh.triangles) else o3d.io.read_point_cloud(test),
             o3d.io.read_triangle_mesh(truth), n))
+"""
+
+# The rays of a saved simulation cast by embreex, one call per core at a time.
+FLOOR_CAST = """
+import sys, os, numpy as np
+from concurrent.futures import ThreadPoolExecutor
+from embreex import mesh_construction, rtcore_scene
+data = np.load(sys.argv[1])
+scene = rtcore_scene.EmbreeScene()
+mesh_construction.TriangleMesh(scene, data["vertices"], data["faces"])
+chunks = [(data[f"o{i}"], data[f"d{i}"]) for i in range(int(data["chunks"]))]
+with ThreadPoolExecutor(os.cpu_count()) as pool:
+    hits = sum(int((h >= 0).sum()) for h in pool.map(
+        lambda od: scene.run(od[0], od[1], query="INTERSECT"), chunks))
+print(hits)
 """
 
 # The three methods' bare fits (normals by Open3D, flipped to face away from the centroid),
@@ -143,6 +173,50 @@ def prepare_inputs(work: Path, *, rotations: int | None) -> dict[str, Path]:
     return files
 
 
+def million_clouds(work: Path, truth: Path) -> dict[int, Path]:
+    """The per-million case's noisy clouds of the truth's surface, made once in ``work``."""
+    paths = {n: work / f"noisy-{n}.ply" for n in MILLION_SIZES}
+    if all(p.exists() for p in paths.values()):
+        return paths
+    sys.path.insert(0, str(ROOT))
+    import numpy as np
+
+    from formats.mesh_io import read_mesh
+    from formats.ply import write_ply
+    from metrics.inputs import bbox_diagonal
+    from metrics.sampling import sample_surface
+
+    mesh = read_mesh(truth)
+    sigma = MILLION_NOISE * bbox_diagonal(mesh.vertices)
+    for n, path in paths.items():
+        points, _ = sample_surface(mesh, n, seed=1)
+        points += np.random.default_rng(1).normal(0.0, sigma, points.shape)
+        write_ply(path, {k: points[:, i] for i, k in enumerate("xyz")},
+                  metadata={"frame": mesh.frame, "units": "m"})
+    return paths
+
+
+def lidar_rays(work: Path) -> Path:
+    """The ``simulate-lidar`` case's mesh and rays, as the simulator builds them, saved once."""
+    path = work / "lidar-rays.npz"
+    if path.exists():
+        return path
+    sys.path.insert(0, str(ROOT))
+    import numpy as np
+
+    import sim
+    from sim import pipeline
+
+    plan = pipeline.make_plan(sim.load_scene(LIDAR[0], [LIDAR[1]]), seed=0)
+    rays = [pipeline.chunk_rays(plan, *bound).float32() for bound in pipeline.chunk_bounds(plan)]
+    arrays = {f"{side}{i}": a for i, pair in enumerate(rays) for side, a in zip("od", pair,
+                                                                                strict=True)}
+    np.savez(path, vertices=plan.scene.vertices.astype(np.float32),
+             faces=plan.scene.faces.astype(np.int32), chunks=len(rays), **arrays)
+    pipeline.close_plan(plan)
+    return path
+
+
 def rso_log(work: Path, preset: str) -> Path:
     log = work / f"{preset}.h5"
     if not log.exists():
@@ -178,10 +252,36 @@ def cases(work: Path, files: dict[str, Path]) -> dict[str, tuple]:
                                          rso_log(work, "rso-b-lrf"), "-o", compare_dir())],
                           None),
         "study-quick": (lambda: [recon("study", "all", "--quick", "-o", compare_dir())], None),
+        "score-per-million": per_million(work, truth, ()),
+        "score-per-million-no-edges": per_million(work, truth, ("--no-edges",)),
+        "simulate-lidar": (
+            lambda: [recon("simulate", LIDAR[0], "--set", LIDAR[1], "-o",
+                           Path(tempfile.mkdtemp(prefix="sim-", dir=work)) / "lidar.h5",
+                           "--seed", 0)],
+            lambda: [floor_python(FLOOR_CAST, lidar_rays(work))]),
     }
 
 
-def run_commands(commands: list[list[str]]) -> dict:
+def per_million(work: Path, truth: Path, extra: tuple[str, ...]) -> tuple:
+    """Ours and the floor on the 4 M cloud, each less the same on the 1 M cloud (``measure``
+    divides the difference by the millions between them)."""
+    def side(make):
+        def commands():
+            small, large = million_clouds(work, truth).values()
+            return {"plus": [make(large)], "minus": [make(small)]}
+        return commands
+    return (side(lambda cloud: recon("score", cloud, "--truth", truth, "--json", *extra)),
+            side(lambda cloud: floor_python(FLOOR_SCORE, cloud, truth, SAMPLES)))
+
+
+def run_commands(commands) -> dict:
+    """Times of a list of commands run one after another, summed; for ``{"plus": [...],
+    "minus": [...]}`` (``per_million``), the plus commands' less the minus commands', per
+    million points between them."""
+    if isinstance(commands, dict):
+        plus, minus = run_commands(commands["plus"]), run_commands(commands["minus"])
+        millions = (MILLION_SIZES[1] - MILLION_SIZES[0]) / 1e6
+        return {k: (plus[k] - minus[k]) / millions for k in plus}
     total = {"wall_s": 0.0, "cpu_s": 0.0}
     for command in commands:
         one = timed(command)

@@ -9,8 +9,9 @@ and ``int`` (int32) for every other integer (a value beyond int32 is refused on 
 The header's ``comment`` lines carry the file's metadata as ``comment KEY VALUE`` (e.g.
 ``comment frame body``, ``comment units m``); ``read_ply`` returns them as a dict.
 
-Reading accepts ASCII and binary PLY from any tool (Open3D, MeshLab, CloudCompare, trimesh)
-through trimesh's parser and keeps every vertex property.
+Reading accepts ASCII and binary PLY from any tool (Open3D, MeshLab, CloudCompare, trimesh) and
+keeps every vertex property: binary files of triangles (what these tools write) straight into
+numpy, any other file through trimesh's parser.
 """
 
 from __future__ import annotations
@@ -401,11 +402,14 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
     MeshFormatError
         A header, body or face that breaks the format, naming the file.
     """
-    from trimesh.exchange.ply import load_ply
-
     header = read_header(path)
     path = Path(path)
     check_body(path, header)
+    fixed = _read_fixed_binary(path, header)
+    if fixed is not None:
+        return (*fixed, header.metadata)
+    from trimesh.exchange.ply import load_ply
+
     try:
         with open(path, "rb") as fh:
             loaded = load_ply(fh, prefer_color="vertex")
@@ -426,6 +430,81 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
     faces = loaded.get("faces")
     faces = None if faces is None or len(faces) == 0 else np.asarray(faces, dtype=np.int64)
     return columns, faces, header.metadata
+
+
+def _fixed_record(properties, byte_order: str) -> np.dtype | None:
+    """The record dtype of an element whose lists all hold three items (a triangle's index
+    list) and whose other properties are scalars; None when another list makes records vary."""
+    fields = []
+    for name, kind in properties:
+        if not isinstance(kind, tuple):
+            fields.append((name, byte_order + kind))
+        elif name in _FACE_LISTS:
+            fields.append((name, [("count", byte_order + kind[0]),
+                                  ("items", byte_order + kind[1], (3,))]))
+        else:
+            return None
+    names = [name for name, _ in fields]
+    return np.dtype(fields) if len(set(names)) == len(names) else None
+
+
+def _fixed_layout(path: Path, header: PlyHeader) -> list[tuple[str, int, np.dtype]] | None:
+    """``(name, count, record dtype)`` of each element of a binary PLY with a vertex element
+    whose records all have one size (``_fixed_record``) filling the body exactly; else None."""
+    byte_order = _ENCODINGS[header.encoding]
+    names = [name for name, _, _ in header.elements]
+    if byte_order is None or "vertex" not in names or len(set(names)) != len(names):
+        return None
+    layout = [(name, count, _fixed_record(properties, byte_order))
+              for name, count, properties in header.elements]
+    if any(dtype is None for _, _, dtype in layout):
+        return None
+    size = sum(count * dtype.itemsize for _, count, dtype in layout)
+    return layout if path.stat().st_size - header.offset == size else None
+
+
+def _triangles(path: Path, face: np.ndarray | None, n_vertices: int):
+    """The (m, 3) int64 triangles of a face element read by ``_fixed_layout``'s dtype (None
+    without faces), or False when its lists are not all triangles (trimesh reads those)."""
+    if face is None or len(face) == 0:
+        return None
+    lists = [k for k in _FACE_LISTS if k in (face.dtype.names or ())]
+    if not lists or np.any(face[lists[0]]["count"] != 3):
+        return False   # no index list, or polygons of other sizes filling the same bytes
+    faces = face[lists[0]]["items"].astype(np.int64)
+    if faces.min() < 0 or faces.max() >= n_vertices:
+        raise MeshFormatError(f"{path}: faces index vertices that do not exist (the file "
+                              f"has {n_vertices:,} vertices, indices run "
+                              f"{int(faces.min())}..{int(faces.max())})")
+    return faces
+
+
+def _read_fixed_binary(path: Path, header: PlyHeader):
+    """Vertex columns and triangles of a binary PLY whose every face is a triangle, read
+    straight into numpy (the files recon, Open3D, MeshLab and trimesh write); None for any
+    other file (ASCII, polygons, extra lists), which trimesh's parser reads.
+
+    Returns
+    -------
+    (columns, faces) or None
+        As ``read_ply``: columns dict of str to (n,) native-order arrays; faces (m, 3) int64
+        or None.
+    """
+    layout = _fixed_layout(path, header)
+    if layout is None:
+        return None
+    data = {}
+    with open(path, "rb") as fh:
+        fh.seek(header.offset)
+        for name, count, dtype in layout:
+            data[name] = np.fromfile(fh, dtype=dtype, count=count)
+    vertex = data["vertex"]
+    faces = _triangles(path, data.get("face"), len(vertex))
+    if faces is False:
+        return None
+    columns = {name: vertex[name].astype(vertex.dtype[name].newbyteorder("="))
+               for name in vertex.dtype.names}
+    return columns, faces
 
 
 # PLY scalar types (both spellings) as numpy type codes, for reading any binary PLY.

@@ -102,6 +102,11 @@ class ScoreReport:
     completeness_mean_m, completeness_rms_m, completeness_median_m, completeness_p95_m,
     completeness_max_m : float
     chamfer_m, hausdorff_m : float
+    accuracy_mean_se_m, completeness_mean_se_m, chamfer_se_m : float
+        Standard errors of the two means and of the Chamfer distance from sampling: a mean's
+        is the sample standard deviation over the square root of the samples (0 for the
+        accuracy of a cloud, scored point by point); the Chamfer's half the root sum of squares
+        of the two.
     precision, recall, fscore : float, in [0, 1]
     coverage : float, in [0, 1]
     normal_consistency : float in [0, 1] or None
@@ -136,6 +141,9 @@ class ScoreReport:
     completeness_max_m: float
     chamfer_m: float
     hausdorff_m: float
+    accuracy_mean_se_m: float
+    completeness_mean_se_m: float
+    chamfer_se_m: float
     precision: float
     recall: float
     fscore: float
@@ -171,9 +179,11 @@ class ScoreReport:
 
 
 def _summary(distance: np.ndarray) -> dict[str, float]:
+    """The ``_STATS`` of distances (n,), and ``se``, the mean's standard error as a sample's."""
     p50, p95 = np.percentile(distance, [50, 95])
+    se = float(np.std(distance, ddof=1) / np.sqrt(len(distance))) if len(distance) > 1 else 0.0
     return {"mean": float(distance.mean()), "rms": float(np.sqrt(np.mean(distance**2))),
-            "median": float(p50), "p95": float(p95), "max": float(distance.max())}
+            "median": float(p50), "p95": float(p95), "max": float(distance.max()), "se": se}
 
 
 def _count(value, name: str) -> int:
@@ -598,13 +608,16 @@ class _Setup:
         coverage = float(np.sum(areas * face_coverage) / areas.sum())
         normal_consistency = (None if accuracy.cos_sum is None
                               else float(accuracy.cos_sum / accuracy.n))
+        acc_se = acc["se"] if test_kind == "mesh" else 0.0  # a cloud's points are all scored
         return ScoreReport(
             n_points=accuracy.n, n_truth_samples=n_samples, tau_m=self.tau,
             truth_diagonal_m=self.diagonal,
             **{f"accuracy_{k}_m": acc[k] for k in _STATS},
             **{f"completeness_{k}_m": comp[k] for k in _STATS},
             chamfer_m=0.5 * (acc["mean"] + comp["mean"]),
-            hausdorff_m=max(acc["max"], comp["max"]),
+            hausdorff_m=max(acc["max"], comp["max"]), accuracy_mean_se_m=acc_se,
+            completeness_mean_se_m=comp["se"], chamfer_se_m=0.5 * float(np.hypot(acc_se,
+                                                                                comp["se"])),
             precision=float(precision), recall=recall, fscore=float(fscore),
             coverage=coverage, normal_consistency=normal_consistency,
             edge_score=None if edge is None else edge.score, test_kind=test_kind,

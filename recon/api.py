@@ -1191,7 +1191,7 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
 
     variants(methods, grid=False)  # unknown names fail before anything is simulated or read
     limits = Limits.from_options(timeout, memory_limit)
-    options = score_options(samples)
+    options = score_options(samples or sweep.STABILITY_SAMPLES)   # a cell's stated precision
     check_value(scheduler)
     output = output_directory(output, sweep.StabilityError)   # before any work
     local = scheduler in (None, "threads")

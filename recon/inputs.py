@@ -13,7 +13,6 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from formats import StrikeLog
 from formats.cloud_io import CLOUD_SUFFIXES, cloud_from_ply_columns, read_cloud
 from formats.errors import MeshFormatError
 from formats.geometry import Cloud, Mesh
@@ -21,7 +20,6 @@ from formats.hdf5_check import check_hdf5, is_hdf5
 from formats.mesh_io import MESH_SUFFIXES, read_mesh
 from formats.paths import check_source
 from formats.ply import read_ply
-from formats.strike_log import FORMAT_NAME
 from metrics.inputs import as_mesh
 
 
@@ -33,12 +31,14 @@ def is_strike_log(path) -> bool:
     MeshFormatError
         An HDF5 file that is damaged or reads other files (``formats.hdf5_check``).
     """
-    import h5py
-
     path = Path(path)
     if (path.suffix.lower() != ".h5" or not path.is_file()
             or not is_hdf5(path, MeshFormatError)):
         return False
+    import h5py  # HDF5 only for .h5 files: reading a PLY or a mesh does not pay for it
+
+    from formats.strike_log import FORMAT_NAME
+
     check_hdf5(path, MeshFormatError)
     try:
         with h5py.File(path, "r") as f:
@@ -111,6 +111,8 @@ def load_truth(path, *, scale: float = 1.0, units: str | None = None) -> Mesh:
     """
     path = check_source(path, MeshFormatError)
     if is_strike_log(path):
+        from formats import StrikeLog
+
         with StrikeLog(path) as log:
             if not log.has_truth:
                 raise MeshFormatError(f"{path}: strike log has no truth mesh; pass the truth "
