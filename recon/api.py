@@ -1173,7 +1173,8 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
     seed : int
     timeout, memory_limit : float [s], int [MiB], optional
     samples : int, optional
-        Surface samples per side when scoring.
+        Surface samples per side when scoring (default ``STABILITY_SAMPLES``: the count a
+        cell's Chamfer needs for its stated precision).
     scheduler, n_workers, resume
         As ``compare``.
 
