@@ -71,19 +71,19 @@ def run_study(args) -> int:
                "n_workers": args.workers}
     if args.name == "all":
         return _print_all(args, api.study_all(args.output, **options))
-    summary = api.study(args.name, args.output, **options)
+    result = api.study(args.name, args.output, **options)
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print(json.dumps(result.to_dict(), indent=2))
         return 0
-    print(f"{summary['title']} ({size}, {summary['wall_time_s']:.1f} s)")
-    for c in summary["claims"]:
+    print(f"{result.title} ({size}, {result.wall_time_s:.1f} s)")
+    for c in result.claims:
         print(f"  [{c['verdict']}] {c['figure']}: {c['claim']}")
         print(f"      ours: {c['ours']}")
-    if summary["n_failed"]:
-        print(f"  {summary['n_failed']} of {summary['n_cases']} cases failed:", file=sys.stderr)
-        for f in summary["failures"]:
+    if result.n_failed:
+        print(f"  {result.n_failed} of {result.n_cases} cases failed:", file=sys.stderr)
+        for f in result.failures:
             print(f"    {f['key']}: {f['reason']}", file=sys.stderr)
-    print(f"wrote {args.output}: " + ", ".join(summary["files"]))
+    print(f"wrote {args.output}: " + ", ".join(result.files))
     return 0
 
 

@@ -40,7 +40,7 @@ if TYPE_CHECKING:
 __all__ = [
     "AltimetryExport", "AltimetryResult", "ApiError", "CompareResult", "DemoResult",
     "EdgesResult", "IngestResult", "ReconstructResult", "SimulatedLog", "StabilityResult",
-    "StudiesResult", "TrajectoryResult",
+    "StudiesResult", "StudyResult", "TrajectoryResult",
     "check_scheduler", "check_seed", "compare", "default_truth", "demo", "edges",
     "export_altimetry", "follow", "ingest", "ingest_altimetry", "ingest_file", "is_altimetry",
     "is_kernel", "load", "method_listing", "presets", "reconstruct", "reconstruct_file",
@@ -311,6 +311,46 @@ class EdgesResult:
         """A JSON-ready summary (what ``recon edges --json`` prints)."""
         return {"edge": self.report.to_dict(), "counts": self.counts,
                 "files": {k: str(v) for k, v in self.files.items()}}
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """One study run (``study``).
+
+    Attributes
+    ----------
+    title : str
+    size : str
+        ``full``, ``quick`` or ``tiny``.
+    claims : list of dict
+        Each checked claim of the paper: ``id``, ``figure``, ``claim``, ``paper``, ``ours``,
+        ``verdict`` (``reproduced``, ``partly``, ``not reproduced`` or ``not tested``) and
+        ``rule``.
+    n_cases, n_failed : int
+    failures : list of dict
+        ``key`` and ``reason`` of every failed case.
+    files : list of str
+        What the study wrote into its directory.
+    wall_time_s : float
+    summary : dict
+        Everything, as written to ``summary_path``.
+    summary_path : Path
+    """
+
+    title: str
+    size: str
+    claims: list
+    n_cases: int
+    n_failed: int
+    failures: list
+    files: list
+    wall_time_s: float
+    summary: dict
+    summary_path: Path
+
+    def to_dict(self) -> dict:
+        """The summary (what ``recon study NAME --json`` prints)."""
+        return self.summary
 
 
 @dataclass(frozen=True)
@@ -1251,7 +1291,7 @@ def studies() -> list[tuple[str, str]]:
 
 
 def study(name: str, output, *, size: str = "full", scheduler: str | None = None,
-          resume: bool = False, n_workers: int | None = None) -> dict:
+          resume: bool = False, n_workers: int | None = None) -> StudyResult:
     """Run one of the paper's studies into ``output`` (``recon study NAME``).
 
     Parameters
@@ -1267,16 +1307,19 @@ def study(name: str, output, *, size: str = "full", scheduler: str | None = None
 
     Returns
     -------
-    dict
-        The study's summary, as written to ``output/summary.json``: ``title``, ``claims``
-        (each with the paper's claim, ours and a verdict), ``n_cases``, ``n_failed``,
-        ``failures``, ``files``, ``wall_time_s``.
+    StudyResult
+        The claims checked (each with the paper's claim, ours and a verdict), the cases and
+        failures, the files; ``summary`` as written to ``output/summary.json``.
     """
     from recon.experiments import studies as registry
+    from recon.experiments.studies.runner import SUMMARY_JSON
 
     _check_workers(n_workers)
-    return registry.run(name, output, size=size, scheduler=scheduler, resume=resume,
-                        n_workers=n_workers)
+    summary = registry.run(name, output, size=size, scheduler=scheduler, resume=resume,
+                           n_workers=n_workers)
+    return StudyResult(summary["title"], summary["size"], summary["claims"], summary["n_cases"],
+                       summary["n_failed"], summary["failures"], summary["files"],
+                       summary["wall_time_s"], summary, Path(output) / SUMMARY_JSON)
 
 
 def study_all(output, *, size: str = "full", scheduler: str | None = None,
