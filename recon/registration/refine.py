@@ -70,6 +70,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
+from scipy.stats import chi2, norm
 
 from formats import Shots, StrikeChunk, StrikeLog
 from formats.errors import ReconError
@@ -134,6 +135,18 @@ CELL_NEIGHBOURHOODS = 4.0
 # which smears the panels into curtains along the line of sight whose planes hold the range
 # noise, and "agreed" to 0.02 m, below the noise; held-out strikes agree there too.
 PLAUSIBLE_PRIORS = 3.0
+# The coarse stage (_coarse_start): a grid of constant position biases across the spin axis,
+# COARSE_POSITION_M either way in steps of COARSE_STEP_M, scored on every COARSE_THIN-th fitted
+# strike with the loss at the scale of a step.
+COARSE_POSITION_M = 2.0
+COARSE_STEP_M = 1.0
+COARSE_THIN = 10
+COARSE_ITERATIONS = 6
+# Ends of the coarse fits whose robust scatter lies within this many standard errors of the
+# best's agree equally well; the standard error of a 1.4826-MAD sigma of n Gaussian residuals is
+# MAD_ERROR * sigma / sqrt(n) (its asymptotic efficiency is 37 %: 1 / sqrt(2 * 0.37) = 1.17).
+COARSE_TIE = 2.0
+MAD_ERROR = 1.17
 # Points per block of the consensus: (block, NEIGHBOURS, 3, 7) float64 is ~15 MB.
 BLOCK = 4096
 # Consistent 1.4826 * median absolute deviation: the 1-sigma of Gaussian residuals.
@@ -502,10 +515,48 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
     RefineError
         Bad options, or too few strikes seen twice to estimate anything.
     """
+    _check_options(interval, max_points)
+    problem = _problem(log_path, interval, spin, max_points, seed)
+    start = _coarse_start(problem)
+    tried, iterations = _fine(problem, start, progress)
+    best, formal, robust = _best(problem, tried)
+    observable, sigma, keep = _judged(problem, best, formal, robust)
+    correction, significant, check_z = _checked(best, keep, problem.check, problem.pairs,
+                                                problem.log_path)
+    before, _, _ = problem.pairs.residuals(problem.fit, problem.zero)
+    after, _, _ = problem.pairs.residuals(problem.fit, correction)
+    return Refinement(correction=correction, sigma=sigma, observable=observable,
+                      significant=significant, check_z=check_z,
+                      residual_before_m=_robust_sigma(before[np.isfinite(before)]),
+                      residual_after_m=_robust_sigma(after[np.isfinite(after)]),
+                      n_points=len(problem.fit.time), n_pairs=int(np.isfinite(after).sum()),
+                      iterations=iterations)
+
+
+def _check_options(interval: float | None, max_points: int) -> None:
     if interval is not None and not (math.isfinite(interval) and interval > 0):
         raise RefineError(f"refine interval must be a positive number of seconds, got {interval}")
     if max_points < 100:
         raise RefineError(f"max_points must be at least 100, got {max_points}")
+
+
+@dataclass
+class _Problem:
+    """What one refinement works on: the samples, how they are compared, the parameters."""
+
+    log_path: object
+    fit: _Sample            # strikes fitted
+    check: _Sample          # strikes held out to check the fit
+    pairs: _Pairs
+    zero: PoseCorrection    # the recorded poses, with the knots and the spin axis
+    weights: np.ndarray     # (n_fit, k) hat weights of the fitted strikes' times
+    prior: np.ndarray       # (p,) prior 1-sigma of every parameter, in the solver's order
+    spin_inertial: np.ndarray | None  # (3,) spin axis in I, None: the target does not spin
+
+
+def _problem(log_path, interval: float | None, spin: bool, max_points: int, seed: int
+             ) -> _Problem:
+    """Read the samples of a log and set up the parameters and their priors."""
     with StrikeLog(log_path) as log:
         if log.n_strikes < 100:
             raise RefineError(f"{log_path}: {log.n_strikes} strikes are too few to refine the "
@@ -520,25 +571,87 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
     step = float(np.median(np.diff(all_shots.time))) if len(all_shots) > 1 else 1.0
     pairs = _Pairs(PAIR_GAP_STEPS * step, axis if rate > 0 and spin else None)
     zero = PoseCorrection(knots, np.zeros((k, 3)), np.zeros((k, 3)), 0.0, axis)
-    weights = zero.weights(fit.time)
     # Prior 1-sigma of every parameter, in the solver's order (per knot: omega 3, position 3).
     prior = np.concatenate([np.repeat([[PRIOR_ATTITUDE_RAD] * 3], k, axis=0).ravel(),
                             np.full(3 * k, PRIOR_POSITION_M)]
                            + ([[PRIOR_SPIN_FRACTION * rate]] if pairs.spin_axis is not None
                               else []))
-    estimate, previous, cluster = zero, None, None
-    # Every iterate: the fitted strikes' residuals, the estimate, and the covariances (formal,
-    # robust) of the step taken from it (the last step's for the final iterate).
-    tried = []
-    for iteration in range(1, MAX_ITERATIONS + 1):
-        residual, points, design = pairs.residuals(fit, estimate, weights)
+    spin_inertial = (Rotation.from_quat(all_shots.target_attitude[0]).apply(axis)
+                     if rate > 0 else None)
+    return _Problem(log_path, fit, check, pairs, zero, zero.weights(fit.time), prior,
+                    spin_inertial)
+
+
+def _coarse_start(problem: _Problem) -> PoseCorrection:
+    """Where the fine fit starts: the best of short fits of a thinned sample from a grid of
+    constant position biases across the spin axis (module docstring).
+
+    A spinning target turns a constant inertial bias in the body frame, so passes at different
+    spin phases place the same surface up to twice the bias apart: beyond the neighbourhoods of
+    the fine fit, whose linearised consensus then barely sees it. Every ``COARSE_THIN``-th fitted
+    strike (neighbourhoods about three times as wide) is fitted for ``COARSE_ITERATIONS`` steps
+    from each node of a grid ``COARSE_POSITION_M`` either way in steps of ``COARSE_STEP_M``, in
+    the plane across the spin axis (along it, a bias shifts the whole cloud); the end with the
+    smallest robust scatter of its residuals to the other passes wins (the recorded poses among
+    the ends; of ends that agree equally well, the smallest correction). A target that does
+    not spin has no such search (a constant inertial bias is then a shift of the whole cloud).
+    """
+    if problem.spin_inertial is None:
+        return problem.zero
+    coarse = _subset(problem.fit, np.arange(0, len(problem.fit.time), COARSE_THIN))
+    weights = problem.zero.weights(coarse.time)
+    axis = problem.spin_inertial
+    across = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]      # (3, 2)
+    half = round(COARSE_POSITION_M / COARSE_STEP_M)
+    steps = COARSE_STEP_M * np.arange(-half, half + 1)
+    nodes = np.stack(np.meshgrid(steps, steps, indexing="ij"), axis=-1).reshape(-1, 2) @ across.T
+    k = len(problem.zero.knots)
+    ends = [problem.zero]
+    for node in nodes:
+        start = replace(problem.zero, position=np.repeat(node[None], k, axis=0))
+        tried, _ = _descend(problem, coarse, weights, start, COARSE_ITERATIONS)
+        ends += [entry[1] for entry in tried[-1:]]
+    residuals = [problem.pairs.residuals(coarse, end)[0] for end in ends]
+    finite = np.array([np.isfinite(r).sum() for r in residuals])
+    scatter = np.array([_robust_sigma(r[np.isfinite(r)]) if n >= 0.5 * finite[0] else np.inf
+                        for r, n in zip(residuals, finite, strict=True)])
+    # Ends within COARSE_TIE standard errors of the best scatter agree equally well (ends along a
+    # valley the data cannot resolve, such as a cross-track misalignment against a position
+    # error along the orbit normal): the smallest correction, in prior sigmas, of them wins.
+    best = int(np.argmin(scatter))
+    tie = scatter <= scatter[best] * (1.0 + COARSE_TIE * MAD_ERROR / math.sqrt(finite[best]))
+    size = [np.linalg.norm(_vector(end, problem.pairs.spin_axis) / problem.prior)
+            for end in ends]
+    return ends[int(np.argmin(np.where(tie, size, np.inf)))]
+
+
+def _descend(problem: _Problem, sample: _Sample, weights: np.ndarray, start: PoseCorrection,
+             iterations: int, progress=None) -> tuple[list, int]:
+    """Robust Gauss-Newton steps from ``start`` until no strike of ``sample`` moves
+    ``STOP_MOVE_M`` (at most ``iterations`` steps).
+
+    Parameters
+    ----------
+    weights : (n, k) float64
+        Hat weights of the sample's times.
+
+    Returns
+    -------
+    tried : list of [residual (n,), PoseCorrection, formal (p, p), robust (p, p)]
+        Every iterate, with the sample's residuals and the covariances of the step taken from it
+        (the last step's for the last iterate); empty when the start leaves fewer than
+        ``MIN_ROWS`` strikes with a consensus.
+    iterations : int
+        Steps taken.
+    """
+    pairs = problem.pairs
+    estimate, previous, cluster, tried = start, None, None, []
+    for iteration in range(1, iterations + 1):
+        residual, points, design = pairs.residuals(sample, estimate, weights)
         moved = (0.0 if previous is None
                  else float(np.max(np.linalg.norm(points - previous, axis=1))))
         rows = np.flatnonzero(np.isfinite(residual))
         if len(rows) < MIN_ROWS:
-            if previous is None:
-                raise RefineError(f"{log_path}: only {len(rows)} strikes have neighbours from "
-                                  "other passes; too few to refine the poses")
             break
         if cluster is None:
             cluster = _cells(points)
@@ -548,40 +661,85 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
         previous = points
         r, d = residual[rows], design
         inlier = np.abs(r - np.median(r)) <= OUTLIER_SIGMAS * _robust_sigma(r)
-        x, *covariances = _solve(r[inlier], d[inlier], prior, _robust_sigma(r[inlier]) or 1e-6,
+        x, *covariances = _solve(r[inlier], d[inlier], problem.prior,
+                                 _robust_sigma(r[inlier]) or 1e-6,
                                  _vector(estimate, pairs.spin_axis), cluster[rows][inlier])
         tried[-1][2:] = covariances
-        estimate = _updated(estimate, x, k, pairs.spin_axis is not None)
+        estimate = _updated(estimate, x, len(problem.zero.knots), pairs.spin_axis is not None)
         if progress:
-            progress(iteration, MAX_ITERATIONS)
+            progress(iteration, iterations)
     else:
-        residual, _, _ = pairs.residuals(fit, estimate)
+        residual, _, _ = pairs.residuals(sample, estimate)
         tried.append([residual, estimate, *tried[-1][2:]])
-    # The best plausible iterate by the mean loss at the scatter of the best agreement reached.
+    return tried, iteration
+
+
+def _fine(problem: _Problem, start: PoseCorrection, progress) -> tuple[list, int]:
+    """The fit of every sampled strike from ``start``: the iterates of ``_descend`` with the
+    zero correction (the recorded poses) first, carrying the first step's covariances when the
+    fit starts elsewhere."""
+    tried, iterations = _descend(problem, problem.fit, problem.weights, start, MAX_ITERATIONS,
+                                 progress)
+    if not tried or len(tried[0]) < 4:
+        rows = 0 if not tried else int(np.isfinite(tried[0][0]).sum())
+        raise RefineError(f"{problem.log_path}: only {rows} strikes have neighbours from other "
+                          "passes; too few to refine the poses")
+    if start is not problem.zero:
+        tried.insert(0, [problem.pairs.residuals(problem.fit, problem.zero)[0], problem.zero,
+                         *tried[0][2:]])
+    return tried, iterations
+
+
+def _best(problem: _Problem, tried: list) -> tuple[PoseCorrection, np.ndarray, np.ndarray]:
+    """The plausible iterate (within ``PLAUSIBLE_PRIORS``) with the lowest mean loss at the
+    scatter of the best agreement reached, and its formal and robust covariances."""
+    spin_axis = problem.pairs.spin_axis
     tried = [entry for entry in tried if np.all(
-        np.abs(_vector(entry[1], pairs.spin_axis)) <= PLAUSIBLE_PRIORS * prior)]
+        np.abs(_vector(entry[1], spin_axis)) <= PLAUSIBLE_PRIORS * problem.prior)]
     scale = _scale(*(entry[0] for entry in tried))
     _, best, formal, robust = min(tried, key=lambda entry: _loss(entry[0], scale).mean())
-    formal = _uncertainty(formal, k, pairs.spin_axis, knots)
-    sigma = _uncertainty(robust, k, pairs.spin_axis, knots)
+    return best, formal, robust
+
+
+def _judged(problem: _Problem, best: PoseCorrection, formal: np.ndarray, robust: np.ndarray
+            ) -> tuple[dict, PoseCorrection, dict]:
+    """Which parameters the data see (observable), their 1-sigma, and which of them the
+    estimate holds clear of their uncertainty (observable and beyond ``SIGNIFICANCE_Z``)."""
+    spin_axis, knots = problem.pairs.spin_axis, problem.zero.knots
+    formal = _uncertainty(formal, len(knots), spin_axis, knots)
+    sigma = _uncertainty(robust, len(knots), spin_axis, knots)
     observable = {"misalignment": formal.misalignment < OBSERVABLE_SHRINK * PRIOR_ATTITUDE_RAD,
                   "position": formal.position < OBSERVABLE_SHRINK * PRIOR_POSITION_M,
-                  "spin": bool(pairs.spin_axis is not None
-                               and formal.spin_rate < OBSERVABLE_SHRINK * prior[-1])}
+                  "spin": bool(spin_axis is not None
+                               and formal.spin_rate < OBSERVABLE_SHRINK * problem.prior[-1])}
+    if _jointly_significant(problem, best, robust, observable):
+        return observable, sigma, observable
     clear = {"misalignment": np.abs(best.misalignment) > SIGNIFICANCE_Z * sigma.misalignment,
              "position": np.abs(best.position) > SIGNIFICANCE_Z * sigma.position,
              "spin": abs(best.spin_rate) > SIGNIFICANCE_Z * sigma.spin_rate}
-    correction, significant, check_z = _checked(
-        best, {name: observable[name] & clear[name] for name in observable}, check, pairs,
-        log_path)
-    before, _, _ = pairs.residuals(fit, zero)
-    after, _, _ = pairs.residuals(fit, correction)
-    return Refinement(correction=correction, sigma=sigma, observable=observable,
-                      significant=significant, check_z=check_z,
-                      residual_before_m=_robust_sigma(before[np.isfinite(before)]),
-                      residual_after_m=_robust_sigma(after[np.isfinite(after)]),
-                      n_points=len(fit.time), n_pairs=int(np.isfinite(after).sum()),
-                      iterations=iteration)
+    return observable, sigma, {name: observable[name] & clear[name] for name in observable}
+
+
+def _jointly_significant(problem: _Problem, best: PoseCorrection, robust: np.ndarray,
+                         observable: dict) -> bool:
+    """Whether the observable parameters of ``best`` together lie beyond their robust
+    uncertainty: their Mahalanobis distance from zero exceeds the chi-square quantile of a
+    one-sided ``SIGNIFICANCE_Z``-sigma test.
+
+    Parameters that trade off (a cross-track misalignment against a position error along the
+    orbit normal) each have a large 1-sigma, while their combination is sharp: tested one by one,
+    the sharp ones alone are kept, and alone they make the passes agree worse (RSO-A: the
+    position bias without its misalignment).
+    """
+    mask = _vector(PoseCorrection(best.knots, observable["misalignment"].astype(float),
+                                  observable["position"].astype(float),
+                                  float(observable["spin"]), best.spin_axis),
+                   problem.pairs.spin_axis) > 0
+    if not mask.any():
+        return False
+    x = _vector(best, problem.pairs.spin_axis)[mask]
+    distance = float(x @ np.linalg.lstsq(robust[np.ix_(mask, mask)], x, rcond=None)[0])
+    return distance > chi2.isf(norm.sf(SIGNIFICANCE_Z), int(mask.sum()))
 
 
 def _subset(sample: _Sample, rows: np.ndarray) -> _Sample:
