@@ -34,7 +34,8 @@ consensus, about 0.1 deg on RSO-A), and a fit can explain range noise (a short n
    cluster-robust standard errors. Otherwise the correction is exactly zero and the cloud is
    registered with the recorded poses, bit for bit.
 
-Parameters not kept are reported as 0, ``[not observable]`` or ``[not significant]``.
+Parameters not kept are reported as 0, ``[not observable]`` or ``[not significant]``; one the data
+see only together with another, applied with it, as ``[not observable alone]``.
 
 Parameters (misalignment and position piecewise-linear in time over knots ``interval`` seconds
 apart, or constant):
@@ -315,12 +316,13 @@ class Refinement:
         return out
 
     def _flag(self, name: str, axis: int | None = None) -> str:
-        """"  [not observable]", "  [not significant]" or nothing, for one parameter."""
+        """"  [not observable]", "  [not observable alone]" (applied: seen only together with
+        another parameter), "  [not significant]" or nothing, for one parameter."""
         observable, significant = self.observable[name], self.significant[name]
         if axis is not None:
             observable, significant = observable[:, axis].any(), significant[:, axis].any()
         if not observable:
-            return "  [not observable]"
+            return "  [not observable alone]" if significant else "  [not observable]"
         return "" if significant else "  [not significant]"
 
 
@@ -403,28 +405,11 @@ def _consensus(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: floa
     design : (m, p) float64 or None
         Change of each residual per unit of each parameter (None without ``jac``).
     """
-    tree = cKDTree(points)
-    k = min(NEIGHBOURS, len(points))
-    distance, index = tree.query(points, k=k, workers=-1)
-    neighbours = points[index]                                                 # (n, k, 3)
-    centred = neighbours - neighbours.mean(axis=1, keepdims=True)
-    normal = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
-    sight = view - points                                                      # toward sensor
-    normal *= np.where(np.einsum("ni,ni->n", normal, sight) < 0, -1.0, 1.0)[:, None]
-    same_side = np.einsum("ni,nki->nk", normal, sight[index]) > 0
-    other = (np.abs(time[index] - time[:, None]) >= gap) & same_side
-    # A surface seen within MIN_FACING of edge-on, or a neighbourhood so small that the range
-    # noise along the beam is its largest spread (its least-squares "normal" then lies across
-    # the beam), holds no crossover: left out.
-    facing = np.einsum("ni,ni->n", normal, sight) / np.maximum(np.linalg.norm(sight, axis=1),
-                                                                1e-300)
-    other &= (facing >= MIN_FACING)[:, None]
-    has = other.any(axis=1)
-    if has.sum() < 2:
+    index, other, normal = _partners(points, view, time, gap)
+    if not other.any():
         return (np.zeros(0, np.int64), np.zeros(0),
                 None if jac is None else np.zeros((0, _n_params(jac, weights))))
-    nearest = distance[has, np.argmax(other[has], axis=1)]
-    other &= distance <= PAIR_DISTANCE_FACTOR * np.median(nearest)
+    neighbours = points[index]                                                 # (n, k, 3)
     count = other.sum(axis=1)
     rows = np.flatnonzero(count >= MIN_CONSENSUS)
     residual = np.empty(len(rows))
@@ -448,6 +433,53 @@ def _consensus(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: floa
             [knots[:, :, :3].reshape(len(r), -1), knots[:, :, 3:].reshape(len(r), -1), spin],
             axis=1)
     return rows, residual, design
+
+
+def _partners(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which neighbours of each point make its consensus (``_consensus``).
+
+    Parameters
+    ----------
+    points, view : (n, 3) float64, metres, B
+        The points and their sensor positions.
+    time : (n,) float64, seconds
+    gap : float, seconds
+        Other passes are at least this far apart in time.
+
+    Returns
+    -------
+    index : (n, k) int64
+        The ``NEIGHBOURS`` nearest points of each point (itself first).
+    other : (n, k) bool
+        Those of other passes, seen from the point's side of its plane, within
+        ``PAIR_DISTANCE_FACTOR`` of the nearest such distance, of a plane facing the point's
+        sensor (all False when fewer than two points have any).
+    normal : (n, 3) float64
+        Unit normal of each neighbourhood's least-squares plane, toward the point's sensor.
+    """
+    tree = cKDTree(points)
+    k = min(NEIGHBOURS, len(points))
+    distance, index = tree.query(points, k=k, workers=-1)
+    neighbours = points[index]                                                 # (n, k, 3)
+    centred = neighbours - neighbours.mean(axis=1, keepdims=True)
+    normal = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
+    sight = view - points                                                      # toward sensor
+    normal *= np.where(np.einsum("ni,ni->n", normal, sight) < 0, -1.0, 1.0)[:, None]
+    same_side = np.einsum("ni,nki->nk", normal, sight[index]) > 0
+    other = (np.abs(time[index] - time[:, None]) >= gap) & same_side
+    # A surface seen within MIN_FACING of edge-on, or a neighbourhood so small that the range
+    # noise along the beam is its largest spread (its least-squares "normal" then lies across
+    # the beam), holds no crossover: left out.
+    facing = np.einsum("ni,ni->n", normal, sight) / np.maximum(np.linalg.norm(sight, axis=1),
+                                                                1e-300)
+    other &= (facing >= MIN_FACING)[:, None]
+    has = other.any(axis=1)
+    if has.sum() < 2:
+        return index, np.zeros_like(other), normal
+    nearest = distance[has, np.argmax(other[has], axis=1)]
+    other &= distance <= PAIR_DISTANCE_FACTOR * np.median(nearest)
+    return index, other, normal
 
 
 def _n_params(jac: np.ndarray, weights: np.ndarray) -> int:
@@ -713,7 +745,12 @@ def _judged(problem: _Problem, best: PoseCorrection, formal: np.ndarray, robust:
                   "spin": bool(spin_axis is not None
                                and formal.spin_rate < OBSERVABLE_SHRINK * problem.prior[-1])}
     if _jointly_significant(problem, best, robust, observable):
-        return observable, sigma, observable
+        # The whole estimate: a parameter the data see only together with another (a
+        # cross-track misalignment with a position error along the orbit normal) keeps the
+        # value that makes the combination right; what the data do not see at all is 0.
+        held = {"misalignment": best.misalignment != 0, "position": best.position != 0,
+                "spin": best.spin_rate != 0}
+        return observable, sigma, {name: observable[name] | held[name] for name in observable}
     clear = {"misalignment": np.abs(best.misalignment) > SIGNIFICANCE_Z * sigma.misalignment,
              "position": np.abs(best.position) > SIGNIFICANCE_Z * sigma.position,
              "spin": abs(best.spin_rate) > SIGNIFICANCE_Z * sigma.spin_rate}
@@ -890,12 +927,14 @@ def _solve(residual: np.ndarray, design: np.ndarray, prior: np.ndarray, scale: f
     -------
     x : (p,) float64
     formal : (p, p) float64
-        Covariance of the parameters after the step: the inverse of the weighted normal matrix
-        ``N`` (prior included), as if the residuals were independent.
+        Covariance of the parameters after the step: along the directions stepped, the inverse
+        of the weighted normal matrix ``N`` (prior included) there, as if the residuals were
+        independent; along the directions left out, the prior's (the data did not move them).
     robust : (p, p) float64
-        The cluster-robust (sandwich) covariance ``N^-1 (sum_c g_c g_c^T + P) N^-1``, with
-        ``g_c`` the gradient of the cell's weighted residuals and ``P`` the prior's precision:
-        neighbouring residuals share points, so they are not independent.
+        The same with the cluster-robust (sandwich) covariance ``N^-1 (sum_c g_c g_c^T + P)
+        N^-1`` along the directions stepped, ``g_c`` the gradient of the cell's weighted
+        residuals and ``P`` the prior's precision: neighbouring residuals share points, so they
+        are not independent.
     """
     x = np.zeros(design.shape[1])
     precision = np.diag(1.0 / prior ** 2)
@@ -911,13 +950,20 @@ def _solve(residual: np.ndarray, design: np.ndarray, prior: np.ndarray, scale: f
         # In column-normalised coordinates y = unit * x, step only along the directions the
         # data see well.
         values, vectors = np.linalg.eigh(data / scaling)
-        kept = vectors[:, values >= WEAK_DIRECTION ** 2 * values.max()]
+        strong = values >= WEAK_DIRECTION ** 2 * values.max()
+        kept = vectors[:, strong]
         y = kept @ np.linalg.solve(kept.T @ (normal / scaling) @ kept, kept.T @ (rhs / unit))
         x = y / unit
-    formal = np.linalg.inv(normal)
+    # Along the directions stepped, the data's covariance; along the others the estimate stays
+    # where it started, known only as well as the prior says.
+    inner = kept @ np.linalg.inv(kept.T @ (normal / scaling) @ kept) @ kept.T
+    left = vectors[:, ~strong]
+    held = (left @ np.linalg.inv(left.T @ (precision / scaling) @ left) @ left.T
+            if left.shape[1] else np.zeros_like(inner))
     gradient = np.zeros((int(cluster.max()) + 1 if len(cluster) else 0, design.shape[1]))
     np.add.at(gradient, cluster, (w * (residual + design @ x))[:, None] * design)
-    return x, formal, formal @ (gradient.T @ gradient + precision) @ formal
+    meat = (gradient.T @ gradient + precision) / scaling
+    return x, (inner + held) / scaling, (inner @ meat @ inner + held) / scaling
 
 
 def _updated(estimate: PoseCorrection, x: np.ndarray, k: int, spin: bool) -> PoseCorrection:
