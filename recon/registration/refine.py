@@ -5,8 +5,15 @@ of a pass the same way in the sensor's or the inertial frame, but those frames t
 body frame as the chaser orbits and the target spins. Passes that see the same patch of surface
 from different geometry therefore place it in different places, and the disagreement says which
 error it was: the crossover adjustment with which NEAR's laser rangefinder and OSIRIS-REx's OLA
-data were corrected. Here, repeatedly until the corrections stop moving the points
-(``STOP_MOVE_M``):
+data were corrected.
+
+Coarse first (``_coarse_start``): a spinning target turns a constant inertial position bias in
+the body frame, so passes at different spin phases place a surface up to twice the bias apart,
+beyond the fine neighbourhoods, and a fit from the recorded poses does not leave their basin
+(RSO-A: 1 m found as 0.03 m). Short fits (the steps below) of every ``COARSE_THIN``-th strike,
+whose neighbourhoods are about three times as wide, start from each node of a grid of biases
+across the spin axis; the end whose residuals scatter least starts the fine fit. Then,
+repeatedly until the corrections stop moving the points (``STOP_MOVE_M``):
 
 1. register a seeded sample of strikes with the recorded poses, corrected by the current
    estimate (none at first);
@@ -15,7 +22,8 @@ data were corrected. Here, repeatedly until the corrections stop moving the poin
    normal of the local plane of the consensus cloud, ``r = n . (p - c)``, where that plane faces
    the point's sensor (``MIN_FACING``; a neighbourhood not much wider than the range noise has
    its least-squares normal across the beam, and residuals along it reward smearing surfaces
-   along the line of sight);
+   along the line of sight) and the other passes' points saw the plane of a coarser
+   neighbourhood from the point's side (``SIDE_THIN``: the two faces of a thin plate apart);
 3. take a robust Gauss-Newton step on every parameter (Huber-weighted least squares; the point
    and the centroid both move with the parameters; a weak prior holds at zero what the data
    cannot see).
@@ -27,7 +35,10 @@ consensus, about 0.1 deg on RSO-A), and a fit can explain range noise (a short n
 4. the estimate is the iterate, the zero correction (the recorded poses) among them, with the
    lowest mean loss of the fitted strikes' residuals (Huber, capped at ``OUTLIER_SIGMAS``; a
    strike without a consensus scores the cap);
-5. a parameter is kept only if observable and larger than ``SIGNIFICANCE_Z`` of its 1-sigma;
+5. when the observable parameters together lie beyond their uncertainty (chi-square, one-sided
+   ``SIGNIFICANCE_Z``-sigma), the whole estimate is kept: parameters that trade off against each
+   other are each uncertain, their combination is not; otherwise a parameter is kept only if
+   observable and larger than ``SIGNIFICANCE_Z`` of its 1-sigma;
 6. the kept correction is applied only if a second, disjoint sample of strikes, which the fit
    never saw (independent range noise, so no noise the fit explained can help it), agrees with
    the other passes better with it than with the recorded poses by more than ``SIGNIFICANCE_Z``
