@@ -22,8 +22,7 @@ repeatedly until the corrections stop moving the points (``STOP_MOVE_M``):
    normal of the local plane of the consensus cloud, ``r = n . (p - c)``, where that plane faces
    the point's sensor (``MIN_FACING``; a neighbourhood not much wider than the range noise has
    its least-squares normal across the beam, and residuals along it reward smearing surfaces
-   along the line of sight) and the other passes' points saw the plane of a coarser
-   neighbourhood from the point's side (``SIDE_THIN``: the two faces of a thin plate apart);
+   along the line of sight);
 3. take a robust Gauss-Newton step on every parameter (Huber-weighted least squares; the point
    and the centroid both move with the parameters; a weak prior holds at zero what the data
    cannot see).
@@ -111,12 +110,6 @@ PAIR_DISTANCE_FACTOR = 3.0
 # sideways offsets, which a runaway misalignment (a 0.5 deg one "corrected" to -2.15 deg on
 # satellite seed 1) reduces by smearing surfaces into curtains along the line of sight.
 MIN_FACING = 0.3
-# A partner must see the surface from the point's side: its line of sight at least MIN_FACING
-# (cosine) from edge-on to the plane of the coarse neighbourhood around the point, every
-# SIDE_THIN-th strike's NEIGHBOURS nearest (four times as wide as the fine one). On a 5 cm plate
-# seen from both sides (9 x 9 beams, 0.3 m 3-sigma range noise), the fine plane's side test
-# paired 21 % of the pairs across the plate; this one 0.3 % (all strikes of the log).
-SIDE_THIN = 16
 # Weak priors (1 sigma) that hold parameters the data cannot see at zero: a degree of attitude,
 # 10 m of position, 0.1 % of the spin rate; each far above what the data resolve when they can.
 PRIOR_ATTITUDE_RAD = math.radians(1.0)
@@ -486,8 +479,7 @@ def _partners(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: float
     normal = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
     sight = view - points                                                      # toward sensor
     normal *= np.where(np.einsum("ni,ni->n", normal, sight) < 0, -1.0, 1.0)[:, None]
-    unit = sight / np.maximum(np.linalg.norm(sight, axis=1), 1e-300)[:, None]
-    same_side = np.einsum("ni,nki->nk", _side_normal(points, sight), unit[index]) >= MIN_FACING
+    same_side = np.einsum("ni,nki->nk", normal, sight[index]) > 0
     other = (np.abs(time[index] - time[:, None]) >= gap) & same_side
     # A surface seen within MIN_FACING of edge-on, or a neighbourhood so small that the range
     # noise along the beam is its largest spread (its least-squares "normal" then lies across
@@ -501,20 +493,6 @@ def _partners(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: float
     nearest = distance[has, np.argmax(other[has], axis=1)]
     other &= distance <= PAIR_DISTANCE_FACTOR * np.median(nearest)
     return index, other, normal
-
-
-def _side_normal(points: np.ndarray, sight: np.ndarray) -> np.ndarray:
-    """The normal (n, 3) toward each point's sensor of the surface at coarse scale: of the
-    least-squares plane of the ``NEIGHBOURS`` nearest of every ``SIDE_THIN``-th point, taken
-    from the nearest of those. It tells the faces of a thin structure apart where the fine
-    neighbourhoods, hardly wider than the range noise, cannot."""
-    coarse = points[::SIDE_THIN]
-    tree = cKDTree(coarse)
-    index = tree.query(coarse, k=min(NEIGHBOURS, len(coarse)), workers=-1)[1]
-    centred = coarse[index] - coarse[index].mean(axis=1, keepdims=True)
-    normal = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
-    normal = normal[tree.query(points, k=1, workers=-1)[1]]
-    return normal * np.where(np.einsum("ni,ni->n", normal, sight) < 0, -1.0, 1.0)[:, None]
 
 
 def _n_params(jac: np.ndarray, weights: np.ndarray) -> int:

@@ -8,7 +8,6 @@ import trimesh
 from scipy.spatial import cKDTree
 
 import sim
-from formats import StrikeLog
 from recon.registration import refine as refine_module
 from recon.registration.ingest import ingest
 from recon.registration.refine import refine
@@ -56,25 +55,6 @@ def test_a_misaligned_thin_plate_seen_from_both_sides_is_corrected(plate_logs):
     along = np.degrees(result.correction.misalignment[0, 1])
     assert 0.5 * MISALIGNMENT_DEG[1] < along <= 1.25 * MISALIGNMENT_DEG[1]
     assert registration_error(posed, result.correction) < 0.5 * registration_error(posed)
-
-
-def test_the_two_faces_of_the_plate_are_almost_never_paired(plate_logs):
-    """Of the consensus pairs under the recorded poses, fewer than 0.5 % join opposite faces of
-    the plate (truth read by the test only); the side test on the fine neighbourhood's plane
-    joined 21 %. Strikes on the plate's rims are neither face."""
-    posed = plate_logs["misaligned"]
-    with StrikeLog(posed) as log:
-        sample = refine_module._sample(log, np.arange(log.n_strikes))
-        hit = log.truth_strikes().point
-    inner = (np.abs(hit[:, 0]) < 2.99) & (np.abs(hit[:, 2]) < 2.99)
-    face = np.where(inner & (hit[:, 1] > 0.024), 1, np.where(inner & (hit[:, 1] < -0.024), -1, 0))
-    points, view, _, _ = refine_module._register(sample, sample.shots)
-    gap = refine_module.PAIR_GAP_STEPS * float(np.median(np.diff(np.unique(sample.time))))
-    index, other, _ = refine_module._partners(points, view, sample.time, gap)
-    assert np.sum(face == 1) > 1000 and np.sum(face == -1) > 1000
-    assert other.any(axis=1).mean() > 0.3
-    across = (face[:, None] * face[index] < 0) & other
-    assert across.sum() < 0.005 * other.sum()
 
 
 def test_a_position_bias_wider_than_the_fine_neighbourhood_is_found_by_the_coarse_stage(
