@@ -748,8 +748,9 @@ def _best(problem: _Problem, tried: list) -> tuple[PoseCorrection, np.ndarray, n
 
 def _judged(problem: _Problem, best: PoseCorrection, formal: np.ndarray, robust: np.ndarray
             ) -> tuple[dict, PoseCorrection, dict]:
-    """Which parameters the data see (observable), their 1-sigma, and which of them the
-    estimate holds clear of their uncertainty (observable and beyond ``SIGNIFICANCE_Z``)."""
+    """Which parameters the data see (observable), their 1-sigma, and which of them to keep:
+    all that the data see, when the observable ones are jointly significant; otherwise those
+    observable and beyond ``SIGNIFICANCE_Z`` of their own 1-sigma."""
     spin_axis, knots = problem.pairs.spin_axis, problem.zero.knots
     formal = _uncertainty(formal, len(knots), spin_axis, knots)
     sigma = _uncertainty(robust, len(knots), spin_axis, knots)
