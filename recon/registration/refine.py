@@ -5,8 +5,15 @@ of a pass the same way in the sensor's or the inertial frame, but those frames t
 body frame as the chaser orbits and the target spins. Passes that see the same patch of surface
 from different geometry therefore place it in different places, and the disagreement says which
 error it was: the crossover adjustment with which NEAR's laser rangefinder and OSIRIS-REx's OLA
-data were corrected. Here, repeatedly until the corrections stop moving the points
-(``STOP_MOVE_M``):
+data were corrected.
+
+Coarse first (``_coarse_start``): a spinning target turns a constant inertial position bias in
+the body frame, so passes at different spin phases place a surface up to twice the bias apart,
+beyond the fine neighbourhoods, and a fit from the recorded poses does not leave their basin
+(RSO-A: 1 m found as 0.03 m). Short fits (the steps below) of every ``COARSE_THIN``-th strike,
+whose neighbourhoods are about three times as wide, start from each node of a grid of biases
+across the spin axis; the end whose residuals scatter least starts the fine fit. Then,
+repeatedly until the corrections stop moving the points (``STOP_MOVE_M``):
 
 1. register a seeded sample of strikes with the recorded poses, corrected by the current
    estimate (none at first);
@@ -27,14 +34,18 @@ consensus, about 0.1 deg on RSO-A), and a fit can explain range noise (a short n
 4. the estimate is the iterate, the zero correction (the recorded poses) among them, with the
    lowest mean loss of the fitted strikes' residuals (Huber, capped at ``OUTLIER_SIGMAS``; a
    strike without a consensus scores the cap);
-5. a parameter is kept only if observable and larger than ``SIGNIFICANCE_Z`` of its 1-sigma;
+5. when the observable parameters together lie beyond their uncertainty (chi-square, one-sided
+   ``SIGNIFICANCE_Z``-sigma), the whole estimate is kept: parameters that trade off against each
+   other are each uncertain, their combination is not; otherwise a parameter is kept only if
+   observable and larger than ``SIGNIFICANCE_Z`` of its 1-sigma;
 6. the kept correction is applied only if a second, disjoint sample of strikes, which the fit
    never saw (independent range noise, so no noise the fit explained can help it), agrees with
    the other passes better with it than with the recorded poses by more than ``SIGNIFICANCE_Z``
    cluster-robust standard errors. Otherwise the correction is exactly zero and the cloud is
    registered with the recorded poses, bit for bit.
 
-Parameters not kept are reported as 0, ``[not observable]`` or ``[not significant]``.
+Parameters not kept are reported as 0, ``[not observable]`` or ``[not significant]``; one the data
+see only together with another, applied with it, as ``[not observable alone]``.
 
 Parameters (misalignment and position piecewise-linear in time over knots ``interval`` seconds
 apart, or constant):
@@ -70,6 +81,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
+from scipy.stats import chi2, norm
 
 from formats import Shots, StrikeChunk, StrikeLog
 from formats.errors import ReconError
@@ -105,6 +117,9 @@ PRIOR_POSITION_M = 10.0
 PRIOR_SPIN_FRACTION = 1e-3
 # A parameter is "observable" when the data shrink its prior uncertainty at least this much.
 OBSERVABLE_SHRINK = 0.5
+# ... and "seen at all" (if only together with another parameter) when they shrink it at all,
+# below this fraction: what the data do not see at all stays 0.
+SEEN_SHRINK = 0.99
 # Outer iterations: stop when no sampled point moves more than STOP_MOVE_M further.
 MAX_ITERATIONS = 15
 STOP_MOVE_M = 5e-3
@@ -134,6 +149,18 @@ CELL_NEIGHBOURHOODS = 4.0
 # which smears the panels into curtains along the line of sight whose planes hold the range
 # noise, and "agreed" to 0.02 m, below the noise; held-out strikes agree there too.
 PLAUSIBLE_PRIORS = 3.0
+# The coarse stage (_coarse_start): a grid of constant position biases across the spin axis,
+# COARSE_POSITION_M either way in steps of COARSE_STEP_M, scored on every COARSE_THIN-th fitted
+# strike with the loss at the scale of a step.
+COARSE_POSITION_M = 2.0
+COARSE_STEP_M = 1.0
+COARSE_THIN = 10
+COARSE_ITERATIONS = 6
+# Ends of the coarse fits whose robust scatter lies within this many standard errors of the
+# best's agree equally well; the standard error of a 1.4826-MAD sigma of n Gaussian residuals is
+# MAD_ERROR * sigma / sqrt(n) (its asymptotic efficiency is 37 %: 1 / sqrt(2 * 0.37) = 1.17).
+COARSE_TIE = 2.0
+MAD_ERROR = 1.17
 # Points per block of the consensus: (block, NEIGHBOURS, 3, 7) float64 is ~15 MB.
 BLOCK = 4096
 # Consistent 1.4826 * median absolute deviation: the 1-sigma of Gaussian residuals.
@@ -302,12 +329,13 @@ class Refinement:
         return out
 
     def _flag(self, name: str, axis: int | None = None) -> str:
-        """"  [not observable]", "  [not significant]" or nothing, for one parameter."""
+        """"  [not observable]", "  [not observable alone]" (applied: seen only together with
+        another parameter), "  [not significant]" or nothing, for one parameter."""
         observable, significant = self.observable[name], self.significant[name]
         if axis is not None:
             observable, significant = observable[:, axis].any(), significant[:, axis].any()
         if not observable:
-            return "  [not observable]"
+            return "  [not observable alone]" if significant else "  [not observable]"
         return "" if significant else "  [not significant]"
 
 
@@ -390,28 +418,11 @@ def _consensus(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: floa
     design : (m, p) float64 or None
         Change of each residual per unit of each parameter (None without ``jac``).
     """
-    tree = cKDTree(points)
-    k = min(NEIGHBOURS, len(points))
-    distance, index = tree.query(points, k=k, workers=-1)
-    neighbours = points[index]                                                 # (n, k, 3)
-    centred = neighbours - neighbours.mean(axis=1, keepdims=True)
-    normal = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
-    sight = view - points                                                      # toward sensor
-    normal *= np.where(np.einsum("ni,ni->n", normal, sight) < 0, -1.0, 1.0)[:, None]
-    same_side = np.einsum("ni,nki->nk", normal, sight[index]) > 0
-    other = (np.abs(time[index] - time[:, None]) >= gap) & same_side
-    # A surface seen within MIN_FACING of edge-on, or a neighbourhood so small that the range
-    # noise along the beam is its largest spread (its least-squares "normal" then lies across
-    # the beam), holds no crossover: left out.
-    facing = np.einsum("ni,ni->n", normal, sight) / np.maximum(np.linalg.norm(sight, axis=1),
-                                                                1e-300)
-    other &= (facing >= MIN_FACING)[:, None]
-    has = other.any(axis=1)
-    if has.sum() < 2:
+    index, other, normal = _partners(points, view, time, gap)
+    if not other.any():
         return (np.zeros(0, np.int64), np.zeros(0),
                 None if jac is None else np.zeros((0, _n_params(jac, weights))))
-    nearest = distance[has, np.argmax(other[has], axis=1)]
-    other &= distance <= PAIR_DISTANCE_FACTOR * np.median(nearest)
+    neighbours = points[index]                                                 # (n, k, 3)
     count = other.sum(axis=1)
     rows = np.flatnonzero(count >= MIN_CONSENSUS)
     residual = np.empty(len(rows))
@@ -435,6 +446,53 @@ def _consensus(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: floa
             [knots[:, :, :3].reshape(len(r), -1), knots[:, :, 3:].reshape(len(r), -1), spin],
             axis=1)
     return rows, residual, design
+
+
+def _partners(points: np.ndarray, view: np.ndarray, time: np.ndarray, gap: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which neighbours of each point make its consensus (``_consensus``).
+
+    Parameters
+    ----------
+    points, view : (n, 3) float64, metres, B
+        The points and their sensor positions.
+    time : (n,) float64, seconds
+    gap : float, seconds
+        Other passes are at least this far apart in time.
+
+    Returns
+    -------
+    index : (n, k) int64
+        The ``NEIGHBOURS`` nearest points of each point (itself first).
+    other : (n, k) bool
+        Those of other passes, seen from the point's side of its plane, within
+        ``PAIR_DISTANCE_FACTOR`` of the nearest such distance, of a plane facing the point's
+        sensor (all False when fewer than two points have any).
+    normal : (n, 3) float64
+        Unit normal of each neighbourhood's least-squares plane, toward the point's sensor.
+    """
+    tree = cKDTree(points)
+    k = min(NEIGHBOURS, len(points))
+    distance, index = tree.query(points, k=k, workers=-1)
+    neighbours = points[index]                                                 # (n, k, 3)
+    centred = neighbours - neighbours.mean(axis=1, keepdims=True)
+    normal = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
+    sight = view - points                                                      # toward sensor
+    normal *= np.where(np.einsum("ni,ni->n", normal, sight) < 0, -1.0, 1.0)[:, None]
+    same_side = np.einsum("ni,nki->nk", normal, sight[index]) > 0
+    other = (np.abs(time[index] - time[:, None]) >= gap) & same_side
+    # A surface seen within MIN_FACING of edge-on, or a neighbourhood so small that the range
+    # noise along the beam is its largest spread (its least-squares "normal" then lies across
+    # the beam), holds no crossover: left out.
+    facing = np.einsum("ni,ni->n", normal, sight) / np.maximum(np.linalg.norm(sight, axis=1),
+                                                                1e-300)
+    other &= (facing >= MIN_FACING)[:, None]
+    has = other.any(axis=1)
+    if has.sum() < 2:
+        return index, np.zeros_like(other), normal
+    nearest = distance[has, np.argmax(other[has], axis=1)]
+    other &= distance <= PAIR_DISTANCE_FACTOR * np.median(nearest)
+    return index, other, normal
 
 
 def _n_params(jac: np.ndarray, weights: np.ndarray) -> int:
@@ -502,10 +560,48 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
     RefineError
         Bad options, or too few strikes seen twice to estimate anything.
     """
+    _check_options(interval, max_points)
+    problem = _problem(log_path, interval, spin, max_points, seed)
+    start = _coarse_start(problem)
+    tried, iterations = _fine(problem, start, progress)
+    best, formal, robust = _best(problem, tried)
+    observable, sigma, keep = _judged(problem, best, formal, robust)
+    correction, significant, check_z = _checked(best, keep, problem.check, problem.pairs,
+                                                problem.log_path)
+    before, _, _ = problem.pairs.residuals(problem.fit, problem.zero)
+    after, _, _ = problem.pairs.residuals(problem.fit, correction)
+    return Refinement(correction=correction, sigma=sigma, observable=observable,
+                      significant=significant, check_z=check_z,
+                      residual_before_m=_robust_sigma(before[np.isfinite(before)]),
+                      residual_after_m=_robust_sigma(after[np.isfinite(after)]),
+                      n_points=len(problem.fit.time), n_pairs=int(np.isfinite(after).sum()),
+                      iterations=iterations)
+
+
+def _check_options(interval: float | None, max_points: int) -> None:
     if interval is not None and not (math.isfinite(interval) and interval > 0):
         raise RefineError(f"refine interval must be a positive number of seconds, got {interval}")
     if max_points < 100:
         raise RefineError(f"max_points must be at least 100, got {max_points}")
+
+
+@dataclass
+class _Problem:
+    """What one refinement works on: the samples, how they are compared, the parameters."""
+
+    log_path: object
+    fit: _Sample            # strikes fitted
+    check: _Sample          # strikes held out to check the fit
+    pairs: _Pairs
+    zero: PoseCorrection    # the recorded poses, with the knots and the spin axis
+    weights: np.ndarray     # (n_fit, k) hat weights of the fitted strikes' times
+    prior: np.ndarray       # (p,) prior 1-sigma of every parameter, in the solver's order
+    spin_inertial: np.ndarray | None  # (3,) spin axis in I, None: the target does not spin
+
+
+def _problem(log_path, interval: float | None, spin: bool, max_points: int, seed: int
+             ) -> _Problem:
+    """Read the samples of a log and set up the parameters and their priors."""
     with StrikeLog(log_path) as log:
         if log.n_strikes < 100:
             raise RefineError(f"{log_path}: {log.n_strikes} strikes are too few to refine the "
@@ -520,25 +616,87 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
     step = float(np.median(np.diff(all_shots.time))) if len(all_shots) > 1 else 1.0
     pairs = _Pairs(PAIR_GAP_STEPS * step, axis if rate > 0 and spin else None)
     zero = PoseCorrection(knots, np.zeros((k, 3)), np.zeros((k, 3)), 0.0, axis)
-    weights = zero.weights(fit.time)
     # Prior 1-sigma of every parameter, in the solver's order (per knot: omega 3, position 3).
     prior = np.concatenate([np.repeat([[PRIOR_ATTITUDE_RAD] * 3], k, axis=0).ravel(),
                             np.full(3 * k, PRIOR_POSITION_M)]
                            + ([[PRIOR_SPIN_FRACTION * rate]] if pairs.spin_axis is not None
                               else []))
-    estimate, previous, cluster = zero, None, None
-    # Every iterate: the fitted strikes' residuals, the estimate, and the covariances (formal,
-    # robust) of the step taken from it (the last step's for the final iterate).
-    tried = []
-    for iteration in range(1, MAX_ITERATIONS + 1):
-        residual, points, design = pairs.residuals(fit, estimate, weights)
+    spin_inertial = (Rotation.from_quat(all_shots.target_attitude[0]).apply(axis)
+                     if rate > 0 else None)
+    return _Problem(log_path, fit, check, pairs, zero, zero.weights(fit.time), prior,
+                    spin_inertial)
+
+
+def _coarse_start(problem: _Problem) -> PoseCorrection:
+    """Where the fine fit starts: the best of short fits of a thinned sample from a grid of
+    constant position biases across the spin axis (module docstring).
+
+    A spinning target turns a constant inertial bias in the body frame, so passes at different
+    spin phases place the same surface up to twice the bias apart: beyond the neighbourhoods of
+    the fine fit, whose linearised consensus then barely sees it. Every ``COARSE_THIN``-th fitted
+    strike (neighbourhoods about three times as wide) is fitted for ``COARSE_ITERATIONS`` steps
+    from each node of a grid ``COARSE_POSITION_M`` either way in steps of ``COARSE_STEP_M``, in
+    the plane across the spin axis (along it, a bias shifts the whole cloud); the end with the
+    smallest robust scatter of its residuals to the other passes wins (the recorded poses among
+    the ends; of ends that agree equally well, the smallest correction). A target that does
+    not spin has no such search (a constant inertial bias is then a shift of the whole cloud).
+    """
+    if problem.spin_inertial is None:
+        return problem.zero
+    coarse = _subset(problem.fit, np.arange(0, len(problem.fit.time), COARSE_THIN))
+    weights = problem.zero.weights(coarse.time)
+    axis = problem.spin_inertial
+    across = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]      # (3, 2)
+    half = round(COARSE_POSITION_M / COARSE_STEP_M)
+    steps = COARSE_STEP_M * np.arange(-half, half + 1)
+    nodes = np.stack(np.meshgrid(steps, steps, indexing="ij"), axis=-1).reshape(-1, 2) @ across.T
+    k = len(problem.zero.knots)
+    ends = [problem.zero]
+    for node in nodes:
+        start = replace(problem.zero, position=np.repeat(node[None], k, axis=0))
+        tried, _ = _descend(problem, coarse, weights, start, COARSE_ITERATIONS)
+        ends += [entry[1] for entry in tried[-1:]]
+    residuals = [problem.pairs.residuals(coarse, end)[0] for end in ends]
+    finite = np.array([np.isfinite(r).sum() for r in residuals])
+    scatter = np.array([_robust_sigma(r[np.isfinite(r)]) if n >= 0.5 * finite[0] else np.inf
+                        for r, n in zip(residuals, finite, strict=True)])
+    # Ends within COARSE_TIE standard errors of the best scatter agree equally well (ends along a
+    # valley the data cannot resolve, such as a cross-track misalignment against a position
+    # error along the orbit normal): the smallest correction, in prior sigmas, of them wins.
+    best = int(np.argmin(scatter))
+    tie = scatter <= scatter[best] * (1.0 + COARSE_TIE * MAD_ERROR / math.sqrt(finite[best]))
+    size = [np.linalg.norm(_vector(end, problem.pairs.spin_axis) / problem.prior)
+            for end in ends]
+    return ends[int(np.argmin(np.where(tie, size, np.inf)))]
+
+
+def _descend(problem: _Problem, sample: _Sample, weights: np.ndarray, start: PoseCorrection,
+             iterations: int, progress=None) -> tuple[list, int]:
+    """Robust Gauss-Newton steps from ``start`` until no strike of ``sample`` moves
+    ``STOP_MOVE_M`` (at most ``iterations`` steps).
+
+    Parameters
+    ----------
+    weights : (n, k) float64
+        Hat weights of the sample's times.
+
+    Returns
+    -------
+    tried : list of [residual (n,), PoseCorrection, formal (p, p), robust (p, p)]
+        Every iterate, with the sample's residuals and the covariances of the step taken from it
+        (the last step's for the last iterate); empty when the start leaves fewer than
+        ``MIN_ROWS`` strikes with a consensus.
+    iterations : int
+        Steps taken.
+    """
+    pairs = problem.pairs
+    estimate, previous, cluster, tried = start, None, None, []
+    for iteration in range(1, iterations + 1):
+        residual, points, design = pairs.residuals(sample, estimate, weights)
         moved = (0.0 if previous is None
                  else float(np.max(np.linalg.norm(points - previous, axis=1))))
         rows = np.flatnonzero(np.isfinite(residual))
         if len(rows) < MIN_ROWS:
-            if previous is None:
-                raise RefineError(f"{log_path}: only {len(rows)} strikes have neighbours from "
-                                  "other passes; too few to refine the poses")
             break
         if cluster is None:
             cluster = _cells(points)
@@ -548,40 +706,94 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
         previous = points
         r, d = residual[rows], design
         inlier = np.abs(r - np.median(r)) <= OUTLIER_SIGMAS * _robust_sigma(r)
-        x, *covariances = _solve(r[inlier], d[inlier], prior, _robust_sigma(r[inlier]) or 1e-6,
+        x, *covariances = _solve(r[inlier], d[inlier], problem.prior,
+                                 _robust_sigma(r[inlier]) or 1e-6,
                                  _vector(estimate, pairs.spin_axis), cluster[rows][inlier])
         tried[-1][2:] = covariances
-        estimate = _updated(estimate, x, k, pairs.spin_axis is not None)
+        estimate = _updated(estimate, x, len(problem.zero.knots), pairs.spin_axis is not None)
         if progress:
-            progress(iteration, MAX_ITERATIONS)
+            progress(iteration, iterations)
     else:
-        residual, _, _ = pairs.residuals(fit, estimate)
+        residual, _, _ = pairs.residuals(sample, estimate)
         tried.append([residual, estimate, *tried[-1][2:]])
-    # The best plausible iterate by the mean loss at the scatter of the best agreement reached.
+    return tried, iteration
+
+
+def _fine(problem: _Problem, start: PoseCorrection, progress) -> tuple[list, int]:
+    """The fit of every sampled strike from ``start``: the iterates of ``_descend`` with the
+    zero correction (the recorded poses) first, carrying the first step's covariances when the
+    fit starts elsewhere."""
+    tried, iterations = _descend(problem, problem.fit, problem.weights, start, MAX_ITERATIONS,
+                                 progress)
+    if not tried or len(tried[0]) < 4:
+        rows = 0 if not tried else int(np.isfinite(tried[0][0]).sum())
+        raise RefineError(f"{problem.log_path}: only {rows} strikes have neighbours from other "
+                          "passes; too few to refine the poses")
+    if start is not problem.zero:
+        tried.insert(0, [problem.pairs.residuals(problem.fit, problem.zero)[0], problem.zero,
+                         *tried[0][2:]])
+    return tried, iterations
+
+
+def _best(problem: _Problem, tried: list) -> tuple[PoseCorrection, np.ndarray, np.ndarray]:
+    """The plausible iterate (within ``PLAUSIBLE_PRIORS``) with the lowest mean loss at the
+    scatter of the best agreement reached, and its formal and robust covariances."""
+    spin_axis = problem.pairs.spin_axis
     tried = [entry for entry in tried if np.all(
-        np.abs(_vector(entry[1], pairs.spin_axis)) <= PLAUSIBLE_PRIORS * prior)]
+        np.abs(_vector(entry[1], spin_axis)) <= PLAUSIBLE_PRIORS * problem.prior)]
     scale = _scale(*(entry[0] for entry in tried))
     _, best, formal, robust = min(tried, key=lambda entry: _loss(entry[0], scale).mean())
-    formal = _uncertainty(formal, k, pairs.spin_axis, knots)
-    sigma = _uncertainty(robust, k, pairs.spin_axis, knots)
+    return best, formal, robust
+
+
+def _judged(problem: _Problem, best: PoseCorrection, formal: np.ndarray, robust: np.ndarray
+            ) -> tuple[dict, PoseCorrection, dict]:
+    """Which parameters the data see (observable), their 1-sigma, and which of them to keep:
+    all that the data see, when the observable ones are jointly significant; otherwise those
+    observable and beyond ``SIGNIFICANCE_Z`` of their own 1-sigma."""
+    spin_axis, knots = problem.pairs.spin_axis, problem.zero.knots
+    formal = _uncertainty(formal, len(knots), spin_axis, knots)
+    sigma = _uncertainty(robust, len(knots), spin_axis, knots)
     observable = {"misalignment": formal.misalignment < OBSERVABLE_SHRINK * PRIOR_ATTITUDE_RAD,
                   "position": formal.position < OBSERVABLE_SHRINK * PRIOR_POSITION_M,
-                  "spin": bool(pairs.spin_axis is not None
-                               and formal.spin_rate < OBSERVABLE_SHRINK * prior[-1])}
+                  "spin": bool(spin_axis is not None
+                               and formal.spin_rate < OBSERVABLE_SHRINK * problem.prior[-1])}
+    if _jointly_significant(problem, best, robust, observable):
+        # The whole estimate: a parameter the data see only together with another (a
+        # cross-track misalignment with a position error along the orbit normal) keeps the
+        # value that makes the combination right; what the data do not see at all is 0
+        # (about the beam, along the spin axis).
+        held = {"misalignment": formal.misalignment < SEEN_SHRINK * PRIOR_ATTITUDE_RAD,
+                "position": formal.position < SEEN_SHRINK * PRIOR_POSITION_M,
+                "spin": bool(spin_axis is not None
+                             and formal.spin_rate < SEEN_SHRINK * problem.prior[-1])}
+        return observable, sigma, {name: observable[name] | held[name] for name in observable}
     clear = {"misalignment": np.abs(best.misalignment) > SIGNIFICANCE_Z * sigma.misalignment,
              "position": np.abs(best.position) > SIGNIFICANCE_Z * sigma.position,
              "spin": abs(best.spin_rate) > SIGNIFICANCE_Z * sigma.spin_rate}
-    correction, significant, check_z = _checked(
-        best, {name: observable[name] & clear[name] for name in observable}, check, pairs,
-        log_path)
-    before, _, _ = pairs.residuals(fit, zero)
-    after, _, _ = pairs.residuals(fit, correction)
-    return Refinement(correction=correction, sigma=sigma, observable=observable,
-                      significant=significant, check_z=check_z,
-                      residual_before_m=_robust_sigma(before[np.isfinite(before)]),
-                      residual_after_m=_robust_sigma(after[np.isfinite(after)]),
-                      n_points=len(fit.time), n_pairs=int(np.isfinite(after).sum()),
-                      iterations=iteration)
+    return observable, sigma, {name: observable[name] & clear[name] for name in observable}
+
+
+def _jointly_significant(problem: _Problem, best: PoseCorrection, robust: np.ndarray,
+                         observable: dict) -> bool:
+    """Whether the observable parameters of ``best`` together lie beyond their robust
+    uncertainty: their Mahalanobis distance from zero exceeds the chi-square quantile of a
+    one-sided ``SIGNIFICANCE_Z``-sigma test.
+
+    Parameters that trade off (a cross-track misalignment against a position error along the
+    orbit normal) each have a large 1-sigma, while their combination is sharp: tested one by one,
+    the sharp ones alone are kept, and alone they make the passes agree worse (RSO-A: the
+    position bias without its misalignment).
+    """
+    mask = _vector(PoseCorrection(best.knots, observable["misalignment"].astype(float),
+                                  observable["position"].astype(float),
+                                  float(observable["spin"]), best.spin_axis),
+                   problem.pairs.spin_axis) > 0
+    if not mask.any():
+        return False
+    x = _vector(best, problem.pairs.spin_axis)[mask]
+    distance = float(x @ np.linalg.lstsq(robust[np.ix_(mask, mask)], x, rcond=None)[0])
+    return distance > chi2.isf(norm.sf(SIGNIFICANCE_Z), int(mask.sum()))
 
 
 def _subset(sample: _Sample, rows: np.ndarray) -> _Sample:
@@ -732,12 +944,14 @@ def _solve(residual: np.ndarray, design: np.ndarray, prior: np.ndarray, scale: f
     -------
     x : (p,) float64
     formal : (p, p) float64
-        Covariance of the parameters after the step: the inverse of the weighted normal matrix
-        ``N`` (prior included), as if the residuals were independent.
+        Covariance of the parameters after the step: along the directions stepped, the inverse
+        of the weighted normal matrix ``N`` (prior included) there, as if the residuals were
+        independent; along the directions left out, the prior's (the data did not move them).
     robust : (p, p) float64
-        The cluster-robust (sandwich) covariance ``N^-1 (sum_c g_c g_c^T + P) N^-1``, with
-        ``g_c`` the gradient of the cell's weighted residuals and ``P`` the prior's precision:
-        neighbouring residuals share points, so they are not independent.
+        The same with the cluster-robust (sandwich) covariance ``N^-1 (sum_c g_c g_c^T + P)
+        N^-1`` along the directions stepped, ``g_c`` the gradient of the cell's weighted
+        residuals and ``P`` the prior's precision: neighbouring residuals share points, so they
+        are not independent.
     """
     x = np.zeros(design.shape[1])
     precision = np.diag(1.0 / prior ** 2)
@@ -753,13 +967,20 @@ def _solve(residual: np.ndarray, design: np.ndarray, prior: np.ndarray, scale: f
         # In column-normalised coordinates y = unit * x, step only along the directions the
         # data see well.
         values, vectors = np.linalg.eigh(data / scaling)
-        kept = vectors[:, values >= WEAK_DIRECTION ** 2 * values.max()]
+        strong = values >= WEAK_DIRECTION ** 2 * values.max()
+        kept = vectors[:, strong]
         y = kept @ np.linalg.solve(kept.T @ (normal / scaling) @ kept, kept.T @ (rhs / unit))
         x = y / unit
-    formal = np.linalg.inv(normal)
+    # Along the directions stepped, the data's covariance; along the others the estimate stays
+    # where it started, known only as well as the prior says.
+    inner = kept @ np.linalg.inv(kept.T @ (normal / scaling) @ kept) @ kept.T
+    left = vectors[:, ~strong]
+    held = (left @ np.linalg.inv(left.T @ (precision / scaling) @ left) @ left.T
+            if left.shape[1] else np.zeros_like(inner))
     gradient = np.zeros((int(cluster.max()) + 1 if len(cluster) else 0, design.shape[1]))
     np.add.at(gradient, cluster, (w * (residual + design @ x))[:, None] * design)
-    return x, formal, formal @ (gradient.T @ gradient + precision) @ formal
+    meat = (gradient.T @ gradient + precision) / scaling
+    return x, (inner + held) / scaling, (inner @ meat @ inner + held) / scaling
 
 
 def _updated(estimate: PoseCorrection, x: np.ndarray, k: int, spin: bool) -> PoseCorrection:
