@@ -2,6 +2,7 @@
 
     python benchmarks/judge_rules.py collect --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py rules   --suite benchmarks/out/suite --work /tmp/judge
+    python benchmarks/judge_rules.py evidence --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py estimate --suite benchmarks/out/suite --work /tmp/judge
 
 The auto suite (``benchmarks/suite.py``) leaves, per cloud, every compare run's true scores
