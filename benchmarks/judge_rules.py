@@ -317,6 +317,11 @@ def evidence(args) -> None:
         print(f"{cloud}: reach {reach:.3g} m; " + "; ".join(
             f"{c.label} chi2 {c.chi2:.3g} unsupported {found[c.run.key]['unsupported']:.2f}"
             for c in sorted(scored, key=lambda c: c.chi2)[:4] if c.run.key in found), flush=True)
+    print_tally(tally)
+
+
+def print_tally(tally: dict[tuple[str, float], list]) -> None:
+    """``evidence``'s summary: per tie-break and band, agreement with the truth and misses."""
     for (name, band), picks in tally.items():
         ok = sum(v.get("ok", False) for _, _, v in picks)
         median = sum(v.get("median", False) for _, _, v in picks)
