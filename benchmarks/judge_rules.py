@@ -2,6 +2,7 @@
 
     python benchmarks/judge_rules.py collect --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py rules   --suite benchmarks/out/suite --work /tmp/judge
+    python benchmarks/judge_rules.py evidence --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py estimate --suite benchmarks/out/suite --work /tmp/judge
 
 The auto suite (``benchmarks/suite.py``) leaves, per cloud, every compare run's true scores
@@ -17,6 +18,12 @@ seconds instead of a suite run:
   the ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best
   F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the
   median run;
+- ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
+  meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
+  its area beyond the strikes' reach (where no strike constrains it) and its distance to the
+  other candidates (their consensus, everywhere and where no strike is); each is tried as the
+  choice among the candidates within ``EVIDENCE_BANDS`` paired standard errors of the best,
+  against the truth as ``rules``;
 - ``estimate``: ``recon.surfaces.judge.estimate`` on every compare mesh (in-sample, as the
   suite calls it), against its true Chamfer: Spearman over all runs and within each cloud, and
   the band's coverage and width (high / low) for each cloud's run of auto's choice.
@@ -111,13 +118,23 @@ def collect(args) -> None:
         print(f"{cloud}: {len(table)} candidates in {elapsed:.0f} s", flush=True)
 
 
-def candidates_of(work: Path, cloud: str, extra: bool) -> tuple[list, np.ndarray, float]:
+# Other held-out statistics ``rules --statistic`` may replay in place of the capped chi-square
+# (each a function of a strike's cost, the capped squared distance in recorded sigmas): the
+# mean chi (L1, less led by the strikes at the cap), the chi-square capped at 3 and 5 sigma,
+# and the fraction of strikes at the cap.
+STATISTICS = {"chi2": None, "chi": np.sqrt, "cap9": lambda c: np.minimum(c, 9.0),
+              "cap25": lambda c: np.minimum(c, 25.0),
+              "capped": lambda c: (c >= 0.999 * c.max()).astype(float)}
+
+
+def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2"
+                  ) -> tuple[list, np.ndarray, float]:
     """The collected candidates of ``cloud`` as ``auto.Candidate`` (on the ladder's levels; with
     ``extra``, the ``EXTRA`` runs join the level of their method's ladder run, else they are left
     out), the tested strikes' blocks and the coverage."""
     from dataclasses import fields
 
-    from recon.surfaces import auto
+    from recon.surfaces import auto, judge
     from recon.surfaces.methods import bind
 
     data = json.loads((work / "folds" / f"{cloud}.json").read_text())["auto"]
@@ -138,6 +155,10 @@ def candidates_of(work: Path, cloud: str, extra: bool) -> tuple[list, np.ndarray
         candidate = auto.Candidate(bind(row["method"], row["params"]), level,
                                    **{k: row[k] for k in names if k in row})
         candidate.cost = arrays.get(f"cost/{row['key']}")
+        if STATISTICS[statistic] is not None and candidate.cost is not None:
+            candidate.cost = STATISTICS[statistic](candidate.cost)
+            candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
+                                                                    arrays["block"])
         out.append(candidate)
     return out, arrays["block"], data["coverage"]
 
@@ -175,13 +196,18 @@ def verdict(rows: list[dict], key: str) -> dict:
 
 
 def rules(args) -> None:
+    from recon.surfaces import auto
+
+    if args.band is not None:
+        auto.BAND_SES = args.band
     names = [c for c in clouds_of(args.suite, args.clouds)
              if (args.work / "folds" / f"{c}.json").exists()]
     good = median = 0
     seconds = []
     for cloud in names:
         rows = records(args.suite, cloud)
-        candidates, block, coverage = candidates_of(args.work, cloud, args.extra)
+        candidates, block, coverage = candidates_of(args.work, cloud, args.extra,
+                                                    args.statistic)
         chosen, fitted = replay(candidates, block, coverage)
         v = verdict(rows, chosen.run.key)
         good += v.get("ok", False)
@@ -201,6 +227,114 @@ def rules(args) -> None:
     print(f"agreement {good}/{len(names)} = {good / max(len(names), 1):.0%}; not below the "
           f"median {median}/{len(names)}; modelled auto/compare time: median "
           f"{statistics.median(seconds):.3f}, worst {max(seconds):.3f}")
+
+
+# Bands (paired standard errors) within which the ``evidence`` tie-breaks choose; consensus is
+# taken over the candidates whose held-out chi-square is at most ``CONSENSUS_CHI2`` x the best's.
+EVIDENCE_BANDS = (2.0, 4.0, 8.0)
+CONSENSUS_CHI2 = 4.0
+EVIDENCE_SAMPLES = 6000
+
+
+def mesh_evidence(args, cloud: str, keys: list[str], rows: list[dict], reach: float
+                  ) -> dict[str, dict]:
+    """Per candidate key (with a compare mesh): ``area`` [m^2], ``unsupported`` (fraction of
+    its area farther than ``reach`` from every strike) and ``to`` (other key -> mean distance
+    of this surface to it, everywhere and over the unsupported samples only, and back) [m]."""
+    from scipy.spatial import cKDTree
+
+    from formats.mesh_io import read_mesh
+    from metrics import Mesh, sample_surface
+
+    mesh_of = {r["key"]: r["mesh"] for r in rows if r.get("mesh")}
+    strikes = cKDTree(load_cloud(args.suite, cloud).points)
+    samples, out = {}, {}
+    for key in (k for k in keys if k in mesh_of):
+        mesh = read_mesh(args.suite / cloud / mesh_of[key])
+        tri = mesh.vertices[mesh.faces]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
+                                    axis=1).sum()
+        samples[key] = sample_surface(Mesh(mesh.vertices, mesh.faces), EVIDENCE_SAMPLES,
+                                      seed=0)[0]
+        far = strikes.query(samples[key], workers=-1)[0] > reach
+        out[key] = {"area": float(area), "unsupported": float(far.mean()), "far": far}
+    trees = {k: cKDTree(s) for k, s in samples.items()}
+    for key, e in out.items():
+        e["to"] = {}
+        for other, tree in trees.items():
+            if other != key:
+                d = tree.query(samples[key], workers=-1)[0]
+                back = trees[key].query(samples[other], workers=-1)[0]
+                e["to"][other] = (0.5 * (d.mean() + back.mean()),
+                                  float(d[e["far"]].mean()) if e["far"].any() else 0.0)
+    return out
+
+
+def _tie_breaks(evidence: dict[str, dict], pool: list):
+    """The evidence tie-breaks: each maps the band's candidates to the one it chooses."""
+    def consensus(part: int):
+        def key(c):
+            gaps = [evidence[c.run.key]["to"][o.run.key][part] for o in pool
+                    if o is not c and o.run.key in evidence]
+            return (np.median(gaps) if gaps else np.inf, c.chi2)
+        return key
+    return {
+        "free space (fewest beams cut or in holes)": lambda c: (c.violated + c.holes, c.chi2),
+        "least area beyond the strikes": lambda c: (
+            evidence[c.run.key]["area"] * evidence[c.run.key]["unsupported"], c.chi2),
+        "most area beyond the strikes": lambda c: (
+            -evidence[c.run.key]["area"] * evidence[c.run.key]["unsupported"], c.chi2),
+        "consensus everywhere": consensus(0),
+        "consensus beyond the strikes": consensus(1),
+        "closed first, then smallest": lambda c: (not c.closed, c.n_params, c.chi2)}
+
+
+def evidence(args) -> None:
+    from recon.surfaces import auto
+    from recon.surfaces.judge import COVERAGE_SPACINGS, SIGMAS
+
+    tally: dict[tuple[str, float], list] = {}
+    for cloud in clouds_of(args.suite, args.clouds):
+        rows = records(args.suite, cloud)
+        candidates, block, coverage = candidates_of(args.work, cloud, args.extra)
+        chosen, fitted = replay(candidates, block, coverage)
+        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
+        points = load_cloud(args.suite, cloud).points
+        spacing = float(np.median(nearest_gaps(points)))
+        reach = max(data["tau_m"], SIGMAS * data["noise_m"], COVERAGE_SPACINGS * spacing)
+        scored = [c for c in fitted if c.scored]
+        found = mesh_evidence(args, cloud, [c.run.key for c in scored], rows, reach)
+        selection = auto.select(fitted, block)
+        best = fitted[selection.best]
+        pool = [c for c in scored if c.chi2 <= CONSENSUS_CHI2 * best.chi2]
+        for band in EVIDENCE_BANDS:
+            within = [c for i, c in enumerate(fitted) if c.scored and c.run.key in found
+                      and selection.gaps[i][0] <= band * selection.gaps[i][1]]
+            for name, key in _tie_breaks(found, pool).items():
+                pick = min(within, key=key) if within else chosen
+                tally.setdefault((name, band), []).append(
+                    (cloud, pick.label, verdict(rows, pick.run.key)))
+        print(f"{cloud}: reach {reach:.3g} m; " + "; ".join(
+            f"{c.label} chi2 {c.chi2:.3g} unsupported {found[c.run.key]['unsupported']:.2f}"
+            for c in sorted(scored, key=lambda c: c.chi2)[:4] if c.run.key in found), flush=True)
+    print_tally(tally)
+
+
+def print_tally(tally: dict[tuple[str, float], list]) -> None:
+    """``evidence``'s summary: per tie-break and band, agreement with the truth and misses."""
+    for (name, band), picks in tally.items():
+        ok = sum(v.get("ok", False) for _, _, v in picks)
+        median = sum(v.get("median", False) for _, _, v in picks)
+        missed = ", ".join(f"{cloud} ({label})" for cloud, label, v in picks if not v.get("ok"))
+        print(f"{name:42} band {band:g}: agreement {ok}/{len(picks)}, not below the median "
+              f"{median}/{len(picks)}; missed {missed}")
+
+
+def nearest_gaps(points: np.ndarray) -> np.ndarray:
+    """Each point's distance to its nearest other point [m]."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points).query(points, k=2, workers=-1)[0][:, 1]
 
 
 def estimates(args, cloud: str, rows: list[dict]) -> dict[str, dict]:
@@ -289,7 +423,7 @@ def estimate_all(args) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=("collect", "rules", "estimate"))
+    parser.add_argument("command", choices=("collect", "rules", "evidence", "estimate"))
     parser.add_argument("--suite", type=Path, required=True, help="a finished suite's --out")
     parser.add_argument("--work", type=Path, required=True, help="where this script writes")
     parser.add_argument("--clouds", nargs="*", help="only these clouds")
@@ -302,10 +436,15 @@ def main(argv=None) -> int:
         "ellipsoid", "planes", "convex-hull", "poisson depth=6", "plane cell=2", "plane",
         "poisson depth=9", "visibility", "rimls", "ball-pivoting", *EXTRA, "delaunay-balls",
         "screened-poisson"], help="estimate: the runs --per-cloud estimates")
+    parser.add_argument("--statistic", choices=tuple(STATISTICS), default="chi2",
+                        help="rules: the held-out statistic replayed (default: auto's)")
+    parser.add_argument("--band", type=float, help="rules: the band in paired standard "
+                        "errors (default: auto.BAND_SES)")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
     args = parser.parse_args(argv)
-    {"collect": collect, "rules": rules, "estimate": estimate_all}[args.command](args)
+    {"collect": collect, "rules": rules, "evidence": evidence,
+     "estimate": estimate_all}[args.command](args)
     return 0
 
 
