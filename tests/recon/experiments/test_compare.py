@@ -176,7 +176,8 @@ def test_compare_records_carry_the_truth_free_prediction(tmp_path, monkeypatch):
     import csv
     from types import SimpleNamespace
 
-    from recon.experiments.compare import compare_input, estimate_version
+    from recon import api
+    from recon.experiments.compare import estimate_version
     from recon.surfaces import judge
     from tests.conftest import write_sphere_log
 
@@ -192,17 +193,17 @@ def test_compare_records_carry_the_truth_free_prediction(tmp_path, monkeypatch):
     monkeypatch.setattr(judge, "estimate", estimate)
     log = tmp_path / "log.h5"
     write_sphere_log(log)
-    report = compare_input(log, log, tmp_path / "out", names=["plane"], n_workers=1)
-    (record,) = report["records"]
+    report = api.compare(log, truth=log, output=tmp_path / "out", methods=["plane"], n_workers=1)
+    (record,) = report.records
     assert seen == [80]      # the strikes of the log, once per successful run
     assert record["status"] == "ok" and record["predicted_by"] == estimate_version()
     assert (record["predicted_chamfer_low_m"], record["predicted_chamfer_m"],
             record["predicted_chamfer_high_m"], record["predicted_fscore"]) == (0.1, 0.2, 0.4,
                                                                                  0.8)
-    with open(report["csv"], newline="") as f:
+    with open(report.csv, newline="") as f:
         (row,) = csv.DictReader(f)
     assert float(row["predicted_chamfer_m"]) == pytest.approx(0.2)
-    report = compare_input(log, log, tmp_path / "again", names=["plane"], n_workers=1)
-    (record,) = report["records"]
+    report = api.compare(log, truth=log, output=tmp_path / "again", methods=["plane"], n_workers=1)
+    (record,) = report.records
     assert record["status"] == "ok" and "flat" in record["prediction_failed"]
     assert record.get("predicted_chamfer_m") is None
