@@ -17,9 +17,9 @@ from typing import Any
 
 from formats.geometry import Cloud, Mesh
 from formats.paths import check_destination
-from recon.surfaces.checks import check_surface, watertight
+from recon.surfaces.checks import check_surface
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits, run_isolated
-from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, watertight
 from recon.surfaces.prepare import InputError, Preparation, load_prepared
 
 
