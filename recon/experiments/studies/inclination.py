@@ -41,7 +41,7 @@ PLAN = {
               "score": runner.CURVE_SCORE},
     "tiny": {"inclinations": (85.0, 90.0), "fixed": 2, "prefixes": (1, 2), "long": (),
              "map_at": 1, "periods_h": (12.0,), "overrides": ("target.subdivisions=3",),
-             "score": {"n_truth_samples": 4000, "coverage_points": 8000}},
+             "score": runner.TINY_SCORE},
 }
 # The two inclinations of the coverage maps (paper Fig. 8).
 MAP_INCLINATIONS = (85.0, 90.0)
