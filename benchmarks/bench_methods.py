@@ -29,7 +29,9 @@ Clouds (each simulated with seed 0, then ingested):
 Results go to ``--out`` (default ``benchmarks/out/methods``) as ``results.json`` and
 ``results.md``, and the table is printed. The fit times of a full run are the table behind
 ``recon reconstruct --list-methods`` (``recon.surfaces.methods.DEFAULT_FIT_S``) and the cost
-stated in ``recon reconstruct --help`` and ``recon compare --help`` (``cli.reconstruct``).
+stated in ``recon reconstruct --help`` and ``recon compare --help``
+(``recon.surfaces.fit_times.cost_help``): ``--update-defaults`` writes them to
+``recon/surfaces/fit_times.json`` (say where and how it ran in docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -155,7 +157,13 @@ def main() -> int:
                         help="limit of each fit, seconds (recon reconstruct's default)")
     parser.add_argument("--quick", action="store_true", help="the clouds of a few rotations")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "methods")
+    parser.add_argument("--update-defaults", action="store_true",
+                        help="write the fit times to recon/surfaces/fit_times.json (a full run "
+                             "over the lidar and rso-a clouds)")
     args = parser.parse_args()
+    if args.update_defaults and (args.quick or not {"lidar", "rso-a"} <= set(
+            args.clouds.split(","))):
+        parser.error("--update-defaults needs a full run over the lidar and rso-a clouds")
     if args.repeats < 3:
         parser.error("--repeats must be >= 3 (medians)")
     names = [n for n in args.clouds.split(",") if n]
@@ -173,6 +181,11 @@ def main() -> int:
     command = "python benchmarks/bench_methods.py " + " ".join(sys.argv[1:])
     (args.out / "results.json").write_text(json.dumps(
         {"command": command, "clouds": summaries}, indent=2, default=str) + "\n")
+    if args.update_defaults:
+        from recon.surfaces import fit_times
+
+        fit_times.TABLE.write_text(json.dumps(fit_times.table_of(summaries), indent=2) + "\n")
+        print(f"wrote {fit_times.TABLE}")
     text = markdown(summaries, command.strip())
     (args.out / "results.md").write_text(text)
     print(text)

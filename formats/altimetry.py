@@ -198,6 +198,84 @@ class BinaryTable:
         return next((self.fields[n.lower()] for n in names if n.lower() in self.fields), None)
 
 
+def _label_root(label: Path) -> ElementTree.Element:
+    """The parsed XML of a label no larger than MAX_LABEL_BYTES, without DOCTYPE or entities."""
+    where = str(label)
+    size = label.stat().st_size
+    if size > MAX_LABEL_BYTES:
+        raise AltimetryError(f"{where}: {size:,} bytes, larger than any PDS4 label "
+                             f"({MAX_LABEL_BYTES:,} at most)")
+    raw = label.read_bytes()
+    if b"<!DOCTYPE" in raw or b"<!ENTITY" in raw:
+        raise AltimetryError(f"{where}: a PDS4 label declares no DOCTYPE or entities")
+    try:
+        return ElementTree.fromstring(raw)
+    except ElementTree.ParseError as exc:
+        raise AltimetryError(f"{where}: not an XML label ({exc})") from None
+
+
+def _required(parent: ElementTree.Element, name: str, within: str, where: str
+              ) -> ElementTree.Element:
+    """The child ``<name>`` of ``parent`` (the element ``<within>``), or AltimetryError."""
+    child = _child(parent, name)
+    if child is None:
+        raise AltimetryError(f"{where}: no <{name}> in <{within}>")
+    return child
+
+
+def _data_file(label: Path, area: ElementTree.Element) -> Path:
+    """The data file ``<File>/<file_name>`` names, which must lie beside the label."""
+    where = str(label)
+    name = _text(_required(area, "File", "File_Area_Observational", where), "file_name", where)
+    if Path(name).name != name or name in (".", ".."):
+        raise AltimetryError(f"{where}: <file_name> {name[:80]!r} must name a file beside the "
+                             "label")
+    return check_source(label.parent / name, AltimetryError)
+
+
+def _binary_field(element: ElementTree.Element, record_length: int, where: str) -> BinaryField:
+    """One ``<Field_Binary>``, checked: known type, its length, inside the record."""
+    name = _text(element, "name", where)
+    at = f"{where}: field {name[:60]!r}"
+    unit = _child(element, "unit")
+    fld = BinaryField(name=name, location=_count(element, "field_location", at, minimum=1),
+                      length=_count(element, "field_length", at, minimum=1),
+                      data_type=_text(element, "data_type", at),
+                      unit=(unit.text or "").strip() if unit is not None else "",
+                      scaling_factor=_number(element, "scaling_factor", at, 1.0),
+                      value_offset=_number(element, "value_offset", at, 0.0))
+    if fld.data_type not in PDS4_BINARY_TYPES and fld.data_type not in PDS4_STRING_TYPES:
+        raise AltimetryError(f"{at}: unknown data_type {fld.data_type[:40]!r}")
+    if fld.dtype.itemsize != fld.length:
+        raise AltimetryError(f"{at}: {fld.data_type} has {fld.dtype.itemsize} bytes, the "
+                             f"label says field_length {fld.length}")
+    if fld.location + fld.length - 1 > record_length:
+        raise AltimetryError(f"{at}: bytes {fld.location}..{fld.location + fld.length - 1} "
+                             f"lie outside the {record_length}-byte record")
+    return fld
+
+
+def _binary_fields(record: ElementTree.Element, record_length: int, where: str
+                   ) -> dict[str, BinaryField]:
+    """The ``<Field_Binary>`` of a ``<Record_Binary>`` by lower-case name, as many as its
+    ``<fields>`` declares, none named twice."""
+    if _count(record, "groups", where) != 0:
+        raise AltimetryError(f"{where}: <Group_Field_Binary> (groups > 0) is not supported")
+    fields: dict[str, BinaryField] = {}
+    for element in record:
+        if _local(element.tag) != "Field_Binary":
+            continue
+        fld = _binary_field(element, record_length, where)
+        if fld.name.lower() in fields:
+            raise AltimetryError(f"{where}: field {fld.name[:60]!r}: named twice")
+        fields[fld.name.lower()] = fld
+    declared = _count(record, "fields", where)
+    if declared != len(fields):
+        raise AltimetryError(f"{where}: <fields> says {declared}, the record has {len(fields)} "
+                             "<Field_Binary>")
+    return fields
+
+
 def read_label(label) -> BinaryTable:
     """Parse the first ``Table_Binary`` of a PDS4 label and check it against its data file.
 
@@ -210,67 +288,17 @@ def read_label(label) -> BinaryTable:
     """
     label = check_source(label, AltimetryError)
     where = str(label)
-    size = label.stat().st_size
-    if size > MAX_LABEL_BYTES:
-        raise AltimetryError(f"{where}: {size:,} bytes, larger than any PDS4 label "
-                             f"({MAX_LABEL_BYTES:,} at most)")
-    raw = label.read_bytes()
-    if b"<!DOCTYPE" in raw or b"<!ENTITY" in raw:
-        raise AltimetryError(f"{where}: a PDS4 label declares no DOCTYPE or entities")
-    try:
-        root = ElementTree.fromstring(raw)
-    except ElementTree.ParseError as exc:
-        raise AltimetryError(f"{where}: not an XML label ({exc})") from None
+    root = _label_root(label)
     area = next((e for e in root.iter() if _local(e.tag) == "File_Area_Observational"), None)
     if area is None:
         raise AltimetryError(f"{where}: no <File_Area_Observational>")
-    file_element = _child(area, "File")
-    if file_element is None:
-        raise AltimetryError(f"{where}: no <File> in <File_Area_Observational>")
-    name = _text(file_element, "file_name", where)
-    if Path(name).name != name or name in (".", ".."):
-        raise AltimetryError(f"{where}: <file_name> {name[:80]!r} must name a file beside the "
-                             "label")
-    data = check_source(label.parent / name, AltimetryError)
-    table = _child(area, "Table_Binary")
-    if table is None:
-        raise AltimetryError(f"{where}: no <Table_Binary> in <File_Area_Observational>")
+    data = _data_file(label, area)
+    table = _required(area, "Table_Binary", "File_Area_Observational", where)
     offset = _count(table, "offset", where)
     records = _count(table, "records", where)
-    record = _child(table, "Record_Binary")
-    if record is None:
-        raise AltimetryError(f"{where}: no <Record_Binary> in <Table_Binary>")
+    record = _required(table, "Record_Binary", "Table_Binary", where)
     record_length = _count(record, "record_length", where, minimum=1)
-    if _count(record, "groups", where) != 0:
-        raise AltimetryError(f"{where}: <Group_Field_Binary> (groups > 0) is not supported")
-    fields: dict[str, BinaryField] = {}
-    for element in record:
-        if _local(element.tag) != "Field_Binary":
-            continue
-        name = _text(element, "name", where)
-        at = f"{where}: field {name[:60]!r}"
-        unit = _child(element, "unit")
-        fld = BinaryField(name=name, location=_count(element, "field_location", at, minimum=1),
-                          length=_count(element, "field_length", at, minimum=1),
-                          data_type=_text(element, "data_type", at),
-                          unit=(unit.text or "").strip() if unit is not None else "",
-                          scaling_factor=_number(element, "scaling_factor", at, 1.0),
-                          value_offset=_number(element, "value_offset", at, 0.0))
-        if fld.data_type not in PDS4_BINARY_TYPES and fld.data_type not in PDS4_STRING_TYPES:
-            raise AltimetryError(f"{at}: unknown data_type {fld.data_type[:40]!r}")
-        if fld.dtype.itemsize != fld.length:
-            raise AltimetryError(f"{at}: {fld.data_type} has {fld.dtype.itemsize} bytes, the "
-                                 f"label says field_length {fld.length}")
-        if fld.location + fld.length - 1 > record_length:
-            raise AltimetryError(f"{at}: bytes {fld.location}..{fld.location + fld.length - 1} "
-                                 f"lie outside the {record_length}-byte record")
-        if name.lower() in fields:
-            raise AltimetryError(f"{at}: named twice")
-        fields[name.lower()] = fld
-    declared = _count(record, "fields", where)
-    if declared != len(fields):
-        raise AltimetryError(f"{where}: <fields> says {declared}, the record has {len(fields)} "
-                             "<Field_Binary>")
+    fields = _binary_fields(record, record_length, where)
     need = offset + records * record_length
     have = data.stat().st_size
     if have < need:
@@ -313,6 +341,50 @@ def _scale(fld: BinaryField, table: BinaryTable, units: dict, what: str) -> floa
 # --------------------------------------------------------------------------- OLA Level 2
 
 
+def _ola_fields(table: BinaryTable, where: str) -> dict:
+    """The OLA fields a reading needs: ``range``, ``flag``, ``xyz`` (3), ``time`` and ``sc``
+    (3 spacecraft-position fields, or None when the table has none); every one but ``time``
+    numeric."""
+    sc = [table.optional(n, f"sc_{n[-1]}", f"sc_pos_{n[-1]}") for n in ("scx", "scy", "scz")]
+    fields = {"range": table.field("range", where=where),
+              "flag": table.field("flag_status", where=where),
+              "xyz": [table.field(axis, where=where) for axis in ("x", "y", "z")],
+              "time": table.optional("et") or table.field("et", "utc", where=where),
+              "sc": sc if all(s is not None for s in sc) else None}
+    for fld in (fields["range"], fields["flag"], *fields["xyz"], *(fields["sc"] or [])):
+        if fld.dtype.kind == "S":
+            raise AltimetryError(f"{where}: field {fld.name!r} is {fld.data_type}, expected a "
+                                 "number")
+    return fields
+
+
+def _ola_kept(flags: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
+    """Which rows ``flag_status`` keeps (n,) bool, and the others counted by reason."""
+    code = flags.astype(np.int64) % 100
+    keep = np.isin(code, OLA_KEPT_FLAGS)
+    dropped: dict[str, int] = {}
+    for value, count in zip(*np.unique(code[~keep], return_counts=True), strict=True):
+        reason = OLA_FLAGS.get(int(value), f"flag_status {int(value)}")
+        dropped[reason] = int(count)
+    return keep, dropped
+
+
+def _ola_et(table: BinaryTable, time: BinaryField, values: np.ndarray, keep: np.ndarray,
+            where: str) -> np.ndarray:
+    """ET [s] of each record from an ``et`` number or a ``utc`` text (NaN where not kept)."""
+    from formats.spice import SpiceError, utcs_to_et
+
+    if time.dtype.kind != "S":
+        return values * _scale(time, table, SECONDS_PER, "time")
+    texts = [t.decode("ascii", "replace").strip() for t in values[keep]]
+    et = np.full(table.records, np.nan)
+    try:
+        et[keep] = utcs_to_et(texts, f"{where}: field {time.name!r}")
+    except SpiceError as exc:
+        raise AltimetryError(str(exc)) from None
+    return et
+
+
 def read_ola_l2(label) -> Altimetry:
     """Read an OLA Level-2 table through its PDS4 label (see the module docstring).
 
@@ -327,41 +399,21 @@ def read_ola_l2(label) -> Altimetry:
         Kept returns; ``dropped`` counts the others by ``flag_status`` reason (and rows whose
         values are not finite).
     """
-    from formats.spice import SpiceError, utcs_to_et
-
     table = read_label(label)
     where = str(label)
-    rng = table.field("range", where=where)
-    flag = table.field("flag_status", where=where)
-    xyz = [table.field(axis, where=where) for axis in ("x", "y", "z")]
-    time = table.optional("et") or table.field("et", "utc", where=where)
-    sc = [table.optional(n, f"sc_{n[-1]}", f"sc_pos_{n[-1]}") for n in ("scx", "scy", "scz")]
-    sc = sc if all(s is not None for s in sc) else None
-    for fld in (rng, flag, *xyz, *(sc or [])):
-        if fld.dtype.kind == "S":
-            raise AltimetryError(f"{where}: field {fld.name!r} is {fld.data_type}, expected a "
-                                 "number")
-    columns = read_columns(table, [rng, flag, *xyz, time, *(sc or [])])
-    code = columns[flag.name].astype(np.int64) % 100
-    keep = np.isin(code, OLA_KEPT_FLAGS)
-    dropped: dict[str, int] = {}
-    for value, count in zip(*np.unique(code[~keep], return_counts=True), strict=True):
-        reason = OLA_FLAGS.get(int(value), f"flag_status {int(value)}")
-        dropped[reason] = int(count)
-    metres = {f.name: _scale(f, table, METRES_PER, "length") for f in [rng, *xyz, *(sc or [])]}
-    points = np.column_stack([columns[f.name] * metres[f.name] for f in xyz])
-    spacecraft = (np.column_stack([columns[f.name] * metres[f.name] for f in sc])
-                  if sc is not None else None)
-    ranges = columns[rng.name] * metres[rng.name]
-    if time.dtype.kind == "S":
-        texts = [t.decode("ascii", "replace").strip() for t in columns[time.name][keep]]
-        try:
-            et = np.full(table.records, np.nan)
-            et[keep] = utcs_to_et(texts, f"{where}: field {time.name!r}")
-        except SpiceError as exc:
-            raise AltimetryError(str(exc)) from None
-    else:
-        et = columns[time.name] * _scale(time, table, SECONDS_PER, "time")
+    f = _ola_fields(table, where)
+    rng, xyz, time, sc = f["range"], f["xyz"], f["time"], f["sc"]
+    columns = read_columns(table, [rng, f["flag"], *xyz, time, *(sc or [])])
+    keep, dropped = _ola_kept(columns[f["flag"].name])
+
+    def metres(fields: list[BinaryField]) -> np.ndarray:
+        return np.column_stack([columns[g.name] * _scale(g, table, METRES_PER, "length")
+                                for g in fields])
+
+    ranges = metres([rng])[:, 0]
+    points = metres(xyz)
+    spacecraft = metres(sc) if sc is not None else None
+    et = _ola_et(table, time, columns[time.name], keep, where)
     finite = np.isfinite(ranges) & np.isfinite(points).all(axis=1) & np.isfinite(et)
     if spacecraft is not None:
         finite &= np.isfinite(spacecraft).all(axis=1)
@@ -550,17 +602,8 @@ def _header(first: list[str], where: str) -> tuple[list[str], dict[str, float]] 
     return names, scales
 
 
-def read_hayabusa2_l2(path) -> Altimetry:
-    """Read a Hayabusa2 LIDAR Level-2 CSV (see the module docstring).
-
-    Returns
-    -------
-    Altimetry
-        Lines with every needed value; ``dropped`` counts those with a missing value.
-    """
-    from formats.spice import SpiceError, utcs_to_et
-
-    path = check_source(path, AltimetryError)
+def _csv_rows(path: Path) -> list[tuple[int, list[str]]]:
+    """The CSV's non-blank, non-comment lines as (line number, cells); at least one."""
     where = str(path)
     size = path.stat().st_size
     if size > MAX_CSV_BYTES:
@@ -575,18 +618,20 @@ def read_hayabusa2_l2(path) -> Altimetry:
             if line.strip() and not line.lstrip().startswith("#")]
     if not rows:
         raise AltimetryError(f"{where}: no lines")
-    header = _header(rows[0][1], where)
-    names, scales = header or (list(HAYABUSA2_COLUMNS), dict.fromkeys(HAYABUSA2_LENGTHS, 1.0))
-    if header:
-        rows = rows[1:]
+    return rows
+
+
+def _hayabusa2_values(rows, names: list[str], scales: dict[str, float], where: str
+                      ) -> tuple[list[str], list[list[float]], list[int], int]:
+    """Shot times, numeric values (metres) and line numbers of the lines with every needed
+    value, and how many lines lacked one."""
     index = {name: names.index(name) for name in HAYABUSA2_COLUMNS}
-    width = len(names)
-    times, values, numbers, missing = [], [], [], 0
     numeric = [c for c in HAYABUSA2_COLUMNS if c in HAYABUSA2_LENGTHS]
+    times, values, numbers, missing = [], [], [], 0
     for number, cells in rows:
-        if len(cells) != width:
+        if len(cells) != len(names):
             raise AltimetryError(f"{where}: line {number} has {len(cells)} values, expected "
-                                 f"{width} ({', '.join(names[:3])}, ...)")
+                                 f"{len(names)} ({', '.join(names[:3])}, ...)")
         try:
             row = [float(cells[index[c]]) * scales[c] for c in numeric]
         except ValueError:
@@ -598,10 +643,31 @@ def read_hayabusa2_l2(path) -> Altimetry:
         times.append(time)
         values.append(row)
         numbers.append(number)
+    return times, values, numbers, missing
+
+
+def read_hayabusa2_l2(path) -> Altimetry:
+    """Read a Hayabusa2 LIDAR Level-2 CSV (see the module docstring).
+
+    Returns
+    -------
+    Altimetry
+        Lines with every needed value; ``dropped`` counts those with a missing value.
+    """
+    from formats.spice import SpiceError, utcs_to_et
+
+    path = check_source(path, AltimetryError)
+    where = str(path)
+    rows = _csv_rows(path)
+    header = _header(rows[0][1], where)
+    names, scales = header or (list(HAYABUSA2_COLUMNS), dict.fromkeys(HAYABUSA2_LENGTHS, 1.0))
+    times, values, numbers, missing = _hayabusa2_values(rows[1:] if header else rows, names,
+                                                        scales, where)
     try:
         et = utcs_to_et(times, f"{where}: SHOT_TIME")
     except SpiceError as exc:
         raise AltimetryError(str(exc)) from None
+    numeric = [c for c in HAYABUSA2_COLUMNS if c in HAYABUSA2_LENGTHS]
     table = np.array(values, dtype=np.float64).reshape(-1, len(numeric))
     col = {c: table[:, k] for k, c in enumerate(numeric)}
     return Altimetry(et=et, range=col["RANGE"],

@@ -555,11 +555,8 @@ def _pcd_int(path: Path, header: dict, key: str) -> int:
     return int(words[0])
 
 
-def _check_pcd(path: Path) -> None:
-    """Refuse a PCD file whose header is malformed or whose body does not hold the declared
-    points: ASCII rows with another number of values than the fields declare, or fewer rows;
-    binary data shorter than POINTS records. Checked before Open3D reads it (Open3D reads a
-    short row as a point)."""
+def _pcd_header(path: Path) -> tuple[dict[str, list[str]], int]:
+    """The header's key -> words, and the byte offset of the body (after the DATA line)."""
     header = {}
     with open(path, "rb") as fh:
         for _ in range(_PCD_MAX_HEADER_LINES):
@@ -569,10 +566,12 @@ def _check_pcd(path: Path) -> None:
                 continue
             header[words[0].upper()] = words[1:]
             if words[0].upper() == "DATA":
-                break
-        else:
-            raise MeshFormatError(f"{path}: not a readable PCD file (no DATA line in its header)")
-        offset = fh.tell()
+                return header, fh.tell()
+    raise MeshFormatError(f"{path}: not a readable PCD file (no DATA line in its header)")
+
+
+def _pcd_fields(path: Path, header: dict) -> tuple[list[str], list[str]]:
+    """Check FIELDS, SIZE, TYPE and COUNT; return the SIZE and COUNT words (one per field)."""
     missing = [k for k in ("FIELDS", "SIZE", "TYPE", "WIDTH", "POINTS", "DATA")
                if k not in header]
     if missing:
@@ -589,36 +588,56 @@ def _check_pcd(path: Path) -> None:
             or any(not c.isdigit() or int(c) < 1 for c in counts)):
         raise MeshFormatError(f"{path}: PCD header SIZE, TYPE or COUNT has a value the format "
                               "does not allow")
+    return sizes, counts
+
+
+def _pcd_points(path: Path, header: dict) -> int:
+    """POINTS, checked against WIDTH x HEIGHT."""
     n = _pcd_int(path, header, "POINTS")
     width = _pcd_int(path, header, "WIDTH")
     height = _pcd_int(path, header, "HEIGHT") if "HEIGHT" in header else 1
     if width * height != n:
         raise MeshFormatError(f"{path}: PCD header declares {n:,} POINTS but WIDTH x HEIGHT is "
                               f"{width:,} x {height:,}")
-    values = sum(int(c) for c in counts)
+    return n
+
+
+def _check_pcd_ascii(path: Path, offset: int, n: int, values: int) -> None:
+    """The ASCII body holds ``n`` rows of ``values`` numbers."""
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        text = fh.read().decode("ascii", errors="replace")
+    rows, columns = 0, values
+    if text.strip():   # numpy warns on a body without data
+        try:
+            rows, columns = np.loadtxt(io.StringIO(text), ndmin=2, dtype=np.float64).shape
+        except ValueError as exc:
+            reason = str(exc).splitlines()[0].split(";")[0]
+            raise MeshFormatError(f"{path}: PCD data rows do not match the "
+                                  f"{values} values per point its header declares "
+                                  f"({reason})") from None
+    if columns != values or rows != n:
+        raise MeshFormatError(f"{path}: the PCD header declares {n:,} points of {values} "
+                              f"values but the body has {rows:,} rows of {columns}")
+
+
+def _check_pcd(path: Path) -> None:
+    """Refuse a PCD file whose header is malformed or whose body does not hold the declared
+    points: ASCII rows with another number of values than the fields declare, or fewer rows;
+    binary data shorter than POINTS records. Checked before Open3D reads it (Open3D reads a
+    short row as a point)."""
+    header, offset = _pcd_header(path)
+    sizes, counts = _pcd_fields(path, header)
+    n = _pcd_points(path, header)
     kind = header["DATA"][0].lower() if header["DATA"] else ""
-    body = path.stat().st_size - offset
     if kind == "binary":
         need = n * sum(int(s) * int(c) for s, c in zip(sizes, counts, strict=True))
+        body = path.stat().st_size - offset
         if body < need:
             raise MeshFormatError(f"{path}: the PCD header declares {n:,} points ({need:,} "
                                   f"bytes) but the body holds {body:,} bytes")
     elif kind == "ascii":
-        with open(path, "rb") as fh:
-            fh.seek(offset)
-            text = fh.read().decode("ascii", errors="replace")
-        rows, columns = 0, values
-        if text.strip():   # numpy warns on a body without data
-            try:
-                rows, columns = np.loadtxt(io.StringIO(text), ndmin=2, dtype=np.float64).shape
-            except ValueError as exc:
-                reason = str(exc).splitlines()[0].split(";")[0]
-                raise MeshFormatError(f"{path}: PCD data rows do not match the "
-                                      f"{values} values per point its header declares "
-                                      f"({reason})") from None
-        if columns != values or rows != n:
-            raise MeshFormatError(f"{path}: the PCD header declares {n:,} points of {values} "
-                                  f"values but the body has {rows:,} rows of {columns}")
+        _check_pcd_ascii(path, offset, n, sum(int(c) for c in counts))
     elif kind != "binary_compressed":
         raise MeshFormatError(f"{path}: PCD DATA {kind[:20]!r} is not ascii, binary or "
                               "binary_compressed")

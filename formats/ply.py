@@ -188,6 +188,61 @@ def _ply_kind(word: str, path, line: int) -> str:
     return kind
 
 
+def _ply_format(path: Path, words: list[str]) -> str:
+    """The encoding of a ``format <encoding> 1.0`` line."""
+    if len(words) != 3 or words[1] not in _ENCODINGS:
+        raise MeshFormatError(f"{path}: PLY format {' '.join(words[1:])!r} is not one of "
+                              f"{', '.join(_ENCODINGS)}")
+    if words[2] != _VERSION:
+        raise MeshFormatError(f"{path}: PLY version {words[2]!r} is not supported (the format "
+                              f"has version {_VERSION})")
+    return words[1]
+
+
+def _ply_element(path: Path, words: list[str], number: int) -> tuple[str, int, list]:
+    """A new ``element <name> <count>`` with no properties yet."""
+    if len(words) != 3 or not words[2].isdigit():
+        raise MeshFormatError(f"{path}: PLY header line {number}: element "
+                              f"{' '.join(words[1:])!r} needs a name and a count")
+    return words[1], int(words[2]), []
+
+
+def _ply_property(path: Path, text: str, number: int, elements: list) -> tuple:
+    """A ``property <type> <name>`` or ``property list <count type> <item type> <name>`` line
+    as ``(name, kind)``; ``kind`` is a tuple for a list."""
+    if not elements:
+        raise MeshFormatError(f"{path}: PLY header line {number}: a property before any "
+                              "element")
+    words = text.split()
+    if len(words) == 5 and words[1] == "list":
+        return words[-1], (_ply_kind(words[2], path, number), _ply_kind(words[3], path, number))
+    if len(words) == 3:
+        return words[-1], _ply_kind(words[1], path, number)
+    raise MeshFormatError(f"{path}: PLY header line {number}: malformed property "
+                          f"{text.strip()!r}")
+
+
+def _header_line(path: Path, text: str, number: int, state: dict) -> None:
+    """Apply one header line (not ``end_header``) to ``state``: ``encoding``, ``elements``
+    (name, count, properties) and ``metadata`` (the first comment of each key)."""
+    words = text.split()
+    key = words[0]
+    if key in ("comment", "obj_info"):
+        parts = text.split(None, 2)
+        if key == "comment" and len(parts) == 3:
+            state["metadata"].setdefault(parts[1], parts[2].strip())
+    elif key == "format":
+        state["encoding"] = _ply_format(path, words)
+    elif key == "element":
+        state["elements"].append(_ply_element(path, words, number))
+    elif key == "property":
+        prop = _ply_property(path, text, number, state["elements"])
+        state["elements"][-1][2].append(prop)
+    else:
+        raise MeshFormatError(f"{path}: PLY header line {number}: unknown keyword "
+                              f"{key[:40]!r}")
+
+
 def read_header(path) -> PlyHeader:
     """Read and check the header of the PLY file ``path``.
 
@@ -201,7 +256,7 @@ def read_header(path) -> PlyHeader:
     MeshFormatError
     """
     path = check_source(path, MeshFormatError)
-    encoding, elements, metadata = None, [], {}
+    state = {"encoding": None, "elements": [], "metadata": {}}
     with open(path, "rb") as fh:
         if fh.readline(16).rstrip(b"\r\n") != b"ply":
             raise MeshFormatError(f"{path}: not a PLY file (no 'ply' magic line)")
@@ -210,46 +265,15 @@ def read_header(path) -> PlyHeader:
             if not raw:
                 break
             text = raw.decode("ascii", errors="replace")
-            words = text.split()
-            if not words:
+            if not text.split():
                 continue
-            key = words[0]
-            if key == "end_header":
-                if encoding is None:
-                    raise MeshFormatError(f"{path}: PLY header has no format line")
-                return PlyHeader(encoding, tuple(elements), fh.tell(), metadata)
-            if key in ("comment", "obj_info"):
-                parts = text.split(None, 2)
-                if key == "comment" and len(parts) == 3:
-                    metadata.setdefault(parts[1], parts[2].strip())
-            elif key == "format":
-                if len(words) != 3 or words[1] not in _ENCODINGS:
-                    raise MeshFormatError(f"{path}: PLY format {' '.join(words[1:])!r} is not "
-                                          f"one of {', '.join(_ENCODINGS)}")
-                if words[2] != _VERSION:
-                    raise MeshFormatError(f"{path}: PLY version {words[2]!r} is not supported "
-                                          f"(the format has version {_VERSION})")
-                encoding = words[1]
-            elif key == "element":
-                if len(words) != 3 or not words[2].isdigit():
-                    raise MeshFormatError(f"{path}: PLY header line {number}: element "
-                                          f"{' '.join(words[1:])!r} needs a name and a count")
-                elements.append((words[1], int(words[2]), []))
-            elif key == "property":
-                if not elements:
-                    raise MeshFormatError(f"{path}: PLY header line {number}: a property "
-                                          "before any element")
-                if len(words) == 5 and words[1] == "list":
-                    kind = (_ply_kind(words[2], path, number), _ply_kind(words[3], path, number))
-                elif len(words) == 3:
-                    kind = _ply_kind(words[1], path, number)
-                else:
-                    raise MeshFormatError(f"{path}: PLY header line {number}: malformed "
-                                          f"property {text.strip()!r}")
-                elements[-1][2].append((words[-1], kind))
-            else:
-                raise MeshFormatError(f"{path}: PLY header line {number}: unknown keyword "
-                                      f"{key[:40]!r}")
+            if text.split()[0] != "end_header":
+                _header_line(path, text, number, state)
+                continue
+            if state["encoding"] is None:
+                raise MeshFormatError(f"{path}: PLY header has no format line")
+            return PlyHeader(state["encoding"], tuple(state["elements"]), fh.tell(),
+                             state["metadata"])
     raise MeshFormatError(f"{path}: PLY header has no end_header line")
 
 

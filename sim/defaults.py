@@ -12,8 +12,11 @@ imaging and shape reconstruction*.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
+
+from sim.sensors import PATTERNS
 
 # Newton's gravitational constant [m^3 kg^-1 s^-2], CODATA 2018.
 GRAVITATIONAL_CONSTANT = 6.67430e-11
@@ -25,7 +28,6 @@ TARGET_KINDS = ("ellipsoid", "rso-a", "rso-b", "mesh", "satellite", "polyhedron"
                 "cratered-asteroid")
 GENERATED_KINDS = ("satellite", "polyhedron", "cratered-asteroid")
 SIZED_KINDS = ("polyhedron", "cratered-asteroid")
-PATTERNS = ("single", "cross", "zigzag", "grid")
 # "kepler": the circular orbit of [orbit] about the target and the uniform spin of [target];
 # "spice": positions and attitudes read from SPICE kernels (sim/motion.py, SpiceGeometry).
 ORBIT_KINDS = ("kepler", "spice")
@@ -67,8 +69,9 @@ class Key:
         The bound itself is refused (``minimum=0, exclusive_minimum=True``: positive).
     finite : bool
         Refuse infinities (NaN is always refused). ``False`` only where ``inf`` means something.
-    choices : tuple of str
-        The allowed values of a ``str`` key (empty: any string).
+    choices : collection of str
+        The allowed values of a ``str`` key (empty: any string); a live view for
+        ``sensor.pattern``.
     nonzero : bool
         An array must not be all zeros (a direction or a quaternion).
     """
@@ -82,7 +85,7 @@ class Key:
     exclusive_minimum: bool = False
     exclusive_maximum: bool = False
     finite: bool = True
-    choices: tuple[str, ...] = ()
+    choices: Collection[str] = ()
     nonzero: bool = False
 
 
@@ -209,7 +212,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "replan_s": Key(300.0, "number", "s", "gaps: replanning interval", **POSITIVE),
     },
     "sensor": {
-        "pattern": Key("single", "str", "", "single, cross, zigzag or grid", choices=PATTERNS),
+        # The registered patterns (sim/sensors.py), read live: a pattern registered later counts.
+        "pattern": Key("single", "str", "", "beam pattern: " + ", ".join(PATTERNS),
+                       choices=PATTERNS.keys()),
         # Paper: "The cross configuration field of view is set to 10 x 10 deg" (asteroid); an
         # "A x B" field of view spans A in azimuth and B in elevation, centred on the boresight.
         # Four numbers give [az_min, az_max, el_min, el_max] per side (paper, Figures 2 and 3).
@@ -319,7 +324,9 @@ ALTERNATIVES: dict[str, tuple[str, ...]] = {
 }
 
 # Keys that only mean something for some values of another key: (section, key) -> (section,
-# key, allowed values). Giving one of these in a scene where it means nothing is an error.
+# key, allowed values). Giving one of these in a scene where it means nothing is an error. The
+# [sensor] keys a beam pattern reads are declared by the pattern itself (sim/sensors.py,
+# ``Pattern.keys``) and added to these by sim/schema.py.
 ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     ("target", "semi_axes"): ("target", "kind", ("ellipsoid",)),
     ("target", "subdivisions"): ("target", "kind", ("ellipsoid",)),
@@ -329,7 +336,6 @@ ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     ("target", "center"): ("target", "kind", ("mesh",)),
     ("target", "seed"): ("target", "kind", GENERATED_KINDS),
     ("target", "size"): ("target", "kind", SIZED_KINDS),
-    ("sensor", "field_of_view_deg"): ("sensor", "pattern", ("cross", "zigzag", "grid")),
     ("attitude", "max_rate_deg_s"): ("attitude", "mode", ("gaps",)),
     ("attitude", "max_offset_deg"): ("attitude", "mode", ("gaps",)),
     ("attitude", "replan_s"): ("attitude", "mode", ("gaps",)),
@@ -337,7 +343,6 @@ ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     ("slew", "period"): ("attitude", "mode", ("fixed",)),
     ("slew", "axis"): ("attitude", "mode", ("fixed",)),
     ("slew", "phase_deg"): ("attitude", "mode", ("fixed",)),
-    ("sensor", "beams"): ("sensor", "pattern", ("zigzag",)),
     **{("orbit", key): ("orbit", "kind", ("kepler",)) for key in (
         "radius", "inclination_deg", "node_deg", "phase_deg", "density", "mu", "period",
         "change_time", "change_inclination_deg")},
@@ -347,7 +352,6 @@ ONLY_WITH: dict[tuple[str, str], tuple[str, str, tuple[str, ...]]] = {
     # The target's attitude comes from its kernel frame in a SPICE-driven scene.
     **{("target", key): ("orbit", "kind", ("kepler",)) for key in (
         "spin_period", "spin_axis", "attitude")},
-    ("sensor", "resolution"): ("sensor", "pattern", ("grid",)),
 }
 
 # Cross-key rules, each checked by sim/schema.py with a one-line message naming the key.

@@ -17,7 +17,7 @@ import numpy as np
 
 from formats.errors import MeshFormatError
 from formats.strike_log import SensorErrors, estimate_log_bytes
-from sim import procedural, targets
+from sim import procedural, sensors, targets
 from sim.defaults import (
     BYTES_PER_FACE,
     BYTES_PER_RAY,
@@ -155,24 +155,18 @@ def check_spice_pose_errors(values: dict) -> None:
                          "the sensor attitude comes from the kernels (leave the slew at 0)")
 
 
-def n_beams(sensor: dict) -> int:
-    """Beams of a ``[sensor]`` pattern, counted without building it (sim/sensors.py)."""
-    pattern = sensor["pattern"]
-    if pattern == "grid":
-        return int(sensor["resolution"][0]) * int(sensor["resolution"][1])
-    return {"single": 1, "cross": 5}.get(pattern) or int(sensor["beams"])
-
-
 def cost(values: dict, n_shots: int, errors: SensorErrors, *, n_vertices: int, n_faces: int
          ) -> Cost:
     """Estimate a run's rays, memory and log size from checked values (sim/pipeline.py's
     chunking: about RAYS_PER_CHUNK rays a chunk, at least one shot, CHUNKS_IN_FLIGHT ahead)."""
-    beams = n_beams(values["sensor"])
+    sensor = values["sensor"]
+    beams = sensors.n_beams(sensor)
     per_shot = beams * (1 + (int(errors.pulse_dilation_subrays) if errors.dilation else 0))
     chunk = max(RAYS_PER_CHUNK, per_shot)
     memory = (CHUNKS_IN_FLIGHT + 1) * chunk * BYTES_PER_RAY + n_faces * BYTES_PER_FACE
-    disk = estimate_log_bytes(n_shots, n_shots * beams, reports_angles=values["sensor"][
-        "pattern"] == "grid", truth=True, n_vertices=n_vertices, n_faces=n_faces)
+    disk = estimate_log_bytes(n_shots, n_shots * beams,
+                              reports_angles=sensors.PATTERNS[sensor["pattern"]].reports_angles,
+                              truth=True, n_vertices=n_vertices, n_faces=n_faces)
     return Cost(shots=n_shots, beams=beams, rays=n_shots * per_shot, memory_bytes=memory,
                 disk_bytes=disk)
 

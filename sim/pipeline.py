@@ -140,8 +140,7 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
     if slew.get("amplitude_deg", 0.0) > 0:
         the_slew = {"amplitude": math.radians(slew["amplitude_deg"]), "period": slew["period"],
                     "axis": slew["axis"], "phase": math.radians(slew["phase_deg"])}
-    pattern = beam_pattern(sensor["pattern"], fov_deg=sensor.get("field_of_view_deg"),
-                           beams=sensor.get("beams"), resolution=sensor.get("resolution"))
+    pattern = beam_pattern(sensor)
     errors = scene.errors
     cone = (cone_pattern(int(errors.pulse_dilation_subrays), errors.pulse_dilation_half_angle)
             if errors.dilation else None)
@@ -427,7 +426,7 @@ def iter_closed_loop(plan: Plan) -> Iterator[Chunk]:
 def sensor_info(plan: Plan) -> SensorInfo:
     """The log's description of the sensor."""
     p = plan.pattern
-    return SensorInfo(pattern=p.pattern, beam_directions=p.directions, range_min=plan.range_min,
+    return SensorInfo(pattern=p.recorded_as, beam_directions=p.directions, range_min=plan.range_min,
                       range_max=plan.range_max, field_of_view=tuple(float(a) for a in
                                                                      p.field_of_view),
                       reports_angles=p.reports_angles, errors=plan.errors)

@@ -37,6 +37,7 @@ from sim.defaults import (
     Key,
 )
 from sim.errors import SceneError
+from sim.sensors import PATTERNS, patterns_using
 
 # --------------------------------------------------------------------------- types, per layer
 
@@ -73,45 +74,49 @@ def _typed_string(name: str, value: str) -> None:
                          f"characters, got {len(value):,} characters {brief(value)}")
 
 
-def _typed(section: str, key: str, value):
-    """Check the type of one value against the schema; return it normalised (floats, lists)."""
-    spec = SCHEMA[section][key]
-    name = f"{section}.{key}"
-    kind = spec.kind
-    got = f"got {_kind_name(value)} {brief(value)}"
-    if kind == "number":
-        if not _is_number(value):
-            raise SceneError(f"{name} must be a number [{spec.unit}], {got}")
-        return float(value)
-    if kind == "int":
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise SceneError(f"{name} must be an integer, {got}")
-        return value
-    if kind == "str":
-        if isinstance(value, datetime.datetime | datetime.date):
-            value = _iso_utc(value)   # a bare TOML date-time (orbit.start_utc)
-        if not isinstance(value, str):
-            raise SceneError(f"{name} must be a string, {got}")
-        if len(value) > MAX_STRING_CHARS or any(ord(c) < 32 for c in value):
-            raise SceneError(f"{name} must be a string of at most {MAX_STRING_CHARS} printable "
-                             f"characters, got {len(value):,} characters {brief(value)}")
-        return value
-    if kind == "paths":
-        if not isinstance(value, list) or not value or len(value) > MAX_PATHS or \
-                not all(isinstance(v, str) and v for v in value):
-            raise SceneError(f"{name} must be an array of 1 to {MAX_PATHS} file names, {got}")
-        for item in value:
-            _typed_string(name, item)
-        return list(value)
-    if kind == "bool":
-        if not isinstance(value, bool):
-            raise SceneError(f"{name} must be true or false, {got}")
-        return value
-    lengths = (2, 4) if kind == "fov" else (int(kind[-1]),)
+def _as_number(name: str, spec: Key, value, got: str) -> float:
+    if not _is_number(value):
+        raise SceneError(f"{name} must be a number [{spec.unit}], {got}")
+    return float(value)
+
+
+def _as_int(name: str, spec: Key, value, got: str) -> int:
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if not isinstance(value, int) or isinstance(value, bool):
+        raise SceneError(f"{name} must be an integer, {got}")
+    return value
+
+
+def _as_str(name: str, spec: Key, value, got: str) -> str:
+    if isinstance(value, datetime.datetime | datetime.date):
+        value = _iso_utc(value)   # a bare TOML date-time (orbit.start_utc)
+    if not isinstance(value, str):
+        raise SceneError(f"{name} must be a string, {got}")
+    _typed_string(name, value)
+    return value
+
+
+def _as_paths(name: str, spec: Key, value, got: str) -> list[str]:
+    if not isinstance(value, list) or not value or len(value) > MAX_PATHS or \
+            not all(isinstance(v, str) and v for v in value):
+        raise SceneError(f"{name} must be an array of 1 to {MAX_PATHS} file names, {got}")
+    for item in value:
+        _typed_string(name, item)
+    return list(value)
+
+
+def _as_bool(name: str, spec: Key, value, got: str) -> bool:
+    if not isinstance(value, bool):
+        raise SceneError(f"{name} must be true or false, {got}")
+    return value
+
+
+def _as_array(name: str, spec: Key, value, got: str) -> list:
+    """``vec<N>``, ``ivec<N>`` and ``fov`` (2 or 4 numbers) values."""
+    lengths = (2, 4) if spec.kind == "fov" else (int(spec.kind[-1]),)
     want = " or ".join(str(n) for n in lengths)
-    integer = kind.startswith("ivec")
+    integer = spec.kind.startswith("ivec")
     what = "integers" if integer else "numbers"
     if not isinstance(value, list) or len(value) not in lengths:
         raise SceneError(f"{name} must be an array of {want} {what}, {got}")
@@ -123,6 +128,18 @@ def _typed(section: str, key: str, value):
     if not all(_is_number(v) for v in value):
         raise SceneError(f"{name} must be an array of {want} numbers, {got}")
     return [float(v) for v in value]
+
+
+# The type check of each scalar kind; every other kind is an array (``_as_array``).
+_AS_KIND: dict[str, Callable] = {"number": _as_number, "int": _as_int, "str": _as_str,
+                                 "paths": _as_paths, "bool": _as_bool}
+
+
+def _typed(section: str, key: str, value):
+    """Check the type of one value against the schema; return it normalised (floats, lists)."""
+    spec = SCHEMA[section][key]
+    check = _AS_KIND.get(spec.kind, _as_array)
+    return check(f"{section}.{key}", spec, value, f"got {_kind_name(value)} {brief(value)}")
 
 
 def check_layer(layer: dict, where: str) -> dict:
@@ -184,6 +201,28 @@ def _unit(spec: Key, bracket: bool) -> str:
     return f" [{spec.unit}]" if bracket else f" {spec.unit}"
 
 
+def _lower_bound_only(spec: Key) -> str:
+    """``requirement`` of a key bounded below only."""
+    lo = spec.minimum
+    if spec.kind == "int":
+        return f"at least {lo:g}"
+    if lo == 0 and spec.exclusive_minimum:
+        return f"a positive {'finite ' if spec.finite else ''}number{_unit(spec, True)}"
+    return (f"a finite number {'>' if spec.exclusive_minimum else '>='} {lo:g}"
+            f"{_unit(spec, True)}")
+
+
+def _range(spec: Key) -> str:
+    """``requirement`` of a number bounded above, and maybe below."""
+    lo, hi = spec.minimum, spec.maximum
+    above = f"{'below' if spec.exclusive_maximum else 'at most'} {hi:g}{_unit(spec, False)}"
+    if lo is None:
+        return above
+    if not (spec.exclusive_minimum or spec.exclusive_maximum):
+        return f"between {lo:g} and {hi:g}{_unit(spec, False)}"
+    return f"{'above' if spec.exclusive_minimum else 'at least'} {lo:g} and {above}"
+
+
 def requirement(spec: Key) -> str:
     """What a key's declared bounds require, as the end of a sentence ``key must be ...``."""
     lo, hi = spec.minimum, spec.maximum
@@ -195,19 +234,7 @@ def requirement(spec: Key) -> str:
         return f"{spec.kind[-1]} positive numbers{_unit(spec, True)}"
     if lo is None and hi is None:
         return "finite"
-    if hi is None:
-        if spec.kind == "int":
-            return f"at least {lo:g}"
-        if lo == 0 and spec.exclusive_minimum:
-            return f"a positive {'finite ' if spec.finite else ''}number{_unit(spec, True)}"
-        return (f"a finite number {'>' if spec.exclusive_minimum else '>='} {lo:g}"
-                f"{_unit(spec, True)}")
-    if lo is None:
-        return f"{'below' if spec.exclusive_maximum else 'at most'} {hi:g}{_unit(spec, False)}"
-    if not (spec.exclusive_minimum or spec.exclusive_maximum):
-        return f"between {lo:g} and {hi:g}{_unit(spec, False)}"
-    return (f"{'above' if spec.exclusive_minimum else 'at least'} {lo:g} and "
-            f"{'below' if spec.exclusive_maximum else 'at most'} {hi:g}{_unit(spec, False)}")
+    return _lower_bound_only(spec) if hi is None else _range(spec)
 
 
 def _within(spec: Key, x: float) -> bool:
@@ -271,13 +298,21 @@ EXTRA_CHECKS: dict[tuple[str, str], Callable[[str, list], None]] = {
 # --------------------------------------------------------------------------- merged values
 
 
+def only_with() -> dict[tuple[str, str], tuple[str, str, tuple[str, ...]]]:
+    """ONLY_WITH of sim/defaults.py and the ``[sensor]`` keys each registered beam pattern
+    reads (sim/sensors.py): (section, key) -> (section, key, allowed values)."""
+    read = {key for pattern in PATTERNS.values() for key in pattern.keys}
+    return {**ONLY_WITH, **{("sensor", key): ("sensor", "pattern", patterns_using(key))
+                            for key in sorted(read)}}
+
+
 def _drop_unused(values: dict, user_keys: dict[tuple[str, str], int]) -> None:
-    """Apply ONLY_WITH: a key that means nothing for the chosen target or pattern.
+    """Apply ``only_with()``: a key that means nothing for the chosen target or pattern.
 
     Given in the layer that made the choice, or later, it is an error; given only by an earlier
     layer (a preset's grid resolution, when ``--set`` picks a cross) it is dropped.
     """
-    for (section, key), (by_section, by_key, allowed) in ONLY_WITH.items():
+    for (section, key), (by_section, by_key, allowed) in only_with().items():
         chosen = values[by_section][by_key]
         if chosen in allowed:
             continue
@@ -327,7 +362,7 @@ def check_values(values: dict, user_keys: dict[tuple[str, str], int]) -> dict:
         A value outside its declared bounds, a key that means nothing here, or a broken
         cross-key rule; one line naming the key.
     """
-    for section, key in {(s, k) for s, k, _ in ONLY_WITH.values()}:   # the choices first
+    for section, key in {(s, k) for s, k, _ in only_with().values()}:   # the choices first
         _check_value(f"{section}.{key}", SCHEMA[section][key], values[section][key])
     _drop_unused(values, user_keys)
     for section, keys in SCHEMA.items():

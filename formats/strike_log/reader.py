@@ -4,7 +4,7 @@ it is read, so a corrupt log raises ``StrikeLogError`` instead of numbers that l
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import fields
 from pathlib import Path
 
@@ -135,6 +135,15 @@ class StrikeLog:
         return ds
 
     def _check_schema(self) -> None:
+        """Check the whole layout of SPEC.md (attributes, sensor, every dataset's shape and
+        kind) and open the datasets, without reading their rows."""
+        self._check_root()
+        self.sensor = self._read_sensor()
+        _check_sensor(self.sensor, self._where)
+        self._open_datasets()
+
+    def _check_root(self) -> None:
+        """The root attributes: format and version, the others of SPEC.md, the row counts."""
         f, where = self._file, self._where
         fmt = f.attrs.get("format")
         if isinstance(fmt, bytes):
@@ -158,17 +167,20 @@ class StrikeLog:
         if self.n_shots < 0 or self.n_strikes < 0:
             raise StrikeLogError(f"{where}: negative row counts")
 
-        g = f["sensor"] if "sensor" in f else None
-        if g is None:
+    def _read_sensor(self) -> SensorInfo:
+        """The /sensor group and its /sensor/errors."""
+        f, where = self._file, self._where
+        if "sensor" not in f:
             raise StrikeLogError(f"{where}: missing group /sensor")
+        g = f["sensor"]
         directions = self._dataset("sensor/beam_directions", None, (3,), "f")[()]
-        errors = f["sensor/errors"] if "sensor/errors" in f else None
-        if errors is None:
+        if "sensor/errors" not in f:
             raise StrikeLogError(f"{where}: missing group /sensor/errors")
+        errors = f["sensor/errors"]
         fov = np.asarray(g.attrs.get("field_of_view", np.zeros(0)))
         if fov.shape != (4,) or fov.dtype.kind != "f":
             raise StrikeLogError(f"{where}: /sensor attribute 'field_of_view' must be 4 floats")
-        self.sensor = SensorInfo(
+        return SensorInfo(
             pattern=self._attr(g, "pattern", str), beam_directions=directions,
             range_min=self._attr(g, "range_min", float),
             range_max=self._attr(g, "range_max", float),
@@ -177,8 +189,9 @@ class StrikeLog:
             errors=SensorErrors(**{k.name: self._error_attr(errors, k.name)
                                    for k in fields(SensorErrors)
                                    if k.name in errors.attrs or k.name not in POSE_ERROR_FIELDS}))
-        _check_sensor(self.sensor, where)
 
+    def _open_datasets(self) -> None:
+        """The shot, strike and (when present) truth datasets, each of its declared shape."""
         self._shots = {k: self._dataset(f"shots/{k}", self.n_shots, tail, "f")
                        for k, tail in _SHOT_FIELDS.items()}
         spec = {k: ((), "iu") for k in ("shot", "beam")} | {"range": ((), "f")}
@@ -186,7 +199,7 @@ class StrikeLog:
             spec |= {k: ((), "f") for k in _ANGLE_FIELDS}
         self._strikes = {k: self._dataset(f"strikes/{k}", self.n_strikes, tail, kinds)
                          for k, (tail, kinds) in spec.items()}
-        self.has_truth = "truth" in f
+        self.has_truth = "truth" in self._file
         if self.has_truth:
             self._truth_shots = {k: self._dataset(f"truth/{k}", self.n_shots, tail, "f")
                                  for k, tail in _TRUTH_SHOT_FIELDS.items()}
@@ -558,20 +571,41 @@ def follow(path, *, chunk_rows: int = READ_CHUNK_ROWS, poll_s: float = 0.5,
     """
     path = Path(path)
     deadline = time.monotonic() + timeout_s
+    temporary = _await_writer(path, deadline, poll_s, timeout_s)
+    if temporary is None:
+        with StrikeLog(path) as log:
+            for chunk in log.iter_chunks(chunk_rows):
+                yield chunk, log
+        return
+    inode = temporary.stat().st_ino
+    done, previous_shot = yield from _follow_live(path, temporary, deadline, chunk_rows, poll_s,
+                                                  timeout_s)
+    _await_rename(path, temporary, inode, poll_s, timeout_s)
+    with StrikeLog(path) as final:
+        for chunk in final.iter_chunks(chunk_rows, first=done, previous_shot=previous_shot):
+            yield chunk, final
+
+
+def _await_writer(path: Path, deadline: float, poll_s: float, timeout_s: float
+                  ) -> Path | None:
+    """The live writer's temporary file beside ``path``, or None when the complete log is there
+    and no writer is at work (waiting until ``deadline``, a ``time.monotonic()``)."""
     while True:
         partial = _partial_logs(path)
         if partial:
-            break
+            return partial[0]
         if path.exists():
-            with StrikeLog(path) as log:
-                for chunk in log.iter_chunks(chunk_rows):
-                    yield chunk, log
-            return
+            return None
         if time.monotonic() > deadline:
             raise StrikeLogError(f"{path}: no log and no writer at work after {timeout_s:g} s")
         time.sleep(poll_s)
-    temporary = partial[0]
-    inode = temporary.stat().st_ino
+
+
+def _follow_live(path: Path, temporary: Path, deadline: float, chunk_rows: int, poll_s: float,
+                 timeout_s: float
+                 ) -> Generator[tuple[StrikeChunk, StrikeLog], None, tuple[int, int | None]]:
+    """Yield the committed strikes of the writer's temporary file until it closes (waiting for
+    it to become readable until ``deadline``); return the strikes read and the last shot."""
     done, previous_shot = 0, None
     with _open_live(temporary, deadline, poll_s) as log:
         deadline = time.monotonic() + timeout_s
@@ -583,26 +617,35 @@ def follow(path, *, chunk_rows: int = READ_CHUNK_ROWS, poll_s: float = 0.5,
                     done, previous_shot = chunk.start + len(chunk), int(chunk.shot[-1])
                 deadline = time.monotonic() + timeout_s
             if log.closing or not temporary.exists():
-                break
-            pid = partial_pid(temporary)
-            if pid is not None and not process_alive(pid):
-                log.refresh()
-                if not log.closing and temporary.exists() and log.n_strikes == done:
-                    raise StrikeLogError(
-                        f"{path}: the writer (process {pid}) died after {log.n_shots} shots and "
-                        f"{done} strikes; `recon recover {path} -o LOG.h5` makes a log of them")
+                return done, previous_shot
+            if _writer_died(path, temporary, log, done):
                 continue
             if time.monotonic() > deadline:
                 raise StrikeLogError(f"{path}: nothing new for {timeout_s:g} s (is the writer "
                                      "still running?)")
             time.sleep(poll_s)
-    # The writer is finishing: the complete log appears at ``path``, the same file renamed.
+
+
+def _writer_died(path: Path, temporary: Path, log: StrikeLog, done: int) -> bool:
+    """Whether the writer's process is gone; raise if it left strikes unfinished (nothing
+    closing, nothing new since ``done``)."""
+    pid = partial_pid(temporary)
+    if pid is None or process_alive(pid):
+        return False
+    log.refresh()
+    if not log.closing and temporary.exists() and log.n_strikes == done:
+        raise StrikeLogError(
+            f"{path}: the writer (process {pid}) died after {log.n_shots} shots and "
+            f"{done} strikes; `recon recover {path} -o LOG.h5` makes a log of them")
+    return True
+
+
+def _await_rename(path: Path, temporary: Path, inode: int, poll_s: float, timeout_s: float
+                  ) -> None:
+    """Wait for the finishing writer to rename its temporary file (``inode``) to ``path``."""
     deadline = time.monotonic() + timeout_s
     while not _is_file(path, inode):
         gone = not temporary.exists()
         if (gone and not _is_file(path, inode)) or time.monotonic() > deadline:
             raise StrikeLogError(f"{path}: the writer stopped before completing the log")
         time.sleep(poll_s)
-    with StrikeLog(path) as final:
-        for chunk in final.iter_chunks(chunk_rows, first=done, previous_shot=previous_shot):
-            yield chunk, final

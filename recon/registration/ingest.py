@@ -27,8 +27,8 @@ from formats.cloud_io import open_cloud_writer
 from formats.geometry import Cloud
 from formats.strike_log import follow
 from formats.strike_log.schema import directions_to_angles
-from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
-from recon.surfaces.uncertainty import strike_columns
+from recon.registration.uncertainty import COLUMNS as SIGMA_COLUMNS
+from recon.registration.uncertainty import strike_columns
 
 Frame = Literal["body", "inertial"]
 # Strikes per block when a log is scored as it is read (``iter_points``): the reader's and the
@@ -99,7 +99,7 @@ def iter_registered(log: StrikeLog, *, frame: Frame = "body", chunk_rows: int | 
         Corrections of the recorded poses (``refine``).
 
     Each block's attributes are ``register_chunk``'s plus the strikes' 1-sigma uncertainty
-    columns from the log's recorded error model (``recon.surfaces.uncertainty``).
+    columns from the log's recorded error model (``recon.registration.uncertainty``).
     """
     if frame not in FRAMES:
         raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
@@ -250,7 +250,7 @@ def ingest(log_path, *, frame: Frame = "body", output=None, chunk_rows: int | No
     Cloud
         (n, 3) float64 metres in ``frame``; attributes ``time``, ``shot``, ``beam``, ``range``,
         ``azimuth``, ``elevation``, ``view_x/y/z`` and the uncertainty columns
-        (``recon.surfaces.uncertainty.COLUMNS``).
+        (``recon.registration.uncertainty.COLUMNS``).
     """
     _, blocks = _register_and_write(log_path, output, frame=frame, chunk_rows=chunk_rows,
                                     progress=progress, keep=True, correction=correction)

@@ -1,6 +1,6 @@
 """What a method's mesh must be before it counts: not empty, not degenerate; and whether it is
-watertight. Applied to every run, isolated or not (``recon.surfaces.isolation``,
-``recon.surfaces.reconstruct``)."""
+watertight (``recon.surfaces.methods.watertight``, which methods use too). Applied to every run,
+isolated or not (``recon.surfaces.isolation``, ``recon.surfaces.reconstruct``)."""
 
 from __future__ import annotations
 
@@ -22,30 +22,6 @@ class SurfaceRejected(MethodFailed):
     def __init__(self, kind: str, reason: str):
         super().__init__(reason)
         self.kind = kind
-
-
-def watertight(faces: np.ndarray) -> bool:
-    """True when every edge has exactly two faces that traverse it in opposite directions.
-
-    Each edge is one int64 key (``a * n + b`` for the edge from vertex a to b, n vertices), so
-    the test is two 1-D sorts rather than row-wise uniques of the (3f, 2) edge array.
-
-    Parameters
-    ----------
-    faces : (f, 3) int64, non-negative
-    """
-    if len(faces) == 0:
-        return False
-    faces = np.asarray(faces, dtype=np.int64)
-    n = int(faces.max()) + 1
-    a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
-    directed = np.sort(a * n + b)
-    if len(directed) % 2 or np.any(directed[1:] == directed[:-1]):
-        return False  # an odd edge count, or an edge traversed twice the same way
-    undirected = np.sort(np.minimum(a, b) * n + np.maximum(a, b))
-    # Sorted, every key exactly twice: equal within each pair, different across pairs.
-    return bool(np.all(undirected[0::2] == undirected[1::2])
-                and np.all(undirected[1:-1:2] != undirected[2::2]))
 
 
 def check_surface(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, *, method: str

@@ -60,8 +60,8 @@ import numpy as np
 
 from formats import scratch
 from formats.errors import ReconError
-from recon.surfaces.checks import SurfaceRejected, check_surface, watertight
-from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, predicted_fit_s
+from recon.surfaces.checks import SurfaceRejected, check_surface
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, predicted_fit_s, watertight
 
 # Defaults of every isolated run, also the CLI's.
 # 600 s: several times the slowest method's default run on 2e5 points (pymeshlab ball pivoting

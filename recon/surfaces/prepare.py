@@ -20,9 +20,9 @@ from scipy.spatial import cKDTree
 
 from formats.errors import ReconError
 from formats.geometry import Cloud
+from recon.registration.uncertainty import COLUMNS as SIGMA_COLUMNS
 from recon.surfaces.methods import MethodInput
 from recon.surfaces.normals import DEFAULT_K, Fallback, local_planes, orient
-from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
 from recon.surfaces.uncertainty import normal_sigma
 
 # Statistical outlier removal (Rusu et al. 2008, PCL's StatisticalOutlierRemoval): a point is an
@@ -162,7 +162,7 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
         Orientation heuristic when there are no view points.
     seed : int
     uncertainty : dict of str to (n,) arrays, optional
-        The strikes' recorded uncertainty columns (``recon.surfaces.uncertainty.COLUMNS``, as
+        The strikes' recorded uncertainty columns (``recon.registration.uncertainty.COLUMNS``, as
         ingest writes them); with ``view_points`` they give ``MethodInput.sigma``.
 
     Returns

@@ -14,9 +14,9 @@ from __future__ import annotations
 from typing import Any
 
 from formats.geometry import Cloud, Mesh
-from recon.surfaces.checks import check_surface, watertight
+from recon.surfaces.checks import check_surface
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_isolated
-from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, watertight
 
 
 def estimate_of(surface: Mesh, cloud: Cloud, *, heldout=None, seed: int = 0):

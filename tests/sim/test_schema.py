@@ -7,15 +7,15 @@ import math
 import pytest
 
 import sim
-from sim.defaults import ALTERNATIVES, ONLY_WITH, SCHEMA, Key
+from sim.defaults import ALTERNATIVES, SCHEMA, Key
 from sim.errors import SceneError
-from sim.schema import requirement
+from sim.schema import only_with, requirement
 
 
 def _context(section: str, key: str) -> list[str]:
     """Overrides under which ``section.key`` means something."""
-    if (section, key) in ONLY_WITH:
-        by_section, by_key, allowed = ONLY_WITH[(section, key)]
+    if (section, key) in only_with():
+        by_section, by_key, allowed = only_with()[(section, key)]
         return [f"{by_section}.{by_key}={allowed[0]}"]
     return []
 
@@ -58,7 +58,7 @@ def test_no_number_key_accepts_nan(section, key):
 
 
 def test_choices_are_declared_and_enforced():
-    for section, key in {(s, k) for s, k, _ in ONLY_WITH.values()}:
+    for section, key in {(s, k) for s, k, _ in only_with().values()}:
         spec = SCHEMA[section][key]
         assert spec.choices and spec.default in spec.choices
         with pytest.raises(SceneError, match=rf"^{section}\.{key} must be one of "):

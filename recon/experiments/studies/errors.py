@@ -23,7 +23,7 @@ import numpy as np
 
 from recon.experiments import charts
 from recon.experiments.studies import runner
-from recon.experiments.studies.runner import ROTATION_H, claim, rotations
+from recon.experiments.studies.runner import claim, rotations
 
 NAME = "errors"
 TITLE = "Error models on the ellipsoid and RSO-A (paper Tables 1 and 2)"
@@ -66,22 +66,22 @@ PLAN = {
     "full": {"duration": {("ellipsoid", "LIDAR"): rotations(15),
                           ("ellipsoid", "cross LRF"): rotations(2),
                           ("ellipsoid", "zigzag LRF"): rotations(2),
-                          ("rso-a", "LIDAR"): 129 * HOUR, ("rso-a", "cross LRF"): 129 * HOUR,
-                          ("rso-a", "zigzag LRF"): 129 * HOUR},
+                          ("rso-a", "LIDAR"): rotations(30), ("rso-a", "cross LRF"): rotations(30),
+                          ("rso-a", "zigzag LRF"): rotations(30)},
              "seeds": (0, 1, 2), "overrides": (), "score": runner.TABLE_SCORE},
     "quick": {"duration": {("ellipsoid", "LIDAR"): rotations(3),
                            ("ellipsoid", "cross LRF"): rotations(2),
                            ("ellipsoid", "zigzag LRF"): rotations(2),
-                           ("rso-a", "LIDAR"): 21.5 * HOUR, ("rso-a", "cross LRF"): 43 * HOUR,
-                           ("rso-a", "zigzag LRF"): 43 * HOUR},
+                           ("rso-a", "LIDAR"): rotations(5), ("rso-a", "cross LRF"): rotations(10),
+                           ("rso-a", "zigzag LRF"): rotations(10)},
               "seeds": (0,), "overrides": (), "score": runner.CURVE_SCORE},
     "tiny": {"duration": {("ellipsoid", "LIDAR"): rotations(0.25),
                           ("ellipsoid", "cross LRF"): rotations(0.5),
                           ("ellipsoid", "zigzag LRF"): rotations(0.5),
-                          ("rso-a", "LIDAR"): 2 * HOUR, ("rso-a", "cross LRF"): ROTATION_H * HOUR,
-                          ("rso-a", "zigzag LRF"): ROTATION_H * HOUR},
+                          ("rso-a", "LIDAR"): 2 * HOUR, ("rso-a", "cross LRF"): rotations(1),
+                          ("rso-a", "zigzag LRF"): rotations(1)},
              "seeds": (0,), "overrides": {"ellipsoid": ("target.subdivisions=3",)},
-             "score": {"n_truth_samples": 4000, "coverage_points": 8000}},
+             "score": runner.TINY_SCORE},
 }
 # A noisy cloud "stays usable" when it keeps this fraction of its noise-free F-score.
 USABLE_F_FRACTION = 0.8

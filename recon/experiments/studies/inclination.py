@@ -26,18 +26,22 @@ NAME = "inclination"
 TITLE = "Score against inclination; coverage maps at 85 and 90 deg (paper Figs. 7a and 8)"
 
 # Per size: inclinations [deg], the fixed duration of the score chart and the prefixes scored
-# [rotations], the long runs of the two map inclinations [rotations], truth overrides, scores.
+# [rotations], the long runs of the two map inclinations [rotations], orbit periods [h] (among
+# them two and four spin periods, where the track over the body repeats), truth overrides,
+# scores.
 PLAN = {
     "full": {"inclinations": (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 75.0, 80.0, 85.0, 87.5, 90.0),
              "fixed": 100, "prefixes": (25, 50, 75, 100), "long": (150, 200), "map_at": 50,
-             "periods_h": (5.0, 6.0, 7.0, 8.6, 10.0, 12.0, 14.0, 17.2, 20.0, 30.0, 40.0),
+             "periods_h": (5.0, 6.0, 7.0, 2 * ROTATION_H, 10.0, 12.0, 14.0,
+                           4 * ROTATION_H, 20.0, 30.0, 40.0),
              "overrides": (), "score": runner.CURVE_SCORE},
     "quick": {"inclinations": (45.0, 75.0, 85.0, 90.0), "fixed": 30, "prefixes": (10, 20, 30),
-              "long": (), "map_at": 20, "periods_h": (8.6, 12.0), "overrides": (),
+              "long": (), "map_at": 20, "periods_h": (2 * ROTATION_H, 12.0),
+              "overrides": (),
               "score": runner.CURVE_SCORE},
     "tiny": {"inclinations": (85.0, 90.0), "fixed": 2, "prefixes": (1, 2), "long": (),
              "map_at": 1, "periods_h": (12.0,), "overrides": ("target.subdivisions=3",),
-             "score": {"n_truth_samples": 4000, "coverage_points": 8000}},
+             "score": runner.TINY_SCORE},
 }
 # The two inclinations of the coverage maps (paper Fig. 8).
 MAP_INCLINATIONS = (85.0, 90.0)
@@ -85,49 +89,10 @@ def finish(records: dict, out_dir, size: str) -> dict:
     fixed, map_at = plan["fixed"], plan["map_at"]
     keys = [k for k in (_key(i) for i in plan["inclinations"]) if k in records]
     incs = np.array([records[k]["tags"]["inclination_deg"] for k in keys])
-    files = []
-    curves = []
-    for r, style in ((map_at, {"ls": "--", "color": "tab:gray"}),
-                     (fixed, {"color": "tab:blue"})):
-        y = {}
-        for metric, _, _ in charts.METRICS:
-            y[metric] = [(runner.at(records, k, rotations(r)) or {}).get(metric, np.nan)
-                         for k in keys]
-        curves.append({"label": f"after {r:g} rotations ({r * ROTATION_H:g} h)", "x": incs, "y": y,
-                       "style": style})
-    charts.metric_panels(curves, out_dir / "score_vs_inclination.png",
-                         title="Asteroid, single-beam LRF: score against orbit inclination",
-                         x_label="orbit inclination to the asteroid's equator [deg]",
-                         note="paper Fig. 7(a): 85 to 90 deg best")
-    files.append("score_vs_inclination.png")
-
-    # Coverage maps and uncovered area of the two map inclinations.
-    vertices, faces = _truth(size)
-    lon, lat, area = charts.face_lonlat(vertices, faces)
-    cap = np.abs(lat) > CAP_LATITUDE_DEG
-    gaps = {}
-    panels = []
+    _score_chart(records, keys, incs, plan, out_dir)
+    files = ["score_vs_inclination.png"]
     longest = max(plan["prefixes"] + plan["long"])
-    for inc in MAP_INCLINATIONS:
-        key = _key(inc)
-        if key not in records:
-            continue
-        gaps[inc] = []
-        for p in records[key]["prefixes"]:
-            if not p.get("scored") or p.get("face_coverage") is None:
-                continue
-            cover = np.asarray(p["face_coverage"], dtype=float)
-            uncovered = float(np.sum(area * (1 - cover)))
-            gaps[inc].append({"rotations": p["rotations"], "uncovered_m2": uncovered,
-                              "uncovered_fraction": uncovered / area.sum(),
-                              "cap_coverage": float(np.sum(area[cap] * cover[cap])
-                                                    / area[cap].sum())})
-            if round(p["rotations"]) in (map_at, longest):
-                panels.append({"title": f"{inc:g} deg, {p['rotations']:g} rotations "
-                                        f"(coverage {p['coverage']:.3f})",
-                               "lon": lon, "lat": lat, "area": area, "coverage": cover,
-                               "order": (p["rotations"], inc)})
-    panels.sort(key=lambda q: q["order"])
+    gaps, panels = _gaps_and_maps(records, size, (map_at, longest))
     if panels:
         charts.coverage_maps(panels, out_dir / "coverage_maps.png",
                              title="Asteroid coverage by the single-beam LRF: 85 vs 90 deg "
@@ -136,17 +101,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
                                   "bands")
         files.append("coverage_maps.png")
     if gaps:
-        curves = [{"label": f"{inc:g} deg", "x": [g["rotations"] for g in gs],
-                   "y": {"uncovered_fraction": [g["uncovered_fraction"] for g in gs],
-                         "cap_coverage": [g["cap_coverage"] for g in gs]}}
-                  for inc, gs in gaps.items()]
-        charts.metric_panels(
-            curves, out_dir / "gaps_vs_rotations.png",
-            title="Do longer runs fill the gaps? Asteroid, single-beam LRF",
-            x_label=f"target rotations ({ROTATION_H:g} h each)",
-            metrics=(("uncovered_fraction", "uncovered fraction of the area", True),
-                     ("cap_coverage", f"coverage of |latitude| > {CAP_LATITUDE_DEG:g} deg",
-                      False)))
+        _gaps_chart(gaps, out_dir)
         files.append("gaps_vs_rotations.png")
     periods = _periods(records, plan, out_dir)
     if periods:
@@ -155,6 +110,65 @@ def finish(records: dict, out_dir, size: str) -> dict:
               _claim_periods(periods, map_at)]
     return {"claims": claims, "files": files,
             "extra": {"gaps": gaps, "fixed_rotations": fixed, "orbit_periods": periods}}
+
+
+def _score_chart(records: dict, keys: list[str], incs: np.ndarray, plan: dict, out_dir) -> None:
+    """Every metric against the inclination, after ``map_at`` and ``fixed`` rotations."""
+    curves = []
+    for r, style in ((plan["map_at"], {"ls": "--", "color": "tab:gray"}),
+                     (plan["fixed"], {"color": "tab:blue"})):
+        y = {metric: [(runner.at(records, k, rotations(r)) or {}).get(metric, np.nan)
+                      for k in keys]
+             for metric, _, _ in charts.METRICS}
+        curves.append({"label": f"after {r:g} rotations ({r * ROTATION_H:g} h)", "x": incs, "y": y,
+                       "style": style})
+    charts.metric_panels(curves, out_dir / "score_vs_inclination.png",
+                         title="Asteroid, single-beam LRF: score against orbit inclination",
+                         x_label="orbit inclination to the asteroid's equator [deg]",
+                         note="paper Fig. 7(a): 85 to 90 deg best")
+
+
+def _gaps_and_maps(records: dict, size: str, mapped_rotations: tuple) -> tuple[dict, list]:
+    """Uncovered area and polar-cap coverage of the two map inclinations at each prefix, and
+    the coverage-map panels of the prefixes in ``mapped_rotations``."""
+    vertices, faces = _truth(size)
+    lon, lat, area = charts.face_lonlat(vertices, faces)
+    cap = np.abs(lat) > CAP_LATITUDE_DEG
+    gaps, panels = {}, []
+    for inc in MAP_INCLINATIONS:
+        if _key(inc) not in records:
+            continue
+        gaps[inc] = []
+        for p in records[_key(inc)]["prefixes"]:
+            if not p.get("scored") or p.get("face_coverage") is None:
+                continue
+            cover = np.asarray(p["face_coverage"], dtype=float)
+            uncovered = float(np.sum(area * (1 - cover)))
+            gaps[inc].append({"rotations": p["rotations"], "uncovered_m2": uncovered,
+                              "uncovered_fraction": uncovered / area.sum(),
+                              "cap_coverage": float(np.sum(area[cap] * cover[cap])
+                                                    / area[cap].sum())})
+            if round(p["rotations"]) in mapped_rotations:
+                panels.append({"title": f"{inc:g} deg, {p['rotations']:g} rotations "
+                                        f"(coverage {p['coverage']:.3f})",
+                               "lon": lon, "lat": lat, "area": area, "coverage": cover,
+                               "order": (p["rotations"], inc)})
+    panels.sort(key=lambda q: q["order"])
+    return gaps, panels
+
+
+def _gaps_chart(gaps: dict, out_dir) -> None:
+    curves = [{"label": f"{inc:g} deg", "x": [g["rotations"] for g in gs],
+               "y": {"uncovered_fraction": [g["uncovered_fraction"] for g in gs],
+                     "cap_coverage": [g["cap_coverage"] for g in gs]}}
+              for inc, gs in gaps.items()]
+    charts.metric_panels(
+        curves, out_dir / "gaps_vs_rotations.png",
+        title="Do longer runs fill the gaps? Asteroid, single-beam LRF",
+        x_label=f"target rotations ({ROTATION_H:g} h each)",
+        metrics=(("uncovered_fraction", "uncovered fraction of the area", True),
+                 ("cap_coverage", f"coverage of |latitude| > {CAP_LATITUDE_DEG:g} deg",
+                  False)))
 
 
 def _periods(records, plan, out_dir) -> dict:
@@ -216,7 +230,9 @@ def _claim_periods(periods, map_at) -> dict:
                  "every period tried; partly at some.")
 
 
-def _claim_best(records, keys, incs, fixed) -> dict:
+def _best_by_metric(records, keys, incs, fixed) -> dict:
+    """Per metric, the inclination scoring best after ``fixed`` rotations, its value and the
+    spread of the metric over the inclinations."""
     best = {}
     for metric, _, lower in charts.METRICS:
         values = np.array([(runner.at(records, k, rotations(fixed)) or {}).get(metric, np.nan)
@@ -228,6 +244,11 @@ def _claim_best(records, keys, incs, fixed) -> dict:
         spread = float(np.ptp(values[np.isfinite(values)]))
         best[metric] = {"inclination_deg": float(incs[i]), "value": float(values[i]),
                         "spread": spread}
+    return best
+
+
+def _claim_best(records, keys, incs, fixed) -> dict:
+    best = _best_by_metric(records, keys, incs, fixed)
     flat = [m for m, b in best.items() if b["spread"] == 0]
     standard = [m for m in ("edge_score", "fscore", "chamfer_m", "coverage")
                 if m in best and m not in flat]

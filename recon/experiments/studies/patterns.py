@@ -36,7 +36,7 @@ PLAN = {
     "quick": {"multi": (0.5, 1, 2, 3), "single": (1, 2, 3, 5, 10, 20),
               "overrides": (), "score": runner.CURVE_SCORE, "points": 4000},
     "tiny": {"multi": (0.5, 1, 2), "single": (1, 2), "overrides": ("target.subdivisions=3",),
-             "score": {"n_truth_samples": 4000, "coverage_points": 8000}, "points": 500},
+             "score": runner.TINY_SCORE, "points": 500},
 }
 # Paper, Fig. 11: strikes of the cross and zigzag clouds (and the 2 rotations we compare at).
 PAPER_STRIKES = {"cross": 15674, "zigzag": 16125}

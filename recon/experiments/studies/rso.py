@@ -23,12 +23,11 @@ import numpy as np
 
 from recon.experiments import charts
 from recon.experiments.studies import runner
-from recon.experiments.studies.runner import ROTATION_H, claim
+from recon.experiments.studies.runner import ROTATION_H, claim, rotations
 
 NAME = "rso"
 TITLE = "RSO-A and RSO-B against the asteroid over time; mid-run inclination change (Figs. 16-18)"
 
-HOUR = 3600.0
 # Targets of Fig. 16: key -> (preset, label, colour).
 TARGETS = {
     "rso-a": ("rso-a-lrf", "RSO-A, single-beam LRF (250 m)", "tab:blue"),
@@ -44,24 +43,26 @@ LIDAR = ("sensor.pattern=grid", "sensor.field_of_view_deg=[6.0, 6.0]",
 SLEW_AXES = {"x": ("[1, 0, 0]", "slew across track: along the longest (panel) axis", "tab:green"),
              "y": ("[0, 1, 0]", "slew along track: along the spin axis (short)", "tab:orange")}
 SLEW_AMPLITUDE_DEG = 2.0  # the paper's slew at 85 deg; RSO-A spans +-2.3 deg at 250 m
-# Hours of the plans; one rotation is ROTATION_H.
+# Durations of the plans in target rotations (ROTATION_H hours each): the paper's axes run
+# from one rotation (4.3 h) to 30 (129 h); the inclination change leaves after 10 (43 h).
 PLAN = {
-    "full": {"hours": (ROTATION_H, 8.6, 12.9, 21.5, 43.0, 64.5, 86.0, 107.5, 129.0),
-             "lidar_hours": (ROTATION_H, 8.6, 21.5, 43.0, 129.0),
+    "full": {"rotations": (1, 2, 3, 5, 10, 15, 20, 25, 30), "lidar_rotations": (1, 2, 5, 10, 30),
              "change_to": (76.0, 78.0, 80.0, 82.0, 84.0, 85.0, 86.0, 88.0, 90.0, 92.0, 94.0),
-             "leg_hours": 43.0, "leg_prefixes": (0.5, 0.75, 1.0), "targets": tuple(TARGETS),
-             "thresholds": (5e-5, 5e-6, 5e-7), "threshold_hours": (ROTATION_H, 43.0, 129.0),
-             "slew_hours": (ROTATION_H, 21.5, 43.0, 129.0), "score": runner.CURVE_SCORE},
-    "quick": {"hours": (ROTATION_H, 8.6, 21.5, 43.0), "lidar_hours": (ROTATION_H, 21.5),
-              "change_to": (76.0, 85.0, 94.0), "leg_hours": 43.0, "leg_prefixes": (1.0,),
+             "leg_rotations": 10, "leg_prefixes": (0.5, 0.75, 1.0), "targets": tuple(TARGETS),
+             "thresholds": (5e-5, 5e-6, 5e-7), "threshold_rotations": (1, 10, 30),
+             "slew_rotations": (1, 5, 10, 30), "score": runner.CURVE_SCORE},
+    "quick": {"rotations": (1, 2, 5, 10), "lidar_rotations": (1, 5),
+              "change_to": (76.0, 85.0, 94.0), "leg_rotations": 10, "leg_prefixes": (1.0,),
               "targets": ("rso-a", "rso-b", "asteroid"), "thresholds": (5e-6,),
-              "threshold_hours": (ROTATION_H, 43.0), "slew_hours": (ROTATION_H, 43.0),
+              "threshold_rotations": (1, 10), "slew_rotations": (1, 10),
               "score": runner.CURVE_SCORE},
-    "tiny": {"hours": (2.15, ROTATION_H), "lidar_hours": (2.15,), "change_to": (80.0, 85.0),
-             "leg_hours": ROTATION_H, "leg_prefixes": (1.0,), "targets": ("rso-a",),
-             "thresholds": (5e-6,), "threshold_hours": (ROTATION_H,), "slew_hours": (ROTATION_H,),
-             "score": {"n_truth_samples": 4000, "coverage_points": 8000}},
+    "tiny": {"rotations": (0.5, 1), "lidar_rotations": (0.5,), "change_to": (80.0, 85.0),
+             "leg_rotations": 1, "leg_prefixes": (1.0,), "targets": ("rso-a",),
+             "thresholds": (5e-6,), "threshold_rotations": (1,), "slew_rotations": (1,),
+             "score": runner.TINY_SCORE},
 }
+# The first leg's inclination (preset rso-a-inclination-change): a change to it is no change.
+FIRST_LEG_DEG = 85.0
 # The one-rotation claim: "most of the large edges" = missed edge rate below this.
 MOST_EDGES = 0.5
 # "Recognisable shape": F-score at tau (1 % of the diagonal) of at least this.
@@ -82,44 +83,50 @@ def _slew_key(axis: str) -> str:
     return f"rso-a slew about {axis}"
 
 
+def _over(prefixes: tuple) -> dict:
+    """A run as long as its longest prefix [rotations], scored at each prefix."""
+    return {"overrides": [f"time.duration={rotations(max(prefixes)):g}"],
+            "prefixes_s": [rotations(r) for r in prefixes]}
+
+
 def cases(size: str) -> dict[str, dict]:
     plan = PLAN[runner.check_size(size)]
     out = {}
-    end = max(plan["hours"])
+    run = _over(plan["rotations"])
     for key in plan["targets"]:
         preset, label, _ = TARGETS[key]
         out[key] = runner.scene_case(
-            preset, [f"time.duration={end * HOUR:g}"],
-            prefixes_s=[h * HOUR for h in plan["hours"]], score_options=plan["score"],
+            preset, run["overrides"], prefixes_s=run["prefixes_s"], score_options=plan["score"],
             tags={"target": label, "sensor": "single-beam LRF"})
+    run = _over(plan["lidar_rotations"])
     out["rso-a-lidar"] = runner.scene_case(
-        "rso-a-lrf", [f"time.duration={max(plan['lidar_hours']) * HOUR:g}", *LIDAR],
-        prefixes_s=[h * HOUR for h in plan["lidar_hours"]], score_options=plan["score"],
+        "rso-a-lrf", [*run["overrides"], *LIDAR], prefixes_s=run["prefixes_s"],
+        score_options=plan["score"],
         tags={"target": "RSO-A, LIDAR 16x16 over 6x6 deg (reference)", "sensor": "LIDAR"})
-    hours = plan["threshold_hours"]
+    run = _over(plan["threshold_rotations"])
     for threshold in plan["thresholds"]:  # the one-rotation claim: is it the threshold?
         out[_threshold_key(threshold)] = runner.scene_case(
-            "rso-a-lrf", [f"time.duration={max(hours) * HOUR:g}"],
-            prefixes_s=[h * HOUR for h in hours],
+            "rso-a-lrf", run["overrides"], prefixes_s=run["prefixes_s"],
             score_options={**plan["score"], "edge_options": {"threshold": threshold}},
             tags={"target": "RSO-A", "sensor": "single-beam LRF", "edge_threshold": threshold})
-    hours = plan["slew_hours"]
+    run = _over(plan["slew_rotations"])
     for axis, (vector, label, _) in SLEW_AXES.items():
         out[_slew_key(axis)] = runner.scene_case(
-            "rso-a-lrf", [f"time.duration={max(hours) * HOUR:g}",
-                          f"slew.amplitude_deg={SLEW_AMPLITUDE_DEG:g}", f"slew.axis={vector}"],
-            prefixes_s=[h * HOUR for h in hours], score_options=plan["score"],
+            "rso-a-lrf", [*run["overrides"], f"slew.amplitude_deg={SLEW_AMPLITUDE_DEG:g}",
+                          f"slew.axis={vector}"],
+            prefixes_s=run["prefixes_s"], score_options=plan["score"],
             tags={"target": "RSO-A", "sensor": f"single-beam LRF, {label}"})
-    leg = plan["leg_hours"] * HOUR
+    leg = rotations(plan["leg_rotations"])
     for inc in plan["change_to"]:
+        prefixes = [leg * (1 + f) for f in plan["leg_prefixes"]]
+        if inc == FIRST_LEG_DEG:   # no change: the first leg alone too
+            prefixes = [leg * f for f in (0.5, 1.0)] + prefixes
         out[_change_key(inc)] = runner.scene_case(
             "rso-a-inclination-change",
             [f"orbit.change_time={leg:g}", f"orbit.change_inclination_deg={inc:g}",
              f"time.duration={2 * leg:g}"],
-            prefixes_s=[leg * (1 + f) for f in plan["leg_prefixes"]] if inc != 85.0 else
-            [leg * f for f in (0.5, 1.0)] + [leg * (1 + f) for f in plan["leg_prefixes"]],
-            score_options=plan["score"], tags={"target": "RSO-A", "sensor": "single-beam LRF",
-                                               "second_inclination_deg": inc})
+            prefixes_s=prefixes, score_options=plan["score"],
+            tags={"target": "RSO-A", "sensor": "single-beam LRF", "second_inclination_deg": inc})
     return out
 
 
@@ -144,17 +151,18 @@ def finish(records: dict, out_dir, size: str) -> dict:
 
     change = change_table(records, plan)
     if change:
-        leg = plan["leg_hours"]
+        leg = plan["leg_rotations"] * ROTATION_H
         x = [r["second_inclination_deg"] for r in change]
         charts.metric_panels(
-            [{"label": f"after {2 * leg:g} h ({leg:g} h at 85 deg, then {leg:g} h at the new "
-                       "inclination)", "x": x,
+            [{"label": f"after {2 * leg:g} h ({leg:g} h at {FIRST_LEG_DEG:g} deg, then {leg:g} h "
+                       "at the new inclination)", "x": x,
               "y": {m: [r[m] for r in change] for m, _, _ in charts.METRICS}}],
             out_dir / "inclination_change.png",
-            references=[{"label": "no change (85 deg throughout)",
-                         "y": {m: r[m] for r in change if r["second_inclination_deg"] == 85.0
+            references=[{"label": f"no change ({FIRST_LEG_DEG:g} deg throughout)",
+                         "y": {m: r[m] for r in change
+                               if r["second_inclination_deg"] == FIRST_LEG_DEG
                                for m, _, _ in charts.METRICS}}],
-            title="RSO-A: score after an inclination change at 43 h (paper Fig. 18)",
+            title=f"RSO-A: score after an inclination change at {leg:g} h (paper Fig. 18)",
             x_label="inclination after the change [deg]")
         files.append("inclination_change.png")
     slews = [(key, colour) for key, colour in ((_slew_key(a), c) for a, (*_, c) in
@@ -190,7 +198,7 @@ def _curve(records, key, label, style) -> dict:
 
 def change_table(records: dict, plan: dict) -> list[dict]:
     """Scores at the end of each inclination-change run, by the second inclination."""
-    end = 2 * plan["leg_hours"] * HOUR
+    end = 2 * rotations(plan["leg_rotations"])
     out = []
     for inc in plan["change_to"]:
         p = runner.at(records, _change_key(inc), end)
@@ -326,8 +334,9 @@ def _claim_lidar(records) -> dict:
 def _claim_change(change) -> dict:
     text = ("Changing the inclination after 43 h at 85 deg (to 76..94 deg) brings no "
             "significant improvement and often slightly worse results (Fig. 18).")
-    base = next((r for r in change if r["second_inclination_deg"] == 85.0), None)
-    others = [r for r in change if r["second_inclination_deg"] != 85.0]
+    base = next((r for r in change
+                 if r["second_inclination_deg"] == FIRST_LEG_DEG), None)
+    others = [r for r in change if r["second_inclination_deg"] != FIRST_LEG_DEG]
     if base is None or not others:
         return claim("rso-inclination-change", "Fig. 18", text, "-", "no data", "not tested")
     gain = {m: np.array([(r[m] - base[m]) * (-1 if lower else 1) for r in others])

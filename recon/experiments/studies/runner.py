@@ -49,6 +49,9 @@ ROTATION_H = ROTATION_S / 3600.0
 CURVE_SCORE = {"n_truth_samples": 50_000, "coverage_points": 100_000}
 # Table studies (one score per case) use metrics.score's defaults.
 TABLE_SCORE: dict[str, Any] = {}
+# The tiny size of every study (tests only): a fiftieth of metrics.score's samples, enough for
+# every metric to be computed, not for its value to mean anything.
+TINY_SCORE = {"n_truth_samples": 4000, "coverage_points": 8000}
 
 # The fewest points scored: the edge metric needs k = 16 neighbours (metrics/defaults.py).
 MIN_SCORED_POINTS = 16

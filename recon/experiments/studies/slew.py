@@ -19,7 +19,8 @@ from recon.experiments.studies.runner import ROTATION_H, claim, rotations
 NAME = "slew"
 TITLE = "Slew against no slew at 85 and 60 deg; score against slew amplitude (paper Figs. 9, 10)"
 
-# The paper's pairs of Fig. 9: (inclination, slew amplitude) [deg].
+# The paper's two inclinations [deg] and its pairs of Fig. 9: (inclination, slew amplitude).
+INCLINATIONS = (85.0, 60.0)
 CURVES = ((85.0, 0.0), (85.0, 2.0), (60.0, 0.0), (60.0, 5.0))
 PLAN = {
     "full": {"prefixes": tuple(range(5, 101, 5)), "fixed": 50,
@@ -29,7 +30,7 @@ PLAN = {
               "overrides": (), "score": runner.CURVE_SCORE},
     "tiny": {"prefixes": (1, 2), "fixed": 2, "amplitudes": (0.0, 2.0),
              "overrides": ("target.subdivisions=3",),
-             "score": {"n_truth_samples": 4000, "coverage_points": 8000}},
+             "score": runner.TINY_SCORE},
 }
 # "No significant improvement": coverage or F-score gains below this (absolute) ...
 SIGNIFICANT = 0.01
@@ -51,7 +52,7 @@ def cases(size: str) -> dict[str, dict]:
                              f"time.rotations={max(plan['prefixes']):g}", *plan["overrides"]],
             prefixes_s=[rotations(r) for r in plan["prefixes"]], score_options=plan["score"],
             tags={"inclination_deg": inc, "slew_deg": amp})
-    for inc in (85.0, 60.0):
+    for inc in INCLINATIONS:
         for amp in plan["amplitudes"]:
             if _key(inc, amp) in out:
                 continue
@@ -67,7 +68,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
     plan = PLAN[size]
     files = []
     colours = {85.0: "tab:blue", 60.0: "tab:orange"}
-    for inc in (85.0, 60.0):
+    for inc in INCLINATIONS:
         curves = []
         for c_inc, amp in CURVES:
             key = _key(c_inc, amp)
@@ -102,7 +103,7 @@ def finish(records: dict, out_dir, size: str) -> dict:
 def amplitude_table(records: dict, plan: dict) -> dict[float, list[dict]]:
     """Scores at the fixed duration by inclination, ascending amplitude."""
     out = {}
-    for inc in (85.0, 60.0):
+    for inc in INCLINATIONS:
         rows = []
         for amp in plan["amplitudes"]:
             p = runner.at(records, _key(inc, amp), rotations(plan["fixed"]))

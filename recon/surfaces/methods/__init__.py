@@ -28,6 +28,7 @@ from typing import Any, Literal
 import numpy as np
 
 from formats.errors import ReconError
+from recon.surfaces import fit_times
 
 Kind = Literal["primitive", "planar", "smooth", "interpolating", "baseline", "test"]
 KINDS = ("primitive", "planar", "smooth", "interpolating", "baseline", "test")
@@ -51,24 +52,13 @@ BUILTIN_MODULES = (
 )
 
 # What a default costs: each listed method's fit time [s] at its defaults, isolated as ``recon
-# reconstruct`` runs it, on (the 336,333-point asteroid LIDAR cloud, the 77,400-point RSO-A LRF
-# cloud) of benchmarks/bench_methods.py (median of 3; the machine and library versions are in
-# docs/decisions.md, "Measurements behind the defaults"). Other machines: compare the ratios to
-# "poisson". ``listing`` prints them; a new method needs its line (tests/recon/surfaces).
-DEFAULT_FIT_S: dict[str, tuple[float, float]] = {
-    "convex-hull": (0.08, 0.01), "ellipsoid": (0.76, 0.22), "planes": (1.3, 0.82),
-    "plane": (14.3, 6.4), "poisson": (1.9, 1.2), "screened-poisson": (4.4, 2.3),
-    "ball-pivoting": (3.6, 0.56), "ball-pivoting-meshlab": (58.5, 4.0),
-    "alpha-shape": (45.3, 9.7), "rimls": (39.1, 10.3), "apss": (34.2, 8.7),
-    "delaunay-balls": (38.9, 11.2),
-    # Measured beside Poisson in a separate run of the same benchmark (--methods visibility):
-    # 178 s and 67 s, 19.8 and 11.4 times Poisson's 9.0 and 5.9 s in that run; entered as those
-    # ratios times Poisson's times above (docs/decisions.md).
-    "visibility": (37.6, 13.7),
-}
-COST_SOURCE = "benchmarks/bench_methods.py"
+# reconstruct`` runs it, on (the LIDAR cloud, the LRF cloud) of benchmarks/bench_methods.py:
+# the table ``recon.surfaces.fit_times`` reads from the benchmark's results. ``listing`` prints
+# them; a new method needs its line (tests/recon/surfaces).
+DEFAULT_FIT_S: dict[str, tuple[float, float]] = fit_times.fit_s()
+COST_SOURCE = fit_times.source()
 # Points of the two clouds ``DEFAULT_FIT_S`` was measured on.
-COST_POINTS = (336_333, 77_400)
+COST_POINTS = fit_times.cost_points()
 
 # How a parameter's type reads in an error message: (one value, several values).
 _TYPE_NAMES = {int: ("an integer", "integers"), float: ("a number", "numbers"),
@@ -490,6 +480,30 @@ def parse_run(method: str, pairs: Sequence[str] = ()) -> Run:
     """A ``Run`` from a method name and command-line ``key=value`` strings (``--param``)."""
     spec = get(method)
     return spec.bind(spec.parse(pairs))
+
+
+def watertight(faces: np.ndarray) -> bool:
+    """True when every edge has exactly two faces that traverse it in opposite directions.
+
+    Each edge is one int64 key (``a * n + b`` for the edge from vertex a to b, n vertices), so
+    the test is two 1-D sorts rather than row-wise uniques of the (3f, 2) edge array.
+
+    Parameters
+    ----------
+    faces : (f, 3) int64, non-negative
+    """
+    if len(faces) == 0:
+        return False
+    faces = np.asarray(faces, dtype=np.int64)
+    n = int(faces.max()) + 1
+    a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
+    directed = np.sort(a * n + b)
+    if len(directed) % 2 or np.any(directed[1:] == directed[:-1]):
+        return False  # an odd edge count, or an edge traversed twice the same way
+    undirected = np.sort(np.minimum(a, b) * n + np.maximum(a, b))
+    # Sorted, every key exactly twice: equal within each pair, different across pairs.
+    return bool(np.all(undirected[0::2] == undirected[1::2])
+                and np.all(undirected[1:-1:2] != undirected[2::2]))
 
 
 def check_mesh_arrays(vertices, faces, *, method: str) -> tuple[np.ndarray, np.ndarray]:

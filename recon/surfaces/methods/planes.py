@@ -32,7 +32,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from recon.surfaces.methods import (
+    Method,
+    MethodFailed,
+    MethodInput,
+    Param,
+    register,
+    watertight,
+)
 
 # Hypotheses are scored on at most this many random remaining points.
 SCORE_SAMPLE = 20_000
@@ -278,8 +285,6 @@ def parameter_count(vertices: np.ndarray, faces: np.ndarray) -> int:
     """Free parameters of a planar model: 3 per distinct plane (normal and offset); open
     polygons add 2 per outline corner (its position in its plane). A closed polyhedron's
     corners follow from its planes."""
-    from recon.surfaces.checks import watertight
-
     a, b, c = (vertices[faces[:, i]] for i in range(3))
     normal = np.cross(b - a, c - a)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)

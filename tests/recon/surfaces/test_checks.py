@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recon.surfaces.checks import watertight
+from recon.surfaces.methods import watertight
 from tests.recon.conftest import box_mesh, sphere_mesh
 
 

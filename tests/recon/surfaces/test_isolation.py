@@ -14,9 +14,8 @@ import pytest
 import recon_fake_methods  # noqa: F401  (registers the test-only methods)
 
 from recon.experiments.compare import compare
-from recon.surfaces.checks import watertight
 from recon.surfaces.isolation import run_isolated
-from recon.surfaces.methods import MethodFailed
+from recon.surfaces.methods import MethodFailed, watertight
 from recon.surfaces.prepare import prepare
 from recon.surfaces.reconstruct import reconstruct
 from tests.recon.conftest import FAST_SCORE, sphere_mesh, sphere_points

@@ -8,9 +8,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from formats.strike_log import SensorErrors
+from recon.registration.uncertainty import strike_columns
 from recon.surfaces import methods, uncertainty
-from recon.surfaces.checks import watertight
-from recon.surfaces.methods import MethodFailed
+from recon.surfaces.methods import MethodFailed, watertight
 from recon.surfaces.methods.delaunay_balls import min_cut_labels
 from recon.surfaces.methods.ellipsoid import fit_quadric
 from recon.surfaces.methods.plane import project_to_planes
@@ -155,7 +155,7 @@ def test_normal_sigma_is_anisotropic_along_the_beam():
     errors = SensorErrors(range_sigma3=0.3, azimuth_sigma3=np.radians(0.6),
                           elevation_sigma3=np.radians(0.6))
     ranges = np.array([100.0, 100.0])
-    columns = uncertainty.strike_columns(errors, ranges, reports_angles=True)
+    columns = strike_columns(errors, ranges, reports_angles=True)
     np.testing.assert_allclose(columns["sigma_along"], 0.1)
     np.testing.assert_allclose(columns["sigma_across"], 100 * np.radians(0.2))
     points = np.zeros((2, 3))
@@ -165,7 +165,7 @@ def test_normal_sigma_is_anisotropic_along_the_beam():
     assert sigma[0] == pytest.approx(0.1)
     lateral = 100 * np.radians(0.2)
     assert sigma[1] == pytest.approx(np.sqrt(0.1**2 * 0.25 + lateral**2 * 0.75))
-    assert uncertainty.normal_sigma(normals, view, points, uncertainty.strike_columns(
+    assert uncertainty.normal_sigma(normals, view, points, strike_columns(
         SensorErrors(), ranges, reports_angles=False)) is None
 
 

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from metrics import Mesh, sample_surface, score
+from recon.registration.uncertainty import COLUMNS
 from recon.surfaces.methods import MethodFailed, ParameterError, bind
 from recon.surfaces.methods.visibility import NoViewPoints
 from recon.surfaces.prepare import prepare
-from recon.surfaces.uncertainty import COLUMNS
 from tests.recon.conftest import FAST_SCORE
 
 # Sensor directions: the 6 axes and the 8 diagonals, unit length.
