@@ -96,8 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 1
     from formats import interrupt, paths
-    from formats.atomic import DiskFull
-    from formats.errors import ReconError
+    from formats.errors import ReconError, ResourceError
 
     try:
         with interrupt.handled(), paths.protecting(options.inputs_of(args)):
@@ -105,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
             status = int(args.func(args) or 0)
             interrupt.check()   # a signal whose exception a library swallowed
         return status
-    except DiskFull as exc:
+    except ResourceError as exc:
         # HDF5 cannot shut down after a failed write (its exit-time flush crashes with SIGSEGV,
         # measured with HDF5 2.0): the temporary file is gone, so leave without finalisers.
         print(f"recon {args.command}: error: {_one_line(exc)}", file=sys.stderr, flush=True)

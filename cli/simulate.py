@@ -66,7 +66,7 @@ def run(args) -> int:
         args.parser.error("SCENE and -o LOG.h5 are required (or --list, --keys)")
     try:
         api.check_seed(args.seed)
-    except api.ApiError as exc:
+    except api.ParameterError as exc:
         args.parser.error(f"--{exc}")   # "--seed must be ..."
     summary = api.simulate(args.scene, args.output, seed=args.seed, overrides=args.overrides,
                            progress=args.progress, live=args.live,

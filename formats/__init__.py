@@ -11,9 +11,8 @@ import importlib
 
 # Public name -> the submodule that defines it.
 _EXPORTS = {
-    "MeshFormatError": "formats.errors",
-    "ReconError": "formats.errors",
-    "StrikeLogError": "formats.errors",
+    **dict.fromkeys(("ReconError", "InputError", "ParameterError", "SceneError", "MethodFailed",
+                     "ResourceError"), "formats.errors"),
     "Cloud": "formats.geometry",
     "Mesh": "formats.geometry",
     **dict.fromkeys(("FORMAT_NAME", "FORMAT_VERSION", "SIGMA3_PER_SIGMA", "SensorErrors",

@@ -30,7 +30,7 @@ dropped and counted.
 
 Files are taken as hostile: sizes declared by a label are checked against the file before
 anything is read, names may not leave the label's directory, and every problem is one
-:class:`AltimetryError` line naming the file and the field.
+:class:`InputError` line naming the file and the field.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ from xml.etree import ElementTree
 import numpy as np
 
 from formats.atomic import write_atomically
-from formats.errors import ReconError
+from formats.errors import InputError
 from formats.paths import check_source
 
 # Largest label read [bytes]: a PDS4 label of a table is tens of kB.
@@ -76,10 +76,6 @@ HAYABUSA2_COLUMNS = ("SHOT_TIME", "RANGE", "TOPO_LONGITUDE", "TOPO_LATITUDE", "T
                      "TOPO_X", "TOPO_Y", "TOPO_Z", "SC_POS_X", "SC_POS_Y", "SC_POS_Z")
 HAYABUSA2_LENGTHS = ("RANGE", "TOPO_HEIGHT", "TOPO_X", "TOPO_Y", "TOPO_Z", "SC_POS_X",
                      "SC_POS_Y", "SC_POS_Z")
-
-
-class AltimetryError(ReconError, ValueError):
-    """An altimetry product (label, table or CSV) that cannot be read as declared."""
 
 
 @dataclass
@@ -129,7 +125,7 @@ def _child(element, name: str):
 def _text(element, name: str, where: str) -> str:
     child = _child(element, name)
     if child is None or child.text is None or not child.text.strip():
-        raise AltimetryError(f"{where}: no <{name}>")
+        raise InputError(f"{where}: no <{name}>")
     return child.text.strip()
 
 
@@ -138,9 +134,9 @@ def _count(element, name: str, where: str, *, minimum: int = 0) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise AltimetryError(f"{where}: <{name}> must be an integer, got {text[:40]!r}") from None
+        raise InputError(f"{where}: <{name}> must be an integer, got {text[:40]!r}") from None
     if value < minimum:
-        raise AltimetryError(f"{where}: <{name}> must be at least {minimum}, got {value}")
+        raise InputError(f"{where}: <{name}> must be at least {minimum}, got {value}")
     return value
 
 
@@ -151,10 +147,10 @@ def _number(element, name: str, where: str, default: float) -> float:
     try:
         value = float(child.text)
     except ValueError:
-        raise AltimetryError(f"{where}: <{name}> must be a number, got "
+        raise InputError(f"{where}: <{name}> must be a number, got "
                              f"{child.text.strip()[:40]!r}") from None
     if not math.isfinite(value):
-        raise AltimetryError(f"{where}: <{name}> must be finite, got {value!r}")
+        raise InputError(f"{where}: <{name}> must be finite, got {value!r}")
     return value
 
 
@@ -192,7 +188,7 @@ class BinaryTable:
         for name in names:
             if name.lower() in self.fields:
                 return self.fields[name.lower()]
-        raise AltimetryError(f"{where}: the table has no field {' or '.join(names)}")
+        raise InputError(f"{where}: the table has no field {' or '.join(names)}")
 
     def optional(self, *names: str) -> BinaryField | None:
         return next((self.fields[n.lower()] for n in names if n.lower() in self.fields), None)
@@ -203,23 +199,23 @@ def _label_root(label: Path) -> ElementTree.Element:
     where = str(label)
     size = label.stat().st_size
     if size > MAX_LABEL_BYTES:
-        raise AltimetryError(f"{where}: {size:,} bytes, larger than any PDS4 label "
+        raise InputError(f"{where}: {size:,} bytes, larger than any PDS4 label "
                              f"({MAX_LABEL_BYTES:,} at most)")
     raw = label.read_bytes()
     if b"<!DOCTYPE" in raw or b"<!ENTITY" in raw:
-        raise AltimetryError(f"{where}: a PDS4 label declares no DOCTYPE or entities")
+        raise InputError(f"{where}: a PDS4 label declares no DOCTYPE or entities")
     try:
         return ElementTree.fromstring(raw)
     except ElementTree.ParseError as exc:
-        raise AltimetryError(f"{where}: not an XML label ({exc})") from None
+        raise InputError(f"{where}: not an XML label ({exc})") from None
 
 
 def _required(parent: ElementTree.Element, name: str, within: str, where: str
               ) -> ElementTree.Element:
-    """The child ``<name>`` of ``parent`` (the element ``<within>``), or AltimetryError."""
+    """The child ``<name>`` of ``parent`` (the element ``<within>``), or InputError."""
     child = _child(parent, name)
     if child is None:
-        raise AltimetryError(f"{where}: no <{name}> in <{within}>")
+        raise InputError(f"{where}: no <{name}> in <{within}>")
     return child
 
 
@@ -228,9 +224,9 @@ def _data_file(label: Path, area: ElementTree.Element) -> Path:
     where = str(label)
     name = _text(_required(area, "File", "File_Area_Observational", where), "file_name", where)
     if Path(name).name != name or name in (".", ".."):
-        raise AltimetryError(f"{where}: <file_name> {name[:80]!r} must name a file beside the "
+        raise InputError(f"{where}: <file_name> {name[:80]!r} must name a file beside the "
                              "label")
-    return check_source(label.parent / name, AltimetryError)
+    return check_source(label.parent / name, InputError)
 
 
 def _binary_field(element: ElementTree.Element, record_length: int, where: str) -> BinaryField:
@@ -245,12 +241,12 @@ def _binary_field(element: ElementTree.Element, record_length: int, where: str) 
                       scaling_factor=_number(element, "scaling_factor", at, 1.0),
                       value_offset=_number(element, "value_offset", at, 0.0))
     if fld.data_type not in PDS4_BINARY_TYPES and fld.data_type not in PDS4_STRING_TYPES:
-        raise AltimetryError(f"{at}: unknown data_type {fld.data_type[:40]!r}")
+        raise InputError(f"{at}: unknown data_type {fld.data_type[:40]!r}")
     if fld.dtype.itemsize != fld.length:
-        raise AltimetryError(f"{at}: {fld.data_type} has {fld.dtype.itemsize} bytes, the "
+        raise InputError(f"{at}: {fld.data_type} has {fld.dtype.itemsize} bytes, the "
                              f"label says field_length {fld.length}")
     if fld.location + fld.length - 1 > record_length:
-        raise AltimetryError(f"{at}: bytes {fld.location}..{fld.location + fld.length - 1} "
+        raise InputError(f"{at}: bytes {fld.location}..{fld.location + fld.length - 1} "
                              f"lie outside the {record_length}-byte record")
     return fld
 
@@ -260,18 +256,18 @@ def _binary_fields(record: ElementTree.Element, record_length: int, where: str
     """The ``<Field_Binary>`` of a ``<Record_Binary>`` by lower-case name, as many as its
     ``<fields>`` declares, none named twice."""
     if _count(record, "groups", where) != 0:
-        raise AltimetryError(f"{where}: <Group_Field_Binary> (groups > 0) is not supported")
+        raise InputError(f"{where}: <Group_Field_Binary> (groups > 0) is not supported")
     fields: dict[str, BinaryField] = {}
     for element in record:
         if _local(element.tag) != "Field_Binary":
             continue
         fld = _binary_field(element, record_length, where)
         if fld.name.lower() in fields:
-            raise AltimetryError(f"{where}: field {fld.name[:60]!r}: named twice")
+            raise InputError(f"{where}: field {fld.name[:60]!r}: named twice")
         fields[fld.name.lower()] = fld
     declared = _count(record, "fields", where)
     if declared != len(fields):
-        raise AltimetryError(f"{where}: <fields> says {declared}, the record has {len(fields)} "
+        raise InputError(f"{where}: <fields> says {declared}, the record has {len(fields)} "
                              "<Field_Binary>")
     return fields
 
@@ -281,17 +277,17 @@ def read_label(label) -> BinaryTable:
 
     Raises
     ------
-    AltimetryError
+    InputError
         The label is not XML, declares an entity, lacks an element, names a data file outside
         its directory or one shorter than ``offset + records * record_length``, or a field that
         lies outside the record or has an unknown data type or a length its type does not have.
     """
-    label = check_source(label, AltimetryError)
+    label = check_source(label, InputError)
     where = str(label)
     root = _label_root(label)
     area = next((e for e in root.iter() if _local(e.tag) == "File_Area_Observational"), None)
     if area is None:
-        raise AltimetryError(f"{where}: no <File_Area_Observational>")
+        raise InputError(f"{where}: no <File_Area_Observational>")
     data = _data_file(label, area)
     table = _required(area, "Table_Binary", "File_Area_Observational", where)
     offset = _count(table, "offset", where)
@@ -302,7 +298,7 @@ def read_label(label) -> BinaryTable:
     need = offset + records * record_length
     have = data.stat().st_size
     if have < need:
-        raise AltimetryError(f"{data}: {have:,} bytes, but its label {label.name} declares "
+        raise InputError(f"{data}: {have:,} bytes, but its label {label.name} declares "
                              f"{records:,} records of {record_length} bytes from byte {offset} "
                              f"({need:,} bytes)")
     return BinaryTable(data=data, offset=offset, records=records, record_length=record_length,
@@ -333,7 +329,7 @@ def read_columns(table: BinaryTable, fields: list[BinaryField]) -> dict[str, np.
 def _scale(fld: BinaryField, table: BinaryTable, units: dict, what: str) -> float:
     factor = units.get(fld.unit.lower())
     if factor is None:
-        raise AltimetryError(f"{table.data}: field {fld.name!r} has unit {fld.unit!r}, not a "
+        raise InputError(f"{table.data}: field {fld.name!r} has unit {fld.unit!r}, not a "
                              f"{what} unit ({', '.join(sorted(units))})")
     return factor
 
@@ -353,7 +349,7 @@ def _ola_fields(table: BinaryTable, where: str) -> dict:
               "sc": sc if all(s is not None for s in sc) else None}
     for fld in (fields["range"], fields["flag"], *fields["xyz"], *(fields["sc"] or [])):
         if fld.dtype.kind == "S":
-            raise AltimetryError(f"{where}: field {fld.name!r} is {fld.data_type}, expected a "
+            raise InputError(f"{where}: field {fld.name!r} is {fld.data_type}, expected a "
                                  "number")
     return fields
 
@@ -372,7 +368,8 @@ def _ola_kept(flags: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
 def _ola_et(table: BinaryTable, time: BinaryField, values: np.ndarray, keep: np.ndarray,
             where: str) -> np.ndarray:
     """ET [s] of each record from an ``et`` number or a ``utc`` text (NaN where not kept)."""
-    from formats.spice import SpiceError, utcs_to_et
+    from formats.errors import InputError
+    from formats.spice import utcs_to_et
 
     if time.dtype.kind != "S":
         return values * _scale(time, table, SECONDS_PER, "time")
@@ -380,8 +377,8 @@ def _ola_et(table: BinaryTable, time: BinaryField, values: np.ndarray, keep: np.
     et = np.full(table.records, np.nan)
     try:
         et[keep] = utcs_to_et(texts, f"{where}: field {time.name!r}")
-    except SpiceError as exc:
-        raise AltimetryError(str(exc)) from None
+    except InputError as exc:
+        raise InputError(str(exc)) from None
     return et
 
 
@@ -552,15 +549,15 @@ def write_ola_l2(label, columns: dict[str, np.ndarray], *, title: str) -> tuple[
     """
     label = Path(label)
     if label.suffix.lower() != ".xml":
-        raise AltimetryError(f"{label}: an OLA Level-2 product is written as its .xml label")
+        raise InputError(f"{label}: an OLA Level-2 product is written as its .xml label")
     data = label.with_suffix(".dat")
     records = ola_records(columns)
     utc = [u.decode() for u in records["utc"][[0, -1]]] if len(records) else ["", ""]
-    write_atomically(data, records.tofile, error=AltimetryError)
+    write_atomically(data, records.tofile, error=InputError)
     text = ola_label(data.name, len(records), start_utc=_isoc(utc[0]), stop_utc=_isoc(utc[1]),
                      title=title)
     write_atomically(label, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"),
-                     error=AltimetryError)
+                     error=InputError)
     return label, data
 
 
@@ -590,13 +587,13 @@ def _header(first: list[str], where: str) -> tuple[list[str], dict[str, float]] 
     names = [m.group(1).upper() for m in matches]
     missing = [c for c in HAYABUSA2_COLUMNS if c not in names]
     if missing:
-        raise AltimetryError(f"{where}: header has no column {', '.join(missing)}")
+        raise InputError(f"{where}: header has no column {', '.join(missing)}")
     scales = {}
     for m in matches:
         name, unit = m.group(1).upper(), (m.group(2) or "m").lower()
         if name in HAYABUSA2_LENGTHS:
             if unit not in METRES_PER:
-                raise AltimetryError(f"{where}: column {name} has unit {unit!r}, not a length "
+                raise InputError(f"{where}: column {name} has unit {unit!r}, not a length "
                                      "unit (mm, m, km)")
             scales[name] = METRES_PER[unit]
     return names, scales
@@ -607,17 +604,17 @@ def _csv_rows(path: Path) -> list[tuple[int, list[str]]]:
     where = str(path)
     size = path.stat().st_size
     if size > MAX_CSV_BYTES:
-        raise AltimetryError(f"{where}: {size:,} bytes, larger than this reader takes "
+        raise InputError(f"{where}: {size:,} bytes, larger than this reader takes "
                              f"({MAX_CSV_BYTES:,})")
     try:
         lines = path.read_text(encoding="ascii").splitlines()
     except UnicodeDecodeError as exc:
-        raise AltimetryError(f"{where}: not an ASCII CSV ({exc.reason} at byte "
+        raise InputError(f"{where}: not an ASCII CSV ({exc.reason} at byte "
                              f"{exc.start})") from None
     rows = [(number, line.split(",")) for number, line in enumerate(lines, start=1)
             if line.strip() and not line.lstrip().startswith("#")]
     if not rows:
-        raise AltimetryError(f"{where}: no lines")
+        raise InputError(f"{where}: no lines")
     return rows
 
 
@@ -630,7 +627,7 @@ def _hayabusa2_values(rows, names: list[str], scales: dict[str, float], where: s
     times, values, numbers, missing = [], [], [], 0
     for number, cells in rows:
         if len(cells) != len(names):
-            raise AltimetryError(f"{where}: line {number} has {len(cells)} values, expected "
+            raise InputError(f"{where}: line {number} has {len(cells)} values, expected "
                                  f"{len(names)} ({', '.join(names[:3])}, ...)")
         try:
             row = [float(cells[index[c]]) * scales[c] for c in numeric]
@@ -654,9 +651,10 @@ def read_hayabusa2_l2(path) -> Altimetry:
     Altimetry
         Lines with every needed value; ``dropped`` counts those with a missing value.
     """
-    from formats.spice import SpiceError, utcs_to_et
+    from formats.errors import InputError
+    from formats.spice import utcs_to_et
 
-    path = check_source(path, AltimetryError)
+    path = check_source(path, InputError)
     where = str(path)
     rows = _csv_rows(path)
     header = _header(rows[0][1], where)
@@ -665,8 +663,8 @@ def read_hayabusa2_l2(path) -> Altimetry:
                                                         scales, where)
     try:
         et = utcs_to_et(times, f"{where}: SHOT_TIME")
-    except SpiceError as exc:
-        raise AltimetryError(str(exc)) from None
+    except InputError as exc:
+        raise InputError(str(exc)) from None
     numeric = [c for c in HAYABUSA2_COLUMNS if c in HAYABUSA2_LENGTHS]
     table = np.array(values, dtype=np.float64).reshape(-1, len(numeric))
     col = {c: table[:, k] for k, c in enumerate(numeric)}
@@ -699,4 +697,4 @@ def write_hayabusa2_l2(path, *, utc: list[str], range_m: np.ndarray, points: np.
     text = "".join(f"{t}," + ",".join(f"{v:.6f}" for v in row) + "\n"
                    for t, row in zip(utc, numbers, strict=True))
     return write_atomically(path, lambda tmp: Path(tmp).write_text(text, encoding="ascii"),
-                            error=AltimetryError)
+                            error=InputError)

@@ -11,7 +11,7 @@ leaves no file that looks complete and never replaces an existing output:
   interpreter exit), and one left by a killed process (SIGKILL, power loss) is removed by the
   next writer of the same name once its process is gone;
 - the finished file gets the permissions of a newly created file (``0o666`` minus the umask);
-- a full disk is one line naming the destination (``DiskFull``), never a traceback or a crash.
+- a full disk is one line naming the destination (``ResourceError``), never a traceback or a crash.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import weakref
 from pathlib import Path
 
 from formats import interrupt
-from formats.errors import ReconError
+from formats.errors import ReconError, ResourceError
 from formats.paths import check_destination
 
 # errno values that mean "the disk (or the user's quota, or the file-size limit) is full".
@@ -45,11 +45,7 @@ FLUSH_BYTES = 16 << 20
 _OPEN: weakref.WeakSet = weakref.WeakSet()   # writers not yet closed, aborted at exit
 
 
-class DiskFull(ReconError, OSError):
-    """The destination's file system has no room (or a quota or file-size limit was hit)."""
-
-
-def check_space(path, n_bytes: float, error: type[Exception] = DiskFull) -> None:
+def check_space(path, n_bytes: float, error: type[Exception] = ResourceError) -> None:
     """Refuse to start a write of about ``n_bytes`` that the destination's disk cannot hold."""
     path = Path(path)
     try:
@@ -178,7 +174,7 @@ class AtomicWriter:
     def _error(self, exc: BaseException) -> Exception:
         """The one-line error of an OS failure while writing ``path``."""
         if is_disk_full(exc):
-            return DiskFull(f"{self.path}: no space left on device (or quota exceeded) in "
+            return ResourceError(f"{self.path}: no space left on device (or quota exceeded) in "
                             f"{self.path.parent}")
         reason = getattr(exc, "strerror", None) or str(exc).splitlines()[0]
         return self.missing_dir_error(f"{self.path}: cannot write ({reason})")

@@ -65,7 +65,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.atomic import AtomicWriter
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 from formats.geometry import (
     NORMAL_ATTRIBUTES,
     UNKNOWN,
@@ -135,7 +135,7 @@ def _las_description(name: str) -> str:
 def _suffix(path: Path, allowed: tuple[str, ...] = CLOUD_SUFFIXES) -> str:
     suffix = path.suffix.lower()
     if suffix not in allowed:
-        raise MeshFormatError(f"{path}: unknown point-cloud suffix {path.suffix!r} (expected one "
+        raise InputError(f"{path}: unknown point-cloud suffix {path.suffix!r} (expected one "
                               f"of {', '.join(allowed)})")
     return suffix
 
@@ -165,7 +165,7 @@ class _PlyCloud(PlyWriter):
 class _H5Cloud(AtomicWriter):
     """recon's HDF5 cloud: ``points`` and one dataset per attribute, chunked and resizable."""
 
-    missing_dir_error = MeshFormatError
+    missing_dir_error = InputError
 
     def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype], metadata: dict):
         import h5py
@@ -209,7 +209,7 @@ class _H5Cloud(AtomicWriter):
     def _finish(self) -> None:
         self._h5.close()
         if self._written != self.n_points:
-            raise MeshFormatError(f"{self.path}: wrote {self._written} points, expected "
+            raise InputError(f"{self.path}: wrote {self._written} points, expected "
                                   f"{self.n_points}")
 
     def _release(self) -> None:
@@ -220,7 +220,7 @@ class _LasCloud(AtomicWriter):
     """LAS 1.4 point format 6 (LAZ when the suffix says so), ASPRS conventions: see the module
     docstring."""
 
-    missing_dir_error = MeshFormatError
+    missing_dir_error = InputError
 
     def __init__(self, path, n_points: int, dtypes: dict[str, np.dtype], metadata: dict):
         import laspy
@@ -259,14 +259,14 @@ class _LasCloud(AtomicWriter):
         self._check()
         points = np.asarray(points, dtype=np.float64)
         if len(points) and np.abs(points).max() > np.iinfo(np.int32).max * LAS_SCALE_M:
-            raise MeshFormatError(f"{self.path}: coordinates beyond +-214 km do not fit LAS at "
+            raise InputError(f"{self.path}: coordinates beyond +-214 km do not fit LAS at "
                                   f"{LAS_SCALE_M} m resolution")
         record = laspy.ScaleAwarePointRecord.zeros(len(points), header=self._las.header)
         record.x, record.y, record.z = points[:, 0], points[:, 1], points[:, 2]
         record.return_number[:] = 1
         record.number_of_returns[:] = 1
         if "beam" in attributes and len(points) and np.max(attributes["beam"]) > 65_535:
-            raise MeshFormatError(f"{self.path}: beam indices beyond 65535 do not fit LAS "
+            raise InputError(f"{self.path}: beam indices beyond 65535 do not fit LAS "
                                   "point_source_id")
         if "azimuth" in attributes:
             steps = np.rad2deg(attributes["azimuth"]) / LAS_SCAN_ANGLE_STEP_DEG
@@ -279,7 +279,7 @@ class _LasCloud(AtomicWriter):
     def _finish(self) -> None:
         self._las.close()
         if self._written != self.n_points:
-            raise MeshFormatError(f"{self.path}: wrote {self._written} points, expected "
+            raise InputError(f"{self.path}: wrote {self._written} points, expected "
                                   f"{self.n_points}")
 
     def _release(self) -> None:
@@ -337,7 +337,7 @@ def read_cloud(path) -> Cloud:
     """
     path = Path(path)
     kind = _suffix(path)
-    check_source(path, MeshFormatError)
+    check_source(path, InputError)
     if kind == ".ply":
         columns, _, metadata = read_ply(path)
         return cloud_from_ply_columns(path, columns, metadata)
@@ -361,7 +361,7 @@ def cloud_from_ply_columns(path, columns: dict[str, np.ndarray],
     frame the metadata names. ``path`` only names the file in errors."""
     missing = [k for k in "xyz" if k not in columns]
     if missing:
-        raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
+        raise InputError(f"{path}: PLY vertices lack {', '.join(missing)}")
     columns = dict(columns)
     points = np.stack([columns.pop(k).astype(np.float64) for k in "xyz"], axis=1)
     attributes = {}
@@ -376,23 +376,23 @@ def _open_h5(path: Path):
     """recon's HDF5 cloud ``path`` checked and open: yields ``(file, metadata)``."""
     import h5py
 
-    check_hdf5(path, MeshFormatError)   # no other files, no loops: formats/hdf5_check.py
+    check_hdf5(path, InputError)   # no other files, no loops: formats/hdf5_check.py
     try:
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") != CLOUD_FORMAT_NAME:
-                raise MeshFormatError(f"{path}: not a recon point cloud (root attribute "
+                raise InputError(f"{path}: not a recon point cloud (root attribute "
                                       f"'format' is {f.attrs.get('format')!r})")
             if int(f.attrs.get("format_version", -1)) != CLOUD_FORMAT_VERSION:
-                raise MeshFormatError(f"{path}: point-cloud format version "
+                raise InputError(f"{path}: point-cloud format version "
                                       f"{f.attrs.get('format_version')} is not supported")
             shape = f["points"].shape
             if len(shape) != 2 or shape[1] != 3:
-                raise MeshFormatError(f"{path}: /points has shape {shape}, expected (n, 3)")
+                raise InputError(f"{path}: /points has shape {shape}, expected (n, 3)")
             yield f, {k: str(f.attrs[k]) for k in ("frame", "units") if k in f.attrs}
-    except MeshFormatError:
+    except InputError:
         raise
     except (OSError, KeyError, ValueError, TypeError) as exc:
-        raise MeshFormatError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
+        raise InputError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
 
 
 def _read_h5(path: Path) -> Cloud:
@@ -401,7 +401,7 @@ def _read_h5(path: Path) -> Cloud:
             points = np.asarray(f["points"][()], dtype=np.float64)
             attributes = {k: np.asarray(v[()]) for k, v in f["attributes"].items()}
         except (OSError, KeyError, ValueError, TypeError) as exc:
-            raise MeshFormatError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
+            raise InputError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
     return Cloud(points, attributes, frame=frame_of(metadata, path))
 
 
@@ -415,19 +415,19 @@ def _las_header(path: Path):
         with laspy.open(path) as reader:
             header = reader.header
     except Exception as exc:  # laspy raises its own and OS errors on bad files
-        raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
+        raise InputError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
     scales, offsets = np.asarray(header.scales), np.asarray(header.offsets)
     if not (np.all(np.isfinite(scales)) and np.all(scales != 0)):
-        raise MeshFormatError(f"{path}: LAS scale factors must be finite and non-zero, got "
+        raise InputError(f"{path}: LAS scale factors must be finite and non-zero, got "
                               f"{', '.join(f'{v:g}' for v in scales)}")
     if not np.all(np.isfinite(offsets)):
-        raise MeshFormatError(f"{path}: LAS offsets must be finite, got "
+        raise InputError(f"{path}: LAS offsets must be finite, got "
                               f"{', '.join(f'{v:g}' for v in offsets)}")
     if not header.are_points_compressed:
         record = header.point_format.size
         held = (path.stat().st_size - header.offset_to_point_data) // max(record, 1)
         if header.point_count > held:
-            raise MeshFormatError(f"{path}: the LAS header declares {header.point_count:,} "
+            raise InputError(f"{path}: the LAS header declares {header.point_count:,} "
                                   f"points but the file holds {max(held, 0):,}")
     return header
 
@@ -439,7 +439,7 @@ def _read_las(path: Path) -> Cloud:
     try:
         las = laspy.read(path)
     except Exception as exc:  # laspy raises its own and OS errors on bad files
-        raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
+        raise InputError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
     points = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
     metadata = _las_metadata(path, las.header)
     standard = metadata.get("dimensions", {})
@@ -459,7 +459,7 @@ def _las_metadata(path: Path, header) -> dict:
             try:
                 return json.loads(vlr.record_data)
             except (ValueError, UnicodeDecodeError):
-                raise MeshFormatError(f"{path}: the recon VLR is not JSON") from None
+                raise InputError(f"{path}: the recon VLR is not JSON") from None
     return {}
 
 
@@ -469,7 +469,7 @@ def _text_columns(path: Path) -> tuple[list[str] | None, str | None, int]:
 
     Raises
     ------
-    MeshFormatError
+    InputError
         The file has no data line (empty, or comments only).
     """
     names, delimiter, header = None, None, 0
@@ -489,12 +489,12 @@ def _text_columns(path: Path) -> tuple[list[str] | None, str | None, int]:
                 names, header = [w.strip().strip('"').lower() for w in first], 1
                 missing = [k for k in "xyz" if k not in names]
                 if missing or len(set(names)) != len(names):
-                    raise MeshFormatError(
+                    raise InputError(
                         f"{path}: the header row must name columns x, y and z once each "
                         f"(found {', '.join(names)[:200]})")
             break
         else:
-            raise MeshFormatError(f"{path}: holds no points (no line of numbers)")
+            raise InputError(f"{path}: holds no points (no line of numbers)")
     return names, delimiter, header
 
 
@@ -512,18 +512,18 @@ def _read_text(path: Path) -> Cloud:
         table = np.loadtxt(path, comments=("#", "//"), delimiter=delimiter, ndmin=2,
                            dtype=np.float64, skiprows=_header_line(path) if header else 0)
     except ValueError as exc:
-        raise MeshFormatError(f"{path}: not a text point cloud of numbers "
+        raise InputError(f"{path}: not a text point cloud of numbers "
                               f"({str(exc).splitlines()[0]})") from None
     if table.size == 0:
-        raise MeshFormatError(f"{path}: holds no points")
+        raise InputError(f"{path}: holds no points")
     n_columns = table.shape[1]
     if n_columns < 3:
-        raise MeshFormatError(f"{path}: needs at least 3 columns (x y z), found {n_columns}")
+        raise InputError(f"{path}: needs at least 3 columns (x y z), found {n_columns}")
     if path.suffix.lower() == ".xyzn" and n_columns != 6:
-        raise MeshFormatError(f"{path}: an .xyzn file has 6 columns (x y z nx ny nz), found "
+        raise InputError(f"{path}: an .xyzn file has 6 columns (x y z nx ny nz), found "
                               f"{n_columns}")
     if header and len(names) != n_columns:
-        raise MeshFormatError(f"{path}: the header names {len(names)} columns but the rows "
+        raise InputError(f"{path}: the header names {len(names)} columns but the rows "
                               f"hold {n_columns}")
     if names is None or len(names) != n_columns:
         names = ["x", "y", "z"] + (list(NORMAL_ATTRIBUTES) if n_columns == 6 else
@@ -550,7 +550,7 @@ _PCD_MAX_HEADER_LINES = 64
 def _pcd_int(path: Path, header: dict, key: str) -> int:
     words = header.get(key, [])
     if len(words) != 1 or not words[0].isdigit():
-        raise MeshFormatError(f"{path}: PCD header {key} must be one non-negative integer, got "
+        raise InputError(f"{path}: PCD header {key} must be one non-negative integer, got "
                               f"{' '.join(words)[:40]!r}")
     return int(words[0])
 
@@ -567,7 +567,7 @@ def _pcd_header(path: Path) -> tuple[dict[str, list[str]], int]:
             header[words[0].upper()] = words[1:]
             if words[0].upper() == "DATA":
                 return header, fh.tell()
-    raise MeshFormatError(f"{path}: not a readable PCD file (no DATA line in its header)")
+    raise InputError(f"{path}: not a readable PCD file (no DATA line in its header)")
 
 
 def _pcd_fields(path: Path, header: dict) -> tuple[list[str], list[str]]:
@@ -575,18 +575,18 @@ def _pcd_fields(path: Path, header: dict) -> tuple[list[str], list[str]]:
     missing = [k for k in ("FIELDS", "SIZE", "TYPE", "WIDTH", "POINTS", "DATA")
                if k not in header]
     if missing:
-        raise MeshFormatError(f"{path}: PCD header lacks {', '.join(missing)}")
+        raise InputError(f"{path}: PCD header lacks {', '.join(missing)}")
     fields = header["FIELDS"]
     counts = header.get("COUNT", ["1"] * len(fields))
     sizes, types = header["SIZE"], header["TYPE"]
     if not (len(fields) == len(sizes) == len(types) == len(counts)) or not fields:
-        raise MeshFormatError(f"{path}: PCD header FIELDS, SIZE, TYPE and COUNT disagree "
+        raise InputError(f"{path}: PCD header FIELDS, SIZE, TYPE and COUNT disagree "
                               f"({len(fields)}, {len(sizes)}, {len(types)}, {len(counts)} "
                               "entries)")
     if (any(s not in ("1", "2", "4", "8") for s in sizes)
             or any(t not in ("I", "U", "F") for t in types)
             or any(not c.isdigit() or int(c) < 1 for c in counts)):
-        raise MeshFormatError(f"{path}: PCD header SIZE, TYPE or COUNT has a value the format "
+        raise InputError(f"{path}: PCD header SIZE, TYPE or COUNT has a value the format "
                               "does not allow")
     return sizes, counts
 
@@ -597,7 +597,7 @@ def _pcd_points(path: Path, header: dict) -> int:
     width = _pcd_int(path, header, "WIDTH")
     height = _pcd_int(path, header, "HEIGHT") if "HEIGHT" in header else 1
     if width * height != n:
-        raise MeshFormatError(f"{path}: PCD header declares {n:,} POINTS but WIDTH x HEIGHT is "
+        raise InputError(f"{path}: PCD header declares {n:,} POINTS but WIDTH x HEIGHT is "
                               f"{width:,} x {height:,}")
     return n
 
@@ -613,11 +613,11 @@ def _check_pcd_ascii(path: Path, offset: int, n: int, values: int) -> None:
             rows, columns = np.loadtxt(io.StringIO(text), ndmin=2, dtype=np.float64).shape
         except ValueError as exc:
             reason = str(exc).splitlines()[0].split(";")[0]
-            raise MeshFormatError(f"{path}: PCD data rows do not match the "
+            raise InputError(f"{path}: PCD data rows do not match the "
                                   f"{values} values per point its header declares "
                                   f"({reason})") from None
     if columns != values or rows != n:
-        raise MeshFormatError(f"{path}: the PCD header declares {n:,} points of {values} "
+        raise InputError(f"{path}: the PCD header declares {n:,} points of {values} "
                               f"values but the body has {rows:,} rows of {columns}")
 
 
@@ -634,12 +634,12 @@ def _check_pcd(path: Path) -> None:
         need = n * sum(int(s) * int(c) for s, c in zip(sizes, counts, strict=True))
         body = path.stat().st_size - offset
         if body < need:
-            raise MeshFormatError(f"{path}: the PCD header declares {n:,} points ({need:,} "
+            raise InputError(f"{path}: the PCD header declares {n:,} points ({need:,} "
                                   f"bytes) but the body holds {body:,} bytes")
     elif kind == "ascii":
         _check_pcd_ascii(path, offset, n, sum(int(c) for c in counts))
     elif kind != "binary_compressed":
-        raise MeshFormatError(f"{path}: PCD DATA {kind[:20]!r} is not ascii, binary or "
+        raise InputError(f"{path}: PCD DATA {kind[:20]!r} is not ascii, binary or "
                               "binary_compressed")
 
 
@@ -650,9 +650,9 @@ def _read_pcd(path: Path) -> Cloud:
     try:
         pcd = o3d.t.io.read_point_cloud(str(path))
     except Exception as exc:  # Open3D raises RuntimeError and others on bad files
-        raise MeshFormatError(f"{path}: not a readable PCD file ({exc})") from None
+        raise InputError(f"{path}: not a readable PCD file ({exc})") from None
     if "positions" not in pcd.point:
-        raise MeshFormatError(f"{path}: not a readable PCD file (no points)")
+        raise InputError(f"{path}: not a readable PCD file (no points)")
     fields = {k: pcd.point[k].numpy() for k in pcd.point}
     points = fields.pop("positions").astype(np.float64)
     attributes = {}
@@ -675,12 +675,12 @@ def _read_e57(path: Path) -> Cloud:
         scans = [e57.read_scan(i, ignore_missing_fields=True, intensity=True, transform=True)
                  for i in range(e57.scan_count)]
     except Exception as exc:  # libE57Format raises its own exception types on bad files
-        raise MeshFormatError(f"{path}: not a readable E57 file ({exc})") from None
+        raise InputError(f"{path}: not a readable E57 file ({exc})") from None
     if not scans:
-        raise MeshFormatError(f"{path}: E57 file holds no scans")
+        raise InputError(f"{path}: E57 file holds no scans")
     xyz = ("cartesianX", "cartesianY", "cartesianZ")
     if any(k not in scan for scan in scans for k in xyz):
-        raise MeshFormatError(f"{path}: E57 scans without cartesian coordinates are not "
+        raise InputError(f"{path}: E57 scans without cartesian coordinates are not "
                               "supported")
     points = np.concatenate([np.stack([s[k] for k in xyz], axis=1) for s in scans])
     attributes = {}
@@ -711,13 +711,13 @@ def stream_cloud(path, rows: int) -> tuple[str, Blocks] | None:
     (frame, blocks) or None
         ``blocks()`` opens the file and yields ``(points, normals)`` pairs: points (b, 3)
         float64 metres in ``frame``, normals (b, 3) float64 or None. It may be called again
-        for another pass. A file shorter than its header says raises ``MeshFormatError``.
+        for another pass. A file shorter than its header says raises ``InputError``.
     """
     path = Path(path)
     kind = path.suffix.lower()
     if kind not in (".ply", ".h5", ".las", ".laz"):
         return None
-    check_source(path, MeshFormatError)
+    check_source(path, InputError)
     if kind == ".ply":
         return _stream_ply(path, rows)
     if kind == ".h5":
@@ -743,7 +743,7 @@ def _stream_ply(path: Path, rows: int) -> tuple[str, Blocks] | None:
     fields = dtype.names or ()
     missing = [k for k in "xyz" if k not in fields]
     if missing:
-        raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
+        raise InputError(f"{path}: PLY vertices lack {', '.join(missing)}")
     names = ("x", "y", "z") + (NORMAL_ATTRIBUTES if all(k in fields for k in NORMAL_ATTRIBUTES)
                                else ())
 
@@ -753,7 +753,7 @@ def _stream_ply(path: Path, rows: int) -> tuple[str, Blocks] | None:
             for start in range(0, count, rows):
                 records = np.fromfile(fh, dtype=dtype, count=min(rows, count - start))
                 if len(records) == 0:
-                    raise MeshFormatError(f"{path}: ends after {start} of {count} vertices")
+                    raise InputError(f"{path}: ends after {start} of {count} vertices")
                 yield _block(records, names)
     return frame_of(metadata, path), blocks
 
@@ -790,5 +790,5 @@ def _stream_las(path: Path, rows: int) -> tuple[str, Blocks]:
                 for chunk in reader.chunk_iterator(rows):
                     yield _block({k: getattr(chunk, k) for k in names}, names)
         except Exception as exc:
-            raise MeshFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
+            raise InputError(f"{path}: not a readable LAS/LAZ file ({exc})") from None
     return frame_of(metadata, path), blocks

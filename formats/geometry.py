@@ -20,7 +20,7 @@ from typing import Literal
 
 import numpy as np
 
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 
 Frame = Literal["body", "inertial", "unknown"]
 # The frames recon registers strikes into; geometry read from files may also be UNKNOWN.
@@ -41,7 +41,7 @@ VIEW_ATTRIBUTES = ("view_x", "view_y", "view_z")
 MAX_COORDINATE_M = 1e15
 
 
-def check_extent(points: np.ndarray, where, *, error: type[Exception] = MeshFormatError) -> None:
+def check_extent(points: np.ndarray, where, *, error: type[Exception] = InputError) -> None:
     """Refuse ``points`` (n, 3) [m] with a coordinate beyond ``MAX_COORDINATE_M``, naming
     ``where`` (the file)."""
     reach = float(np.abs(points).max()) if len(points) else 0.0
@@ -50,7 +50,7 @@ def check_extent(points: np.ndarray, where, *, error: type[Exception] = MeshForm
                     "(not metres?)")
 
 
-def xyz_array(values, what: str, *, error: type[Exception] = MeshFormatError) -> np.ndarray:
+def xyz_array(values, what: str, *, error: type[Exception] = InputError) -> np.ndarray:
     """``values`` as an (n, 3) float64 array, or ``error`` with a message naming ``what``."""
     try:
         array = np.asarray(values, dtype=np.float64)
@@ -63,7 +63,7 @@ def xyz_array(values, what: str, *, error: type[Exception] = MeshFormatError) ->
 
 def _frame(frame: str, what: str) -> str:
     if frame not in GEOMETRY_FRAMES:
-        raise MeshFormatError(f"{what} frame must be one of {GEOMETRY_FRAMES}, got {frame!r}")
+        raise InputError(f"{what} frame must be one of {GEOMETRY_FRAMES}, got {frame!r}")
     return frame
 
 
@@ -97,16 +97,16 @@ def frame_of(metadata: Mapping[str, str], where) -> Frame:
 
     Raises
     ------
-    MeshFormatError
+    InputError
         The metadata names units other than metres or an unknown frame; the message names
         ``where`` (the file).
     """
     units = metadata.get("units", UNITS)
     if units != UNITS:
-        raise MeshFormatError(f"{where}: file says units {units!r}; recon reads metres ({UNITS!r})")
+        raise InputError(f"{where}: file says units {units!r}; recon reads metres ({UNITS!r})")
     frame = metadata.get("frame", UNKNOWN)
     if frame not in GEOMETRY_FRAMES:
-        raise MeshFormatError(f"{where}: file says frame {frame!r}, expected one of "
+        raise InputError(f"{where}: file says frame {frame!r}, expected one of "
                               f"{', '.join(GEOMETRY_FRAMES)}")
     return frame
 
@@ -143,16 +143,16 @@ class Cloud:
         if normals is not None:
             normals = xyz_array(normals, "cloud normals")
             if normals.shape != self.points.shape:
-                raise MeshFormatError(f"cloud normals must match its points, got "
+                raise InputError(f"cloud normals must match its points, got "
                                       f"{normals.shape} for {self.points.shape}")
             self.attributes.update(zip(NORMAL_ATTRIBUTES, normals.T, strict=True))
         for name, values in self.attributes.items():
             if len(values) != len(self.points):
-                raise MeshFormatError(f"attribute {name!r} has {len(values)} values for "
+                raise InputError(f"attribute {name!r} has {len(values)} values for "
                                       f"{len(self.points)} points")
         self.frame = _frame(frame, "cloud")
         if units != UNITS:
-            raise MeshFormatError(f"cloud units must be {UNITS!r}, got {units!r}")
+            raise InputError(f"cloud units must be {UNITS!r}, got {units!r}")
         self.units = units
 
     def __len__(self) -> int:
@@ -189,17 +189,17 @@ class Cloud:
 
         Raises
         ------
-        MeshFormatError
+        InputError
             ``value`` is a mesh or not an (n, 3) array; the message names ``name``.
         """
         if isinstance(value, Cloud):
             return value
         if isinstance(value, Mesh) or (hasattr(value, "vertices") and hasattr(value, "faces")):
-            raise MeshFormatError(f"{name} must be a point cloud, got a mesh")
+            raise InputError(f"{name} must be a point cloud, got a mesh")
         try:
             return cls(value)
-        except MeshFormatError as exc:
-            raise MeshFormatError(f"{name} must be a Cloud or an (n, 3) array of points, got "
+        except InputError as exc:
+            raise InputError(f"{name} must be a Cloud or an (n, 3) array of points, got "
                                   f"{type(value).__name__} ({exc})") from None
 
 
@@ -229,13 +229,13 @@ class Mesh:
         if faces.size == 0:
             faces = faces.reshape(0, 3)
         if faces.ndim != 2 or faces.shape[1] != 3:
-            raise MeshFormatError(f"mesh faces must be (m, 3), got {faces.shape}")
+            raise InputError(f"mesh faces must be (m, 3), got {faces.shape}")
         if not np.issubdtype(faces.dtype, np.integer):
-            raise MeshFormatError(f"mesh faces must be integers, got dtype {faces.dtype}")
+            raise InputError(f"mesh faces must be integers, got dtype {faces.dtype}")
         self.faces = np.ascontiguousarray(faces, dtype=np.int64)
         self.frame = _frame(frame, "mesh")
         if units != UNITS:
-            raise MeshFormatError(f"mesh units must be {UNITS!r}, got {units!r}")
+            raise InputError(f"mesh units must be {UNITS!r}, got {units!r}")
         self.units = units
 
     def __iter__(self) -> Iterator[np.ndarray]:
@@ -276,7 +276,7 @@ class Mesh:
 
         Raises
         ------
-        MeshFormatError
+        InputError
             Anything else; the message names ``name``.
         """
         if isinstance(value, Mesh):
@@ -286,9 +286,9 @@ class Mesh:
         elif hasattr(value, "vertices") and hasattr(value, "faces"):
             vertices, faces = value.vertices, value.faces
         else:
-            raise MeshFormatError(f"{name} must be a Mesh, a (vertices, faces) pair or an object "
+            raise InputError(f"{name} must be a Mesh, a (vertices, faces) pair or an object "
                                   f"with vertices and faces, got {type(value).__name__}")
         try:
             return cls(vertices, faces, frame=getattr(value, "frame", "body"))
-        except MeshFormatError as exc:
-            raise MeshFormatError(f"{name}: {exc}") from None
+        except InputError as exc:
+            raise InputError(f"{name}: {exc}") from None

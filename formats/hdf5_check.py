@@ -193,7 +193,7 @@ def check_hdf5(path, error: type[Exception], *, cpu_s: int | None = None,
     path : str or Path
         An existing HDF5 file.
     error : exception class
-        A ReconError subclass (``StrikeLogError``, ``MeshFormatError``).
+        A ReconError subclass (``InputError``).
     cpu_s : int, seconds, optional
         CPU time the structural walk may use (default ``CHECK_CPU_S``).
     live : bool

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 from formats.geometry import UNKNOWN, Mesh, check_extent, file_metadata, frame_of
 from formats.paths import check_source
 from formats.ply import read_ply, read_ply_metadata, write_ply
@@ -72,23 +72,23 @@ def read_mesh(path, *, scale: float = 1.0, units: str | None = None) -> Mesh:
 
     Raises
     ------
-    MeshFormatError
+    InputError
         Missing file, unknown suffix or units, unreadable content, no triangles, indices that
         name no vertex, or non-finite vertices; the message names the file (and the units it
         was read in where they matter).
     """
-    path = check_source(path, MeshFormatError)
+    path = check_source(path, InputError)
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
-        raise MeshFormatError(f"{path}: unknown mesh suffix {path.suffix!r} (expected one of "
+        raise InputError(f"{path}: unknown mesh suffix {path.suffix!r} (expected one of "
                               f"{', '.join(MESH_SUFFIXES)})")
     if not (np.isfinite(scale) and scale > 0):
-        raise MeshFormatError(f"{path}: scale must be a positive number, got {scale}")
+        raise InputError(f"{path}: scale must be a positive number, got {scale}")
     if units is not None:
         units_factor(units, path)   # a bad name first
     stated = _stated_units(path, suffix)
     if units is not None and stated is not None and units != stated:
-        raise MeshFormatError(f"{path}: the file is in {stated}, not {units} (omit the units)")
+        raise InputError(f"{path}: the file is in {stated}, not {units} (omit the units)")
     units = units or stated or default_units(path)
     factor = units_factor(units, path) * scale
     if suffix in DSK_SUFFIXES:
@@ -101,11 +101,11 @@ def read_mesh(path, *, scale: float = 1.0, units: str | None = None) -> Mesh:
     else:
         vertices, faces, frame = _read_trimesh(path)
     if not np.all(np.isfinite(vertices)):
-        raise MeshFormatError(f"{path}: vertices contain NaN or Inf (read as {units})")
+        raise InputError(f"{path}: vertices contain NaN or Inf (read as {units})")
     if len(faces) == 0:
-        raise MeshFormatError(f"{path}: has no triangles (a point cloud, not a mesh?)")
+        raise InputError(f"{path}: has no triangles (a point cloud, not a mesh?)")
     if faces.min() < 0 or faces.max() >= len(vertices):
-        raise MeshFormatError(f"{path}: faces index vertices that do not exist")
+        raise InputError(f"{path}: faces index vertices that do not exist")
     vertices = vertices * factor
     check_extent(vertices, path)
     return Mesh(vertices, faces, frame=frame)
@@ -118,7 +118,7 @@ def _stated_units(path: Path, suffix: str) -> str | None:
     if suffix == ".ply":
         stated = read_ply_metadata(path).get("units")
         if stated is not None and stated not in METRES_PER:
-            raise MeshFormatError(f"{path}: file says units {stated!r}; recon reads "
+            raise InputError(f"{path}: file says units {stated!r}; recon reads "
                                   f"{' or '.join(UNITS)}")
         return stated
     return None
@@ -130,7 +130,7 @@ def _read_ply_mesh(path: Path) -> tuple[np.ndarray, np.ndarray, str]:
     columns, faces, metadata = read_ply(path)
     missing = [k for k in "xyz" if k not in columns]
     if missing:
-        raise MeshFormatError(f"{path}: PLY vertices lack {', '.join(missing)}")
+        raise InputError(f"{path}: PLY vertices lack {', '.join(missing)}")
     vertices = np.stack([np.asarray(columns[k], dtype=np.float64) for k in "xyz"], axis=1)
     faces = np.zeros((0, 3), dtype=np.int64) if faces is None else faces
     return vertices, faces, frame_of({k: v for k, v in metadata.items() if k != "units"}, path)
@@ -144,7 +144,7 @@ def _read_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray, str]:
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types on bad files; all mean "unreadable"
-        raise MeshFormatError(f"{path}: not a readable mesh ({type(exc).__name__}: "
+        raise InputError(f"{path}: not a readable mesh ({type(exc).__name__}: "
                               f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
     faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
@@ -183,16 +183,16 @@ def write_mesh(path, vertices, faces: np.ndarray | None = None, *,
         vertices, faces = Mesh.of(vertices, "mesh")
     suffix = path.suffix.lower()
     if suffix not in WRITE_SUFFIXES:
-        raise MeshFormatError(f"{path}: meshes are written as {', '.join(WRITE_SUFFIXES)}")
+        raise InputError(f"{path}: meshes are written as {', '.join(WRITE_SUFFIXES)}")
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     if vertices.ndim != 2 or vertices.shape[1] != 3:
-        raise MeshFormatError(f"{path}: vertices must be (n, 3), got {vertices.shape}")
+        raise InputError(f"{path}: vertices must be (n, 3), got {vertices.shape}")
     if faces.ndim != 2 or faces.shape[1] != 3:
-        raise MeshFormatError(f"{path}: faces must be (m, 3), got {faces.shape}")
+        raise InputError(f"{path}: faces must be (m, 3), got {faces.shape}")
     fixed = {".ply": "m", ".bds": "km", ".dsk": "km"}.get(suffix)
     if units is not None and fixed is not None and units != fixed:
-        raise MeshFormatError(f"{path}: {suffix} files are written in {fixed}, not {units}")
+        raise InputError(f"{path}: {suffix} files are written in {fixed}, not {units}")
     if suffix == ".tab":
         return write_pds_table(path, vertices, faces, units=units or "km")
     if suffix in DSK_SUFFIXES:
@@ -203,7 +203,7 @@ def write_mesh(path, vertices, faces: np.ndarray | None = None, *,
         vertex_normals = Mesh(vertices, faces).vertex_normals
     n = np.asarray(vertex_normals, dtype=np.float64)
     if n.shape != vertices.shape:
-        raise MeshFormatError(f"{path}: vertex_normals must be {vertices.shape}, got {n.shape}")
+        raise InputError(f"{path}: vertex_normals must be {vertices.shape}, got {n.shape}")
     columns = {"x": vertices[:, 0], "y": vertices[:, 1], "z": vertices[:, 2],
                "nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2]}
     write_ply(path, columns, faces=faces, metadata=file_metadata(frame, source=source))

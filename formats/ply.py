@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.atomic import AtomicWriter
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 from formats.paths import check_source
 
 _PLY_TYPES = {"f8": "double", "f4": "float", "i4": "int", "u1": "uchar"}
@@ -42,7 +42,7 @@ def _ply_dtype(dtype: np.dtype) -> np.dtype:
         return np.dtype("<f4")
     if dtype.kind == "f":
         return np.dtype("<f8")
-    raise MeshFormatError(f"PLY columns must be numbers, got dtype {dtype}")
+    raise InputError(f"PLY columns must be numbers, got dtype {dtype}")
 
 
 def _comment_lines(metadata: dict[str, str]) -> list[str]:
@@ -50,7 +50,7 @@ def _comment_lines(metadata: dict[str, str]) -> list[str]:
     for key, value in metadata.items():
         text = f"{key} {value}"
         if " " in key or "\n" in text or "\r" in text:
-            raise MeshFormatError(f"PLY comment {key!r} must be one line with a one-word key")
+            raise InputError(f"PLY comment {key!r} must be one line with a one-word key")
         lines.append(f"comment {text}")
     return lines
 
@@ -73,7 +73,7 @@ class PlyWriter(AtomicWriter):
         Written as ``comment KEY VALUE`` header lines.
     """
 
-    missing_dir_error = MeshFormatError
+    missing_dir_error = InputError
 
     def __init__(self, path, n_rows: int, dtypes: dict[str, np.dtype], *, n_faces: int = 0,
                  metadata: dict[str, str] | None = None):
@@ -102,7 +102,7 @@ class PlyWriter(AtomicWriter):
             values = np.asarray(columns[name])
             if (self._disk[name] == np.int32 and len(values)
                     and (values.min() < _INT32.min or values.max() > _INT32.max)):
-                raise MeshFormatError(f"{self.path}: column {name!r} has values beyond the "
+                raise InputError(f"{self.path}: column {name!r} has values beyond the "
                                       "int32 range of a PLY 'int' property")
             rows[name] = values
         self._fh.write(rows.tobytes())
@@ -121,7 +121,7 @@ class PlyWriter(AtomicWriter):
     def _finish(self) -> None:
         self._fh.close()
         if (self._written, self._faces_written) != (self.n_rows, self.n_faces):
-            raise MeshFormatError(f"{self.path}: wrote {self._written} rows and "
+            raise InputError(f"{self.path}: wrote {self._written} rows and "
                                   f"{self._faces_written} faces, header says {self.n_rows} and "
                                   f"{self.n_faces}")
 
@@ -184,17 +184,17 @@ class PlyHeader:
 def _ply_kind(word: str, path, line: int) -> str:
     kind = _NUMPY_OF_PLY.get(word)
     if kind is None:
-        raise MeshFormatError(f"{path}: PLY header line {line}: unknown property type {word!r}")
+        raise InputError(f"{path}: PLY header line {line}: unknown property type {word!r}")
     return kind
 
 
 def _ply_format(path: Path, words: list[str]) -> str:
     """The encoding of a ``format <encoding> 1.0`` line."""
     if len(words) != 3 or words[1] not in _ENCODINGS:
-        raise MeshFormatError(f"{path}: PLY format {' '.join(words[1:])!r} is not one of "
+        raise InputError(f"{path}: PLY format {' '.join(words[1:])!r} is not one of "
                               f"{', '.join(_ENCODINGS)}")
     if words[2] != _VERSION:
-        raise MeshFormatError(f"{path}: PLY version {words[2]!r} is not supported (the format "
+        raise InputError(f"{path}: PLY version {words[2]!r} is not supported (the format "
                               f"has version {_VERSION})")
     return words[1]
 
@@ -202,7 +202,7 @@ def _ply_format(path: Path, words: list[str]) -> str:
 def _ply_element(path: Path, words: list[str], number: int) -> tuple[str, int, list]:
     """A new ``element <name> <count>`` with no properties yet."""
     if len(words) != 3 or not words[2].isdigit():
-        raise MeshFormatError(f"{path}: PLY header line {number}: element "
+        raise InputError(f"{path}: PLY header line {number}: element "
                               f"{' '.join(words[1:])!r} needs a name and a count")
     return words[1], int(words[2]), []
 
@@ -211,14 +211,14 @@ def _ply_property(path: Path, text: str, number: int, elements: list) -> tuple:
     """A ``property <type> <name>`` or ``property list <count type> <item type> <name>`` line
     as ``(name, kind)``; ``kind`` is a tuple for a list."""
     if not elements:
-        raise MeshFormatError(f"{path}: PLY header line {number}: a property before any "
+        raise InputError(f"{path}: PLY header line {number}: a property before any "
                               "element")
     words = text.split()
     if len(words) == 5 and words[1] == "list":
         return words[-1], (_ply_kind(words[2], path, number), _ply_kind(words[3], path, number))
     if len(words) == 3:
         return words[-1], _ply_kind(words[1], path, number)
-    raise MeshFormatError(f"{path}: PLY header line {number}: malformed property "
+    raise InputError(f"{path}: PLY header line {number}: malformed property "
                           f"{text.strip()!r}")
 
 
@@ -239,7 +239,7 @@ def _header_line(path: Path, text: str, number: int, state: dict) -> None:
         prop = _ply_property(path, text, number, state["elements"])
         state["elements"][-1][2].append(prop)
     else:
-        raise MeshFormatError(f"{path}: PLY header line {number}: unknown keyword "
+        raise InputError(f"{path}: PLY header line {number}: unknown keyword "
                               f"{key[:40]!r}")
 
 
@@ -253,13 +253,13 @@ def read_header(path) -> PlyHeader:
 
     Raises
     ------
-    MeshFormatError
+    InputError
     """
-    path = check_source(path, MeshFormatError)
+    path = check_source(path, InputError)
     state = {"encoding": None, "elements": [], "metadata": {}}
     with open(path, "rb") as fh:
         if fh.readline(16).rstrip(b"\r\n") != b"ply":
-            raise MeshFormatError(f"{path}: not a PLY file (no 'ply' magic line)")
+            raise InputError(f"{path}: not a PLY file (no 'ply' magic line)")
         for number in range(2, _MAX_HEADER_LINES):
             raw = fh.readline(4096)
             if not raw:
@@ -271,10 +271,10 @@ def read_header(path) -> PlyHeader:
                 _header_line(path, text, number, state)
                 continue
             if state["encoding"] is None:
-                raise MeshFormatError(f"{path}: PLY header has no format line")
+                raise InputError(f"{path}: PLY header has no format line")
             return PlyHeader(state["encoding"], tuple(state["elements"]), fh.tell(),
                              state["metadata"])
-    raise MeshFormatError(f"{path}: PLY header has no end_header line")
+    raise InputError(f"{path}: PLY header has no end_header line")
 
 
 def _min_record_bytes(name: str, properties) -> tuple[int, bool]:
@@ -303,7 +303,7 @@ def check_body(path, header: PlyHeader) -> None:
 
     Raises
     ------
-    MeshFormatError
+    InputError
         Naming the file, the declared counts and what the body holds.
     """
     path = Path(path)
@@ -316,7 +316,7 @@ def check_body(path, header: PlyHeader) -> None:
             exact = exact and fixed
         if body < least or (exact and body != least):
             need = f"{least:,}" if exact else f"at least {least:,}"
-            raise MeshFormatError(f"{path}: the PLY header declares {header.describe()} "
+            raise InputError(f"{path}: the PLY header declares {header.describe()} "
                                   f"elements ({need} bytes) but the body holds {body:,} bytes")
         return
     with open(path, "rb") as fh:
@@ -325,12 +325,12 @@ def check_body(path, header: PlyHeader) -> None:
     empty = re.search(rb"(?:^|\n)[ \t\r]*\n", text)
     if empty is not None:
         line = text[:empty.end()].count(b"\n")
-        raise MeshFormatError(f"{path}: line {line} of the ASCII PLY body is empty (the format "
+        raise InputError(f"{path}: line {line} of the ASCII PLY body is empty (the format "
                               "has one element per line)")
     lines = text.count(b"\n") + 1 if text else 0
     declared = sum(n for _, n, _ in header.elements)
     if lines != declared:
-        raise MeshFormatError(f"{path}: the PLY header declares {header.describe()} elements "
+        raise InputError(f"{path}: the PLY header declares {header.describe()} elements "
                               f"({declared:,} lines) but the body has {lines:,} lines")
     _check_ascii_values(path, header, _values_per_line(text, lines))
 
@@ -356,7 +356,7 @@ def _check_ascii_values(path, header: PlyHeader, values: np.ndarray) -> None:
         if len(bad):
             line = first + int(bad[0]) + 1
             want = f"at least {len(properties)}" if lists else str(len(properties))
-            raise MeshFormatError(f"{path}: line {line:,} of the ASCII PLY body holds "
+            raise InputError(f"{path}: line {line:,} of the ASCII PLY body holds "
                                   f"{int(block[bad[0]])} values where a {name} element has "
                                   f"{want}")
         first += count
@@ -393,16 +393,16 @@ def _face_lists(path, raw: dict, n_vertices: int) -> None:
         items = np.concatenate([np.asarray(x).ravel() for x in lists]) if len(lists) else None
         bad = np.zeros(0, dtype=np.intp)
     if len(bad):
-        raise MeshFormatError(f"{path}: face {int(bad[0])} declares {int(counts[bad[0]])} "
+        raise InputError(f"{path}: face {int(bad[0])} declares {int(counts[bad[0]])} "
                               f"indices where the binary PLY holds {width}")
     small = np.flatnonzero(sizes < _MIN_FACE_INDICES)
     if len(small):
-        raise MeshFormatError(f"{path}: face {int(small[0])} has {int(sizes[small[0]])} "
+        raise InputError(f"{path}: face {int(small[0])} has {int(sizes[small[0]])} "
                               f"vertex indices; a face needs at least {_MIN_FACE_INDICES}")
     if items is not None and np.size(items):
         items = np.asarray(items)
         if items.min() < 0 or items.max() >= n_vertices:
-            raise MeshFormatError(f"{path}: faces index vertices that do not exist (the file "
+            raise InputError(f"{path}: faces index vertices that do not exist (the file "
                                   f"has {n_vertices:,} vertices, indices run "
                                   f"{int(items.min())}..{int(items.max())})")
 
@@ -423,7 +423,7 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
 
     Raises
     ------
-    MeshFormatError
+    InputError
         A header, body or face that breaks the format, naming the file.
     """
     header = read_header(path)
@@ -438,17 +438,17 @@ def read_ply(path) -> tuple[dict[str, np.ndarray], np.ndarray | None, dict[str, 
         with open(path, "rb") as fh:
             loaded = load_ply(fh, prefer_color="vertex")
     except Exception as exc:  # trimesh's parser raises many types on malformed input
-        raise MeshFormatError(f"{path}: not a readable PLY file ({type(exc).__name__})") from None
+        raise InputError(f"{path}: not a readable PLY file ({type(exc).__name__})") from None
     raw = loaded.get("metadata", {}).get("_ply_raw", {})
     vertex = raw.get("vertex", {}).get("data")
     if vertex is None:
-        raise MeshFormatError(f"{path}: PLY file has no vertex element")
+        raise InputError(f"{path}: PLY file has no vertex element")
     # binary files give a structured array, ASCII files a dict of arrays
     names = vertex.dtype.names if isinstance(vertex, np.ndarray) else list(vertex)
     columns = {name: np.asarray(vertex[name]).reshape(-1) for name in names}
     n_vertices = header.count("vertex")
     if any(len(c) != n_vertices for c in columns.values()):
-        raise MeshFormatError(f"{path}: the PLY header declares {n_vertices:,} vertices but "
+        raise InputError(f"{path}: the PLY header declares {n_vertices:,} vertices but "
                               f"{min(len(c) for c in columns.values()):,} were read")
     _face_lists(path, raw, n_vertices)
     faces = loaded.get("faces")
@@ -497,7 +497,7 @@ def _triangles(path: Path, face: np.ndarray | None, n_vertices: int):
         return False   # no index list, or polygons of other sizes filling the same bytes
     faces = face[lists[0]]["items"].astype(np.int64)
     if faces.min() < 0 or faces.max() >= n_vertices:
-        raise MeshFormatError(f"{path}: faces index vertices that do not exist (the file "
+        raise InputError(f"{path}: faces index vertices that do not exist (the file "
                               f"has {n_vertices:,} vertices, indices run "
                               f"{int(faces.min())}..{int(faces.max())})")
     return faces

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.atomic import write_atomically
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 from formats.paths import check_source
 from formats.spice import LOCK, TARGET_FRAME, TARGET_FRAME_ID, TARGET_ID
 
@@ -65,7 +65,7 @@ SPICE_INERTIAL_IDS = range(1, 22)
 def units_factor(units: str, where) -> float:
     """Metres per file unit of ``units`` (``"km"`` or ``"m"``)."""
     if units not in METRES_PER:
-        raise MeshFormatError(f"{where}: units must be km or m, got {units!r}")
+        raise InputError(f"{where}: units must be km or m, got {units!r}")
     return METRES_PER[units]
 
 
@@ -84,7 +84,7 @@ def _numbers(path: Path, tokens: list[str], what: str) -> np.ndarray:
                         dtype=np.float64)
     except ValueError:
         bad = next(t for t in tokens if not _is_number(t))
-        raise MeshFormatError(f"{path}: {what} holds {bad!r}, not a number "
+        raise InputError(f"{path}: {what} holds {bad!r}, not a number "
                               f"(line {_line_of(path, bad)})") from None
 
 
@@ -106,13 +106,13 @@ def _indices(path: Path, values: np.ndarray, what: str) -> np.ndarray:
     """Whole numbers of ``values`` as int64, or an error naming ``what``."""
     if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
         bad = values[~np.isfinite(values) | (values != np.round(values))][0]
-        raise MeshFormatError(f"{path}: {what} must be whole numbers, found {bad:g}")
+        raise InputError(f"{path}: {what} must be whole numbers, found {bad:g}")
     return values.astype(np.int64)
 
 
 def _count(path: Path, token: str, what: str) -> int:
     if not token.isdigit():
-        raise MeshFormatError(f"{path}: expected the {what} count (a whole number), found "
+        raise InputError(f"{path}: expected the {what} count (a whole number), found "
                               f"{token[:40]!r}")
     return int(token)
 
@@ -128,17 +128,17 @@ def read_pds_table(path) -> tuple[np.ndarray, np.ndarray, str]:
 
     Raises
     ------
-    MeshFormatError
+    InputError
         Not one of the layouts, counts that disagree with the rows, indices that name no
         vertex, words that are not numbers; one line naming the file.
     """
-    path = check_source(path, MeshFormatError)
+    path = check_source(path, InputError)
     try:
         tokens = path.read_text(encoding="utf-8", errors="replace").split()
     except OSError as exc:
-        raise MeshFormatError(f"{path}: cannot read ({exc.strerror})") from None
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
     if not tokens:
-        raise MeshFormatError(f"{path}: is empty")
+        raise InputError(f"{path}: is empty")
     if tokens[0].lower() == "v":
         return (*_read_vf(path, tokens), "v/f")
     n = _count(path, tokens[0], "vertex (or ICQ Q)")
@@ -156,13 +156,13 @@ def _looks_like_plates(tokens: list[str], n: int) -> bool:
 
 def _read_vf(path: Path, tokens: list[str]) -> tuple[np.ndarray, np.ndarray]:
     if len(tokens) % 4:
-        raise MeshFormatError(f"{path}: every row of a v/f table is 'v x y z' or 'f i j k'; "
+        raise InputError(f"{path}: every row of a v/f table is 'v x y z' or 'f i j k'; "
                               f"{len(tokens)} words do not make rows of four")
     rows = np.array(tokens, dtype=object).reshape(-1, 4)
     tags = np.char.lower(rows[:, 0].astype(str))
     unknown = sorted(set(tags) - {"v", "f"})
     if unknown:
-        raise MeshFormatError(f"{path}: rows must start with v or f, found {unknown[0]!r}")
+        raise InputError(f"{path}: rows must start with v or f, found {unknown[0]!r}")
     vertices = _numbers(path, list(rows[tags == "v", 1:].ravel()),
                         "a vertex row").reshape(-1, 3)
     faces = _indices(path, _numbers(path, list(rows[tags == "f", 1:].ravel()), "a facet row"),
@@ -174,36 +174,36 @@ def _read_vf(path: Path, tokens: list[str]) -> tuple[np.ndarray, np.ndarray]:
 def _read_plates(path: Path, tokens: list[str], n: int) -> tuple[np.ndarray, np.ndarray]:
     at = 1 + 4 * n
     if at >= len(tokens):
-        raise MeshFormatError(f"{path}: says {n} vertices but holds {(len(tokens) - 1) // 4} "
+        raise InputError(f"{path}: says {n} vertices but holds {(len(tokens) - 1) // 4} "
                               "rows of 'id x y z' and no plate table")
     m = _count(path, tokens[at], "plate")
     if len(tokens) != at + 1 + 4 * m:
-        raise MeshFormatError(f"{path}: says {n} vertices and {m} plates, which take "
+        raise InputError(f"{path}: says {n} vertices and {m} plates, which take "
                               f"{at + 1 + 4 * m} words; the file holds {len(tokens)}")
     vertex_rows = _numbers(path, tokens[1:at], "the vertex table").reshape(n, 4)
     plate_rows = _indices(path, _numbers(path, tokens[at + 1:], "the plate table"),
                           "plate rows").reshape(m, 4)
     ids = _indices(path, vertex_rows[:, 0], "vertex ids")
     if len(np.unique(ids)) != n:
-        raise MeshFormatError(f"{path}: vertex ids repeat")
+        raise InputError(f"{path}: vertex ids repeat")
     order = np.argsort(ids)
     corners = plate_rows[:, 1:]
     where = np.searchsorted(ids[order], corners)
     found = (where < n) & (ids[order][np.minimum(where, n - 1)] == corners)
     if not found.all():
         plate = int(np.argmax(~found.all(axis=1)))
-        raise MeshFormatError(f"{path}: plate {plate_rows[plate, 0]} names vertex "
+        raise InputError(f"{path}: plate {plate_rows[plate, 0]} names vertex "
                               f"{corners[~found][0]}, which the vertex table does not hold")
     return vertex_rows[:, 1:], order[where]
 
 
 def _check_faces(path: Path, faces: np.ndarray, n_vertices: int, what: str, *, base: int):
     if len(faces) == 0:
-        raise MeshFormatError(f"{path}: has no {what}s (a point list, not a shape model?)")
+        raise InputError(f"{path}: has no {what}s (a point list, not a shape model?)")
     bad = (faces < 0) | (faces >= n_vertices)
     if bad.any():
         row = int(np.argmax(bad.any(axis=1)))
-        raise MeshFormatError(f"{path}: {what} {row + base} names vertex "
+        raise InputError(f"{path}: {what} {row + base} names vertex "
                               f"{faces[bad][0] + base}; the file has vertices {base}.."
                               f"{n_vertices - 1 + base}")
 
@@ -211,7 +211,7 @@ def _check_faces(path: Path, faces: np.ndarray, n_vertices: int, what: str, *, b
 def _icq_mesh(path: Path, q: int, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Triangles of an ICQ grid (see the module docstring), shared edge vertices welded."""
     if q < 1:
-        raise MeshFormatError(f"{path}: ICQ Q must be at least 1, got {q}")
+        raise InputError(f"{path}: ICQ Q must be at least 1, got {q}")
     grid = values.reshape(6, q + 1, q + 1, 3)               # [F, J, I, xyz]
     index = np.arange(6 * (q + 1) ** 2).reshape(6, q + 1, q + 1)
     a, b = index[:, :-1, :-1], index[:, 1:, :-1]            # v(I, J), v(I, J+1)
@@ -221,7 +221,7 @@ def _icq_mesh(path: Path, q: int, values: np.ndarray) -> tuple[np.ndarray, np.nd
     unique, inverse = np.unique(grid.reshape(-1, 3), axis=0, return_inverse=True)
     faces = inverse.reshape(-1)[faces]
     if len(unique) != 6 * q * q + 2:
-        raise MeshFormatError(f"{path}: the ICQ faces do not meet at the cube's edges "
+        raise InputError(f"{path}: the ICQ faces do not meet at the cube's edges "
                               f"({len(unique)} distinct vertices, a valid Q = {q} grid has "
                               f"{6 * q * q + 2})")
     return unique, _outward(faces, unique)
@@ -261,7 +261,7 @@ def write_pds_table(path, vertices, faces, *, form: str = "plates", units: str =
         v_rows, f_rows = vertices, faces
         v_fmt, f_fmt = "v %.17g %.17g %.17g", "f %d %d %d"
     else:
-        raise MeshFormatError(f"{path}: PDS table form must be 'plates' or 'v/f', got {form!r}")
+        raise InputError(f"{path}: PDS table form must be 'plates' or 'v/f', got {form!r}")
 
     def write(tmp: Path) -> None:
         with open(tmp, "w", encoding="ascii") as fh:
@@ -269,7 +269,7 @@ def write_pds_table(path, vertices, faces, *, form: str = "plates", units: str =
             np.savetxt(fh, v_rows, fmt=v_fmt)
             fh.write(head_f)
             np.savetxt(fh, f_rows, fmt=f_fmt)
-    return write_atomically(path, write, error=MeshFormatError)
+    return write_atomically(path, write, error=InputError)
 
 
 # --------------------------------------------------------------------------- SPICE DSK
@@ -287,7 +287,7 @@ def _spice_call(path, call, what: str):
         except SpiceyError as exc:
             short = getattr(exc, "short", "") or type(exc).__name__
             detail = " ".join((getattr(exc, "long", "") or "").split())
-            raise MeshFormatError(f"{path}: {what} ({short} {detail})") from None
+            raise InputError(f"{path}: {what} ({short} {detail})") from None
 
 
 def read_dsk(path) -> tuple[np.ndarray, np.ndarray, str]:
@@ -303,10 +303,10 @@ def read_dsk(path) -> tuple[np.ndarray, np.ndarray, str]:
 
     Raises
     ------
-    MeshFormatError
+    InputError
         Not a DSK file, no type 2 segment, segments in different frames or of different bodies.
     """
-    path = check_source(path, MeshFormatError)
+    path = check_source(path, InputError)
 
     def read(sp):
         handle = sp.dasopr(str(path))
@@ -329,9 +329,9 @@ def read_dsk(path) -> tuple[np.ndarray, np.ndarray, str]:
 
     segments = _spice_call(path, read, "not a readable DSK file")
     if not segments:
-        raise MeshFormatError(f"{path}: holds no DSK type 2 (plate model) segment")
+        raise InputError(f"{path}: holds no DSK type 2 (plate model) segment")
     if len({(center, frame) for center, frame, _, _ in segments}) > 1:
-        raise MeshFormatError(f"{path}: its segments describe different bodies or frames; "
+        raise InputError(f"{path}: its segments describe different bodies or frames; "
                               "recon reads one body in one frame")
     offsets = np.cumsum([0] + [len(v) for _, _, v, _ in segments[:-1]])
     vertices = np.concatenate([v for _, _, v, _ in segments])
@@ -371,7 +371,7 @@ def write_dsk(path, vertices, faces, *, center: int = TARGET_ID, frame: str = TA
     vertices_km = np.asarray(vertices, dtype=np.float64) / METRES_PER["km"]
     plates = np.asarray(faces, dtype=np.int64) + 1
     if len(plates) == 0 or vertices_km.ndim != 2 or vertices_km.shape[1] != 3:
-        raise MeshFormatError(f"{path}: a DSK needs (n, 3) vertices and at least one plate")
+        raise InputError(f"{path}: a DSK needs (n, 3) vertices and at least one plate")
     size = DSK_LIST_PER_PLATE * len(plates) + 10_000
     # the integer index: fixed part, voxel pointers and lists, and the vertex-plate list
     # (a count and the plates of each vertex)
@@ -407,4 +407,4 @@ def write_dsk(path, vertices, faces, *, center: int = TARGET_ID, frame: str = TA
                                                      ("NAME", "CLASS", "CLASS_ID", "CENTER"))):
                         sp.dvpool(name)
         _spice_call(path, call, "cannot write the DSK file")
-    return write_atomically(path, write, error=MeshFormatError)
+    return write_atomically(path, write, error=InputError)

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import ReconError
+from formats.errors import InputError
 
 # Every SPICE call holds this lock (the toolkit has one global state and is not thread-safe).
 LOCK = threading.RLock()
@@ -66,10 +66,6 @@ SEGMENT_STATES = 10_000
 KM = 1000.0   # metres per kilometre: SPK states are in km and km/s
 
 
-class SpiceError(ReconError, ValueError):
-    """A SPICE kernel, name or time cannot be used (one line from the toolkit's own message)."""
-
-
 def _spice():
     import spiceypy
 
@@ -85,7 +81,7 @@ def _message(exc) -> str:
 
 @contextlib.contextmanager
 def calls(what: str) -> Iterator:
-    """Hold :data:`LOCK` and turn the toolkit's errors into a one-line :class:`SpiceError`
+    """Hold :data:`LOCK` and turn the toolkit's errors into a one-line :class:`InputError`
     that starts with ``what`` (a file, a key)."""
     from spiceypy.utils.exceptions import SpiceyError
 
@@ -93,7 +89,7 @@ def calls(what: str) -> Iterator:
         try:
             yield _spice()
         except SpiceyError as exc:
-            raise SpiceError(f"{what}: {_message(exc)}") from None
+            raise InputError(f"{what}: {_message(exc)}") from None
 
 
 _LEAPSECONDS_LOADED = False
@@ -139,14 +135,14 @@ def loaded(paths: Sequence, what: str = "kernel") -> Iterator[None]:
 
     Raises
     ------
-    SpiceError
+    InputError
         A file that does not exist or that the toolkit cannot read, naming it.
     """
     load_leapseconds()
     paths = [Path(p) for p in paths]
     for path in paths:
         if not path.is_file():
-            raise SpiceError(f"{what} {path}: no such file")
+            raise InputError(f"{what} {path}: no such file")
     done: list[Path] = []
     try:
         for path in paths:

@@ -12,6 +12,7 @@ Imports only ``formats`` and third-party libraries; Open3D is imported on the fi
 query.
 """
 
+from formats.errors import InputError
 from metrics.distance import MeshDistance, point_mesh_distance
 from metrics.edges import (
     EdgeReport,
@@ -23,7 +24,7 @@ from metrics.edges import (
     feature_edges,
     surface_variation,
 )
-from metrics.errors import FrameAssumedWarning, MetricsInputError, ScaleMismatchWarning
+from metrics.errors import FrameAssumedWarning, ScaleMismatchWarning
 from metrics.inputs import Cloud, Mesh
 from metrics.sampling import sample_surface
 from metrics.score import ScoreReport, Truth, score
@@ -32,9 +33,9 @@ __all__ = [
     "Cloud",
     "EdgeReport",
     "FrameAssumedWarning",
+    "InputError",
     "Mesh",
     "MeshDistance",
-    "MetricsInputError",
     "ScaleMismatchWarning",
     "ScoreReport",
     "SurfaceVariation",

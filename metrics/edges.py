@@ -86,8 +86,8 @@ from typing import Literal
 
 import numpy as np
 
+from formats.errors import InputError
 from metrics import defaults
-from metrics.errors import MetricsInputError
 from metrics.inputs import Mesh, as_mesh, as_points, bbox_diagonal, face_normals
 from metrics.spatial import distinct_points, morton_order, nearest_distance, query_distance
 
@@ -200,9 +200,9 @@ class EdgeReport:
 
 def _check_k(k, n_points: int) -> int:
     if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 4:
-        raise MetricsInputError(f"k must be an integer >= 4, got {k!r}")
+        raise InputError(f"k must be an integer >= 4, got {k!r}")
     if n_points < k:
-        raise MetricsInputError(f"points has {n_points} rows, fewer than k = {k} neighbours")
+        raise InputError(f"points has {n_points} rows, fewer than k = {k} neighbours")
     return int(k)
 
 
@@ -446,25 +446,25 @@ def _classify(variation: SurfaceVariation, rule: str, threshold: float) -> np.nd
 
 def _check_rule(rule, threshold, k) -> tuple[str, float]:
     if rule not in _RULES:
-        raise MetricsInputError(f"rule must be one of {_RULES}, got {rule!r}")
+        raise InputError(f"rule must be one of {_RULES}, got {rule!r}")
     if threshold is None:
         threshold = default_threshold(rule, k)
     if not (isinstance(threshold, int | float | np.integer | np.floating)
             and not isinstance(threshold, bool) and np.isfinite(threshold) and threshold >= 0):
-        raise MetricsInputError(f"threshold must be a finite number >= 0, got {threshold!r}")
+        raise InputError(f"threshold must be a finite number >= 0, got {threshold!r}")
     return rule, float(threshold)
 
 
 def _check_variant(variant) -> str:
     if variant not in VARIANTS:
-        raise MetricsInputError(f"variant must be one of {VARIANTS}, got {variant!r}")
+        raise InputError(f"variant must be one of {VARIANTS}, got {variant!r}")
     return variant
 
 
 def _check_angle(angle_deg) -> float:
     if not (isinstance(angle_deg, int | float | np.integer | np.floating)
             and not isinstance(angle_deg, bool) and 0.0 <= angle_deg < 180.0):
-        raise MetricsInputError(f"feature_angle_deg must be in [0, 180), got {angle_deg!r}")
+        raise InputError(f"feature_angle_deg must be in [0, 180), got {angle_deg!r}")
     return float(angle_deg)
 
 
@@ -772,7 +772,7 @@ def check_options(n_points: int, diagonal: float, *, k: int = defaults.EDGE_K,
 
     Raises
     ------
-    MetricsInputError
+    InputError
         The first bad option, named.
     """
     _check_rule(rule, threshold, _check_k(k, n_points))
@@ -787,18 +787,18 @@ def resolve_length(value, fraction, default_fraction: float, diagonal: float, na
 
     Raises
     ------
-    MetricsInputError
+    InputError
         Both given, or a value that is not a finite positive number.
     """
     if value is not None and fraction is not None:
-        raise MetricsInputError(f"give {name} or {name}_fraction, not both")
+        raise InputError(f"give {name} or {name}_fraction, not both")
     if value is not None:
         if not _positive_finite(value):
-            raise MetricsInputError(f"{name} must be a finite length > 0 metres, got {value!r}")
+            raise InputError(f"{name} must be a finite length > 0 metres, got {value!r}")
         return float(value)
     fraction = default_fraction if fraction is None else fraction
     if not _positive_finite(fraction):
-        raise MetricsInputError(f"{name}_fraction must be a finite number > 0, got {fraction!r}")
+        raise InputError(f"{name}_fraction must be a finite number > 0, got {fraction!r}")
     return float(fraction) * diagonal
 
 

@@ -41,6 +41,7 @@ from itertools import pairwise
 import numpy as np
 
 from formats import interrupt
+from formats.errors import InputError
 from metrics import defaults
 from metrics.edges import (
     EdgeReport,
@@ -57,7 +58,6 @@ from metrics.edges import (
     neighbourhood_variation,
     resolve_length,
 )
-from metrics.errors import MetricsInputError
 from metrics.inputs import Mesh, bbox_diagonal, face_areas
 from metrics.spatial import morton_order, nearest_distance, query_distance
 
@@ -111,7 +111,7 @@ class EdgeStream:
 
         Raises
         ------
-        MetricsInputError
+        InputError
             Fewer points than k, or a pass that gives another number of points.
         """
         k = _check_k(self.k, self.n)
@@ -172,7 +172,7 @@ class EdgeStream:
             yield points
             interrupt.check()
         if seen != self.n:
-            raise MetricsInputError(f"the test gave {seen} points on a second pass, {self.n} on "
+            raise InputError(f"the test gave {seen} points on a second pass, {self.n} on "
                                     "the first: it changed while it was scored")
 
     def _slab(self, blocks: Blocks, tally: _Tally, lo: float, hi: float, h: float,

@@ -1,14 +1,9 @@
 """Errors and warnings raised by the metrics package.
 
-Every error caused by the caller's input is a ``MetricsInputError``, which is a
+Every error caused by the caller's input is a ``InputError``, which is a
 ``formats.errors.ReconError`` (the CLI prints it on one line and exits 1) and a ``ValueError``.
 """
 
-from formats.errors import ReconError
-
-
-class MetricsInputError(ReconError, ValueError):
-    """A cloud, mesh or option handed to a metric is empty, malformed or out of range."""
 
 
 class ScaleMismatchWarning(UserWarning):

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from formats.errors import InputError
 from formats.geometry import Cloud, Mesh, xyz_array
-from metrics.errors import MetricsInputError
 from metrics.spatial import bounds, row_cross, row_norms
 
 # Largest coordinate accepted [m], about 7 au: beyond any target imaged from nearby. The
@@ -25,18 +25,18 @@ def _finite_xyz(array, what: str, *, first_row: int = 0, allow_empty: bool = Fal
     """``array`` as a C-contiguous (n, 3) float64 array of finite values within
     ``MAX_COORDINATE_M`` of the origin, n >= 1 (or 0 with ``allow_empty``). Rows are numbered
     from ``first_row`` in messages (a block of a streamed input)."""
-    arr = xyz_array(array, what, error=MetricsInputError)
+    arr = xyz_array(array, what, error=InputError)
     if len(arr) == 0:
         if allow_empty:
             return np.ascontiguousarray(arr)
-        raise MetricsInputError(f"{what} is empty (0 rows)")
+        raise InputError(f"{what} is empty (0 rows)")
     if not np.isfinite(arr).all():  # one flat reduction; rows only when something is wrong
         bad = ~np.isfinite(arr).all(axis=1)
-        raise MetricsInputError(f"{what} has {int(bad.sum())} row(s) with NaN or Inf, first at "
+        raise InputError(f"{what} has {int(bad.sum())} row(s) with NaN or Inf, first at "
                                 f"row {first_row + int(np.argmax(bad))}")
     if np.abs(arr).max() > MAX_COORDINATE_M:
         bad = (np.abs(arr) > MAX_COORDINATE_M).any(axis=1)
-        raise MetricsInputError(f"{what} has {int(bad.sum())} row(s) farther than "
+        raise InputError(f"{what} has {int(bad.sum())} row(s) farther than "
                                 f"{MAX_COORDINATE_M:g} m from the origin, first at row "
                                 f"{first_row + int(np.argmax(bad))} "
                                 f"({np.abs(arr[np.argmax(bad)]).max():g} m)")
@@ -58,7 +58,7 @@ def as_points(points, name: str = "points") -> np.ndarray:
 
     Raises
     ------
-    MetricsInputError
+    InputError
         Wrong shape, no points, or NaN/Inf coordinates.
     """
     return _finite_xyz(points, name)
@@ -81,11 +81,11 @@ def as_cloud(cloud, name: str = "cloud", *, first_row: int = 0, allow_empty: boo
     if normals is not None:
         normals = _finite_xyz(normals, f"{name} normals", **rows)
         if normals.shape != points.shape:
-            raise MetricsInputError(
+            raise InputError(
                 f"{name} normals must match its points, got {normals.shape} for {points.shape}")
         length = np.linalg.norm(normals, axis=1)
         if (length == 0).any():
-            raise MetricsInputError(f"{name} normals has {int((length == 0).sum())} zero vector(s)")
+            raise InputError(f"{name} normals has {int((length == 0).sum())} zero vector(s)")
         normals = normals / length[:, None]
     return Cloud(points, normals=normals, frame=getattr(cloud, "frame", "body"))
 
@@ -107,7 +107,7 @@ def as_mesh(mesh, name: str = "mesh") -> Mesh:
 
     Raises
     ------
-    MetricsInputError
+    InputError
         Wrong shapes, no faces, NaN/Inf vertices, non-integer or out-of-range face indices, or zero
         total area.
     """
@@ -116,24 +116,24 @@ def as_mesh(mesh, name: str = "mesh") -> Mesh:
     elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
         vertices, faces = mesh.vertices, mesh.faces
     else:
-        raise MetricsInputError(
+        raise InputError(
             f"{name} must be a Mesh, a (vertices, faces) tuple or an object with vertices and "
             f"faces, got {type(mesh).__name__}")
     vertices = _finite_xyz(vertices, f"{name} vertices")
     faces_arr = np.asarray(faces)
     if faces_arr.size == 0:
-        raise MetricsInputError(f"{name} has no faces")
+        raise InputError(f"{name} has no faces")
     if faces_arr.ndim != 2 or faces_arr.shape[1] != 3:
-        raise MetricsInputError(f"{name} faces must be (m, 3), got shape {faces_arr.shape}")
+        raise InputError(f"{name} faces must be (m, 3), got shape {faces_arr.shape}")
     if not np.issubdtype(faces_arr.dtype, np.integer):
-        raise MetricsInputError(f"{name} faces must be integers, got dtype {faces_arr.dtype}")
+        raise InputError(f"{name} faces must be integers, got dtype {faces_arr.dtype}")
     lo, hi = int(faces_arr.min()), int(faces_arr.max())
     if lo < 0 or hi >= len(vertices):
-        raise MetricsInputError(
+        raise InputError(
             f"{name} faces index vertices {lo}..{hi}, outside 0..{len(vertices) - 1}")
     faces_arr = np.ascontiguousarray(faces_arr, dtype=np.int64)
     if not face_areas(vertices, faces_arr).sum() > 0:
-        raise MetricsInputError(f"{name} has zero total area (all faces degenerate)")
+        raise InputError(f"{name} has zero total area (all faces degenerate)")
     return Mesh(vertices, faces_arr, frame=getattr(mesh, "frame", "body"))
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from metrics.errors import MetricsInputError
+from formats.errors import InputError
 from metrics.inputs import Mesh, face_areas
 
 
@@ -119,5 +119,5 @@ def coverage_lattice(mesh: Mesh, levels: np.ndarray) -> tuple[np.ndarray, np.nda
 
 def _positive_int(value, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-        raise MetricsInputError(f"{name} must be a positive integer, got {value!r}")
+        raise InputError(f"{name} must be a positive integer, got {value!r}")
     return int(value)

@@ -58,12 +58,13 @@ from functools import cached_property
 import numpy as np
 
 from formats import interrupt
+from formats.errors import InputError
 from formats.geometry import UNKNOWN
 from metrics import defaults
 from metrics.distance import MeshDistance
 from metrics.edges import EdgeReport, check_options, edge_report, resolve_length
 from metrics.edges_stream import EdgeStream
-from metrics.errors import FrameAssumedWarning, MetricsInputError, ScaleMismatchWarning
+from metrics.errors import FrameAssumedWarning, ScaleMismatchWarning
 from metrics.inputs import (
     Cloud,
     Mesh,
@@ -188,7 +189,7 @@ def _summary(distance: np.ndarray) -> dict[str, float]:
 
 def _count(value, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-        raise MetricsInputError(f"{name} must be a positive integer, got {value!r}")
+        raise InputError(f"{name} must be a positive integer, got {value!r}")
     return int(value)
 
 
@@ -344,7 +345,7 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
 
     Raises
     ------
-    MetricsInputError
+    InputError
         Empty or malformed inputs, NaN/Inf coordinates, a truth with no faces, bad options.
 
     Warns
@@ -432,7 +433,7 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
 
     Raises
     ------
-    MetricsInputError
+    InputError
         As ``score``; also a stream that gives other points on a later pass.
     """
     setup = _Setup(truth, tau=tau, tau_fraction=tau_fraction, n_truth_samples=n_truth_samples,
@@ -458,7 +459,7 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
     _reduce_nearest(nearest, pending, queries)
     n = accuracy.n
     if n == 0:
-        raise MetricsInputError(f"{name} points is empty (0 rows)")
+        raise InputError(f"{name} points is empty (0 rows)")
     setup.check_scale(float(np.linalg.norm(accuracy.high - accuracy.low)))
     summary = accuracy.summary(lambda: (setup.distance.query(points)[0] for points, _ in
                                         _checked_blocks(blocks, name)))
@@ -515,7 +516,7 @@ class _Setup:
         self.mesh = self.prepared.mesh
         if seed is not None and (isinstance(seed, bool) or
                                  not isinstance(seed, int | np.integer) or seed < 0):
-            raise MetricsInputError(f"seed must be a non-negative integer or None, got {seed!r}")
+            raise InputError(f"seed must be a non-negative integer or None, got {seed!r}")
         self.seed = seed
         self.n_truth_samples = _count(n_truth_samples, "n_truth_samples")
         self.n_test_samples = _count(n_test_samples, "n_test_samples")
@@ -525,7 +526,7 @@ class _Setup:
         self.edge_options = dict(edge_options or {})
         unknown = set(self.edge_options) - _EDGE_OPTIONS
         if unknown:
-            raise MetricsInputError(f"edge_options has unknown key(s) {sorted(unknown)}; "
+            raise InputError(f"edge_options has unknown key(s) {sorted(unknown)}; "
                                     f"allowed: {sorted(_EDGE_OPTIONS)}")
 
     @property
@@ -547,14 +548,14 @@ class _Setup:
             note = (f"the truth records no frame (unknown); compared as if in the {frame} frame "
                     f"of {name}")
         else:
-            raise MetricsInputError(f"{name} is in the {frame} frame but truth in the "
+            raise InputError(f"{name} is in the {frame} frame but truth in the "
                                     f"{truth} frame: register both in one frame")
         warnings.warn(note, FrameAssumedWarning, stacklevel=3)
 
     def check_edges(self, n_points: int) -> None:
         k = self.edge_options.get("k", defaults.EDGE_K)
         if isinstance(k, int | np.integer) and k >= 4 and n_points < k:
-            raise MetricsInputError(
+            raise InputError(
                 f"test has {n_points} points, fewer than the edge metric's k = {k} "
                 "(pass edges=False or a smaller edge_options['k'])")
         check_options(n_points, self.diagonal, **self.edge_options)
@@ -651,7 +652,7 @@ class _Accuracy:
         if len(points) == 0:
             return
         if (normals is None) != (self.cos_sum is None) and self.n > 0:
-            raise MetricsInputError("test blocks must all have normals or none")
+            raise InputError("test blocks must all have normals or none")
         distance, faces, _ = self.setup.distance.query(points)
         self.n += len(distance)
         self.total += float(distance.sum())
@@ -744,7 +745,7 @@ class _RankFinder:
                         counts[prefix, used, keep] += np.bincount(digit, minlength=1 << bits)
                 interrupt.check()
             if seen != n:
-                raise MetricsInputError(f"the test gave {seen} points on a second pass, "
+                raise InputError(f"the test gave {seen} points on a second pass, "
                                         f"{n} on the first: it changed while it was scored")
             for r, (prefix, used, within, keep) in list(state.items()):
                 if keep:

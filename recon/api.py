@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from formats.errors import ReconError
+from formats.errors import ParameterError
 
 if TYPE_CHECKING:
     from formats.geometry import Cloud, Frame, Mesh
@@ -38,19 +38,50 @@ if TYPE_CHECKING:
     from recon.surfaces.reconstruct import Surface
 
 __all__ = [
-    "AltimetryExport", "AltimetryResult", "ApiError", "CompareResult", "DemoResult",
-    "EdgesResult", "IngestResult", "ReconstructResult", "SimulatedLog", "StabilityResult",
-    "StudiesResult", "StudyResult", "TrajectoryResult",
-    "check_scheduler", "check_seed", "compare", "default_truth", "demo", "edges",
-    "export_altimetry", "follow", "ingest", "ingest_altimetry", "ingest_file", "is_altimetry",
-    "is_kernel", "load", "method_listing", "presets", "reconstruct", "reconstruct_file",
-    "refine", "report", "save", "scene_keys", "score", "simulate", "stability", "studies",
-    "study", "study_all", "trajectory", "truth_of",
+    "AltimetryExport",
+    "AltimetryResult",
+    "CompareResult",
+    "DemoResult",
+    "EdgesResult",
+    "IngestResult",
+    "ParameterError",
+    "ReconstructResult",
+    "SimulatedLog",
+    "StabilityResult",
+    "StudiesResult",
+    "StudyResult",
+    "TrajectoryResult",
+    "check_scheduler",
+    "check_seed",
+    "compare",
+    "default_truth",
+    "demo",
+    "edges",
+    "export_altimetry",
+    "follow",
+    "ingest",
+    "ingest_altimetry",
+    "ingest_file",
+    "is_altimetry",
+    "is_kernel",
+    "load",
+    "method_listing",
+    "presets",
+    "reconstruct",
+    "reconstruct_file",
+    "refine",
+    "report",
+    "save",
+    "scene_keys",
+    "score",
+    "simulate",
+    "stability",
+    "studies",
+    "study",
+    "study_all",
+    "trajectory",
+    "truth_of",
 ]
-
-
-class ApiError(ReconError, ValueError):
-    """A public API call got an argument it cannot use."""
 
 
 def _jsonable(value):
@@ -419,8 +450,8 @@ def _from_library(value):
         if getattr(value, "faces", None) is not None and len(value.faces):
             return Mesh(np.asarray(value.vertices), np.asarray(value.faces))
         return Cloud(np.asarray(value.vertices))
-    raise ApiError(f"{type(value).__module__}.{type(value).__name__} is neither a point cloud "
-                   "nor a triangle mesh")
+    raise ParameterError(f"{type(value).__module__}.{type(value).__name__} is neither a point "
+                         "cloud nor a triangle mesh")
 
 
 def load(value, *, name: str = "input", points_only: bool = False) -> Cloud | Mesh:
@@ -462,15 +493,15 @@ def default_truth(test):
 
     Raises
     ------
-    ApiError
+    ParameterError
         ``test`` is not a strike log, so the truth must be given.
     """
     from formats.paths import check_source
     from recon.inputs import is_strike_log
 
-    check_source(test, ApiError)
+    check_source(test, ParameterError)
     if not is_strike_log(test):
-        raise ApiError(f"{test}: is not a strike log with truth; give --truth")
+        raise ParameterError(f"{test}: is not a strike log with truth; give --truth")
     return test
 
 
@@ -506,13 +537,13 @@ def save(geometry, path, *, source=None, units: str | None = None) -> Path:
     from formats.paths import check_destination
 
     geometry = load(geometry, name="geometry")
-    check_destination(path, ApiError)
+    check_destination(path, ParameterError)
     name = None if source is None else Path(source).name
     if isinstance(geometry, Mesh):
         return write_mesh(path, Mesh(geometry.vertices, geometry.faces, frame=geometry.frame),
                           source=name, units=units)
     if units is not None:
-        raise ApiError(f"{path}: units apply to .tab meshes, not to clouds")
+        raise ParameterError(f"{path}: units apply to .tab meshes, not to clouds")
     return write_cloud(path, Cloud.of(geometry), source=name)
 
 
@@ -558,11 +589,12 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
 
 
 def check_seed(seed: int) -> int:
-    """``seed`` if the simulator takes it (0 to ``sim.defaults.MAX_SEED``), else ``ApiError``."""
+    """``seed`` if the simulator takes it (0 to ``sim.defaults.MAX_SEED``), else
+    ``ParameterError``."""
     from sim.defaults import MAX_SEED
 
     if not 0 <= seed <= MAX_SEED:
-        raise ApiError(f"seed must be >= 0 and at most {MAX_SEED}, got {seed}")
+        raise ParameterError(f"seed must be >= 0 and at most {MAX_SEED}, got {seed}")
     return seed
 
 
@@ -612,7 +644,7 @@ def ingest(log, *, frame: Frame = "body", output=None,
 
     with protecting(_inputs(log)):
         if output is not None:
-            check_destination(output, ApiError)
+            check_destination(output, ParameterError)
         return register_log(log, frame=frame, output=output, progress=progress)
 
 
@@ -636,7 +668,7 @@ def ingest_file(log, output, *, frame: Frame = "body", refinement: Refinement | 
 
     correction = None if refinement is None else refinement.correction
     with protecting(_inputs(log)):
-        check_destination(output, ApiError)
+        check_destination(output, ParameterError)
         summary = ingest_to_file(log, output, frame=frame, progress=progress,
                                  correction=correction)
     return IngestResult(summary["n_points"], frame, Path(output), refined=correction is not None)
@@ -663,8 +695,8 @@ def follow(log, output, *, frame: Frame = "body", timeout_s: float = 60.0,
     from recon.registration.ingest import ingest_following
 
     if not timeout_s > 0:
-        raise ApiError(f"timeout_s must be a positive number of seconds, got {timeout_s:g}")
-    check_destination(output, ApiError)
+        raise ParameterError(f"timeout_s must be a positive number of seconds, got {timeout_s:g}")
+    check_destination(output, ParameterError)
     summary = ingest_following(log, output, frame=frame, progress=progress, timeout_s=timeout_s)
     return IngestResult(summary["n_points"], frame, Path(output))
 
@@ -719,7 +751,7 @@ def ingest_altimetry(product, output) -> AltimetryResult:
     from recon.registration.altimetry import ingest_altimetry as read_product
 
     with protecting(_inputs(product)):
-        check_destination(output, ApiError)
+        check_destination(output, ParameterError)
         summary = read_product(product, output)
     return AltimetryResult(summary["n_points"], summary["dropped"], summary["product"],
                            Path(summary["output"]))
@@ -740,7 +772,7 @@ def export_altimetry(log, output, *, epoch_et: float | None = None) -> Altimetry
     from recon.registration.altimetry import export_altimetry as write_product
 
     with protecting(_inputs(log)):
-        check_destination(output, ApiError)
+        check_destination(output, ParameterError)
         summary = write_product(log, output, epoch_et=epoch_et)
     return AltimetryExport(summary["n_returns"], summary["n_no_return"], summary["product"],
                            tuple(Path(p) for p in summary["written"]))
@@ -772,12 +804,12 @@ def trajectory(log, output, *, frame: str | None = None, epoch_et: float | None 
 
     kernel = is_kernel(output)
     if kernel and frame is not None:
-        raise ApiError("frame is for text trajectories: an SPK is in J2000 (the log's inertial "
-                       "frame) and a CK holds the body frame too")
+        raise ParameterError("frame is for text trajectories: an SPK is in J2000 (the log's "
+                             "inertial frame) and a CK holds the body frame too")
     if not kernel and epoch_et is not None:
-        raise ApiError("epoch_et is for kernels (.bsp, .bc)")
+        raise ParameterError("epoch_et is for kernels (.bsp, .bc)")
     with protecting(_inputs(log)):
-        check_destination(output, ApiError)
+        check_destination(output, ParameterError)
         if kernel:
             summary = export_kernel(log, output, epoch_et=epoch_et)
             return TrajectoryResult(summary["n_shots"], None, summary["epoch_et"],
@@ -1007,16 +1039,16 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
 
     holdout = HOLDOUT_FRACTION if holdout is None else holdout
     if not 0 < holdout <= 0.5:   # checked even when unused: a bad value is a mistake
-        raise ApiError(f"holdout must be in (0, 0.5], got {holdout}")
+        raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}")
     auto = method == "auto"
     if auto and params:
-        raise ApiError("params cannot be combined with method='auto'")
+        raise ParameterError("params cannot be combined with method='auto'")
     run = None if auto else _bind(method, params)
     preparation = _preparation(*preparation)
     limits = Limits.from_options(timeout, memory_limit)
     with protecting(_inputs(source)):
         if output is not None:
-            check_destination(output, ApiError)   # before the work, not after it
+            check_destination(output, ParameterError)   # before the work, not after it
         cloud, prepared = load_prepared(_from_library(source), preparation)
         choice = None
         if auto:
@@ -1048,7 +1080,7 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
 def check_scheduler(scheduler: str | None, *, probe: bool = True) -> str | None:
     """A scheduler value for ``compare``, ``stability`` and ``study``: None, ``"threads"``,
     ``"serial"`` or a Dask address (``tcp://host:port``) where, with ``probe``, a Dask
-    scheduler answers. Returned as it is; otherwise ``recon.experiments.sweep.SweepError``."""
+    scheduler answers. Returned as it is; otherwise ``recon.experiments.sweep.ParameterError``."""
     from recon.experiments.sweep import check_scheduler as check_value
     from recon.experiments.sweep import probe_scheduler
 
@@ -1119,7 +1151,7 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     from formats.paths import output_directory
     from recon.experiments import compare as comparison
     from recon.experiments.cases import SWEEP_THREADS, score_options, variants
-    from recon.experiments.sweep import SweepError, default_workers
+    from recon.experiments.sweep import default_workers
     from recon.inputs import load_truth, walk_early
     from recon.surfaces.isolation import Limits, start_workers, warm_truth
     from recon.surfaces.methods import MethodFailed
@@ -1128,7 +1160,7 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     preparation = _preparation(remove_outliers, voxel, normals_k, orient, seed)
     limits = Limits.from_options(timeout, memory_limit)
     runs = variants(methods, grid=grid)
-    output = output_directory(output, SweepError)   # before any work: a read-only parent
+    output = output_directory(output, ParameterError)   # before any work: a read-only parent
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
         walk_early(*_inputs(cloud, truth))  # before the pool's launcher thread starts
@@ -1155,7 +1187,7 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
         agreement = _auto_agreement(points, report["records"], methods, preparation, limits)
         write_text_atomically(output / "auto.json",
                               json.dumps(_jsonable(agreement[0]), indent=2) + "\n",
-                              error=SweepError)
+                              error=ParameterError)
     if not any(r.get("status") == "ok" for r in report["records"]):
         kinds = sorted({str(r.get("failure")) for r in report["records"]})
         raise MethodFailed(f"every run failed ({len(report['records'])} runs: "
@@ -1234,7 +1266,7 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
     limits = Limits.from_options(timeout, memory_limit)
     options = score_options(samples or sweep.STABILITY_SAMPLES)   # a cell's stated precision
     check_value(scheduler)
-    output = output_directory(output, sweep.StabilityError)   # before any work
+    output = output_directory(output, sweep.ParameterError)   # before any work
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
         walk_early(*_inputs(source, truth))  # before the pool's launcher thread starts
@@ -1267,14 +1299,14 @@ def _stability_clouds(source, output: Path, truth, truth_scale: float, overrides
     path = Path(source)
     if path.is_file() and path.suffix.lower() != ".toml":
         if overrides:
-            raise sweep.StabilityError("--set applies to scenes only, not to a cloud or a log")
+            raise sweep.ParameterError("--set applies to scenes only, not to a cloud or a log")
         cloud = load_cloud(path)
         if truth is not None:
             truth_mesh = load_truth(truth, scale=truth_scale)
         elif is_strike_log(path):
             truth_mesh = load_truth(path)
         else:
-            raise sweep.StabilityError(f"{path}: a cloud needs --truth")
+            raise sweep.ParameterError(f"{path}: a cloud needs --truth")
         return {"base": (cloud.points, cloud.view_points, False)}, truth_mesh
     clouds, truth_mesh = sweep.simulate_levels(str(source), noise, output, overrides=overrides,
                                                seed=seed)
@@ -1336,7 +1368,7 @@ def study_all(output, *, size: str = "full", scheduler: str | None = None,
 
 def _check_workers(n_workers: int | None) -> None:
     if n_workers is not None and n_workers < 1:
-        raise ApiError(f"n_workers must be >= 1, got {n_workers}")
+        raise ParameterError(f"n_workers must be >= 1, got {n_workers}")
 
 
 def report(directory, output) -> Path:

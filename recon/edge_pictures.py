@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.atomic import write_atomically, write_text_atomically
-from formats.errors import ReconError
+from formats.errors import ParameterError
 from formats.geometry import Mesh
 from formats.paths import output_directory
 
@@ -35,10 +35,6 @@ PLY_NAME, PNG_NAME, JSON_NAME = "edges.ply", "edges.png", "edges.json"
 SURFACE, TRUE_EDGE, FALSE_EDGE = 0, 1, 2
 # A truth edge is drawn as missed when less than this fraction of its length is reconstructed.
 MISSED_BELOW = 0.5
-
-
-class EdgePicturesError(ReconError, ValueError):
-    """The output of ``edge_pictures`` cannot be written where asked."""
 
 
 def edge_pictures(test, truth, output, *, seed: int = 0, n_test_samples: int | None = None,
@@ -75,7 +71,7 @@ def edge_pictures(test, truth, output, *, seed: int = 0, n_test_samples: int | N
     from metrics.inputs import as_mesh, as_test
     from recon.experiments import charts
 
-    out = output_directory(output, EdgePicturesError)
+    out = output_directory(output, ParameterError)
     stage = progress or (lambda name: None)
     truth = as_mesh(truth, "truth")
     test = as_test(test, "test")
@@ -106,7 +102,7 @@ def edge_pictures(test, truth, output, *, seed: int = 0, n_test_samples: int | N
             f"{_number(report.missed_edge_rate)}, feature edges missed "
             f"{_number(report.feature_missed_rate)}\nk = {report.k}, tolerance "
             f"{report.tolerance_m:.3g} m, feature angle {report.feature_angle_deg:g} deg")
-    write_atomically(files["png"], error=EdgePicturesError, write=lambda path: charts.edge_points(
+    write_atomically(files["png"], error=ParameterError, write=lambda path: charts.edge_points(
         points, label, path, bounds=(truth.vertices.min(axis=0), truth.vertices.max(axis=0)),
         missed_feature=segments[missed & sharp], missed_gentle=segments[missed & ~sharp],
         title=title or "Edge points against the truth", note=note, seed=seed))
@@ -114,7 +110,7 @@ def edge_pictures(test, truth, output, *, seed: int = 0, n_test_samples: int | N
     summary = {"edge": report.to_dict(), "counts": counts,
                "files": {k: str(v) for k, v in files.items()}}
     write_text_atomically(files["json"], json.dumps(summary, indent=2) + "\n",
-                          error=EdgePicturesError)
+                          error=ParameterError)
     return {"report": report, "files": files, "counts": counts}
 
 

@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 
 from formats.cloud_io import CLOUD_SUFFIXES, cloud_from_ply_columns, read_cloud
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 from formats.geometry import Cloud, Mesh
 from formats.hdf5_check import check_hdf5, is_hdf5
 from formats.mesh_io import MESH_SUFFIXES, read_mesh
@@ -28,18 +28,18 @@ def is_strike_log(path) -> bool:
 
     Raises
     ------
-    MeshFormatError
+    InputError
         An HDF5 file that is damaged or reads other files (``formats.hdf5_check``).
     """
     path = Path(path)
     if (path.suffix.lower() != ".h5" or not path.is_file()
-            or not is_hdf5(path, MeshFormatError)):
+            or not is_hdf5(path, InputError)):
         return False
     import h5py  # HDF5 only for .h5 files: reading a PLY or a mesh does not pay for it
 
     from formats.strike_log import FORMAT_NAME
 
-    check_hdf5(path, MeshFormatError)
+    check_hdf5(path, InputError)
     try:
         with h5py.File(path, "r") as f:
             fmt = f.attrs.get("format")
@@ -70,7 +70,7 @@ def load_geometry(path, *, points_only: bool = False) -> Cloud | Mesh:
     Strike logs are ingested into a body-frame cloud; with ``points_only`` (scoring) without
     the per-point attributes, in a third of the memory.
     """
-    path = check_source(path, MeshFormatError)
+    path = check_source(path, InputError)
     suffix = path.suffix.lower()
     if is_strike_log(path):
         # scipy's Rotation, which ingest needs, is imported only when a log is read.
@@ -85,7 +85,7 @@ def load_geometry(path, *, points_only: bool = False) -> Cloud | Mesh:
         return read_mesh(path)
     if suffix in CLOUD_SUFFIXES:
         return read_cloud(path)
-    raise MeshFormatError(f"{path}: unknown suffix {path.suffix!r}: expected a point cloud "
+    raise InputError(f"{path}: unknown suffix {path.suffix!r}: expected a point cloud "
                           f"({', '.join(CLOUD_SUFFIXES)}), a mesh ({', '.join(MESH_SUFFIXES)}) "
                           "or a strike log (.h5)")
 
@@ -94,7 +94,7 @@ def load_cloud(path) -> Cloud:
     """A point cloud from a cloud file or a strike log (ingested); a mesh is refused."""
     geometry = load_geometry(path)
     if not isinstance(geometry, Cloud):
-        raise MeshFormatError(f"{path}: is a mesh, expected a point cloud or a strike log")
+        raise InputError(f"{path}: is a mesh, expected a point cloud or a strike log")
     return geometry
 
 
@@ -109,17 +109,17 @@ def load_truth(path, *, scale: float = 1.0, units: str | None = None) -> Mesh:
     units : {"km", "m"}, optional
         Units of a mesh file's coordinates (default: the format's, ``formats.mesh_io``).
     """
-    path = check_source(path, MeshFormatError)
+    path = check_source(path, InputError)
     if is_strike_log(path):
         from formats import StrikeLog
 
         with StrikeLog(path) as log:
             if not log.has_truth:
-                raise MeshFormatError(f"{path}: strike log has no truth mesh; pass the truth "
+                raise InputError(f"{path}: strike log has no truth mesh; pass the truth "
                                       "mesh file with --truth")
             mesh = log.truth_mesh()
     elif path.suffix.lower() in CLOUD_SUFFIXES and path.suffix.lower() != ".ply":
-        raise MeshFormatError(f"{path}: is not a mesh (truth must be a mesh file or a strike "
+        raise InputError(f"{path}: is not a mesh (truth must be a mesh file or a strike "
                               "log with truth)")
     else:
         mesh = read_mesh(path, scale=scale, units=units)

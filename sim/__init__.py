@@ -13,8 +13,9 @@ presets: resolving the layers), ``schema`` (checking values against the declared
 ``pipeline`` (the streaming pipeline).
 """
 
+from formats.errors import SceneError
 from sim import targets
 from sim.pipeline import simulate
-from sim.scene import Scene, SceneError, list_presets, load_scene
+from sim.scene import Scene, list_presets, load_scene
 
 __all__ = ["Scene", "SceneError", "list_presets", "load_scene", "simulate", "targets"]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import MeshFormatError
+from formats.errors import InputError, SceneError
 from formats.strike_log import SensorErrors, estimate_log_bytes
 from sim import procedural, sensors, targets
 from sim.defaults import (
@@ -25,7 +25,6 @@ from sim.defaults import (
     GRAVITATIONAL_CONSTANT,
     RAYS_PER_CHUNK,
 )
-from sim.errors import SceneError
 
 # Scene units converted to SI where the log needs radians (sim/defaults.py: every angle key
 # says its unit); each conversion happens once, here.
@@ -134,11 +133,12 @@ def spice_epoch(values: dict) -> float:
                          + (", not both" if given else ""))
     if "start_et" in orbit:
         return orbit["start_et"]
-    from formats.spice import SpiceError, utc_to_et
+    from formats.errors import InputError
+    from formats.spice import utc_to_et
 
     try:
         return utc_to_et(orbit["start_utc"], "orbit.start_utc")
-    except SpiceError as exc:
+    except InputError as exc:
         raise SceneError(str(exc)) from None
 
 
@@ -203,7 +203,7 @@ def target_mesh(target: dict) -> tuple[np.ndarray, np.ndarray, str]:
     try:
         vertices, faces = targets.load_mesh(target["path"], target["scale"],
                                             center=target["center"], units=target.get("units"))
-    except MeshFormatError as exc:
+    except InputError as exc:
         hint = ("" if Path(target["path"]).is_absolute() else
                 " (a preset's mesh is looked up in the current directory and the directories "
                 "of RECON_MESH_PATH; or give --set target.path=FILE)")

@@ -31,8 +31,8 @@ from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
 from formats.atomic import check_space
+from formats.errors import InputError, SceneError
 from formats.paths import check_destination
-from formats.spice import SpiceError
 from formats.strike_log import (
     DEFAULT_COMPRESSION,
     LOG_SUFFIXES,
@@ -64,7 +64,7 @@ from sim.motion import (
     target_attitude,
 )
 from sim.raycast import BACKENDS, DEFAULT_BACKEND, EmbreeBackend, ExactHits, Open3DBackend
-from sim.scene import Scene, SceneError
+from sim.scene import Scene
 from sim.sensors import BeamPattern, beam_pattern, cone_pattern
 
 
@@ -156,7 +156,7 @@ def make_plan(scene: Scene, *, seed: int, backend: str = DEFAULT_BACKEND) -> Pla
     if isinstance(the_orbit, SpiceGeometry):   # the kernels stay loaded until close_plan
         try:
             check_spice_geometry(the_orbit.open(), scene)
-        except SpiceError as exc:
+        except InputError as exc:
             the_orbit.close()
             raise SceneError(f"[orbit] kind = spice: {exc}") from None
         except BaseException:

@@ -52,10 +52,10 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from formats.errors import SceneError
 from formats.paths import check_source
 from sim.defaults import ALTERNATIVES, MAX_SCENE_BYTES, SCHEMA
 from sim.derive import Derived, derive
-from sim.errors import SceneError
 from sim.schema import brief, check_layer, check_values
 
 __all__ = ["Scene", "SceneError", "list_presets", "load_scene", "toml_value"]

@@ -22,6 +22,7 @@ import difflib
 import math
 from collections.abc import Callable
 
+from formats.errors import SceneError
 from sim.defaults import (
     ALTERNATIVES,
     MAX_FIELD_OF_VIEW_DEG,
@@ -36,7 +37,6 @@ from sim.defaults import (
     TOGETHER,
     Key,
 )
-from sim.errors import SceneError
 from sim.sensors import PATTERNS, patterns_using
 
 # --------------------------------------------------------------------------- types, per layer

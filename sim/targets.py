@@ -269,7 +269,7 @@ def load_mesh(path, scale: float = 1.0, *, center: bool = False,
 
     Raises
     ------
-    MeshFormatError
+    InputError
         The file is missing, unreadable or has no triangles, or ``scale`` is not positive
         (formats.mesh_io.read_mesh).
     """

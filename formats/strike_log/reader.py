@@ -1,5 +1,5 @@
 """The strike-log reader: the format, version and schema checked on open, every block checked as
-it is read, so a corrupt log raises ``StrikeLogError`` instead of numbers that look right."""
+it is read, so a corrupt log raises ``InputError`` instead of numbers that look right."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 
 from formats.atomic import partial_pid, process_alive
-from formats.errors import StrikeLogError
+from formats.errors import InputError
 from formats.geometry import Mesh
 from formats.hdf5_check import check_hdf5, is_hdf5
 from formats.paths import check_source
@@ -52,7 +52,7 @@ class StrikeLog:
     Data are read on demand: ``shots(start, stop)``, ``strikes(start, stop)`` and
     ``iter_chunks()``; nothing holds the whole log in memory. Every block read is checked
     (finite values, unit quaternions, increasing time, indices in range) and a violation raises
-    ``StrikeLogError``. ``validate()`` streams through everything once.
+    ``InputError``. ``validate()`` streams through everything once.
 
     Parameters
     ----------
@@ -60,11 +60,11 @@ class StrikeLog:
     """
 
     def __init__(self, path):
-        self.path = check_source(path, StrikeLogError)
+        self.path = check_source(path, InputError)
         where = self._where = str(self.path)
-        if not is_hdf5(self.path, StrikeLogError):
-            raise StrikeLogError(f"{where}: not an HDF5 file")
-        check_hdf5(self.path, StrikeLogError)   # no other files, no loops: formats/hdf5_check.py
+        if not is_hdf5(self.path, InputError):
+            raise InputError(f"{where}: not an HDF5 file")
+        check_hdf5(self.path, InputError)   # no other files, no loops: formats/hdf5_check.py
         with _hdf5_errors(where):
             self._file = h5py.File(self.path, "r")
         try:
@@ -80,21 +80,21 @@ class StrikeLog:
         where = self._where
         if name not in obj.attrs:
             place = "root" if obj.name == "/" else obj.name
-            raise StrikeLogError(f"{where}: missing {place} attribute '{name}'")
+            raise InputError(f"{where}: missing {place} attribute '{name}'")
         value = obj.attrs[name]
         if kind is str:
             if isinstance(value, bytes):
                 value = value.decode("utf-8")
             if not isinstance(value, str):
-                raise StrikeLogError(f"{where}: attribute '{name}' must be a string")
+                raise InputError(f"{where}: attribute '{name}' must be a string")
             return value
         arr = np.asarray(value)
         if kind is int and (arr.shape != () or arr.dtype.kind not in "iu"):
-            raise StrikeLogError(f"{where}: attribute '{name}' must be an integer")
+            raise InputError(f"{where}: attribute '{name}' must be an integer")
         if kind is float and (arr.shape != () or arr.dtype.kind not in "iuf"):
-            raise StrikeLogError(f"{where}: attribute '{name}' must be a number")
+            raise InputError(f"{where}: attribute '{name}' must be a number")
         if kind is bool and (arr.shape != () or arr.dtype.kind not in "biu"):
-            raise StrikeLogError(f"{where}: attribute '{name}' must be a boolean")
+            raise InputError(f"{where}: attribute '{name}' must be a boolean")
         return kind(arr)
 
     def _error_attr(self, errors, name: str):
@@ -103,7 +103,7 @@ class StrikeLog:
             return self._attr(errors, name, float)
         arr = np.asarray(errors.attrs[name])
         if arr.shape != (3,) or arr.dtype.kind not in "iuf" or not np.all(np.isfinite(arr)):
-            raise StrikeLogError(f"{self._where}: /sensor/errors attribute '{name}' must be 3 "
+            raise InputError(f"{self._where}: /sensor/errors attribute '{name}' must be 3 "
                                  "finite numbers")
         return tuple(float(v) for v in arr)
 
@@ -111,7 +111,7 @@ class StrikeLog:
         """Shot and strike rows of a complete log (written last, on a clean close)."""
         for name in ("n_shots", "n_strikes"):
             if name not in self._file.attrs:
-                raise StrikeLogError(f"{self._where}: incomplete log (no '{name}' attribute: "
+                raise InputError(f"{self._where}: incomplete log (no '{name}' attribute: "
                                      "the writer did not close cleanly)")
         return self._attr(self._file, "n_shots", int), self._attr(self._file, "n_strikes", int)
 
@@ -121,16 +121,16 @@ class StrikeLog:
     def _dataset(self, path: str, n: int | None, tail: tuple, kinds: str) -> h5py.Dataset:
         where = self._where
         if path not in self._file:
-            raise StrikeLogError(f"{where}: missing dataset /{path}")
+            raise InputError(f"{where}: missing dataset /{path}")
         ds = self._file[path]
         if not isinstance(ds, h5py.Dataset):
-            raise StrikeLogError(f"{where}: /{path} is not a dataset")
+            raise InputError(f"{where}: /{path} is not a dataset")
         short = n is not None and (ds.shape[0] < n if self._growing else ds.shape[0] != n)
         if ds.ndim != 1 + len(tail) or ds.shape[1:] != tail or short:
             want = ("n" if n is None else str(n)) + "".join(f", {k}" for k in tail)
-            raise StrikeLogError(f"{where}: /{path} has shape {ds.shape}, expected ({want})")
+            raise InputError(f"{where}: /{path} has shape {ds.shape}, expected ({want})")
         if ds.dtype.kind not in kinds:
-            raise StrikeLogError(f"{where}: /{path} has dtype {ds.dtype}, expected "
+            raise InputError(f"{where}: /{path} has dtype {ds.dtype}, expected "
                                  + {"f": "float", "iu": "integer"}.get(kinds, kinds))
         return ds
 
@@ -149,11 +149,11 @@ class StrikeLog:
         if isinstance(fmt, bytes):
             fmt = fmt.decode("utf-8", "replace")
         if fmt != FORMAT_NAME:
-            raise StrikeLogError(f"{where}: not a strike log (root attribute 'format' is "
+            raise InputError(f"{where}: not a strike log (root attribute 'format' is "
                                  f"{fmt!r}, expected {FORMAT_NAME!r})")
         version = self._attr(f, "format_version", int)
         if version != FORMAT_VERSION:
-            raise StrikeLogError(f"{where}: format version {version} is not supported (this "
+            raise InputError(f"{where}: format version {version} is not supported (this "
                                  f"recon reads version {FORMAT_VERSION})")
         self.attrs = {name: self._attr(f, name, str) for name in _ROOT_ATTRS
                       if name not in ("format_version", "seed")}
@@ -162,24 +162,24 @@ class StrikeLog:
         # Optional (SPEC.md): ET of time 0 when the scene was SPICE-driven.
         self.epoch_et = self._attr(f, "epoch_et", float) if "epoch_et" in f.attrs else None
         if self.epoch_et is not None and not np.isfinite(self.epoch_et):
-            raise StrikeLogError(f"{where}: root attribute 'epoch_et' must be finite")
+            raise InputError(f"{where}: root attribute 'epoch_et' must be finite")
         self.n_shots, self.n_strikes = self._counts()
         if self.n_shots < 0 or self.n_strikes < 0:
-            raise StrikeLogError(f"{where}: negative row counts")
+            raise InputError(f"{where}: negative row counts")
 
     def _read_sensor(self) -> SensorInfo:
         """The /sensor group and its /sensor/errors."""
         f, where = self._file, self._where
         if "sensor" not in f:
-            raise StrikeLogError(f"{where}: missing group /sensor")
+            raise InputError(f"{where}: missing group /sensor")
         g = f["sensor"]
         directions = self._dataset("sensor/beam_directions", None, (3,), "f")[()]
         if "sensor/errors" not in f:
-            raise StrikeLogError(f"{where}: missing group /sensor/errors")
+            raise InputError(f"{where}: missing group /sensor/errors")
         errors = f["sensor/errors"]
         fov = np.asarray(g.attrs.get("field_of_view", np.zeros(0)))
         if fov.shape != (4,) or fov.dtype.kind != "f":
-            raise StrikeLogError(f"{where}: /sensor attribute 'field_of_view' must be 4 floats")
+            raise InputError(f"{where}: /sensor attribute 'field_of_view' must be 4 floats")
         return SensorInfo(
             pattern=self._attr(g, "pattern", str), beam_directions=directions,
             range_min=self._attr(g, "range_min", float),
@@ -215,14 +215,14 @@ class StrikeLog:
     def _slice(self, start: int, stop: int | None, n: int) -> tuple[int, int]:
         stop = n if stop is None else stop
         if not (0 <= start <= stop <= n):
-            raise StrikeLogError(f"{self._where}: rows {start}:{stop} out of range (0:{n})")
+            raise InputError(f"{self._where}: rows {start}:{stop} out of range (0:{n})")
         return start, stop
 
     def _blocks(self, n: int, chunk_rows: int, first: int = 0) -> Iterator[tuple[int, int]]:
         """``(start, stop)`` of consecutive blocks of at most ``chunk_rows`` of rows
         ``first .. n - 1``."""
         if chunk_rows < 1:
-            raise StrikeLogError(f"{self._where}: chunk_rows must be positive")
+            raise InputError(f"{self._where}: chunk_rows must be positive")
         for start in range(first, n, chunk_rows):
             yield start, min(start + chunk_rows, n)
 
@@ -254,9 +254,9 @@ class StrikeLog:
             beam = np.asarray(self._strikes["beam"][start:stop])
             rng = np.asarray(self._strikes["range"][start:stop], dtype=np.float64)
         if shot.dtype.kind == "i" and len(shot) and shot.min() < 0:
-            raise StrikeLogError(f"{self._where}: negative shot index")
+            raise InputError(f"{self._where}: negative shot index")
         if beam.dtype.kind == "i" and len(beam) and beam.min() < 0:
-            raise StrikeLogError(f"{self._where}: negative beam index")
+            raise InputError(f"{self._where}: negative beam index")
         _check_strike_rows(shot, beam, rng, n_shots=self.n_shots, n_beams=self.sensor.n_beams,
                            where=self._where, row0=start, previous_shot=previous_shot,
                            range_min=self.sensor.range_min,
@@ -271,7 +271,7 @@ class StrikeLog:
         pairs = np.concatenate([carried, shot * n_beams + beam])
         ordered = np.sort(pairs)   # np.unique is ~200x slower than a sort (1e6 rows)
         if np.any(ordered[1:] == ordered[:-1]):
-            raise StrikeLogError(f"{self._where}: a (shot, beam) pair appears twice near "
+            raise InputError(f"{self._where}: a (shot, beam) pair appears twice near "
                                  f"strike {start}")
         return pairs[pairs // n_beams == shot[-1]] if len(shot) else carried
 
@@ -335,7 +335,7 @@ class StrikeLog:
 
     def _require_truth(self) -> None:
         if not self.has_truth:
-            raise StrikeLogError(f"{self._where}: log has no /truth group")
+            raise InputError(f"{self._where}: log has no /truth group")
 
     def truth_mesh(self) -> Mesh:
         """The truth mesh: vertices (n, 3) float64 [m, body frame] and faces (m, 3) int64."""
@@ -345,15 +345,15 @@ class StrikeLog:
             faces = np.asarray(self._file["truth/mesh/faces"][()]).astype(np.int64)
         _check_finite("truth mesh vertices", vertices, self._where)
         if len(faces) == 0:
-            raise StrikeLogError(f"{self._where}: truth mesh has no faces")
+            raise InputError(f"{self._where}: truth mesh has no faces")
         if faces.min() < 0 or faces.max() >= len(vertices):
-            raise StrikeLogError(f"{self._where}: truth mesh faces index missing vertices")
+            raise InputError(f"{self._where}: truth mesh faces index missing vertices")
         with _hdf5_errors(self._where):
             stored = self._file["truth/mesh"].attrs.get("sha256")
         if stored is not None:
             stored = stored.decode("ascii", "replace") if isinstance(stored, bytes) else stored
             if stored != mesh_checksum(vertices, faces):
-                raise StrikeLogError(f"{self._where}: truth mesh does not match its sha256 "
+                raise InputError(f"{self._where}: truth mesh does not match its sha256 "
                                      "checksum (the file is damaged)")
         return Mesh(vertices, faces)
 
@@ -378,7 +378,7 @@ class StrikeLog:
     # ------------------------------------------------------------------ whole-log checks
 
     def validate(self, chunk_rows: int = READ_CHUNK_ROWS, progress=None) -> None:
-        """Check every row of the log (streaming); raise StrikeLogError at the first problem.
+        """Check every row of the log (streaming); raise InputError at the first problem.
 
         Parameters
         ----------
@@ -421,10 +421,10 @@ class StrikeLog:
             hits = self.truth_strikes(start, stop)
             _check_finite("truth point", hits.point, where)
             if len(hits.facet) and (hits.facet.min() < 0 or hits.facet.max() >= n_faces):
-                raise StrikeLogError(f"{where}: truth facet out of range (the mesh has "
+                raise InputError(f"{where}: truth facet out of range (the mesh has "
                                      f"{n_faces} faces) near strike {start}")
             if not np.all(np.isfinite(hits.range) & (hits.range > 0)):
-                raise StrikeLogError(f"{where}: truth range is not a finite positive number "
+                raise InputError(f"{where}: truth range is not a finite positive number "
                                      f"near strike {start}")
 
     def summary(self) -> dict:
@@ -479,7 +479,7 @@ class LiveStrikeLog(StrikeLog):
             self._file = h5py.File(self.path, "r", libver="latest", swmr=True, locking=False)
         try:
             if LIVE_COMMITTED not in self._file:
-                raise StrikeLogError(f"{self._where}: not a live log (no /{LIVE_COMMITTED})")
+                raise InputError(f"{self._where}: not a live log (no /{LIVE_COMMITTED})")
             self.closing = False
             with _hdf5_errors(self._where):
                 self._check_schema()
@@ -502,9 +502,9 @@ class LiveStrikeLog(StrikeLog):
                 for ds in datasets.values():
                     ds.refresh()
                     if ds.shape[0] < n:
-                        raise StrikeLogError(f"{self._where}: committed rows beyond {ds.name}")
+                        raise InputError(f"{self._where}: committed rows beyond {ds.name}")
         if n_shots < self.n_shots or n_strikes < self.n_strikes:
-            raise StrikeLogError(f"{self._where}: committed counts went backwards")
+            raise InputError(f"{self._where}: committed counts went backwards")
         self.n_shots, self.n_strikes = n_shots, n_strikes
 
 
@@ -513,7 +513,7 @@ def _open_live(path: Path, deadline: float, poll_s: float) -> LiveStrikeLog:
     while True:
         try:
             return LiveStrikeLog(path)
-        except StrikeLogError:
+        except InputError:
             if time.monotonic() > deadline:
                 raise
         time.sleep(poll_s)
@@ -565,7 +565,7 @@ def follow(path, *, chunk_rows: int = READ_CHUNK_ROWS, poll_s: float = 0.5,
 
     Raises
     ------
-    StrikeLogError
+    InputError
         No writer appeared, the writer stopped (its temporary file vanished without the log
         appearing, or nothing arrived for ``timeout_s``), or a block fails its checks.
     """
@@ -597,7 +597,7 @@ def _await_writer(path: Path, deadline: float, poll_s: float, timeout_s: float
         if path.exists():
             return None
         if time.monotonic() > deadline:
-            raise StrikeLogError(f"{path}: no log and no writer at work after {timeout_s:g} s")
+            raise InputError(f"{path}: no log and no writer at work after {timeout_s:g} s")
         time.sleep(poll_s)
 
 
@@ -621,7 +621,7 @@ def _follow_live(path: Path, temporary: Path, deadline: float, chunk_rows: int, 
             if _writer_died(path, temporary, log, done):
                 continue
             if time.monotonic() > deadline:
-                raise StrikeLogError(f"{path}: nothing new for {timeout_s:g} s (is the writer "
+                raise InputError(f"{path}: nothing new for {timeout_s:g} s (is the writer "
                                      "still running?)")
             time.sleep(poll_s)
 
@@ -634,7 +634,7 @@ def _writer_died(path: Path, temporary: Path, log: StrikeLog, done: int) -> bool
         return False
     log.refresh()
     if not log.closing and temporary.exists() and log.n_strikes == done:
-        raise StrikeLogError(
+        raise InputError(
             f"{path}: the writer (process {pid}) died after {log.n_shots} shots and "
             f"{done} strikes; `recon recover {path} -o LOG.h5` makes a log of them")
     return True
@@ -647,5 +647,5 @@ def _await_rename(path: Path, temporary: Path, inode: int, poll_s: float, timeou
     while not _is_file(path, inode):
         gone = not temporary.exists()
         if (gone and not _is_file(path, inode)) or time.monotonic() > deadline:
-            raise StrikeLogError(f"{path}: the writer stopped before completing the log")
+            raise InputError(f"{path}: the writer stopped before completing the log")
         time.sleep(poll_s)

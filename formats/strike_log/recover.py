@@ -20,7 +20,7 @@ from pathlib import Path
 import h5py
 
 from formats.atomic import LIVE_SUFFIX, partial_pid, process_alive
-from formats.errors import StrikeLogError
+from formats.errors import InputError
 from formats.hdf5_check import check_hdf5, is_hdf5
 from formats.paths import check_destination, check_source
 from formats.strike_log.reader import LiveStrikeLog
@@ -78,7 +78,7 @@ def find_partial(path) -> Path:
 
     Raises
     ------
-    StrikeLogError
+    InputError
         No such file, or its writer is still running.
     """
     path = Path(path)
@@ -89,12 +89,12 @@ def find_partial(path) -> Path:
         found = sorted((p for p in path.parent.glob(f"{glob.escape(prefix)}*{LIVE_SUFFIX}")
                         if _PARTIAL.match(p.name)), key=lambda p: p.stat().st_mtime, reverse=True)
         if not found:
-            raise StrikeLogError(f"{path}: no live writer's file beside it to recover "
+            raise InputError(f"{path}: no live writer's file beside it to recover "
                                  f"({prefix}*{LIVE_SUFFIX}; only logs written with --live can "
                                  "be recovered)")
     pid = partial_pid(found[0])
     if pid != os.getpid() and process_alive(pid):
-        raise StrikeLogError(f"{found[0]}: its writer (process {pid}) is still running; "
+        raise InputError(f"{found[0]}: its writer (process {pid}) is still running; "
                              "follow it with `recon ingest --follow` or wait for it to end")
     return found[0]
 
@@ -127,16 +127,16 @@ def recover(partial, output, *, chunk_rows: int = READ_CHUNK_ROWS,
 
     Raises
     ------
-    StrikeLogError
+    InputError
         ``partial`` is not a live log, is damaged, or ``output`` is ``partial`` itself.
     """
-    partial = check_source(find_partial(partial), StrikeLogError)
-    output = check_destination(output, StrikeLogError)
+    partial = check_source(find_partial(partial), InputError)
+    output = check_destination(output, InputError)
     if output.exists() and output.samefile(partial):
-        raise StrikeLogError(f"{output}: is the partial log itself; name another output")
-    if not is_hdf5(partial, StrikeLogError):
-        raise StrikeLogError(f"{partial}: not an HDF5 file")
-    check_hdf5(partial, StrikeLogError, live=True)
+        raise InputError(f"{output}: is the partial log itself; name another output")
+    if not is_hdf5(partial, InputError):
+        raise InputError(f"{partial}: not an HDF5 file")
+    check_hdf5(partial, InputError, live=True)
     with LiveStrikeLog(partial) as log:
         log.refresh()
         present = (_dataset_rows(log._file, "shots"), _dataset_rows(log._file, "strikes"))

@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from formats.errors import StrikeLogError
+from formats.errors import InputError
 
 FORMAT_NAME = "recon-strike-log"
 FORMAT_VERSION = 1
@@ -42,7 +42,7 @@ def compression_filters(spec: str, where: str | None = None) -> dict:
 
     Raises
     ------
-    StrikeLogError
+    InputError
         Any other name; the message names ``where`` (the log, when given) and the allowed
         forms.
     """
@@ -55,7 +55,7 @@ def compression_filters(spec: str, where: str | None = None) -> dict:
         return {"compression": "gzip", "compression_opts": int(level or GZIP_LEVEL),
                 "shuffle": True}
     prefix = f"{where}: " if where else ""
-    raise StrikeLogError(f"{prefix}compression must be one of none, lzf, gzip or gzip:LEVEL "
+    raise InputError(f"{prefix}compression must be one of none, lzf, gzip or gzip:LEVEL "
                          f"(LEVEL 0-9), got {spec!r}")
 
 
@@ -357,7 +357,7 @@ def directions_to_angles(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def _check_finite(name: str, values: np.ndarray, where: str) -> None:
     if not np.all(np.isfinite(values)):
         bad = int(np.flatnonzero(~np.isfinite(values).reshape(len(values), -1).all(axis=1))[0])
-        raise StrikeLogError(f"{where}: {name} has NaN or Inf (first at row {bad})")
+        raise InputError(f"{where}: {name} has NaN or Inf (first at row {bad})")
 
 
 def _check_quaternions(name: str, q: np.ndarray, where: str, row0: int = 0) -> None:
@@ -365,7 +365,7 @@ def _check_quaternions(name: str, q: np.ndarray, where: str, row0: int = 0) -> N
     err = np.abs(np.linalg.norm(q, axis=1) - 1.0)
     if np.any(err > QUATERNION_NORM_TOLERANCE):
         bad = int(np.argmax(err > QUATERNION_NORM_TOLERANCE))
-        raise StrikeLogError(
+        raise InputError(
             f"{where}: {name} row {row0 + bad} is not a unit quaternion "
             f"(norm {np.linalg.norm(q[bad]):.9g})")
 
@@ -387,7 +387,7 @@ def check_time(time: np.ndarray, where: str, row0: int, previous_time: float | N
     steps = np.diff(t)
     if np.any(steps <= 0):
         bad = int(np.argmax(steps <= 0)) + row0 + (0 if previous_time is None else -1) + 1
-        raise StrikeLogError(f"{where}: time does not increase at shot {bad}")
+        raise InputError(f"{where}: time does not increase at shot {bad}")
 
 
 def _check_strike_rows(shot: np.ndarray, beam: np.ndarray, rng: np.ndarray, *, n_shots: int,
@@ -397,29 +397,29 @@ def _check_strike_rows(shot: np.ndarray, beam: np.ndarray, rng: np.ndarray, *, n
     (SPEC.md, /strikes)."""
     if len(shot) and int(shot.max()) >= n_shots:
         bad = int(np.argmax(shot >= n_shots))
-        raise StrikeLogError(f"{where}: strike {row0 + bad} has shot index {int(shot[bad])} out "
+        raise InputError(f"{where}: strike {row0 + bad} has shot index {int(shot[bad])} out "
                              f"of range (n_shots = {n_shots})")
     if len(beam) and int(beam.max()) >= n_beams:
         bad = int(np.argmax(beam >= n_beams))
-        raise StrikeLogError(f"{where}: strike {row0 + bad} has beam index {int(beam[bad])} out "
+        raise InputError(f"{where}: strike {row0 + bad} has beam index {int(beam[bad])} out "
                              f"of range (n_beams = {n_beams})")
     s = shot.astype(np.int64)
     if previous_shot is not None:
         s = np.concatenate([[previous_shot], s])
     if np.any(np.diff(s) < 0):
         bad = int(np.argmax(np.diff(s) < 0)) + row0 + (0 if previous_shot is None else -1) + 1
-        raise StrikeLogError(f"{where}: strikes are not ordered by shot at strike {bad}")
+        raise InputError(f"{where}: strikes are not ordered by shot at strike {bad}")
     if not np.all(np.isfinite(rng) & (rng > 0)):
         bad = int(np.argmax(~(np.isfinite(rng) & (rng > 0))))
-        raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r}, "
+        raise InputError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r}, "
                              "expected a finite positive number of metres")
     if len(rng) and rng.min() < range_min:
         bad = int(np.argmax(rng < range_min))
-        raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
+        raise InputError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
                              f"below the sensor's range_min of {range_min!r} m")
     if len(rng) and rng.max() > range_max:
         bad = int(np.argmax(rng > range_max))
-        raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
+        raise InputError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
                              f"beyond the sensor's range_max of {range_max:g} m")
 
 
@@ -462,31 +462,31 @@ def _as_array(name: str, values, shape_tail: tuple, dtype, where: str) -> np.nda
     try:
         arr = np.asarray(values, dtype=dtype)
     except (TypeError, ValueError) as exc:
-        raise StrikeLogError(f"{where}: {name} cannot be read as {np.dtype(dtype)}: "
+        raise InputError(f"{where}: {name} cannot be read as {np.dtype(dtype)}: "
                              f"{exc}") from None
     if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
         want = "(n" + "".join(f", {k}" for k in shape_tail) + ")"
-        raise StrikeLogError(f"{where}: {name} must have shape {want}, got {arr.shape}")
+        raise InputError(f"{where}: {name} must have shape {want}, got {arr.shape}")
     return arr
 
 
 def _check_sensor(sensor: SensorInfo, where: str) -> None:
     if sensor.pattern not in _PATTERNS:
-        raise StrikeLogError(f"{where}: sensor pattern {sensor.pattern!r} is not one of "
+        raise InputError(f"{where}: sensor pattern {sensor.pattern!r} is not one of "
                              f"{', '.join(_PATTERNS)}")
     d = _as_array("sensor beam_directions", sensor.beam_directions, (3,), np.float64, where)
     if len(d) == 0:
-        raise StrikeLogError(f"{where}: sensor has no beams")
+        raise InputError(f"{where}: sensor has no beams")
     _check_finite("sensor beam_directions", d, where)
     if np.any(np.abs(np.linalg.norm(d, axis=1) - 1.0) > 1e-9):
-        raise StrikeLogError(f"{where}: sensor beam_directions must be unit vectors")
+        raise InputError(f"{where}: sensor beam_directions must be unit vectors")
     if not (np.isfinite(sensor.range_min) and np.isfinite(sensor.range_max)
             and 0 <= sensor.range_min < sensor.range_max):
-        raise StrikeLogError(f"{where}: sensor range limits must satisfy 0 <= range_min < "
+        raise InputError(f"{where}: sensor range limits must satisfy 0 <= range_min < "
                              f"range_max, got {sensor.range_min}, {sensor.range_max}")
     fov = np.asarray(sensor.field_of_view, dtype=np.float64)
     if fov.shape != (4,) or not np.all(np.isfinite(fov)):
-        raise StrikeLogError(f"{where}: sensor field_of_view must be 4 finite angles [rad]")
+        raise InputError(f"{where}: sensor field_of_view must be 4 finite angles [rad]")
 
 
 @contextlib.contextmanager
@@ -494,8 +494,8 @@ def _hdf5_errors(where: str):
     """Turn what h5py raises on damaged files into one-line StrikeLogErrors."""
     try:
         yield
-    except StrikeLogError:
+    except InputError:
         raise
     except (OSError, KeyError, ValueError, TypeError, RuntimeError, IndexError) as exc:
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise StrikeLogError(f"{where}: damaged or unreadable HDF5 ({message})") from None
+        raise InputError(f"{where}: damaged or unreadable HDF5 ({message})") from None

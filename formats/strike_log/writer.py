@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 
 from formats.atomic import LIVE_SUFFIX, AtomicWriter
-from formats.errors import StrikeLogError
+from formats.errors import InputError
 from formats.hdf5_check import trust
 from formats.strike_log.schema import (
     _ANGLE_FIELDS,
@@ -101,7 +101,7 @@ class StrikeLogWriter(AtomicWriter):
     ...     log.write_strikes(shot, beam, rng)
     """
 
-    missing_dir_error = StrikeLogError
+    missing_dir_error = InputError
 
     def __init__(self, path, *, sensor: SensorInfo, target: str, scene: str = "", seed: int = -1,
                  truth_mesh: tuple[np.ndarray, np.ndarray] | None = None,
@@ -289,16 +289,16 @@ class StrikeLogWriter(AtomicWriter):
             strict=True)))
         n = len(rows)
         if any(len(getattr(rows, k)) != n for k in _SHOT_FIELDS):
-            raise StrikeLogError(f"{where}: write_shots arrays differ in length")
+            raise InputError(f"{where}: write_shots arrays differ in length")
         _check_shot_rows(rows, where, self._n_shots, self._last_time)
         if self.has_truth != (truth is not None):
-            raise StrikeLogError(f"{where}: write_shots needs truth= exactly when the log has a "
+            raise InputError(f"{where}: write_shots needs truth= exactly when the log has a "
                                  "truth mesh")
         if truth is not None:
             t = {k: _as_array(f"truth {k}", getattr(truth, k), tail, np.float64, where)
                  for k, tail in _TRUTH_SHOT_FIELDS.items()}
             if any(len(v) != n for v in t.values()):
-                raise StrikeLogError(f"{where}: truth shots differ in length from the shots")
+                raise InputError(f"{where}: truth shots differ in length from the shots")
             self._extend("truth", t)
         self._extend("shots", {k: getattr(rows, k) for k in _SHOT_FIELDS})
         self._wrote(n * (96 if truth is None else 184))   # bytes per row: SPEC.md, /shots
@@ -330,9 +330,9 @@ class StrikeLogWriter(AtomicWriter):
         rng = _as_array("range", range, (), np.float64, where)
         n = len(shot)
         if len(beam) != n or len(rng) != n:
-            raise StrikeLogError(f"{where}: write_strikes arrays differ in length")
+            raise InputError(f"{where}: write_strikes arrays differ in length")
         if n and (shot.min() < 0 or beam.min() < 0):
-            raise StrikeLogError(f"{where}: shot and beam indices must be non-negative")
+            raise InputError(f"{where}: shot and beam indices must be non-negative")
         _check_strike_rows(shot, beam, rng, n_shots=self._n_shots, n_beams=self.sensor.n_beams,
                            where=where, row0=self._n_strikes, previous_shot=self._last_shot,
                            range_min=self.sensor.range_min,
@@ -340,22 +340,22 @@ class StrikeLogWriter(AtomicWriter):
         values = {"shot": shot.astype(np.uint32), "beam": beam.astype(np.uint32), "range": rng}
         if self.sensor.reports_angles != (azimuth_offset is not None
                                           and elevation_offset is not None):
-            raise StrikeLogError(f"{where}: write_strikes needs azimuth_offset and "
+            raise InputError(f"{where}: write_strikes needs azimuth_offset and "
                                  "elevation_offset exactly when the sensor reports angles")
         if self.sensor.reports_angles:
             for k, v in zip(_ANGLE_FIELDS, (azimuth_offset, elevation_offset), strict=True):
                 values[k] = _as_array(k, v, (), np.float64, where)
                 if len(values[k]) != n:
-                    raise StrikeLogError(f"{where}: {k} differs in length from the strikes")
+                    raise InputError(f"{where}: {k} differs in length from the strikes")
                 _check_finite(k, values[k], where)
         if self.has_truth != (truth is not None):
-            raise StrikeLogError(f"{where}: write_strikes needs truth= exactly when the log "
+            raise InputError(f"{where}: write_strikes needs truth= exactly when the log "
                                  "has a truth mesh")
         if truth is not None:
             t = {k: _as_array(f"truth {k}", getattr(truth, k), tail, dtype, where)
                  for k, (tail, dtype) in _TRUTH_STRIKE_FIELDS.items()}
             if any(len(v) != n for v in t.values()):
-                raise StrikeLogError(f"{where}: truth strikes differ in length from the strikes")
+                raise InputError(f"{where}: truth strikes differ in length from the strikes")
             self._extend("truth", t)
         self._extend("strikes", values)
         self._wrote(n * (16 + 8 * len(values) + (44 if truth is not None else 0)))
@@ -376,7 +376,7 @@ class StrikeLogWriter(AtomicWriter):
         then ``ET = epoch_et + time``, TDB seconds past J2000 (a SPICE-driven scene)."""
         self._check()
         if not np.isfinite(epoch_et):
-            raise StrikeLogError(f"{self.path}: epoch_et must be finite, got {epoch_et!r}")
+            raise InputError(f"{self.path}: epoch_et must be finite, got {epoch_et!r}")
         if self.live:   # attributes cannot be added in SWMR mode: written on close
             self._epoch_et = float(epoch_et)
         else:

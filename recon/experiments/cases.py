@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from formats.atomic import write_text_atomically
-from recon.experiments.sweep import SweepError, to_jsonable
+from formats.errors import ParameterError
+from recon.experiments.sweep import to_jsonable
 from recon.surfaces import methods
 from recon.surfaces.methods import Run
 
@@ -55,7 +56,7 @@ def variants(names: Sequence[str] | None = None, *, grid: bool | str = "full") -
 
     Raises
     ------
-    UnknownMethod
+    ParameterError
         A name that is not registered (checked before anything runs).
     """
     full = grid_name(grid) == "full"
@@ -71,7 +72,7 @@ def grid_name(grid: bool | str) -> str:
     if isinstance(grid, bool):
         return "full" if grid else "defaults"
     if grid not in GRIDS:
-        raise SweepError(f"grid must be one of {', '.join(GRIDS)}, got {grid!r}")
+        raise ParameterError(f"grid must be one of {', '.join(GRIDS)}, got {grid!r}")
     return grid
 
 
@@ -115,7 +116,7 @@ def score_options(samples: int | None = None) -> dict | None:
     if samples is None:
         return None
     if samples < MIN_SCORE_SAMPLES:
-        raise SweepError(f"--samples must be at least {MIN_SCORE_SAMPLES}, got {samples}")
+        raise ParameterError(f"--samples must be at least {MIN_SCORE_SAMPLES}, got {samples}")
     return {"n_truth_samples": samples, "n_test_samples": samples,
             "coverage_points": 2 * samples}
 
@@ -165,4 +166,4 @@ def write_csv(records: list[dict], path) -> Path:
                 value = json.dumps(to_jsonable(value), sort_keys=True)
             row.append("" if value is None else value)
         writer.writerow(row)
-    return write_text_atomically(path, out.getvalue(), error=SweepError)
+    return write_text_atomically(path, out.getvalue(), error=ParameterError)

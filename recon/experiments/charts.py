@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.atomic import write_atomically
-from formats.errors import ReconError
+from formats.errors import ResourceError
 from recon.experiments.cases import CHAMFER, FSCORE, pareto_front
 from recon.surfaces.isolation import FAILURE_KINDS
 
@@ -80,10 +80,6 @@ def preload() -> None:
     threading.Thread(target=_pyplot, name="recon-charts-preload", daemon=True).start()
 
 
-class ChartError(ReconError, OSError):
-    """A chart cannot be written (its destination is a directory, its disk is full...)."""
-
-
 def _save(fig, path) -> Path:
     """Write ``fig`` to ``path`` atomically: an interrupted or failed write (a full disk)
     leaves the previous chart as it was. The PNG carries the chart's title (its ``Title``
@@ -93,7 +89,7 @@ def _save(fig, path) -> Path:
     metadata = {"Title": " ".join(title.split())} if title else {}
     try:
         return write_atomically(path, lambda tmp: fig.savefig(tmp, dpi=DPI, metadata=metadata),
-                                error=ChartError)
+                                error=ResourceError)
     finally:
         _pyplot().close(fig)
 

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from formats.atomic import write_text_atomically
+from formats.errors import ParameterError
 from formats.geometry import Cloud
 from recon.experiments import charts
 from recon.experiments.cases import (
@@ -54,7 +55,7 @@ from recon.experiments.cases import (
     variants,
     write_csv,
 )
-from recon.experiments.sweep import SweepError, default_workers, run_sweep, to_jsonable
+from recon.experiments.sweep import default_workers, run_sweep, to_jsonable
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_isolated
 from recon.surfaces.methods import MethodInput, Run
 
@@ -295,7 +296,7 @@ def finish(records: list[dict], out_dir, *, title: str = "", extra: dict | None 
                "pareto_fscore": fronts[FSCORE], **(extra or {})}
     json_path = write_text_atomically(out_dir / "results.json",
                                       json.dumps(to_jsonable(summary), indent=2) + "\n",
-                                      error=SweepError)
+                                      error=ParameterError)
     png_path = charts.speed_accuracy(ranked, out_dir / "speed_accuracy.png", title=title)
     return {"records": ranked, "table": format_table(ranked),
             "pareto_chamfer": fronts[CHAMFER], "pareto_fscore": fronts[FSCORE],

@@ -31,7 +31,7 @@ import math
 from pathlib import Path
 
 from formats.atomic import write_text_atomically
-from formats.errors import ReconError
+from formats.errors import InputError
 
 # Rows of a CSV table shown in the page (the file keeps them all).
 MAX_TABLE_ROWS = 300
@@ -107,11 +107,6 @@ def verdict_shown(verdict, size) -> tuple[str, str]:
     return verdict, ""
 
 
-class ReportError(ReconError, ValueError):
-    """The input is not a study, comparison or stability directory, or the report cannot be
-    written."""
-
-
 # The first bytes of every PNG file (the PNG specification, section 5.2).
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -136,24 +131,24 @@ def member(directory: Path, name, source: Path) -> Path:
 
     Raises
     ------
-    ReportError
+    InputError
         ``name`` is not a relative path under ``directory`` (absolute, with ``..``, or a
         symbolic link whose target leaves it).
     """
     if not isinstance(name, str | Path) or not str(name) or "\x00" in str(name):
-        raise ReportError(f"{source}: lists {str(name)[:80]!r}, not a file name")
+        raise InputError(f"{source}: lists {str(name)[:80]!r}, not a file name")
     relative = Path(name)
     if relative.is_absolute() or ".." in relative.parts:
-        raise ReportError(f"{source}: lists {str(name)[:200]!r}, outside {directory} (the report "
+        raise InputError(f"{source}: lists {str(name)[:200]!r}, outside {directory} (the report "
                           "reads only files inside its directory)")
     root = directory.resolve()
     try:
         resolved = (directory / relative).resolve()
     except (OSError, RuntimeError) as exc:   # a symbolic-link loop
-        raise ReportError(f"{source}: lists {str(name)[:200]!r}, which cannot be resolved "
+        raise InputError(f"{source}: lists {str(name)[:200]!r}, which cannot be resolved "
                           f"({exc})") from None
     if not resolved.is_relative_to(root):
-        raise ReportError(f"{source}: lists {str(name)[:200]!r}, a link to {resolved}, outside "
+        raise InputError(f"{source}: lists {str(name)[:200]!r}, a link to {resolved}, outside "
                           f"{directory} (the report reads only files inside its directory)")
     return resolved
 
@@ -162,14 +157,14 @@ def _read_bytes(path: Path) -> bytes:
     try:
         return path.read_bytes()
     except OSError as exc:
-        raise ReportError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+        raise InputError(f"{path}: cannot be read ({exc.strerror or exc})") from None
 
 
 def _read_text(path: Path) -> str:
     try:
         return _read_bytes(path).decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ReportError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+        raise InputError(f"{path}: not UTF-8 text (byte {exc.start})") from None
 
 
 def read_json(directory: Path, name: str) -> dict:
@@ -178,11 +173,11 @@ def read_json(directory: Path, name: str) -> dict:
     try:
         value = json.loads(_read_text(path))
     except json.JSONDecodeError as exc:
-        raise ReportError(f"{directory / name}: not valid JSON ({exc})") from None
+        raise InputError(f"{directory / name}: not valid JSON ({exc})") from None
     except RecursionError:
-        raise ReportError(f"{directory / name}: JSON nested too deeply") from None
+        raise InputError(f"{directory / name}: JSON nested too deeply") from None
     if not isinstance(value, dict):
-        raise ReportError(f"{directory / name}: holds a JSON {type(value).__name__}, not an "
+        raise InputError(f"{directory / name}: holds a JSON {type(value).__name__}, not an "
                           "object")
     return value
 
@@ -195,11 +190,11 @@ def _field(data: dict, key: str, kind: type | tuple, default, source: Path):
         return default
     outer, item = (kind if isinstance(kind, tuple) and kind[0] is list else (kind, None))
     if not isinstance(value, outer):
-        raise ReportError(f"{source}: {key!r} must be {_kinds[outer]}, got "
+        raise InputError(f"{source}: {key!r} must be {_kinds[outer]}, got "
                           f"{type(value).__name__}")
     if item is not None and not all(isinstance(v, item) and not isinstance(v, bool)
                                     for v in value):
-        raise ReportError(f"{source}: every item of {key!r} must be {_kinds[item]}")
+        raise InputError(f"{source}: every item of {key!r} must be {_kinds[item]}")
     return value
 
 
@@ -250,7 +245,7 @@ def image(path: Path, alt: str) -> str:
     text is the chart's own title when the file carries one, else ``alt``."""
     raw = _read_bytes(path)
     if not raw.startswith(PNG_SIGNATURE):
-        raise ReportError(f"{path}: not a PNG image")
+        raise InputError(f"{path}: not a PNG image")
     data = base64.b64encode(raw).decode("ascii")
     text = " ".join((png_title(raw) or alt).split())
     return f'<img alt="{_e(text)}" src="data:image/png;base64,{data}">'
@@ -262,16 +257,16 @@ def csv_table(path: Path, *, columns: tuple[str, ...] | None = None,
 
     Raises
     ------
-    ReportError
+    InputError
         Not UTF-8 text, or not a CSV table (NUL bytes, a field over csv's size limit).
     """
     text = _read_text(path)
     if "\x00" in text:
-        raise ReportError(f"{path}: not a readable CSV table (binary: it holds NUL bytes)")
+        raise InputError(f"{path}: not a readable CSV table (binary: it holds NUL bytes)")
     try:
         rows = list(csv.reader(io.StringIO(text, newline="")))
     except csv.Error as exc:
-        raise ReportError(f"{path}: not a readable CSV table ({exc})") from None
+        raise InputError(f"{path}: not a readable CSV table ({exc})") from None
     if not rows:
         return f"<p class=meta>{_e(path.name)} is empty.</p>"
     names, body = rows[0], rows[1:]
@@ -553,11 +548,11 @@ def kind(directory: Path) -> str:
 
     Raises
     ------
-    ReportError
+    InputError
         The directory holds none of them.
     """
     if not directory.is_dir():
-        raise ReportError(f"{directory}: no such directory")
+        raise InputError(f"{directory}: no such directory")
     if (directory / "summary.json").is_file():
         return "study"
     if (directory / "index.json").is_file() or _study_dirs(directory):
@@ -566,7 +561,7 @@ def kind(directory: Path) -> str:
         return "compare"
     if (directory / "stability.json").is_file():
         return "stability"
-    raise ReportError(f"{directory}: not a study or comparison directory, nor a stability "
+    raise InputError(f"{directory}: not a study or comparison directory, nor a stability "
                       "run (no summary.json, index.json, results.json or stability.json)")
 
 
@@ -615,23 +610,23 @@ def write_report(directory, output) -> Path:
 
     Raises
     ------
-    ReportError
+    InputError
         Bad input directory, or an output that is a directory or cannot be written.
     """
     output = Path(output)
     try:
         if output.is_dir():
-            raise ReportError(f"-o {output}: is a directory; give an .html file")
+            raise InputError(f"-o {output}: is a directory; give an .html file")
         inside = output.exists() and output.resolve().is_relative_to(Path(directory).resolve())
     except OSError as exc:   # a name too long, a loop of links
         shown = str(output) if len(str(output)) < 200 else f"{str(output)[:120]}..."
-        raise ReportError(f"-o {shown}: cannot be written ({exc.strerror or exc})") from None
+        raise InputError(f"-o {shown}: cannot be written ({exc.strerror or exc})") from None
     if inside and output.suffix.lower() not in (".html", ".htm"):
-        raise ReportError(f"-o {output}: is one of the files of {directory} the report reads; "
+        raise InputError(f"-o {output}: is one of the files of {directory} the report reads; "
                           "give an .html file")
     text = render(directory)
     try:
         output.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ReportError(f"-o {output}: cannot create {output.parent} ({exc.strerror})") from None
-    return write_text_atomically(output, text, error=ReportError)
+        raise InputError(f"-o {output}: cannot create {output.parent} ({exc.strerror})") from None
+    return write_text_atomically(output, text, error=InputError)

@@ -53,11 +53,10 @@ import numpy as np
 
 from formats import sigma_from_sigma3
 from formats.atomic import write_text_atomically
-from formats.errors import ReconError
+from formats.errors import ParameterError, ReconError
 from recon.experiments import charts
 from recon.experiments.cases import SWEEP_THREADS, variants, write_csv
 from recon.experiments.sweep import (
-    SweepError,
     run_sweep,
     to_jsonable,
 )
@@ -100,21 +99,17 @@ DISTANCE_CV = 5.0
 STABILITY_SAMPLES = math.ceil(0.5 * (DISTANCE_CV / CHAMFER_PRECISION) ** 2)
 
 
-class StabilityError(ReconError, ValueError):
-    """A bad grid level or source for the stability sweep."""
-
-
 def _check_levels(name: str, levels: Sequence[float], low: float, high: float | None
                   ) -> tuple[float, ...]:
     levels = tuple(float(v) for v in levels)
     if not levels:
-        raise StabilityError(f"{name} needs at least one level")
+        raise ParameterError(f"{name} needs at least one level")
     for v in levels:
         if not np.isfinite(v) or v < low or (high is not None and v > high):
             limit = f"[{low:g}, {high:g}]" if high is not None else f">= {low:g}"
-            raise StabilityError(f"{name} level {v:g} is out of range (must be {limit})")
+            raise ParameterError(f"{name} level {v:g} is out of range (must be {limit})")
     if len(set(levels)) != len(levels):
-        raise StabilityError(f"{name} levels repeat: {levels}")
+        raise ParameterError(f"{name} levels repeat: {levels}")
     return levels
 
 
@@ -406,7 +401,7 @@ def finish(records: list[dict], out_dir, *, noise, density, outliers) -> dict:
                                 for m in dict.fromkeys(r["method"] for r in records)}}
     json_path = out_dir / "stability.json"
     write_text_atomically(json_path, json.dumps(to_jsonable(summary), indent=2) + "\n",
-                          error=SweepError)
+                          error=ParameterError)
     pngs = []
     for method in dict.fromkeys(r["method"] for r in records):
         mine = [r for r in records if r["method"] == method]

@@ -43,7 +43,7 @@ import numpy as np
 
 from formats import scratch
 from formats.atomic import write_text_atomically
-from formats.errors import ReconError
+from formats.errors import ParameterError
 from formats.paths import check_destination, output_directory
 from recon.experiments import progress
 
@@ -65,12 +65,7 @@ SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss|ucx)://)?[A-Za-z0-9_.\-\[\]:]
 LOCAL_HOST = "127.0.0.1"
 
 
-class SweepError(ReconError, ValueError):
-    """A sweep cannot start or finish: bad scheduler, unreachable cluster, a mismatched or
-    damaged resume, or an output that cannot be written."""
-
-
-def check_scheduler(scheduler, error: type[Exception] = SweepError):
+def check_scheduler(scheduler, error: type[Exception] = ParameterError):
     """A ``--scheduler`` value: None, ``threads``, ``serial`` or a Dask address; returned as it
     is, or ``error`` (one line) when it is none of them."""
     if scheduler is None or scheduler in ("threads", "serial"):
@@ -88,7 +83,7 @@ def _host_port(address: str) -> tuple[str, int]:
     return host.strip("[]"), int(port)
 
 
-def probe_scheduler(scheduler: str, error: type[Exception] = SweepError) -> None:
+def probe_scheduler(scheduler: str, error: type[Exception] = ParameterError) -> None:
     """Refuse, in one line and within seconds, a ``tcp://`` address where no Dask scheduler
     answers: a closed port, a server of another protocol (HTTP waits for a request and sends
     nothing; Dask would wait for its greeting forever), or one that sends something else (Dask
@@ -135,7 +130,7 @@ def _receive(conn: socket.socket, n: int) -> bytes:
     return data
 
 
-def connect(scheduler: str, error: type[Exception] = SweepError):
+def connect(scheduler: str, error: type[Exception] = ParameterError):
     """A ``distributed.Client`` of the existing scheduler at ``scheduler``.
 
     Raises
@@ -223,7 +218,7 @@ def read_results(path) -> dict[str, dict]:
 
     Raises
     ------
-    SweepError
+    ParameterError
         The file cannot be read, or a line other than the last is not UTF-8 text (not a file
         a sweep wrote).
     """
@@ -234,14 +229,14 @@ def read_results(path) -> dict[str, dict]:
     try:
         lines = path.read_bytes().splitlines()
     except OSError as exc:
-        raise SweepError(f"--resume: {path}: cannot be read ({exc.strerror})") from None
+        raise ParameterError(f"--resume: {path}: cannot be read ({exc.strerror})") from None
     for number, raw in enumerate(lines, 1):
         try:
             line = raw.decode("utf-8")
         except UnicodeDecodeError:
             if number == len(lines):   # a torn last line may end inside a character
                 continue
-            raise SweepError(f"--resume: {path}: line {number} is not UTF-8 text (not a "
+            raise ParameterError(f"--resume: {path}: line {number} is not UTF-8 text (not a "
                              "results file of recon; use a new output directory or drop "
                              "--resume)") from None
         try:
@@ -271,14 +266,14 @@ def _check_fingerprint(out_dir: Path, fingerprint: Mapping | None, resume: bool)
         except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
             previous = None
         if not isinstance(previous, dict):
-            raise SweepError(f"--resume: {file} is damaged (not a JSON object); use a new "
+            raise ParameterError(f"--resume: {file} is damaged (not a JSON object); use a new "
                              "output directory or drop --resume")
         if previous != current:
             changed = sorted(k for k in set(previous) | set(current)
                              if previous.get(k) != current.get(k))
-            raise SweepError(f"--resume: {out_dir} holds a sweep with different "
+            raise ParameterError(f"--resume: {out_dir} holds a sweep with different "
                              f"{', '.join(changed)}; use a new output directory or drop --resume")
-    write_text_atomically(file, json.dumps(current, indent=2) + "\n", error=SweepError)
+    write_text_atomically(file, json.dumps(current, indent=2) + "\n", error=ParameterError)
 
 
 def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]], out_dir, *,
@@ -326,11 +321,11 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
     from tqdm import tqdm
 
     check_scheduler(scheduler)
-    out_dir = output_directory(out_dir, SweepError)
+    out_dir = output_directory(out_dir, ParameterError)
     for name in (RESULTS_NAME, FINGERPRINT_NAME, *outputs):
-        check_destination(out_dir / name, SweepError)
+        check_destination(out_dir / name, ParameterError)
     if n_workers is not None and n_workers < 1:
-        raise SweepError(f"workers must be >= 1, got {n_workers}")
+        raise ParameterError(f"workers must be >= 1, got {n_workers}")
     _check_fingerprint(out_dir, fingerprint, resume)
     path = out_dir / RESULTS_NAME
     done = {k: v for k, v in read_results(path).items() if k in cases} if resume else {}

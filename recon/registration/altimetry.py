@@ -24,13 +24,13 @@ import numpy as np
 from formats import StrikeLog
 from formats.altimetry import (
     Altimetry,
-    AltimetryError,
     read_hayabusa2_l2,
     read_ola_l2,
     write_hayabusa2_l2,
     write_ola_l2,
 )
 from formats.cloud_io import open_cloud_writer
+from formats.errors import InputError
 from formats.geometry import Cloud
 from recon.registration.ingest import ingest
 
@@ -51,7 +51,7 @@ def read_altimetry(path) -> Altimetry:
     """An OLA Level-2 label (``.xml``) or a Hayabusa2 LIDAR Level-2 CSV (``.csv``)."""
     suffix = Path(path).suffix.lower()
     if suffix not in READERS:
-        raise AltimetryError(f"{path}: an altimetry product is an OLA Level-2 label (.xml) or a "
+        raise InputError(f"{path}: an altimetry product is an OLA Level-2 label (.xml) or a "
                              "Hayabusa2 LIDAR Level-2 CSV (.csv)")
     return READERS[suffix](path)
 
@@ -60,7 +60,7 @@ def altimetry_cloud(data: Altimetry) -> Cloud:
     """The returns of a product as a body-frame cloud with the attributes of the module
     docstring (``view_x/y/z`` only when the product gives the spacecraft position)."""
     if len(data) == 0:
-        raise AltimetryError(f"{data.source}: no returns to ingest ("
+        raise InputError(f"{data.source}: no returns to ingest ("
                              + (", ".join(f"{n} {why}" for why, n in data.dropped.items())
                                 or "empty") + ")")
     attributes = {"time": data.et - data.et[0], "et": data.et,
@@ -134,7 +134,7 @@ def export_altimetry(log, output, *, product: str | None = None,
     product = product or {".xml": "ola", ".csv": "hayabusa2"}.get(suffix)
     if product not in PRODUCTS or (product, suffix) not in (("ola", ".xml"),
                                                            ("hayabusa2", ".csv")):
-        raise AltimetryError(f"{output}: an OLA Level-2 product is written as its .xml label, "
+        raise InputError(f"{output}: an OLA Level-2 product is written as its .xml label, "
                              "a Hayabusa2 LIDAR Level-2 product as .csv")
     with StrikeLog(log) as strike_log:
         epoch = log_epoch(strike_log, epoch_et)

@@ -84,7 +84,7 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2, norm
 
 from formats import Shots, StrikeChunk, StrikeLog
-from formats.errors import ReconError
+from formats.errors import InputError
 
 # Strikes sampled for the estimate (seeded, uniform): 30,000 of the demo's 77,400 estimate a
 # misalignment to ~0.002 deg; more adds little to a handful of parameters and costs time. The
@@ -167,10 +167,6 @@ BLOCK = 4096
 MAD_TO_SIGMA = 1.4826
 # A spin slower than this many turns over the whole log is treated as no spin (no parameter).
 MIN_SPIN_TURNS = 0.05
-
-
-class RefineError(ReconError, ValueError):
-    """A log or option the self-calibration cannot use."""
 
 
 def spin_of(shots: Shots) -> tuple[np.ndarray, float]:
@@ -557,7 +553,7 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
 
     Raises
     ------
-    RefineError
+    InputError
         Bad options, or too few strikes seen twice to estimate anything.
     """
     _check_options(interval, max_points)
@@ -580,9 +576,9 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
 
 def _check_options(interval: float | None, max_points: int) -> None:
     if interval is not None and not (math.isfinite(interval) and interval > 0):
-        raise RefineError(f"refine interval must be a positive number of seconds, got {interval}")
+        raise InputError(f"refine interval must be a positive number of seconds, got {interval}")
     if max_points < 100:
-        raise RefineError(f"max_points must be at least 100, got {max_points}")
+        raise InputError(f"max_points must be at least 100, got {max_points}")
 
 
 @dataclass
@@ -604,7 +600,7 @@ def _problem(log_path, interval: float | None, spin: bool, max_points: int, seed
     """Read the samples of a log and set up the parameters and their priors."""
     with StrikeLog(log_path) as log:
         if log.n_strikes < 100:
-            raise RefineError(f"{log_path}: {log.n_strikes} strikes are too few to refine the "
+            raise InputError(f"{log_path}: {log.n_strikes} strikes are too few to refine the "
                               "poses (at least 100)")
         all_shots = log.shots()
         fit, check = _samples(log, max_points, seed)
@@ -727,7 +723,7 @@ def _fine(problem: _Problem, start: PoseCorrection, progress) -> tuple[list, int
                                  progress)
     if not tried or len(tried[0]) < 4:
         rows = 0 if not tried else int(np.isfinite(tried[0][0]).sum())
-        raise RefineError(f"{problem.log_path}: only {rows} strikes have neighbours from other "
+        raise InputError(f"{problem.log_path}: only {rows} strikes have neighbours from other "
                           "passes; too few to refine the poses")
     if start is not problem.zero:
         tried.insert(0, [problem.pairs.residuals(problem.fit, problem.zero)[0], problem.zero,
@@ -891,7 +887,7 @@ def _checked(best: PoseCorrection, keep: dict, check: _Sample, pairs: _Pairs, lo
     base, points, _ = pairs.residuals(check, zero)
     finite = np.isfinite(base)
     if finite.sum() < MIN_ROWS:
-        raise RefineError(f"{log_path}: only {int(finite.sum())} held-out strikes have "
+        raise InputError(f"{log_path}: only {int(finite.sum())} held-out strikes have "
                           "neighbours from other passes; too few to check the refinement")
     residual, _, _ = pairs.residuals(check, candidate)
     z = _gain(base, residual, _scale(base, residual), _cells(points))

@@ -31,7 +31,7 @@ from scipy.spatial.transform import Rotation
 
 from formats import StrikeLog
 from formats.atomic import AtomicWriter
-from formats.errors import ReconError
+from formats.errors import ParameterError
 from formats.geometry import FRAMES, file_metadata
 from formats.strike_log import READ_CHUNK_ROWS
 
@@ -39,10 +39,6 @@ COLUMNS = ("time", "x", "y", "z", "roll", "pitch", "yaw", "qx", "qy", "qz", "qw"
 UNITS = ("s", "m", "m", "m", "rad", "rad", "rad", "1", "1", "1", "1")
 SUFFIXES = (".txt", ".csv")
 KERNEL_SUFFIXES = (".bsp", ".bc")
-
-
-class TrajectoryError(ReconError, ValueError):
-    """A trajectory cannot be written as asked (suffix, frame)."""
 
 
 def trajectory_rows(shots, *, frame: str = "body") -> np.ndarray:
@@ -68,7 +64,7 @@ def trajectory_rows(shots, *, frame: str = "body") -> np.ndarray:
 
 
 class _TextWriter(AtomicWriter):
-    missing_dir_error = TrajectoryError
+    missing_dir_error = ParameterError
 
     def __init__(self, path):
         super().__init__(path)
@@ -102,10 +98,10 @@ def export_trajectory(log, output, *, frame: str = "body", chunk_rows: int = REA
     """
     output = Path(output)
     if output.suffix.lower() not in SUFFIXES:
-        raise TrajectoryError(f"{output}: a trajectory is written as .txt or .csv (text), "
+        raise ParameterError(f"{output}: a trajectory is written as .txt or .csv (text), "
                               ".bsp (SPK) or .bc (CK)")
     if frame not in FRAMES:
-        raise TrajectoryError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
+        raise ParameterError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
     csv = output.suffix.lower() == ".csv"
     with StrikeLog(log) as strike_log, _TextWriter(output) as writer:
         if csv:
@@ -127,7 +123,7 @@ def log_epoch(log: StrikeLog, epoch_et: float | None) -> float:
     """ET [s] of the log's time 0: ``epoch_et`` when given, else the log's, else 0 (J2000)."""
     if epoch_et is not None:
         if not np.isfinite(epoch_et):
-            raise TrajectoryError(f"epoch must be a finite ET, got {epoch_et!r}")
+            raise ParameterError(f"epoch must be a finite ET, got {epoch_et!r}")
         return float(epoch_et)
     return 0.0 if log.epoch_et is None else log.epoch_et
 
@@ -157,32 +153,32 @@ def export_kernel(log, output, *, epoch_et: float | None = None) -> dict:
     output = Path(output)
     suffix = output.suffix.lower()
     if suffix not in KERNEL_SUFFIXES:
-        raise TrajectoryError(f"{output}: a kernel is written as {' or '.join(KERNEL_SUFFIXES)}")
+        raise ParameterError(f"{output}: a kernel is written as {' or '.join(KERNEL_SUFFIXES)}")
     with StrikeLog(log) as strike_log:
         if strike_log.n_shots == 0:
-            raise TrajectoryError(f"{log}: no shots to write")
+            raise ParameterError(f"{log}: no shots to write")
         shots = strike_log.shots()
         epoch = log_epoch(strike_log, epoch_et)
     et = epoch + shots.time
     if not np.all(np.diff(et) > 0):
-        raise TrajectoryError(f"{log}: shot times do not stay strictly increasing at ET "
+        raise ParameterError(f"{log}: shot times do not stay strictly increasing at ET "
                               f"{epoch:.17g} + t (float64 resolution); give an earlier epoch")
     comment = (f"recon {Path(log).name}: {len(et)} recorded shots, ET = {epoch!r} + time")
     frames = output.with_suffix(".tf")
-    write_text_atomically(frames, spice.frames_kernel(), error=TrajectoryError)
+    write_text_atomically(frames, spice.frames_kernel(), error=ParameterError)
     written = [frames]
 
     def kernel(write):
         def into(temporary):
             Path(temporary).unlink(missing_ok=True)   # the toolkit creates the file itself
             write(temporary)
-        write_atomically(output, into, error=TrajectoryError)
+        write_atomically(output, into, error=ParameterError)
 
     if suffix == ".bsp":
         kernel(lambda tmp: spice.write_spk(tmp, et, shots.sensor_position, comment=comment))
     else:
         clock = output.with_suffix(".tsc")
-        write_text_atomically(clock, spice.clock_kernel(epoch), error=TrajectoryError)
+        write_text_atomically(clock, spice.clock_kernel(epoch), error=ParameterError)
         written.append(clock)
         with spice.loaded([clock], "SCLK"):
             kernel(lambda tmp: spice.write_ck(

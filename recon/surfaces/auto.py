@@ -53,7 +53,7 @@ from typing import Any
 
 import numpy as np
 
-from formats.errors import ReconError
+from formats.errors import ParameterError
 from formats.geometry import Cloud
 from recon.surfaces import judge
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
@@ -90,10 +90,6 @@ ALWAYS_LEVELS = 3
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
 # compete for the cores.
 FIT_THREADS = 1
-
-
-class AutoError(ReconError, ValueError):
-    """Bad options of the automatic choice."""
 
 
 @dataclass
@@ -546,7 +542,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     from recon.surfaces.methods import bind
 
     if not 0 < holdout <= 0.5:
-        raise AutoError(f"holdout must be in (0, 0.5], got {holdout}")
+        raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}")
     attributes = _columns(uncertainty)
     if view_points is not None:
         attributes |= dict(zip(("view_x", "view_y", "view_z"), np.asarray(view_points).T,
@@ -555,7 +551,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     folds = judge.pass_folds(cloud, max(2, round(1 / holdout)), seed=seed)
     tested = min(len(folds.test(f)) for f in range(folds.k))
     if tested < MIN_HELD_OUT:
-        raise AutoError(f"auto needs at least {MIN_HELD_OUT} held-out points a fold; "
+        raise ParameterError(f"auto needs at least {MIN_HELD_OUT} held-out points a fold; "
                         f"{len(cloud)} points in {folds.k} folds of {folds.n_blocks} blocks test "
                         f"{tested} in the smallest fold")
     levels = ([[bind(*r) if isinstance(r, tuple) else bind(r) for r in candidates]]

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from recon.surfaces.methods import MethodFailed, check_mesh_arrays
+from formats.errors import MethodFailed
+from recon.surfaces.methods import check_mesh_arrays
 
 # Degenerate-mesh tests, relative to the points' bounding-box diagonal: a mesh whose own
 # diagonal is below the first collapsed to a point or a line; above the second it extends far

@@ -59,9 +59,9 @@ from typing import Any
 import numpy as np
 
 from formats import scratch
-from formats.errors import ReconError
+from formats.errors import MethodFailed, ParameterError
 from recon.surfaces.checks import SurfaceRejected, check_surface
-from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, predicted_fit_s, watertight
+from recon.surfaces.methods import MethodInput, Run, bind, predicted_fit_s, watertight
 
 # Defaults of every isolated run, also the CLI's.
 # 600 s: several times the slowest method's default run on 2e5 points (pymeshlab ball pivoting
@@ -99,10 +99,6 @@ _WARM_PROBE = 64
 _PR_SET_PDEATHSIG = 1
 # Stages a job goes through, as the worker writes them to the job's ``stage`` file.
 _LOADING, _RUNNING, _CHECKING, _SCORING = "loading", "running", "checking", "scoring"
-
-
-class LimitError(ReconError, ValueError):
-    """A time or memory limit that is not a valid limit."""
 
 
 @dataclass(frozen=True)
@@ -143,9 +139,9 @@ class Limits:
 
 def _check_limits(timeout: float, memory: int | None, timeout_name: str, memory_name: str):
     if not timeout > 0:
-        raise LimitError(f"{timeout_name} must be positive, got {timeout:g}")
+        raise ParameterError(f"{timeout_name} must be positive, got {timeout:g}")
     if memory is not None and memory < 0:
-        raise LimitError(f"{memory_name} must be >= 0, got {memory}")
+        raise ParameterError(f"{memory_name} must be >= 0, got {memory}")
 
 
 class _Failure(Exception):

@@ -29,7 +29,7 @@ from typing import Literal
 import numpy as np
 from scipy.spatial import cKDTree
 
-from formats.errors import ReconError
+from formats.errors import InputError
 from formats.geometry import check_extent
 
 Fallback = Literal["centroid", "propagate"]
@@ -53,25 +53,21 @@ MAX_K = 256
 BLOCK_ENTRIES = 800_000
 
 
-class NormalsError(ReconError, ValueError):
-    """Points, view points or options handed to the normal estimator are unusable."""
-
-
 def _check_points(points: np.ndarray, name: str = "points") -> np.ndarray:
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
-        raise NormalsError(f"{name} must be (n, 3), got {points.shape}")
+        raise InputError(f"{name} must be (n, 3), got {points.shape}")
     if not np.all(np.isfinite(points)):
-        raise NormalsError(f"{name} contain NaN or Inf")
-    check_extent(points, name, error=NormalsError)
+        raise InputError(f"{name} contain NaN or Inf")
+    check_extent(points, name, error=InputError)
     return points
 
 
 def _check_k(k: int, n: int) -> int:
     if int(k) != k or k < 3:
-        raise NormalsError(f"k must be an integer >= 3, got {k}")
+        raise InputError(f"k must be an integer >= 3, got {k}")
     if n < k:
-        raise NormalsError(f"need at least k = {k} points for normals, got {n}")
+        raise InputError(f"need at least k = {k} points for normals, got {n}")
     return int(k)
 
 
@@ -179,7 +175,7 @@ def orient_toward(normals: np.ndarray, points: np.ndarray, view_points: np.ndarr
     """
     view_points = _check_points(view_points, "view_points")
     if view_points.shape != points.shape:
-        raise NormalsError(f"view_points must match points {points.shape}, got "
+        raise InputError(f"view_points must match points {points.shape}, got "
                            f"{view_points.shape}")
     sign = np.where(np.einsum("ij,ij->i", normals, view_points - points) < 0, -1.0, 1.0)
     return normals * sign[:, None]
@@ -203,7 +199,7 @@ def orient_fallback(normals: np.ndarray, points: np.ndarray, *, fallback: Fallba
         Oriented unit normals (a new array).
     """
     if fallback not in FALLBACKS:
-        raise NormalsError(f"fallback must be one of {FALLBACKS}, got {fallback!r}")
+        raise InputError(f"fallback must be one of {FALLBACKS}, got {fallback!r}")
     outward = points - points.mean(axis=0)
     sign = np.where(np.einsum("ij,ij->i", normals, outward) < 0, -1.0, 1.0)
     oriented = normals * sign[:, None]
@@ -243,12 +239,12 @@ def estimate_normals(points: np.ndarray, *, view_points: np.ndarray | None = Non
 
     Raises
     ------
-    NormalsError
+    InputError
         Bad shapes, non-finite values, fewer than ``k`` points or an unknown fallback.
     """
     points = _check_points(points)
     if fallback not in FALLBACKS:
-        raise NormalsError(f"fallback must be one of {FALLBACKS}, got {fallback!r}")
+        raise InputError(f"fallback must be one of {FALLBACKS}, got {fallback!r}")
     return orient(local_planes(points, k=k).normals, points, view_points=view_points,
                   fallback=fallback, k=k)
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from formats.errors import ReconError
+from formats.errors import InputError
 from formats.geometry import Cloud
 from recon.registration.uncertainty import COLUMNS as SIGMA_COLUMNS
 from recon.surfaces.methods import MethodInput
@@ -37,10 +37,6 @@ MIN_POINTS = 16
 MAX_VOXELS_ACROSS = 1e9
 # Attributes that say when and by which beam a strike was taken (ingest writes them).
 ORDER_COLUMNS = ("time", "shot", "beam")
-
-
-class InputError(ReconError, ValueError):
-    """A cloud or a preprocessing option that cannot be reconstructed from."""
 
 
 def remove_statistical_outliers(points: np.ndarray, *, k: int = OUTLIER_K,

@@ -82,7 +82,7 @@ def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: di
 
     Raises
     ------
-    UnknownMethod, ParameterError
+    ParameterError
         Bad method name or parameter.
     MethodFailed
         The method failed, crashed, timed out, or returned an empty or degenerate mesh.

@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 from formats import spice
-from formats.altimetry import AltimetryError, read_hayabusa2_l2, read_label, read_ola_l2
+from formats.altimetry import read_hayabusa2_l2, read_label, read_ola_l2
+from formats.errors import InputError
 
 # (name, PDS4 data type, bytes, unit) in the published order.
 OLA_LAYOUT = [
@@ -170,7 +171,7 @@ def test_ola_l2_refuses_hostile_labels_in_one_line(tmp_path, change, message):
     (tmp_path / "t.dat").write_bytes(_records(OLA_LAYOUT, values))
     label = tmp_path / "t.xml"
     label.write_text(change(_label("t.dat", len(FLAGS), OLA_LAYOUT)))
-    with pytest.raises(AltimetryError, match=message) as caught:
+    with pytest.raises(InputError, match=message) as caught:
         read_ola_l2(label)
     assert "\n" not in str(caught.value)
 
@@ -222,6 +223,6 @@ def test_hayabusa2_l2_reads_the_published_columns_in_metres(tmp_path):
 def test_hayabusa2_l2_refuses_bad_files_in_one_line(tmp_path, text, message):
     path = tmp_path / "bad.csv"
     path.write_text(text)
-    with pytest.raises(AltimetryError, match=message) as caught:
+    with pytest.raises(InputError, match=message) as caught:
         read_hayabusa2_l2(path)
     assert "\n" not in str(caught.value)

@@ -1,4 +1,4 @@
-"""Every kind of bad strike log gets one clear StrikeLogError naming the file and the problem."""
+"""Every kind of bad strike log gets one clear InputError naming the file and the problem."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from formats import StrikeLog, StrikeLogError
+from formats import StrikeLog
+from formats.errors import InputError
 from tests.conftest import write_sphere_log
 
 
@@ -78,35 +79,35 @@ CASES = {
 def test_damaged_log_raises_one_line_error(case, sphere_log):
     edit, pattern = CASES[case]
     path = _mutated(sphere_log, edit)
-    with pytest.raises(StrikeLogError, match=pattern) as info:
+    with pytest.raises(InputError, match=pattern) as info:
         _read_everything(path)
     message = str(info.value)
     assert message.startswith(str(path)) and "\n" not in message
 
 
 def test_missing_file(tmp_path):
-    with pytest.raises(StrikeLogError, match=r"nope\.h5: no such file"):
+    with pytest.raises(InputError, match=r"nope\.h5: no such file"):
         StrikeLog(tmp_path / "nope.h5")
 
 
 def test_not_hdf5(tmp_path):
     path = tmp_path / "text.h5"
     path.write_text("hello")
-    with pytest.raises(StrikeLogError, match=r"text\.h5: not an HDF5 file"):
+    with pytest.raises(InputError, match=r"text\.h5: not an HDF5 file"):
         StrikeLog(path)
 
 
 def test_truncated_file(sphere_log):
     data = sphere_log.read_bytes()
     sphere_log.write_bytes(data[: len(data) // 2])
-    with pytest.raises(StrikeLogError, match=r"sphere\.h5: (damaged|not an HDF5)"):
+    with pytest.raises(InputError, match=r"sphere\.h5: (damaged|not an HDF5)"):
         _read_everything(sphere_log)
 
 
 def test_truth_requested_from_a_log_without_truth(tmp_path):
     path = tmp_path / "log.h5"
     write_sphere_log(path, with_truth=False)
-    with StrikeLog(path) as log, pytest.raises(StrikeLogError, match="no /truth group"):
+    with StrikeLog(path) as log, pytest.raises(InputError, match="no /truth group"):
         log.truth_mesh()
 
 
@@ -121,7 +122,7 @@ def valid_log_bytes(tmp_path_factory):
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_truncated_or_flipped_bytes_raise_only_our_error(data, valid_log_bytes, tmp_path):
-    """Property: whatever damage, reading raises StrikeLogError or nothing, never anything else."""
+    """Property: whatever damage, reading raises InputError or nothing, never anything else."""
     blob = bytearray(valid_log_bytes)
     if data.draw(st.booleans(), label="truncate"):
         blob = blob[: data.draw(st.integers(0, len(blob) - 1), label="length")]
@@ -133,7 +134,7 @@ def test_truncated_or_flipped_bytes_raise_only_our_error(data, valid_log_bytes, 
     path.write_bytes(bytes(blob))
     try:
         _read_everything(path)
-    except StrikeLogError as exc:
+    except InputError as exc:
         assert "\n" not in str(exc)
 
 
@@ -146,7 +147,7 @@ def test_copy_is_independent(sphere_log, tmp_path):
 
 def test_duplicate_shot_beam_pair(sphere_log):
     path = _mutated(sphere_log, _set("strikes/beam", 1, 0))  # shot 0 has beams 0 and 0
-    with pytest.raises(StrikeLogError, match=r"\(shot, beam\) pair appears twice"):
+    with pytest.raises(InputError, match=r"\(shot, beam\) pair appears twice"):
         _read_everything(path)
 
 
@@ -156,7 +157,7 @@ def test_duplicate_shot_beam_pair(sphere_log):
 ])
 def test_validate_checks_across_block_boundaries(sphere_log, edit, pattern):
     path = _mutated(sphere_log, edit)
-    with StrikeLog(path) as log, pytest.raises(StrikeLogError, match=pattern):
+    with StrikeLog(path) as log, pytest.raises(InputError, match=pattern):
         log.validate(chunk_rows=8)
 
 
@@ -183,6 +184,6 @@ def test_validate_checks_each_block_once(sphere_log, monkeypatch):
 
 
 def test_validate_rejects_empty_blocks(sphere_log):
-    with StrikeLog(sphere_log) as log, pytest.raises(StrikeLogError,
+    with StrikeLog(sphere_log) as log, pytest.raises(InputError,
                                                      match="chunk_rows must be positive"):
         log.validate(chunk_rows=0)

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from formats.cloud_io import read_cloud, write_cloud
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 from formats.geometry import Cloud
 from formats.mesh_io import read_mesh, write_mesh
 from formats.ply import read_ply_metadata
-from metrics.errors import FrameAssumedWarning, MetricsInputError
+from metrics.errors import FrameAssumedWarning
 from tests.conftest import SPHERE_RADIUS_M, icosphere
 
 
@@ -73,7 +73,7 @@ def test_score_api_warns_once_and_still_refuses_two_known_frames():
         report = score(unknown, truth, edges=False)
     assert [w.category for w in caught] == [FrameAssumedWarning]
     assert report.accuracy_mean_m < 1.0   # the points lie on the truth sphere
-    with pytest.raises(MetricsInputError, match="in the inertial frame but truth in the body"):
+    with pytest.raises(InputError, match="in the inertial frame but truth in the body"):
         score(Cloud(_sphere_points(), frame="inertial"), truth, edges=False)
 
 
@@ -99,7 +99,7 @@ def test_xyzn_clouds(tmp_path):
     np.testing.assert_allclose(cloud.points, points)
     np.testing.assert_allclose(cloud.normals, normals)
     np.savetxt(tmp_path / "bad.xyzn", points)
-    with pytest.raises(MeshFormatError, match=r"bad\.xyzn: an \.xyzn file has 6 columns "
+    with pytest.raises(InputError, match=r"bad\.xyzn: an \.xyzn file has 6 columns "
                                               r"\(x y z nx ny nz\), found 3"):
         read_cloud(tmp_path / "bad.xyzn")
 
@@ -128,7 +128,7 @@ def test_csv_clouds_with_a_header_row(tmp_path):
 def test_bad_csv_headers(tmp_path, header, message):
     path = tmp_path / "bad.csv"
     np.savetxt(path, _sphere_points(5), delimiter=",", header=header, comments="")
-    with pytest.raises(MeshFormatError, match=message) as caught:
+    with pytest.raises(InputError, match=message) as caught:
         read_cloud(path)
     assert str(caught.value).startswith(str(path))
 

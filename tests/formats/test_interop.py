@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from formats.cloud_io import LAS_SCAN_ANGLE_STEP_DEG, read_cloud, write_cloud
-from formats.errors import MeshFormatError, ReconError
+from formats.errors import InputError, ReconError
 from formats.geometry import Cloud, Mesh
 from formats.mesh_io import read_mesh, write_mesh
 from formats.ply import read_ply, read_ply_metadata
@@ -113,7 +113,7 @@ def test_file_in_other_units_is_refused(tmp_path):
     (tmp_path / "km.ply").write_text("ply\nformat ascii 1.0\ncomment units km\nelement vertex 1\n"
                                      "property float x\nproperty float y\nproperty float z\n"
                                      "end_header\n1 2 3\n")
-    with pytest.raises(MeshFormatError, match=r"km\.ply: file says units 'km'"):
+    with pytest.raises(InputError, match=r"km\.ply: file says units 'km'"):
         read_cloud(tmp_path / "km.ply")
 
 
@@ -233,7 +233,7 @@ def test_ply_is_read_whole_by_cloudcompare(tmp_path, cloud):
 
 def test_ply_columns_beyond_int32_are_refused(tmp_path):
     big = Cloud(np.zeros((1, 3)), {"shot": np.array([2**31], dtype=np.uint32)})
-    with pytest.raises(MeshFormatError, match="'scalar_shot' has values beyond the int32"):
+    with pytest.raises(InputError, match="'scalar_shot' has values beyond the int32"):
         write_cloud(tmp_path / "big.ply", big)
     assert list(tmp_path.iterdir()) == []
 
@@ -259,10 +259,10 @@ def test_reads_text_clouds(tmp_path):
     np.testing.assert_array_equal(h.attributes["column_4"], np.arange(20))
     assert len(h.attributes) == 8
     (tmp_path / "bad.xyz").write_text("1 2 three\n")
-    with pytest.raises(MeshFormatError, match=r"bad\.xyz: not a text point cloud"):
+    with pytest.raises(InputError, match=r"bad\.xyz: not a text point cloud"):
         read_cloud(tmp_path / "bad.xyz")
     (tmp_path / "two.xyz").write_text("1 2\n")
-    with pytest.raises(MeshFormatError, match="at least 3 columns"):
+    with pytest.raises(InputError, match="at least 3 columns"):
         read_cloud(tmp_path / "two.xyz")
 
 
@@ -279,7 +279,7 @@ def test_reads_pcd_written_by_open3d(tmp_path):
     np.testing.assert_allclose(back.normals, np.tile([1.0, 0.0, 0.0], (40, 1)))
     np.testing.assert_array_equal(back.attributes["intensity"], np.arange(40))
     (tmp_path / "bad.pcd").write_text("nonsense")
-    with pytest.raises(MeshFormatError, match=r"bad\.pcd: not a readable PCD"):
+    with pytest.raises(InputError, match=r"bad\.pcd: not a readable PCD"):
         read_cloud(tmp_path / "bad.pcd")
 
 
@@ -294,7 +294,7 @@ def test_reads_e57_written_by_pye57(tmp_path):
     np.testing.assert_allclose(back.points, pts)
     np.testing.assert_allclose(back.attributes["intensity"], np.linspace(0, 1, 30))
     (tmp_path / "bad.e57").write_bytes(b"\x00" * 100)
-    with pytest.raises(MeshFormatError, match=r"bad\.e57: not a readable E57"):
+    with pytest.raises(InputError, match=r"bad\.e57: not a readable E57"):
         read_cloud(tmp_path / "bad.e57")
 
 

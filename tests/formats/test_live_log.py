@@ -10,7 +10,8 @@ import h5py
 import numpy as np
 import pytest
 
-from formats import StrikeLog, StrikeLogError, StrikeLogWriter
+from formats import StrikeLog, StrikeLogWriter
+from formats.errors import InputError
 from formats.strike_log import LIVE_COMMITTED, SensorInfo, angles_to_directions, follow
 
 N_BLOCKS, SHOTS_PER_BLOCK, BEAMS = 40, 50, 3
@@ -92,7 +93,7 @@ def test_follow_reports_a_writer_that_stops_before_completing(tmp_path):
     path = tmp_path / "aborted.h5"
     process = _start(path, pause_s=0.01, abort=True)
     try:
-        with pytest.raises(StrikeLogError, match="stopped before completing"):
+        with pytest.raises(InputError, match="stopped before completing"):
             for _ in follow(path, poll_s=0.002, timeout_s=60):
                 pass
     finally:
@@ -112,5 +113,5 @@ def test_follow_reads_a_complete_log_whole_and_waits_only_so_long(tmp_path):
                                        N_BLOCKS * SHOTS_PER_BLOCK * BEAMS, 1])
     total = sum(len(chunk) for chunk, _ in follow(path, timeout_s=5))
     assert total == N_BLOCKS * SHOTS_PER_BLOCK * BEAMS
-    with pytest.raises(StrikeLogError, match=r"no log and no writer at work after 0\.05 s"):
+    with pytest.raises(InputError, match=r"no log and no writer at work after 0\.05 s"):
         next(follow(tmp_path / "never.h5", poll_s=0.01, timeout_s=0.05))

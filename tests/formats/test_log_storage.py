@@ -7,7 +7,8 @@ import h5py
 import numpy as np
 import pytest
 
-from formats import StrikeLog, StrikeLogError
+from formats import StrikeLog
+from formats.errors import InputError
 from formats.strike_log.schema import (
     DATASET_UNITS,
     DEFAULT_COMPRESSION,
@@ -89,7 +90,7 @@ def test_compression_names(spec, expected):
 
 @pytest.mark.parametrize("spec", ["zstd", "gzip:10", "gzip:", "gzip:-1", "lzf:3", "none:1", ""])
 def test_bad_compression_names_are_refused(spec):
-    with pytest.raises(StrikeLogError, match=r"compression must be one of none, lzf, gzip or "
+    with pytest.raises(InputError, match=r"compression must be one of none, lzf, gzip or "
                                              r"gzip:LEVEL \(LEVEL 0-9\), got"):
         compression_filters(spec)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from formats.cloud_io import LAS_SCALE_M, open_cloud_writer, read_cloud, write_cloud
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 from formats.geometry import Cloud
 from formats.mesh_io import read_mesh, write_mesh
 from tests.conftest import SHARED_MESHES as MESHES
@@ -46,7 +46,7 @@ def test_streamed_cloud_matches_whole_write(tmp_path, cloud):
 
 
 def test_short_stream_leaves_no_file(tmp_path, cloud):
-    with pytest.raises(MeshFormatError, match="wrote 10 rows"), \
+    with pytest.raises(InputError, match="wrote 10 rows"), \
             open_cloud_writer(tmp_path / "s.ply", len(cloud), {}) as w:
         w.write(cloud.points[:10], {})
     assert list(tmp_path.iterdir()) == []
@@ -85,34 +85,34 @@ def test_write_mesh_round_trip(tmp_path):
 
 
 def test_bad_mesh_inputs(tmp_path):
-    with pytest.raises(MeshFormatError, match=r"missing\.obj: no such file"):
+    with pytest.raises(InputError, match=r"missing\.obj: no such file"):
         read_mesh(tmp_path / "missing.obj")
     (tmp_path / "notes.txt").write_text("x")
-    with pytest.raises(MeshFormatError, match=r"unknown mesh suffix '\.txt'"):
+    with pytest.raises(InputError, match=r"unknown mesh suffix '\.txt'"):
         read_mesh(tmp_path / "notes.txt")
     (tmp_path / "garbage.ply").write_bytes(b"\x00\x01garbage")
-    with pytest.raises(MeshFormatError, match=r"garbage\.ply: "):
+    with pytest.raises(InputError, match=r"garbage\.ply: "):
         read_mesh(tmp_path / "garbage.ply")
     write_cloud(tmp_path / "pts.ply", Cloud(np.zeros((3, 3))))
-    with pytest.raises(MeshFormatError, match=r"pts\.ply: has no triangles"):
+    with pytest.raises(InputError, match=r"pts\.ply: has no triangles"):
         read_mesh(tmp_path / "pts.ply")
-    with pytest.raises(MeshFormatError, match="scale must be a positive number"):
+    with pytest.raises(InputError, match="scale must be a positive number"):
         read_mesh(MESHES / "spot.obj", scale=-1.0)
 
 
 def test_bad_cloud_inputs(tmp_path):
-    with pytest.raises(MeshFormatError, match=r"unknown point-cloud suffix '\.vtk'"):
+    with pytest.raises(InputError, match=r"unknown point-cloud suffix '\.vtk'"):
         read_cloud(tmp_path / "a.vtk")
-    with pytest.raises(MeshFormatError, match=r"unknown point-cloud suffix '\.xyz'"):
+    with pytest.raises(InputError, match=r"unknown point-cloud suffix '\.xyz'"):
         write_cloud(tmp_path / "a.xyz", Cloud(np.zeros((1, 3))))
-    with pytest.raises(MeshFormatError, match=r"a\.las: no such file"):
+    with pytest.raises(InputError, match=r"a\.las: no such file"):
         read_cloud(tmp_path / "a.las")
     (tmp_path / "bad.las").write_bytes(b"LASF" + b"\x00" * 50)
-    with pytest.raises(MeshFormatError, match=r"bad\.las: not a readable LAS"):
+    with pytest.raises(InputError, match=r"bad\.las: not a readable LAS"):
         read_cloud(tmp_path / "bad.las")
-    with pytest.raises(MeshFormatError, match=r"points must be \(n, 3\)"):
+    with pytest.raises(InputError, match=r"points must be \(n, 3\)"):
         Cloud(np.zeros((4, 2)))
-    with pytest.raises(MeshFormatError, match="beyond"):
+    with pytest.raises(InputError, match="beyond"):
         write_cloud(tmp_path / "far.las", Cloud(np.array([[1e6, 0, 0]])))
 
 
@@ -161,7 +161,7 @@ def test_truncated_binary_ply_is_one_line(tmp_path, cloud):
     path = write_cloud(tmp_path / "c.ply", cloud)
     body = path.stat().st_size - read_header(path).offset
     path.write_bytes(path.read_bytes()[:-100])
-    with pytest.raises(MeshFormatError, match=rf"c\.ply: the PLY header declares 2,000 vertex "
+    with pytest.raises(InputError, match=rf"c\.ply: the PLY header declares 2,000 vertex "
                                               rf"elements \({body:,} bytes\) but the body "
                                               rf"holds {body - 100:,} bytes"):
         stream_cloud(path, 300)
@@ -178,7 +178,7 @@ def test_hdf5_cloud_points_of_the_wrong_shape_are_one_line(tmp_path):
         f["points"] = np.zeros((10, 2))
         f.create_group("attributes")
     for read in (read_cloud, lambda p: stream_cloud(p, 4)):
-        with pytest.raises(MeshFormatError, match=r"flat\.h5: /points has shape \(10, 2\), "
+        with pytest.raises(InputError, match=r"flat\.h5: /points has shape \(10, 2\), "
                                                   r"expected \(n, 3\)"):
             read(path)
 
@@ -193,12 +193,12 @@ def test_coordinates_beyond_reach_are_refused_naming_the_file(tmp_path, suffix):
         np.savetxt(path, points)
     else:
         write_cloud(path, Cloud(points))
-    with pytest.raises(MeshFormatError, match=rf"far\{suffix}: coordinates reach 1e\+200 m"):
+    with pytest.raises(InputError, match=rf"far\{suffix}: coordinates reach 1e\+200 m"):
         read_cloud(path)
 
 
 def test_a_mesh_beyond_reach_is_refused(tmp_path):
     path = tmp_path / "far.ply"
     write_mesh(path, np.array([[0.0, 0, 0], [1e20, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
-    with pytest.raises(MeshFormatError, match=r"far\.ply: coordinates reach 1e\+20 m"):
+    with pytest.raises(InputError, match=r"far\.ply: coordinates reach 1e\+20 m"):
         read_mesh(path)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from formats import ply
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 
 
 def _trimesh_read(path):
@@ -98,5 +98,5 @@ def test_quads_and_ascii_fall_back_to_trimesh(tmp_path):
 def test_direct_read_refuses_indices_beyond_the_vertices(tmp_path):
     path = tmp_path / "bad.ply"
     ply.write_ply(path, {k: np.zeros(3) for k in "xyz"}, faces=np.array([[0, 1, 3]]))
-    with pytest.raises(MeshFormatError, match="faces index vertices that do not exist"):
+    with pytest.raises(InputError, match="faces index vertices that do not exist"):
         ply.read_ply(path)

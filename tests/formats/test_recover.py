@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from formats import StrikeLog, StrikeLogError, StrikeLogWriter
+from formats import StrikeLog, StrikeLogWriter
 from formats.atomic import LIVE_SUFFIX
+from formats.errors import InputError
 from formats.strike_log import SensorInfo, TruthStrikes, angles_to_directions, follow
 from formats.strike_log.recover import find_partial, recover
 from tests.conftest import icosphere
@@ -139,7 +140,7 @@ def test_a_running_writer_s_file_is_refused(tmp_path):
             found = list(tmp_path.glob(f".run.h5.partial-{process.pid}-*"))
             partial = found[0] if found else None
             time.sleep(0.05)
-        with pytest.raises(StrikeLogError, match=rf"process {process.pid}\) is still running"):
+        with pytest.raises(InputError, match=rf"process {process.pid}\) is still running"):
             recover(partial, tmp_path / "out.h5")
     finally:
         process.kill()
@@ -160,7 +161,7 @@ def test_what_cannot_be_recovered_is_one_line(tmp_path, case):
     else:
         partial = _crash(log_path, blocks=1)
         args, match = (partial, partial), "is the partial log itself"
-    with pytest.raises(StrikeLogError, match=match):
+    with pytest.raises(InputError, match=match):
         recover(*args)
     assert not (tmp_path / "out.h5").exists()
 
@@ -169,7 +170,7 @@ def test_follow_says_the_writer_died_and_how_to_recover(tmp_path):
     log_path = tmp_path / "run.h5"
     _crash(log_path)
     seen = 0
-    with pytest.raises(StrikeLogError, match=r"died after 160 shots and 480 strikes; `recon "
+    with pytest.raises(InputError, match=r"died after 160 shots and 480 strikes; `recon "
                                              r"recover"):
         for chunk, _ in follow(log_path, poll_s=0.05, timeout_s=600):
             seen += len(chunk)

@@ -23,7 +23,7 @@ import json
 import numpy as np
 import pytest
 
-from formats.errors import MeshFormatError, ReconError
+from formats.errors import InputError, ReconError
 from formats.mesh_io import default_units, read_mesh, write_mesh
 from sim.targets import is_closed, signed_volume
 from tests.conftest import SHARED_MESHES
@@ -191,14 +191,14 @@ def test_recon_dsk_is_read_by_spice_itself(tmp_path):
 
 def test_units_are_explicit_and_dsk_is_km(tmp_path):
     write_mesh(tmp_path / "t.bds", TETRA_KM * 1000.0, TETRA_FACES)
-    with pytest.raises(MeshFormatError, match=r"t\.bds: the file is in km, not m"):
+    with pytest.raises(InputError, match=r"t\.bds: the file is in km, not m"):
         read_mesh(tmp_path / "t.bds", units="m")
-    with pytest.raises(MeshFormatError, match="units must be km or m, got 'mi'"):
+    with pytest.raises(InputError, match="units must be km or m, got 'mi'"):
         read_mesh(tmp_path / "t.bds", units="mi")
     write_mesh(tmp_path / "m.tab", TETRA_KM * 1000.0, TETRA_FACES, units="m")
     np.testing.assert_allclose(read_mesh(tmp_path / "m.tab", units="m").vertices,
                                TETRA_KM * 1000.0)
-    with pytest.raises(MeshFormatError, match=r"\.bds files are written in km, not m"):
+    with pytest.raises(InputError, match=r"\.bds files are written in km, not m"):
         write_mesh(tmp_path / "x.bds", TETRA_KM, TETRA_FACES, units="m")
 
 
@@ -208,7 +208,7 @@ def test_a_ply_that_says_km_is_read_in_km(tmp_path):
     write_ply(tmp_path / "km.ply", dict(zip("xyz", TETRA_KM.T, strict=True)),
               faces=TETRA_FACES, metadata={"units": "km"})
     np.testing.assert_allclose(read_mesh(tmp_path / "km.ply").vertices, TETRA_KM * 1000.0)
-    with pytest.raises(MeshFormatError, match="the file is in km, not m"):
+    with pytest.raises(InputError, match="the file is in km, not m"):
         read_mesh(tmp_path / "km.ply", units="m")
 
 
@@ -252,7 +252,7 @@ def test_bad_tables_are_one_line_errors_naming_the_file(tmp_path, case):
 def test_a_file_that_is_not_a_dsk(tmp_path):
     path = tmp_path / "junk.bds"
     path.write_bytes(b"DAS/DSK " + bytes(range(256)) * 8)
-    with pytest.raises(MeshFormatError, match=r"junk\.bds: not a readable DSK file") as caught:
+    with pytest.raises(InputError, match=r"junk\.bds: not a readable DSK file") as caught:
         read_mesh(path)
     assert "\n" not in str(caught.value)
 

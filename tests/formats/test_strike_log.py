@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from formats import SensorInfo, StrikeLog, StrikeLogError, StrikeLogWriter
+from formats import SensorInfo, StrikeLog, StrikeLogWriter
+from formats.errors import InputError
 from formats.strike_log import angles_to_directions, directions_to_angles
 from tests.conftest import write_sphere_log
 
@@ -107,7 +108,7 @@ def test_append_extends_a_complete_log(tmp_path):
     with StrikeLogWriter.append(path) as w:
         w.write_shots([10.0], [[500.0, 0, 0]], q, q)
         w.write_strikes([1, 1], [0, 2], [400.0, 401.0])
-        with pytest.raises(StrikeLogError, match="time does not increase"):
+        with pytest.raises(InputError, match="time does not increase"):
             w.write_shots([5.0], [[500.0, 0, 0]], q, q)
     with StrikeLog(path) as log:
         assert (log.n_shots, log.n_strikes) == (2, 3)
@@ -118,23 +119,23 @@ def test_append_extends_a_complete_log(tmp_path):
 def test_writer_rejects_bad_rows(tmp_path):
     q = [[0, 0, 0, 1.0]]
     with StrikeLogWriter(tmp_path / "x.h5", sensor=_sensor(), target="t") as w:
-        with pytest.raises(StrikeLogError, match="sensor_position must have shape"):
+        with pytest.raises(InputError, match="sensor_position must have shape"):
             w.write_shots([0.0], [[1.0, 0]], q, q)
-        with pytest.raises(StrikeLogError, match="not a unit quaternion"):
+        with pytest.raises(InputError, match="not a unit quaternion"):
             w.write_shots([0.0], [[1.0, 0, 0]], [[0, 0, 0, 2.0]], q)
-        with pytest.raises(StrikeLogError, match="NaN or Inf"):
+        with pytest.raises(InputError, match="NaN or Inf"):
             w.write_shots([np.nan], [[1.0, 0, 0]], q, q)
         w.write_shots([0.0], [[1.0, 0, 0]], q, q)
-        with pytest.raises(StrikeLogError, match="shot index 3 out of range"):
+        with pytest.raises(InputError, match="shot index 3 out of range"):
             w.write_strikes([3], [0], [1.0])
-        with pytest.raises(StrikeLogError, match="beam index 9 out of range"):
+        with pytest.raises(InputError, match="beam index 9 out of range"):
             w.write_strikes([0], [9], [1.0])
-        with pytest.raises(StrikeLogError, match="finite positive"):
+        with pytest.raises(InputError, match="finite positive"):
             w.write_strikes([0], [0], [-1.0])
-    with pytest.raises(StrikeLogError, match="pattern 'star' is not one of"):
+    with pytest.raises(InputError, match="pattern 'star' is not one of"):
         StrikeLogWriter(tmp_path / "y.h5", target="t",
                         sensor=SensorInfo("star", np.array([[0, 0, 1.0]]), 0, 1))
-    with pytest.raises(StrikeLogError, match="range_min < range_max"):
+    with pytest.raises(InputError, match="range_min < range_max"):
         StrikeLogWriter(tmp_path / "y.h5", target="t",
                         sensor=SensorInfo("single", np.array([[0, 0, 1.0]]), 5, 1))
     assert not (tmp_path / "y.h5").exists()
@@ -143,7 +144,7 @@ def test_writer_rejects_bad_rows(tmp_path):
 def test_closed_writer_refuses_writes(tmp_path):
     w = StrikeLogWriter(tmp_path / "x.h5", sensor=_sensor(), target="t")
     w.close()
-    with pytest.raises(StrikeLogError, match="writer is closed"):
+    with pytest.raises(InputError, match="writer is closed"):
         w.write_shots([0.0], [[1.0, 0, 0]], [[0, 0, 0, 1.0]], [[0, 0, 0, 1.0]])
 
 
@@ -168,12 +169,12 @@ def test_compressed_logs_read_the_same(tmp_path, compression):
     with StrikeLog(path) as log:
         log.validate()
         np.testing.assert_array_equal(log.strikes()[2], rho)
-    with pytest.raises(StrikeLogError, match="compression must be one of none, lzf, gzip"):
+    with pytest.raises(InputError, match="compression must be one of none, lzf, gzip"):
         StrikeLogWriter(tmp_path / "d.h5", sensor=_sensor(), target="t", compression="zstd")
 
 
 def test_missing_directory_and_dropped_writer(tmp_path):
-    with pytest.raises(StrikeLogError, match=r"directory .*nowhere does not exist"):
+    with pytest.raises(InputError, match=r"directory .*nowhere does not exist"):
         StrikeLogWriter(tmp_path / "nowhere" / "x.h5", sensor=_sensor(), target="t")
     w = StrikeLogWriter(tmp_path / "x.h5", sensor=_sensor(), target="t")
     w.write_shots([0.0], [[1.0, 0, 0]], [[0, 0, 0, 1.0]], [[0, 0, 0, 1.0]])

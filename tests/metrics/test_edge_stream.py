@@ -9,7 +9,8 @@ import pytest
 from metrics_reference import box, ellipsoid, satellite
 from scipy.spatial import cKDTree
 
-from metrics import MetricsInputError, defaults, sample_surface
+from formats.errors import InputError
+from metrics import defaults, sample_surface
 from metrics.edges import (
     copy_tree,
     edge_report,
@@ -122,11 +123,11 @@ def test_fewer_points_than_k_and_a_changing_stream_are_refused(monkeypatch):
     points = cloud(mesh, 100, 6, 0.01)
     stream = EdgeStream(mesh)
     stream.add(points[:10])
-    with pytest.raises(MetricsInputError, match="points has 10 rows, fewer than k = 16"):
+    with pytest.raises(InputError, match="points has 10 rows, fewer than k = 16"):
         stream.report(lambda: iter([points[:10]]))
     stream = EdgeStream(mesh)
     stream.add(points)
-    with pytest.raises(MetricsInputError, match="gave 99 points on a second pass, 100 on the "
+    with pytest.raises(InputError, match="gave 99 points on a second pass, 100 on the "
                                                 "first: it changed while it was scored"):
         stream.report(lambda: iter([points[:-1]]))
 

@@ -7,7 +7,8 @@ import pytest
 import trimesh
 from metrics_reference import MESHES, as_mesh, box, brute_force_distance, load
 
-from metrics import MeshDistance, MetricsInputError, point_mesh_distance
+from formats.errors import InputError, ReconError
+from metrics import MeshDistance, point_mesh_distance
 from metrics.distance import _CORNER, _EDGE, _QUICK, closest_on_faces
 from metrics.inputs import Mesh, bbox_diagonal
 
@@ -181,7 +182,7 @@ def test_results_do_not_depend_on_threads_or_blocks():
     ([["a", "b", "c"]], r"points must be an \(n, 3\) array of numbers"),
 ])
 def test_bad_points_raise(points, match):
-    with pytest.raises(MetricsInputError, match=match):
+    with pytest.raises(InputError, match=match):
         point_mesh_distance(points, box())
 
 
@@ -194,15 +195,14 @@ def test_bad_points_raise(points, match):
     ("not a mesh", "mesh must be a Mesh"),
 ])
 def test_bad_meshes_raise(mesh, match):
-    with pytest.raises(MetricsInputError, match=match):
+    with pytest.raises(InputError, match=match):
         MeshDistance(mesh)
 
 
 def test_error_is_a_recon_error_and_value_error():
-    from formats.errors import ReconError
 
-    assert issubclass(MetricsInputError, ReconError)
-    assert issubclass(MetricsInputError, ValueError)
+    assert issubclass(InputError, ReconError)
+    assert issubclass(InputError, ValueError)
 
 
 def ring_checked_everywhere(md: MeshDistance) -> MeshDistance:

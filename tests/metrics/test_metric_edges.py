@@ -9,9 +9,9 @@ import trimesh
 from metrics_reference import MESHES, area, box, ellipsoid, load, satellite
 from scipy.spatial import cKDTree
 
+from formats.errors import InputError
 from metrics import (
     Mesh,
-    MetricsInputError,
     defaults,
     detect_edges,
     dihedral_edges,
@@ -391,5 +391,5 @@ def test_pauly_rule_variant():
     ({"variant": "sharp"}, "variant must be one of"),
 ])
 def test_bad_edge_options_raise(kwargs, match):
-    with pytest.raises(MetricsInputError, match=match):
+    with pytest.raises(InputError, match=match):
         edge_score(cloud(box(), 200), box(), **kwargs)

@@ -11,17 +11,8 @@ import trimesh
 from metrics_reference import area, as_mesh, box, brute_force_distance, ellipsoid
 from scipy.spatial import cKDTree
 
-from formats.errors import MeshFormatError
-from metrics import (
-    Cloud,
-    Mesh,
-    MetricsInputError,
-    ScaleMismatchWarning,
-    ScoreReport,
-    defaults,
-    sample_surface,
-    score,
-)
+from formats.errors import InputError
+from metrics import Cloud, Mesh, ScaleMismatchWarning, ScoreReport, defaults, sample_surface, score
 
 SPEED = {"n_truth_samples": 20_000, "coverage_points": 20_000}  # small but exact-enough
 
@@ -227,13 +218,13 @@ def test_km_against_m_warns(sphere):
     (np.zeros((50, 3)), {"edge_options": {"rule": "magic"}}, "rule must be one of"),
 ])
 def test_bad_input_raises_one_clear_error(sphere, test, kwargs, match):
-    with pytest.raises(MetricsInputError, match=match):
+    with pytest.raises(InputError, match=match):
         score(test, sphere, **kwargs)
 
 
 def test_cloud_with_mismatched_normals_cannot_be_built():
     # formerly scored and refused there; the one Cloud type refuses it on construction
-    with pytest.raises(MeshFormatError, match="cloud normals must match its points"):
+    with pytest.raises(InputError, match="cloud normals must match its points"):
         Cloud(np.zeros((3, 3)), normals=np.zeros((2, 3)))
 
 
@@ -245,7 +236,7 @@ def test_cloud_with_mismatched_normals_cannot_be_built():
     (42, "truth must be a Mesh"),
 ])
 def test_bad_truth_raises(truth, match):
-    with pytest.raises(MetricsInputError, match=match):
+    with pytest.raises(InputError, match=match):
         score(np.zeros((5, 3)), truth)
 
 
@@ -264,7 +255,7 @@ def test_progress_reports_each_stage_once_in_order():
 
 def test_frames_must_agree(sphere):
     inertial = Cloud(sphere.vertices, frame="inertial")
-    with pytest.raises(MetricsInputError, match="test is in the inertial frame but truth in the "
+    with pytest.raises(InputError, match="test is in the inertial frame but truth in the "
                                                 "body frame"):
         score(inertial, sphere, edges=False, **SPEED)
 

@@ -10,7 +10,8 @@ import pytest
 import trimesh
 from metrics_reference import as_mesh
 
-from metrics import Cloud, MetricsInputError, Truth, defaults, score
+from formats.errors import InputError
+from metrics import Cloud, Truth, defaults, score
 from metrics.score import _RankFinder, score_stream
 
 SPEED = {"n_truth_samples": 5_000, "coverage_points": 5_000}
@@ -90,14 +91,14 @@ def test_rank_finder_gives_numpys_percentiles(values, keep, monkeypatch):
 def test_errors_number_rows_across_blocks(sphere):
     points, _ = noisy_points(3_000, seed=4)
     points[2_345] = np.nan
-    with pytest.raises(MetricsInputError, match=r"^test x points has 1 row\(s\) with NaN or Inf, "
+    with pytest.raises(InputError, match=r"^test x points has 1 row\(s\) with NaN or Inf, "
                                                 r"first at row 2345$"):
         score_stream(blocks_of(points, None, 1_000), sphere, name="test x", **SPEED)
-    with pytest.raises(MetricsInputError, match=r"^test x points is empty \(0 rows\)$"):
+    with pytest.raises(InputError, match=r"^test x points is empty \(0 rows\)$"):
         score_stream(lambda: iter([np.zeros((0, 3))]), sphere, name="test x", **SPEED)
-    with pytest.raises(MetricsInputError, match="fewer than the edge metric's k = 16"):
+    with pytest.raises(InputError, match="fewer than the edge metric's k = 16"):
         score_stream(blocks_of(points[:10], None, 4), sphere, **SPEED)
-    with pytest.raises(MetricsInputError, match="test is in the inertial frame but truth in "
+    with pytest.raises(InputError, match="test is in the inertial frame but truth in "
                                                 "the body frame"):
         score_stream(blocks_of(points, None, 1_000), sphere, frame="inertial", **SPEED)
 
@@ -110,7 +111,7 @@ def test_a_stream_that_changes_between_passes_is_refused(sphere, monkeypatch):
     def blocks():
         calls.append(1)
         return iter([points] if len(calls) == 1 else [points[:-1]])
-    with pytest.raises(MetricsInputError, match="gave 2999 points on a second pass, 3000 on the "
+    with pytest.raises(InputError, match="gave 2999 points on a second pass, 3000 on the "
                                                 "first: it changed while it was scored"):
         score_stream(blocks, sphere, edges=False, **SPEED)
 

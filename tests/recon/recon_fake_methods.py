@@ -11,7 +11,8 @@ import time
 
 import numpy as np
 
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from formats.errors import MethodFailed
+from recon.surfaces.methods import Method, MethodInput, Param, register
 
 
 def _abort(cloud: MethodInput) -> tuple[np.ndarray, np.ndarray]:

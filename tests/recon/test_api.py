@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from formats.errors import MeshFormatError, ReconError
+from formats.errors import InputError, ReconError
 from formats.geometry import Cloud, Mesh
 from recon import api
 from tests.recon.conftest import SPHERE_RADIUS, sphere_mesh, sphere_points
@@ -47,12 +47,12 @@ def test_auto_refuses_params():
     (np.zeros((4, 2)), r"cloud must be a Cloud or an \(n, 3\) array"),
 ])
 def test_cloud_of_names_the_argument(value, match):
-    with pytest.raises(MeshFormatError, match=match):
+    with pytest.raises(InputError, match=match):
         Cloud.of(value, "cloud")
 
 
 def test_mesh_of_names_the_argument():
-    with pytest.raises(MeshFormatError, match="truth must be a Mesh, a \\(vertices, faces\\) pair"):
+    with pytest.raises(InputError, match="truth must be a Mesh, a \\(vertices, faces\\) pair"):
         Mesh.of(42, "truth")
-    with pytest.raises(MeshFormatError, match="truth: mesh faces must be integers"):
+    with pytest.raises(InputError, match="truth: mesh faces must be integers"):
         Mesh.of((np.zeros((3, 3)), np.zeros((1, 3))), "truth")

@@ -86,7 +86,7 @@ def test_trimesh_clouds_and_meshes_are_taken():
 def test_an_open3d_object_that_is_no_cloud_or_mesh_is_named():
     import open3d as o3d
 
-    with pytest.raises(api.ApiError, match=r"open3d.*VoxelGrid is neither a point cloud nor"):
+    with pytest.raises(api.ParameterError, match=r"open3d.*VoxelGrid is neither a point cloud nor"):
         api.load(o3d.geometry.VoxelGrid())
 
 
@@ -96,7 +96,7 @@ def test_reconstruct_writes_its_output_and_never_over_its_input(tmp_path):
 
     source = write_cloud(tmp_path / "cloud.ply", _sphere_cloud())
     before = source.read_bytes()
-    with pytest.raises(api.ApiError, match=r"cloud\.ply: is an input of this run"):
+    with pytest.raises(api.ParameterError, match=r"cloud\.ply: is an input of this run"):
         api.reconstruct(source, method="convex-hull", isolate=False, output=source)
     assert source.read_bytes() == before
     surface = api.reconstruct(source, method="convex-hull", isolate=False,
@@ -118,7 +118,7 @@ def test_reconstruct_file_returns_a_result_with_the_run(tmp_path):
     summary = result.to_dict()
     assert summary["method"] == "convex-hull" and summary["n_faces"] == result.surface.n_faces
     assert summary["estimate"] == result.estimate and "auto" not in summary
-    with pytest.raises(api.ApiError, match=r"holdout must be in \(0, 0.5\], got 0.9"):
+    with pytest.raises(api.ParameterError, match=r"holdout must be in \(0, 0.5\], got 0.9"):
         api.reconstruct_file(source, tmp_path / "x.ply", method="auto", holdout=0.9)
     assert not (tmp_path / "x.ply").exists()
 
@@ -135,9 +135,9 @@ def test_save_writes_meshes_and_clouds_and_refuses_an_input(tmp_path):
     assert np.array_equal(saved.points, cloud.points)
     assert np.allclose(saved.view_points, cloud.view_points)
     before = path.read_bytes()
-    with protecting([path]), pytest.raises(api.ApiError, match="is an input of this run"):
+    with protecting([path]), pytest.raises(api.ParameterError, match="is an input of this run"):
         api.save(Mesh(*sphere_mesh(1)), path)
     assert path.read_bytes() == before
-    with pytest.raises(api.ApiError, match=r"units apply to \.tab meshes"):
+    with pytest.raises(api.ParameterError, match=r"units apply to \.tab meshes"):
         api.save(cloud, tmp_path / "c.ply", units="km")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cloud.h5", "sphere.ply"]

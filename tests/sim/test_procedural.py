@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from formats.errors import SceneError
 from formats.strike_log import StrikeLog
 from sim import procedural, targets
-from sim.errors import SceneError
 from tests.sim.conftest import distance_to_mesh, registered_points, run_scene
 
 # The asteroid at 4 subdivisions (5,120 faces) keeps these tests small; the craters still span

@@ -10,9 +10,8 @@ import pytest
 import trimesh
 
 import sim
-from formats.errors import ReconError
+from formats.errors import ReconError, SceneError
 from sim.defaults import SCHEMA
-from sim.scene import SceneError
 from tests.sim.conftest import write_obj
 
 PAPER_PRESETS = ["asteroid-lrf", "asteroid-lrf-slew", "asteroid-cross", "asteroid-zigzag",

@@ -8,8 +8,8 @@ import re
 import pytest
 
 import sim
+from formats.errors import SceneError
 from formats.strike_log import StrikeLog
-from sim import SceneError
 from sim.defaults import MAX_SEED
 
 

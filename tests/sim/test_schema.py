@@ -7,8 +7,8 @@ import math
 import pytest
 
 import sim
+from formats.errors import SceneError
 from sim.defaults import ALTERNATIVES, SCHEMA, Key
-from sim.errors import SceneError
 from sim.schema import only_with, requirement
 
 

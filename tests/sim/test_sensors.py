@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from formats.errors import SceneError
 from formats.strike_log import StrikeLog
 from sim import sensors
-from sim.errors import SceneError
 from sim.scene import load_scene
 from sim.sensors import Pattern, beam_pattern, cone_pattern
 from tests.sim.conftest import run_scene

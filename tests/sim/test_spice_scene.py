@@ -8,10 +8,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from formats import StrikeLog, spice
+from formats.errors import SceneError
 from recon import api
 from recon.registration.trajectory import export_kernel
 from sim import load_scene
-from sim.errors import SceneError
 
 START = "2019-02-13T01:00:00"
 # A cross LRF sweeping the spinning asteroid with a slew: 120 shots, 600 pulses.

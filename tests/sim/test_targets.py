@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from formats.errors import MeshFormatError
+from formats.errors import InputError
 from sim import targets
 from tests.conftest import SHARED_MESHES
 from tests.sim.conftest import write_obj
@@ -86,7 +86,7 @@ def test_load_mesh_scales_and_centres(tmp_path):
 
 
 def test_load_mesh_missing_file(tmp_path):
-    with pytest.raises(MeshFormatError, match="no such file"):
+    with pytest.raises(InputError, match="no such file"):
         targets.load_mesh(tmp_path / "nothing.obj")
 
 

@@ -30,8 +30,9 @@ from pathlib import Path
 from types import ModuleType
 
 from formats.atomic import write_text_atomically
+from formats.errors import ParameterError
 from formats.paths import output_directory
-from recon.experiments.studies.runner import SIZES, StudyError, check_size
+from recon.experiments.studies.runner import SIZES, check_size
 
 # Study modules, in the order of the paper (and of ``recon study --list``).
 STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "methods",
@@ -39,7 +40,7 @@ STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors", "meth
 # ``recon study all`` writes this beside the study directories.
 INDEX_JSON = "index.json"
 
-__all__ = ["SIZES", "STUDIES", "StudyError", "describe", "get", "names", "run", "run_all"]
+__all__ = ["SIZES", "STUDIES", "ParameterError", "describe", "get", "names", "run", "run_all"]
 
 
 def names() -> list[str]:
@@ -52,11 +53,11 @@ def get(name: str) -> ModuleType:
 
     Raises
     ------
-    StudyError
+    ParameterError
         No such study; the message lists them.
     """
     if name not in STUDIES:
-        raise StudyError(f"unknown study {name!r} (studies: {', '.join(STUDIES)}, or all)")
+        raise ParameterError(f"unknown study {name!r} (studies: {', '.join(STUDIES)}, or all)")
     return importlib.import_module(f"recon.experiments.studies.{name.replace('-', '_')}")
 
 
@@ -70,17 +71,17 @@ def check_scheduler(scheduler: str | None, *, connect: bool = True) -> str | Non
 
     Raises
     ------
-    StudyError
+    ParameterError
         Not ``threads``, ``serial`` or an address, or nothing answers at the address.
     """
     from recon.experiments.sweep import check_scheduler as check_address
     from recon.experiments.sweep import connect as connect_client
     from recon.experiments.sweep import quiet_dask
 
-    if check_address(scheduler, StudyError) in (None, "threads", "serial"):
+    if check_address(scheduler, ParameterError) in (None, "threads", "serial"):
         return scheduler
     if connect:
-        client = connect_client(scheduler, StudyError)
+        client = connect_client(scheduler, ParameterError)
         with quiet_dask():
             client.close()
     return scheduler
@@ -88,7 +89,7 @@ def check_scheduler(scheduler: str | None, *, connect: bool = True) -> str | Non
 
 def check_output(out_dir) -> Path:
     """The output directory, created; refuses a path that is a file."""
-    return output_directory(out_dir, StudyError)
+    return output_directory(out_dir, ParameterError)
 
 
 def run(name: str, out_dir, *, size: str = "full", scheduler: str | None = None,

@@ -200,9 +200,10 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, max_points: int
     """
     import sim
     from formats import StrikeLog
+    from formats.errors import InputError
     from recon.experiments import progress
     from recon.registration.ingest import ingest
-    from recon.registration.refine import RefineError, refine
+    from recon.registration.refine import refine
     from recon.surfaces.prepare import prepare
 
     start = time.perf_counter()
@@ -220,7 +221,7 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, max_points: int
         try:
             result = refine(log, max_points=refine_points, seed=seed,
                             progress=progress.within(0.3, 0.5))
-        except RefineError as exc:
+        except InputError as exc:
             refined = {"error": str(exc)}
         else:
             refined = result.to_dict() | {"wall_time_s": time.perf_counter() - began}

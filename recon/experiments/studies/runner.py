@@ -31,7 +31,7 @@ import numpy as np
 
 from formats import scratch
 from formats.atomic import write_text_atomically
-from formats.errors import ReconError
+from formats.errors import ParameterError
 
 # Study sizes: ``full`` reproduces the paper's durations, ``quick`` is for CI (every study in a
 # few minutes together), ``tiny`` only exercises the code in the tests.
@@ -68,10 +68,6 @@ FACE_COVERAGE_DECIMALS = 3
 
 RESULTS_CSV = "results.csv"
 SUMMARY_JSON = "summary.json"
-
-
-class StudyError(ReconError, ValueError):
-    """A study cannot start: unknown name, bad size, scheduler address or output directory."""
 
 
 # --------------------------------------------------------------------------- one case
@@ -218,7 +214,7 @@ def run_case(*, scene: str, overrides: Sequence[str], seed: int, prefixes_s: Seq
 
 def check_size(size: str) -> str:
     if size not in SIZES:
-        raise StudyError(f"size must be one of {', '.join(SIZES)}, got {size!r}")
+        raise ParameterError(f"size must be one of {', '.join(SIZES)}, got {size!r}")
     return size
 
 

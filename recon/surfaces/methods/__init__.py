@@ -27,7 +27,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from formats.errors import ReconError
+from formats.errors import MethodFailed, ParameterError
 from recon.surfaces import fit_times
 
 Kind = Literal["primitive", "planar", "smooth", "interpolating", "baseline", "test"]
@@ -63,18 +63,6 @@ COST_POINTS = fit_times.cost_points()
 # How a parameter's type reads in an error message: (one value, several values).
 _TYPE_NAMES = {int: ("an integer", "integers"), float: ("a number", "numbers"),
                bool: ("a boolean", "booleans"), str: ("a string", "strings")}
-
-class UnknownMethod(ReconError, ValueError):
-    """A method name that is not registered."""
-
-
-class ParameterError(ReconError, ValueError):
-    """A method parameter that does not exist or has a bad value."""
-
-
-class MethodFailed(ReconError, RuntimeError):
-    """A method ran but could not produce a usable surface (the message says why)."""
-
 
 @dataclass(frozen=True)
 class MethodInput:
@@ -406,12 +394,12 @@ def get(name: str) -> Method:
 
     Raises
     ------
-    UnknownMethod
+    ParameterError
         No such method; the message lists the available ones.
     """
     _load_builtins()
     if name not in _REGISTRY:
-        raise UnknownMethod(f"unknown method {name!r} (available: {', '.join(available())})")
+        raise ParameterError(f"unknown method {name!r} (available: {', '.join(available())})")
     return _REGISTRY[name]
 
 
@@ -467,7 +455,7 @@ def bind(method: str | Run, params: Mapping[str, Any] | None = None) -> Run:
 
     Raises
     ------
-    UnknownMethod, ParameterError
+    ParameterError
     """
     if isinstance(method, Run):
         if params:

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from recon.surfaces.methods import MethodFailed, MethodInput
+from formats.errors import MethodFailed
+from recon.surfaces.methods import MethodInput
 
 # Largest perturbation of a coordinate before a Delaunay tetrahedralisation, in spacings
 # (``general_position``). Noise-free samples of planar facets (coplanar) or of a sphere

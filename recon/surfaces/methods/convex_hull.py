@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, register
+from formats.errors import MethodFailed
+from recon.surfaces.methods import Method, MethodInput, register
 
 
 def run(cloud: MethodInput) -> tuple[np.ndarray, np.ndarray]:

@@ -39,8 +39,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from formats.errors import MethodFailed
 from recon.surfaces import uncertainty
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from recon.surfaces.methods import Method, MethodInput, Param, register
 from recon.surfaces.methods._backends import (
     CELL_FACETS,
     boundary_faces,

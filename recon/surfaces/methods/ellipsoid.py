@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from formats.errors import MethodFailed
+from recon.surfaces.methods import Method, MethodInput, Param, register
 from recon.surfaces.methods.plane import MAD_TO_SIGMA, TUKEY_C
 
 # Free parameters of a general ellipsoid: centre (3), semi-axes (3), orientation (3).

@@ -31,8 +31,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from formats.errors import MethodFailed
 from recon.surfaces import uncertainty
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from recon.surfaces.methods import Method, MethodInput, Param, register
 from recon.surfaces.methods._backends import above_noise
 from recon.surfaces.methods._contour import node_keys, surface_nets
 

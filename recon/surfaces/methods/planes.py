@@ -32,14 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from recon.surfaces.methods import (
-    Method,
-    MethodFailed,
-    MethodInput,
-    Param,
-    register,
-    watertight,
-)
+from formats.errors import MethodFailed
+from recon.surfaces.methods import Method, MethodInput, Param, register, watertight
 
 # Hypotheses are scored on at most this many random remaining points.
 SCORE_SAMPLE = 20_000

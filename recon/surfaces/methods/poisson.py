@@ -20,7 +20,8 @@ import os
 
 import numpy as np
 
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from formats.errors import MethodFailed
+from recon.surfaces.methods import Method, MethodInput, Param, register
 from recon.surfaces.methods._backends import open3d_arrays, open3d_cloud
 
 # Deepest octree accepted (Poisson and screened Poisson). A depth-d octree fills its finest level

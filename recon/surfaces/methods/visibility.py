@@ -50,7 +50,7 @@ took the Chamfer distance from 0.361 to 0.311 m and the F-score from 0.838 to 0.
 raw noise as its scale, the soft visibility let the rays carve away the denoised thin panels);
 it is floored at ``MIN_SIGMA`` spacings.
 
-A cloud without view points (a plain point file) is refused with ``NoViewPoints``: the method
+A cloud without view points (a plain point file) is refused with ``MethodFailed``: the method
 has no rays to use, and normals alone would only give back what the surface already says.
 """
 
@@ -60,8 +60,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from formats.errors import MethodFailed
 from recon.surfaces import uncertainty
-from recon.surfaces.methods import Method, MethodFailed, MethodInput, Param, register
+from recon.surfaces.methods import Method, MethodInput, Param, register
 from recon.surfaces.methods._backends import CELL_FACETS, boundary_faces, source_side
 from recon.surfaces.methods.plane import project_to_planes
 
@@ -95,10 +96,6 @@ CAPACITY_UNITS = 1000
 # Crossings buffered before they are summed per facet (bounds the walk's memory).
 FLUSH_CROSSINGS = 4_000_000
 _INT32_MAX = np.iinfo(np.int32).max
-
-
-class NoViewPoints(MethodFailed, ValueError):
-    """The cloud has no sensor positions, so there are no rays to reconstruct from."""
 
 
 def ray_sigma(cloud: MethodInput, sigma: float | None) -> np.ndarray:
@@ -409,7 +406,7 @@ def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
 
     Raises
     ------
-    NoViewPoints
+    MethodFailed
         The cloud has no view points.
     MethodFailed
         qhull failed, or no cell ended inside.
@@ -417,11 +414,11 @@ def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
     from scipy.spatial import Delaunay, QhullError
 
     if cloud.view_points is None:
-        raise NoViewPoints("visibility: the cloud has no view points (view_x/y/z, the sensor "
+        raise MethodFailed("visibility: the cloud has no view points (view_x/y/z, the sensor "
                            "position of each strike); ingest a strike log to get them")
     points, normals, view = cloud.points, cloud.normals, cloud.view_points
     if not np.all(np.isfinite(view)):
-        raise NoViewPoints("visibility: the cloud's view points contain NaN or Inf")
+        raise MethodFailed("visibility: the cloud's view points contain NaN or Inf")
     if len(points) < 5:
         raise MethodFailed(f"visibility: need at least 5 points, got {len(points)}")
     scale = ray_sigma(cloud, sigma)

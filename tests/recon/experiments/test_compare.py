@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from formats.errors import ParameterError
 from recon.experiments.cases import pareto_front, rank, variants
 from recon.experiments.compare import agreement, finish
 from recon.surfaces.methods import run_key as case_key
@@ -92,9 +93,8 @@ def test_variants_and_labels():
 
 
 def test_bad_grid_is_named():
-    from recon.experiments.sweep import SweepError
 
-    with pytest.raises(SweepError, match="grid must be one of defaults, full, got 'big'"):
+    with pytest.raises(ParameterError, match="grid must be one of defaults, full, got 'big'"):
         variants(["poisson"], grid="big")
 
 
@@ -128,12 +128,11 @@ def test_agreement_on_another_truth_metric():
 
 def test_score_options_sample_coverage_on_twice_the_samples():
     from recon.experiments.cases import score_options
-    from recon.experiments.sweep import SweepError
 
     assert score_options() is None
     assert score_options(4000) == {"n_truth_samples": 4000, "n_test_samples": 4000,
                                    "coverage_points": 8000}
-    with pytest.raises(SweepError, match="--samples must be at least 100, got 99"):
+    with pytest.raises(ParameterError, match="--samples must be at least 100, got 99"):
         score_options(99)
 
 

@@ -9,7 +9,8 @@ import os
 import pytest
 
 from cli.main import main
-from recon.experiments.report import ReportError, render
+from formats.errors import InputError
+from recon.experiments.report import render
 
 SECRET = "top-secret-line-outside-the-study"
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(32)
@@ -151,7 +152,7 @@ def test_a_damaged_index_is_one_line(tmp_path, capsys, index, message):
 def test_the_report_never_replaces_a_file_it_reads(tmp_path):
     study = _study(tmp_path / "study")
     before = (study / "summary.json").read_bytes()
-    with pytest.raises(ReportError, match=r"one of the files of .* the report reads"):
+    with pytest.raises(InputError, match=r"one of the files of .* the report reads"):
         from recon.experiments.report import write_report
 
         write_report(study, study / "summary.json")

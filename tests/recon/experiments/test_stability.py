@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import recon_fake_methods  # noqa: F401  (registers the test-only methods)
 
-from recon.experiments.stability import StabilityError, degrade, simulate_levels, stability
+from formats.errors import ParameterError
+from recon.experiments.stability import degrade, simulate_levels, stability
 from tests.recon.conftest import FAST_SCORE, sphere_mesh, sphere_points
 
 
@@ -119,7 +120,7 @@ def test_scene_levels_are_fresh_simulations_with_range_noise(tmp_path):
 ])
 def test_bad_levels_are_named(tmp_path, kwargs, match):
     points, view, _ = sphere_points(200)
-    with pytest.raises(StabilityError, match=match):
+    with pytest.raises(ParameterError, match=match):
         stability(tmp_path, clouds={"base": (points, view, False)}, truth=sphere_mesh(2),
                   names=["convex-hull"], **kwargs)
 
@@ -132,7 +133,7 @@ def test_a_plain_cloud_needs_a_truth_and_takes_no_scene_overrides(tmp_path):
     points, _, _ = sphere_points(200)
     path = tmp_path / "sphere.ply"
     write_cloud(path, Cloud(points))
-    with pytest.raises(StabilityError, match=r"sphere\.ply: a cloud needs --truth"):
+    with pytest.raises(ParameterError, match=r"sphere\.ply: a cloud needs --truth"):
         api.stability(path, output=tmp_path / "out", methods=["convex-hull"])
-    with pytest.raises(StabilityError, match="--set applies to scenes only"):
+    with pytest.raises(ParameterError, match="--set applies to scenes only"):
         api.stability(path, output=tmp_path / "out", overrides=["x=1"])

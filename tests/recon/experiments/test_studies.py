@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import sim
+from formats.errors import InputError, ParameterError
 from recon.experiments import charts, studies
-from recon.experiments.report import ReportError, render, write_report
+from recon.experiments.report import render, write_report
 from recon.experiments.studies import duration, errors, inclination, pointing, rso, runner, slew
-from recon.experiments.sweep import SweepError
 
 SCENE_STUDIES = ("inclination", "duration", "slew", "patterns", "rso", "errors")
 VERDICTS = {"reproduced", "partly", "not reproduced", "not tested"}
@@ -190,9 +190,9 @@ def test_pointing_requirement_is_where_the_best_surface_stops_being_tolerated(mo
 
 
 def test_unknown_study_and_size_are_refused(tmp_path):
-    with pytest.raises(studies.StudyError, match=r"unknown study 'orbits' \(studies: incl"):
+    with pytest.raises(studies.ParameterError, match=r"unknown study 'orbits' \(studies: incl"):
         studies.get("orbits")
-    with pytest.raises(studies.StudyError, match="size must be one of tiny, quick, full"):
+    with pytest.raises(studies.ParameterError, match="size must be one of tiny, quick, full"):
         studies.run("duration", tmp_path, size="huge")
 
 
@@ -347,22 +347,23 @@ def test_resume_keeps_a_finished_case_untouched(tmp_path):
 
 def test_resume_with_other_cases_is_refused(tmp_path):
     studies.run("duration", tmp_path, size="tiny", scheduler="serial")
-    with pytest.raises(SweepError, match=r"--resume: .* holds a sweep with different "
+    with pytest.raises(ParameterError, match=r"--resume: .* holds a sweep with different "
                                          r"cases_sha1"):
         studies.run("duration", tmp_path, size="quick", scheduler="serial", resume=True)
 
 
 def test_bad_scheduler_and_output(tmp_path):
-    with pytest.raises(studies.StudyError, match="--scheduler must be a Dask scheduler address"):
+    with pytest.raises(studies.ParameterError,
+                       match="--scheduler must be a Dask scheduler address"):
         studies.run("duration", tmp_path, size="tiny", scheduler="my cluster")
     file = tmp_path / "file"
     file.write_text("x")
-    with pytest.raises(studies.StudyError, match=r"-o .*file: is a file, not a directory"):
+    with pytest.raises(studies.ParameterError, match=r"-o .*file: is a file, not a directory"):
         studies.run("duration", file, size="tiny", scheduler="serial")
 
 
 def test_unreachable_scheduler(tmp_path):
-    with pytest.raises(studies.StudyError, match=r"--scheduler tcp://127.0.0.1:9: cannot "
+    with pytest.raises(studies.ParameterError, match=r"--scheduler tcp://127.0.0.1:9: cannot "
                                                  "connect"):
         studies.run("duration", tmp_path, size="tiny", scheduler="tcp://127.0.0.1:9")
 
@@ -409,13 +410,13 @@ def test_report_escapes_text(tmp_path):
 
 
 def test_report_bad_inputs(tmp_path):
-    with pytest.raises(ReportError, match="not a study or comparison directory"):
+    with pytest.raises(InputError, match="not a study or comparison directory"):
         render(tmp_path)
-    with pytest.raises(ReportError, match="no such directory"):
+    with pytest.raises(InputError, match="no such directory"):
         render(tmp_path / "missing")
     (tmp_path / "summary.json").write_text(json.dumps({"study": "x", "claims": [],
                                                        "files": []}))
-    with pytest.raises(ReportError, match=r"is a directory; give an \.html file"):
+    with pytest.raises(InputError, match=r"is a directory; give an \.html file"):
         write_report(tmp_path, tmp_path)
 
 

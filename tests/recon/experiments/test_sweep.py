@@ -8,7 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from recon.experiments.sweep import SweepError, read_results, run_sweep, to_jsonable
+from formats.errors import ParameterError
+from recon.experiments.sweep import read_results, run_sweep, to_jsonable
 
 CALLS_ENV = "RECON_TEST_SWEEP_CALLS"
 
@@ -78,7 +79,7 @@ def test_resume_refuses_results_of_another_input(tmp_path):
     calls = str(tmp_path / "calls")
     run_sweep(square, _cases(2), tmp_path, shared={"calls": calls}, scheduler="serial",
               fingerprint={"input": "a.ply"})
-    with pytest.raises(SweepError, match="different input; use a new output directory"):
+    with pytest.raises(ParameterError, match="different input; use a new output directory"):
         run_sweep(square, _cases(2), tmp_path, shared={"calls": calls}, scheduler="serial",
                   fingerprint={"input": "b.ply"}, resume=True)
 
@@ -97,13 +98,13 @@ def test_local_dask_cluster_runs_the_cases(tmp_path):
 
 def test_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setattr("recon.experiments.sweep.CONNECT_TIMEOUT_S", 1.0)
-    with pytest.raises(SweepError, match=r"--scheduler tcp://127\.0\.0\.1:9: cannot connect"):
+    with pytest.raises(ParameterError, match=r"--scheduler tcp://127\.0\.0\.1:9: cannot connect"):
         run_sweep(square, _cases(1), tmp_path, shared={"calls": str(tmp_path / "c")},
                   scheduler="tcp://127.0.0.1:9")
 
 
 def test_workers_must_be_positive(tmp_path):
-    with pytest.raises(SweepError, match="workers must be >= 1"):
+    with pytest.raises(ParameterError, match="workers must be >= 1"):
         run_sweep(square, _cases(1), tmp_path, n_workers=0)
 
 

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from formats.atomic import DiskFull
+from formats.errors import ParameterError, ResourceError
 from recon.experiments import charts
-from recon.experiments.sweep import SweepError, read_results, run_sweep
+from recon.experiments.sweep import read_results, run_sweep
 from tests.recon.experiments.test_sweep import _cases, _ran, square
 
 REPO = Path(__file__).resolve().parents[3]
@@ -32,7 +32,7 @@ def test_resume_of_a_results_file_that_is_not_utf8_is_one_line(tmp_path):
     calls = _first_run(tmp_path)
     results = tmp_path / "out" / "results.jsonl"
     results.write_bytes(b"\xff\xfe garbage\n" + results.read_bytes())
-    with pytest.raises(SweepError, match=r"--resume: .*results.jsonl: line 1 is not UTF-8"):
+    with pytest.raises(ParameterError, match=r"--resume: .*results.jsonl: line 1 is not UTF-8"):
         run_sweep(square, _cases(3), tmp_path / "out", shared={"calls": calls},
                   scheduler="serial", resume=True)
 
@@ -48,7 +48,7 @@ def test_a_torn_last_line_inside_a_character_is_dropped(tmp_path):
 def test_resume_of_a_damaged_fingerprint_is_one_line(tmp_path, damage):
     calls = _first_run(tmp_path)
     (tmp_path / "out" / "sweep.json").write_bytes(damage)
-    with pytest.raises(SweepError, match=r"--resume: .*sweep.json is damaged"):
+    with pytest.raises(ParameterError, match=r"--resume: .*sweep.json is damaged"):
         run_sweep(square, _cases(3), tmp_path / "out", shared={"calls": calls},
                   scheduler="serial", resume=True)
 
@@ -57,7 +57,7 @@ def test_resume_of_a_damaged_fingerprint_is_one_line(tmp_path, damage):
 def test_an_output_that_is_a_directory_is_refused_before_any_work(tmp_path, name):
     calls = str(tmp_path / "calls")
     (tmp_path / "out" / name).mkdir(parents=True)
-    with pytest.raises(SweepError, match=rf"{name}: is a directory"):
+    with pytest.raises(ParameterError, match=rf"{name}: is a directory"):
         run_sweep(square, _cases(2), tmp_path / "out", shared={"calls": calls},
                   scheduler="serial", outputs=("results.csv",))
     assert _ran(calls) == []
@@ -75,7 +75,7 @@ def test_a_full_disk_while_a_chart_is_written_keeps_the_old_chart(tmp_path, monk
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr("matplotlib.figure.Figure.savefig", half_then_full)
-    with pytest.raises(DiskFull, match=r"speed_accuracy\.png: no space left"):
+    with pytest.raises(ResourceError, match=r"speed_accuracy\.png: no space left"):
         charts.speed_accuracy(records, chart)
     assert chart.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["speed_accuracy.png"]

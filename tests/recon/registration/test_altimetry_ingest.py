@@ -11,8 +11,9 @@ import pytest
 
 from cli.main import main
 from formats import StrikeLog
-from formats.altimetry import AltimetryError, read_label
+from formats.altimetry import read_label
 from formats.cloud_io import read_cloud
+from formats.errors import InputError
 from recon import api
 from recon.registration.altimetry import export_altimetry
 from sim.scene import MESH_PATH_VARIABLE
@@ -86,7 +87,7 @@ def test_products_read_back_and_score_against_the_truth(bennu_log, tmp_path, cap
 
 
 def test_export_refuses_a_suffix_it_cannot_write(bennu_log, tmp_path, capsys):
-    with pytest.raises(AltimetryError, match=r"written as its \.xml label"):
+    with pytest.raises(InputError, match=r"written as its \.xml label"):
         export_altimetry(bennu_log, tmp_path / "x.dat")
     assert main(["ingest", str(tmp_path / "none.xml"), "-o", str(tmp_path / "c.ply")]) == 1
     assert "none.xml" in capsys.readouterr().err

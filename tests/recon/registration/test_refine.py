@@ -13,8 +13,9 @@ import pytest
 import sim
 from cli.main import main
 from formats import StrikeLog
+from formats.errors import InputError
 from recon.registration.ingest import ingest
-from recon.registration.refine import PoseCorrection, RefineError, refine
+from recon.registration.refine import PoseCorrection, refine
 
 # The paper's asteroid and single-beam LRF (0.3 m 3-sigma range noise), its 50 rotations (fewer
 # leave too few crossings of ascending and descending passes to separate the errors).
@@ -104,10 +105,10 @@ def test_slowly_varying_errors_are_estimated_per_knot(logs):
 
 def test_bad_refine_options_are_refused(logs, tmp_path):
     _, posed = logs
-    with pytest.raises(RefineError, match="refine interval must be a positive number"):
+    with pytest.raises(InputError, match="refine interval must be a positive number"):
         refine(posed, interval=0.0)
     tiny = _simulate(tmp_path / "tiny.h5", "time.duration=300")
-    with pytest.raises(RefineError, match="too few to refine the poses"):
+    with pytest.raises(InputError, match="too few to refine the poses"):
         refine(tiny)
 
 

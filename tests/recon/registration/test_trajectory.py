@@ -7,8 +7,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cli.main import main
+from formats.errors import ParameterError
 from recon import api
-from recon.registration.trajectory import COLUMNS, TrajectoryError, export_trajectory
+from recon.registration.trajectory import COLUMNS, export_trajectory
 
 
 @pytest.fixture
@@ -57,7 +58,7 @@ def test_inertial_csv_is_as_recorded(spinning_log, tmp_path):
 
 
 def test_bad_trajectory_requests(spinning_log, tmp_path, capsys):
-    with pytest.raises(TrajectoryError, match=r"t\.las: a trajectory is written as \.txt or"):
+    with pytest.raises(ParameterError, match=r"t\.las: a trajectory is written as \.txt or"):
         export_trajectory(spinning_log, tmp_path / "t.las")
     assert main(["trajectory", str(tmp_path / "missing.h5"), "-o", str(tmp_path / "t.txt")]) == 1
     assert capsys.readouterr().err.count("\n") == 1

@@ -8,8 +8,8 @@ import itertools
 import numpy as np
 import pytest
 
-from recon.surfaces.auto import AutoError, Candidate, choose, format_choice, select
-from recon.surfaces.methods import MethodFailed
+from formats.errors import MethodFailed, ParameterError
+from recon.surfaces.auto import Candidate, choose, format_choice, select
 from tests.recon.conftest import box_points, ellipsoid_points
 
 # Candidates of the tests: one of each kind, two resolutions of Poisson (a full default run of
@@ -174,7 +174,7 @@ def test_select_fails_when_every_candidate_failed():
 ])
 def test_bad_options_are_named(kwargs, match):
     points, view, _ = box_points(500)
-    with pytest.raises(AutoError, match=match):
+    with pytest.raises(ParameterError, match=match):
         choose(points, view_points=view, candidates=CANDIDATES, **kwargs)
 
 

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 import recon_fake_methods  # noqa: F401  (registers the test-only methods)
 
+from formats.errors import MethodFailed, ParameterError
 from recon.experiments.compare import compare
 from recon.surfaces.isolation import run_isolated
-from recon.surfaces.methods import MethodFailed, watertight
+from recon.surfaces.methods import watertight
 from recon.surfaces.prepare import prepare
 from recon.surfaces.reconstruct import reconstruct
 from tests.recon.conftest import FAST_SCORE, sphere_mesh, sphere_points
@@ -188,20 +189,15 @@ def test_peak_memory_is_the_childs_own_not_the_parents():
 
 
 def test_limits_take_the_defaults_and_name_the_options():
-    from recon.surfaces.isolation import (
-        DEFAULT_MEMORY_MB,
-        DEFAULT_TIMEOUT_S,
-        LimitError,
-        Limits,
-    )
+    from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
 
     assert Limits.from_options() == Limits(DEFAULT_TIMEOUT_S, DEFAULT_MEMORY_MB)
     assert Limits.from_options(5, 0) == Limits(5.0, None)  # 0: no memory limit
-    with pytest.raises(LimitError, match="--timeout must be positive, got 0"):
+    with pytest.raises(ParameterError, match="--timeout must be positive, got 0"):
         Limits.from_options(0)
-    with pytest.raises(LimitError, match="--memory-limit must be >= 0, got -1"):
+    with pytest.raises(ParameterError, match="--memory-limit must be >= 0, got -1"):
         Limits.from_options(memory_limit=-1)
-    with pytest.raises(LimitError, match="timeout_s must be positive, got -1"):
+    with pytest.raises(ParameterError, match="timeout_s must be positive, got -1"):
         Limits(-1.0)
 
 

@@ -21,11 +21,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from formats.errors import InputError, MethodFailed, ParameterError
 from metrics import Mesh, point_mesh_distance, sample_surface
 from recon.surfaces import methods
-from recon.surfaces.methods import MethodFailed, ParameterError, UnknownMethod
 from recon.surfaces.methods._contour import node_keys, surface_nets
-from recon.surfaces.prepare import InputError, prepare, preprocess
+from recon.surfaces.prepare import prepare, preprocess
 from recon.surfaces.reconstruct import reconstruct
 from tests.recon.conftest import (
     BOX_HALF,
@@ -139,7 +139,7 @@ def test_registry_lists_methods_and_hides_test_ones():
             "delaunay-balls"} <= set(listed)
     assert not any(name.startswith("test-") for name in listed)
     assert "test-abort" in methods.available(include_hidden=True)
-    with pytest.raises(UnknownMethod, match=r"unknown method 'marching' .*poisson"):
+    with pytest.raises(ParameterError, match=r"unknown method 'marching' .*poisson"):
         methods.get("marching")
 
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from formats import StrikeLog
+from formats.errors import InputError
 from recon.registration.ingest import ingest
 from recon.surfaces.normals import (
-    NormalsError,
     estimate_normals,
     local_planes,
     noise_scale,
@@ -102,5 +102,5 @@ def test_same_points_same_normals():
      "view_points must match points"),
 ])
 def test_bad_inputs_are_named(kwargs, match):
-    with pytest.raises(NormalsError, match=match):
+    with pytest.raises(InputError, match=match):
         estimate_normals(**kwargs)

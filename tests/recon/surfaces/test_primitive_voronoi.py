@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from formats.errors import MethodFailed
 from formats.strike_log import SensorErrors
 from recon.registration.uncertainty import strike_columns
 from recon.surfaces import methods, uncertainty
-from recon.surfaces.methods import MethodFailed, watertight
+from recon.surfaces.methods import watertight
 from recon.surfaces.methods.delaunay_balls import min_cut_labels
 from recon.surfaces.methods.ellipsoid import fit_quadric
 from recon.surfaces.methods.plane import project_to_planes
