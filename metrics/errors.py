@@ -1,9 +1,8 @@
-"""Errors and warnings raised by the metrics package.
+"""Warnings raised by the metrics package.
 
-Every error caused by the caller's input is a ``InputError``, which is a
-``formats.errors.ReconError`` (the CLI prints it on one line and exits 1) and a ``ValueError``.
+Every error caused by the caller's input is a ``formats.errors.InputError`` (a ``ReconError``,
+which the CLI prints on one line with exit status 1, and a ``ValueError``).
 """
-
 
 
 class ScaleMismatchWarning(UserWarning):
