@@ -170,7 +170,7 @@ def accuracy_targets(tmp: Path) -> bool:
 
 def cost_target(tmp: Path) -> bool:
     from recon import api
-    from recon.demo import DEMO_METHOD, DEMO_SCENE
+    from recon.api import DEMO_METHOD, DEMO_SCENE
     from recon.registration.ingest import ingest
     from recon.registration.refine import refine
 

@@ -1,11 +1,11 @@
-"""``recon demo``: the whole pipeline on a built-in scene (``recon.demo.run_demo``)."""
+"""``recon demo``: the whole pipeline on a built-in scene (``recon.api.demo``)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-# Repeated from recon/demo.py as help text only, so that ``recon --help`` imports nothing heavy.
+# Repeated from recon/api.py as help text only, so that ``recon --help`` imports nothing heavy.
 DEMO_SCENE = "asteroid-lrf-slew"
 DEMO_METHOD = "screened-poisson"
 

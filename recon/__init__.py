@@ -8,9 +8,8 @@ simulate``) and listed by ``dir(recon)``, loaded on first use so that importing 
 starting ``recon --help``) stays light.
 """
 
-# The verbs of recon.api (its __all__ without the result classes, and without ``demo``: here
-# that name is the module recon.demo; a test keeps them equal).
-VERBS = ("check_scheduler", "check_seed", "compare", "default_truth", "edges",
+# The verbs of recon.api (its __all__ without the result classes; a test keeps them equal).
+VERBS = ("check_scheduler", "check_seed", "compare", "default_truth", "demo", "edges",
          "export_altimetry", "follow", "ingest", "ingest_altimetry", "ingest_file",
          "is_altimetry", "is_kernel", "load", "method_listing", "presets", "reconstruct",
          "reconstruct_file", "refine", "report", "save", "scene_keys", "score", "simulate",

@@ -1,4 +1,4 @@
-"""``recon demo`` is ``recon.demo.run_demo``: the whole pipeline, every file in one directory."""
+"""``recon demo`` is ``recon.api.demo``: the whole pipeline, every file in one directory."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from cli.main import main
 
 def test_cli_help_defaults_match_the_library():
     from cli import demo as cli_demo
-    from recon import demo
+    from recon import api
 
-    assert (cli_demo.DEMO_SCENE, cli_demo.DEMO_METHOD) == (demo.DEMO_SCENE, demo.DEMO_METHOD)
+    assert (cli_demo.DEMO_SCENE, cli_demo.DEMO_METHOD) == (api.DEMO_SCENE, api.DEMO_METHOD)
 
 
 def test_demo_writes_every_file_and_scores_both(tmp_path, capsys):
