@@ -21,11 +21,6 @@ from cli.options import (
 TIMEOUT_HELP = ("wall-clock limit of each method run, seconds (default: 600); a method at its "
                 "defaults whose predicted time exceeds it is declined at once")
 MEMORY_HELP = "address-space limit of each method run, MiB (default: 8192; 0: none)"
-# What the defaults cost, as benchmarks/bench_methods.py measured it (the slowest method of
-# recon/surfaces/methods DEFAULT_FIT_S, which --list-methods prints per method).
-COST_HELP = ("At their defaults the methods fit a 336k-point asteroid LIDAR cloud in at most "
-             "59 s each (ball-pivoting-meshlab; Open3D Poisson 1.9 s) and a 77k-point LRF "
-             "cloud in at most 14 s (benchmarks/bench_methods.py).")
 
 
 def _add_input_options(p: argparse.ArgumentParser) -> None:
@@ -68,6 +63,8 @@ def _add_closing_options(p: argparse.ArgumentParser, *, preprocessing: bool, swe
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from recon import api  # light: formats.errors, and the cost table (JSON) for the help
+
     p = add_command(
         sub, "reconstruct", run_reconstruct,
         help="reconstruct a surface mesh from a cloud or a log",
@@ -77,7 +74,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "says why. Every surface comes with a predicted Chamfer distance and F-score "
                     "(a band, from the strikes and their rays, without the truth). "
                     "'--list-methods' lists the methods, their parameters and what "
-                    "each default costs. " + COST_HELP)
+                    "each default costs. " + api.method_cost())
     p.add_argument("input", nargs="?", metavar="INPUT",
                    help="point cloud (.ply, .las, .laz, .h5, .xyz, .pcd, .e57...) or strike log")
     p.add_argument("-m", "--method", default="poisson",
@@ -104,7 +101,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "--scheduler); score each mesh against the truth; write DIR/results.csv, "
                     "DIR/results.json, DIR/speed_accuracy.png and the meshes; print the "
                     "ranking, the Pareto fronts and how long the full grid would take. "
-                    + COST_HELP)
+                    + api.method_cost())
     p.add_argument("input", nargs="?", metavar="INPUT", help="point cloud or strike log")
     add_truth_and_output_options(
         p, truth_help="truth mesh file, or a strike log with its truth mesh", truth_required=True)

@@ -11,9 +11,9 @@ starting ``recon --help``) stays light.
 # The verbs of recon.api (its __all__ without the result classes; a test keeps them equal).
 VERBS = ("check_scheduler", "check_seed", "compare", "default_truth", "demo", "edges",
          "export_altimetry", "follow", "ingest", "ingest_altimetry", "ingest_file",
-         "is_altimetry", "is_kernel", "load", "method_listing", "presets", "reconstruct",
-         "reconstruct_file", "refine", "report", "save", "scene_keys", "score", "simulate",
-         "stability", "studies", "study", "study_all", "trajectory", "truth_of")
+         "is_altimetry", "is_kernel", "load", "method_cost", "method_listing", "presets",
+         "reconstruct", "reconstruct_file", "refine", "report", "save", "scene_keys", "score",
+         "simulate", "stability", "studies", "study", "study_all", "trajectory", "truth_of")
 __all__ = list(VERBS)
 
 

@@ -67,6 +67,7 @@ __all__ = [
     "is_altimetry",
     "is_kernel",
     "load",
+    "method_cost",
     "method_listing",
     "presets",
     "reconstruct",
@@ -938,6 +939,15 @@ def method_listing() -> str:
     from recon.surfaces import methods
 
     return methods.listing()
+
+
+def method_cost() -> str:
+    """One sentence on what the methods cost at their defaults: the slowest default fit on the
+    benchmark's two clouds, from the table the benchmark writes (for ``--help``; reads JSON
+    only, no method is imported)."""
+    from recon.surfaces.fit_times import cost_help
+
+    return cost_help()
 
 
 def _bind(method: str, params):
