@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -90,3 +92,34 @@ def registration_error(path, correction=None) -> float:
         truth = log.truth_strikes().point
     return float(np.linalg.norm(ingest(path, correction=correction).points - truth, axis=1)
                  .mean())
+
+
+def python_on_zero_size_pty(script: str, *args: str) -> str:
+    """Run ``python -c script args`` with stderr on a pseudo-terminal that reports 0 rows and 0
+    columns (CI runners, ``script``); return what it drew there. The repository is on its path.
+    """
+    import fcntl
+    import pty
+    import struct
+    import termios
+
+    main, child = pty.openpty()
+    fcntl.ioctl(child, termios.TIOCSWINSZ, struct.pack("HHHH", 0, 0, 0, 0))
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("LINES", "COLUMNS", "TQDM_NROWS", "TQDM_NCOLS")}
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1])
+    proc = subprocess.Popen([sys.executable, "-c", script, *args], stderr=child,
+                            stdout=subprocess.DEVNULL, env=env)
+    os.close(child)
+    chunks = []
+    while True:
+        try:
+            data = os.read(main, 4096)
+        except OSError:  # the child closed its end
+            break
+        if not data:
+            break
+        chunks.append(data)
+    os.close(main)
+    assert proc.wait(timeout=120) == 0
+    return b"".join(chunks).decode(errors="replace")

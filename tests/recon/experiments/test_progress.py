@@ -3,23 +3,16 @@ on a pseudo-terminal of 0 x 0 too (where tqdm alone draws nothing)."""
 
 from __future__ import annotations
 
-import fcntl
 import itertools
-import os
-import pty
 import re
-import struct
-import subprocess
 import sys
-import termios
 import time
-from pathlib import Path
 
 import pytest
 
 from recon.experiments import progress
+from tests.conftest import python_on_zero_size_pty
 
-ROOT = Path(__file__).resolve().parents[3]
 # One case of five steps, each reported; the sweep's bar redraws every 0.2 s.
 SWEEP = """
 import sys, tempfile, time
@@ -39,33 +32,10 @@ run_sweep(case, {"a": {"n": 5}}, tempfile.mkdtemp(), scheduler=sys.argv[1], desc
 """
 
 
-def _on_zero_size_pty(script: str, *args: str) -> str:
-    main, child = pty.openpty()
-    fcntl.ioctl(child, termios.TIOCSWINSZ, struct.pack("HHHH", 0, 0, 0, 0))
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("LINES", "COLUMNS", "TQDM_NROWS", "TQDM_NCOLS")}
-    env["PYTHONPATH"] = str(ROOT)
-    proc = subprocess.Popen([sys.executable, "-c", script, *args], stderr=child,
-                            stdout=subprocess.DEVNULL, env=env)
-    os.close(child)
-    chunks = []
-    while True:
-        try:
-            data = os.read(main, 4096)
-        except OSError:
-            break
-        if not data:
-            break
-        chunks.append(data)
-    os.close(main)
-    assert proc.wait(timeout=120) == 0
-    return b"".join(chunks).decode(errors="replace")
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux pseudo-terminals")
 @pytest.mark.parametrize("scheduler", ["serial", "threads"])
 def test_the_bar_moves_within_a_case_on_a_zero_size_terminal(scheduler):
-    drawn = _on_zero_size_pty(SWEEP, scheduler)
+    drawn = python_on_zero_size_pty(SWEEP, scheduler)
     within = set(re.findall(r"cases: +\d+%\|[^|]*\| (0\.\d)/1 runs", drawn))
     assert len(within - {"0.0"}) >= 2, drawn   # at least two steps seen before the end
 
@@ -118,7 +88,7 @@ studies.run_all(tempfile.mkdtemp(), size="tiny", scheduler="serial", only=["dura
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux pseudo-terminals")
 def test_study_all_has_an_overall_bar():
-    drawn = _on_zero_size_pty(ALL)
+    drawn = python_on_zero_size_pty(ALL)
     assert re.search(r"studies: +50%\|[^|]*\| 1/2 .*slew", drawn), drawn
     assert re.search(r"studies: +100%\|[^|]*\| 2/2", drawn), drawn
 
