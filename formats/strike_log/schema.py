@@ -410,19 +410,20 @@ def _check_strike_rows(shot: np.ndarray, beam: np.ndarray, rng: np.ndarray, *, n
             s = np.concatenate([[previous_shot], s])
         bad = int(np.argmax(np.diff(s) < 0)) + row0 + (0 if previous_shot is None else -1) + 1
         raise StrikeLogError(f"{where}: strikes are not ordered by shot at strike {bad}")
-    if len(rng):   # two passes decide the common, valid case; min and max are NaN if any is
-        lo, hi = rng.min(), rng.max()
-        if 0 < lo and range_min <= lo and hi <= range_max and hi < np.inf:
-            return
+    if not len(rng):
+        return
+    lo, hi = rng.min(), rng.max()   # NaN if any range is: two passes decide the valid case
+    if 0 < lo and range_min <= lo and hi <= range_max and hi < np.inf:
+        return
     if not np.all(np.isfinite(rng) & (rng > 0)):
         bad = int(np.argmax(~(np.isfinite(rng) & (rng > 0))))
         raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r}, "
                              "expected a finite positive number of metres")
-    if len(rng) and rng.min() < range_min:
+    if lo < range_min:
         bad = int(np.argmax(rng < range_min))
         raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
                              f"below the sensor's range_min of {range_min!r} m")
-    if len(rng) and rng.max() > range_max:
+    if hi > range_max:
         bad = int(np.argmax(rng > range_max))
         raise StrikeLogError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
                              f"beyond the sensor's range_max of {range_max:g} m")
