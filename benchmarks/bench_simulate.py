@@ -19,7 +19,9 @@
    float64 hit refinement and the rest of the chunk (~35 ns), writing the log (~58 ns:
    Fletcher-32, deflate level 1 on the index columns, the copy into the file), which alone
    keeps the ratio under ~66 %; docs/decisions.md has the breakdown. ``--no-paper-run`` skips
-   part 3; the load average before and after is printed.
+   part 3; the load average before and after is printed. The same comparison in fresh
+   processes, as a user runs ``recon simulate``, is the ``simulate-lidar`` case of
+   benchmarks/bench_user.py.
 2. **Memory**: peak resident memory of a ``--memory-rays`` (default 1e8) LIDAR run in a fresh
    process (target: under 2 GB), with its time.
 3. **The paper's 50-rotation single-beam run** (``asteroid-lrf``, 77,400 shots): in-process and
