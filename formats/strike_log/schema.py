@@ -403,21 +403,27 @@ def _check_strike_rows(shot: np.ndarray, beam: np.ndarray, rng: np.ndarray, *, n
         bad = int(np.argmax(beam >= n_beams))
         raise InputError(f"{where}: strike {row0 + bad} has beam index {int(beam[bad])} out "
                              f"of range (n_beams = {n_beams})")
-    s = shot.astype(np.int64)
-    if previous_shot is not None:
-        s = np.concatenate([[previous_shot], s])
-    if np.any(np.diff(s) < 0):
+    if len(shot) and ((previous_shot is not None and int(shot[0]) < previous_shot)
+                      or np.any(shot[1:] < shot[:-1])):
+        s = shot.astype(np.int64)
+        if previous_shot is not None:
+            s = np.concatenate([[previous_shot], s])
         bad = int(np.argmax(np.diff(s) < 0)) + row0 + (0 if previous_shot is None else -1) + 1
         raise InputError(f"{where}: strikes are not ordered by shot at strike {bad}")
+    if not len(rng):
+        return
+    lo, hi = rng.min(), rng.max()   # NaN if any range is: two passes decide the valid case
+    if 0 < lo and range_min <= lo and hi <= range_max and hi < np.inf:
+        return
     if not np.all(np.isfinite(rng) & (rng > 0)):
         bad = int(np.argmax(~(np.isfinite(rng) & (rng > 0))))
         raise InputError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r}, "
                              "expected a finite positive number of metres")
-    if len(rng) and rng.min() < range_min:
+    if lo < range_min:
         bad = int(np.argmax(rng < range_min))
         raise InputError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
                              f"below the sensor's range_min of {range_min!r} m")
-    if len(rng) and rng.max() > range_max:
+    if hi > range_max:
         bad = int(np.argmax(rng > range_max))
         raise InputError(f"{where}: strike {row0 + bad} has range {float(rng[bad])!r} m, "
                              f"beyond the sensor's range_max of {range_max:g} m")

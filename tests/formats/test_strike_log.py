@@ -141,6 +141,29 @@ def test_writer_rejects_bad_rows(tmp_path):
     assert not (tmp_path / "y.h5").exists()
 
 
+def test_writer_names_the_first_bad_strike_in_a_block(tmp_path):
+    """The strike checks decide a valid block from its range extremes and its shot steps; a bad
+    block still names its first bad row, also across calls."""
+    q = [[0, 0, 0, 1.0]] * 3
+    sensor = SensorInfo("single", np.array([[0, 0, 1.0]]), 10.0, 1000.0)
+    with StrikeLogWriter(tmp_path / "x.h5", sensor=sensor, target="t") as w:
+        w.write_shots([0.0, 1.0, 2.0], [[500.0, 0, 0]] * 3, q, q)
+        w.write_strikes([0, 1], [0, 0], [400.0, 401.0])
+        for rng, message in [([400.0, np.nan, 5.0], r"strike 3 has range nan, expected"),
+                             ([400.0, np.inf, 5.0], r"strike 3 has range inf, expected"),
+                             ([400.0, 401.0, 5.0], r"strike 4 has range 5.0 m, below"),
+                             ([400.0, 4000.0, 500.0], r"strike 3 has range 4000.0 m, beyond")]:
+            with pytest.raises(InputError, match=message):
+                w.write_strikes([1, 2, 2], [0, 0, 0], rng)
+        with pytest.raises(InputError, match="not ordered by shot at strike 2"):
+            w.write_strikes([0, 2], [0, 0], [400.0, 400.0])    # before the last call's shot 1
+        with pytest.raises(InputError, match="not ordered by shot at strike 4"):
+            w.write_strikes([1, 2, 1], [0, 0, 0], [400.0] * 3)
+        w.write_strikes(np.array([1, 2], np.uint32), [0, 0], [10.0, 1000.0])   # the limits
+    with StrikeLog(tmp_path / "x.h5") as log:
+        assert log.n_strikes == 4
+
+
 def test_closed_writer_refuses_writes(tmp_path):
     w = StrikeLogWriter(tmp_path / "x.h5", sensor=_sensor(), target="t")
     w.close()
