@@ -54,6 +54,7 @@ from metrics.edges import (
     _tree,
     copy_tree,
     nearest_k,
+    neighbour_offsets,
     neighbourhood_variation,
     resolve_length,
 )
@@ -205,8 +206,8 @@ class EdgeStream:
             x = core[sl, axis]
             ok = dist[:, -1] < np.minimum(x - a, b - x) * (1 - 1e-9)
             radii[sl], sure[sl] = dist[:, -1], ok
-            value = neighbourhood_variation(columns[:, idx[ok]]
-                                            - queries[:, sl][:, ok, None])
+            value = neighbourhood_variation(neighbour_offsets(columns, idx[ok],
+                                                              queries[:, sl][:, ok]))
             is_edge[sl][ok] = self._edge(value)
         tally.add(core[sure], is_edge[sure], far[sure], lo, hi)
         aside.append(np.column_stack([core[~sure], far[~sure]]))
