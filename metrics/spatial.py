@@ -108,22 +108,19 @@ class PointIndex:
         ----------
         queries : (m, 3) float64
         upper : float
-            Distances above this are not resolved and come back as ``inf`` (a bounded search,
-            much faster where most queries have no point that close); a distance equal to
-            ``upper`` is resolved.
+            Distances above this come back as ``inf`` (a distance equal to it is kept).
 
         Returns
         -------
         (m,) float64
         """
-        queries = self._tensor(np.ascontiguousarray(queries))
-        if not np.isfinite(upper):
-            return np.sqrt(self._search.knn_search(queries, 1)[1].numpy()[:, 0])
-        # The search radius a hair wider: a point at exactly ``upper`` is found whatever the
-        # rounding of the squared radius; the distances are exact and compared by the caller.
-        _, squared, count = self._search.hybrid_search(queries, upper * (1 + 1e-9), 1)
+        if len(queries) == 0:
+            return np.zeros(0)
+        # The nearest point, unbounded: Open3D's bounded (hybrid) search gathers every point
+        # within the bound before keeping the nearest, far slower where the bound holds many.
+        squared = self._search.knn_search(self._tensor(np.ascontiguousarray(queries)), 1)[1]
         distance = np.sqrt(squared.numpy()[:, 0])
-        return np.where((count.numpy() > 0) & (distance <= upper), distance, np.inf)
+        return np.where(distance <= upper, distance, np.inf)
 
 
 def nearest_distance(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
@@ -154,8 +151,7 @@ def query_distance(index: PointIndex, queries: np.ndarray, *, upper: float = np.
     index : PointIndex
     queries : (m, 3) float64
     upper : float
-        Distances above this are not resolved and come back as ``inf`` (a bounded search,
-        much faster where most queries have no point that close).
+        Distances above this come back as ``inf`` (a distance equal to it is kept).
     presorted : bool
         The queries are already in Morton order (else they are ordered here, which halves the
         time of a large query).
