@@ -89,7 +89,13 @@ import numpy as np
 from formats.errors import InputError
 from metrics import defaults
 from metrics.inputs import Mesh, as_mesh, as_points, bbox_diagonal, face_normals
-from metrics.spatial import distinct_points, morton_order, nearest_distance, query_distance
+from metrics.spatial import (
+    PointIndex,
+    distinct_points,
+    morton_order,
+    nearest_distance,
+    query_distance,
+)
 
 EdgeRule = Literal["leave_one_out", "pauly"]
 EdgeVariant = Literal["weighted", "feature"]
@@ -223,7 +229,7 @@ def surface_variation(points, *, k: int = defaults.EDGE_K) -> SurfaceVariation:
     -----
     The points are put in Morton (Z-curve) order before the KD-tree is built and queried, so
     consecutive queries touch the same tree nodes and memory: 2-3x faster on a million points.
-    Per block of points: k-nearest neighbours (scipy cKDTree, all cores; ties in distance
+    Per block of points: k-nearest neighbours (``spatial.PointIndex``, all cores; ties in distance
     broken by the points' coordinates, ``nearest_k``), the six distinct
     entries of each neighbourhood's scatter matrix from coordinate-major offsets, the scatter
     without the point by a rank-one downdate, and the smallest eigenvalue of both in closed form
@@ -239,7 +245,7 @@ def _surface_variation(points: np.ndarray, k: int):
     Returns
     -------
     variation : SurfaceVariation
-    tree : scipy.spatial.cKDTree
+    tree : spatial.PointIndex
         Over the distinct points (``spatial.distinct_points``) in Morton order, for later
         nearest-point queries.
     order : (n,) int64
@@ -260,14 +266,15 @@ def _surface_variation(points: np.ndarray, k: int):
     for lo in range(0, n, step):  # blocks of points, bounded memory; each block is vectorised
         sl = slice(lo, lo + step)
         dist, idx = nearest_k(tree, ordered[sl], k, copies)
-        out[:2, lo:lo + step] = neighbourhood_variation(columns[:, idx] - queries[:, sl, None])
+        out[:2, lo:lo + step] = neighbourhood_variation(neighbour_offsets(columns, idx,
+                                                                          queries[:, sl]))
         out[2, lo:lo + step] = dist[:, -1]
     out[:, order] = out.copy()
     return SurfaceVariation(sigma=out[0], drop=out[1], radius=out[2], k=k), tree, order, ordered
 
 
 def copy_tree(points: np.ndarray):
-    """cKDTree over the distinct points, and how many copies each stands for.
+    """Nearest-neighbour index over the distinct points, and how many copies each stands for.
 
     Parameters
     ----------
@@ -275,23 +282,21 @@ def copy_tree(points: np.ndarray):
 
     Returns
     -------
-    tree : scipy.spatial.cKDTree
+    tree : spatial.PointIndex
         Over the distinct points (in Morton order when some repeat; else ``points``).
     copies : (d,) int64 or None
         Copies per row of ``tree.data``; None when there are none (every count 1).
     """
-    from scipy.spatial import cKDTree
-
     distinct, copies = distinct_points(points, counts=True)
     if len(distinct) == len(points):
-        return cKDTree(points), None
+        return PointIndex(points), None
     order = morton_order(distinct)
-    return cKDTree(distinct[order]), copies[order]
+    return PointIndex(distinct[order]), copies[order]
 
 
 def nearest_k(tree, queries: np.ndarray, k: int, copies: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray]:
-    """The k nearest points of a cKDTree to each query, in canonical order.
+    """The k nearest points of an index to each query, in canonical order.
 
     Sorted by distance, equal distances by the points' x, then y, then z: the neighbourhood
     and its order depend on the point set alone, not on the tree that holds it (nor on the
@@ -304,7 +309,7 @@ def nearest_k(tree, queries: np.ndarray, k: int, copies: np.ndarray | None = Non
 
     Parameters
     ----------
-    tree : scipy.spatial.cKDTree
+    tree : spatial.PointIndex
         Over n >= k points (with ``copies``: n distinct points standing for ``copies.sum()``
         >= k).
     queries : (m, 3) float64
@@ -328,7 +333,7 @@ def nearest_k(tree, queries: np.ndarray, k: int, copies: np.ndarray | None = Non
         return np.take_along_axis(dist, slot, axis=1), np.take_along_axis(idx, slot, axis=1)
     n = tree.n
     want = min(k + 1, n)
-    dist, idx = _query(tree, queries, want)
+    dist, idx = tree.knn(queries, want)
     tied = np.flatnonzero((dist[:, 1:] == dist[:, :-1]).any(axis=1))
     out_dist, out_idx = dist[:, :k].copy(), idx[:, :k].copy()
     rows, dist, idx = tied, dist[tied], idx[tied]
@@ -343,14 +348,33 @@ def nearest_k(tree, queries: np.ndarray, k: int, copies: np.ndarray | None = Non
         out_idx[rows[complete]] = np.take_along_axis(idx[complete], pick, axis=1)
         rows = rows[~complete]
         if rows.size:
-            dist, idx = _query(tree, queries[rows], min(2 * idx.shape[1], n))
+            dist, idx = tree.knn(queries[rows], min(2 * idx.shape[1], n))
     return out_dist, out_idx
 
 
-def _query(tree, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """cKDTree's k nearest, always (m, k) arrays (all cores)."""
-    dist, idx = tree.query(queries, k=k, workers=-1)
-    return dist.reshape(len(queries), k), idx.reshape(len(queries), k)
+def neighbour_offsets(columns: np.ndarray, idx: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    """Each neighbourhood's points relative to its query, coordinate-major.
+
+    ``columns[:, idx] - queries[:, :, None]`` bit for bit, one ``np.take`` per coordinate into
+    the result (fancy indexing of the (3, n) array cost 2-10x more).
+
+    Parameters
+    ----------
+    columns : (3, n) float64, metres
+        The indexed points, coordinate-major.
+    idx : (b, k) int64
+        Rows of the neighbours.
+    queries : (3, b) float64, metres
+
+    Returns
+    -------
+    (3, b, k) float64, metres
+    """
+    offset = np.empty((3, *idx.shape))
+    for axis in range(3):  # three coordinates, each a batched gather
+        np.take(columns[axis], idx, out=offset[axis])
+        offset[axis] -= queries[axis, :, None]
+    return offset
 
 
 def neighbourhood_variation(offset: np.ndarray) -> np.ndarray:
@@ -704,7 +728,7 @@ class TruthEdges:
                    sample_length=sample_length, which=which, on_sharp=sharp[which])
 
     def sharp_tree(self):
-        """cKDTree over the feature-edge samples (Morton order), for ``near`` queries."""
+        """``PointIndex`` over the feature-edge samples (Morton order), for ``near`` queries."""
         return _tree(self.samples[self.on_sharp])
 
     def report(self, found: np.ndarray, *, n_points: int, n_edge_points: int, n_far: int,
@@ -756,10 +780,8 @@ class TruthEdges:
 
 
 def _tree(points: np.ndarray):
-    """cKDTree over points in Morton order (faster queries; the tree's data is reordered)."""
-    from scipy.spatial import cKDTree
-
-    return cKDTree(points[morton_order(points)])
+    """``PointIndex`` over points in Morton order (faster queries; its data is reordered)."""
+    return PointIndex(points[morton_order(points)])
 
 
 def check_options(n_points: int, diagonal: float, *, k: int = defaults.EDGE_K,

@@ -55,11 +55,12 @@ from metrics.edges import (
     _tree,
     copy_tree,
     nearest_k,
+    neighbour_offsets,
     neighbourhood_variation,
     resolve_length,
 )
 from metrics.inputs import Mesh, bbox_diagonal, face_areas
-from metrics.spatial import morton_order, nearest_distance, query_distance
+from metrics.spatial import PointIndex, morton_order, nearest_distance, query_distance
 
 Blocks = Callable[[], Iterable[np.ndarray]]
 
@@ -188,11 +189,14 @@ class EdgeStream:
         if len(core) == 0:
             return np.zeros(0)
         far = tally.far(core)
-        tally.found_by(core, lo, hi, edge=False)
         if len(held) < k:
+            tally.found_by(core, lo, hi, edge=False)
             aside.append(np.column_stack([core, far]))
             return np.zeros(0)
         tree, copies = copy_tree(held)
+        # The held points (core and halo, all of them the cloud's) look for the gentle samples
+        # near the core: over all slabs the same samples are found as by the cores alone.
+        tally.found_by(core, lo, hi, edge=False, index=tree)
         columns = np.ascontiguousarray(tree.data.T)
         queries = np.ascontiguousarray(core.T)  # C layout: the offsets' bits (edges.py)
         radii = np.empty(len(core))
@@ -205,8 +209,8 @@ class EdgeStream:
             x = core[sl, axis]
             ok = dist[:, -1] < np.minimum(x - a, b - x) * (1 - 1e-9)
             radii[sl], sure[sl] = dist[:, -1], ok
-            value = neighbourhood_variation(columns[:, idx[ok]]
-                                            - queries[:, sl][:, ok, None])
+            value = neighbourhood_variation(neighbour_offsets(columns, idx[ok],
+                                                              queries[:, sl][:, ok]))
             is_edge[sl][ok] = self._edge(value)
         tally.add(core[sure], is_edge[sure], far[sure], lo, hi)
         aside.append(np.column_stack([core[~sure], far[~sure]]))
@@ -270,9 +274,11 @@ class _Tally:
         x = self.side.samples[which, self.axis]
         return which[(x >= lo - t) & (x <= hi + t)]
 
-    def found_by(self, points: np.ndarray, lo: float, hi: float, *, edge: bool) -> None:
+    def found_by(self, points: np.ndarray, lo: float, hi: float, *, edge: bool,
+                 index: PointIndex | None = None) -> None:
         """Mark the samples (feature-edge ones when ``edge``, else the others) within t of
-        points (b, 3) lying in lo <= x < hi."""
+        points (b, 3) lying in lo <= x < hi; ``index``, when given, holds the points (or more
+        of the cloud's) for the gentle samples' search."""
         which = self._within(self.sharp if edge else self.gentle, lo, hi)
         if len(which) == 0 or len(points) == 0:
             return
@@ -280,7 +286,8 @@ class _Tally:
         if edge:
             hit = nearest_distance(points, self.side.samples[which]) <= t
         else:
-            hit = query_distance(_tree(points), self.side.samples[which], upper=t) <= t
+            index = _tree(points) if index is None else index
+            hit = query_distance(index, self.side.samples[which], upper=t) <= t
         self.found[which[hit]] = True
 
     def add(self, points: np.ndarray, is_edge: np.ndarray, far: np.ndarray, lo: float,

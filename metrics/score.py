@@ -6,7 +6,7 @@ Temples, Knapitsch et al. 2017, and Open3D's ``compute_metrics``):
 - accuracy: d(test point, truth surface), exact point-to-triangle in float64, for every test
   point (a test mesh is first sampled uniformly by area, ``n_test_samples`` points).
 - completeness: d(truth sample, test), for ``n_truth_samples`` points sampled uniformly by area on
-  the truth: to a test cloud by nearest neighbour (scipy cKDTree), to a test mesh exactly.
+  the truth: to a test cloud by nearest neighbour (Open3D's KD-tree), to a test mesh exactly.
 - mean, RMS, median, 95th percentile and max of each; Chamfer = (mean accuracy + mean
   completeness) / 2; Hausdorff = max(max accuracy, max completeness).
 - precision = fraction of test points within tau of the truth; recall = fraction of truth samples

@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from metrics_reference import box, ellipsoid, satellite
-from scipy.spatial import cKDTree
 
 from formats.errors import InputError
 from metrics import defaults, sample_surface
@@ -19,6 +18,7 @@ from metrics.edges import (
     surface_variation,
 )
 from metrics.edges_stream import EdgeStream
+from metrics.spatial import PointIndex
 
 
 def cloud(mesh, n: int, seed: int, noise: float) -> np.ndarray:
@@ -150,7 +150,7 @@ def test_nearest_k_is_canonical_on_a_lattice_with_copies(k):
     queries = grid[rng.choice(len(grid), 60, replace=False)] + np.array([0.0, 0.0, 0.5])
     want_dist, want_near = canonical_brute_force(data, queries, k)
     for points in (data, data[rng.permutation(len(data))], data[::-1]):
-        dist, idx = nearest_k(cKDTree(points), queries, k)
+        dist, idx = nearest_k(PointIndex(points), queries, k)
         assert np.array_equal(dist, want_dist)
         assert np.array_equal(points[idx], want_near)
         tree, copies = copy_tree(points)   # the distinct points, with their copies counted
@@ -159,7 +159,7 @@ def test_nearest_k_is_canonical_on_a_lattice_with_copies(k):
         assert np.array_equal(dist, want_dist)
         assert np.array_equal(tree.data[idx], want_near)
     few = data[:k]   # exactly k points: every point in every neighbourhood
-    dist, idx = nearest_k(cKDTree(few), queries, k)
+    dist, idx = nearest_k(PointIndex(few), queries, k)
     assert np.array_equal(few[idx], canonical_brute_force(few, queries, k)[1])
 
 
