@@ -775,6 +775,64 @@ def _weighting_lines(summaries: list[dict]) -> list[str]:
     return lines
 
 
+# The issue's targets as rows of the report's first table: what is measured, the target, and
+# for a group (``totals``, ``prediction_totals`` and its clouds) the figure and whether it holds.
+SPEARMAN_TARGET, BAND_TARGET, AGREEMENT_TARGET, COST_TARGET = 0.8, 0.8, 0.9, 0.25
+
+
+def _share(fraction: float, n: int) -> str:
+    """A fraction of ``n`` clouds as "88 % (22 of 25)"."""
+    return f"{fraction:.0%} ({round(fraction * n)} of {n})" if n else "-"
+
+
+def _target_cells(total: dict, pred: dict, group: list[dict]) -> list[tuple[str, bool]]:
+    """One group's column of the targets table: (figure, holds) per row of ``TARGET_ROWS``."""
+    n = total["n_clouds"]
+    present = [s["visibility"] for s in group if s["visibility"]["present"]]
+    drawn = sum(bool(v["on_chart"]) for v in present)
+    wins = sum(v["chamfer_ratio"] <= WIN_RATIO for v in present)
+    finite = math.isfinite
+    return [
+        (_share(total["within_both"], n), n > 0 and total["within_both"] >= AGREEMENT_TARGET),
+        (_share(total["not_below_median"], n), n > 0 and total["not_below_median"] == 1.0),
+        (f"worst {total['cost_ratio_max']:.2f}, median {total['cost_ratio_median']:.2f}",
+         n > 0 and total["cost_ratio_max"] <= COST_TARGET),
+        (f"{pred['spearman']:.2f} ({pred['n_runs']:,} runs)",
+         finite(pred["spearman"]) and pred["spearman"] >= SPEARMAN_TARGET),
+        (_share(pred["band_holds_truth"], pred["n_choices"]) if pred["n_choices"] else "-",
+         finite(pred["band_holds_truth"]) and pred["band_holds_truth"] >= BAND_TARGET),
+        (f"{drawn} of {n}", n > 0 and drawn == n),
+        (f"{wins} of {len(present)}", None)]
+
+
+TARGET_ROWS = (
+    f"auto within {F_TOLERANCE:.0%} of the best F **and** {CHAMFER_TOLERANCE:.0%} of the best "
+    f"Chamfer (target: >= {AGREEMENT_TARGET:.0%} of clouds)",
+    "auto not below the median run on either score (target: every cloud)",
+    f"auto's wall time over compare's (target: <= {COST_TARGET:g} on every cloud)",
+    f"Spearman, predicted against true Chamfer, every run (target: >= {SPEARMAN_TARGET:g})",
+    f"auto's predicted band holds its true Chamfer (target: >= {BAND_TARGET:.0%} of clouds)",
+    f"`{VISIBILITY}` drawn on the Pareto chart (target: every cloud)",
+    f"`{VISIBILITY}` wins: its best run within {CHAMFER_TOLERANCE:.0%} of the best Chamfer "
+    "(no target)")
+
+
+def _targets_lines(summaries: list[dict], totals_by: dict, preds: dict) -> list[str]:
+    """The targets table: each target's figure per group (all, tuning, held out), marked
+    **no** where it does not hold."""
+    columns = [_target_cells(totals_by[key], preds[key], [s for s in summaries if keep(s)])
+               for key, _, keep in GROUPS]
+
+    def cell(figure, holds):
+        return figure if holds is None or figure == "-" else \
+            f"{figure} {'yes' if holds else '**no**'}"
+
+    return ["| target | " + " | ".join(what for _, what, _ in GROUPS) + " |",
+            "|---|" + "---|" * len(GROUPS),
+            *[f"| {row} | " + " | ".join(cell(*c[i]) for c in columns) + " |"
+              for i, row in enumerate(TARGET_ROWS)], ""]
+
+
 def markdown(summaries: list[dict], totals_by: dict, preds: dict, *, command: str) -> str:
     """The suite's report (docs/auto-suite.md): agreement (all, tuning, held out), the table,
     the truth-free estimate, the visibility method, auto's reasons, weighting."""
@@ -798,9 +856,12 @@ def markdown(summaries: list[dict], totals_by: dict, preds: dict, *, command: st
         "of the estimate was chosen after looking at them, so their figures are reported apart "
         "and must never be tuned on.", "",
         "**Tuning clouds**: every other cloud. Rules were chosen after looking at them; "
-        + (", ".join(earlier) + " were held out in an earlier round and have been looked at "
+        + (", ".join(earlier) + " were held out in earlier rounds and have been looked at "
            "since, so they are reported as tuning clouds." if earlier else
            "none of them was held out before."), "",
+        "## The targets, per group", "",
+        *_targets_lines(summaries, totals_by, preds),
+        "## Agreement with the truth", "",
         *[_agreement(totals_by[key], what) + "\n" for key, what, _ in GROUPS],
         "| cloud | points | auto's choice | faces | params | F | rank F | C | rank C | best F "
         "| best Chamfer | cost | fits |",

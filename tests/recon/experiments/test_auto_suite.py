@@ -274,3 +274,33 @@ def test_quick_suite_on_one_cloud(tmp_path):
     assert band["lo_m"] <= band["chamfer_m"] <= band["hi_m"] and band["source"] == "held-out"
     assert cloud["visibility"]["present"] is False    # not among the methods asked for
     assert "## The `visibility` method" in text and "Held out" in text
+
+
+def _scored(name, *, held_out, within, cost, vis_ratio):
+    """A cloud's summary as far as the targets table reads it: auto within both tolerances or
+    not (and below the median when not), its cost ratio, the visibility method's Chamfer
+    ratio, and runs predicted in the truth's order with auto's band holding its Chamfer."""
+    base = _summary(name, [(0.1, 1.0), (0.2, 2.0), (0.4, 3.0)], (0.1, 0.1, 0.05, 0.2),
+                    held_out=held_out)
+    return base | {
+        "verdict": {"within_f": within, "within_chamfer": within, "not_below_median": within},
+        "cost_ratio": cost, "fit_ratio": cost,
+        "visibility": {"present": True, "on_chart": True, "chamfer_ratio": vis_ratio}}
+
+
+def test_targets_table_marks_each_group_against_the_issue_targets():
+    summaries = [*(_scored(f"t{i}", held_out=False, within=True, cost=0.1, vis_ratio=1.05)
+                   for i in range(9)),
+                 _scored("t9", held_out=False, within=False, cost=0.3, vis_ratio=2.0),
+                 _scored("h0", held_out=True, within=True, cost=0.2, vis_ratio=3.0)]
+    groups = {key: [s for s in summaries if keep(s)] for key, _, keep in suite.GROUPS}
+    lines = suite._targets_lines(summaries, {k: suite.totals(g) for k, g in groups.items()},
+                                 {k: suite.prediction_totals(g) for k, g in groups.items()})
+    assert lines[0] == "| target | All clouds | Tuning clouds | Held out |"
+    both, median, cost, spearman, band, drawn, wins = (
+        line.strip("| ").split(" | ")[1:] for line in lines[2:-1])
+    assert both == ["91% (10 of 11) yes", "90% (9 of 10) yes", "100% (1 of 1) yes"]
+    assert median[0].endswith("**no**") and median[2].startswith("100% (1 of 1) yes")
+    assert cost[0] == "worst 0.30, median 0.10 **no**" and cost[2].startswith("worst 0.20")
+    assert spearman[0].startswith("1.00 (33 runs) yes") and band[0] == "100% (11 of 11) yes"
+    assert drawn[1] == "10 of 10 yes" and wins == ["9 of 11", "9 of 10", "0 of 1"]
