@@ -4,6 +4,7 @@
     python benchmarks/suite.py --quick         # 4 small clouds, 8 methods at defaults (CI)
     python benchmarks/suite.py --clouds satellite-a-cross-noisy --out /tmp/suite
     python benchmarks/suite.py --held-out --compare-only   # the held-out compares, unseen
+    python benchmarks/suite.py --plan          # what --resume would compute, per cloud
     python benchmarks/suite.py --resume --doc docs/auto-suite.md   # auto, estimate, report
 
 Every cloud is a short campaign of a preset scene (``sim/presets``) simulated with seed 0 and
@@ -55,6 +56,7 @@ again, so a changed rule or estimate is measured in minutes.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import os
@@ -292,6 +294,8 @@ F_TOLERANCE, CHAMFER_TOLERANCE = 0.05, 0.10
 # Surface samples per side of every truth score: the methods' Chamfer distances on these clouds
 # differ by far more than the ~1% sampling error of 20,000 samples (metrics/defaults.py).
 SAMPLES = 20_000
+SCORE_OPTIONS = {"n_truth_samples": SAMPLES, "n_test_samples": SAMPLES,
+                 "coverage_points": 2 * SAMPLES}
 
 # The visibility-aware method (Delaunay cells labelled by an s-t cut on the recorded rays), by
 # its registered name: per cloud, is it on the Pareto fronts, and how far from the best.
@@ -376,15 +380,10 @@ def weighting(records: list[dict]) -> dict:
     return out
 
 
-def compare_cloud(cloud: SuiteCloud, args):
-    """Simulate, ingest and prepare one cloud and run every method on it against the truth.
-
-    Returns the ingested cloud, the compare's report and the timing record (``compare_s``,
-    the compare's wall time, kept in ``DIR/timing.json`` so a resumed suite reports the time
-    of the run that did the work).
-    """
+def load_cloud(cloud: SuiteCloud, args):
+    """The cloud's strikes (ingested from its simulated log), the truth mesh and the prepared
+    points the compare runs on."""
     from formats import StrikeLog
-    from recon.experiments.compare import compare
     from recon.registration.ingest import ingest
     from recon.surfaces.prepare import prepare
 
@@ -394,6 +393,19 @@ def compare_cloud(cloud: SuiteCloud, args):
         truth = reader.truth_mesh()
     prepared = prepare(points.points, view_points=points.view_points, seed=0,
                        uncertainty=points.attributes)
+    return points, truth, prepared
+
+
+def compare_cloud(cloud: SuiteCloud, args):
+    """Simulate, ingest and prepare one cloud and run every method on it against the truth.
+
+    Returns the ingested cloud, the compare's report and the timing record (``compare_s``,
+    the compare's wall time, kept in ``DIR/timing.json`` so a resumed suite reports the time
+    of the run that did the work).
+    """
+    from recon.experiments.compare import compare
+
+    points, truth, prepared = load_cloud(cloud, args)
     names = args.methods or (QUICK_METHODS if args.quick else None)
     out_dir = args.out / cloud.name
     timing_path = out_dir / "timing.json"
@@ -402,8 +414,7 @@ def compare_cloud(cloud: SuiteCloud, args):
     report = compare(prepared, truth, out_dir, runs=runs_of(names, grid=not args.quick),
                      scheduler=args.scheduler,
                      n_workers=args.workers, resume=args.resume, keep_meshes=True,
-                     score_options={"n_truth_samples": SAMPLES, "n_test_samples": SAMPLES,
-                                    "coverage_points": 2 * SAMPLES}, title=cloud.name,
+                     score_options=SCORE_OPTIONS, title=cloud.name,
                      timeout_s=args.timeout, strikes=points)
     if "compare_s" not in timing:
         timing["compare_s"] = time.perf_counter() - start
@@ -889,6 +900,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--compare-only", action="store_true",
                         help="simulate and compare (with the records' predictions) only: no "
                              "auto, no report; prints per cloud its runs and time")
+    parser.add_argument("--plan", action="store_true",
+                        help="say per cloud how many compare runs --out holds and how many "
+                             "--resume would compute (no fit, no score); exit status 1 when "
+                             "any would be computed")
     parser.add_argument("--methods", nargs="*", help="restrict compare and auto to these")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "suite")
     parser.add_argument("--doc", type=Path, default=None,
@@ -925,6 +940,37 @@ def compare_only(names: list[str], args: argparse.Namespace) -> int:
               f"predicted; compare {timing['compare_s']:.0f} s, this call "
               f"{time.perf_counter() - start:.0f} s", flush=True)
     return 0
+
+
+def plan(names: list[str], args: argparse.Namespace) -> int:
+    """What ``--resume`` would compute, per cloud, without computing it (nor reading any
+    score): how many of its runs the compare under ``--out`` holds and how many it would run,
+    and whether the cached compare was made on the same points (else ``--resume`` refuses it).
+    Simulates the clouds whose logs are missing. Returns 0 when nothing would be computed."""
+    import numpy as np
+
+    from recon.experiments.sweep import FINGERPRINT_NAME, RESULTS_NAME, read_results
+
+    keys = {run.key for run in runs_of(args.methods or (QUICK_METHODS if args.quick else None),
+                                        grid=not args.quick)}
+    to_run = 0
+    for name in names:
+        out_dir = args.out / name
+        done = set(read_results(out_dir / RESULTS_NAME)) & keys
+        _, truth, prepared = load_cloud(CLOUDS[name], args)
+        fingerprint = out_dir / FINGERPRINT_NAME
+        cached = json.loads(fingerprint.read_text()) if fingerprint.exists() else {}
+        same = {"n_points": len(prepared.points), "spacing": prepared.spacing,
+                "seed": prepared.seed, "truth_faces": len(truth[1]), "timeout_s": args.timeout,
+                "points_sha1": hashlib.sha1(np.ascontiguousarray(prepared.points)).hexdigest(),
+                "score_options": SCORE_OPTIONS}
+        refused = bool(cached) and any(cached.get(k) != v for k, v in same.items())
+        to_run += len(keys - done) + (len(done) if refused else 0)
+        print(f"{name}: {len(done)} of {len(keys)} runs cached, {len(keys - done)} to run"
+              + ("; its cached compare was made on other points: --resume refuses it"
+                 if refused else ""), flush=True)
+    print(f"suite: {to_run} runs to compute over {len(names)} clouds", flush=True)
+    return 0 if to_run == 0 else 1
 
 
 def _say(summary: dict, seconds: float) -> None:
@@ -991,6 +1037,8 @@ def main(argv=None) -> int:
               "(give their folder with --meshes or RECON_MESH_PATH)", file=sys.stderr)
         return 1
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.plan:
+        return plan(names, args)
     if args.compare_only:
         return compare_only(names, args)
     start = time.perf_counter()

@@ -304,3 +304,33 @@ def test_targets_table_marks_each_group_against_the_issue_targets():
     assert cost[0] == "worst 0.30, median 0.10 **no**" and cost[2].startswith("worst 0.20")
     assert spearman[0].startswith("1.00 (33 runs) yes") and band[0] == "100% (11 of 11) yes"
     assert drawn[1] == "10 of 10 yes" and wins == ["9 of 11", "9 of 10", "0 of 1"]
+
+
+def test_plan_counts_cached_runs_and_spots_a_compare_on_other_points(tmp_path, monkeypatch,
+                                                                      capsys):
+    import hashlib
+    from types import SimpleNamespace
+
+    points = np.arange(12.0).reshape(4, 3)
+    prepared = SimpleNamespace(points=points, spacing=0.1, seed=0)
+    monkeypatch.setattr(suite, "load_cloud", lambda cloud, args: (None, (None, [0, 1]),
+                                                                  prepared))
+    monkeypatch.setattr(suite, "runs_of", lambda names, grid: [SimpleNamespace(key=k)
+                                                               for k in ("a", "b")])
+    name = "satellite-a-cross-noisy"
+    out = tmp_path / name
+    out.mkdir()
+    fingerprint = {"n_points": 4, "spacing": 0.1, "seed": 0, "truth_faces": 2,
+                   "timeout_s": 300.0, "memory_mb": 8192, "score_options": suite.SCORE_OPTIONS,
+                   "points_sha1": hashlib.sha1(points).hexdigest()}
+    (out / "sweep.json").write_text(json.dumps(fingerprint))
+    (out / "results.jsonl").write_text('{"key": "a"}\n{"key": "gone"}\n')
+    args = suite.parse_args(["--plan", "--out", str(tmp_path), "--clouds", name])
+    assert suite.plan([name], args) == 1
+    assert f"{name}: 1 of 2 runs cached, 1 to run\n" in capsys.readouterr().out
+    (out / "results.jsonl").write_text('{"key": "a"}\n{"key": "b"}\n')
+    assert suite.plan([name], args) == 0
+    assert "suite: 0 runs to compute over 1 clouds" in capsys.readouterr().out
+    (out / "sweep.json").write_text(json.dumps(fingerprint | {"points_sha1": "other"}))
+    assert suite.plan([name], args) == 1
+    assert "--resume refuses it" in capsys.readouterr().out
