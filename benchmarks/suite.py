@@ -797,23 +797,26 @@ def _share(fraction: float, n: int) -> str:
     return f"{fraction:.0%} ({round(fraction * n)} of {n})" if n else "-"
 
 
-def _target_cells(total: dict, pred: dict, group: list[dict]) -> list[tuple[str, bool]]:
-    """One group's column of the targets table: (figure, holds) per row of ``TARGET_ROWS``."""
+def _target_cells(total: dict, pred: dict, group: list[dict]) -> list[tuple[str, bool | None]]:
+    """One group's column of the targets table: (figure, holds or None for no target) per
+    row of ``TARGET_ROWS``; "-" throughout for a group without clouds."""
     n = total["n_clouds"]
+    if not n:
+        return [("-", None)] * len(TARGET_ROWS)
     present = [s["visibility"] for s in group if s["visibility"]["present"]]
     drawn = sum(bool(v["on_chart"]) for v in present)
     wins = sum(v["chamfer_ratio"] <= WIN_RATIO for v in present)
     finite = math.isfinite
     return [
-        (_share(total["within_both"], n), n > 0 and total["within_both"] >= AGREEMENT_TARGET),
-        (_share(total["not_below_median"], n), n > 0 and total["not_below_median"] == 1.0),
+        (_share(total["within_both"], n), total["within_both"] >= AGREEMENT_TARGET),
+        (_share(total["not_below_median"], n), total["not_below_median"] == 1.0),
         (f"worst {total['cost_ratio_max']:.2f}, median {total['cost_ratio_median']:.2f}",
-         n > 0 and total["cost_ratio_max"] <= COST_TARGET),
-        (f"{pred['spearman']:.2f} ({pred['n_runs']:,} runs)",
+         total["cost_ratio_max"] <= COST_TARGET),
+        (f"{pred['spearman']:.2f} ({pred['n_runs']:,} runs)" if pred["n_runs"] else "-",
          finite(pred["spearman"]) and pred["spearman"] >= SPEARMAN_TARGET),
         (_share(pred["band_holds_truth"], pred["n_choices"]) if pred["n_choices"] else "-",
          finite(pred["band_holds_truth"]) and pred["band_holds_truth"] >= BAND_TARGET),
-        (f"{drawn} of {n}", n > 0 and drawn == n),
+        (f"{drawn} of {n}", drawn == n),
         (f"{wins} of {len(present)}", None)]
 
 
@@ -868,8 +871,8 @@ def markdown(summaries: list[dict], totals_by: dict, preds: dict, *, command: st
         "of the estimate was chosen after looking at them, so their figures are reported apart "
         "and must never be tuned on.", "",
         "**Tuning clouds**: every other cloud. Rules were chosen after looking at them; "
-        + (", ".join(earlier) + " were held out in earlier rounds and have been looked at "
-           "since, so they are reported as tuning clouds." if earlier else
+        + (", ".join(earlier) + (" were" if len(earlier) > 1 else " was") + " held out in "
+           "earlier rounds and looked at since, so reported as tuning clouds." if earlier else
            "none of them was held out before."), "",
         "## The targets, per group", "",
         *_targets_lines(summaries, totals_by, preds),

@@ -334,3 +334,11 @@ def test_plan_counts_cached_runs_and_spots_a_compare_on_other_points(tmp_path, m
     (out / "sweep.json").write_text(json.dumps(fingerprint | {"points_sha1": "other"}))
     assert suite.plan([name], args) == 1
     assert "--resume refuses it" in capsys.readouterr().out
+
+
+def test_targets_table_of_a_group_without_clouds_is_dashes():
+    summaries = [_scored("t0", held_out=False, within=True, cost=0.1, vis_ratio=1.0)]
+    groups = {key: [s for s in summaries if keep(s)] for key, _, keep in suite.GROUPS}
+    lines = suite._targets_lines(summaries, {k: suite.totals(g) for k, g in groups.items()},
+                                 {k: suite.prediction_totals(g) for k, g in groups.items()})
+    assert all(line.strip("| ").split(" | ")[3] == "-" for line in lines[2:-1])
