@@ -906,7 +906,7 @@ def choice_vs_ranking(summaries: Sequence[Mapping], path, *, title: str) -> Path
         (``present``, ``f_ratio``, ``chamfer_ratio``), as ``benchmarks/suite.py`` makes.
     """
     plt = _pyplot()
-    fig, axes = plt.subplots(2, 1, figsize=(max(8.0, 0.75 * len(summaries) + 3), 8.5),
+    fig, axes = plt.subplots(2, 1, figsize=(max(10.0, 0.55 * len(summaries) + 5), 8.5),
                              sharex=True, constrained_layout=True)
     for ax, key, ratio, lower in ((axes[0], FSCORE, "f_ratio", False),
                                   (axes[1], CHAMFER, "chamfer_ratio", True)):
@@ -932,6 +932,9 @@ def _ranking_column(ax, i: int, summary: Mapping, key: str, ratio: str, lower: b
     def once(text):
         return None if text in labelled else text
 
+    if summary.get("held_out"):
+        ax.axvspan(i - 0.5, i + 0.5, color="gold", alpha=0.25, lw=0, zorder=0,
+                   label=once("held-out cloud"))
     ax.scatter(np.full(rel.size, i), rel, s=14, color="0.55", alpha=0.7, zorder=2,
                label=once("a run"))
     ax.hlines(np.median(rel), i - 0.3, i + 0.3, color="0.2", lw=1.6, zorder=3,
@@ -959,7 +962,7 @@ def _ranking_axis(ax, lower: bool) -> None:
     ax.set_title(f"{'Chamfer distance' if lower else 'F-score'} relative to the truth's best"
                  f" run ({_better(lower)})", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left" if lower else "lower left")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0))
 
 
 def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path:
@@ -974,8 +977,11 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path
         ``benchmarks/suite.py`` makes.
     """
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(8.0, 7.0), constrained_layout=True)
-    colours = plt.get_cmap("tab20")
+    fig, ax = plt.subplots(figsize=(12.0, 7.5), constrained_layout=True)
+    palette = [*plt.get_cmap("tab20").colors, *plt.get_cmap("tab20b").colors]
+
+    def colours(i):
+        return palette[i % len(palette)]
     values = []
     for i, s in enumerate(summaries):
         runs = s["predicted"]["runs"]
@@ -984,7 +990,7 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path
         truth = np.array([r["truth_m"] for r in runs])
         pred = np.array([r["predicted_m"] for r in runs])
         values += [truth, pred]
-        ax.scatter(truth, pred, s=12, color=colours(i % 20), alpha=0.6,
+        ax.scatter(truth, pred, s=12, color=colours(i), alpha=0.6,
                    marker="^" if s.get("held_out") else "o",
                    label=s["cloud"] + (" (held out)" if s.get("held_out") else ""))
         a = s["auto"]
@@ -992,7 +998,7 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path
             p = a["predicted"]
             ax.errorbar([a["chamfer_m"]], [p["chamfer_m"]],
                         yerr=[[p["chamfer_m"] - p["lo_m"]], [p["hi_m"] - p["chamfer_m"]]],
-                        fmt="*", ms=13, color=colours(i % 20), mec="black", mew=0.6,
+                        fmt="*", ms=13, color=colours(i), mec="black", mew=0.6,
                         ecolor="black", elinewidth=0.8, capsize=3, zorder=4)
     if values:
         both = np.concatenate(values)
@@ -1008,7 +1014,8 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path
     ax.set_xlabel("true Chamfer distance [m]")
     ax.set_ylabel("predicted Chamfer distance, without the truth [m]")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2, loc="upper left")
+    ax.legend(fontsize=7, ncol=1 + (len(summaries) > 20), loc="upper left",
+              bbox_to_anchor=(1.01, 1.0))
     ax.set_title("every run (dots; triangles: held-out clouds), auto's choice (star, its "
                  "predicted band)", fontsize=9)
     _title(fig, title)

@@ -63,6 +63,48 @@ def test_every_generated_scene_loads():
                                                   "cratered-asteroid"), name
 
 
+# The held-out set, fixed before any of its results existed: changing it means changing this
+# list in the same commit, where the history shows it.
+FIXED_HELD_OUT = ("bennu-cross-noisy", "satellite-e-slew-noisy", "polyhedron-cross-noisy",
+                  "cratered-asteroid-lidar-noisy", "fandisk-slew-noisy",
+                  "satellite-f-lidar-noisy", "spot-cross-clean")
+
+
+def test_held_out_set_is_the_fixed_one_and_apart_from_every_tuning_cloud():
+    assert suite.HELD_OUT == FIXED_HELD_OUT
+    assert not set(suite.HELD_OUT) & (set(suite.TUNING) | set(suite.EARLIER_HELD_OUT))
+    # No held-out shape is a tuning cloud's: not its body (kind, seed, size) nor its real model.
+    def body(name):
+        o = _overrides(suite.CLOUDS[name])
+        return (o.get("target.kind"), o.get("target.seed"), o.get("target.size"),
+                suite.CLOUDS[name].mesh)
+
+    assert not {body(n) for n in suite.HELD_OUT} & {body(n) for n in suite.TUNING}
+    tuned_sizes = {float(o["target.size"]) for o in map(_overrides, map(suite.CLOUDS.get,
+                                                                          suite.TUNING))
+                   if o.get("target.kind") == "polyhedron"}
+    held_sizes = {float(o["target.size"]) for o in map(_overrides, map(suite.CLOUDS.get,
+                                                                         suite.HELD_OUT))
+                  if o.get("target.kind") == "polyhedron"}
+    assert held_sizes and not held_sizes & tuned_sizes
+
+
+@pytest.mark.parametrize("name", [n for n in FIXED_HELD_OUT
+                                  if "target.seed" in _overrides(suite.CLOUDS[n])])
+def test_held_out_generated_body_is_built_from_its_seed_alone(name):
+    import sim
+
+    cloud = suite.CLOUDS[name]
+    first, again = (sim.load_scene(cloud.preset, list(cloud.overrides)) for _ in range(2))
+    assert first.vertices.tobytes() == again.vertices.tobytes()
+    assert first.faces.tobytes() == again.faces.tobytes()
+    # The seed is what makes the body: the next seed is another one.
+    seed = int(_overrides(cloud)["target.seed"])
+    other = sim.load_scene(cloud.preset, [*cloud.overrides, f"target.seed={seed + 1}"])
+    assert other.vertices.shape != first.vertices.shape or \
+        not np.allclose(other.vertices, first.vertices)
+
+
 def test_prediction_reads_a_records_columns():
     assert suite.prediction({"predicted_chamfer_m": 0.1, "predicted_chamfer_low_m": 0.05,
                              "predicted_chamfer_high_m": 0.15}) == \
@@ -232,3 +274,71 @@ def test_quick_suite_on_one_cloud(tmp_path):
     assert band["lo_m"] <= band["chamfer_m"] <= band["hi_m"] and band["source"] == "held-out"
     assert cloud["visibility"]["present"] is False    # not among the methods asked for
     assert "## The `visibility` method" in text and "Held out" in text
+
+
+def _scored(name, *, held_out, within, cost, vis_ratio):
+    """A cloud's summary as far as the targets table reads it: auto within both tolerances or
+    not (and below the median when not), its cost ratio, the visibility method's Chamfer
+    ratio, and runs predicted in the truth's order with auto's band holding its Chamfer."""
+    base = _summary(name, [(0.1, 1.0), (0.2, 2.0), (0.4, 3.0)], (0.1, 0.1, 0.05, 0.2),
+                    held_out=held_out)
+    return base | {
+        "verdict": {"within_f": within, "within_chamfer": within, "not_below_median": within},
+        "cost_ratio": cost, "fit_ratio": cost,
+        "visibility": {"present": True, "on_chart": True, "chamfer_ratio": vis_ratio}}
+
+
+def test_targets_table_marks_each_group_against_the_issue_targets():
+    summaries = [*(_scored(f"t{i}", held_out=False, within=True, cost=0.1, vis_ratio=1.05)
+                   for i in range(9)),
+                 _scored("t9", held_out=False, within=False, cost=0.3, vis_ratio=2.0),
+                 _scored("h0", held_out=True, within=True, cost=0.2, vis_ratio=3.0)]
+    groups = {key: [s for s in summaries if keep(s)] for key, _, keep in suite.GROUPS}
+    lines = suite._targets_lines(summaries, {k: suite.totals(g) for k, g in groups.items()},
+                                 {k: suite.prediction_totals(g) for k, g in groups.items()})
+    assert lines[0] == "| target | All clouds | Tuning clouds | Held out |"
+    both, median, cost, spearman, band, drawn, wins = (
+        line.strip("| ").split(" | ")[1:] for line in lines[2:-1])
+    assert both == ["91% (10 of 11) yes", "90% (9 of 10) yes", "100% (1 of 1) yes"]
+    assert median[0].endswith("**no**") and median[2].startswith("100% (1 of 1) yes")
+    assert cost[0] == "worst 0.30, median 0.10 **no**" and cost[2].startswith("worst 0.20")
+    assert spearman[0].startswith("1.00 (33 runs) yes") and band[0] == "100% (11 of 11) yes"
+    assert drawn[1] == "10 of 10 yes" and wins == ["9 of 11", "9 of 10", "0 of 1"]
+
+
+def test_plan_counts_cached_runs_and_spots_a_compare_on_other_points(tmp_path, monkeypatch,
+                                                                      capsys):
+    import hashlib
+    from types import SimpleNamespace
+
+    points = np.arange(12.0).reshape(4, 3)
+    prepared = SimpleNamespace(points=points, spacing=0.1, seed=0)
+    monkeypatch.setattr(suite, "load_cloud", lambda cloud, args: (None, (None, [0, 1]),
+                                                                  prepared))
+    monkeypatch.setattr(suite, "runs_of", lambda names, grid: [SimpleNamespace(key=k)
+                                                               for k in ("a", "b")])
+    name = "satellite-a-cross-noisy"
+    out = tmp_path / name
+    out.mkdir()
+    fingerprint = {"n_points": 4, "spacing": 0.1, "seed": 0, "truth_faces": 2,
+                   "timeout_s": 300.0, "memory_mb": 8192, "score_options": suite.SCORE_OPTIONS,
+                   "points_sha1": hashlib.sha1(points).hexdigest()}
+    (out / "sweep.json").write_text(json.dumps(fingerprint))
+    (out / "results.jsonl").write_text('{"key": "a"}\n{"key": "gone"}\n')
+    args = suite.parse_args(["--plan", "--out", str(tmp_path), "--clouds", name])
+    assert suite.plan([name], args) == 1
+    assert f"{name}: 1 of 2 runs cached, 1 to run\n" in capsys.readouterr().out
+    (out / "results.jsonl").write_text('{"key": "a"}\n{"key": "b"}\n')
+    assert suite.plan([name], args) == 0
+    assert "suite: 0 runs to compute over 1 clouds" in capsys.readouterr().out
+    (out / "sweep.json").write_text(json.dumps(fingerprint | {"points_sha1": "other"}))
+    assert suite.plan([name], args) == 1
+    assert "--resume refuses it" in capsys.readouterr().out
+
+
+def test_targets_table_of_a_group_without_clouds_is_dashes():
+    summaries = [_scored("t0", held_out=False, within=True, cost=0.1, vis_ratio=1.0)]
+    groups = {key: [s for s in summaries if keep(s)] for key, _, keep in suite.GROUPS}
+    lines = suite._targets_lines(summaries, {k: suite.totals(g) for k, g in groups.items()},
+                                 {k: suite.prediction_totals(g) for k, g in groups.items()})
+    assert all(line.strip("| ").split(" | ")[3] == "-" for line in lines[2:-1])
