@@ -30,6 +30,14 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    then the lower ``chi2``. Open and closed surfaces compete alike: on the suite's clouds,
    preferring closed ones where the strikes cover little of the body chose worse surfaces
    (docs/decisions.md). The coverage of the best closed candidate is reported.
+5. **What the caller knows of the target** (``target``, ``TARGET_KINDS``): the held-out passes
+   all lie where strikes are, so they cannot judge what a surface does where none is. For a
+   ``"natural"`` body (an asteroid, a comet: a closed solid whose large-scale shape is
+   smooth) seen over less than ``NATURAL_COVERAGE`` of the best closed candidate, the
+   simplest closed candidate (the ellipsoid on the ladder) is chosen when its held-out
+   strikes lie within ``judge.PROXY_FIT`` tau of it on average: it stands for the unseen far
+   side, where an open surface leaves the body out and a hull cuts inside it
+   (``natural_prior``). For an ``"unknown"`` target (the default) steps 1-4 alone decide.
 
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
@@ -87,6 +95,11 @@ MAX_FITS = sum(len(level) for level in LADDER)
 # Levels fitted whatever the earlier ones gave: the primitives, the coarse surfaces and the
 # defaults.
 ALWAYS_LEVELS = 3
+# What the caller may know of the target (step 5 of the module docstring).
+TARGET_KINDS = ("unknown", "natural")
+# A natural body's prior acts when the strikes cover less than this fraction of the best closed
+# candidate: most of the body is unseen (docs/decisions.md).
+NATURAL_COVERAGE = 0.5
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
 # compete for the cores.
 FIT_THREADS = 1
@@ -187,6 +200,8 @@ class AutoChoice:
     noise_m, tau_m : float, metres
         The recorded noise length (or the local-plane scatter without one) and the tolerance
         floor.
+    target : str
+        What was known of the target (``TARGET_KINDS``).
     """
 
     run: Run
@@ -197,6 +212,7 @@ class AutoChoice:
     folds: judge.Folds
     noise_m: float
     tau_m: float
+    target: str = "unknown"
 
     @property
     def method(self) -> str:
@@ -218,7 +234,7 @@ class AutoChoice:
         folds = self.folds
         return {"method": self.method, "params": self.params, "label": self.label,
                 "reason": self.reason, "threshold": self.threshold, "coverage": self.coverage,
-                "noise_m": self.noise_m, "tau_m": self.tau_m,
+                "noise_m": self.noise_m, "tau_m": self.tau_m, "target": self.target,
                 "folds": {"k": folds.k, "n_tested": int(folds.tested.sum()),
                           "n_blocks": folds.n_blocks, "block_shots": folds.block_shots,
                           "margin_shots": folds.margin, "step_m": folds.step_m},
@@ -260,13 +276,15 @@ class _Context:
 class Selection:
     """``select``'s answer: the chosen index, the best's, the band's upper edge (the largest
     chi-square in it), the candidates within the band, and each scored candidate's chi-square
-    above the best's with its paired standard error."""
+    above the best's with its paired standard error; ``prior``: the natural-body prior
+    (``natural_prior``) made the choice."""
 
     chosen: int
     best: int
     threshold: float
     eligible: tuple[int, ...]
     gaps: dict[int, tuple[float, float]]
+    prior: bool = False
 
 
 def closed(faces: np.ndarray) -> bool:
@@ -460,6 +478,34 @@ def select(candidates: list[Candidate], block: np.ndarray) -> Selection:
     return Selection(chosen, best, threshold, eligible, gaps)
 
 
+def natural_prior(candidates: list[Candidate], selection: Selection, coverage: float,
+                  tau: float) -> Selection:
+    """Step 5 of the module docstring for a natural body: ``selection`` with the simplest
+    closed candidate chosen when the strikes cover less than ``NATURAL_COVERAGE`` of the best
+    closed candidate (``coverage``) and that candidate's mean held-out distance is within
+    ``judge.PROXY_FIT`` ``tau`` [m]; else ``selection`` unchanged."""
+    enclosing = [i for i, c in enumerate(candidates) if c.scored and c.closed]
+    if not enclosing or not coverage < NATURAL_COVERAGE:   # NaN: nothing closed to judge by
+        return selection
+    simplest = min(enclosing, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
+    if simplest == selection.chosen or \
+            candidates[simplest].heldout_mean_m > judge.PROXY_FIT * tau:
+        return selection
+    return replace(selection, chosen=simplest, prior=True)
+
+
+def _prior_reason(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
+    """The reason of a choice the natural-body prior made."""
+    c, b = candidates[selection.chosen], candidates[selection.best]
+    gap, se = selection.gaps[selection.chosen]
+    return (f"; the target is a natural body and the strikes cover {coverage:.0%} of the best "
+            f"closed surface: held-out passes, all where strikes are, cannot judge the rest. "
+            f"It is the simplest closed model, its held-out strikes {c.heldout_mean_m:.3g} m "
+            f"from it on average (within {judge.PROXY_FIT:g} tau), so it stands for the unseen "
+            f"part; {gap:.2g} +- {se:.2g} above the best on the held-out strikes, {b.label} "
+            f"({b.chi2:.3g}, {b.n_params:,} parameters, {'closed' if b.closed else 'open'})")
+
+
 def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
     """The reason in words: what was chosen, open or closed, the statistic and the band, and
     what decided among the candidates in the band (only what the rule actually did)."""
@@ -471,7 +517,9 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
             f"{c.violated:.1%} of beams cut before their strike, {c.holes:.1%} of strikes in "
             f"holes")
     others = len(selection.eligible) - 1
-    if selection.chosen == selection.best:
+    if selection.prior:
+        text += _prior_reason(candidates, selection, coverage)
+    elif selection.chosen == selection.best:
         text += ("; the lowest held-out statistic" + (
             f"; the {others} other candidate(s) {band} "
             + "are larger models"
@@ -507,7 +555,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
            methods: Sequence[str] | None = None, holdout: float = HOLDOUT_FRACTION,
            seed: int = 0, k: int = DEFAULT_K, fallback: Fallback = "centroid",
            timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
-           n_workers: int | None = None) -> AutoChoice:
+           n_workers: int | None = None, target: str = "unknown") -> AutoChoice:
     """Choose a method and resolution by held-out passes and the sensor rays, without the truth.
 
     Parameters
@@ -534,6 +582,9 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
         Limits of each isolated fit.
     n_workers : int, optional
         Fits run at once (default: the usable cores), each in its own process.
+    target : {"unknown", "natural"}
+        What is known of the target (step 5 of the module docstring): ``"natural"`` for an
+        asteroid or a comet.
 
     Returns
     -------
@@ -543,6 +594,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
 
     if not 0 < holdout <= 0.5:
         raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}")
+    if target not in TARGET_KINDS:
+        raise ParameterError(f"target must be one of {', '.join(TARGET_KINDS)}, got {target!r}")
     attributes = _columns(uncertainty)
     if view_points is not None:
         attributes |= dict(zip(("view_x", "view_y", "view_z"), np.asarray(view_points).T,
@@ -562,6 +615,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
         else float("nan")
     selection = select(table, context.block)
+    if target == "natural":
+        selection = natural_prior(table, selection, coverage, context.tau)
     for i, c in enumerate(table):
         c.eligible, c.chosen = i in selection.eligible, i == selection.chosen
     fitted = sum(c.status != "skipped" for c in table)
@@ -569,7 +624,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
               + f"; {fitted} candidate fit(s) of {len(table)}" + (f"; {note}" if note else "")
               + ".")
     return AutoChoice(table[selection.chosen].run, reason, table, selection.threshold,
-                      coverage, folds, context.noise, context.tau)
+                      coverage, folds, context.noise, context.tau, target)
 
 
 def format_choice(choice: AutoChoice) -> str:
@@ -599,7 +654,7 @@ def format_choice(choice: AutoChoice) -> str:
 
 def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
                holdout: float = HOLDOUT_FRACTION, preparation: Preparation | None = None,
-               limits: Limits | None = None) -> AutoChoice:
+               limits: Limits | None = None, target: str = "unknown") -> AutoChoice:
     """``choose`` on a cleaned ``Cloud`` (``Preparation.apply``) with a preparation's normals
     options and a run's limits: the choice ``-m auto`` makes.
 
@@ -613,8 +668,11 @@ def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
     holdout : float
     preparation : Preparation, optional
     limits : Limits, optional
+    target : {"unknown", "natural"}
+        What is known of the target (``choose``).
     """
     preparation = preparation or Preparation()
     return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
                   methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
-                  fallback=preparation.fallback, **(limits or Limits()).kwargs())
+                  fallback=preparation.fallback, target=target,
+                  **(limits or Limits()).kwargs())
