@@ -144,11 +144,13 @@ STATISTICS = {"chi2": None, "chi": np.sqrt, "cap9": lambda c: np.minimum(c, 9.0)
               "capped": lambda c: (c >= 0.999 * c.max()).astype(float)}
 
 
-def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2"
-                  ) -> tuple[list, np.ndarray, float, float]:
+def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
+                  suite: Path | None = None) -> tuple[list, np.ndarray, float, float]:
     """The collected candidates of ``cloud`` as ``auto.Candidate`` (on the ladder's levels; with
     ``extra``, the ``EXTRA`` runs join the level of their method's ladder run, else they are left
-    out), the tested strikes' blocks, the coverage and tau [m]."""
+    out), the tested strikes' blocks, the coverage and tau [m]. A ``span`` not collected (older
+    collections) is measured, given ``suite``, on the compare's mesh of the run (fitted on all
+    strikes, not fold 0's) for the natural prior's model."""
     from dataclasses import fields
 
     from recon.surfaces import auto, judge
@@ -172,12 +174,27 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2"
         candidate = auto.Candidate(bind(row["method"], row["params"]), level,
                                    **{k: row[k] for k in names if k in row})
         candidate.cost = arrays.get(f"cost/{row['key']}")
+        if candidate.span is None and suite is not None and candidate.scored and \
+                row["method"] == auto.NATURAL_MODEL:
+            candidate.span = compare_span(suite, cloud, row["key"])
         if STATISTICS[statistic] is not None and candidate.cost is not None:
             candidate.cost = STATISTICS[statistic](candidate.cost)
             candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
                                                                     arrays["block"])
         out.append(candidate)
     return out, arrays["block"], data["coverage"], data["tau_m"]
+
+
+def compare_span(suite: Path, cloud: str, key: str) -> float | None:
+    """``auto.span`` of the compare's mesh of run ``key`` on ``cloud`` (None without one)."""
+    from formats.mesh_io import read_mesh
+    from recon.surfaces import auto
+
+    row = next((r for r in records(suite, cloud) if r["key"] == key and r.get("mesh")), None)
+    if row is None:
+        return None
+    mesh = read_mesh(suite / cloud / row["mesh"])
+    return auto.span(mesh.vertices, load_cloud(suite, cloud).points)
 
 
 def replay(candidates: list, block: np.ndarray, coverage: float, tau: float,
@@ -228,7 +245,7 @@ def rules(args) -> None:
     for cloud in names:
         rows = records(args.suite, cloud)
         candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
-                                                         args.statistic)
+                                                         args.statistic, args.suite)
         chosen, fitted = replay(candidates, block, coverage, tau,
                                 target_of(cloud, not args.no_prior))
         v = verdict(rows, chosen.run.key)
@@ -318,7 +335,8 @@ def evidence(args) -> None:
     tally: dict[tuple[str, float], list] = {}
     for cloud in clouds_of(args.suite, args.clouds):
         rows = records(args.suite, cloud)
-        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra)
+        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
+                                                         suite=args.suite)
         chosen, fitted = replay(candidates, block, coverage, tau,
                                 target_of(cloud, not args.no_prior))
         data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
@@ -396,7 +414,8 @@ def chosen_key(args, cloud: str) -> str:
     """The run auto chooses on ``cloud``: replayed on the collected folds when there are
     some, else the suite's own choice (``auto.json``)."""
     if (args.work / "folds" / f"{cloud}.json").exists():
-        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra)
+        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
+                                                         suite=args.suite)
         return replay(candidates, block, coverage, tau,
                       target_of(cloud, not args.no_prior))[0].run.key
     data = json.loads((args.suite / cloud / "auto.json").read_text())

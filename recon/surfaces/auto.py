@@ -34,10 +34,12 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    all lie where strikes are, so they cannot judge what a surface does where none is. For a
    ``"natural"`` body (an asteroid, a comet: a closed solid whose large-scale shape is
    smooth) seen over less than ``NATURAL_COVERAGE`` of the best closed candidate, the
-   simplest closed candidate (the ellipsoid on the ladder) is chosen when its held-out
-   strikes lie within ``judge.PROXY_FIT`` tau of it on average: it stands for the unseen far
-   side, where an open surface leaves the body out and a hull cuts inside it
-   (``natural_prior``). For an ``"unknown"`` target (the default) steps 1-4 alone decide.
+   ellipsoid (``NATURAL_MODEL``) is chosen when it holds where the strikes are and is not
+   extrapolated beyond them: its held-out strikes lie within ``NATURAL_FIT`` tau of it on
+   average, and along each of its principal axes it reaches at most ``NATURAL_SPAN`` times
+   the strikes' extent (``span``). It then stands for the unseen far side, where an open
+   surface leaves the body out and a hull cuts inside it (``natural_prior``). For an
+   ``"unknown"`` target (the default) steps 1-4 alone decide.
 
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
@@ -98,8 +100,14 @@ ALWAYS_LEVELS = 3
 # What the caller may know of the target (step 5 of the module docstring).
 TARGET_KINDS = ("unknown", "natural")
 # A natural body's prior acts when the strikes cover less than this fraction of the best closed
-# candidate: most of the body is unseen (docs/decisions.md).
+# candidate: most of the body is unseen. Its model, the smooth closed surface of a few numbers,
+# stands for the body when its mean held-out distance is within NATURAL_FIT tau and it reaches
+# at most NATURAL_SPAN times the strikes' extent along each of its axes (chosen on the auto
+# suite's clouds, docs/decisions.md).
 NATURAL_COVERAGE = 0.5
+NATURAL_MODEL = "ellipsoid"
+NATURAL_FIT = 0.5
+NATURAL_SPAN = 1.5
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
 # compete for the cores.
 FIT_THREADS = 1
@@ -135,6 +143,8 @@ class Candidate:
     violated, holes : float or None
         Over all strikes (a seeded subsample of ``judge.MAX_CHECKED``): fraction of beams the
         surface cuts before their strike, and of strikes with no surface within tolerance.
+    span : float or None
+        How far the surface reaches beyond the strikes (``span``; 1: no farther).
     eligible, chosen : bool
     """
 
@@ -154,6 +164,7 @@ class Candidate:
     beam_misses: float | None = None
     violated: float | None = None
     holes: float | None = None
+    span: float | None = None
     eligible: bool = False
     chosen: bool = False
     heldout: judge.HeldOut | None = field(default=None, repr=False)
@@ -296,6 +307,22 @@ def closed(faces: np.ndarray) -> bool:
     return bool(len(faces)) and not np.any(count == 1)
 
 
+def span(vertices: np.ndarray, points: np.ndarray) -> float:
+    """How far a surface reaches beyond the strikes: the largest ratio, over the principal axes
+    of its vertices, of its extent along the axis to the strikes' extent along it.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float64, metres
+    points : (n, 3) float64, metres
+    """
+    centre = vertices.mean(axis=0)
+    _, _, axes = np.linalg.svd(vertices - centre, full_matrices=False)
+    extent = np.ptp((vertices - centre) @ axes.T, axis=0)
+    return float(np.max(extent / np.maximum(np.ptp((points - centre) @ axes.T, axis=0),
+                                            1e-300)))
+
+
 def coverage_of(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, reach: float,
                 *, seed: int = 0) -> float:
     """Fraction of a surface's area within ``reach`` [m] of a strike (uniform area samples)."""
@@ -411,6 +438,7 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                    beam_misses=float(np.mean(np.concatenate([h.missed for h in held]))),
                    violated=float(everywhere.violated.mean()),
                    holes=float(everywhere.hole.mean()),
+                   span=span(vertices, context.checked.points),
                    heldout=judge.HeldOut(distance, np.concatenate([h.sigma_normal for h in held]),
                                          context.block),
                    cost=cost, mesh=(vertices, faces))
@@ -480,18 +508,19 @@ def select(candidates: list[Candidate], block: np.ndarray) -> Selection:
 
 def natural_prior(candidates: list[Candidate], selection: Selection, coverage: float,
                   tau: float) -> Selection:
-    """Step 5 of the module docstring for a natural body: ``selection`` with the simplest
-    closed candidate chosen when the strikes cover less than ``NATURAL_COVERAGE`` of the best
-    closed candidate (``coverage``) and that candidate's mean held-out distance is within
-    ``judge.PROXY_FIT`` ``tau`` [m]; else ``selection`` unchanged."""
-    enclosing = [i for i, c in enumerate(candidates) if c.scored and c.closed]
-    if not enclosing or not coverage < NATURAL_COVERAGE:   # NaN: nothing closed to judge by
+    """Step 5 of the module docstring for a natural body: ``selection`` with the
+    ``NATURAL_MODEL`` candidate chosen when the strikes cover less than ``NATURAL_COVERAGE`` of
+    the best closed candidate (``coverage``; NaN: nothing closed to judge by), its mean
+    held-out distance is within ``NATURAL_FIT`` ``tau`` [m] and its ``span`` at most
+    ``NATURAL_SPAN``; else ``selection`` unchanged."""
+    model = next((i for i, c in enumerate(candidates)
+                  if c.scored and c.run.method == NATURAL_MODEL), None)
+    if model is None or model == selection.chosen or not coverage < NATURAL_COVERAGE:
         return selection
-    simplest = min(enclosing, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
-    if simplest == selection.chosen or \
-            candidates[simplest].heldout_mean_m > judge.PROXY_FIT * tau:
+    c = candidates[model]
+    if c.heldout_mean_m > NATURAL_FIT * tau or not c.span <= NATURAL_SPAN:
         return selection
-    return replace(selection, chosen=simplest, prior=True)
+    return replace(selection, chosen=model, prior=True)
 
 
 def _prior_reason(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
@@ -500,10 +529,12 @@ def _prior_reason(candidates: list[Candidate], selection: Selection, coverage: f
     gap, se = selection.gaps[selection.chosen]
     return (f"; the target is a natural body and the strikes cover {coverage:.0%} of the best "
             f"closed surface: held-out passes, all where strikes are, cannot judge the rest. "
-            f"It is the simplest closed model, its held-out strikes {c.heldout_mean_m:.3g} m "
-            f"from it on average (within {judge.PROXY_FIT:g} tau), so it stands for the unseen "
-            f"part; {gap:.2g} +- {se:.2g} above the best on the held-out strikes, {b.label} "
-            f"({b.chi2:.3g}, {b.n_params:,} parameters, {'closed' if b.closed else 'open'})")
+            f"This smooth closed model holds where they are (held-out strikes "
+            f"{c.heldout_mean_m:.3g} m from it on average, within {NATURAL_FIT:g} tau) and "
+            f"reaches {c.span:.2f} times their extent (at most {NATURAL_SPAN:g}), so it stands "
+            f"for the unseen part; {gap:.2g} +- {se:.2g} above the best on the held-out "
+            f"strikes, {b.label} ({b.chi2:.3g}, {b.n_params:,} parameters, "
+            f"{'closed' if b.closed else 'open'})")
 
 
 def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
