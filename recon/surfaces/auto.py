@@ -30,8 +30,8 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    then the lower ``chi2``. Open and closed surfaces compete alike: on the suite's clouds,
    preferring closed ones where the strikes cover little of the body chose worse surfaces
    (docs/decisions.md). The coverage of the best closed candidate is reported.
-5. **What the caller knows of the target** (``target``, ``TARGET_KINDS``): the held-out passes
-   all lie where strikes are, so they cannot judge what a surface does where none is. For a
+5. **What the caller knows of the target** (``target_kind``, ``TARGET_KINDS``): the held-out
+   passes all lie where strikes are, so they cannot judge what a surface does where none is. For a
    ``"natural"`` body (an asteroid, a comet: a closed solid whose large-scale shape is
    smooth) seen over less than ``NATURAL_COVERAGE`` of the best closed candidate, the
    ellipsoid (``NATURAL_MODEL``) is chosen when it holds where the strikes are and is not
@@ -211,7 +211,7 @@ class AutoChoice:
     noise_m, tau_m : float, metres
         The recorded noise length (or the local-plane scatter without one) and the tolerance
         floor.
-    target : str
+    target_kind : str
         What was known of the target (``TARGET_KINDS``).
     """
 
@@ -223,7 +223,7 @@ class AutoChoice:
     folds: judge.Folds
     noise_m: float
     tau_m: float
-    target: str = "unknown"
+    target_kind: str = "unknown"
 
     @property
     def method(self) -> str:
@@ -245,7 +245,7 @@ class AutoChoice:
         folds = self.folds
         return {"method": self.method, "params": self.params, "label": self.label,
                 "reason": self.reason, "threshold": self.threshold, "coverage": self.coverage,
-                "noise_m": self.noise_m, "tau_m": self.tau_m, "target": self.target,
+                "noise_m": self.noise_m, "tau_m": self.tau_m, "target_kind": self.target_kind,
                 "folds": {"k": folds.k, "n_tested": int(folds.tested.sum()),
                           "n_blocks": folds.n_blocks, "block_shots": folds.block_shots,
                           "margin_shots": folds.margin, "step_m": folds.step_m},
@@ -564,7 +564,7 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
     if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
         text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
                  "it follows part of the noise")
-    if np.isfinite(coverage):
+    if np.isfinite(coverage) and not selection.prior:   # the prior's reason says it
         text += f". The strikes cover {coverage:.0%} of the best closed surface"
     return text
 
@@ -586,7 +586,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
            methods: Sequence[str] | None = None, holdout: float = HOLDOUT_FRACTION,
            seed: int = 0, k: int = DEFAULT_K, fallback: Fallback = "centroid",
            timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
-           n_workers: int | None = None, target: str = "unknown") -> AutoChoice:
+           n_workers: int | None = None, target_kind: str = "unknown") -> AutoChoice:
     """Choose a method and resolution by held-out passes and the sensor rays, without the truth.
 
     Parameters
@@ -613,7 +613,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
         Limits of each isolated fit.
     n_workers : int, optional
         Fits run at once (default: the usable cores), each in its own process.
-    target : {"unknown", "natural"}
+    target_kind : {"unknown", "natural"}
         What is known of the target (step 5 of the module docstring): ``"natural"`` for an
         asteroid or a comet.
 
@@ -625,8 +625,9 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
 
     if not 0 < holdout <= 0.5:
         raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}")
-    if target not in TARGET_KINDS:
-        raise ParameterError(f"target must be one of {', '.join(TARGET_KINDS)}, got {target!r}")
+    if target_kind not in TARGET_KINDS:
+        raise ParameterError(f"target_kind must be one of {', '.join(TARGET_KINDS)}, "
+                             f"got {target_kind!r}")
     attributes = _columns(uncertainty)
     if view_points is not None:
         attributes |= dict(zip(("view_x", "view_y", "view_z"), np.asarray(view_points).T,
@@ -646,7 +647,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
         else float("nan")
     selection = select(table, context.block)
-    if target == "natural":
+    if target_kind == "natural":
         selection = natural_prior(table, selection, coverage, context.tau)
     for i, c in enumerate(table):
         c.eligible, c.chosen = i in selection.eligible, i == selection.chosen
@@ -655,7 +656,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
               + f"; {fitted} candidate fit(s) of {len(table)}" + (f"; {note}" if note else "")
               + ".")
     return AutoChoice(table[selection.chosen].run, reason, table, selection.threshold,
-                      coverage, folds, context.noise, context.tau, target)
+                      coverage, folds, context.noise, context.tau, target_kind)
 
 
 def format_choice(choice: AutoChoice) -> str:
@@ -685,7 +686,7 @@ def format_choice(choice: AutoChoice) -> str:
 
 def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
                holdout: float = HOLDOUT_FRACTION, preparation: Preparation | None = None,
-               limits: Limits | None = None, target: str = "unknown") -> AutoChoice:
+               limits: Limits | None = None, target_kind: str = "unknown") -> AutoChoice:
     """``choose`` on a cleaned ``Cloud`` (``Preparation.apply``) with a preparation's normals
     options and a run's limits: the choice ``-m auto`` makes.
 
@@ -699,11 +700,11 @@ def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
     holdout : float
     preparation : Preparation, optional
     limits : Limits, optional
-    target : {"unknown", "natural"}
+    target_kind : {"unknown", "natural"}
         What is known of the target (``choose``).
     """
     preparation = preparation or Preparation()
     return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
                   methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
-                  fallback=preparation.fallback, target=target,
+                  fallback=preparation.fallback, target_kind=target_kind,
                   **(limits or Limits()).kwargs())
