@@ -518,7 +518,7 @@ def natural_prior(candidates: list[Candidate], selection: Selection, coverage: f
     if model is None or model == selection.chosen or not coverage < NATURAL_COVERAGE:
         return selection
     c = candidates[model]
-    if c.heldout_mean_m > NATURAL_FIT * tau or not c.span <= NATURAL_SPAN:
+    if c.heldout_mean_m > NATURAL_FIT * tau or c.span is None or c.span > NATURAL_SPAN:
         return selection
     return replace(selection, chosen=model, prior=True)
 

@@ -112,3 +112,36 @@ def test_an_unknown_target_kind_is_named():
     points, view = bumpy_body(500, width=0.12)
     with pytest.raises(ParameterError, match="target_kind must be one of unknown, natural"):
         choose(points, view_points=view, candidates=CANDIDATES, target_kind="rock")
+
+
+def test_recon_reconstruct_passes_the_target_kind_to_the_api(monkeypatch, tmp_path, capsys):
+    from cli.main import main
+    from cli.reconstruct import TARGET_KINDS as CLI_KINDS
+    from recon import api
+    from recon.surfaces.auto import TARGET_KINDS
+
+    assert CLI_KINDS == TARGET_KINDS
+    calls = []
+
+    def recorder(*args, **kwargs):
+        calls.append(kwargs)
+        raise KeyboardInterrupt   # stop before any work
+
+    monkeypatch.setattr(api, "reconstruct_file", recorder)
+    argv = ["reconstruct", "cloud.ply", "-m", "auto", "-o", str(tmp_path / "m.ply")]
+    assert main([*argv, "--target-kind", "natural"]) == 130
+    assert calls[-1]["target_kind"] == "natural"
+    main(argv)
+    assert calls[-1]["target_kind"] == "unknown"
+    with pytest.raises(SystemExit) as stop:
+        main([*argv, "--target-kind", "rock"])
+    assert stop.value.code == 1
+    assert "--target-kind: invalid choice: 'rock'" in capsys.readouterr().err
+
+
+def test_the_api_names_a_bad_target_kind_before_any_work(tmp_path):
+    from recon import api
+
+    points, _ = bumpy_body(200, width=0.12)
+    with pytest.raises(ParameterError, match="target_kind must be one of unknown, natural"):
+        api.reconstruct(points, method="auto", target_kind="asteroid")
