@@ -17,7 +17,8 @@ seconds instead of a suite run:
 - ``rules``: replays ``auto.select`` (and the ladder's stop) on those figures, restricted to
   the ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best
   F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the
-  median run;
+  median run; the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every
+  cloud "unknown");
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
