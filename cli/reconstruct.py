@@ -21,6 +21,9 @@ from cli.options import (
 TIMEOUT_HELP = ("wall-clock limit of each method run, seconds (default: 600); a method at its "
                 "defaults whose predicted time exceeds it is declined at once")
 MEMORY_HELP = "address-space limit of each method run, MiB (default: 8192; 0: none)"
+# What -m auto may be told of the target (recon.surfaces.auto.TARGET_KINDS, not imported: the
+# CLI reaches recon only through recon.api, and the help stays light).
+TARGET_KINDS = ("unknown", "natural")
 
 
 def _add_input_options(p: argparse.ArgumentParser) -> None:
@@ -89,6 +92,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--holdout", type=float, default=0.25,
                    help="fraction of shots each of -m auto's folds holds out, in time blocks; "
                         "1 / holdout folds (default: %(default)s, 4 folds)")
+    p.add_argument("--target-kind", choices=TARGET_KINDS, default="unknown",
+                   help="what -m auto may assume of the target: 'natural' (an asteroid, a "
+                        "comet) lets a smooth closed model stand for a far side the strikes "
+                        "leave unseen; 'unknown': the strikes and their rays alone decide "
+                        "(default: %(default)s)")
     p.add_argument("--in-process", action="store_true",
                    help="run the method in this process (no isolation; a crash ends recon)")
     _add_closing_options(p, preprocessing=True, sweep=False)
@@ -217,7 +225,8 @@ def run_reconstruct(args) -> int:
     with _StageBar(args.method) as bar:
         result = api.reconstruct_file(
             args.input, args.output, method=args.method, params=args.param,
-            auto_methods=args.auto_methods, holdout=args.holdout, isolate=not args.in_process,
+            auto_methods=args.auto_methods, holdout=args.holdout,
+            target_kind=args.target_kind, isolate=not args.in_process,
             on_wait=bar, say=None if args.json else print, **_preparation(args), **_limits(args))
     if args.json:
         _print_json(result.to_dict())

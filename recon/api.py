@@ -977,7 +977,7 @@ def reconstruct(cloud, *, method: str = "poisson", params: Mapping[str, Any] | N
                 isolate: bool = True,
                 timeout: float | None = None, memory_limit: int | None = None,
                 auto_methods: Sequence[str] | None = None, holdout: float | None = None,
-                output=None) -> Surface:
+                target_kind: str = "unknown", output=None) -> Surface:
     """Reconstruct a surface mesh from a point cloud with one method, or ``method="auto"``.
 
     Parameters
@@ -996,6 +996,10 @@ def reconstruct(cloud, *, method: str = "poisson", params: Mapping[str, Any] | N
         Run the method in its own process with ``timeout`` [s] and ``memory_limit`` [MiB].
     auto_methods, holdout
         Candidates and held-out fraction of ``method="auto"``.
+    target_kind : {"unknown", "natural"}
+        What is known of the target, for ``method="auto"``: ``"natural"`` (an asteroid, a
+        comet) lets a smooth closed model stand for a far side the strikes leave unseen
+        (``recon.surfaces.auto``, step 5).
     output : str or Path, optional
         Also write the mesh there (``save``: atomically, never over the input).
 
@@ -1010,7 +1014,8 @@ def reconstruct(cloud, *, method: str = "poisson", params: Mapping[str, Any] | N
     return _reconstruct(cloud, output, method=method, params=params,
                         preparation=(remove_outliers, voxel, normals_k, orient, seed),
                         timeout=timeout, memory_limit=memory_limit, isolate=isolate,
-                        auto_methods=auto_methods, holdout=holdout).surface
+                        auto_methods=auto_methods, holdout=holdout,
+                        target_kind=target_kind).surface
 
 
 def reconstruct_file(input, output, *, method: str = "poisson",
@@ -1019,7 +1024,7 @@ def reconstruct_file(input, output, *, method: str = "poisson",
                      normals_k: int | None = None, orient: str = "centroid", seed: int = 0,
                      isolate: bool = True, timeout: float | None = None,
                      memory_limit: int | None = None, auto_methods: Sequence[str] | None = None,
-                     holdout: float | None = None,
+                     holdout: float | None = None, target_kind: str = "unknown",
                      on_wait: Callable[[str], None] | None = None,
                      say: Callable[[str], None] | None = None) -> ReconstructResult:
     """``reconstruct`` from a cloud file or strike log to a mesh file (``recon reconstruct``).
@@ -1035,7 +1040,7 @@ def reconstruct_file(input, output, *, method: str = "poisson",
     say : callable, optional
         ``method="auto"``: called with the candidates table and the reason once chosen.
     method, remove_outliers, voxel, normals_k, orient, seed, isolate, timeout, memory_limit,
-    auto_methods, holdout
+    auto_methods, holdout, target_kind
         As ``reconstruct``.
 
     Returns
@@ -1045,17 +1050,18 @@ def reconstruct_file(input, output, *, method: str = "poisson",
     return _reconstruct(input, output, method=method, params=params,
                         preparation=(remove_outliers, voxel, normals_k, orient, seed),
                         timeout=timeout, memory_limit=memory_limit, isolate=isolate,
-                        auto_methods=auto_methods, holdout=holdout, on_wait=on_wait, say=say)
+                        auto_methods=auto_methods, holdout=holdout, target_kind=target_kind,
+                        on_wait=on_wait, say=say)
 
 
 def _reconstruct(source, output, *, method: str, params, preparation: tuple, timeout,
-                 memory_limit, isolate: bool, auto_methods, holdout, on_wait=None, say=None
-                 ) -> ReconstructResult:
+                 memory_limit, isolate: bool, auto_methods, holdout, target_kind="unknown",
+                 on_wait=None, say=None) -> ReconstructResult:
     """The one reconstruction policy: check the options and the output before any work,
     prepare, choose (``auto``), fit, predict the accuracy, write. ``preparation``: the
     arguments of ``_preparation``."""
     from formats.paths import check_destination, protecting
-    from recon.surfaces.auto import HOLDOUT_FRACTION, choose_for, format_choice
+    from recon.surfaces.auto import HOLDOUT_FRACTION, TARGET_KINDS, choose_for, format_choice
     from recon.surfaces.isolation import Limits
     from recon.surfaces.prepare import load_prepared
     from recon.surfaces.reconstruct import estimate_of
@@ -1064,6 +1070,9 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
     holdout = HOLDOUT_FRACTION if holdout is None else holdout
     if not 0 < holdout <= 0.5:   # checked even when unused: a bad value is a mistake
         raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}")
+    if target_kind not in TARGET_KINDS:   # checked even when unused, as the hold-out
+        raise ParameterError(f"target_kind must be one of {', '.join(TARGET_KINDS)}, "
+                             f"got {target_kind!r}")
     auto = method == "auto"
     if auto and params:
         raise ParameterError("params cannot be combined with method='auto'")
@@ -1077,7 +1086,7 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
         choice = None
         if auto:
             choice = choose_for(cloud, methods=auto_methods, preparation=preparation,
-                                limits=limits, holdout=holdout)
+                                limits=limits, holdout=holdout, target_kind=target_kind)
             run = choice.run
             if say is not None:
                 say(format_choice(choice))

@@ -30,6 +30,16 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    then the lower ``chi2``. Open and closed surfaces compete alike: on the suite's clouds,
    preferring closed ones where the strikes cover little of the body chose worse surfaces
    (docs/decisions.md). The coverage of the best closed candidate is reported.
+5. **What the caller knows of the target** (``target_kind``, ``TARGET_KINDS``): the held-out
+   passes all lie where strikes are, so they cannot judge what a surface does where none is. For a
+   ``"natural"`` body (an asteroid, a comet: a closed solid whose large-scale shape is
+   smooth) seen over less than ``NATURAL_COVERAGE`` of the best closed candidate, the
+   ellipsoid (``NATURAL_MODEL``) is chosen when it holds where the strikes are and is not
+   extrapolated beyond them: its held-out strikes lie within ``NATURAL_FIT`` tau of it on
+   average, and along each of its principal axes it reaches at most ``NATURAL_SPAN`` times
+   the strikes' extent (``span``). It then stands for the unseen far side, where an open
+   surface leaves the body out and a hull cuts inside it (``natural_prior``). For an
+   ``"unknown"`` target (the default) steps 1-4 alone decide.
 
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
@@ -87,6 +97,17 @@ MAX_FITS = sum(len(level) for level in LADDER)
 # Levels fitted whatever the earlier ones gave: the primitives, the coarse surfaces and the
 # defaults.
 ALWAYS_LEVELS = 3
+# What the caller may know of the target (step 5 of the module docstring).
+TARGET_KINDS = ("unknown", "natural")
+# A natural body's prior acts when the strikes cover less than this fraction of the best closed
+# candidate: most of the body is unseen. Its model, the smooth closed surface of a few numbers,
+# stands for the body when its mean held-out distance is within NATURAL_FIT tau and it reaches
+# at most NATURAL_SPAN times the strikes' extent along each of its axes (chosen on the auto
+# suite's clouds, docs/decisions.md).
+NATURAL_COVERAGE = 0.5
+NATURAL_MODEL = "ellipsoid"
+NATURAL_FIT = 0.5
+NATURAL_SPAN = 1.5
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
 # compete for the cores.
 FIT_THREADS = 1
@@ -122,6 +143,8 @@ class Candidate:
     violated, holes : float or None
         Over all strikes (a seeded subsample of ``judge.MAX_CHECKED``): fraction of beams the
         surface cuts before their strike, and of strikes with no surface within tolerance.
+    span : float or None
+        How far the surface reaches beyond the strikes (``span``; 1: no farther).
     eligible, chosen : bool
     """
 
@@ -141,6 +164,7 @@ class Candidate:
     beam_misses: float | None = None
     violated: float | None = None
     holes: float | None = None
+    span: float | None = None
     eligible: bool = False
     chosen: bool = False
     heldout: judge.HeldOut | None = field(default=None, repr=False)
@@ -187,6 +211,8 @@ class AutoChoice:
     noise_m, tau_m : float, metres
         The recorded noise length (or the local-plane scatter without one) and the tolerance
         floor.
+    target_kind : str
+        What was known of the target (``TARGET_KINDS``).
     """
 
     run: Run
@@ -197,6 +223,7 @@ class AutoChoice:
     folds: judge.Folds
     noise_m: float
     tau_m: float
+    target_kind: str = "unknown"
 
     @property
     def method(self) -> str:
@@ -218,7 +245,7 @@ class AutoChoice:
         folds = self.folds
         return {"method": self.method, "params": self.params, "label": self.label,
                 "reason": self.reason, "threshold": self.threshold, "coverage": self.coverage,
-                "noise_m": self.noise_m, "tau_m": self.tau_m,
+                "noise_m": self.noise_m, "tau_m": self.tau_m, "target_kind": self.target_kind,
                 "folds": {"k": folds.k, "n_tested": int(folds.tested.sum()),
                           "n_blocks": folds.n_blocks, "block_shots": folds.block_shots,
                           "margin_shots": folds.margin, "step_m": folds.step_m},
@@ -260,13 +287,15 @@ class _Context:
 class Selection:
     """``select``'s answer: the chosen index, the best's, the band's upper edge (the largest
     chi-square in it), the candidates within the band, and each scored candidate's chi-square
-    above the best's with its paired standard error."""
+    above the best's with its paired standard error; ``prior``: the natural-body prior
+    (``natural_prior``) made the choice."""
 
     chosen: int
     best: int
     threshold: float
     eligible: tuple[int, ...]
     gaps: dict[int, tuple[float, float]]
+    prior: bool = False
 
 
 def closed(faces: np.ndarray) -> bool:
@@ -276,6 +305,22 @@ def closed(faces: np.ndarray) -> bool:
                     axis=1)
     _, count = np.unique(edges, axis=0, return_counts=True)
     return bool(len(faces)) and not np.any(count == 1)
+
+
+def span(vertices: np.ndarray, points: np.ndarray) -> float:
+    """How far a surface reaches beyond the strikes: the largest ratio, over the principal axes
+    of its vertices, of its extent along the axis to the strikes' extent along it.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float64, metres
+    points : (n, 3) float64, metres
+    """
+    centre = vertices.mean(axis=0)
+    _, _, axes = np.linalg.svd(vertices - centre, full_matrices=False)
+    extent = np.ptp((vertices - centre) @ axes.T, axis=0)
+    return float(np.max(extent / np.maximum(np.ptp((points - centre) @ axes.T, axis=0),
+                                            1e-300)))
 
 
 def coverage_of(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, reach: float,
@@ -393,6 +438,7 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                    beam_misses=float(np.mean(np.concatenate([h.missed for h in held]))),
                    violated=float(everywhere.violated.mean()),
                    holes=float(everywhere.hole.mean()),
+                   span=span(vertices, context.checked.points),
                    heldout=judge.HeldOut(distance, np.concatenate([h.sigma_normal for h in held]),
                                          context.block),
                    cost=cost, mesh=(vertices, faces))
@@ -460,6 +506,37 @@ def select(candidates: list[Candidate], block: np.ndarray) -> Selection:
     return Selection(chosen, best, threshold, eligible, gaps)
 
 
+def natural_prior(candidates: list[Candidate], selection: Selection, coverage: float,
+                  tau: float) -> Selection:
+    """Step 5 of the module docstring for a natural body: ``selection`` with the
+    ``NATURAL_MODEL`` candidate chosen when the strikes cover less than ``NATURAL_COVERAGE`` of
+    the best closed candidate (``coverage``; NaN: nothing closed to judge by), its mean
+    held-out distance is within ``NATURAL_FIT`` ``tau`` [m] and its ``span`` at most
+    ``NATURAL_SPAN``; else ``selection`` unchanged."""
+    model = next((i for i, c in enumerate(candidates)
+                  if c.scored and c.run.method == NATURAL_MODEL), None)
+    if model is None or model == selection.chosen or not coverage < NATURAL_COVERAGE:
+        return selection
+    c = candidates[model]
+    if c.heldout_mean_m > NATURAL_FIT * tau or c.span is None or c.span > NATURAL_SPAN:
+        return selection
+    return replace(selection, chosen=model, prior=True)
+
+
+def _prior_reason(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
+    """The reason of a choice the natural-body prior made."""
+    c, b = candidates[selection.chosen], candidates[selection.best]
+    gap, se = selection.gaps[selection.chosen]
+    return (f"; the target is a natural body and the strikes cover {coverage:.0%} of the best "
+            f"closed surface: held-out passes, all where strikes are, cannot judge the rest. "
+            f"This smooth closed model holds where they are (held-out strikes "
+            f"{c.heldout_mean_m:.3g} m from it on average, within {NATURAL_FIT:g} tau) and "
+            f"reaches {c.span:.2f} times their extent (at most {NATURAL_SPAN:g}), so it stands "
+            f"for the unseen part; {gap:.2g} +- {se:.2g} above the best on the held-out "
+            f"strikes, {b.label} ({b.chi2:.3g}, {b.n_params:,} parameters, "
+            f"{'closed' if b.closed else 'open'})")
+
+
 def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
     """The reason in words: what was chosen, open or closed, the statistic and the band, and
     what decided among the candidates in the band (only what the rule actually did)."""
@@ -471,7 +548,9 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
             f"{c.violated:.1%} of beams cut before their strike, {c.holes:.1%} of strikes in "
             f"holes")
     others = len(selection.eligible) - 1
-    if selection.chosen == selection.best:
+    if selection.prior:
+        text += _prior_reason(candidates, selection, coverage)
+    elif selection.chosen == selection.best:
         text += ("; the lowest held-out statistic" + (
             f"; the {others} other candidate(s) {band} "
             + "are larger models"
@@ -485,7 +564,7 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
     if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
         text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
                  "it follows part of the noise")
-    if np.isfinite(coverage):
+    if np.isfinite(coverage) and not selection.prior:   # the prior's reason says it
         text += f". The strikes cover {coverage:.0%} of the best closed surface"
     return text
 
@@ -507,7 +586,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
            methods: Sequence[str] | None = None, holdout: float = HOLDOUT_FRACTION,
            seed: int = 0, k: int = DEFAULT_K, fallback: Fallback = "centroid",
            timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
-           n_workers: int | None = None) -> AutoChoice:
+           n_workers: int | None = None, target_kind: str = "unknown") -> AutoChoice:
     """Choose a method and resolution by held-out passes and the sensor rays, without the truth.
 
     Parameters
@@ -534,6 +613,9 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
         Limits of each isolated fit.
     n_workers : int, optional
         Fits run at once (default: the usable cores), each in its own process.
+    target_kind : {"unknown", "natural"}
+        What is known of the target (step 5 of the module docstring): ``"natural"`` for an
+        asteroid or a comet.
 
     Returns
     -------
@@ -543,6 +625,9 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
 
     if not 0 < holdout <= 0.5:
         raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}")
+    if target_kind not in TARGET_KINDS:
+        raise ParameterError(f"target_kind must be one of {', '.join(TARGET_KINDS)}, "
+                             f"got {target_kind!r}")
     attributes = _columns(uncertainty)
     if view_points is not None:
         attributes |= dict(zip(("view_x", "view_y", "view_z"), np.asarray(view_points).T,
@@ -562,6 +647,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
         else float("nan")
     selection = select(table, context.block)
+    if target_kind == "natural":
+        selection = natural_prior(table, selection, coverage, context.tau)
     for i, c in enumerate(table):
         c.eligible, c.chosen = i in selection.eligible, i == selection.chosen
     fitted = sum(c.status != "skipped" for c in table)
@@ -569,7 +656,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
               + f"; {fitted} candidate fit(s) of {len(table)}" + (f"; {note}" if note else "")
               + ".")
     return AutoChoice(table[selection.chosen].run, reason, table, selection.threshold,
-                      coverage, folds, context.noise, context.tau)
+                      coverage, folds, context.noise, context.tau, target_kind)
 
 
 def format_choice(choice: AutoChoice) -> str:
@@ -599,7 +686,7 @@ def format_choice(choice: AutoChoice) -> str:
 
 def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
                holdout: float = HOLDOUT_FRACTION, preparation: Preparation | None = None,
-               limits: Limits | None = None) -> AutoChoice:
+               limits: Limits | None = None, target_kind: str = "unknown") -> AutoChoice:
     """``choose`` on a cleaned ``Cloud`` (``Preparation.apply``) with a preparation's normals
     options and a run's limits: the choice ``-m auto`` makes.
 
@@ -613,8 +700,11 @@ def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
     holdout : float
     preparation : Preparation, optional
     limits : Limits, optional
+    target_kind : {"unknown", "natural"}
+        What is known of the target (``choose``).
     """
     preparation = preparation or Preparation()
     return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
                   methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
-                  fallback=preparation.fallback, **(limits or Limits()).kwargs())
+                  fallback=preparation.fallback, target_kind=target_kind,
+                  **(limits or Limits()).kwargs())
