@@ -43,6 +43,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import suite as suite_clouds  # noqa: E402  (the suite's clouds, beside this script)
 
 F_TOLERANCE, CHAMFER_TOLERANCE = 0.05, 0.10
 # The ladder (recon.surfaces.auto.LADDER) and grid runs that the truth finds best on some suite
@@ -70,13 +73,9 @@ TUNING = ("asteroid-slew-clean", "asteroid-slew-noisy", "asteroid-cross-noisy",
           "near-cross-noisy", "psyche-slew-noisy")
 
 
-# The clouds whose target a user would state as a natural body (``auto.choose``'s ``target``):
-# the asteroids, the comet, the cratered asteroids and the real small-body models; the
-# satellites, the Hubble and NEAR spacecraft and the generated polyhedra stay "unknown".
-NATURAL = ("asteroid-slew-clean", "asteroid-slew-noisy", "asteroid-cross-noisy",
-           "asteroid-lidar-noisy", "itokawa-cross-noisy", "eros-lidar-clean", "comet-cross-clean",
-           "cratered-asteroid-slew-noisy", "cratered-asteroid-cross-noisy", "ryugu-slew-noisy",
-           "castalia-lidar-noisy", "psyche-slew-noisy")
+# The clouds whose target a user would state as a natural body (``auto.choose``'s
+# ``target_kind``): the suite's own statement of each cloud (``SuiteCloud.target_kind``).
+NATURAL = tuple(name for name in TUNING if suite_clouds.CLOUDS[name].target_kind == "natural")
 
 
 def target_of(cloud: str, prior: bool = True) -> str:

@@ -145,6 +145,14 @@ class SuiteCloud:
     mesh: str | None = None   # a shared real mesh the cloud needs
     held_out: bool = False    # no rule of auto was tuned on it (HELD_OUT)
 
+    @property
+    def target_kind(self) -> str:
+        """What a mission states of its target (``auto.choose``'s ``target_kind``): the clouds
+        made from the asteroid presets image natural bodies (asteroids, the comet, the cratered
+        asteroids, the real small-body models); the others, spacecraft, polyhedra and other
+        models, are stated as "unknown"."""
+        return "natural" if self.preset.startswith("asteroid") else "unknown"
+
 
 def _cloud(name, preset, overrides, target, sensor, errors, density, mesh=None, *,
            held_out=False):
@@ -555,7 +563,8 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
     start = time.perf_counter()
     choice = choose(points.points, view_points=points.view_points,
                     uncertainty=points.attributes, methods=names, seed=0,
-                    timeout_s=args.timeout, n_workers=args.workers)
+                    timeout_s=args.timeout, n_workers=args.workers,
+                    target_kind=cloud.target_kind)
     timing["auto_s"] = time.perf_counter() - start
     (out_dir / "auto.json").write_text(json.dumps(choice.to_dict(), indent=2, default=str))
     records = report["records"]
