@@ -24,7 +24,7 @@ seconds instead of a suite run:
   other candidates (their consensus, everywhere and where no strike is); each is tried as the
   choice among the candidates within ``EVIDENCE_BANDS`` paired standard errors of the best,
   against the truth as ``rules``;
-- ``estimate``: ``recon.surfaces.judge.estimate`` on every compare mesh (in-sample, as the
+- ``estimate``: ``recon.surfaces.estimate.estimate`` on every compare mesh (in-sample, as the
   suite calls it), against its true Chamfer: Spearman over all runs and within each cloud, and
   the band's coverage and width (high / low) for each cloud's run of auto's choice.
 """
@@ -338,18 +338,17 @@ def nearest_gaps(points: np.ndarray) -> np.ndarray:
 
 
 def estimates(args, cloud: str, rows: list[dict]) -> dict[str, dict]:
-    """``judge.estimate`` of every run's mesh of ``cloud`` (cached in ``WORK/estimates``; a
-    cache is reused only for the same ``judge.py`` source but for the band's constants, which
-    do not move the central value: ``estimate_all`` applies them to it)."""
+    """``recon.surfaces.estimate.estimate`` of every run's mesh of ``cloud`` (cached in
+    ``WORK/estimates``; a cache is reused only for the same ``estimate.py`` and ``judge.py``
+    sources)."""
     import hashlib
     import inspect
 
     from formats.geometry import Mesh
     from formats.mesh_io import read_mesh
-    from recon.surfaces import judge
+    from recon.surfaces import estimate, judge
 
-    source = "".join(line for line in inspect.getsource(judge).splitlines(keepends=True)
-                     if not line.startswith("BAND_BELOW, BAND_ABOVE ="))
+    source = inspect.getsource(estimate) + inspect.getsource(judge)
     digest = hashlib.sha1(source.encode()).hexdigest()
     path = args.work / "estimates" / f"{cloud}.json"
     cache = json.loads(path.read_text()) if path.exists() else {}
@@ -363,7 +362,7 @@ def estimates(args, cloud: str, rows: list[dict]) -> dict[str, dict]:
             continue
         points = points or load_cloud(args.suite, cloud)
         mesh = read_mesh(args.suite / cloud / r["mesh"])
-        runs[r["key"]] = judge.estimate(Mesh(mesh.vertices, mesh.faces), points).to_dict()
+        runs[r["key"]] = estimate.estimate(Mesh(mesh.vertices, mesh.faces), points).to_dict()
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"digest": digest, "runs": runs}, default=float))
     return runs
@@ -383,7 +382,7 @@ def chosen_key(args, cloud: str) -> str:
 def estimate_all(args) -> None:
     from scipy.stats import spearmanr
 
-    from recon.surfaces.judge import BAND_ABOVE, BAND_BELOW
+    from recon.surfaces.estimate import BAND_ABOVE, BAND_BELOW
 
     pairs, within, held, ratios = [], [], 0, []
     names = clouds_of(args.suite, args.clouds)
