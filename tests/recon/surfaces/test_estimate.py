@@ -39,9 +39,14 @@ def test_the_estimate_brackets_the_true_chamfer_of_a_seen_sphere(scale):
     if scale == 1.0:
         assert true < predicted.chamfer_m < 0.005, (true, predicted)
     else:
+        # Struck all over: the strikes measure nearly all of it, and the band is narrow (a
+        # factor 4 from edge to edge, where a band for unseen truth is wider).
         assert predicted.contains(true), (true, predicted)
+        assert predicted.chamfer_high_m < 4 * predicted.chamfer_low_m, predicted
     assert predicted.chamfer_m == pytest.approx(true, abs=0.01)
-    assert predicted.source == "in-sample" and predicted.unseen < 0.05
+    # Closed: its own area far from the strikes (a few % at 3 cm out) stands for unseen truth.
+    assert predicted.source == "in-sample" and predicted.closed
+    assert predicted.unseen == predicted.unsupported < 0.1
 
 
 def test_the_estimate_brackets_the_true_chamfer_on_a_noisy_track_log(track_sphere):
@@ -53,6 +58,8 @@ def test_the_estimate_brackets_the_true_chamfer_on_a_noisy_track_log(track_spher
         true = _scored_chamfer(surface, (vertices, faces))
         assert predicted.contains(true), (scale, true, predicted.describe())
         assert predicted.unseen > 0.5
+        # Most of it unseen: the proxy stands for most of the truth, and the band says so.
+        assert predicted.chamfer_high_m > 4.5 * predicted.chamfer_low_m, predicted
     # A surface 0.5 m out: every strike in a hole, every beam cut.
     out = estimate((1.05 * vertices, faces), cloud)
     assert out.holes > 0.9 and out.violated > 0.9
@@ -84,3 +91,41 @@ def test_the_proxy_is_the_ellipsoid_of_a_sphere_and_the_carved_hull_of_a_dumbbel
     area = face_areas(dumbbell.vertices, dumbbell.faces)
     bridge = np.abs(dumbbell.vertices[dumbbell.faces].mean(axis=1)[:, 0]) < 2
     assert area[dumbbell.carved & bridge].sum() > 0.5 * area[bridge].sum()
+
+
+def _two_spheres(n, *, noise=0.0, seed=3):
+    """Two unit spheres 6 radii apart, struck all over with short beams (each view 1 cm out
+    along the normal, below every tolerance): no beam crosses the hull's bridge between them,
+    so the bridge stands uncarved and far from every strike."""
+    points, _, normal = sphere_points(n, noise=noise, seed=seed)
+    shift = np.array([3.0, 0.0, 0.0])
+    twin = np.vstack([points - shift, points + shift])
+    view = twin + 0.01 * np.vstack([normal, normal])
+    vertices, faces = sphere_mesh(4)
+    mesh = (np.vstack([vertices - shift, vertices + shift]),
+            np.vstack([faces, faces + len(vertices)]))
+    return _cloud(twin, view), mesh
+
+
+def test_a_closed_surface_stands_for_the_unseen_truth_where_the_hull_stands_for_none():
+    # The hull's bridge is most of its area and no strike is near it: taken for unseen truth,
+    # it would put the true surface (both spheres, every part struck) 0.3 m off. The closed
+    # surface is struck all over, so nothing of the truth is unseen.
+    cloud, (vertices, faces) = _two_spheres(3000, noise=0.005)
+    predicted = estimate((vertices, faces), cloud)
+    assert predicted.closed and predicted.unseen < 0.05
+    assert predicted.chamfer_m < 0.01, predicted
+    # Open (one sphere's lower half cut away): the surface no longer closes the body, and the
+    # hull's bridge stands for unseen truth again.
+    centre = vertices[faces].mean(axis=1)
+    predicted = estimate((vertices, faces[~((centre[:, 0] > 0) & (centre[:, 2] < 0))]), cloud)
+    assert not predicted.closed and predicted.unseen > 0.5 and predicted.chamfer_m > 0.1
+
+
+def test_closed_is_no_edge_bordering_a_single_face():
+    from recon.surfaces.estimate import _closed
+
+    _, faces = sphere_mesh(1)
+    assert _closed(faces)
+    assert not _closed(faces[1:])
+    assert not _closed(np.zeros((0, 3), dtype=np.int64))
