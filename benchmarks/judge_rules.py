@@ -24,9 +24,12 @@ seconds instead of a suite run:
   other candidates (their consensus, everywhere and where no strike is); each is tried as the
   choice among the candidates within ``EVIDENCE_BANDS`` paired standard errors of the best,
   against the truth as ``rules``;
-- ``estimate``: ``recon.surfaces.estimate.estimate`` on every compare mesh (in-sample, as the
-  suite calls it), against its true Chamfer: Spearman over all runs and within each cloud, and
-  the band's coverage and width (high / low) for each cloud's run of auto's choice.
+- ``estimate``: ``recon.surfaces.estimate.estimate`` on every compare mesh of every cloud of the
+  suite (in-sample, as the suite calls it; ``--per-cloud``: only the runs ``--labels`` names),
+  against its true Chamfer: Spearman over all runs and within each cloud, and the band's
+  coverage and width (high / low) for auto's choice in the suite, estimated as ``recon
+  reconstruct -m auto`` reports it, with the chosen candidate's held-out residuals
+  (``--heldout`` fits auto's ladder once per cloud to collect them, in ``WORK/heldout``).
 """
 
 from __future__ import annotations

@@ -37,8 +37,8 @@ PROXY_FOLDS = 4
 PROXY_SUBDIVISIONS = 5
 PROXY_SIGMAS = 2.0
 # Clouds whose proxy, KD-tree and area weights are kept (``_context``): every surface of one
-# cloud shares them.
-CONTEXT_CACHE = 4
+# cloud shares them (a compare judges its runs one cloud at a time).
+CONTEXT_CACHE = 2
 # The ellipsoid proxy is fitted to at most this many strikes (seeded subsample) in this many
 # robust rounds: 5 leave it within 1.2% of the 20-round fit with 5% outliers
 # (recon/surfaces/methods/ellipsoid.py), a proxy's band is wider.
@@ -126,13 +126,15 @@ class Estimate:
 
     def describe(self) -> str:
         """One line: the predicted Chamfer and F-score bands."""
+        unseen = ("it is closed and stands for the truth there" if self.closed else
+                  f"{self.unseen:.0%} of the truth's proxy is")
         return (f"predicted without the truth ({self.source}): Chamfer {self.chamfer_m:.3g} m "
-                f"[{self.chamfer_low_m:.3g}, {self.chamfer_high_m:.3g}], F-score@{self.tau_m:.3g}"
-                f" m {self.fscore:.3f} [{self.fscore_low:.3f}, {self.fscore_high:.3f}]; "
-                f"{self.unsupported:.0%} of the surface and {self.unseen:.0%} of the truth's "
-                "proxy are far from any strike, "
-                f"{self.holes:.1%} of strikes fall in holes, {self.violated:.1%} of beams "
-                "are cut before their strike")
+                f"[{self.chamfer_low_m:.3g}, {self.chamfer_high_m:.3g}] ({self.measured_m[0]:.3g}"
+                f" m measured by the strikes, {self.proxied_m[0]:.3g} m stood for by a proxy), "
+                f"F-score@{self.tau_m:.3g} m {self.fscore:.3f} [{self.fscore_low:.3f}, "
+                f"{self.fscore_high:.3f}]; {self.unsupported:.0%} of the surface is far from "
+                f"any strike ({unseen}), {self.holes:.1%} of strikes fall in holes, "
+                f"{self.violated:.1%} of beams are cut before their strike")
 
 
 
@@ -338,7 +340,11 @@ def _context(cloud: Cloud, seed: int) -> _Context:
     from scipy.spatial import cKDTree
 
     strikes = Strikes.of(cloud)
-    key = (hashlib.sha1(np.ascontiguousarray(strikes.points).tobytes()).hexdigest(), seed)
+    digest = hashlib.sha1(np.ascontiguousarray(strikes.points).tobytes())
+    for name in sorted(cloud.attributes):   # view points, error model, shots: all of it
+        digest.update(name.encode())
+        digest.update(np.ascontiguousarray(cloud.attributes[name]).tobytes())
+    key = (digest.hexdigest(), seed)
     if key in _CONTEXTS:
         return _CONTEXTS[key]
     tau = tau_of(strikes.points)

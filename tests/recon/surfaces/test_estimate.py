@@ -129,3 +129,18 @@ def test_closed_is_no_edge_bordering_a_single_face():
     assert _closed(faces)
     assert not _closed(faces[1:])
     assert not _closed(np.zeros((0, 3), dtype=np.int64))
+
+
+def test_one_cloud_context_per_cloud_not_per_points():
+    # The same points with another recorded noise are another cloud: the estimate of the
+    # second is not read from the first's kept context.
+    points, view, _ = sphere_points(2000, noise=0.01, seed=4)
+    vertices, faces = sphere_mesh(3)
+    predicted = []
+    for sigma in (0.01, 0.05):
+        columns = {"sigma_along": np.full(2000, sigma), "sigma_across": np.zeros(2000),
+                   "dilation_along": np.zeros(2000), "dilation_across": np.zeros(2000)}
+        cloud = Cloud(points, dict(zip(("view_x", "view_y", "view_z"), view.T, strict=True))
+                      | columns)
+        predicted.append(estimate((vertices, faces), cloud))
+    assert predicted[0].chamfer_m != predicted[1].chamfer_m
