@@ -80,17 +80,16 @@ class Estimate:
     unsupported : float
         Fraction of the surface's area farther than the support reach from any strike.
     unseen : float
-        The truth no strike saw, as a fraction of the truth: for a closed surface its own
-        ``unsupported`` fraction, else the fraction of the truth's proxy (``proxy``: the
-        convex hull or the ellipsoid of the strikes, less the faces a beam crossed) farther
-        than the support reach from any strike.
+        Fraction of the truth's proxy (``proxy``: the convex hull or the ellipsoid of the
+        strikes, less the faces a beam crossed) farther than the support reach from any strike:
+        the truth no strike saw.
     holes : float
         Area-weighted fraction of strikes with no surface within their tolerance.
     violated : float
         Fraction of beams the surface cuts before their strike.
     closed : bool
-        No edge of the surface borders a single face (``estimate``: it then stands for the
-        truth's unseen area).
+        No edge of the surface borders a single face (``estimate``: its own unsupported area
+        may then stand for the unseen truth, and the band spans that model too).
     source : str
         ``"held-out"`` (the residuals of strikes the surface was not fitted on) or
         ``"in-sample"``.
@@ -98,6 +97,9 @@ class Estimate:
         The two parts of the predicted Chamfer distance (``estimate``): what the strikes
         measure (the surface where they are, holes included) and what the proxy stands for
         (the surface where no strike is, the truth no strike saw); ``chamfer_m`` is their sum.
+    closed_m : (measured_m, proxied_m), or None
+        For a closed surface, the same two parts with its own unsupported area standing for
+        the unseen truth (``estimate``); None for an open one.
     """
 
     chamfer_m: float
@@ -116,6 +118,7 @@ class Estimate:
     source: str
     measured_m: tuple[float, float, float]
     proxied_m: tuple[float, float, float]
+    closed_m: tuple | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -126,8 +129,9 @@ class Estimate:
 
     def describe(self) -> str:
         """One line: the predicted Chamfer and F-score bands."""
-        unseen = ("it is closed and stands for the truth there" if self.closed else
-                  f"{self.unseen:.0%} of the truth's proxy is")
+        unseen = f"{self.unseen:.0%} of the truth's proxy is" + (
+            "; closed, it may stand for the truth there itself, and the band spans both"
+            if self.closed else "")
         return (f"predicted without the truth ({self.source}): Chamfer {self.chamfer_m:.3g} m "
                 f"[{self.chamfer_low_m:.3g}, {self.chamfer_high_m:.3g}] ({self.measured_m[0]:.3g}"
                 f" m measured by the strikes, {self.proxied_m[0]:.3g} m stood for by a proxy), "
@@ -163,13 +167,14 @@ def _error_band(d2: np.ndarray, s2: np.ndarray, w: np.ndarray, *, heldout: bool,
             np.sqrt(max(excess + 2 * variance + 2 * se, 0.0)))
 
 
-def chamfer_band(measured: tuple[float, float, float], proxied: tuple[float, float, float]
-                 ) -> tuple[float, float]:
-    """The Chamfer band (low, high) [m] from its measured and proxied parts, each (central,
-    low, high) metres (``estimate``): the measured part's own edges widened by
-    ``MEASURED_SPREAD``, the proxied part's central value times and over ``PROXIED_SPREAD``."""
-    return (measured[1] / MEASURED_SPREAD + proxied[0] / PROXIED_SPREAD,
-            measured[2] * MEASURED_SPREAD + proxied[0] * PROXIED_SPREAD)
+def chamfer_band(*models) -> tuple[float, float]:
+    """The Chamfer band (low, high) [m] over one or more models of the truth, each its
+    measured and proxied parts, (central, low, high) metres each (``estimate``): the measured
+    part's own edges widened by ``MEASURED_SPREAD``, the proxied part's central value times and
+    over ``PROXIED_SPREAD``; the band spans every model's."""
+    low = min(m[1] / MEASURED_SPREAD + p[0] / PROXIED_SPREAD for m, p in models)
+    high = max(m[2] * MEASURED_SPREAD + p[0] * PROXIED_SPREAD for m, p in models)
+    return low, high
 
 
 def _closed(faces: np.ndarray) -> bool:
@@ -463,12 +468,13 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     passes through it); the proxy's uncarved area farther than the reach from every strike
     (fraction ``v``) stands for unseen truth, as far from the surface as the proxy is, ``H``,
     band ``H +- 2`` proxy errors. A **closed** surface closes the body where no strike is, as
-    the truth does, and across the same gaps: its own unsupported area stands for the unseen
-    truth, ``v = u`` and ``H = G`` (the proxy's uncarved area far from the strikes can be far
-    larger than the truth's: the hull across a satellite's concavity that no beam crossed,
-    the far side of a body seen from one side). What neither the hull nor the ellipsoid can
-    stand for (a crater's floor, the unseen side of a non-convex body) is outside what the
-    strikes can say. Then:
+    the truth does: its own unsupported area may stand for the unseen truth instead, ``v = u``
+    and ``H = G`` (``Estimate.closed_m``). Which stands for it better is beyond what the strikes
+    say (the hull's uncarved area is mostly air across a satellite's parts that no beam
+    crossed, and mostly body on an asteroid seen along tracks; a closed alpha shape wraps the
+    tracks alone), so the central value takes the proxy and the band spans both. What neither
+    the hull nor the ellipsoid can stand for (a crater's floor, the unseen side of a
+    non-convex body) is outside what the strikes can say. Then:
 
     - accuracy (surface to truth) = ``(1 - u) E + u G``;
     - completeness (truth to surface) = ``(1 - v) ((1 - h) E + h D) + v H``;
@@ -483,8 +489,9 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     standard errors) widened by ``MEASURED_SPREAD``, and the proxied part times and over
     ``PROXIED_SPREAD`` (the scale of a proxy's error, and how well a proxy stands for the
     truth, are known to within a factor; factors fitted on the auto suite's runs,
-    ``chamfer_band``). It is narrow where the strikes measure the surface and the truth (a
-    surface struck all over), wide where a proxy stands for much of either; a measured part
+    ``chamfer_band``), over both models of the unseen truth for a closed surface. It is narrow
+    where the strikes measure the surface and the truth (a surface struck all over), wide
+    where a proxy stands for much of either; a measured part
     below what the noise lets the strikes resolve has its low edge at 0. The band of the
     F-score takes every part at its own edge.
 
@@ -527,23 +534,32 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     error = (rms[0] * 0.5 * (1 + MEAN_OVER_RMS), rms[1] * MEAN_OVER_RMS, rms[2])
     bare = _unsupported(vertices, faces, tree, reach, Caster(truth.vertices, truth.faces), seed,
                         bounded=True, error=truth.error_at)
-    closed = _closed(faces)
-    unseen = bare if closed else _unsupported(truth.vertices, truth.faces, tree, reach, caster,
-                                              seed, bounded=False, error=truth.error_at,
-                                              carved=truth.carved)
+    unseen = _unsupported(truth.vertices, truth.faces, tree, reach, caster, seed,
+                          bounded=False, error=truth.error_at, carved=truth.carved)
     u, v = bare.share, unseen.share
-    measured = [0.5 * ((1 - u) * e + (1 - v) * ((1 - h) * e + h * hole_distance))
-                for e in error]
-    proxied = [0.5 * (u * g + v * k) for g, k in zip(bare.mean(), unseen.mean(), strict=True)]
+
+    def parts(share: float, far: _Unsupported) -> tuple[list[float], list[float]]:
+        """Measured and proxied parts (central, low, high) with ``share`` of the truth
+        unseen, as far from the surface as ``far`` says."""
+        measured = [0.5 * ((1 - u) * e + (1 - share) * ((1 - h) * e + h * hole_distance))
+                    for e in error]
+        return measured, [0.5 * (u * g + share * k)
+                          for g, k in zip(bare.mean(), far.mean(), strict=True)]
+
+    measured, proxied = parts(v, unseen)
     chamfer = measured[0] + proxied[0]
+    closed = _closed(faces)
+    alternative = parts(u, bare) if closed else None
     near = [_hit_fraction(tau, r) for r in (rms[0], rms[2], rms[1])]   # central, low, high
     precision = [(1 - u) * p + u * q for p, q in zip(near, bare.within(tau), strict=True)]
     recall = [(1 - v) * (1 - h) * p + v * q
               for p, q in zip(near, unseen.within(tau), strict=True)]
     fscore = [_f(p, r) for p, r in zip(precision, recall, strict=True)]
-    low, high = chamfer_band(measured, proxied)
+    low, high = chamfer_band((measured, proxied), *([alternative] if closed else []))
     return Estimate(chamfer_m=chamfer, chamfer_low_m=low, chamfer_high_m=high,
                     measured_m=tuple(measured), proxied_m=tuple(proxied),
+                    closed_m=None if alternative is None else
+                    tuple(tuple(x) for x in alternative),
                     fscore=fscore[0], fscore_low=fscore[1], fscore_high=fscore[2], tau_m=tau,
                     error_rms_m=float(rms[0]), unsupported=u, unseen=v, holes=h,
                     violated=float(result.violated.mean()), closed=closed, source=source)
