@@ -437,7 +437,7 @@ def estimate_all(args) -> None:
     kept its residuals), its coverage and width."""
     from scipy.stats import spearmanr
 
-    pairs, within, held, ratios, sources = [], [], 0, [], []
+    pairs, within, held, ratios, sources, inside_all = [], [], 0, [], [], []
     names = sorted(p.parent.name for p in args.suite.glob("*/results.jsonl")
                    if not args.clouds or p.parent.name in args.clouds)
     for cloud in names:
@@ -450,6 +450,8 @@ def estimate_all(args) -> None:
         keys = [k for k in runs if k in truth]
         mine = [(runs[k]["chamfer_m"], truth[k]) for k in keys]
         pairs += mine
+        inside_all += [runs[k]["chamfer_low_m"] <= truth[k] <= runs[k]["chamfer_high_m"]
+                       for k in keys]
         rho = spearmanr(*np.array(mine).T).statistic if len(mine) > 2 else float("nan")
         within.append(rho)
         e = runs.get("held-out " + key, runs.get(key))
@@ -468,7 +470,8 @@ def estimate_all(args) -> None:
     overall = spearmanr(*np.array(pairs).T).statistic
     ratio = np.array([t / p for p, t in pairs if p > 0])
     print("true / predicted Chamfer over all runs, percentiles 5, 10, 25, 50, 75, 90, 95: "
-          + ", ".join(f"{q:.3g}" for q in np.percentile(ratio, [5, 10, 25, 50, 75, 90, 95])))
+          + ", ".join(f"{q:.3g}" for q in np.percentile(ratio, [5, 10, 25, 50, 75, 90, 95]))
+          + f"; the band holds {np.mean(inside_all):.1%} of all runs")
     print(f"Spearman over {len(pairs)} runs {overall:.3f}; within a cloud median "
           f"{np.nanmedian(within):.3f}; band holds auto's choice on {held}/{len(ratios)} "
           f"({sources.count('held-out')} held-out); high/low median {np.median(ratios):.3g}, "
