@@ -121,7 +121,11 @@ class Estimate:
     closed_m: tuple | None = None
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The attributes, JSON-ready (parts as lists of floats)."""
+        def plain(value):
+            return [plain(v) for v in value] if isinstance(value, tuple) else value
+
+        return {key: plain(value) for key, value in asdict(self).items()}
 
     def contains(self, chamfer_m: float) -> bool:
         """Whether a Chamfer distance lies in the predicted band."""
