@@ -495,9 +495,9 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     truth, are known to within a factor; factors fitted on the auto suite's runs,
     ``chamfer_band``), over both models of the unseen truth for a closed surface. It is narrow
     where the strikes measure the surface and the truth (a surface struck all over), wide
-    where a proxy stands for much of either; a measured part
-    below what the noise lets the strikes resolve has its low edge at 0. The band of the
-    F-score takes every part at its own edge.
+    where a proxy stands for much of either; a measured part below what the noise lets the
+    strikes resolve has its low edge at 0. The band of the F-score takes every part at its
+    own edge.
 
     Parameters
     ----------
