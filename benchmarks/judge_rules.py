@@ -25,9 +25,12 @@ seconds instead of a suite run:
   other candidates (their consensus, everywhere and where no strike is); each is tried as the
   choice among the candidates within ``EVIDENCE_BANDS`` paired standard errors of the best,
   against the truth as ``rules``;
-- ``estimate``: ``recon.surfaces.judge.estimate`` on every compare mesh (in-sample, as the
-  suite calls it), against its true Chamfer: Spearman over all runs and within each cloud, and
-  the band's coverage and width (high / low) for each cloud's run of auto's choice.
+- ``estimate``: ``recon.surfaces.estimate.estimate`` on every compare mesh of every cloud of the
+  suite (in-sample, as the suite calls it; ``--per-cloud``: only the runs ``--labels`` names),
+  against its true Chamfer: Spearman over all runs and within each cloud, and the band's
+  coverage and width (high / low) for auto's choice in the suite, estimated as ``recon
+  reconstruct -m auto`` reports it, with the chosen candidate's held-out residuals
+  (``--heldout`` fits auto's ladder once per cloud to collect them, in ``WORK/heldout``).
 """
 
 from __future__ import annotations
@@ -378,33 +381,45 @@ def nearest_gaps(points: np.ndarray) -> np.ndarray:
     return cKDTree(points).query(points, k=2, workers=-1)[0][:, 1]
 
 
-def estimates(args, cloud: str, rows: list[dict]) -> dict[str, dict]:
-    """``judge.estimate`` of every run's mesh of ``cloud`` (cached in ``WORK/estimates``; a
-    cache is reused only for the same ``judge.py`` source but for the band's constants, which
-    do not move the central value: ``estimate_all`` applies them to it)."""
+def estimate_digest() -> str:
+    """A digest of the estimate's sources (``recon.surfaces.estimate`` and the checks of
+    ``recon.surfaces.judge`` it calls): a cached estimate is reused only under the same one."""
     import hashlib
     import inspect
 
+    from recon.surfaces import estimate, judge
+
+    source = inspect.getsource(estimate) + inspect.getsource(judge)
+    return hashlib.sha1(source.encode()).hexdigest()
+
+
+def estimates(args, cloud: str, rows: list[dict], chosen: str) -> dict[str, dict]:
+    """``recon.surfaces.estimate.estimate`` of every run's mesh of ``cloud``, in-sample, and
+    of auto's choice ``chosen`` with its held-out residuals (``heldout_of``) under the key
+    ``"held-out " + chosen``; cached in ``WORK/estimates`` under ``estimate_digest``."""
     from formats.geometry import Mesh
     from formats.mesh_io import read_mesh
-    from recon.surfaces import judge
+    from recon.surfaces import estimate
 
-    source = "".join(line for line in inspect.getsource(judge).splitlines(keepends=True)
-                     if not line.startswith("BAND_BELOW, BAND_ABOVE ="))
-    digest = hashlib.sha1(source.encode()).hexdigest()
+    digest = estimate_digest()
     path = args.work / "estimates" / f"{cloud}.json"
     cache = json.loads(path.read_text()) if path.exists() else {}
     runs = cache.get("runs", {}) if cache.get("digest") == digest else {}
     wanted = [r for r in rows if r.get("mesh")]
     if args.per_cloud:
-        wanted = [r for r in wanted if r["label"] in args.labels]
+        wanted = [r for r in wanted if r["label"] in args.labels or r["key"] == chosen]
+    heldout = heldout_of(args.work, cloud, chosen)
+    jobs = [(r["key"], r, None) for r in wanted]
+    jobs += [("held-out " + r["key"], r, heldout) for r in wanted
+             if r["key"] == chosen and heldout is not None]
     points = None
-    for r in wanted:
-        if r["key"] in runs:
+    for key, r, held in jobs:
+        if key in runs:
             continue
         points = points or load_cloud(args.suite, cloud)
         mesh = read_mesh(args.suite / cloud / r["mesh"])
-        runs[r["key"]] = judge.estimate(Mesh(mesh.vertices, mesh.faces), points).to_dict()
+        runs[key] = estimate.estimate(Mesh(mesh.vertices, mesh.faces), points,
+                                      heldout=held).to_dict()
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"digest": digest, "runs": runs}, default=float))
     return runs
@@ -418,49 +433,101 @@ def chosen_key(args, cloud: str) -> str:
                                                          suite=args.suite)
         return replay(candidates, block, coverage, tau,
                       target_of(cloud, not args.no_prior))[0].run.key
-    data = json.loads((args.suite / cloud / "auto.json").read_text())
+    return suite_choice(args.suite, cloud)
+
+
+def collect_heldout(args, cloud: str) -> None:
+    """Auto's ladder (``recon.surfaces.auto.choose``, seed 0) on ``cloud``: every fitted
+    candidate's held-out residuals, kept in ``WORK/heldout/CLOUD.npz`` and ``.json`` (once)."""
+    from recon.surfaces import auto
+
+    out = args.work / "heldout"
+    if (out / f"{cloud}.json").exists():
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    points = load_cloud(args.suite, cloud)
+    choice = auto.choose(points.points, view_points=points.view_points,
+                         uncertainty=points.attributes, seed=0, n_workers=args.workers,
+                         target_kind=target_of(cloud, not args.no_prior))
+    arrays, table = {}, []
+    for i, c in enumerate(choice.candidates):
+        table.append({"key": c.run.key, "label": c.label, "status": c.status})
+        if c.heldout is not None:
+            arrays |= {f"d{i}": c.heldout.distance, f"s{i}": c.heldout.sigma,
+                       f"b{i}": c.heldout.block}
+    np.savez_compressed(out / f"{cloud}.npz", **arrays)
+    (out / f"{cloud}.json").write_text(json.dumps({"chosen": choice.run.key,
+                                                   "candidates": table}, indent=1))
+
+
+def heldout_of(work: Path, cloud: str, key: str):
+    """The held-out residuals (``recon.surfaces.judge.HeldOut``) of the candidate ``key`` that
+    ``collect_heldout`` kept for ``cloud``, or None."""
+    from recon.surfaces.judge import HeldOut
+
+    path = work / "heldout" / f"{cloud}.json"
+    if not path.exists():
+        return None
+    table = json.loads(path.read_text())["candidates"]
+    arrays = np.load(work / "heldout" / f"{cloud}.npz")
+    i = next((i for i, c in enumerate(table) if c["key"] == key), None)
+    if i is None or f"d{i}" not in arrays:
+        return None
+    return HeldOut(arrays[f"d{i}"], arrays[f"s{i}"], arrays[f"b{i}"])
+
+
+def suite_choice(suite: Path, cloud: str) -> str:
+    """The run auto chose on ``cloud`` in the suite (``auto.json``)."""
+    data = json.loads((suite / cloud / "auto.json").read_text())
     return next(f"{c['method']} {json.dumps(c['params'], sort_keys=True)}"
                 for c in data["candidates"] if c["chosen"])
 
 
 def estimate_all(args) -> None:
+    """The estimate against the truth on every cloud of the suite (all are tuning clouds of
+    the estimate): Spearman over all runs and within each cloud; for auto's choice in the
+    suite, the band ``recon reconstruct -m auto`` reports (held-out when ``collect_heldout``
+    kept its residuals), its coverage and width."""
     from scipy.stats import spearmanr
 
-    from recon.surfaces.judge import BAND_ABOVE, BAND_BELOW
-
-    pairs, within, held, ratios = [], [], 0, []
-    names = clouds_of(args.suite, args.clouds)
+    pairs, within, held, ratios, sources, inside_all = [], [], 0, [], [], []
+    names = sorted(p.parent.name for p in args.suite.glob("*/results.jsonl")
+                   if not args.clouds or p.parent.name in args.clouds)
     for cloud in names:
         rows = records(args.suite, cloud)
-        runs = estimates(args, cloud, rows)
+        key = chosen_key(args, cloud)
+        if args.heldout:
+            collect_heldout(args, cloud)
+        runs = estimates(args, cloud, rows, key)
         truth = {r["key"]: r["chamfer_m"] for r in rows}
         keys = [k for k in runs if k in truth]
         mine = [(runs[k]["chamfer_m"], truth[k]) for k in keys]
         pairs += mine
+        inside_all += [runs[k]["chamfer_low_m"] <= truth[k] <= runs[k]["chamfer_high_m"]
+                       for k in keys]
         rho = spearmanr(*np.array(mine).T).statistic if len(mine) > 2 else float("nan")
         within.append(rho)
-        key = chosen_key(args, cloud)
-        e = runs.get(key)
-        if e is None:
+        e = runs.get("held-out " + key, runs.get(key))
+        if e is None or key not in truth:
             print(f"{cloud:30} rho {rho:5.2f} (auto's choice not estimated)")
             continue
-        low, high = BAND_BELOW * e["chamfer_m"], BAND_ABOVE * e["chamfer_m"]
+        low, high = e["chamfer_low_m"], e["chamfer_high_m"]
         inside = low <= truth[key] <= high
         ratio = high / max(low, 1e-300)
         held += inside
         ratios.append(ratio)
+        sources.append(e["source"])
         print(f"{cloud:30} rho {rho:5.2f} n {len(mine):3d} | choice {truth[key]:.4g} m: "
-              f"predicted {e['chamfer_m']:.4g} [{low:.4g}, {high:.4g}] "
-              f"{'in' if inside else 'OUT'} high/low {ratio:.3g}")
+              f"predicted {e['chamfer_m']:.4g} [{low:.4g}, {high:.4g}] ({e['source']}) "
+              f"{'in' if inside else 'OUT'} high/low {ratio:.3g}", flush=True)
     overall = spearmanr(*np.array(pairs).T).statistic
     ratio = np.array([t / p for p, t in pairs if p > 0])
     print("true / predicted Chamfer over all runs, percentiles 5, 10, 25, 50, 75, 90, 95: "
           + ", ".join(f"{q:.3g}" for q in np.percentile(ratio, [5, 10, 25, 50, 75, 90, 95]))
-          + f"; the band [{BAND_BELOW:g}, {BAND_ABOVE:g}] x predicted holds "
-          f"{np.mean((ratio >= BAND_BELOW) & (ratio <= BAND_ABOVE)):.0%} of all runs")
+          + f"; the band holds {np.mean(inside_all):.1%} of all runs")
     print(f"Spearman over {len(pairs)} runs {overall:.3f}; within a cloud median "
-          f"{np.nanmedian(within):.3f}; band holds auto's choice on {held}/{len(ratios)}; "
-          f"high/low median {np.median(ratios):.3g}, "
+          f"{np.nanmedian(within):.3f}; band holds auto's choice on {held}/{len(ratios)} "
+          f"({sources.count('held-out')} held-out); high/low median {np.median(ratios):.3g}, "
           f"{np.mean(np.array(ratios) <= 4):.0%} at most 4")
 
 
@@ -473,6 +540,9 @@ def main(argv=None) -> int:
     parser.add_argument("--holdout", type=float, default=0.25)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--force", action="store_true", help="collect again")
+    parser.add_argument("--heldout", action="store_true",
+                        help="estimate: fit auto's ladder on each cloud once (cached) for the "
+                        "held-out residuals of auto's choice")
     parser.add_argument("--per-cloud", action="store_true",
                         help="estimate: only the runs named by --labels")
     parser.add_argument("--labels", nargs="*", default=[

@@ -509,7 +509,7 @@ def auto_prediction(choice, records: list[dict], cloud, out_dir: Path) -> dict |
     compare or its mesh was not kept.
     """
     from formats.mesh_io import read_mesh
-    from recon.surfaces.judge import estimate
+    from recon.surfaces.estimate import estimate
 
     record = next((r for r in _ok(records) if r["key"] == choice.run.key and r.get("mesh")),
                   None)

@@ -201,8 +201,10 @@ def _estimate_line(estimate: dict) -> str:
             f"{estimate['chamfer_m']:.3g} m [{estimate['chamfer_low_m']:.3g}, "
             f"{estimate['chamfer_high_m']:.3g}], F-score at {estimate['tau_m']:.3g} m "
             f"{estimate['fscore']:.3f} [{estimate['fscore_low']:.3f}, "
-            f"{estimate['fscore_high']:.3f}]; {estimate['unsupported']:.0%} of the surface far "
-            f"from any strike, {estimate['holes']:.1%} of strikes in holes, "
+            f"{estimate['fscore_high']:.3f}]; {estimate['measured_m'][0]:.3g} m of the Chamfer "
+            f"measured by the strikes, {estimate['proxied_m'][0]:.3g} m stood for by a proxy "
+            f"where no strike is; {estimate['unsupported']:.0%} of the surface far from any "
+            f"strike, {estimate['holes']:.1%} of strikes in holes, "
             f"{estimate['violated']:.1%} of beams cut before their strike")
 
 

@@ -1008,7 +1008,7 @@ def reconstruct(cloud, *, method: str = "poisson", params: Mapping[str, Any] | N
     recon.surfaces.reconstruct.Surface
         A ``Mesh`` with ``method``, resolved ``params`` and run ``info``; ``info["estimate"]``
         is the truth-free predicted Chamfer distance and F-score with their band
-        (``recon.surfaces.judge.estimate``; for ``"auto"`` from the chosen candidate's held-out
+        (``recon.surfaces.estimate.estimate``; for ``"auto"`` from the chosen candidate's held-out
         passes).
     """
     return _reconstruct(cloud, output, method=method, params=params,

@@ -17,7 +17,7 @@ thread per core or on Dask (``recon.experiments.sweep``) and streams to
   per method, the Pareto front drawn and labelled;
 - ``DIR/meshes/*.ply``: the meshes (unless ``keep_meshes=False``);
 - with the strikes given (``strikes``), the truth-free prediction of every successful run
-  (``recon.surfaces.judge.estimate`` on its mesh, in-sample): ``predicted_chamfer_m``,
+  (``recon.surfaces.estimate.estimate`` on its mesh, in-sample): ``predicted_chamfer_m``,
   ``predicted_chamfer_low_m``, ``predicted_chamfer_high_m``, ``predicted_fscore`` and
   ``predicted_by`` (``ESTIMATE_VERSION``: which estimate made them, so a reader can tell a
   stale prediction from a current one);
@@ -79,17 +79,18 @@ def run_case(*, run: Run, cloud: MethodInput, truth, timeout_s: float, memory_mb
 
 
 def estimate_version() -> str:
-    """Which truth-free estimate predicts: a digest of ``recon.surfaces.judge``'s source (its
-    ``estimate`` and everything it calls), 12 hex digits."""
+    """Which truth-free estimate predicts: a digest of the sources of ``recon.surfaces.estimate``
+    and of ``recon.surfaces.judge``, whose checks it calls, 12 hex digits."""
     import inspect
 
-    from recon.surfaces import judge
+    from recon.surfaces import estimate, judge
 
-    return hashlib.sha1(inspect.getsource(judge).encode()).hexdigest()[:12]
+    source = inspect.getsource(estimate) + inspect.getsource(judge)
+    return hashlib.sha1(source.encode()).hexdigest()[:12]
 
 
 def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud) -> dict:
-    """The truth-free prediction of one surface as record columns (``recon.surfaces.judge.
+    """The truth-free prediction of one surface as record columns (``recon.surfaces.estimate.
     estimate``, in-sample: the fit saw every strike).
 
     Parameters
@@ -107,7 +108,7 @@ def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud) -
         estimate cannot judge these strikes (e.g. all in one plane), ``predicted_by`` and
         ``prediction_failed`` (why) only: the run itself stands.
     """
-    from recon.surfaces.judge import estimate
+    from recon.surfaces.estimate import estimate
 
     try:
         e = estimate((vertices, faces), strikes)

@@ -20,9 +20,9 @@ from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, waterti
 
 
 def estimate_of(surface: Mesh, cloud: Cloud, *, heldout=None, seed: int = 0):
-    """``recon.surfaces.judge.estimate`` of a surface on the (prepared) cloud it was made from:
+    """``recon.surfaces.estimate.estimate`` of a surface on the (prepared) cloud it was made from:
     its truth-free predicted Chamfer distance and F-score band."""
-    from recon.surfaces.judge import estimate
+    from recon.surfaces.estimate import estimate
 
     return estimate((surface.vertices, surface.faces), cloud, heldout=heldout, seed=seed)
 

@@ -177,7 +177,7 @@ def test_compare_records_carry_the_truth_free_prediction(tmp_path, monkeypatch):
 
     from recon import api
     from recon.experiments.compare import estimate_version
-    from recon.surfaces import judge
+    from recon.surfaces import estimate as module
     from tests.conftest import write_sphere_log
 
     seen = []
@@ -189,7 +189,7 @@ def test_compare_records_carry_the_truth_free_prediction(tmp_path, monkeypatch):
         return SimpleNamespace(chamfer_m=0.2, chamfer_low_m=0.1, chamfer_high_m=0.4,
                                fscore=0.8)
 
-    monkeypatch.setattr(judge, "estimate", estimate)
+    monkeypatch.setattr(module, "estimate", estimate)
     log = tmp_path / "log.h5"
     write_sphere_log(log)
     report = api.compare(log, truth=log, output=tmp_path / "out", methods=["plane"], n_workers=1)
