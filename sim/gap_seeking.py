@@ -49,20 +49,21 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from formats.strike_log import StrikeChunk
+from formats.strike_log.schema import Shots
 from sim.defaults import (
-    GAP_CLAIM_VOXELS,
+    GAP_BLOCK_VOXELS,
     GAP_HORIZON_INTERVALS,
     GAP_IDLE_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
+    GAP_PLAN_INTERVALS,
     GAP_REBUILD_BEAMS,
     GAP_RESIDUAL_QUANTILE,
-    GAP_URGENT_WEIGHT,
     GAP_VOXEL_FRACTION,
     GAP_VOXEL_MIN_DEG,
     GAP_VOXEL_REBUILD,
 )
-from sim.surface_map import SurfaceMap
+from sim.surface_map import SurfaceMap, pack, unpack
 
 
 def turn_from_boresight(boresight: np.ndarray) -> np.ndarray:
@@ -153,6 +154,10 @@ class GapSeeker:
         self.boresight = np.array([0.0, 0.0, 1.0])           # commanded, nominal frame
         self.map: SurfaceMap | None = None
         self._origins, self._directions, self._ranges = [], [], []
+        self._pending: list[StrikeChunk] = []                # observed since the last plan
+        self._plan_t = np.zeros(0)                           # the plan: shot times [s],
+        self._plan_b = np.zeros((0, 3))                      # boresights (nominal frame)
+        self._plan = np.zeros((0, 3, 3))                     # and attitude offsets
         self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
         self._hi = np.full(3, -np.inf)
         self.n_strikes = 0
@@ -174,9 +179,17 @@ class GapSeeker:
         return GAP_MARGIN_FRACTION * float(np.linalg.norm(self._hi - self._lo))
 
     def observe(self, chunk: StrikeChunk) -> None:
-        """Add the recorded shots and strikes of an interval (a block as
-        ``StrikeLog.iter_chunks`` yields, with all its shots) to the map."""
-        origins, directions, ranges = recorded_beams(chunk, self.beams)
+        """Take the recorded shots and strikes of an interval (a block as
+        ``StrikeLog.iter_chunks`` yields, with all its shots); they go into the map when the
+        law next plans."""
+        self._pending.append(chunk)
+
+    def _update(self) -> None:
+        """Add the intervals observed since the last plan to the map, all at once."""
+        if not self._pending:
+            return
+        origins, directions, ranges = recorded_beams(merge_chunks(self._pending), self.beams)
+        self._pending = []
         self._origins.append(origins)
         self._directions.append(directions)
         self._ranges.append(ranges)
@@ -231,7 +244,9 @@ class GapSeeker:
     # ------------------------------------------------------------------ the plan
 
     def command(self, t: np.ndarray) -> np.ndarray:
-        """Plan the next interval: the commanded boresight of each shot at times ``t`` (n,) [s].
+        """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval:
+        from the plan when it holds them, else from a new plan of ``GAP_PLAN_INTERVALS``
+        intervals like this one.
 
         Returns
         -------
@@ -240,67 +255,120 @@ class GapSeeker:
         """
         t = np.asarray(t, dtype=np.float64)
         n = len(t)
+        if not n:
+            return np.zeros((0, 3, 3))
+        at = int(np.searchsorted(self._plan_t, t[0] - 1e-6 * self.step))
+        held = self._plan_t[at:at + n]
+        if len(held) < n or not np.allclose(held, t, rtol=0.0, atol=1e-6 * self.step):
+            self._update()
+            self._plan_t, at = t[0] + self.step * np.arange(n * GAP_PLAN_INTERVALS), 0
+            self._plan_b = self._plan_boresights(self._plan_t, n)
+            self._plan = turn_from_boresight(self._plan_b)
+        self.boresight = self._plan_b[at + n - 1]
+        return self._plan[at:at + n]
+
+    def _plan_boresights(self, t: np.ndarray, size: int) -> np.ndarray:
+        """The boresight (n, 3) [nominal frame] of each shot at times ``t`` (n,) [s], intervals
+        of ``size`` shots: a sweep of the candidates predicted visible (module docstring)."""
+        n = len(t)
         out = np.empty((n, 3))
         out[:] = self.boresight
+        intervals = max(1, -(-n // max(size, 1)))
         if self.map is None:                     # nothing seen yet: nadir, or hold
-            return turn_from_boresight(out)
+            return out
         keys = self._candidates()
         if not len(keys):                        # the map is complete: hold
-            self._after_interval(False)
-            return turn_from_boresight(out)
-        aim, ok, weight = self._predict(t, keys)
-        aimed = False
-        settled = np.zeros(len(keys), dtype=bool)
+            for _ in range(intervals):
+                self._after_interval(False)
+            return out
+        keys = _spread(keys, GAP_BLOCK_VOXELS)
         centres = self.map.centres(keys)
-        reach = self.max_rate * self.step
-        claim = (GAP_CLAIM_VOXELS * self.map.size) ** 2
-        for k in range(n):
-            open_ = np.flatnonzero(ok[k] & ~settled)
-            if len(open_):
-                aimed = True
-                turn = np.arccos(np.clip(aim[k, open_] @ self.boresight, -1.0, 1.0))
-                pick = np.argmax(weight[open_] / np.maximum(turn, reach) - 1e-9 * turn)
-                if turn[pick] <= reach:
-                    self.boresight = aim[k, open_[pick]]
-                    gap = centres - centres[open_[pick]]
-                    settled |= np.einsum("ci,ci->c", gap, gap) <= claim
-                else:
-                    self.boresight = _turn_toward(self.boresight, aim[k, open_[pick]], reach)
-            out[k] = self.boresight
-        self._after_interval(aimed)
-        return turn_from_boresight(out)
-
-    def _predict(self, t: np.ndarray, keys: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Where the voxels ``keys`` (c,) lie from each shot at times ``t`` (n,) [s], and
-        which of them a beam is predicted to reach there (module docstring).
-
-        Returns
-        -------
-        aim : (n, c, 3) float64, unit vectors, nominal sensor frame: from the chaser at each
-            shot to each voxel's centre
-        ok : (n, c) bool: predicted visible at the nearest of the interval's start, middle and
-            end, and within ``max_offset`` of the nominal boresight
-        weight : (c,) float64: 1, or ``GAP_URGENT_WEIGHT`` for a voxel predicted hidden
-            ``GAP_HORIZON_INTERVALS`` intervals on
-        """
-        n = len(t)
-        centres = self.map.centres(keys)
-        horizon = t[-1] + GAP_HORIZON_INTERVALS * (t[-1] - t[0] + self.step)
-        samples = np.array(sorted({0, n // 2, n - 1}))
-        position, target, nominal = self._poses(np.append(t, horizon))
+        # Segments of half an interval, each judged from its middle shot.
+        edges = np.unique(np.append(np.arange(0, n, max(1, size // 2)), n))
+        middle = (edges[:-1] + edges[1:]) // 2
+        lookahead = t[-1] + GAP_HORIZON_INTERVALS * size * self.step
+        position, target, nominal = self._poses(np.append(t, lookahead))
         m_ib = target.as_matrix().transpose(0, 2, 1)
         chaser = np.einsum("nij,nj->ni", m_ib, position)              # B
         to_nominal = np.matmul(m_ib, nominal).transpose(0, 2, 1)       # sends B to nominal
-        at = np.append(samples, n)                                     # one cast for all
-        seen = self.map.visible(np.repeat(chaser[at], len(keys), axis=0),
-                                np.tile(centres, (len(at), 1))).reshape(len(at), len(keys))
-        weight = np.where(seen[-1], 1.0, GAP_URGENT_WEIGHT)
-        nearest = np.abs(np.arange(n)[:, None] - samples).argmin(axis=1)
-        aim = np.matmul(centres[None] - chaser[:n, None], to_nominal[:n].transpose(0, 2, 1))
-        aim /= np.sqrt(np.einsum("nci,nci->nc", aim, aim))[:, :, None]
-        ok = seen[nearest] & (aim[:, :, 2] >= math.cos(self.max_offset))
-        return aim, ok, weight
+        seen = self.map.visible(chaser[np.append(middle, n)], centres)
+        urgent = ~seen[-1]                        # hidden after the plan: take it first
+        aim = np.einsum("sij,scj->sci", to_nominal[middle], centres[None] - chaser[middle, None])
+        aim /= np.linalg.norm(aim, axis=2)[:, :, None]
+        ok = seen[:-1] & (aim[:, :, 2] >= math.cos(self.max_offset))
+        # The sweep: rows two voxels wide as seen from the chaser, alternately left and right.
+        band = GAP_BLOCK_VOXELS * self.map.size / np.linalg.norm(chaser[middle], axis=1)
+        row = np.floor(aim[:, :, 1] / band[:, None]).astype(np.int64)
+        across = np.where(row % 2 == 0, aim[:, :, 0], -aim[:, :, 0])
+        pick = np.full(n, -1)
+        used = np.zeros(len(keys), dtype=bool)
+        for s in range(len(middle)):             # a few segments; each takes its shots at once
+            open_ = np.flatnonzero(ok[s] & ~used)
+            chosen = open_[np.lexsort((across[s, open_], row[s, open_], ~urgent[open_]))]
+            chosen = chosen[:edges[s + 1] - edges[s]]
+            pick[edges[s]:edges[s] + len(chosen)] = chosen
+            used[chosen] = True
+        for first in range(0, n, max(size, 1)):
+            self._after_interval(bool((pick[first:first + size] >= 0).any()))
+        return self._steer(pick, centres, chaser[:n], to_nominal[:n])
+
+    def _steer(self, pick: np.ndarray, centres: np.ndarray, chaser: np.ndarray,
+               to_nominal: np.ndarray) -> np.ndarray:
+        """Boresights (n, 3) that aim shot ``k`` at ``centres[pick[k]]`` (hold where ``pick``
+        is -1), within ``max_offset`` of the nominal one and ``max_rate`` per step.
+
+        Parameters
+        ----------
+        pick : (n,) int: candidate of each shot, or -1
+        centres : (c, 3) float64, metres, B
+        chaser : (n, 3) float64, metres, B: the chaser at each shot
+        to_nominal : (n, 3, 3) float64: sends B vectors to the nominal sensor frame per shot
+        """
+        n = len(pick)
+        aimed = pick >= 0
+        g = np.einsum("nij,nj->ni", to_nominal[aimed], centres[pick[aimed]] - chaser[aimed])
+        g /= np.linalg.norm(g, axis=1)[:, None]
+        # Within the offset limit: a goal beyond it goes onto the cone's edge, toward it.
+        cos = math.cos(self.max_offset)
+        beyond = g[:, 2] < cos
+        side = g[beyond, :2] / np.linalg.norm(g[beyond, :2], axis=1)[:, None]
+        g[beyond] = np.column_stack([math.sin(self.max_offset) * side,
+                                     np.full(len(side), cos)])
+        goal = np.empty((n, 3))
+        goal[aimed] = g
+        # Hold the last goal where nothing is picked.
+        last = np.maximum.accumulate(np.where(aimed, np.arange(n), -1))
+        goal = np.where((last >= 0)[:, None], goal[np.maximum(last, 0)], self.boresight)
+        # Within the rate limit: turn toward a goal beyond one step's reach.
+        reach = self.max_rate * self.step
+        before = np.vstack([self.boresight, goal[:-1]])
+        turn = np.arccos(np.clip(np.einsum("ni,ni->n", goal, before), -1.0, 1.0))
+        late = np.flatnonzero(turn > reach)
+        if len(late):
+            b = goal[late[0] - 1] if late[0] else self.boresight
+            for k in range(late[0], n):          # only once a goal is out of reach
+                b = goal[k] = _turn_toward(b, goal[k], reach)
+        return goal
+
+
+def _spread(keys: np.ndarray, block: int) -> np.ndarray:
+    """The first of ``keys`` (sorted) in each cube of ``block`` voxels on a side: candidates
+    that one strike each settles, evenly over the map."""
+    cube = pack(np.floor_divide(unpack(keys), block))
+    return keys[np.sort(np.unique(cube, return_index=True)[1])]
+
+
+def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:
+    """One chunk of consecutive chunks (each with its shots, the shots following on)."""
+    if len(chunks) == 1:
+        return chunks[0]
+    shots = Shots(*(np.concatenate([getattr(c.shots, name) for c in chunks]) for name in
+                    ("time", "sensor_position", "sensor_attitude", "target_attitude")))
+    return StrikeChunk(start=chunks[0].start, shot=np.concatenate([c.shot for c in chunks]),
+                       beam=np.concatenate([c.beam for c in chunks]),
+                       range=np.concatenate([c.range for c in chunks]),
+                       direction=np.concatenate([c.direction for c in chunks]), shots=shots,
+                       shot_offset=chunks[0].shot_offset)
 
 
 def _turn_toward(b: np.ndarray, goal: np.ndarray, angle: float) -> np.ndarray:
