@@ -157,7 +157,8 @@ class GapSeeker:
         self._pending: list[StrikeChunk] = []                # observed since the last plan
         self._plan_t = np.zeros(0)                           # the plan: shot times [s],
         self._plan_b = np.zeros((0, 3))                      # boresights (nominal frame)
-        self._plan = np.zeros((0, 3, 3))                     # and attitude offsets
+        self._plan = np.zeros((0, 3, 3))                     # and attitude offsets,
+        self._aimed = np.zeros(0, dtype=bool)                # shots aimed at a candidate
         self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
         self._hi = np.full(3, -np.inf)
         self.n_strikes = 0
@@ -259,11 +260,13 @@ class GapSeeker:
             return np.zeros((0, 3, 3))
         at = int(np.searchsorted(self._plan_t, t[0] - 1e-6 * self.step))
         held = self._plan_t[at:at + n]
-        if len(held) < n or not np.allclose(held, t, rtol=0.0, atol=1e-6 * self.step):
+        if len(held) < n or not np.allclose(held, t, rtol=0.0, atol=1e-6 * self.step) \
+                or not self._aimed[at:at + n].any():
             self._update()
             self._plan_t, at = t[0] + self.step * np.arange(n * GAP_PLAN_INTERVALS), 0
-            self._plan_b = self._plan_boresights(self._plan_t, n)
+            self._plan_b, self._aimed = self._plan_boresights(self._plan_t, n)
             self._plan = turn_from_boresight(self._plan_b)
+        self._after_interval(bool(self._aimed[at:at + n].any()))
         self.boresight = self._plan_b[at + n - 1]
         return self._plan[at:at + n]
 
@@ -273,18 +276,15 @@ class GapSeeker:
         n = len(t)
         out = np.empty((n, 3))
         out[:] = self.boresight
-        intervals = max(1, -(-n // max(size, 1)))
         if self.map is None:                     # nothing seen yet: nadir, or hold
-            return out
+            return out, np.zeros(n, dtype=bool)
         keys = self._candidates()
         if not len(keys):                        # the map is complete: hold
-            for _ in range(intervals):
-                self._after_interval(False)
-            return out
+            return out, np.zeros(n, dtype=bool)
         keys = _spread(keys, GAP_BLOCK_VOXELS)
         centres = self.map.centres(keys)
-        # Segments of half an interval, each judged from its middle shot.
-        edges = np.unique(np.append(np.arange(0, n, max(1, size // 2)), n))
+        # Each interval judged from its middle shot.
+        edges = np.append(np.arange(0, n, size), n)
         middle = (edges[:-1] + edges[1:]) // 2
         lookahead = t[-1] + GAP_HORIZON_INTERVALS * size * self.step
         position, target, nominal = self._poses(np.append(t, lookahead))
@@ -308,9 +308,7 @@ class GapSeeker:
             chosen = chosen[:edges[s + 1] - edges[s]]
             pick[edges[s]:edges[s] + len(chosen)] = chosen
             used[chosen] = True
-        for first in range(0, n, max(size, 1)):
-            self._after_interval(bool((pick[first:first + size] >= 0).any()))
-        return self._steer(pick, centres, chaser[:n], to_nominal[:n])
+        return self._steer(pick, centres, chaser[:n], to_nominal[:n]), pick >= 0
 
     def _steer(self, pick: np.ndarray, centres: np.ndarray, chaser: np.ndarray,
                to_nominal: np.ndarray) -> np.ndarray:
@@ -373,10 +371,11 @@ def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:
 
 def _turn_toward(b: np.ndarray, goal: np.ndarray, angle: float) -> np.ndarray:
     """Unit vector ``b`` turned toward ``goal`` by ``angle`` [rad] in their common plane."""
-    cos = float(np.clip(b @ goal, -1.0, 1.0))
-    total = math.acos(cos)
-    if total <= angle:
+    (bx, by, bz), (gx, gy, gz) = b.tolist(), goal.tolist()      # three floats: plain Python
+    cos = min(max(bx * gx + by * gy + bz * gz, -1.0), 1.0)
+    if math.acos(cos) <= angle:
         return goal
-    side = goal - cos * b
-    side /= np.linalg.norm(side)
-    return math.cos(angle) * b + math.sin(angle) * side
+    sx, sy, sz = gx - cos * bx, gy - cos * by, gz - cos * bz
+    norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+    c, s = math.cos(angle), math.sin(angle) / norm
+    return np.array([c * bx + s * sx, c * by + s * sy, c * bz + s * sz])

@@ -23,17 +23,18 @@ them, all beams of a batch at once.
 
 The **frontier** is the unknown voxels next to (sharing a face with) an occupied voxel: where
 the seen surface continues into space no beam has examined. It is kept up to date as voxels are
-struck and crossed (a struck voxel marks its unknown neighbours; a struck or crossed voxel leaves
-the frontier), so reading it costs one pass over the grid. A thin plate seen from one side keeps
-the unknown voxels behind it, so it stays on the frontier until a beam from its other side
-strikes it; a solid body keeps its unknown interior, which :meth:`SurfaceMap.visible` predicts
-hidden once the surface around it is struck.
+struck and crossed (a struck voxel marks its unknown neighbours and adds them to a key list; a
+struck or crossed voxel leaves the frontier, and the list when it is next read). A thin plate
+seen from one side keeps the unknown voxels behind it, so it stays on the frontier until a beam
+from its other side strikes it; a solid body keeps its unknown interior, which
+:meth:`SurfaceMap.visible` predicts hidden once the surface around it is struck.
 
 :meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by a
-depth image of the occupied voxels seen from there: one pixel per voxel edge as seen at the
-nearest occupied voxel, holding the distance of the nearest occupied voxel centre that falls in
-it (a beam cast through each pixel against the map, all at once). A voxel whose pixel holds a
-centre nearer than its own by more than ``BLOCK_SLACK`` edges is behind struck surface.
+depth image of the occupied voxels seen from there: pixels of half a voxel edge as seen at the
+nearest occupied voxel, each holding the distance of the nearest occupied voxel centre that
+falls in it or next to it (a beam cast through each pixel against the map, all at once). A
+voxel whose pixel holds a centre nearer than its own by more than ``BLOCK_SLACK`` edges is
+behind struck surface.
 """
 
 from __future__ import annotations
@@ -128,6 +129,7 @@ class SurfaceMap:
         self.view = np.zeros((0, 3))                     # sum of unit vectors strike -> sensor
         self._state = np.zeros((0, 0, 0), dtype=np.uint8)   # OCCUPIED | CROSSED | FRONTIER
         self._corner = np.zeros(3, dtype=np.int64)      # voxel index of _state[0, 0, 0]
+        self._frontier = np.zeros(0, dtype=np.int64)    # sorted keys, each once a frontier
 
     def keys_of(self, points: np.ndarray) -> np.ndarray:
         """Keys (n,) of the voxels holding ``points`` (n, 3) [m, B]."""
@@ -220,8 +222,10 @@ class SurfaceMap:
         cell = self._cells(index)[0]
         state[cell] = (state[cell] | OCCUPIED) & ~FRONTIER
         around = self._cells((index[:, None, :] + FACE_STEPS[None]).reshape(-1, 3))[0]
-        unknown = around[(state[around] & (OCCUPIED | CROSSED)) == 0]
-        state[unknown] |= FRONTIER
+        fresh = np.unique(around[(state[around] & (OCCUPIED | CROSSED | FRONTIER)) == 0])
+        state[fresh] |= FRONTIER
+        fresh = self._keys_of_cells(fresh)
+        self._frontier = np.insert(self._frontier, np.searchsorted(self._frontier, fresh), fresh)
 
     def carve(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
               margin: float) -> None:
@@ -235,17 +239,22 @@ class SurfaceMap:
                     np.floor(hi / self.size).astype(np.int64))
         enter, leave = clip_to_box(origins, directions, lo, hi)
         leave = np.where(hit, np.minimum(leave, ranges - self.size), leave)
-        length = np.maximum(leave - enter, 0.0)
-        spacing = self.size / TRAVERSAL_STEP
-        samples = np.ceil(length / spacing).astype(np.int64)
-        if not samples.sum():
+        samples = np.ceil(np.maximum(leave - enter, 0.0) * (TRAVERSAL_STEP / self.size)
+                          ).astype(np.int64)
+        total = int(samples.sum())
+        if not total:
             return
+        # In grid units (voxel edges from the grid's corner), where truncation is the cell.
         ray = np.repeat(np.arange(len(origins)), samples)
         first = np.cumsum(samples) - samples
-        along = enter[ray] + (np.arange(samples.sum()) - first[ray] + 0.5) * spacing
-        points = origins[ray] + along[:, None] * directions[ray]
-        cell, inside = self._cells(np.floor(points / self.size).astype(np.int64))
-        cell = cell[inside]
+        along = (enter[ray] / self.size + (np.arange(total) - first[ray] + 0.5)
+                 / TRAVERSAL_STEP)
+        start = origins / self.size - self._corner
+        shape = self._state.shape
+        cell = np.zeros(total, dtype=np.int64)
+        for axis, stride in enumerate((shape[1] * shape[2], shape[2], 1)):
+            cell += stride * np.clip((start[ray, axis] + along * directions[ray, axis]
+                                      ).astype(np.int64), 0, shape[axis] - 1)
         state = self._state.reshape(-1)
         state[cell] = (state[cell] | CROSSED) & ~FRONTIER
 
@@ -258,7 +267,10 @@ class SurfaceMap:
 
     def frontier(self) -> np.ndarray:
         """Sorted keys (m,) of the unknown voxels sharing a face with an occupied voxel."""
-        return self._keys_of_cells(np.flatnonzero(self._state.reshape(-1) & FRONTIER))
+        if len(self._frontier):
+            cell = self._cells(unpack(self._frontier))[0]
+            self._frontier = self._frontier[(self._state.reshape(-1)[cell] & FRONTIER) > 0]
+        return self._frontier
 
     def surface_frontier(self) -> np.ndarray:
         """Sorted keys (m,) of the occupied voxels sharing a face with a frontier voxel: seen
@@ -299,33 +311,34 @@ class SurfaceMap:
         o = len(occupied)
         # Image axes per position: w toward the occupied voxels' box centre, a and b across.
         w = 0.5 * (occupied.min(axis=0) + occupied.max(axis=0)) - positions
-        w /= np.linalg.norm(w, axis=1)[:, None]
-        a = np.cross(w, np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-        a /= np.linalg.norm(a, axis=1)[:, None]
+        w /= np.sqrt((w * w).sum(axis=1))[:, None]
+        a = np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+        a -= (a * w).sum(axis=1)[:, None] * w
+        a /= np.sqrt((a * a).sum(axis=1))[:, None]
         frame = np.stack([a, np.cross(w, a), w], axis=1)                 # (p, 3, 3)
         local = np.einsum("pij,pnj->pni", frame, np.concatenate([occupied, targets])[None]
                           - positions[:, None])                           # (p, o + n, 3)
-        distance = np.linalg.norm(local, axis=2)
-        front = local[:, :, 2] > 0
+        distance = np.sqrt(np.einsum("pni,pni->pn", local, local))
+        depth = local[:, :, 2]
+        front = depth > 0
         pixel = PIXEL_EDGES * self.size / distance[:, :o].min(axis=1)    # rad per pixel
-        scale = np.where(front, local[:, :, 2], 1.0) * pixel[:, None]
+        scale = np.where(front, depth, 1.0) * pixel[:, None]
         uv = np.floor(local[:, :, :2] / scale[:, :, None]).astype(np.int64)
+        uv[~front] = 0
         # Each image spans its occupied voxels' pixels and the splat around them.
-        big = np.iinfo(np.int64).max
-        lo = np.where(front[:, :o, None], uv[:, :o], big).min(axis=1) - SPLAT
-        hi = np.where(front[:, :o, None], uv[:, :o], -big).max(axis=1) + SPLAT
-        width = np.maximum(hi - lo + 1, 1)                                # (p, 2)
-        inside = front & ((uv >= lo[:, None]) & (uv <= hi[:, None])).all(axis=2)
-        uv = np.where(inside[:, :, None], uv - lo[:, None], 0)
+        lo = uv[:, :o].min(axis=1) - SPLAT                               # (p, 2)
+        width = uv[:, :o].max(axis=1) + SPLAT + 1 - lo
+        uv -= lo[:, None]
+        inside = front & (uv >= 0).all(axis=2) & (uv < width[:, None]).all(axis=2)
         start = np.concatenate([[0], np.cumsum(width[:, 0] * width[:, 1])[:-1]])
         flat = start[:, None] + uv[:, :, 0] * width[:, 1:] + uv[:, :, 1]  # (p, o + n)
-        image = np.full(int((width[:, 0] * width[:, 1]).sum()), np.inf)
-        keep = inside[:, :o] & (uv[:, :o] >= SPLAT).all(axis=2) \
-            & (uv[:, :o] < width[:, None] - SPLAT).all(axis=2)
+        keep = front[:, :o]
         spot, near = flat[:, :o][keep], distance[:, :o][keep]
-        row_width = np.broadcast_to(width[:, 1:], keep.shape)[keep]
-        for du in range(-SPLAT, SPLAT + 1):          # the splat: a stencil, not a loop on voxels
-            for dv in range(-SPLAT, SPLAT + 1):
-                np.minimum.at(image, spot + du * row_width + dv, near)
-        nearest = np.where(inside[:, o:], image[flat[:, o:]], np.inf)
+        row = np.broadcast_to(width[:, 1:], keep.shape)[keep]
+        span = np.arange(-SPLAT, SPLAT + 1)
+        shift = (span[:, None, None] * row + span[None, :, None]).reshape(-1, len(spot))
+        image = np.full(int((width[:, 0] * width[:, 1]).sum()), np.inf)
+        np.minimum.at(image, (spot + shift).ravel(), np.tile(near, len(shift)))
+        nearest = np.where(inside[:, o:], image[np.where(inside[:, o:], flat[:, o:], 0)],
+                           np.inf)
         return nearest < distance[:, o:] - BLOCK_SLACK * self.size
