@@ -402,9 +402,10 @@ GAP_MARGIN_FRACTION = 0.25
 # key), bounding the planner's cost on large maps. A plan of GAP_PLAN_INTERVALS intervals of 30
 # shots aims at most 120 of them.
 GAP_MAX_CANDIDATES = 2048
-# The law plans this many replanning intervals at once and follows the plan; the map takes the
-# intervals' strikes when it next plans. Planning every interval cost 70-85 % of a closed-loop
-# run (docs/decisions.md).
+# The law plans (the map takes the intervals observed since; the frontier and the candidates
+# are chosen anew) at most this many replanning intervals apart, sooner when an interval could
+# not aim every shot at a candidate (sim/gap_seeking.py). Planning everything every interval cost
+# 70-85 % of a closed-loop run (docs/decisions.md).
 GAP_PLAN_INTERVALS = 4
 # A frontier voxel visible during the plan but predicted hidden this many intervals after it is
 # taken first (see it now or wait).

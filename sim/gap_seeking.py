@@ -8,7 +8,8 @@ target's spin and its own orbit.
 
 What it keeps: a voxel map in the target body frame B (sim/surface_map.py) of the voxels struck
 (occupied, with the side they were seen from) and those the beams crossed (free), from every
-recorded beam, struck or not. Its voxel edge is ``GAP_VOXEL_FRACTION`` of the target's size
+recorded beam, struck or not (:meth:`GapSeeker.observe` only keeps an interval's record; the map
+takes it when the law next plans). Its voxel edge is ``GAP_VOXEL_FRACTION`` of the target's size
 seen so far (the diagonal of the strikes' bounding box, or twice the farthest strike from the
 target's centre if more: the first strikes on a large body already tell its scale), which is
 about the coverage metric's tau, and at least ``GAP_VOXEL_MIN_DEG`` seen from the target's
@@ -16,18 +17,23 @@ range; when that edge drifts by more than ``GAP_VOXEL_REBUILD`` as the target is
 rebuilt from every beam so far.
 
 The **frontier** is the unknown voxels next to a struck one: surface continuing into space no
-beam has examined, including the far side of a thin plate seen from one side. Every interval the
-law predicts, from its orbit and the known spin, where the chaser is in B at the interval's
-start, middle and end and ``GAP_HORIZON_INTERVALS`` intervals later, and which frontier voxels a
-beam from there would reach before striking a struck voxel (Embree on a mesh of the struck
-voxels' exposed faces, :meth:`SurfaceMap.visible`; all four positions in one cast). Then, shot by
-shot, among the voxels visible at that shot and within ``attitude.max_offset_deg`` of the
-nominal boresight, it aims at the one of most value per unit slew: value 1, or
-``GAP_URGENT_WEIGHT`` when the voxel is predicted hidden at the horizon (see it now or wait),
-divided by the turn (at least one shot's reach, ``max_rate * step``, so every voxel within reach
-is equally cheap and the nearest wins). Within reach the boresight goes onto it and the voxels
-within ``GAP_CLAIM_VOXELS`` of it count as settled for the rest of the interval; beyond, the
-boresight turns toward it at the rate limit.
+beam has examined, including the far side of a thin plate seen from one side.
+
+**The plan** (:meth:`GapSeeker.command`). The law plans at most every ``GAP_PLAN_INTERVALS``
+intervals: it takes the intervals observed since into the map (all at once) and chooses the
+plan's candidates, the frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side
+(a strike is expected to settle the frontier around its aim). Every interval it then predicts,
+from its orbit and the known spin, where the chaser is in B at the interval's middle shot and
+``GAP_HORIZON_INTERVALS`` intervals after its end, and which of the candidates not yet aimed at
+a beam from there would reach before striking a struck voxel (a depth image of the map,
+:meth:`SurfaceMap.visible`). Of those visible at the middle shot and within
+``attitude.max_offset_deg`` of the nominal boresight, the interval's shots take one each: first
+those predicted hidden later (see it now or wait), then in a sweep, rows two voxels wide across
+the view, alternately left and right, so that consecutive aims lie next to each other. A shot
+whose aim is beyond one step's reach (``max_rate * step``) turns toward it at the rate limit;
+shots left over when the visible candidates run out hold the boresight, and the law plans anew
+before the next interval (its candidates are used up; the map has grown). So the map, the
+frontier and the candidates cost once per plan, the prediction and the sweep once per interval.
 
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run
@@ -155,10 +161,11 @@ class GapSeeker:
         self.map: SurfaceMap | None = None
         self._origins, self._directions, self._ranges = [], [], []
         self._pending: list[StrikeChunk] = []                # observed since the last plan
-        self._plan_t = np.zeros(0)                           # the plan: shot times [s],
-        self._plan_b = np.zeros((0, 3))                      # boresights (nominal frame)
-        self._plan = np.zeros((0, 3, 3))                     # and attitude offsets,
-        self._aimed = np.zeros(0, dtype=bool)                # shots aimed at a candidate
+        self._keys = np.zeros(0, dtype=np.int64)             # the plan's candidates,
+        self._centres = np.zeros((0, 3))                     # their centres [m, B]
+        self._used = np.zeros(0, dtype=bool)                 # and those aimed at
+        self._age = 0                                        # intervals since the plan
+        self._short = True                                   # the last interval held a shot
         self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
         self._hi = np.full(3, -np.inf)
         self.n_strikes = 0
@@ -245,9 +252,9 @@ class GapSeeker:
     # ------------------------------------------------------------------ the plan
 
     def command(self, t: np.ndarray) -> np.ndarray:
-        """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval:
-        from the plan when it holds them, else from a new plan of ``GAP_PLAN_INTERVALS``
-        intervals like this one.
+        """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
+        (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old or ran
+        short, then this interval's sweep of its candidates).
 
         Returns
         -------
@@ -255,60 +262,59 @@ class GapSeeker:
         (the attitude offset the pipeline applies).
         """
         t = np.asarray(t, dtype=np.float64)
-        n = len(t)
-        if not n:
-            return np.zeros((0, 3, 3))
-        at = int(np.searchsorted(self._plan_t, t[0] - 1e-6 * self.step))
-        held = self._plan_t[at:at + n]
-        if len(held) < n or not np.allclose(held, t, rtol=0.0, atol=1e-6 * self.step) \
-                or not self._aimed[at:at + n].any():
-            self._update()
-            self._plan_t, at = t[0] + self.step * np.arange(n * GAP_PLAN_INTERVALS), 0
-            self._plan_b, self._aimed = self._plan_boresights(self._plan_t, n)
-            self._plan = turn_from_boresight(self._plan_b)
-        self._after_interval(bool(self._aimed[at:at + n].any()))
-        self.boresight = self._plan_b[at + n - 1]
-        return self._plan[at:at + n]
+        if self._short or self._age >= GAP_PLAN_INTERVALS:
+            self._plan()
+        pick, out = np.full(len(t), -1), np.tile(self.boresight, (len(t), 1))
+        if len(self._keys) and len(t):
+            pick, out = self._sweep(t)
+            self.boresight = out[-1]
+        self._age += 1
+        self._short = bool((pick < 0).any())
+        self._after_interval(bool((pick >= 0).any()))
+        return turn_from_boresight(out)
 
-    def _plan_boresights(self, t: np.ndarray, size: int) -> np.ndarray:
-        """The boresight (n, 3) [nominal frame] of each shot at times ``t`` (n,) [s], intervals
-        of ``size`` shots: a sweep of the candidates predicted visible (module docstring)."""
+    def _plan(self) -> None:
+        """Take what was observed into the map and choose the candidates of the next
+        ``GAP_PLAN_INTERVALS`` intervals: one per cube of ``GAP_BLOCK_VOXELS`` voxels."""
+        self._update()
+        self._age = 0
+        keys = np.zeros(0, dtype=np.int64) if self.map is None else self._candidates()
+        self._keys = _spread(keys, GAP_BLOCK_VOXELS)
+        self._centres = self.map.centres(self._keys) if len(keys) else np.zeros((0, 3))
+        self._used = np.zeros(len(self._keys), dtype=bool)
+
+    def _sweep(self, t: np.ndarray) -> np.ndarray:
+        """Aim the shots at times ``t`` (n,) [s] of one interval: the plan's candidates not yet
+        aimed at, predicted visible from the interval's middle shot and within the offset
+        limit, those predicted hidden ``GAP_HORIZON_INTERVALS`` intervals on first, in a sweep.
+
+        Returns
+        -------
+        pick : (n,) int: the open candidate each shot aims at, or -1 (held)
+        boresight : (n, 3) float64, unit vectors, nominal sensor frame
+        """
         n = len(t)
-        out = np.empty((n, 3))
-        out[:] = self.boresight
-        if self.map is None:                     # nothing seen yet: nadir, or hold
-            return out, np.zeros(n, dtype=bool)
-        keys = self._candidates()
-        if not len(keys):                        # the map is complete: hold
-            return out, np.zeros(n, dtype=bool)
-        keys = _spread(keys, GAP_BLOCK_VOXELS)
-        centres = self.map.centres(keys)
-        # Each interval judged from its middle shot.
-        edges = np.append(np.arange(0, n, size), n)
-        middle = (edges[:-1] + edges[1:]) // 2
-        lookahead = t[-1] + GAP_HORIZON_INTERVALS * size * self.step
+        open_ = np.flatnonzero(~self._used)
+        centres = self._centres[open_]
+        lookahead = t[-1] + GAP_HORIZON_INTERVALS * n * self.step
         position, target, nominal = self._poses(np.append(t, lookahead))
         m_ib = target.as_matrix().transpose(0, 2, 1)
         chaser = np.einsum("nij,nj->ni", m_ib, position)              # B
         to_nominal = np.matmul(m_ib, nominal).transpose(0, 2, 1)       # sends B to nominal
-        seen = self.map.visible(chaser[np.append(middle, n)], centres)
-        urgent = ~seen[-1]                        # hidden after the plan: take it first
-        aim = np.einsum("sij,scj->sci", to_nominal[middle], centres[None] - chaser[middle, None])
-        aim /= np.linalg.norm(aim, axis=2)[:, :, None]
-        ok = seen[:-1] & (aim[:, :, 2] >= math.cos(self.max_offset))
+        middle = n // 2
+        seen = self.map.visible(chaser[[middle, n]], centres)
+        aim = (centres - chaser[middle]) @ to_nominal[middle].T
+        aim /= np.linalg.norm(aim, axis=1)[:, None]
+        ok = np.flatnonzero(seen[0] & (aim[:, 2] >= math.cos(self.max_offset)))
         # The sweep: rows two voxels wide as seen from the chaser, alternately left and right.
-        band = GAP_BLOCK_VOXELS * self.map.size / np.linalg.norm(chaser[middle], axis=1)
-        row = np.floor(aim[:, :, 1] / band[:, None]).astype(np.int64)
-        across = np.where(row % 2 == 0, aim[:, :, 0], -aim[:, :, 0])
+        band = GAP_BLOCK_VOXELS * self.map.size / np.linalg.norm(chaser[middle])
+        row = np.floor(aim[ok, 1] / band).astype(np.int64)
+        across = np.where(row % 2 == 0, aim[ok, 0], -aim[ok, 0])
+        chosen = ok[np.lexsort((across, row, seen[1, ok]))][:n]
+        self._used[open_[chosen]] = True
         pick = np.full(n, -1)
-        used = np.zeros(len(keys), dtype=bool)
-        for s in range(len(middle)):             # a few segments; each takes its shots at once
-            open_ = np.flatnonzero(ok[s] & ~used)
-            chosen = open_[np.lexsort((across[s, open_], row[s, open_], ~urgent[open_]))]
-            chosen = chosen[:edges[s + 1] - edges[s]]
-            pick[edges[s]:edges[s] + len(chosen)] = chosen
-            used[chosen] = True
-        return self._steer(pick, centres, chaser[:n], to_nominal[:n]), pick >= 0
+        pick[:len(chosen)] = chosen
+        return pick, self._steer(pick, centres, chaser[:n], to_nominal[:n])
 
     def _steer(self, pick: np.ndarray, centres: np.ndarray, chaser: np.ndarray,
                to_nominal: np.ndarray) -> np.ndarray:

@@ -157,5 +157,6 @@ def test_the_depth_image_agrees_with_beams_cast_against_the_voxels():
         agree.append([(row & reference).sum(), (row & ~reference).sum(), reference.sum()])
         np.testing.assert_array_equal(seen.visible(view, targets), row)   # one view alone
     both, only_predicted, cast = np.sum(agree, axis=0)
-    # Predicted visible: almost only what the beams reach, and most of it (measured 0.98, 0.80).
-    assert both / (both + only_predicted) > 0.95 and both / cast > 0.7, (both, only_predicted, cast)
+    # Predicted visible: mostly what the beams reach, and most of that (measured 0.90 and 0.90).
+    assert both / (both + only_predicted) > 0.85 and both / cast > 0.85, (both, only_predicted,
+                                                                           cast)
