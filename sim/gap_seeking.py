@@ -29,7 +29,8 @@ a beam from there would reach before striking a struck voxel (a depth image of t
 :meth:`SurfaceMap.visible`). Of those visible at the middle shot and within
 ``attitude.max_offset_deg`` of the nominal boresight, the interval's shots take one each: first
 those predicted hidden later (see it now or wait), then in a sweep, rows two voxels wide across
-the view, alternately left and right, so that consecutive aims lie next to each other. A shot
+the view, alternately left and right, going on from the boresight's row (the rows below it, then
+from the top), so that consecutive aims lie next to each other. A shot
 whose aim is beyond one step's reach (``max_rate * step``) turns toward it at the rate limit;
 shots left over when the visible candidates run out hold the boresight, and the law plans anew
 before the next interval (its candidates are used up; the map has grown). So the map, the
@@ -310,7 +311,9 @@ class GapSeeker:
         band = GAP_BLOCK_VOXELS * self.map.size / np.linalg.norm(chaser[middle])
         row = np.floor(aim[ok, 1] / band).astype(np.int64)
         across = np.where(row % 2 == 0, aim[ok, 0], -aim[ok, 0])
-        chosen = ok[np.lexsort((across, row, seen[1, ok]))][:n]
+        # The sweep goes on from the boresight's row: the rows below it first, then from the top.
+        later = row >= math.floor(float(self.boresight[1]) / band)
+        chosen = ok[np.lexsort((across, row, ~later, seen[1, ok]))][:n]
         self._used[open_[chosen]] = True
         pick = np.full(n, -1)
         pick[:len(chosen)] = chosen
