@@ -74,18 +74,18 @@ from sim.surface_map import SurfaceMap, pack, unpack
 
 
 def turn_from_boresight(boresight: np.ndarray) -> np.ndarray:
-    """Smallest rotations taking ``+z`` onto each unit vector of ``boresight`` (n, 3).
+    """Smallest rotations taking ``+z`` onto each unit vector of ``boresight`` (n, 3), none
+    within 90 deg of ``-z`` (Rodrigues' formula about ``z x b``: I + K + K^2 / (1 + cos)).
 
     Returns
     -------
     (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame.
     """
-    b = np.asarray(boresight, dtype=np.float64)
-    axis = np.cross([0.0, 0.0, 1.0], b)
-    sine = np.linalg.norm(axis, axis=1)
-    angle = np.arctan2(sine, b[:, 2])
-    safe = np.where(sine > 0, sine, 1.0)
-    return Rotation.from_rotvec(axis / safe[:, None] * angle[:, None]).as_matrix()
+    x, y, z = np.asarray(boresight, dtype=np.float64).reshape(-1, 3).T
+    k = 1.0 / (1.0 + z)
+    return np.stack([np.stack([1.0 - k * x * x, -k * x * y, x], axis=1),
+                     np.stack([-k * x * y, 1.0 - k * y * y, y], axis=1),
+                     np.stack([-x, -y, z], axis=1)], axis=1)
 
 
 def body_points(chunk: StrikeChunk) -> np.ndarray:
