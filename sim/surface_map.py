@@ -317,8 +317,8 @@ class SurfaceMap:
         a -= (a * w).sum(axis=1)[:, None] * w
         a /= np.sqrt((a * a).sum(axis=1))[:, None]
         frame = np.stack([a, np.cross(w, a), w], axis=1)                 # (p, 3, 3)
-        local = np.einsum("pij,pnj->pni", frame, np.concatenate([occupied, targets])[None]
-                          - positions[:, None])                           # (p, o + n, 3)
+        local = np.matmul(np.concatenate([occupied, targets])[None] - positions[:, None],
+                          frame.transpose(0, 2, 1))                       # (p, o + n, 3)
         distance = np.sqrt(np.einsum("pni,pni->pn", local, local))
         depth = local[:, :, 2]
         front = depth > 0
@@ -330,9 +330,10 @@ class SurfaceMap:
         lo = uv[:, :o].min(axis=1) - SPLAT                               # (p, 2)
         width = uv[:, :o].max(axis=1) + SPLAT + 1 - lo
         uv -= lo[:, None]
-        inside = front & (uv >= 0).all(axis=2) & (uv < width[:, None]).all(axis=2)
+        u, v = uv[:, :, 0], uv[:, :, 1]
+        inside = front & (u >= 0) & (v >= 0) & (u < width[:, :1]) & (v < width[:, 1:])
         start = np.concatenate([[0], np.cumsum(width[:, 0] * width[:, 1])[:-1]])
-        flat = start[:, None] + uv[:, :, 0] * width[:, 1:] + uv[:, :, 1]  # (p, o + n)
+        flat = start[:, None] + u * width[:, 1:] + v                       # (p, o + n)
         keep = front[:, :o]
         spot, near = flat[:, :o][keep], distance[:, :o][keep]
         row = np.broadcast_to(width[:, 1:], keep.shape)[keep]
