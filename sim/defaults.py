@@ -398,15 +398,21 @@ GAP_VOXEL_REBUILD = 1.25
 # Misses and beam paths are traversed within the occupied voxels' box grown by this fraction of
 # its diagonal: space farther from the target holds nothing to plan for.
 GAP_MARGIN_FRACTION = 0.25
-# Frontier voxels the planner weighs per interval; beyond this it takes an even subset (every
-# k-th key), bounding the planner's cost on large maps.
-GAP_MAX_CANDIDATES = 8192
-# Planning horizon in replanning intervals: a frontier voxel visible now but predicted hidden
-# this far ahead is worth GAP_URGENT_WEIGHT times one that stays visible.
+# Frontier voxels the planner weighs per plan; beyond this it takes an even subset (every k-th
+# key), bounding the planner's cost on large maps. A plan of GAP_PLAN_INTERVALS intervals of 30
+# shots aims at most 120 of them.
+GAP_MAX_CANDIDATES = 2048
+# The law plans (the map takes the intervals observed since; the frontier and the candidates
+# are chosen anew) at most this many replanning intervals apart, sooner when an interval could
+# not aim every shot at a candidate (sim/gap_seeking.py). Planning everything every interval cost
+# 70-85 % of a closed-loop run (docs/decisions.md).
+GAP_PLAN_INTERVALS = 4
+# A frontier voxel visible during the plan but predicted hidden this many intervals after it is
+# taken first (see it now or wait).
 GAP_HORIZON_INTERVALS = 3
-GAP_URGENT_WEIGHT = 2.0
-# A strike is expected to settle the frontier voxels within this many voxel edges of its aim.
-GAP_CLAIM_VOXELS = 1.5
+# One candidate per cube of this many voxels on a side: a strike is expected to settle the
+# frontier around its aim.
+GAP_BLOCK_VOXELS = 2
 # The frontier counts as exhausted after this many consecutive intervals with no frontier voxel
 # predicted visible within the offset limit. From then on the law also aims at the least-struck
 # surface voxels (strike count at most this quantile of the counts): a voxel 1.3 tau wide that
@@ -416,11 +422,6 @@ GAP_CLAIM_VOXELS = 1.5
 # instead was measured slower: docs/decisions.md.)
 GAP_IDLE_INTERVALS = 2
 GAP_RESIDUAL_QUANTILE = 0.25
-# The Embree scene of the map's faces is rebuilt only when the occupied voxels have grown by this
-# fraction since it was built; the voxels struck since go into a second, small scene rebuilt
-# every interval (sim/surface_map.py). A rebuild of the whole scene every interval cost about 60 %
-# of the planner's time.
-GAP_MESH_GROWTH = 0.1
 # A rebuilt map takes the recorded beams this many at a time (bounded memory: a miss crosses
 # a few hundred voxels).
 GAP_REBUILD_BEAMS = 4096

@@ -8,7 +8,8 @@ target's spin and its own orbit.
 
 What it keeps: a voxel map in the target body frame B (sim/surface_map.py) of the voxels struck
 (occupied, with the side they were seen from) and those the beams crossed (free), from every
-recorded beam, struck or not. Its voxel edge is ``GAP_VOXEL_FRACTION`` of the target's size
+recorded beam, struck or not (:meth:`GapSeeker.observe` only keeps an interval's record; the map
+takes it when the law next plans). Its voxel edge is ``GAP_VOXEL_FRACTION`` of the target's size
 seen so far (the diagonal of the strikes' bounding box, or twice the farthest strike from the
 target's centre if more: the first strikes on a large body already tell its scale), which is
 about the coverage metric's tau, and at least ``GAP_VOXEL_MIN_DEG`` seen from the target's
@@ -16,18 +17,24 @@ range; when that edge drifts by more than ``GAP_VOXEL_REBUILD`` as the target is
 rebuilt from every beam so far.
 
 The **frontier** is the unknown voxels next to a struck one: surface continuing into space no
-beam has examined, including the far side of a thin plate seen from one side. Every interval the
-law predicts, from its orbit and the known spin, where the chaser is in B at the interval's
-start, middle and end and ``GAP_HORIZON_INTERVALS`` intervals later, and which frontier voxels a
-beam from there would reach before striking a struck voxel (Embree on a mesh of the struck
-voxels' exposed faces, :meth:`SurfaceMap.visible`; all four positions in one cast). Then, shot by
-shot, among the voxels visible at that shot and within ``attitude.max_offset_deg`` of the
-nominal boresight, it aims at the one of most value per unit slew: value 1, or
-``GAP_URGENT_WEIGHT`` when the voxel is predicted hidden at the horizon (see it now or wait),
-divided by the turn (at least one shot's reach, ``max_rate * step``, so every voxel within reach
-is equally cheap and the nearest wins). Within reach the boresight goes onto it and the voxels
-within ``GAP_CLAIM_VOXELS`` of it count as settled for the rest of the interval; beyond, the
-boresight turns toward it at the rate limit.
+beam has examined, including the far side of a thin plate seen from one side.
+
+**The plan** (:meth:`GapSeeker.command`). The law plans at most every ``GAP_PLAN_INTERVALS``
+intervals: it takes the intervals observed since into the map (all at once) and chooses the
+plan's candidates, the frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side
+(a strike is expected to settle the frontier around its aim). Every interval it then predicts,
+from its orbit and the known spin, where the chaser is in B at the interval's middle shot and
+``GAP_HORIZON_INTERVALS`` intervals after its end, and which of the candidates not yet aimed at
+a beam from there would reach before striking a struck voxel (a depth image of the map,
+:meth:`SurfaceMap.visible`). Of those visible at the middle shot and within
+``attitude.max_offset_deg`` of the nominal boresight, the interval's shots take one each: first
+those predicted hidden later (see it now or wait), then in a sweep, rows two voxels wide across
+the view, alternately left and right, going on from the boresight's row (the rows below it, then
+from the top), so that consecutive aims lie next to each other. A shot
+whose aim is beyond one step's reach (``max_rate * step``) turns toward it at the rate limit;
+shots left over when the visible candidates run out hold the boresight, and the law plans anew
+before the next interval (its candidates are used up; the map has grown). So the map, the
+frontier and the candidates cost once per plan, the prediction and the sweep once per interval.
 
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run
@@ -49,35 +56,36 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from formats.strike_log import StrikeChunk
+from formats.strike_log.schema import Shots
 from sim.defaults import (
-    GAP_CLAIM_VOXELS,
+    GAP_BLOCK_VOXELS,
     GAP_HORIZON_INTERVALS,
     GAP_IDLE_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
+    GAP_PLAN_INTERVALS,
     GAP_REBUILD_BEAMS,
     GAP_RESIDUAL_QUANTILE,
-    GAP_URGENT_WEIGHT,
     GAP_VOXEL_FRACTION,
     GAP_VOXEL_MIN_DEG,
     GAP_VOXEL_REBUILD,
 )
-from sim.surface_map import SurfaceMap
+from sim.surface_map import SurfaceMap, pack, unpack
 
 
 def turn_from_boresight(boresight: np.ndarray) -> np.ndarray:
-    """Smallest rotations taking ``+z`` onto each unit vector of ``boresight`` (n, 3).
+    """Smallest rotations taking ``+z`` onto each unit vector of ``boresight`` (n, 3), none
+    within 90 deg of ``-z`` (Rodrigues' formula about ``z x b``: I + K + K^2 / (1 + cos)).
 
     Returns
     -------
     (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame.
     """
-    b = np.asarray(boresight, dtype=np.float64)
-    axis = np.cross([0.0, 0.0, 1.0], b)
-    sine = np.linalg.norm(axis, axis=1)
-    angle = np.arctan2(sine, b[:, 2])
-    safe = np.where(sine > 0, sine, 1.0)
-    return Rotation.from_rotvec(axis / safe[:, None] * angle[:, None]).as_matrix()
+    x, y, z = np.asarray(boresight, dtype=np.float64).reshape(-1, 3).T
+    k = 1.0 / (1.0 + z)
+    return np.stack([np.stack([1.0 - k * x * x, -k * x * y, x], axis=1),
+                     np.stack([-k * x * y, 1.0 - k * y * y, y], axis=1),
+                     np.stack([-x, -y, z], axis=1)], axis=1)
 
 
 def body_points(chunk: StrikeChunk) -> np.ndarray:
@@ -153,6 +161,12 @@ class GapSeeker:
         self.boresight = np.array([0.0, 0.0, 1.0])           # commanded, nominal frame
         self.map: SurfaceMap | None = None
         self._origins, self._directions, self._ranges = [], [], []
+        self._pending: list[StrikeChunk] = []                # observed since the last plan
+        self._keys = np.zeros(0, dtype=np.int64)             # the plan's candidates,
+        self._centres = np.zeros((0, 3))                     # their centres [m, B]
+        self._used = np.zeros(0, dtype=bool)                 # and those aimed at
+        self._age = 0                                        # intervals since the plan
+        self._short = True                                   # the last interval held a shot
         self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
         self._hi = np.full(3, -np.inf)
         self.n_strikes = 0
@@ -174,9 +188,17 @@ class GapSeeker:
         return GAP_MARGIN_FRACTION * float(np.linalg.norm(self._hi - self._lo))
 
     def observe(self, chunk: StrikeChunk) -> None:
-        """Add the recorded shots and strikes of an interval (a block as
-        ``StrikeLog.iter_chunks`` yields, with all its shots) to the map."""
-        origins, directions, ranges = recorded_beams(chunk, self.beams)
+        """Take the recorded shots and strikes of an interval (a block as
+        ``StrikeLog.iter_chunks`` yields, with all its shots); they go into the map when the
+        law next plans."""
+        self._pending.append(chunk)
+
+    def _update(self) -> None:
+        """Add the intervals observed since the last plan to the map, all at once."""
+        if not self._pending:
+            return
+        origins, directions, ranges = recorded_beams(merge_chunks(self._pending), self.beams)
+        self._pending = []
         self._origins.append(origins)
         self._directions.append(directions)
         self._ranges.append(ranges)
@@ -231,7 +253,9 @@ class GapSeeker:
     # ------------------------------------------------------------------ the plan
 
     def command(self, t: np.ndarray) -> np.ndarray:
-        """Plan the next interval: the commanded boresight of each shot at times ``t`` (n,) [s].
+        """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
+        (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old or ran
+        short, then this interval's sweep of its candidates).
 
         Returns
         -------
@@ -239,76 +263,128 @@ class GapSeeker:
         (the attitude offset the pipeline applies).
         """
         t = np.asarray(t, dtype=np.float64)
-        n = len(t)
-        out = np.empty((n, 3))
-        out[:] = self.boresight
-        if self.map is None:                     # nothing seen yet: nadir, or hold
-            return turn_from_boresight(out)
-        keys = self._candidates()
-        if not len(keys):                        # the map is complete: hold
-            self._after_interval(False)
-            return turn_from_boresight(out)
-        aim, ok, weight = self._predict(t, keys)
-        aimed = False
-        settled = np.zeros(len(keys), dtype=bool)
-        centres = self.map.centres(keys)
-        reach = self.max_rate * self.step
-        claim = (GAP_CLAIM_VOXELS * self.map.size) ** 2
-        for k in range(n):
-            open_ = np.flatnonzero(ok[k] & ~settled)
-            if len(open_):
-                aimed = True
-                turn = np.arccos(np.clip(aim[k, open_] @ self.boresight, -1.0, 1.0))
-                pick = np.argmax(weight[open_] / np.maximum(turn, reach) - 1e-9 * turn)
-                if turn[pick] <= reach:
-                    self.boresight = aim[k, open_[pick]]
-                    gap = centres - centres[open_[pick]]
-                    settled |= np.einsum("ci,ci->c", gap, gap) <= claim
-                else:
-                    self.boresight = _turn_toward(self.boresight, aim[k, open_[pick]], reach)
-            out[k] = self.boresight
-        self._after_interval(aimed)
+        if self._short or self._age >= GAP_PLAN_INTERVALS:
+            self._plan()
+        pick, out = np.full(len(t), -1), np.tile(self.boresight, (len(t), 1))
+        if len(self._keys) and len(t):
+            pick, out = self._sweep(t)
+            self.boresight = out[-1]
+        self._age += 1
+        self._short = bool((pick < 0).any())
+        self._after_interval(bool((pick >= 0).any()))
         return turn_from_boresight(out)
 
-    def _predict(self, t: np.ndarray, keys: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Where the voxels ``keys`` (c,) lie from each shot at times ``t`` (n,) [s], and
-        which of them a beam is predicted to reach there (module docstring).
+    def _plan(self) -> None:
+        """Take what was observed into the map and choose the candidates of the next
+        ``GAP_PLAN_INTERVALS`` intervals: one per cube of ``GAP_BLOCK_VOXELS`` voxels."""
+        self._update()
+        self._age = 0
+        keys = np.zeros(0, dtype=np.int64) if self.map is None else self._candidates()
+        self._keys = _spread(keys, GAP_BLOCK_VOXELS)
+        self._centres = self.map.centres(self._keys) if len(keys) else np.zeros((0, 3))
+        self._used = np.zeros(len(self._keys), dtype=bool)
+
+    def _sweep(self, t: np.ndarray) -> np.ndarray:
+        """Aim the shots at times ``t`` (n,) [s] of one interval: the plan's candidates not yet
+        aimed at, predicted visible from the interval's middle shot and within the offset
+        limit, those predicted hidden ``GAP_HORIZON_INTERVALS`` intervals on first, in a sweep.
 
         Returns
         -------
-        aim : (n, c, 3) float64, unit vectors, nominal sensor frame: from the chaser at each
-            shot to each voxel's centre
-        ok : (n, c) bool: predicted visible at the nearest of the interval's start, middle and
-            end, and within ``max_offset`` of the nominal boresight
-        weight : (c,) float64: 1, or ``GAP_URGENT_WEIGHT`` for a voxel predicted hidden
-            ``GAP_HORIZON_INTERVALS`` intervals on
+        pick : (n,) int: the open candidate each shot aims at, or -1 (held)
+        boresight : (n, 3) float64, unit vectors, nominal sensor frame
         """
         n = len(t)
-        centres = self.map.centres(keys)
-        horizon = t[-1] + GAP_HORIZON_INTERVALS * (t[-1] - t[0] + self.step)
-        samples = np.array(sorted({0, n // 2, n - 1}))
-        position, target, nominal = self._poses(np.append(t, horizon))
+        open_ = np.flatnonzero(~self._used)
+        centres = self._centres[open_]
+        lookahead = t[-1] + GAP_HORIZON_INTERVALS * n * self.step
+        position, target, nominal = self._poses(np.append(t, lookahead))
         m_ib = target.as_matrix().transpose(0, 2, 1)
         chaser = np.einsum("nij,nj->ni", m_ib, position)              # B
         to_nominal = np.matmul(m_ib, nominal).transpose(0, 2, 1)       # sends B to nominal
-        at = np.append(samples, n)                                     # one cast for all
-        seen = self.map.visible(np.repeat(chaser[at], len(keys), axis=0),
-                                np.tile(centres, (len(at), 1))).reshape(len(at), len(keys))
-        weight = np.where(seen[-1], 1.0, GAP_URGENT_WEIGHT)
-        nearest = np.abs(np.arange(n)[:, None] - samples).argmin(axis=1)
-        aim = np.matmul(centres[None] - chaser[:n, None], to_nominal[:n].transpose(0, 2, 1))
-        aim /= np.sqrt(np.einsum("nci,nci->nc", aim, aim))[:, :, None]
-        ok = seen[nearest] & (aim[:, :, 2] >= math.cos(self.max_offset))
-        return aim, ok, weight
+        middle = n // 2
+        seen = self.map.visible(chaser[[middle, n]], centres)
+        aim = (centres - chaser[middle]) @ to_nominal[middle].T
+        aim /= np.linalg.norm(aim, axis=1)[:, None]
+        ok = np.flatnonzero(seen[0] & (aim[:, 2] >= math.cos(self.max_offset)))
+        # The sweep: rows two voxels wide as seen from the chaser, alternately left and right.
+        band = GAP_BLOCK_VOXELS * self.map.size / np.linalg.norm(chaser[middle])
+        row = np.floor(aim[ok, 1] / band).astype(np.int64)
+        across = np.where(row % 2 == 0, aim[ok, 0], -aim[ok, 0])
+        # The sweep goes on from the boresight's row: the rows below it first, then from the top.
+        later = row >= math.floor(float(self.boresight[1]) / band)
+        chosen = ok[np.lexsort((across, row, ~later, seen[1, ok]))][:n]
+        self._used[open_[chosen]] = True
+        pick = np.full(n, -1)
+        pick[:len(chosen)] = chosen
+        return pick, self._steer(pick, centres, chaser[:n], to_nominal[:n])
+
+    def _steer(self, pick: np.ndarray, centres: np.ndarray, chaser: np.ndarray,
+               to_nominal: np.ndarray) -> np.ndarray:
+        """Boresights (n, 3) that aim shot ``k`` at ``centres[pick[k]]`` (hold where ``pick``
+        is -1), within ``max_offset`` of the nominal one and ``max_rate`` per step.
+
+        Parameters
+        ----------
+        pick : (n,) int: candidate of each shot, or -1
+        centres : (c, 3) float64, metres, B
+        chaser : (n, 3) float64, metres, B: the chaser at each shot
+        to_nominal : (n, 3, 3) float64: sends B vectors to the nominal sensor frame per shot
+        """
+        n = len(pick)
+        aimed = pick >= 0
+        g = np.einsum("nij,nj->ni", to_nominal[aimed], centres[pick[aimed]] - chaser[aimed])
+        g /= np.linalg.norm(g, axis=1)[:, None]
+        # Within the offset limit: a goal beyond it goes onto the cone's edge, toward it.
+        cos = math.cos(self.max_offset)
+        beyond = g[:, 2] < cos
+        side = g[beyond, :2] / np.linalg.norm(g[beyond, :2], axis=1)[:, None]
+        g[beyond] = np.column_stack([math.sin(self.max_offset) * side,
+                                     np.full(len(side), cos)])
+        goal = np.empty((n, 3))
+        goal[aimed] = g
+        # Hold the last goal where nothing is picked.
+        last = np.maximum.accumulate(np.where(aimed, np.arange(n), -1))
+        goal = np.where((last >= 0)[:, None], goal[np.maximum(last, 0)], self.boresight)
+        # Within the rate limit: turn toward a goal beyond one step's reach.
+        reach = self.max_rate * self.step
+        before = np.vstack([self.boresight, goal[:-1]])
+        turn = np.arccos(np.clip(np.einsum("ni,ni->n", goal, before), -1.0, 1.0))
+        late = np.flatnonzero(turn > reach)
+        if len(late):
+            b = goal[late[0] - 1] if late[0] else self.boresight
+            for k in range(late[0], n):          # only once a goal is out of reach
+                b = goal[k] = _turn_toward(b, goal[k], reach)
+        return goal
+
+
+def _spread(keys: np.ndarray, block: int) -> np.ndarray:
+    """The first of ``keys`` (sorted) in each cube of ``block`` voxels on a side: candidates
+    that one strike each settles, evenly over the map."""
+    cube = pack(np.floor_divide(unpack(keys), block))
+    return keys[np.sort(np.unique(cube, return_index=True)[1])]
+
+
+def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:
+    """One chunk of consecutive chunks (each with its shots, the shots following on)."""
+    if len(chunks) == 1:
+        return chunks[0]
+    shots = Shots(*(np.concatenate([getattr(c.shots, name) for c in chunks]) for name in
+                    ("time", "sensor_position", "sensor_attitude", "target_attitude")))
+    return StrikeChunk(start=chunks[0].start, shot=np.concatenate([c.shot for c in chunks]),
+                       beam=np.concatenate([c.beam for c in chunks]),
+                       range=np.concatenate([c.range for c in chunks]),
+                       direction=np.concatenate([c.direction for c in chunks]), shots=shots,
+                       shot_offset=chunks[0].shot_offset)
 
 
 def _turn_toward(b: np.ndarray, goal: np.ndarray, angle: float) -> np.ndarray:
     """Unit vector ``b`` turned toward ``goal`` by ``angle`` [rad] in their common plane."""
-    cos = float(np.clip(b @ goal, -1.0, 1.0))
-    total = math.acos(cos)
-    if total <= angle:
+    (bx, by, bz), (gx, gy, gz) = b.tolist(), goal.tolist()      # three floats: plain Python
+    cos = min(max(bx * gx + by * gy + bz * gz, -1.0), 1.0)
+    if math.acos(cos) <= angle:
         return goal
-    side = goal - cos * b
-    side /= np.linalg.norm(side)
-    return math.cos(angle) * b + math.sin(angle) * side
+    sx, sy, sz = gx - cos * bx, gy - cos * by, gz - cos * bz
+    norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+    c, s = math.cos(angle), math.sin(angle) / norm
+    return np.array([c * bx + s * sx, c * by + s * sy, c * bz + s * sz])
