@@ -54,12 +54,20 @@ def test_hours_to_a_level_interpolates_and_the_verdict_follows_the_target():
         (30.0, 0.97, 0.99)]
     result = closed_loop._claim_target(records, "asteroid-60", 1.0)
     assert result["verdict"] == "not reproduced" and "below it at 30 h" in result["ours"]
-    # Never 95 %, but never below the slew either: partly, and the ceiling is stated.
+    # A ceiling below 95 %: the claim times 95 % of the ceiling (88.7 %) and says so; 1.5x
+    # sooner and never below: partly.
     records["asteroid-60 gaps"] = _record([10, 20, 30], [0.5, 0.92, 0.93], [100, 200, 300])
     records["asteroid-60 slew-5"] = _record([10, 30], [0.5, 0.92], [10, 20], law="slew-5")
     result = closed_loop._claim_target(records, "asteroid-60", 0.934)
+    assert "88.7% coverage (95% of 0.934, the most any law can reach here)" in result["claim"]
+    assert result["ours"].startswith("88.7% after 19.2 h (gap-seeking) against 28.4 h")
+    assert result["verdict"] == "partly"
+    # Not even that level, but never below the slew: partly, and the ceiling is stated.
+    records["asteroid-60 gaps"] = _record([10, 20, 30], [0.5, 0.85, 0.88], [100, 200, 300])
+    records["asteroid-60 slew-5"] = _record([10, 30], [0.5, 0.87], [10, 20], law="slew-5")
+    result = closed_loop._claim_target(records, "asteroid-60", 0.934)
     assert result["verdict"] == "partly" and "any law can reach here is 0.934" in result["ours"]
-    assert "above what any law can reach" in result["rule"]
+    assert "never reached 88.7%" in result["rule"]
     # A run that ends before 24 h cannot tell: not tested.
     records["asteroid-60 gaps"] = _record([4, 8], [0.5, 0.7], [100, 200])
     assert closed_loop._claim_target(records, "asteroid-60", 1.0)["verdict"] == "not tested"
