@@ -418,8 +418,9 @@ def estimates(args, cloud: str, rows: list[dict], chosen: str) -> dict[str, dict
             continue
         points = points or load_cloud(args.suite, cloud)
         mesh = read_mesh(args.suite / cloud / r["mesh"])
+        kind = "unknown" if held is None else target_of(cloud, not args.no_prior)
         runs[key] = estimate.estimate(Mesh(mesh.vertices, mesh.faces), points,
-                                      heldout=held).to_dict()
+                                      heldout=held, target_kind=kind).to_dict()
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"digest": digest, "runs": runs}, default=float))
     return runs

@@ -516,7 +516,8 @@ def auto_prediction(choice, records: list[dict], cloud, out_dir: Path) -> dict |
     if record is None:
         return None
     mesh = read_mesh(out_dir / record["mesh"])
-    e = estimate((mesh.vertices, mesh.faces), cloud, heldout=choice.chosen.heldout)
+    e = estimate((mesh.vertices, mesh.faces), cloud, heldout=choice.chosen.heldout,
+                 target_kind=choice.target_kind)
     return {"chamfer_m": e.chamfer_m, "lo_m": e.chamfer_low_m, "hi_m": e.chamfer_high_m,
             "source": e.source}
 

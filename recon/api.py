@@ -1095,7 +1095,7 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
         surface.frame = cloud.frame  # so that scoring against a truth in another frame is refused
         surface.info["estimate"] = estimate_of(
             surface, cloud, heldout=None if choice is None else choice.chosen.heldout,
-            seed=preparation.seed).to_dict()
+            seed=preparation.seed, target_kind=target_kind).to_dict()
         if choice is not None:
             surface.info["auto"] = choice.to_dict()
         named = isinstance(source, str | os.PathLike)

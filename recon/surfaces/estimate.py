@@ -218,6 +218,8 @@ class Proxy:
         Its held-out chi-square per strike over the folds (the lower of the two won).
     error_m : float, metres
         Its RMS error on the held-out passes, the residuals deconvolved by the recorded noise.
+    mean_m : float, metres
+        Mean distance of the held-out strikes to it, each capped at its tolerance.
     gap_m : float, metres
         Median distance of a held-out strike to the nearest training strike: the gap across
         which ``error_m`` was measured.
@@ -234,6 +236,7 @@ class Proxy:
     name: str
     chi2: float
     error_m: float
+    mean_m: float
     gap_m: float
     growth: float
     carved: np.ndarray
@@ -289,13 +292,18 @@ def _growth(distance: np.ndarray, gap: np.ndarray) -> float:
 _PROXIES: dict[str, Proxy] = {}
 
 
-def proxy(cloud: Cloud, strikes: Strikes, *, tau: float, noise: float) -> Proxy:
+def proxy(cloud: Cloud, strikes: Strikes, *, tau: float, noise: float,
+          target_kind: str = "unknown") -> Proxy:
     """The convex hull of the strikes or their least-squares ellipsoid, whichever predicts
     held-out passes better (``PROXY_FOLDS`` folds of ``pass_folds``, chi-square per strike),
     fitted on all strikes; the ellipsoid only when its held-out error is within ``PROXY_FIT``
-    tau."""
+    tau. For a target stated ``"natural"`` (an asteroid, a comet: ``recon.surfaces.auto``'s
+    ``target_kind``) the ellipsoid is what the caller says the unseen far side is like: it
+    stands for the truth whenever its mean capped held-out distance is within
+    ``auto.NATURAL_FIT`` tau, the tolerance under which auto's natural-body prior takes it."""
     from scipy.spatial import cKDTree
 
+    from recon.surfaces.auto import NATURAL_FIT
     from recon.surfaces.methods import MethodFailed
 
     folds = pass_folds(cloud, PROXY_FOLDS, noise=noise)
@@ -318,8 +326,12 @@ def proxy(cloud: Cloud, strikes: Strikes, *, tau: float, noise: float) -> Proxy:
         gap = np.concatenate(gaps)
         distance = np.concatenate([np.minimum(c.distance, c.tolerance) for c in checks])
         scored.append(Proxy(*whole, name, float(np.mean(cost)),
-                            float(np.sqrt(max(np.mean(excess), 0.0))), float(np.median(gap)),
-                            _growth(distance, gap), carved))
+                            float(np.sqrt(max(np.mean(excess), 0.0))), float(np.mean(distance)),
+                            float(np.median(gap)), _growth(distance, gap), carved))
+    ellipsoid = next((p for p in scored if p.name == "ellipsoid"), None)
+    if (target_kind == "natural" and ellipsoid is not None
+            and ellipsoid.mean_m <= NATURAL_FIT * tau):
+        return ellipsoid
     trusted = [p for p in scored if p.name == "convex hull" or p.error_m <= PROXY_FIT * tau]
     return min(trusted, key=lambda p: p.chi2)
 
@@ -340,10 +352,10 @@ class _Context:
     proxy: Proxy
 
 
-_CONTEXTS: dict[tuple[str, int], _Context] = {}
+_CONTEXTS: dict[tuple[str, int, str], _Context] = {}
 
 
-def _context(cloud: Cloud, seed: int) -> _Context:
+def _context(cloud: Cloud, seed: int, target_kind: str) -> _Context:
     """The cloud's ``_Context``, kept for the last ``CONTEXT_CACHE`` clouds judged: every
     surface of one cloud shares it (the proxy and the area weights cost most of an estimate)."""
     from scipy.spatial import cKDTree
@@ -353,7 +365,7 @@ def _context(cloud: Cloud, seed: int) -> _Context:
     for name in sorted(cloud.attributes):   # view points, error model, shots: all of it
         digest.update(name.encode())
         digest.update(np.ascontiguousarray(cloud.attributes[name]).tobytes())
-    key = (digest.hexdigest(), seed)
+    key = (digest.hexdigest(), seed, target_kind)
     if key in _CONTEXTS:
         return _CONTEXTS[key]
     tau = tau_of(strikes.points)
@@ -369,7 +381,7 @@ def _context(cloud: Cloud, seed: int) -> _Context:
     checked = strikes.take(subsample(len(strikes), MAX_CHECKED, seed))
     context = _Context(strikes, tau, tree, noise, reach, checked,
                        _area_weights(checked.points, reach),
-                       proxy(cloud, strikes, tau=tau, noise=noise))
+                       proxy(cloud, strikes, tau=tau, noise=noise, target_kind=target_kind))
     if len(_CONTEXTS) >= CONTEXT_CACHE:
         _CONTEXTS.pop(next(iter(_CONTEXTS)))
     _CONTEXTS[key] = context
@@ -431,8 +443,8 @@ def _unsupported(vertices, faces, tree, reach: float, other: Caster, seed: int, 
     return _Unsupported(float(far.mean()), gap, rho[far], error(rho[far]), bounded)
 
 
-def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int = 0
-             ) -> Estimate:
+def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int = 0,
+             target_kind: str = "unknown") -> Estimate:
     """Predict a surface's Chamfer distance and F-score against the unknown truth.
 
     **Where there are strikes** they are noisy samples of the truth, and the recorded error
@@ -508,13 +520,16 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     heldout : HeldOut, optional
         Residuals of held-out strikes of the same method's fit (``recon.surfaces.auto``).
     seed : int
+    target_kind : {"unknown", "natural"}
+        What the caller states of the target (``recon.surfaces.auto.TARGET_KINDS``): for a
+        natural body the ellipsoid stands for the unseen truth where it fits (``proxy``).
 
     Returns
     -------
     Estimate
     """
     vertices, faces = (np.asarray(a) for a in surface)
-    context = _context(cloud, seed)
+    context = _context(cloud, seed, target_kind)
     tau, tree, reach, truth = context.tau, context.tree, context.reach, context.proxy
     caster = Caster(vertices, faces)
     result = check(context.checked, caster, tau=tau, noise=context.noise)

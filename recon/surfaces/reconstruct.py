@@ -19,12 +19,14 @@ from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_i
 from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, watertight
 
 
-def estimate_of(surface: Mesh, cloud: Cloud, *, heldout=None, seed: int = 0):
+def estimate_of(surface: Mesh, cloud: Cloud, *, heldout=None, seed: int = 0,
+                target_kind: str = "unknown"):
     """``recon.surfaces.estimate.estimate`` of a surface on the (prepared) cloud it was made from:
     its truth-free predicted Chamfer distance and F-score band."""
     from recon.surfaces.estimate import estimate
 
-    return estimate((surface.vertices, surface.faces), cloud, heldout=heldout, seed=seed)
+    return estimate((surface.vertices, surface.faces), cloud, heldout=heldout, seed=seed,
+                    target_kind=target_kind)
 
 
 class Surface(Mesh):

@@ -147,3 +147,20 @@ def test_one_cloud_context_per_cloud_not_per_points():
                       | columns)
         predicted.append(estimate((vertices, faces), cloud))
     assert predicted[0].chamfer_m != predicted[1].chamfer_m
+
+
+@pytest.mark.parametrize(("bumps", "natural_proxy"), [(0.01, "ellipsoid"), (0.05, "convex hull")])
+def test_a_natural_target_has_the_ellipsoid_stand_for_its_unseen_side_where_it_fits(
+        bumps, natural_proxy):
+    # Two belts over a bumpy ellipsoid: told nothing, the hull predicts the held-out passes
+    # better and stands for the unseen; told the body is natural, the ellipsoid does, as long
+    # as it fits where the strikes are (1 % bumps), not when it does not (5 %).
+    from tests.recon.surfaces.test_auto_prior import bumpy_body
+
+    points, view = bumpy_body(2000, width=0.12, bumps=bumps)
+    cloud = _cloud(points, view)
+    strikes = judge.Strikes.of(cloud)
+    tau, noise = judge.tau_of(points), 0.004   # bumpy_body's noise: no error model recorded
+    assert proxy(cloud, strikes, tau=tau, noise=noise).name == "convex hull"
+    assert proxy(cloud, strikes, tau=tau, noise=noise,
+                 target_kind="natural").name == natural_proxy
