@@ -128,3 +128,22 @@ EDGE_HALO_RADII = 2.0
 # kept and sorted once a bin holds at most this many (8 MB of float64 each); larger bins are
 # split by a further pass (metrics.score._RankFinder).
 QUANTILE_KEEP = 1 << 20
+
+# --------------------------------------------------------------------------- precision
+
+# What a score states when the caller gives no sample count (``metrics.precision``): the
+# Chamfer distance's standard error at most 1 % of it, the F-score's, the coverage's and the
+# edge score's at most 0.005. 1 % of a Chamfer distance is far below the differences the
+# comparisons rank (methods differ by tens of per cent); 0.005 on F is the third decimal's
+# half. The counts follow from a pilot: on the demo asteroid's Poisson surface ~1e4 per side
+# instead of the 2e5 of TRUTH_SAMPLES and TEST_MESH_SAMPLES.
+PRECISION = 0.01
+# Pilot samples per side, from which the spreads are estimated before the counts are sized;
+# also the least a score to a precision scores.
+PILOT_SAMPLES = 1 << 14
+# Rounds of "size from what is scored, score the rest": the second corrects a pilot whose
+# spread was underestimated (long tails).
+PRECISION_ROUNDS = 3
+# Most samples per side a score to a precision takes (and most points of a cloud it keeps for
+# its accuracy sample); beyond it, the achieved standard error is reported as it is.
+MAX_SAMPLES = 1 << 20
