@@ -89,7 +89,14 @@ import numpy as np
 from formats.errors import InputError
 from metrics import defaults
 from metrics.inputs import Mesh, as_mesh, as_points, bbox_diagonal, face_normals
-from metrics.precision import EDGE_SALT, point_keys, proportion_se
+from metrics.precision import (
+    EDGE_SALT,
+    far_sample_fraction,
+    far_share_points,
+    point_keys,
+    proportion_se,
+    smallest_keys,
+)
 from metrics.spatial import (
     PointIndex,
     distinct_points,
@@ -667,18 +674,19 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
                 feature_angle_deg: float = defaults.FEATURE_ANGLE_DEG,
                 tolerance: float | None = None,
                 tolerance_fraction: float | None = None,
-                variant: EdgeVariant = "weighted", far_fraction: float = 1.0,
+                variant: EdgeVariant = "weighted", precision: float | None = None,
                 seed: int = 0) -> EdgeReport:
     """``edge_score`` of points and a mesh already validated (``inputs.as_points`` and
     ``inputs.as_mesh``), as ``metrics.score`` passes them; the options are still checked.
     A cloud given block by block: ``metrics.edges_stream.EdgeStream`` (the same report in
     memory that does not grow with the cloud).
 
-    ``far_fraction`` below 1 tests only a sample of the points far from feature edges (those
-    whose ``precision.point_keys`` under ``seed`` fall below it) and every point near one: the
-    missed-edge rates stay exact (they depend on the near points alone), the false-edge rate
-    is that of the sample, with its standard error; the per-point ``is_edge`` and
-    ``variation`` are then None."""
+    With a ``precision``, only a sample of the points far from feature edges is tested (those
+    whose ``precision.point_keys`` under ``seed`` fall below ``precision.far_sample_fraction``
+    of the share of far points among the ``far_share_points`` smallest keys) and every point
+    near one: the missed-edge rates stay exact (they depend on the near points alone), the
+    false-edge rate is that of the sample, with its standard error; the per-point ``is_edge``
+    and ``variation`` are then None unless every point was tested."""
     t = resolve_length(tolerance, tolerance_fraction, defaults.EDGE_TOLERANCE_FRACTION,
                        bbox_diagonal(mesh.vertices), "tolerance")
     k = _check_k(k, len(points))
@@ -694,9 +702,12 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
         if on_sharp.any():
             near[order] = query_distance(side.sharp_tree(), ordered, upper=t,
                                          presorted=True) <= t
-        if far_fraction >= 1:
+        if precision is None:
             return np.ones(len(ordered), dtype=bool)
-        return near[order] | (point_keys(ordered, seed, EDGE_SALT) < far_fraction)
+        keys = point_keys(points, seed, EDGE_SALT)
+        share = float(np.mean(~near[smallest_keys(keys, far_share_points(precision))]))
+        fraction = far_sample_fraction(len(points), share, precision)
+        return (near | (keys < fraction))[order]
 
     variation, tree = _surface_variation(points, k, tested)[:2]
     checked = ~np.isnan(variation.drop)

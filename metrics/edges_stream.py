@@ -60,7 +60,13 @@ from metrics.edges import (
     resolve_length,
 )
 from metrics.inputs import Mesh, bbox_diagonal, face_areas
-from metrics.precision import EDGE_SALT, far_sample_fraction, point_keys
+from metrics.precision import (
+    EDGE_SALT,
+    KeySample,
+    far_sample_fraction,
+    far_share_points,
+    point_keys,
+)
 from metrics.spatial import PointIndex, morton_order, nearest_distance, query_distance
 
 Blocks = Callable[[], Iterable[np.ndarray]]
@@ -101,11 +107,16 @@ class EdgeStream:
         self.kept: list[np.ndarray] | None = []   # the blocks, while they fit in one slab
         self.precision, self.seed = precision, seed
         self.far_fraction = 1.0
+        # The points whose share far from feature edges sizes the far sample (edge_report).
+        self.share = (None if precision is None
+                      else KeySample(far_share_points(precision), seed, EDGE_SALT))
 
     def add(self, points: np.ndarray) -> None:
         """Count a block of the first pass: points (b, 3) float64, metres, truth frame."""
         self.counts += np.bincount(self._bin(points[:, self.axis]), minlength=len(self.counts))
         self.n += len(points)
+        if self.share is not None:
+            self.share.add(points, None)
         if self.kept is not None:
             self.kept.append(points)
             if self.n > defaults.EDGE_SLAB_POINTS:
@@ -120,12 +131,18 @@ class EdgeStream:
             Fewer points than k, or a pass that gives another number of points.
         """
         k = _check_k(self.k, self.n)
+        side = self.side
         if self.precision is not None:
-            self.far_fraction = far_sample_fraction(self.n, self.precision)
+            probe = self.share.sample()[0]
+            near = np.zeros(len(probe), dtype=bool)
+            if side.on_sharp.any():
+                t = side.tolerance_m
+                near = query_distance(side.sharp_tree(), probe, upper=t) <= t
+            self.far_fraction = far_sample_fraction(self.n, float(np.mean(~near)),
+                                                    self.precision)
         if self.kept is not None:   # one slab, held since the first pass: no further pass
             kept, self.kept = self.kept, None
             blocks = partial(iter, kept)
-        side = self.side
         tally = _Tally(side, self)
         budget = max(defaults.EDGE_SLAB_POINTS, 1)
         radius = np.sqrt(k * self.area / (np.pi * self.n))   # uniform cover of the truth

@@ -233,12 +233,20 @@ def lattice_size(precision: float) -> int:
     return math.ceil(0.25 / (0.5 * precision)**2)
 
 
-def far_sample_fraction(n_points: int, precision: float) -> float:
+def far_share_points(precision: float) -> int:
+    """Points of smallest edge keys whose share far from feature edges sizes the far sample
+    (``far_sample_fraction``): eight times the sample the precision asks, so the share is
+    known to about 0.01."""
+    return 8 * math.ceil(0.25 / precision**2)
+
+
+def far_sample_fraction(n_points: int, far_share: float, precision: float) -> float:
     """Fraction of a cloud's points far from feature edges whose edge test is run, for the
     false-edge rate's standard error to be at most ``precision`` (the edge score's at most
-    ``precision / 2``) at the worst rate 1/2 when every point is far: ``0.25 / precision**2``
-    of them, i.e. this fraction of ``n_points`` (1 for small clouds)."""
-    return min(1.0, 0.25 / precision**2 / max(n_points, 1))
+    ``precision / 2``) at the worst rate 1/2: ``0.25 / precision**2`` of the
+    ``n_points * far_share`` far points expected (1 for small clouds)."""
+    far = n_points * far_share
+    return 1.0 if far <= 0 else min(1.0, 0.25 / precision**2 / far)
 
 
 def check_precision(value) -> float:

@@ -79,7 +79,6 @@ from metrics.precision import (
     CLOUD_SALT,
     KeySample,
     check_precision,
-    far_sample_fraction,
     fscore_se,
     lattice_size,
     plan,
@@ -482,7 +481,7 @@ def _score_to_precision(setup: _Setup, test, edges: bool, report_stage) -> Score
     edge = None
     if edges:
         edge = edge_report(drawn, setup.mesh, **setup.edge_options, seed=seed,
-                           far_fraction=far_sample_fraction(len(drawn), setup.precision))
+                           precision=setup.precision)
         report_stage("edges")
     distances = np.concatenate(accuracy.distances)
     return setup.report(accuracy, _summary(distances), (completeness, lattice), edge,
