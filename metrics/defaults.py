@@ -14,19 +14,25 @@ diagonal, so a 300 m asteroid and a 20 m satellite are scored on the same footin
 # threshold would sit at 1 sigma of that noise and F would mostly measure the noise.
 TAU_FRACTION = 0.01
 
-# Points sampled on the truth surface (uniformly by area) for completeness and recall. Recall is a
-# proportion estimated from these samples: its standard error is at most 0.5 / sqrt(n) = 0.0011,
-# so F-scores are good to the third decimal; a KD-tree query of 2e5 points takes ~0.2 s here.
+# Points sampled on the truth surface (uniformly by area) for completeness and recall when the
+# caller gives a sample count (``score(..., n_test_samples=...)``): recall is then a proportion
+# of these, its standard error at most 0.5 / sqrt(n) = 0.0011. A score to a precision (no count
+# given, ``metrics.precision``) takes its truth samples first from this draw (seed [seed, 1]),
+# as many as its precision needs.
 TRUTH_SAMPLES = 200_000
 
-# Points sampled on a test *mesh* (uniformly by area) to measure its accuracy. Same count as the
-# truth side, for the same reason (accuracy mean and precision to ~1e-3 relative).
+# Points sampled on a test *mesh* (uniformly by area) to measure its accuracy, when a count is
+# given. A score to a precision draws this many too (the same points, seed ``seed``): the edge
+# metric runs on all of them (its value depends on the sampling density: a point within the
+# tolerance of a truth edge), the accuracy on the first as many as its precision needs.
 TEST_MESH_SAMPLES = 200_000
 
 # Coverage quadrature: each truth face is split into s**2 congruent sub-triangles whose centroids
 # are tested against tau; s is chosen per face so the sub-triangles have about total_area /
 # COVERAGE_POINTS of area each (and s >= 1, so every face is tested at least once). 4e5 points
-# keep the query under ~0.5 s and give ~9 points per face on a 49k-face asteroid model.
+# keep the query under ~0.5 s and give ~9 points per face on a 49k-face asteroid model. The
+# fixed-count default; a score to a precision sizes it with ``precision.lattice_size`` (10,000 at
+# the default precision, i.e. one point per face on the demo asteroid's 20,480 faces).
 COVERAGE_POINTS = 400_000
 # Cap on s, so one face that holds most of the area cannot ask for an unbounded lattice.
 COVERAGE_MAX_SUBDIVISION = 512
