@@ -7,7 +7,7 @@ deviations of the two distance distributions and the two proportions within tau,
 each side so that
 
 - the Chamfer distance's standard error is at most ``precision`` times the Chamfer distance,
-- the F-score's standard error is at most ``precision / 2``
+- the F-score's standard error is at most ``precision / 4``
 
 (``plan``), then scores the further samples and checks again (``defaults.PRECISION_ROUNDS``
 rounds at most; the counts are capped at ``defaults.MAX_SAMPLES`` per side). The standard
@@ -20,7 +20,8 @@ mean completeness) / 2, so its variance is a quarter of the sum of the two means
 p of n has variance ``p (1 - p) / n``; F = 2 P R / (P + R) has the gradient
 ``(2 R**2, 2 P**2) / (P + R)**2`` in (P, R), whose first-order (delta method) variance is
 ``fscore_se``. For a total variance ``v1 / n1 + v2 / n2`` at most T**2, the fewest samples
-``n1 + n2`` are ``ni = sqrt(vi) (sqrt(v1) + sqrt(v2)) / T**2`` (``_allocate``).
+``n1 + n2`` are ``ni = sqrt(vi) (sqrt(v1) + sqrt(v2)) / T**2``, or, when one side already
+has more samples than that, the other side what the rest of the budget asks (``_allocate``).
 
 Which points of a cloud are scored must not depend on how the cloud is cut into blocks (a file
 is streamed, an array is held whole, both give the same report): each point gets a key in
@@ -176,12 +177,27 @@ def fscore_se(precision: float, recall: float, precision_se: float, recall_se: f
     return 2.0 * math.hypot(recall**2 * precision_se, precision**2 * recall_se) / total**2
 
 
-def _allocate(sd1: float, sd2: float, target: float) -> tuple[float, float]:
-    """Fewest samples (n1, n2) with ``sd1**2 / n1 + sd2**2 / n2 <= target**2``."""
+def _allocate(sd1: float, sd2: float, target: float, have1: int, have2: int
+              ) -> tuple[float, float]:
+    """Fewest further samples: (n1, n2) with ``sd1**2 / n1 + sd2**2 / n2 <= target**2``, n1
+    >= have1 and n2 >= have2. The unconstrained optimum is ``ni = sdi (sd1 + sd2) /
+    target**2``; when a side already has more than its optimum, the other side needs only
+    what is left of the variance budget."""
     if target <= 0:
         return math.inf, math.inf
     scale = (sd1 + sd2) / target**2
-    return sd1 * scale, sd2 * scale
+    n1, n2 = sd1 * scale, sd2 * scale
+    if have1 > n1:   # side 1 keeps what it has (more than it needs)
+        n2 = _rest(sd2, target**2 - sd1**2 / have1)
+    elif have2 > n2:
+        n1 = _rest(sd1, target**2 - sd2**2 / have2)
+    return n1, n2
+
+
+def _rest(sd: float, budget: float) -> float:
+    """Samples for a variance ``sd**2 / n`` within ``budget`` (> 0: the other side's share is
+    below the whole target)."""
+    return sd**2 / budget if budget > 0 else math.inf
 
 
 def plan(accuracy: np.ndarray, completeness: np.ndarray, tau: float, precision: float,
@@ -194,7 +210,8 @@ def plan(accuracy: np.ndarray, completeness: np.ndarray, tau: float, precision: 
         Distances of the samples scored so far (test to truth, truth to test).
     tau : float, metres
     precision : float
-        Relative standard error wanted of the Chamfer distance; the F-score's is half of it.
+        Relative standard error wanted of the Chamfer distance; the F-score's (absolute) is a
+        quarter of it.
     population : int, optional
         Points of a test cloud (its accuracy side cannot have more samples).
 
@@ -208,12 +225,13 @@ def plan(accuracy: np.ndarray, completeness: np.ndarray, tau: float, precision: 
     sd_a, sd_c = (float(np.std(d, ddof=1)) if len(d) > 1 else 0.0
                   for d in (accuracy, completeness))
     # Chamfer: the two means' variances over four.
-    need_a, need_c = _allocate(0.5 * sd_a, 0.5 * sd_c, precision * chamfer)
+    have = (len(accuracy), len(completeness))
+    need_a, need_c = _allocate(0.5 * sd_a, 0.5 * sd_c, precision * chamfer, *have)
     p, r = float(np.mean(accuracy < tau)), float(np.mean(completeness < tau))
     if p + r > 0:
         grad_p, grad_r = 2 * r**2 / (p + r)**2, 2 * p**2 / (p + r)**2
         f_a, f_c = _allocate(grad_p * math.sqrt(p * (1 - p)), grad_r * math.sqrt(r * (1 - r)),
-                             0.5 * precision)
+                             0.25 * precision, *have)
         need_a, need_c = max(need_a, f_a), max(need_c, f_c)
     cap_a = defaults.MAX_SAMPLES if population is None else min(population, defaults.MAX_SAMPLES)
     return (_clip(need_a, len(accuracy), cap_a),
@@ -229,25 +247,25 @@ def _clip(need: float, have: int, cap: int) -> int:
 
 def lattice_size(precision: float) -> int:
     """Target size of the coverage lattice for the stated precision: the count whose binomial
-    standard error at a coverage of 1/2 (the worst case) is ``precision / 2``."""
-    return math.ceil(0.25 / (0.5 * precision)**2)
+    standard error at a coverage of 1/2 (the worst case) is ``precision / 4``."""
+    return math.ceil(0.25 / (0.25 * precision)**2)
 
 
 def far_share_points(precision: float) -> int:
     """Points of smallest edge keys whose share far from feature edges sizes the far sample
     (``far_sample_fraction``): eight times the sample the precision asks, so the share is
     known to about 0.01."""
-    return 8 * math.ceil(0.25 / precision**2)
+    return 8 * math.ceil(0.25 / (0.5 * precision)**2)
 
 
 def far_sample_fraction(n_points: int, far_share: float, precision: float) -> float:
     """Fraction of a cloud's points far from feature edges whose edge test is run, for the
-    false-edge rate's standard error to be at most ``precision`` (the edge score's at most
-    ``precision / 2``) at the worst rate 1/2: ``0.25 / precision**2`` of the
+    false-edge rate's standard error to be at most ``precision / 2`` (the edge score's at most
+    ``precision / 4``) at the worst rate 1/2: ``0.25 / (precision / 2)**2`` of the
     ``n_points * far_share`` far points expected, and 10 % more (1 for small clouds)."""
     far = n_points * far_share
     # 10 % to spare: the sample's size is itself random (a Bernoulli sample of the keys).
-    return 1.0 if far <= 0 else min(1.0, 1.1 * 0.25 / precision**2 / far)
+    return 1.0 if far <= 0 else min(1.0, 1.1 * 0.25 / (0.5 * precision)**2 / far)
 
 
 def check_precision(value) -> float:

@@ -8,7 +8,7 @@ Temples, Knapitsch et al. 2017, and Open3D's ``compute_metrics``):
 - completeness: d(truth sample, test), for ``n_truth_samples`` points sampled uniformly by area on
   the truth: to a test cloud by nearest neighbour (Open3D's KD-tree), to a test mesh exactly.
 - how many: with no sample count given, as many as the stated precision needs
-  (``metrics.precision``: the Chamfer distance's standard error at most 1 % of it, the
+  (``metrics.precision``: the Chamfer distance's standard error at most 2 % of it, the
   F-score's, coverage's and edge score's at most 0.005, sized from a pilot), a cloud's
   accuracy then averaged over a seeded sample of its points; with a count given, that count
   (and every point of a cloud). Every report states its standard errors (``*_se``).
@@ -136,8 +136,8 @@ class ScoreReport:
         quadrature that places one point per cell; ``metrics.precision``).
     target_precision : float or None
         The precision the sample counts were sized for (``metrics.precision``): the Chamfer
-        distance's standard error at most this fraction of it, the F-score's and coverage's at
-        most half of it. None when the caller gave the sample counts.
+        distance's standard error at most this fraction of it, the F-score's, coverage's and
+        edge score's at most a quarter of it. None when the caller gave the sample counts.
     normal_consistency : float in [0, 1] or None
     edge_score : float in [0, 1] or None (None when not computed)
     test_kind : {"cloud", "mesh"}
@@ -362,12 +362,13 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
         400,000), scores every point of a cloud and runs the edge test on every point.
     precision : float, optional
         With no count given: the sample counts are sized from a pilot until the Chamfer
-        distance's standard error is at most this fraction of it and the F-score's at most
-        half of it (default ``defaults.PRECISION``, 1 %; ``metrics.precision``); a cloud's
-        accuracy is averaged over a seeded sample of its points, the coverage lattice sized
-        for a standard error of half of it, and the edge metric's false-edge rate estimated
-        from a seeded sample of the points far from feature edges (every point near one
-        tested). The achieved standard errors are in the report.
+        distance's standard error is at most this fraction of it and the F-score's at most a
+        quarter of it (default ``defaults.PRECISION``, 2 %: 0.005 on F; ``metrics.precision``);
+        a cloud's accuracy is averaged over a seeded sample of its points, the coverage lattice
+        sized for a standard error of a quarter of it, and the edge metric's false-edge rate
+        estimated from a seeded sample of the points far from feature edges (every point near
+        one tested) for an edge score's error of a quarter of it. The achieved standard errors
+        are in the report.
     seed : int or None
         Seed of all sampling (``np.random.default_rng``, ``precision.point_keys``); the same
         seed gives the same report.
