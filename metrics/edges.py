@@ -102,7 +102,7 @@ from metrics.spatial import (
     distinct_points,
     morton_order,
     nearest_distance,
-    query_distance,
+    within,
 )
 
 EdgeRule = Literal["leave_one_out", "pauly"]
@@ -700,8 +700,7 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
     def tested(order: np.ndarray, ordered: np.ndarray) -> np.ndarray:
         """Near points (all of them marked in ``near``) and the sample of the far ones."""
         if on_sharp.any():
-            near[order] = query_distance(side.sharp_tree(), ordered, upper=t,
-                                         presorted=True) <= t
+            near[order] = within(side.sharp_tree(), ordered, t, presorted=True)
         if precision is None:
             return np.ones(len(ordered), dtype=bool)
         keys = point_keys(points, seed, EDGE_SALT)
@@ -717,7 +716,7 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
     if is_edge.any() and on_sharp.any():
         found[on_sharp] = nearest_distance(points[is_edge], samples[on_sharp]) <= t
     if (~on_sharp).any():
-        found[~on_sharp] = query_distance(tree, samples[~on_sharp], upper=t) <= t
+        found[~on_sharp] = within(tree, samples[~on_sharp], t)
     far = ~near
     whole = bool(checked.all())
     return side.report(found, n_points=len(points), n_edge_points=int(is_edge.sum()),

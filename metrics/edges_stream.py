@@ -67,7 +67,7 @@ from metrics.precision import (
     far_share_points,
     point_keys,
 )
-from metrics.spatial import PointIndex, morton_order, nearest_distance, query_distance
+from metrics.spatial import PointIndex, morton_order, nearest_distance, within
 
 Blocks = Callable[[], Iterable[np.ndarray]]
 
@@ -137,7 +137,7 @@ class EdgeStream:
             near = np.zeros(len(probe), dtype=bool)
             if side.on_sharp.any():
                 t = side.tolerance_m
-                near = query_distance(side.sharp_tree(), probe, upper=t) <= t
+                near = within(side.sharp_tree(), probe, t)
             self.far_fraction = far_sample_fraction(self.n, float(np.mean(~near)),
                                                     self.precision)
         if self.kept is not None:   # one slab, held since the first pass: no further pass
@@ -299,7 +299,7 @@ class _Tally:
             far = np.ones(len(points), dtype=bool)
         else:
             t = self.side.tolerance_m
-            far = ~(query_distance(self.sharp_tree, points, upper=t) <= t)
+            far = ~within(self.sharp_tree, points, t)
         self.n_far += int(far.sum())
         return far
 
@@ -322,7 +322,7 @@ class _Tally:
             hit = nearest_distance(points, self.side.samples[which]) <= t
         else:
             index = _tree(points) if index is None else index
-            hit = query_distance(index, self.side.samples[which], upper=t) <= t
+            hit = within(index, self.side.samples[which], t)
         self.found[which[hit]] = True
 
     def add(self, points: np.ndarray, is_edge: np.ndarray, far: np.ndarray, lo: float,

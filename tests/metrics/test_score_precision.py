@@ -155,3 +155,18 @@ def test_a_coarser_precision_takes_fewer_samples():
     assert coarse.target_precision == 0.05
     assert coarse.n_truth_samples <= fine.n_truth_samples
     assert coarse.chamfer_se_m <= 1.05 * 0.05 * coarse.chamfer_m
+
+
+def test_within_is_the_bounded_nearest_query():
+    from metrics.spatial import PointIndex, query_distance, within
+
+    rng = np.random.default_rng(9)
+    points = rng.uniform(0, 10, size=(3000, 3))
+    queries = np.concatenate([rng.uniform(-1, 11, size=(20_000, 3)),
+                              points[:500] + 0.3,        # near a point, maybe another cell
+                              np.round(points[:500], 1)])   # on cell-like round numbers
+    index = PointIndex(points)
+    for t in (0.05, 0.3, 1.0):
+        want = query_distance(index, queries, upper=t) <= t
+        assert np.array_equal(within(index, queries, t), want)
+        assert 0 < want.sum() < len(want)
