@@ -471,8 +471,12 @@ def _score_to_precision(setup: _Setup, test, edges: bool, report_stage) -> Score
             test_distance = pool.submit(MeshDistance, test)
             drawn, faces = sample_surface(test, defaults.TEST_MESH_SAMPLES, seed=setup.seed)
             normals = face_normals(test.vertices, test.faces)
-            test_pool = _Pool((drawn, normals[faces]), lambda n, at: (
-                lambda p, f: (p, normals[f]))(*sample_surface(test, n, seed=[seed, 2, at])))
+
+            def more(n: int, at: int) -> tuple[np.ndarray, np.ndarray]:
+                points, more_faces = sample_surface(test, n, seed=[seed, 2, at])
+                return points, normals[more_faces]
+
+            test_pool = _Pool((drawn, normals[faces]), more)
             population = None
         else:
             drawn = test.points

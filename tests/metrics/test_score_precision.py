@@ -10,6 +10,7 @@ from metrics_reference import ellipsoid, satellite
 
 from formats.errors import InputError
 from metrics import defaults, sample_surface, score
+from metrics.inputs import as_mesh
 from metrics.precision import KeySample, point_keys, smallest_keys
 from metrics.score import Truth, score_stream
 
@@ -170,3 +171,21 @@ def test_within_is_the_bounded_nearest_query():
         want = query_distance(index, queries, upper=t) <= t
         assert np.array_equal(within(index, queries, t), want)
         assert 0 < want.sum() < len(want)
+
+
+def test_samples_beyond_the_first_draw_come_from_further_seeded_draws(monkeypatch):
+    monkeypatch.setattr(defaults, "TEST_MESH_SAMPLES", 3000)
+    monkeypatch.setattr(defaults, "TRUTH_SAMPLES", 3000)
+    monkeypatch.setattr(defaults, "PILOT_SAMPLES", 1000)
+    truth = ellipsoid(3)
+    test = _bumpy_ellipsoid()
+    first = score(test, truth, edges=False, precision=0.004)
+    assert first.n_points > 3000 and first.n_truth_samples > 3000
+    assert len(first.test_points) == first.n_points == len(first.accuracy_distances)
+    assert len(first.truth_points) == first.n_truth_samples
+    # The first draw is a prefix of what was scored.
+    assert np.array_equal(first.test_points[:3000],
+                          sample_surface(as_mesh(test, "test"), 3000, seed=0)[0])
+    again = score(test, truth, edges=False, precision=0.004)
+    assert np.array_equal(first.test_points, again.test_points)
+    assert first.to_dict() == again.to_dict()
