@@ -17,7 +17,8 @@ Formulas. A mean of n values drawn independently has the standard error ``s / sq
 sample standard deviation); of n values drawn without replacement from a cloud of N points,
 ``s / sqrt(n) * sqrt(1 - n / N)`` (0 when every point is scored). Chamfer = (mean accuracy +
 mean completeness) / 2, so its variance is a quarter of the sum of the two means'. A proportion
-p of n has variance ``p (1 - p) / n``; F = 2 P R / (P + R) has the gradient
+p of n has variance ``p (1 - p) / n`` (stated with Agresti and Coull's adjustment,
+``proportion_se``); F = 2 P R / (P + R) has the gradient
 ``(2 R**2, 2 P**2) / (P + R)**2`` in (P, R), whose first-order (delta method) variance is
 ``fscore_se``. For a total variance ``v1 / n1 + v2 / n2`` at most T**2, the fewest samples
 ``n1 + n2`` are ``ni = sqrt(vi) (sqrt(v1) + sqrt(v2)) / T**2``, or, when one side already
@@ -161,10 +162,12 @@ def mean_se(values: np.ndarray, population: int | None = None) -> float:
 
 def proportion_se(p: float, n: int, population: int | None = None) -> float:
     """Standard error of a proportion ``p`` of ``n`` draws (without replacement from
-    ``population`` when given)."""
+    ``population`` when given), Agresti and Coull's: that of the proportion of x + 2 in
+    n + 4 (x = p n), so a sample that saw none (or all) still states an error, ~1 / n."""
     if n < 1:
         return 0.0
-    se = math.sqrt(max(p * (1.0 - p), 0.0) / n)
+    adjusted = (p * n + 2.0) / (n + 4.0)
+    se = math.sqrt(adjusted * (1.0 - adjusted) / (n + 4.0))
     return se if population is None else se * math.sqrt(max(0.0, 1.0 - n / population))
 
 

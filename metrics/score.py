@@ -130,8 +130,9 @@ class ScoreReport:
     precision, recall, fscore : float, in [0, 1]
     coverage : float, in [0, 1]
     precision_se, recall_se, fscore_se, coverage_se : float
-        Standard errors from sampling: of the two proportions (binomial; 0 for the precision
-        of a cloud whose every point is scored), of F by the delta method, of the coverage the
+        Standard errors from sampling: of the two proportions (binomial, Agresti-Coull
+        adjusted, ``precision.proportion_se``; 0 for the precision of a cloud whose every
+        point is scored), of F by the delta method, of the coverage the
         binomial one of as many random points as the lattice has (an upper bound for a
         quadrature that places one point per cell; ``metrics.precision``).
     target_precision : float or None
