@@ -152,6 +152,10 @@ PILOT_SAMPLES = 1 << 14
 # Rounds of "size from what is scored, score the rest": the second corrects a pilot whose
 # spread was underestimated (long tails).
 PRECISION_ROUNDS = 3
-# Most samples per side a score to a precision takes (and most points of a cloud it keeps for
-# its accuracy sample); beyond it, the achieved standard error is reported as it is.
+# Most samples per side a score to a precision takes; beyond it, the achieved standard error is
+# reported as it is.
 MAX_SAMPLES = 1 << 20
+# Most points of a cloud its accuracy is averaged over (the smallest keys): a stream keeps up to
+# twice this many as it goes (56 bytes a point with normals: 29 MB), less than a query group of
+# STREAM_BLOCK points, so the memory of a streamed score stays flat in the cloud's size.
+CLOUD_SAMPLES = 1 << 18

@@ -10,8 +10,9 @@ each side so that
 - the F-score's standard error is at most ``precision / 4``
 
 (``plan``), then scores the further samples and checks again (``defaults.PRECISION_ROUNDS``
-rounds at most; the counts are capped at ``defaults.MAX_SAMPLES`` per side). The standard
-errors of the samples actually scored are reported, whatever the target.
+rounds at most; the counts are capped at ``defaults.MAX_SAMPLES`` per side, a cloud's sample
+at ``defaults.CLOUD_SAMPLES``). The standard errors of the samples actually scored are
+reported, whatever the target.
 
 Formulas. A mean of n values drawn independently has the standard error ``s / sqrt(n)`` (s the
 sample standard deviation); of n values drawn without replacement from a cloud of N points,
@@ -221,8 +222,8 @@ def plan(accuracy: np.ndarray, completeness: np.ndarray, tau: float, precision: 
     Returns
     -------
     n_accuracy, n_completeness : int
-        At least the samples already scored, at most ``defaults.MAX_SAMPLES`` (and
-        ``population``).
+        At least the samples already scored, at most ``defaults.MAX_SAMPLES`` (a cloud's
+        accuracy side: ``population`` and ``defaults.CLOUD_SAMPLES``).
     """
     chamfer = 0.5 * (accuracy.mean() + completeness.mean())
     sd_a, sd_c = (float(np.std(d, ddof=1)) if len(d) > 1 else 0.0
@@ -236,7 +237,8 @@ def plan(accuracy: np.ndarray, completeness: np.ndarray, tau: float, precision: 
         f_a, f_c = _allocate(grad_p * math.sqrt(p * (1 - p)), grad_r * math.sqrt(r * (1 - r)),
                              0.25 * precision, *have)
         need_a, need_c = max(need_a, f_a), max(need_c, f_c)
-    cap_a = defaults.MAX_SAMPLES if population is None else min(population, defaults.MAX_SAMPLES)
+    cap_a = (defaults.MAX_SAMPLES if population is None
+             else min(population, defaults.CLOUD_SAMPLES))
     return (_clip(need_a, len(accuracy), cap_a),
             _clip(need_c, len(completeness), defaults.MAX_SAMPLES))
 

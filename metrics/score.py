@@ -481,7 +481,7 @@ def _score_to_precision(setup: _Setup, test, edges: bool, report_stage) -> Score
             population = None
         else:
             drawn = test.points
-            rows = smallest_keys(point_keys(drawn, seed, CLOUD_SALT), defaults.MAX_SAMPLES)
+            rows = smallest_keys(point_keys(drawn, seed, CLOUD_SALT), defaults.CLOUD_SAMPLES)
             test_pool = _Pool((drawn[rows], None if test.normals is None
                                else test.normals[rows]), None)
             population = len(drawn)
@@ -581,7 +581,7 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
         ``defaults.EDGE_SLAB_POINTS`` points and one or more for points near slab faces
         (``metrics.edges_stream``). Scored to a precision (no count given), the sample of the
         cloud's points is kept as the blocks go by (``precision.KeySample``, at most
-        ``defaults.MAX_SAMPLES`` points), the pilot truth samples and the lattice are queried
+        ``defaults.CLOUD_SAMPLES`` points), the pilot truth samples and the lattice are queried
         in the first pass, and further truth samples, when the precision asks for them, in one
         further pass per round.
 
@@ -641,7 +641,7 @@ def _stream_to_precision(setup: _Setup, blocks: Blocks, name: str,
                          edge_stream: EdgeStream | None, report_stage) -> ScoreReport:
     """``score_stream`` with the sample counts sized from ``setup.precision``: the same report
     as ``score`` of the whole cloud (the same points sampled, the same distances)."""
-    sample = KeySample(defaults.MAX_SAMPLES, setup.key_seed, CLOUD_SALT)
+    sample = KeySample(defaults.CLOUD_SAMPLES, setup.key_seed, CLOUD_SALT)
     pilot = setup.truth_pool.take(0, defaults.PILOT_SAMPLES)[0]
     first = _stream_nearest(blocks, name, np.concatenate([pilot, setup.lattice[1]]),
                             sample=sample, edge_stream=edge_stream)

@@ -60,7 +60,7 @@ def test_streamed_cloud_file_scores_as_the_whole_cloud(suffix, rso_log, tmp_path
                                 Cloud(ingest.ingest_points(rso_log)))
     cloud = cloud_io.read_cloud(path)
     # A sample of the cloud smaller than the cloud (kept block by block), a small pilot.
-    monkeypatch.setattr(defaults, "MAX_SAMPLES", 1000)
+    monkeypatch.setattr(defaults, "CLOUD_SAMPLES", 1000)
     monkeypatch.setattr(defaults, "PILOT_SAMPLES", 400)
     whole = score(cloud, load_truth(rso_log), seed=0).to_dict()
     assert 400 <= whole["n_points"] <= 1000 < len(cloud)
