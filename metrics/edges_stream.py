@@ -30,6 +30,11 @@ of set-aside points, each re-reading the input; memory: a slab and its halo (24 
 its KD-tree and the k-nearest temporaries of ``defaults.EDGE_BLOCK`` points), or a batch of
 set-aside points with their neighbours (32 k bytes each). The report is ``edge_report``'s:
 score, rates and counts exactly; only its per-point arrays are left out (None).
+
+With a ``precision`` (a score sized to one, ``metrics.precision``), the edge test runs on the
+core points near a feature edge and on the far ones whose key falls below the fraction sized
+from the share of far points among the ``far_share_points`` smallest keys (kept in the first
+pass): the same points as ``edge_report`` with that precision tests, so the same report.
 """
 
 from __future__ import annotations
