@@ -286,17 +286,17 @@ def _surface_variation(points: np.ndarray, k: int, tested=None):
     columns = np.ascontiguousarray(tree.data.T)  # (3, d): each coordinate's gathers contiguous
     # The queries coordinate-major too: the offsets' memory layout sets neighbourhood_variation's
     # summation order, hence its last bits.
-    rows = np.arange(len(points)) if tested is None else np.flatnonzero(tested(order, ordered))
-    queries = np.ascontiguousarray(ordered[rows].T)
-    n = len(rows)
+    rows = None if tested is None else np.flatnonzero(tested(order, ordered))
+    chosen = ordered if rows is None else ordered[rows]   # every point: no copy
+    queries = np.ascontiguousarray(chosen.T)
     out = np.full((3, len(points)), np.nan)
     step = max(1, defaults.EDGE_BLOCK)
-    for lo in range(0, n, step):  # blocks of points, bounded memory; each block is vectorised
+    for lo in range(0, len(chosen), step):  # blocks of points, bounded memory; each vectorised
         sl = slice(lo, lo + step)
-        dist, idx = nearest_k(tree, ordered[rows[sl]], k, copies)
-        out[:2, rows[sl]] = neighbourhood_variation(neighbour_offsets(columns, idx,
-                                                                      queries[:, sl]))
-        out[2, rows[sl]] = dist[:, -1]
+        at = sl if rows is None else rows[sl]
+        dist, idx = nearest_k(tree, chosen[sl], k, copies)
+        out[:2, at] = neighbourhood_variation(neighbour_offsets(columns, idx, queries[:, sl]))
+        out[2, at] = dist[:, -1]
     out[:, order] = out.copy()
     return SurfaceVariation(sigma=out[0], drop=out[1], radius=out[2], k=k), tree, order, ordered
 
