@@ -463,11 +463,13 @@ def _score_to_precision(setup: _Setup, test, edges: bool, report_stage) -> Score
     A test mesh: its samples are the first of today's ``TEST_MESH_SAMPLES`` draw (the edge
     metric runs on that whole draw, its far points sampled), extended by further seeded draws
     when more are needed. A cloud: its points in ascending ``precision.point_keys``. The truth:
-    the first of its ``TRUTH_SAMPLES`` draw, likewise extended."""
+    the first of its ``TRUTH_SAMPLES`` draw, likewise extended. The test mesh's distance
+    structure and the edge metric run on two further threads while the samples are scored (all
+    three spend their time in numpy, Embree and Open3D kernels that release the GIL)."""
     seed = setup.key_seed
     is_mesh = isinstance(test, Mesh)
     accuracy = _Accuracy(setup, keep=True)
-    with ThreadPoolExecutor(max_workers=1) as pool:
+    with ThreadPoolExecutor(max_workers=2) as pool:
         if is_mesh:
             test_distance = pool.submit(MeshDistance, test)
             drawn, faces = sample_surface(test, defaults.TEST_MESH_SAMPLES, seed=setup.seed)
@@ -485,17 +487,17 @@ def _score_to_precision(setup: _Setup, test, edges: bool, report_stage) -> Score
             test_pool = _Pool((drawn[rows], None if test.normals is None
                                else test.normals[rows]), None)
             population = len(drawn)
+        edge = (pool.submit(edge_report, drawn, setup.mesh, **setup.edge_options, seed=seed,
+                            precision=setup.precision) if edges else None)
         complete = (lambda q: test_distance.result().query(q)[0]) if is_mesh else (
             lambda q: cloud_distance(drawn, q))
         completeness, lattice = _sample_to_precision(setup, test_pool, accuracy, complete,
                                                      population)
-    report_stage("accuracy")
-    report_stage("completeness")
-    edge = None
-    if edges:
-        edge = edge_report(drawn, setup.mesh, **setup.edge_options, seed=seed,
-                           precision=setup.precision)
-        report_stage("edges")
+        report_stage("accuracy")
+        report_stage("completeness")
+        if edge is not None:
+            edge = edge.result()
+            report_stage("edges")
     distances = np.concatenate(accuracy.distances)
     return setup.report(accuracy, _summary(distances), (completeness, lattice), edge,
                         test_kind="mesh" if is_mesh else "cloud", population=population,
@@ -648,18 +650,22 @@ def _stream_to_precision(setup: _Setup, blocks: Blocks, name: str,
     if sample.n == 0:
         raise InputError(f"{name} points is empty (0 rows)")
     setup.check_scale(float(np.linalg.norm(sample.high - sample.low)))
-    accuracy = _Accuracy(setup, keep=True)
-    completeness, lattice = _sample_to_precision(
-        setup, _Pool(sample.sample(), None), accuracy,
-        lambda queries: _stream_nearest(blocks, name, queries), sample.n, first=first)
-    report_stage("accuracy")
-    report_stage("completeness")
-    edge = None
     if edge_stream is not None:
         setup.check_edges(sample.n)
-        edge = edge_stream.report(lambda: (points for points, _ in
-                                           _checked_blocks(blocks, name)))
-        report_stage("edges")
+    accuracy = _Accuracy(setup, keep=True)
+    # The edge metric on a second thread while the samples are scored (numpy, Embree and
+    # Open3D kernels release the GIL); each reads the blocks on its own.
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        edge = None if edge_stream is None else pool.submit(
+            edge_stream.report, lambda: (points for points, _ in _checked_blocks(blocks, name)))
+        completeness, lattice = _sample_to_precision(
+            setup, _Pool(sample.sample(), None), accuracy,
+            lambda queries: _stream_nearest(blocks, name, queries), sample.n, first=first)
+        report_stage("accuracy")
+        report_stage("completeness")
+        if edge is not None:
+            edge = edge.result()
+            report_stage("edges")
     return setup.report(accuracy, _summary(np.concatenate(accuracy.distances)),
                         (completeness, lattice), edge, test_kind="cloud", population=sample.n,
                         arrays=dict.fromkeys(_ARRAYS))
