@@ -653,19 +653,16 @@ def _stream_to_precision(setup: _Setup, blocks: Blocks, name: str,
     if edge_stream is not None:
         setup.check_edges(sample.n)
     accuracy = _Accuracy(setup, keep=True)
-    # The edge metric on a second thread while the samples are scored (numpy, Embree and
-    # Open3D kernels release the GIL); each reads the blocks on its own.
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        edge = None if edge_stream is None else pool.submit(
-            edge_stream.report, lambda: (points for points, _ in _checked_blocks(blocks, name)))
-        completeness, lattice = _sample_to_precision(
-            setup, _Pool(sample.sample(), None), accuracy,
-            lambda queries: _stream_nearest(blocks, name, queries), sample.n, first=first)
-        report_stage("accuracy")
-        report_stage("completeness")
-        if edge is not None:
-            edge = edge.result()
-            report_stage("edges")
+    completeness, lattice = _sample_to_precision(
+        setup, _Pool(sample.sample(), None), accuracy,
+        lambda queries: _stream_nearest(blocks, name, queries), sample.n, first=first)
+    report_stage("accuracy")
+    report_stage("completeness")
+    edge = None
+    if edge_stream is not None:   # after the distances, not beside them: one slab at a time
+        edge = edge_stream.report(lambda: (points for points, _ in
+                                           _checked_blocks(blocks, name)))
+        report_stage("edges")
     return setup.report(accuracy, _summary(np.concatenate(accuracy.distances)),
                         (completeness, lattice), edge, test_kind="cloud", population=sample.n,
                         arrays=dict.fromkeys(_ARRAYS))
