@@ -65,7 +65,9 @@ PYTHON = sys.executable
 RECON = ([str(Path(PYTHON).parent / "recon")] if (Path(PYTHON).parent / "recon").exists()
          else [PYTHON, "-c", "import sys; from cli.main import main; sys.exit(main())"])
 DEMO_SCENE = "asteroid-lrf-slew"
-SAMPLES = 200_000  # metrics' default samples per side, what the floor samples too
+# The floor's samples per side (metrics' fixed-count default; a score to its default precision
+# draws its samples from as many and scores as many as its stated precision needs).
+SAMPLES = 200_000
 # The per-million case's clouds, and the noise on them as a fraction of the truth's diagonal.
 MILLION_SIZES = (1_000_000, 4_000_000)
 MILLION_NOISE = 0.01 / 3

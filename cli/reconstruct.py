@@ -48,9 +48,10 @@ def _add_run_options(p: argparse.ArgumentParser, *, sweep: bool) -> None:
     g.add_argument("--memory-limit", type=int, metavar="MB", help=MEMORY_HELP)
     if sweep:
         g.add_argument("--samples", type=int, metavar="N",
-                       help="points sampled per side when scoring (default: metrics' 200000 "
-                            "for compare; stability takes enough for a 2%% standard error of "
-                            "each cell's Chamfer distance; fewer is faster and noisier)")
+                       help="points sampled per side when scoring (default: compare samples "
+                            "until the Chamfer distance's standard error is 2%% of it and the "
+                            "F-score's 0.005; stability takes enough for a 2%% standard error "
+                            "of each cell's Chamfer distance; fewer is faster and noisier)")
         add_sweep_options(g, resume_help="keep DIR/results.jsonl and skip the runs it holds",
                           default="threads, each method in its own worker process")
 

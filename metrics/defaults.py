@@ -14,19 +14,25 @@ diagonal, so a 300 m asteroid and a 20 m satellite are scored on the same footin
 # threshold would sit at 1 sigma of that noise and F would mostly measure the noise.
 TAU_FRACTION = 0.01
 
-# Points sampled on the truth surface (uniformly by area) for completeness and recall. Recall is a
-# proportion estimated from these samples: its standard error is at most 0.5 / sqrt(n) = 0.0011,
-# so F-scores are good to the third decimal; a KD-tree query of 2e5 points takes ~0.2 s here.
+# Points sampled on the truth surface (uniformly by area) for completeness and recall when the
+# caller gives a sample count (``score(..., n_test_samples=...)``): recall is then a proportion
+# of these, its standard error at most 0.5 / sqrt(n) = 0.0011. A score to a precision (no count
+# given, ``metrics.precision``) takes its truth samples first from this draw (seed [seed, 1]),
+# as many as its precision needs.
 TRUTH_SAMPLES = 200_000
 
-# Points sampled on a test *mesh* (uniformly by area) to measure its accuracy. Same count as the
-# truth side, for the same reason (accuracy mean and precision to ~1e-3 relative).
+# Points sampled on a test *mesh* (uniformly by area) to measure its accuracy, when a count is
+# given. A score to a precision draws this many too (the same points, seed ``seed``): the edge
+# metric runs on all of them (its value depends on the sampling density: a point within the
+# tolerance of a truth edge), the accuracy on the first as many as its precision needs.
 TEST_MESH_SAMPLES = 200_000
 
 # Coverage quadrature: each truth face is split into s**2 congruent sub-triangles whose centroids
 # are tested against tau; s is chosen per face so the sub-triangles have about total_area /
 # COVERAGE_POINTS of area each (and s >= 1, so every face is tested at least once). 4e5 points
-# keep the query under ~0.5 s and give ~9 points per face on a 49k-face asteroid model.
+# keep the query under ~0.5 s and give ~9 points per face on a 49k-face asteroid model. The
+# fixed-count default; a score to a precision sizes it with ``precision.lattice_size`` (10,000 at
+# the default precision, i.e. one point per face on the demo asteroid's 20,480 faces).
 COVERAGE_POINTS = 400_000
 # Cap on s, so one face that holds most of the area cannot ask for an unbounded lattice.
 COVERAGE_MAX_SUBDIVISION = 512
@@ -128,3 +134,28 @@ EDGE_HALO_RADII = 2.0
 # kept and sorted once a bin holds at most this many (8 MB of float64 each); larger bins are
 # split by a further pass (metrics.score._RankFinder).
 QUANTILE_KEEP = 1 << 20
+
+# --------------------------------------------------------------------------- precision
+
+# What a score states when the caller gives no sample count (``metrics.precision``): the
+# Chamfer distance's standard error at most 2 % of it, the F-score's, the coverage's and the
+# edge score's at most a quarter of that, 0.005 (half the third decimal). 2 % of a Chamfer
+# distance is far below the differences the comparisons rank (methods differ by tens of per
+# cent; ``recon stability`` sizes its cells for the same 2 %). On the demo asteroid's Poisson
+# surface the truth-to-surface distances spread 9 times their mean (a few regions the surface
+# misses by tens of metres): 1 % would ask ~270,000 truth samples, more than TRUTH_SAMPLES,
+# 2 % asks ~68,000; its accuracy side needs no more than the pilot.
+PRECISION = 0.02
+# Pilot samples per side, from which the spreads are estimated before the counts are sized;
+# also the least a score to a precision scores.
+PILOT_SAMPLES = 1 << 14
+# Rounds of "size from what is scored, score the rest": the second corrects a pilot whose
+# spread was underestimated (long tails).
+PRECISION_ROUNDS = 3
+# Most samples per side a score to a precision takes; beyond it, the achieved standard error is
+# reported as it is.
+MAX_SAMPLES = 1 << 20
+# Most points of a cloud its accuracy is averaged over (the smallest keys): a stream keeps up to
+# twice this many as it goes (56 bytes a point with normals: 29 MB), less than a query group of
+# STREAM_BLOCK points, so the memory of a streamed score stays flat in the cloud's size.
+CLOUD_SAMPLES = 1 << 18

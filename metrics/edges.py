@@ -89,12 +89,20 @@ import numpy as np
 from formats.errors import InputError
 from metrics import defaults
 from metrics.inputs import Mesh, as_mesh, as_points, bbox_diagonal, face_normals
+from metrics.precision import (
+    EDGE_SALT,
+    far_sample_fraction,
+    far_share_points,
+    point_keys,
+    proportion_se,
+    smallest_keys,
+)
 from metrics.spatial import (
     PointIndex,
     distinct_points,
     morton_order,
     nearest_distance,
-    query_distance,
+    within,
 )
 
 EdgeRule = Literal["leave_one_out", "pauly"]
@@ -132,8 +140,17 @@ class EdgeReport:
     ----------
     score : float
         In [0, 1], lower is better (formula in the module docstring).
+    score_se : float
+        Its standard error: the false-edge rate's over the number of terms (0 when every far
+        point was tested; the missed-edge rate is exact).
     false_edge_rate : float or None
         FER; None when every test point is near a feature edge.
+    false_edge_rate_se : float or None
+        Its standard error when it is estimated from a sample of the far points (without
+        replacement: 0 when all were tested).
+    n_far, n_far_tested : int
+        Test points not within t of a feature edge, and those of them whose edge test ran
+        (all of them unless ``metrics.score`` sampled them to its stated precision).
     missed_edge_rate : float or None
         MER, weighted; None when no truth edge has weight.
     feature_missed_rate : float or None
@@ -141,7 +158,8 @@ class EdgeReport:
         feature variant's MER; None when the truth has no feature edge.
     variant : {"weighted", "feature"}
     n_points, n_edge_points : int
-        Test points, and those classified as edge points.
+        Test points, and those classified as edge points (among the points tested: all but
+        the far points left out of a sample, ``n_far - n_far_tested``).
     n_truth_edges : int
         Truth edges that count (weighted: every edge that is not coplanar; feature: the
         feature edges).
@@ -172,7 +190,11 @@ class EdgeReport:
     """
 
     score: float
+    score_se: float
     false_edge_rate: float | None
+    false_edge_rate_se: float | None
+    n_far: int
+    n_far_tested: int
     missed_edge_rate: float | None
     feature_missed_rate: float | None
     variant: str
@@ -198,7 +220,8 @@ class EdgeReport:
     def to_dict(self) -> dict:
         """The scalar fields, JSON-ready."""
         return {name: getattr(self, name) for name in (
-            "score", "false_edge_rate", "missed_edge_rate", "feature_missed_rate", "variant",
+            "score", "score_se", "false_edge_rate", "false_edge_rate_se", "n_far",
+            "n_far_tested", "missed_edge_rate", "feature_missed_rate", "variant",
             "n_points", "n_edge_points", "n_truth_edges", "n_feature_edges",
             "feature_edge_length_m", "truth_edge_weight", "feature_weight_fraction",
             "tolerance_m", "feature_angle_deg", "k", "rule", "threshold")}
@@ -239,8 +262,12 @@ def surface_variation(points, *, k: int = defaults.EDGE_K) -> SurfaceVariation:
     return _surface_variation(points, _check_k(k, len(points)))[0]
 
 
-def _surface_variation(points: np.ndarray, k: int):
+def _surface_variation(points: np.ndarray, k: int, tested=None):
     """``surface_variation`` of points and k already validated.
+
+    ``tested``, when given, is called with the Morton order of the points and the points in
+    that order, and returns which of them (bool, in that order) to compute: the neighbourhoods
+    are still the whole cloud's, the others' sigma, drop and radius are NaN.
 
     Returns
     -------
@@ -259,16 +286,17 @@ def _surface_variation(points: np.ndarray, k: int):
     columns = np.ascontiguousarray(tree.data.T)  # (3, d): each coordinate's gathers contiguous
     # The queries coordinate-major too: the offsets' memory layout sets neighbourhood_variation's
     # summation order, hence its last bits.
-    queries = np.ascontiguousarray(ordered.T)
-    n = len(points)
-    out = np.empty((3, n))
+    rows = None if tested is None else np.flatnonzero(tested(order, ordered))
+    chosen = ordered if rows is None else ordered[rows]   # every point: no copy
+    queries = np.ascontiguousarray(chosen.T)
+    out = np.full((3, len(points)), np.nan)
     step = max(1, defaults.EDGE_BLOCK)
-    for lo in range(0, n, step):  # blocks of points, bounded memory; each block is vectorised
+    for lo in range(0, len(chosen), step):  # blocks of points, bounded memory; each vectorised
         sl = slice(lo, lo + step)
-        dist, idx = nearest_k(tree, ordered[sl], k, copies)
-        out[:2, lo:lo + step] = neighbourhood_variation(neighbour_offsets(columns, idx,
-                                                                          queries[:, sl]))
-        out[2, lo:lo + step] = dist[:, -1]
+        at = sl if rows is None else rows[sl]
+        dist, idx = nearest_k(tree, chosen[sl], k, copies)
+        out[:2, at] = neighbourhood_variation(neighbour_offsets(columns, idx, queries[:, sl]))
+        out[2, at] = dist[:, -1]
     out[:, order] = out.copy()
     return SurfaceVariation(sigma=out[0], drop=out[1], radius=out[2], k=k), tree, order, ordered
 
@@ -646,37 +674,56 @@ def edge_report(points: np.ndarray, mesh: Mesh, *, k: int = defaults.EDGE_K,
                 feature_angle_deg: float = defaults.FEATURE_ANGLE_DEG,
                 tolerance: float | None = None,
                 tolerance_fraction: float | None = None,
-                variant: EdgeVariant = "weighted") -> EdgeReport:
+                variant: EdgeVariant = "weighted", precision: float | None = None,
+                seed: int = 0) -> EdgeReport:
     """``edge_score`` of points and a mesh already validated (``inputs.as_points`` and
     ``inputs.as_mesh``), as ``metrics.score`` passes them; the options are still checked.
     A cloud given block by block: ``metrics.edges_stream.EdgeStream`` (the same report in
-    memory that does not grow with the cloud)."""
+    memory that does not grow with the cloud).
+
+    With a ``precision``, only a sample of the points far from feature edges is tested (those
+    whose ``precision.point_keys`` under ``seed`` fall below ``precision.far_sample_fraction``
+    of the share of far points among the ``far_share_points`` smallest keys) and every point
+    near one: the missed-edge rates stay exact (they depend on the near points alone), the
+    false-edge rate is that of the sample, with its standard error; the per-point ``is_edge``
+    and ``variation`` are then None unless every point was tested."""
     t = resolve_length(tolerance, tolerance_fraction, defaults.EDGE_TOLERANCE_FRACTION,
                        bbox_diagonal(mesh.vertices), "tolerance")
     k = _check_k(k, len(points))
     rule, threshold = _check_rule(rule, threshold, k)
     variant = _check_variant(variant)
     feature_angle_deg = _check_angle(feature_angle_deg)
-
-    variation, tree, order, ordered = _surface_variation(points, k)
-    is_edge = _classify(variation, rule, threshold)
     side = TruthEdges.of(mesh, t, feature_angle_deg, variant)
     samples, on_sharp = side.samples, side.on_sharp
+    near = np.zeros(len(points), dtype=bool)
 
+    def tested(order: np.ndarray, ordered: np.ndarray) -> np.ndarray:
+        """Near points (all of them marked in ``near``) and the sample of the far ones."""
+        if on_sharp.any():
+            near[order] = within(side.sharp_tree(), ordered, t, presorted=True)
+        if precision is None:
+            return np.ones(len(ordered), dtype=bool)
+        keys = point_keys(points, seed, EDGE_SALT)
+        share = float(np.mean(~near[smallest_keys(keys, far_share_points(precision))]))
+        fraction = far_sample_fraction(len(points), share, precision)
+        return (near | (keys < fraction))[order]
+
+    variation, tree = _surface_variation(points, k, tested)[:2]
+    checked = ~np.isnan(variation.drop)
+    is_edge = _classify(variation, rule, threshold)
     # Reconstructed: feature-edge samples need an edge point within t, the others any point.
     found = np.zeros(len(samples), dtype=bool)
     if is_edge.any() and on_sharp.any():
         found[on_sharp] = nearest_distance(points[is_edge], samples[on_sharp]) <= t
     if (~on_sharp).any():
-        found[~on_sharp] = query_distance(tree, samples[~on_sharp], upper=t) <= t
-    near = np.zeros(len(points), dtype=bool)
-    if on_sharp.any():
-        near[order] = query_distance(side.sharp_tree(), ordered, upper=t, presorted=True) <= t
+        found[~on_sharp] = within(tree, samples[~on_sharp], t)
     far = ~near
+    whole = bool(checked.all())
     return side.report(found, n_points=len(points), n_edge_points=int(is_edge.sum()),
                        n_far=int(far.sum()), n_false_edges=int((is_edge & far).sum()), k=k,
-                       rule=rule, threshold=threshold, is_edge=is_edge, near_edge=near,
-                       variation=variation)
+                       rule=rule, threshold=threshold, is_edge=is_edge if whole else None,
+                       near_edge=near, variation=variation if whole else None,
+                       n_far_tested=int((far & checked).sum()))
 
 
 @dataclass(frozen=True)
@@ -734,7 +781,8 @@ class TruthEdges:
     def report(self, found: np.ndarray, *, n_points: int, n_edge_points: int, n_far: int,
                n_false_edges: int, k: int, rule: str, threshold: float,
                is_edge: np.ndarray | None = None, near_edge: np.ndarray | None = None,
-               variation: SurfaceVariation | None = None) -> EdgeReport:
+               variation: SurfaceVariation | None = None,
+               n_far_tested: int | None = None) -> EdgeReport:
         """The report from what the test cloud gave.
 
         Parameters
@@ -749,6 +797,10 @@ class TruthEdges:
             The edge rule's options, validated.
         is_edge, near_edge, variation
             Per-point results, when the cloud was held whole (None when streamed).
+        n_far_tested : int, optional
+            The far points whose edge test ran (default ``n_far``: all of them); the
+            false-edge rate is that of these, with the standard error of a sample drawn
+            without replacement from the ``n_far``.
         """
         variant, on_sharp, sample_length = self.variant, self.on_sharp, self.sample_length
         weight = (sample_length if variant == "feature"
@@ -762,10 +814,16 @@ class TruthEdges:
                                            minlength=len(self.edges)),
                                self.lengths, out=np.ones(len(self.edges)),
                                where=self.lengths > 0)
-        false_rate = n_false_edges / n_far if n_far else None
+        tested = n_far if n_far_tested is None else n_far_tested
+        false_rate = n_false_edges / tested if tested else None
+        false_se = (None if false_rate is None
+                    else proportion_se(false_rate, tested, population=n_far))
         terms = [x for x in (false_rate, missed) if x is not None]
         return EdgeReport(
-            score=float(np.mean(terms)) if terms else 0.0, false_edge_rate=false_rate,
+            score=float(np.mean(terms)) if terms else 0.0,
+            score_se=0.0 if false_se is None else false_se / len(terms),
+            false_edge_rate=false_rate, false_edge_rate_se=false_se, n_far=n_far,
+            n_far_tested=tested,
             missed_edge_rate=missed, feature_missed_rate=feature_missed, variant=variant,
             n_points=n_points, n_edge_points=n_edge_points, n_truth_edges=len(self.edges),
             n_feature_edges=int(self.sharp.sum()),

@@ -30,6 +30,11 @@ of set-aside points, each re-reading the input; memory: a slab and its halo (24 
 its KD-tree and the k-nearest temporaries of ``defaults.EDGE_BLOCK`` points), or a batch of
 set-aside points with their neighbours (32 k bytes each). The report is ``edge_report``'s:
 score, rates and counts exactly; only its per-point arrays are left out (None).
+
+With a ``precision`` (a score sized to one, ``metrics.precision``), the edge test runs on the
+core points near a feature edge and on the far ones whose key falls below the fraction sized
+from the share of far points among the ``far_share_points`` smallest keys (kept in the first
+pass): the same points as ``edge_report`` with that precision tests, so the same report.
 """
 
 from __future__ import annotations
@@ -60,7 +65,14 @@ from metrics.edges import (
     resolve_length,
 )
 from metrics.inputs import Mesh, bbox_diagonal, face_areas
-from metrics.spatial import PointIndex, morton_order, nearest_distance, query_distance
+from metrics.precision import (
+    EDGE_SALT,
+    KeySample,
+    far_sample_fraction,
+    far_share_points,
+    point_keys,
+)
+from metrics.spatial import PointIndex, morton_order, nearest_distance, within
 
 Blocks = Callable[[], Iterable[np.ndarray]]
 
@@ -83,7 +95,8 @@ class EdgeStream:
                  rule: EdgeRule = "leave_one_out", threshold: float | None = None,
                  feature_angle_deg: float = defaults.FEATURE_ANGLE_DEG,
                  tolerance: float | None = None, tolerance_fraction: float | None = None,
-                 variant: EdgeVariant = "weighted"):
+                 variant: EdgeVariant = "weighted", precision: float | None = None,
+                 seed: int = 0):
         t = resolve_length(tolerance, tolerance_fraction, defaults.EDGE_TOLERANCE_FRACTION,
                            bbox_diagonal(mesh.vertices), "tolerance")
         self.k = _check_k(k, k)
@@ -97,11 +110,18 @@ class EdgeStream:
         self.area = float(face_areas(mesh.vertices, mesh.faces).sum())
         self.n = 0
         self.kept: list[np.ndarray] | None = []   # the blocks, while they fit in one slab
+        self.precision, self.seed = precision, seed
+        self.far_fraction = 1.0
+        # The points whose share far from feature edges sizes the far sample (edge_report).
+        self.share = (None if precision is None
+                      else KeySample(far_share_points(precision), seed, EDGE_SALT))
 
     def add(self, points: np.ndarray) -> None:
         """Count a block of the first pass: points (b, 3) float64, metres, truth frame."""
         self.counts += np.bincount(self._bin(points[:, self.axis]), minlength=len(self.counts))
         self.n += len(points)
+        if self.share is not None:
+            self.share.add(points, None)
         if self.kept is not None:
             self.kept.append(points)
             if self.n > defaults.EDGE_SLAB_POINTS:
@@ -116,10 +136,18 @@ class EdgeStream:
             Fewer points than k, or a pass that gives another number of points.
         """
         k = _check_k(self.k, self.n)
+        side = self.side
+        if self.precision is not None:
+            probe = self.share.sample()[0]
+            near = np.zeros(len(probe), dtype=bool)
+            if side.on_sharp.any():
+                t = side.tolerance_m
+                near = within(side.sharp_tree(), probe, t)
+            self.far_fraction = far_sample_fraction(self.n, float(np.mean(~near)),
+                                                    self.precision)
         if self.kept is not None:   # one slab, held since the first pass: no further pass
             kept, self.kept = self.kept, None
             blocks = partial(iter, kept)
-        side = self.side
         tally = _Tally(side, self)
         budget = max(defaults.EDGE_SLAB_POINTS, 1)
         radius = np.sqrt(k * self.area / (np.pi * self.n))   # uniform cover of the truth
@@ -134,7 +162,7 @@ class EdgeStream:
         self._resolve(blocks, tally, aside)
         return side.report(tally.found, n_points=self.n, n_edge_points=tally.n_edge,
                            n_far=tally.n_far, n_false_edges=tally.n_false, k=k, rule=self.rule,
-                           threshold=self.threshold)
+                           threshold=self.threshold, n_far_tested=tally.n_far_tested)
 
     def _bin(self, x: np.ndarray) -> np.ndarray:
         """Bin of coordinates: 0 below the truth, j for [cuts[j-1], cuts[j]), last above."""
@@ -191,12 +219,14 @@ class EdgeStream:
         far = tally.far(core)
         if len(held) < k:
             tally.found_by(core, lo, hi, edge=False)
-            aside.append(np.column_stack([core, far]))
+            aside.append(self._tested(tally, core, far))
             return np.zeros(0)
         tree, copies = copy_tree(held)
         # The held points (core and halo, all of them the cloud's) look for the gentle samples
         # near the core: over all slabs the same samples are found as by the cores alone.
         tally.found_by(core, lo, hi, edge=False, index=tree)
+        rows = self._tested(tally, core, far)
+        core, far = np.ascontiguousarray(rows[:, :3]), rows[:, 3].astype(bool)
         columns = np.ascontiguousarray(tree.data.T)
         queries = np.ascontiguousarray(core.T)  # C layout: the offsets' bits (edges.py)
         radii = np.empty(len(core))
@@ -215,6 +245,16 @@ class EdgeStream:
         tally.add(core[sure], is_edge[sure], far[sure], lo, hi)
         aside.append(np.column_stack([core[~sure], far[~sure]]))
         return radii
+
+    def _tested(self, tally: _Tally, core: np.ndarray, far: np.ndarray) -> np.ndarray:
+        """Rows (x, y, z, far) of the core points whose edge test runs: all, or those near a
+        feature edge and the far ones whose key falls below ``far_fraction``
+        (``edges.edge_report``); the far ones counted in ``tally.n_far_tested``."""
+        if self.far_fraction < 1:
+            keep = ~far | (point_keys(core, self.seed, EDGE_SALT) < self.far_fraction)
+            core, far = core[keep], far[keep]
+        tally.n_far_tested += int(far.sum())
+        return np.column_stack([core, far])
 
     def _edge(self, value: np.ndarray) -> np.ndarray:
         """Edge points from ``neighbourhood_variation``'s (2, b) sigma and drop."""
@@ -256,7 +296,7 @@ class _Tally:
         self.sharp = np.flatnonzero(side.on_sharp)
         self.gentle = np.flatnonzero(~side.on_sharp)
         self.sharp_tree = side.sharp_tree() if len(self.sharp) else None
-        self.n_edge = self.n_far = self.n_false = 0
+        self.n_edge = self.n_far = self.n_false = self.n_far_tested = 0
 
     def far(self, points: np.ndarray) -> np.ndarray:
         """(b,) bool: points not within t of a feature edge (counted here)."""
@@ -264,7 +304,7 @@ class _Tally:
             far = np.ones(len(points), dtype=bool)
         else:
             t = self.side.tolerance_m
-            far = ~(query_distance(self.sharp_tree, points, upper=t) <= t)
+            far = ~within(self.sharp_tree, points, t)
         self.n_far += int(far.sum())
         return far
 
@@ -287,7 +327,7 @@ class _Tally:
             hit = nearest_distance(points, self.side.samples[which]) <= t
         else:
             index = _tree(points) if index is None else index
-            hit = query_distance(index, self.side.samples[which], upper=t) <= t
+            hit = within(index, self.side.samples[which], t)
         self.found[which[hit]] = True
 
     def add(self, points: np.ndarray, is_edge: np.ndarray, far: np.ndarray, lo: float,

@@ -7,8 +7,15 @@ Temples, Knapitsch et al. 2017, and Open3D's ``compute_metrics``):
   point (a test mesh is first sampled uniformly by area, ``n_test_samples`` points).
 - completeness: d(truth sample, test), for ``n_truth_samples`` points sampled uniformly by area on
   the truth: to a test cloud by nearest neighbour (Open3D's KD-tree), to a test mesh exactly.
+- how many: with no sample count given, as many as the stated precision needs
+  (``metrics.precision``: the Chamfer distance's standard error at most 2 % of it, the
+  F-score's, coverage's and edge score's at most 0.005, sized from a pilot), a cloud's
+  accuracy then averaged over a seeded sample of its points; with a count given, that count
+  (and every point of a cloud). Every report states its standard errors (``*_se``).
 - mean, RMS, median, 95th percentile and max of each; Chamfer = (mean accuracy + mean
-  completeness) / 2; Hausdorff = max(max accuracy, max completeness).
+  completeness) / 2; Hausdorff = max(max accuracy, max completeness). The median, 95th
+  percentile and max of a sampled side are the sample's (the max of a sample is at most the
+  whole's: a cloud's lone outlier may be left out of its sample).
 - precision = fraction of test points within tau of the truth; recall = fraction of truth samples
   within tau of the test; F = 2 P R / (P + R) (0 when P + R = 0).
 - coverage: fraction of the truth's area within tau of the test, by a deterministic quadrature
@@ -75,6 +82,17 @@ from metrics.inputs import (
     face_areas,
     face_normals,
 )
+from metrics.precision import (
+    CLOUD_SALT,
+    KeySample,
+    check_precision,
+    fscore_se,
+    lattice_size,
+    plan,
+    point_keys,
+    proportion_se,
+    smallest_keys,
+)
 from metrics.sampling import coverage_lattice, sample_surface, subdivision_levels
 from metrics.spatial import bounds, cloud_distance, morton_order
 
@@ -94,7 +112,8 @@ class ScoreReport:
     Attributes
     ----------
     n_points : int
-        Test points scored (the cloud's size, or the samples drawn on a test mesh).
+        Test points scored (the cloud's points or the sample of them scored, or the samples
+        drawn on a test mesh).
     n_truth_samples : int
     tau_m : float
     truth_diagonal_m : float
@@ -105,11 +124,21 @@ class ScoreReport:
     chamfer_m, hausdorff_m : float
     accuracy_mean_se_m, completeness_mean_se_m, chamfer_se_m : float
         Standard errors of the two means and of the Chamfer distance from sampling: a mean's
-        is the sample standard deviation over the square root of the samples (0 for the
-        accuracy of a cloud, scored point by point); the Chamfer's half the root sum of squares
-        of the two.
+        is the sample standard deviation over the square root of the samples (for a cloud's
+        points, drawn without replacement, times sqrt(1 - n / N): 0 when every point is
+        scored); the Chamfer's half the root sum of squares of the two.
     precision, recall, fscore : float, in [0, 1]
     coverage : float, in [0, 1]
+    precision_se, recall_se, fscore_se, coverage_se : float
+        Standard errors from sampling: of the two proportions (binomial, Agresti-Coull
+        adjusted, ``precision.proportion_se``; 0 for the precision of a cloud whose every
+        point is scored), of F by the delta method, of the coverage the
+        binomial one of as many random points as the lattice has (an upper bound for a
+        quadrature that places one point per cell; ``metrics.precision``).
+    target_precision : float or None
+        The precision the sample counts were sized for (``metrics.precision``): the Chamfer
+        distance's standard error at most this fraction of it, the F-score's, coverage's and
+        edge score's at most a quarter of it. None when the caller gave the sample counts.
     normal_consistency : float in [0, 1] or None
     edge_score : float in [0, 1] or None (None when not computed)
     test_kind : {"cloud", "mesh"}
@@ -149,6 +178,11 @@ class ScoreReport:
     recall: float
     fscore: float
     coverage: float
+    precision_se: float
+    recall_se: float
+    fscore_se: float
+    coverage_se: float
+    target_precision: float | None
     normal_consistency: float | None
     edge_score: float | None
     test_kind: str
@@ -301,9 +335,8 @@ def _frozen(arrays: tuple) -> tuple:
 
 
 def score(test, truth, *, tau: float | None = None, tau_fraction: float | None = None,
-          n_truth_samples: int = defaults.TRUTH_SAMPLES,
-          n_test_samples: int = defaults.TEST_MESH_SAMPLES,
-          coverage_points: int = defaults.COVERAGE_POINTS,
+          n_truth_samples: int | None = None, n_test_samples: int | None = None,
+          coverage_points: int | None = None, precision: float | None = None,
           seed: int | None = defaults.SEED, edges: bool = True,
           edge_options: dict | None = None, progress=None) -> ScoreReport:
     """Score a test cloud or mesh against a truth mesh.
@@ -320,18 +353,28 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     tau_fraction : float, optional
         tau as a fraction of the truth's bounding-box diagonal; default
         ``defaults.TAU_FRACTION`` (1 %) when neither is given. Give at most one of the two.
-    n_truth_samples : int
-        Points sampled on the truth for completeness and recall (default 200,000).
-    n_test_samples : int
-        Points sampled on a test mesh for accuracy and precision (default 200,000); unused for a
-        cloud.
-    coverage_points : int
-        Target size of the coverage quadrature lattice (default 400,000; at least one point per
-        truth face).
+    n_truth_samples : int, optional
+        Points sampled on the truth for completeness and recall.
+    n_test_samples : int, optional
+        Points sampled on a test mesh for accuracy and precision; unused for a cloud.
+    coverage_points : int, optional
+        Target size of the coverage quadrature lattice (at least one point per truth face).
+        Given any of the three counts, the score uses them (the others at 200,000, 200,000 and
+        400,000), scores every point of a cloud and runs the edge test on every point.
+    precision : float, optional
+        With no count given: the sample counts are sized from a pilot until the Chamfer
+        distance's standard error is at most this fraction of it and the F-score's at most a
+        quarter of it (default ``defaults.PRECISION``, 2 %: 0.005 on F; ``metrics.precision``);
+        a cloud's accuracy is averaged over a seeded sample of its points, the coverage lattice
+        sized for a standard error of a quarter of it, and the edge metric's false-edge rate
+        estimated from a seeded sample of the points far from feature edges (every point near
+        one tested) for an edge score's error of a quarter of it. The achieved standard errors
+        are in the report.
     seed : int or None
-        Seed of all sampling (``np.random.default_rng``); the same seed gives the same report.
+        Seed of all sampling (``np.random.default_rng``, ``precision.point_keys``); the same
+        seed gives the same report.
     edges : bool
-        Compute the edge metric (``edge_score`` in the report; ~3 s per million points).
+        Compute the edge metric (``edge_score`` in the report).
     edge_options : dict, optional
         Keyword arguments for ``edges.edge_score`` (``k``, ``rule``, ``threshold``,
         ``feature_angle_deg``, ``tolerance``, ``tolerance_fraction``, ``variant``).
@@ -354,8 +397,8 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
         Test and truth bounding-box diagonals differ by more than ``SCALE_MISMATCH_RATIO`` (100).
     """
     setup = _Setup(truth, tau=tau, tau_fraction=tau_fraction, n_truth_samples=n_truth_samples,
-                   n_test_samples=n_test_samples, coverage_points=coverage_points, seed=seed,
-                   edge_options=edge_options)
+                   n_test_samples=n_test_samples, coverage_points=coverage_points,
+                   precision=precision, seed=seed, edge_options=edge_options)
     test = as_test(test, "test")
     setup.check_frame(test.frame)
     is_mesh = isinstance(test, Mesh)
@@ -364,6 +407,8 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     setup.check_scale(bbox_diagonal(test.vertices if is_mesh else test.points))
 
     report_stage = progress or (lambda stage: None)
+    if setup.precision is not None:
+        return _score_to_precision(setup, test, edges, report_stage)
     accuracy = _Accuracy(setup, keep=True)
     # A test mesh's distance structure is set up on a second thread while its samples are drawn
     # and scored (numpy releases the GIL in its kernels).
@@ -387,11 +432,121 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
         edge = edge_report(test_points, setup.mesh, **setup.edge_options)
         report_stage("edges")
     distances = np.concatenate(accuracy.distances)
-    return setup.report(accuracy, _summary(distances), nearest, edge,
+    return setup.report(accuracy, _summary(distances), setup.split(nearest), edge,
                         test_kind="mesh" if is_mesh else "cloud",
+                        population=None if is_mesh else accuracy.n,
                         arrays={"accuracy_distances": distances,
                                 "accuracy_faces": np.concatenate(accuracy.faces),
                                 "test_points": test_points})
+
+
+class _Pool:
+    """The samples of one side, taken as prefixes of a seeded draw: the first ``n`` are the
+    same whatever is taken later. ``base`` holds the first arrays (points first); ``more(n,
+    offset)`` draws ``n`` more (None: the base is all there is, a cloud's sample)."""
+
+    def __init__(self, base: tuple, more: Callable[[int, int], tuple] | None):
+        self.arrays, self.more = list(base), more
+
+    def take(self, lo: int, hi: int) -> tuple:
+        have = len(self.arrays[0])
+        if hi > have and self.more is not None:
+            extra = self.more(hi - have, have)
+            self.arrays = [np.concatenate([a, b]) for a, b in zip(self.arrays, extra,
+                                                                   strict=True)]
+        return tuple(None if a is None else a[lo:hi] for a in self.arrays)
+
+
+def _score_to_precision(setup: _Setup, test, edges: bool, report_stage) -> ScoreReport:
+    """``score`` with the sample counts sized from ``setup.precision`` (``metrics.precision``).
+
+    A test mesh: its samples are the first of today's ``TEST_MESH_SAMPLES`` draw (the edge
+    metric runs on that whole draw, its far points sampled), extended by further seeded draws
+    when more are needed. A cloud: its points in ascending ``precision.point_keys``. The truth:
+    the first of its ``TRUTH_SAMPLES`` draw, likewise extended. The test mesh's distance
+    structure and the edge metric run on two further threads while the samples are scored (all
+    three spend their time in numpy, Embree and Open3D kernels that release the GIL)."""
+    seed = setup.key_seed
+    is_mesh = isinstance(test, Mesh)
+    accuracy = _Accuracy(setup, keep=True)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        if is_mesh:
+            test_distance = pool.submit(MeshDistance, test)
+            drawn, faces = sample_surface(test, defaults.TEST_MESH_SAMPLES, seed=setup.seed)
+            normals = face_normals(test.vertices, test.faces)
+
+            def more(n: int, at: int) -> tuple[np.ndarray, np.ndarray]:
+                points, more_faces = sample_surface(test, n, seed=[seed, 2, at])
+                return points, normals[more_faces]
+
+            test_pool = _Pool((drawn, normals[faces]), more)
+            population = None
+        else:
+            drawn = test.points
+            rows = smallest_keys(point_keys(drawn, seed, CLOUD_SALT), defaults.CLOUD_SAMPLES)
+            test_pool = _Pool((drawn[rows], None if test.normals is None
+                               else test.normals[rows]), None)
+            population = len(drawn)
+        edge = (pool.submit(edge_report, drawn, setup.mesh, **setup.edge_options, seed=seed,
+                            precision=setup.precision) if edges else None)
+        complete = (lambda q: test_distance.result().query(q)[0]) if is_mesh else (
+            lambda q: cloud_distance(drawn, q))
+        completeness, lattice = _sample_to_precision(setup, test_pool, accuracy, complete,
+                                                     population)
+        report_stage("accuracy")
+        report_stage("completeness")
+        if edge is not None:
+            edge = edge.result()
+            report_stage("edges")
+    distances = np.concatenate(accuracy.distances)
+    return setup.report(accuracy, _summary(distances), (completeness, lattice), edge,
+                        test_kind="mesh" if is_mesh else "cloud", population=population,
+                        arrays={"accuracy_distances": distances,
+                                "accuracy_faces": np.concatenate(accuracy.faces),
+                                "test_points": test_pool.take(0, accuracy.n)[0]})
+
+
+def _sample_to_precision(setup: _Setup, test_pool: _Pool, accuracy: _Accuracy,
+                         complete: Callable[[np.ndarray], np.ndarray], population: int | None,
+                         first: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Score a pilot of each side, then more samples until the plan is met (``precision.plan``,
+    at most ``defaults.PRECISION_ROUNDS`` rounds).
+
+    Parameters
+    ----------
+    test_pool : _Pool
+        The test's samples (points, normals), added to ``accuracy``.
+    complete : callable
+        Nearest distances to the test of truth points (m, 3) -> (m,).
+    population : int or None
+        A cloud's size (its accuracy side has at most that many samples).
+    first : (p + l,) float64, optional
+        The distances of the pilot truth samples then the lattice, already found (a stream's
+        first pass); else found here.
+
+    Returns
+    -------
+    completeness : (n_c,) float64, of the first n_c truth samples (``setup.truth_pool``)
+    lattice : (l,) float64, of the coverage lattice points (``setup.lattice``)
+    """
+    pilot = defaults.PILOT_SAMPLES
+    if accuracy.n < pilot:
+        accuracy.add(*test_pool.take(accuracy.n, pilot))
+    truth = setup.truth_pool.take(0, pilot)[0]
+    if first is None:
+        first = complete(np.concatenate([truth, setup.lattice[1]]))
+    completeness = [first[:len(truth)]]
+    for _ in range(defaults.PRECISION_ROUNDS):
+        have_a, have_c = accuracy.n, sum(map(len, completeness))
+        want_a, want_c = plan(np.concatenate(accuracy.distances), np.concatenate(completeness),
+                              setup.tau, setup.precision, population)
+        if want_a > have_a:
+            accuracy.add(*test_pool.take(have_a, want_a))
+        if want_c > have_c:
+            completeness.append(complete(setup.truth_pool.take(have_c, want_c)[0]))
+        if (accuracy.n, sum(map(len, completeness))) == (have_a, have_c):
+            break
+    return np.concatenate(completeness), first[len(truth):]
 
 
 Blocks = Callable[[], Iterable[np.ndarray | tuple[np.ndarray, np.ndarray | None]]]
@@ -400,10 +555,10 @@ Blocks = Callable[[], Iterable[np.ndarray | tuple[np.ndarray, np.ndarray | None]
 def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "body",
                  tau: float | None = None,
                  tau_fraction: float | None = None,
-                 n_truth_samples: int = defaults.TRUTH_SAMPLES,
-                 coverage_points: int = defaults.COVERAGE_POINTS,
-                 seed: int | None = defaults.SEED, edges: bool = True,
-                 edge_options: dict | None = None, progress=None) -> ScoreReport:
+                 n_truth_samples: int | None = None, coverage_points: int | None = None,
+                 precision: float | None = None, seed: int | None = defaults.SEED,
+                 edges: bool = True, edge_options: dict | None = None,
+                 progress=None) -> ScoreReport:
     """Score a test cloud given block by block, in memory that does not grow with its size.
 
     The same report as ``score(cloud, truth, ...)`` of the whole cloud (module docstring: every
@@ -422,10 +577,15 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
     name : str
         The test's name in error messages (e.g. ``"test run.h5"``: "test run.h5 points has 1
         row(s) with NaN or Inf, first at row 7"); rows are numbered across blocks.
-    tau, tau_fraction, n_truth_samples, coverage_points, seed, edges, edge_options, progress
+    tau, tau_fraction, n_truth_samples, coverage_points, precision, seed, edges, edge_options,
+    progress
         As ``score``. With ``edges`` the edge metric takes one further pass per
         ``defaults.EDGE_SLAB_POINTS`` points and one or more for points near slab faces
-        (``metrics.edges_stream``).
+        (``metrics.edges_stream``). Scored to a precision (no count given), the sample of the
+        cloud's points is kept as the blocks go by (``precision.KeySample``, at most
+        ``defaults.CLOUD_SAMPLES`` points), the pilot truth samples and the lattice are queried
+        in the first pass, and further truth samples, when the precision asks for them, in one
+        further pass per round.
 
     Returns
     -------
@@ -437,13 +597,17 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
         As ``score``; also a stream that gives other points on a later pass.
     """
     setup = _Setup(truth, tau=tau, tau_fraction=tau_fraction, n_truth_samples=n_truth_samples,
-                   n_test_samples=defaults.TEST_MESH_SAMPLES, coverage_points=coverage_points,
+                   n_test_samples=None, coverage_points=coverage_points, precision=precision,
                    seed=seed, edge_options=edge_options)
     setup.check_frame(frame, name)
+    edge_stream = None
     if edges:  # the options now; the point count against k once it is known
         check_options(np.iinfo(np.int64).max, setup.diagonal, **setup.edge_options)
-        edge_stream = EdgeStream(setup.mesh, **setup.edge_options)
+        edge_stream = EdgeStream(setup.mesh, **setup.edge_options, precision=setup.precision,
+                                 seed=setup.key_seed)
     report_stage = progress or (lambda stage: None)
+    if setup.precision is not None:
+        return _stream_to_precision(setup, blocks, name, edge_stream, report_stage)
     queries = setup.queries()
     nearest = np.full(len(queries), np.inf)
     accuracy = _Accuracy(setup, keep=False)
@@ -471,8 +635,62 @@ def score_stream(blocks: Blocks, truth, *, name: str = "test", frame: str = "bod
         edge = edge_stream.report(lambda: (points for points, _ in
                                            _checked_blocks(blocks, name)))
         report_stage("edges")
-    return setup.report(accuracy, summary, nearest, edge, test_kind="cloud",
+    return setup.report(accuracy, summary, setup.split(nearest), edge, test_kind="cloud",
+                        population=n, arrays=dict.fromkeys(_ARRAYS))
+
+
+def _stream_to_precision(setup: _Setup, blocks: Blocks, name: str,
+                         edge_stream: EdgeStream | None, report_stage) -> ScoreReport:
+    """``score_stream`` with the sample counts sized from ``setup.precision``: the same report
+    as ``score`` of the whole cloud (the same points sampled, the same distances)."""
+    sample = KeySample(defaults.CLOUD_SAMPLES, setup.key_seed, CLOUD_SALT)
+    pilot = setup.truth_pool.take(0, defaults.PILOT_SAMPLES)[0]
+    first = _stream_nearest(blocks, name, np.concatenate([pilot, setup.lattice[1]]),
+                            sample=sample, edge_stream=edge_stream)
+    if sample.n == 0:
+        raise InputError(f"{name} points is empty (0 rows)")
+    setup.check_scale(float(np.linalg.norm(sample.high - sample.low)))
+    if edge_stream is not None:
+        setup.check_edges(sample.n)
+    accuracy = _Accuracy(setup, keep=True)
+    completeness, lattice = _sample_to_precision(
+        setup, _Pool(sample.sample(), None), accuracy,
+        lambda queries: _stream_nearest(blocks, name, queries), sample.n, first=first)
+    report_stage("accuracy")
+    report_stage("completeness")
+    edge = None
+    if edge_stream is not None:   # after the distances, not beside them: one slab at a time
+        edge = edge_stream.report(lambda: (points for points, _ in
+                                           _checked_blocks(blocks, name)))
+        report_stage("edges")
+    return setup.report(accuracy, _summary(np.concatenate(accuracy.distances)),
+                        (completeness, lattice), edge, test_kind="cloud", population=sample.n,
                         arrays=dict.fromkeys(_ARRAYS))
+
+
+def _stream_nearest(blocks: Blocks, name: str, queries: np.ndarray, *,
+                    sample: KeySample | None = None,
+                    edge_stream: EdgeStream | None = None) -> np.ndarray:
+    """One pass over a stream: each query's (m, 3) nearest distance to its points (m,), in the
+    queries' order; on the first pass, the blocks also go to the cloud's ``sample`` and the
+    ``edge_stream``."""
+    order = morton_order(queries)
+    ordered = queries[order]
+    nearest = np.full(len(queries), np.inf)
+    pending = []
+    for points, normals in _checked_blocks(blocks, name):
+        if sample is not None:
+            sample.add(points, normals)
+        if edge_stream is not None:
+            edge_stream.add(points)
+        pending.append(points)
+        if sum(map(len, pending)) >= defaults.STREAM_BLOCK:
+            _reduce_nearest(nearest, pending, ordered)
+        interrupt.check()   # a swallowed Ctrl-C stops at the next block
+    _reduce_nearest(nearest, pending, ordered)
+    out = np.empty_like(nearest)
+    out[order] = nearest
+    return out
 
 
 def _checked_blocks(blocks: Blocks, name: str):
@@ -511,13 +729,28 @@ class _Setup:
     """What a score derives from the truth and the options, validated before any work."""
 
     def __init__(self, truth, *, tau, tau_fraction, n_truth_samples, n_test_samples,
-                 coverage_points, seed, edge_options):
+                 coverage_points, precision, seed, edge_options):
         self.prepared = Truth.of(truth)
         self.mesh = self.prepared.mesh
         if seed is not None and (isinstance(seed, bool) or
                                  not isinstance(seed, int | np.integer) or seed < 0):
             raise InputError(f"seed must be a non-negative integer or None, got {seed!r}")
         self.seed = seed
+        # The seed of the keys and further draws of a score to a precision (a fresh one when
+        # the caller asks for fresh randomness).
+        self.key_seed = (int(np.random.SeedSequence().generate_state(1)[0]) if seed is None
+                         else int(seed))
+        counts = (n_truth_samples, n_test_samples, coverage_points)
+        if precision is not None and any(c is not None for c in counts):
+            raise InputError("give a precision or sample counts (n_truth_samples, "
+                             "n_test_samples, coverage_points), not both")
+        self.precision = (None if any(c is not None for c in counts)
+                          else check_precision(defaults.PRECISION if precision is None
+                                               else precision))
+        defaults_counts = (defaults.TRUTH_SAMPLES, defaults.TEST_MESH_SAMPLES,
+                           defaults.COVERAGE_POINTS)
+        n_truth_samples, n_test_samples, coverage_points = (
+            d if c is None else c for c, d in zip(counts, defaults_counts, strict=True))
         self.n_truth_samples = _count(n_truth_samples, "n_truth_samples")
         self.n_test_samples = _count(n_test_samples, "n_test_samples")
         self.coverage_points = _count(coverage_points, "coverage_points")
@@ -571,6 +804,21 @@ class _Setup:
                 ScaleMismatchWarning, stacklevel=3)
 
     @cached_property
+    def truth_pool(self) -> _Pool:
+        """The truth's samples (points, faces) of a score to a precision: the first of its
+        ``TRUTH_SAMPLES`` draw, then further seeded draws."""
+        return _Pool(self.prepared.samples(defaults.TRUTH_SAMPLES, _child_seed(self.seed)),
+                     lambda n, at: sample_surface(self.mesh, n, seed=[self.key_seed, 1, at]))
+
+    @cached_property
+    def lattice(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``Truth.lattice`` of this score: ``coverage_points``, or the size its precision
+        asks (``precision.lattice_size``)."""
+        size = (self.coverage_points if self.precision is None
+                else lattice_size(self.precision))
+        return self.prepared.lattice(size)
+
+    @cached_property
     def truth_samples(self) -> tuple[np.ndarray, np.ndarray]:
         """``Truth.samples`` of this score, drawn once (fresh ones each call when unseeded)."""
         return self.prepared.samples(self.n_truth_samples, _child_seed(self.seed))
@@ -588,16 +836,25 @@ class _Setup:
         (``Truth.queries``): completeness and coverage in one nearest-distance query."""
         return self._queries[0]
 
-    def report(self, accuracy: _Accuracy, acc: dict, nearest: np.ndarray, edge, *,
-               test_kind: str, arrays: dict) -> ScoreReport:
-        """The report from the accuracy statistics and the nearest test distances of the points
-        of ``queries()``, in their order."""
-        n_samples = self.n_truth_samples
-        truth_points, truth_faces = self.truth_samples
-        levels, _, lattice_faces = self.prepared.lattice(self.coverage_points)
+    def split(self, nearest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The nearest test distances of the points of ``queries()``, in their order, as those
+        of the truth samples and those of the lattice points."""
         unordered = np.empty_like(nearest)
         unordered[self._queries[1]] = nearest
-        completeness, lattice_distance = unordered[:n_samples], unordered[n_samples:]
+        return unordered[:self.n_truth_samples], unordered[self.n_truth_samples:]
+
+    def report(self, accuracy: _Accuracy, acc: dict, nearest: tuple[np.ndarray, np.ndarray],
+               edge, *, test_kind: str, population: int | None, arrays: dict) -> ScoreReport:
+        """The report from the accuracy statistics and the nearest test distances of the first
+        truth samples and of the lattice points (``nearest``); ``population`` the size of a
+        test cloud, whose points were drawn without replacement (None for a mesh's samples)."""
+        completeness, lattice_distance = nearest
+        n_samples = len(completeness)
+        if self.precision is None:
+            truth_points, truth_faces = self.truth_samples
+        else:
+            truth_points, truth_faces = self.truth_pool.take(0, n_samples)
+        levels, _, lattice_faces = self.lattice
         comp = _summary(completeness)
         precision = accuracy.within / accuracy.n
         recall = float(np.mean(completeness < self.tau))
@@ -609,18 +866,26 @@ class _Setup:
         coverage = float(np.sum(areas * face_coverage) / areas.sum())
         normal_consistency = (None if accuracy.cos_sum is None
                               else float(accuracy.cos_sum / accuracy.n))
-        acc_se = acc["se"] if test_kind == "mesh" else 0.0  # a cloud's points are all scored
+        # A cloud scored point by point (n == population) has no sampling error.
+        acc_se = acc.get("se", 0.0)   # a stream of every point keeps no distances: 0 below
+        if population is not None:
+            acc_se *= np.sqrt(max(0.0, 1.0 - accuracy.n / population))
+        precision_se = proportion_se(precision, accuracy.n, population)
+        recall_se = proportion_se(recall, n_samples)
         return ScoreReport(
             n_points=accuracy.n, n_truth_samples=n_samples, tau_m=self.tau,
             truth_diagonal_m=self.diagonal,
             **{f"accuracy_{k}_m": acc[k] for k in _STATS},
             **{f"completeness_{k}_m": comp[k] for k in _STATS},
             chamfer_m=0.5 * (acc["mean"] + comp["mean"]),
-            hausdorff_m=max(acc["max"], comp["max"]), accuracy_mean_se_m=acc_se,
+            hausdorff_m=max(acc["max"], comp["max"]), accuracy_mean_se_m=float(acc_se),
             completeness_mean_se_m=comp["se"], chamfer_se_m=0.5 * float(np.hypot(acc_se,
                                                                                 comp["se"])),
             precision=float(precision), recall=recall, fscore=float(fscore),
-            coverage=coverage, normal_consistency=normal_consistency,
+            coverage=coverage, precision_se=precision_se, recall_se=recall_se,
+            fscore_se=fscore_se(precision, recall, precision_se, recall_se),
+            coverage_se=proportion_se(coverage, len(lattice_faces)),
+            target_precision=self.precision, normal_consistency=normal_consistency,
             edge_score=None if edge is None else edge.score, test_kind=test_kind,
             seed=self.seed, **arrays, completeness_distances=completeness,
             truth_points=truth_points, truth_point_faces=truth_faces,

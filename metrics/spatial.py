@@ -168,6 +168,50 @@ def query_distance(index: PointIndex, queries: np.ndarray, *, upper: float = np.
     return out
 
 
+def within(index: PointIndex, queries: np.ndarray, t: float, *, presorted: bool = False
+           ) -> np.ndarray:
+    """Whether each query has a point of the index within ``t`` (distance <= t), exactly
+    ``query_distance(index, queries, upper=t) <= t``.
+
+    A query in the same cell of a grid of side ``t / sqrt(3)`` (less a 1e-9 margin for the
+    rounding of the cell numbers) as some point is within t of it: those are settled by
+    looking up their cell among the points' cells (a sort of the points' cells and a binary
+    search per query, several times cheaper than a nearest-neighbour search); the others are
+    asked of the index. The sort pays only when there are about as many queries as points
+    (the edge metric's truth-edge samples against a sampled surface, its points against the
+    feature-edge samples); with fewer than half as many queries every query is asked.
+
+    Parameters
+    ----------
+    index : PointIndex
+    queries : (m, 3) float64
+    t : float, > 0
+    presorted : bool
+        As ``query_distance``.
+
+    Returns
+    -------
+    (m,) bool
+    """
+    hit = np.zeros(len(queries), dtype=bool)
+    if len(queries) == 0:
+        return hit
+    side = t / np.sqrt(3.0) * (1.0 - 1e-9)
+    low = np.minimum(index.data.min(axis=0), queries.min(axis=0))
+    high = np.maximum(index.data.max(axis=0), queries.max(axis=0))
+    size = np.floor((high - low) / side).astype(np.float64) + 1
+    if 2 * len(queries) >= len(index.data) and np.prod(size) < 2.0**62:  # int64 cell numbers
+        strides = np.array([size[1] * size[2], size[2], 1.0]).astype(np.int64)
+        cells = np.unique(np.floor((index.data - low) / side).astype(np.int64) @ strides)
+        keys = np.floor((queries - low) / side).astype(np.int64) @ strides
+        slot = np.minimum(np.searchsorted(cells, keys), len(cells) - 1)
+        hit = cells[slot] == keys
+    ask = ~hit
+    if ask.any():
+        hit[ask] = query_distance(index, queries[ask], upper=t, presorted=presorted) <= t
+    return hit
+
+
 def cloud_distance(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
     """Distance from each query to its nearest point, float64 (Open3D's KD-tree, all cores).
 

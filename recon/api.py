@@ -1159,7 +1159,8 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     timeout, memory_limit : float [s], int [MiB], optional
         Of every isolated run.
     samples : int, optional
-        Surface samples per side when scoring (default: metrics').
+        Surface samples per side when scoring (default: as many as metrics' stated precision
+        needs, ``metrics.precision``).
     auto : bool
         Also run ``method="auto"``'s choice (its ladder restricted to ``methods``) and record
         where it ranks on the truth.

@@ -93,7 +93,7 @@ CELL_CACHE = 4
 # sweep of a 10,000-point asteroid cloud, 5.2, is a completeness; a typical one is 1.4), the
 # Chamfer's relative error is sqrt(2) / 2 * DISTANCE_CV / sqrt(samples). Each record carries the
 # error it achieved (``chamfer_se_m``). The edge score of a mesh is measured on its samples,
-# so it is that of 31,250 samples, not of metrics' default 200,000.
+# so it is that of 31,250 samples, not of the 200,000 metrics draws by default.
 CHAMFER_PRECISION = 0.02
 DISTANCE_CV = 5.0
 STABILITY_SAMPLES = math.ceil(0.5 * (DISTANCE_CV / CHAMFER_PRECISION) ** 2)

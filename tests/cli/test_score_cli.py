@@ -128,3 +128,13 @@ def test_edge_variant_option(rso_log, capsys):
         main(["score", str(rso_log), "--edge-variant", "sharp"])
     assert exit_.value.code == 1
     assert "invalid choice: 'sharp'" in capsys.readouterr().err
+
+
+def test_precision_option_states_what_it_asked(rso_log, capsys):
+    coarse = _json(capsys, ["score", str(rso_log), "--json", "--no-edges", "--precision", "0.2"])
+    default = _json(capsys, ["score", str(rso_log), "--json", "--no-edges"])
+    assert coarse["target_precision"] == 0.2 and default["target_precision"] == 0.02
+    assert default["chamfer_se_m"] <= 1.05 * 0.02 * default["chamfer_m"]
+    assert default["fscore_se"] <= 1.05 * 0.005
+    assert main(["score", str(rso_log), "--precision", "-1"]) == 1
+    assert "precision must be a number in (0, 0.5]" in capsys.readouterr().err

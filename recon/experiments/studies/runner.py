@@ -42,12 +42,13 @@ ROTATION_S = 15480.0
 # The same in hours, as the paper's time axes and the studies' labels give it.
 ROTATION_H = ROTATION_S / 3600.0
 
-# Score options of the curves (many prefixes per case): a quarter of metrics.score's default
+# Score options of the curves (many prefixes per case): a quarter of metrics.score's fixed-count
 # truth samples (200,000) and coverage lattice (400,000). On the 100-rotation asteroid cloud this
 # moves coverage by 1e-4 and F-score by 7e-4 (measured), far below the differences between the
 # cases compared, at half the cost. Every study writes the options it used into its data.
 CURVE_SCORE = {"n_truth_samples": 50_000, "coverage_points": 100_000}
-# Table studies (one score per case) use metrics.score's defaults.
+# Table studies (one score per case) use metrics.score's defaults: counts sized from its stated
+# precision (metrics/precision.py).
 TABLE_SCORE: dict[str, Any] = {}
 # The tiny size of every study (tests only): a fiftieth of metrics.score's samples, enough for
 # every metric to be computed, not for its value to mean anything.
