@@ -97,9 +97,16 @@ def run(args) -> int:
         return 0
     print(f"{args.test} ({result['test_kind']}) against {truth}")
     width = max(len(label) for _, label, _ in _TABLE)
+    total = result.get("n_test_points")
+    sampled = total is not None and total > result["n_points"]
     for key, label, unit in _TABLE:
         value = result.get(key)
         text = "n/a" if value is None else (f"{value:d}" if isinstance(value, int)
                                             else f"{value:.4g}")
+        if key == "n_points" and sampled:
+            text += f" of {total} (a seeded sample sized by the precision)"
         print(f"  {label:<{width}}  {text} {unit}".rstrip())
+    if sampled:
+        print("  the accuracy median, 95th percentile and Hausdorff are the sample's: a lone "
+              "far point may be missed")
     return 0

@@ -143,6 +143,10 @@ class ScoreReport:
     edge_score : float in [0, 1] or None (None when not computed)
     test_kind : {"cloud", "mesh"}
     seed : int or None
+    n_test_points : int or None
+        A test cloud's points (``n_points`` of them scored: fewer when the precision sampled
+        them, and then the accuracy's median, 95th percentile and max, and the Hausdorff
+        distance, are the sample's); None for a mesh.
     accuracy_distances : (n_points,) float64, or None from ``score_stream``
     accuracy_faces : (n_points,) int64, truth face nearest each test point, or None from
         ``score_stream``
@@ -187,6 +191,7 @@ class ScoreReport:
     edge_score: float | None
     test_kind: str
     seed: int | None
+    n_test_points: int | None
     accuracy_distances: np.ndarray | None = field(repr=False)
     accuracy_faces: np.ndarray | None = field(repr=False)
     test_points: np.ndarray | None = field(repr=False)
@@ -887,7 +892,8 @@ class _Setup:
             coverage_se=proportion_se(coverage, len(lattice_faces)),
             target_precision=self.precision, normal_consistency=normal_consistency,
             edge_score=None if edge is None else edge.score, test_kind=test_kind,
-            seed=self.seed, **arrays, completeness_distances=completeness,
+            seed=self.seed, n_test_points=population, **arrays,
+            completeness_distances=completeness,
             truth_points=truth_points, truth_point_faces=truth_faces,
             face_coverage=face_coverage, edge=edge)
 

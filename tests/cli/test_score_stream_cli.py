@@ -78,3 +78,21 @@ def test_streamed_cloud_file_scores_as_the_whole_cloud(suffix, rso_log, tmp_path
     streamed = json.loads(capsys.readouterr().out)
     streamed.pop("test"), streamed.pop("truth")
     _assert_same_report(streamed, whole)
+
+
+def test_a_sampled_cloud_says_so_in_the_readable_report(rso_log, tmp_path, monkeypatch, capsys):
+    # Sampled to the precision, the report says how many of the cloud's points were scored and
+    # that the median, 95th percentile and Hausdorff are the sample's; the JSON carries both.
+    from formats import cloud_io
+
+    path = cloud_io.write_cloud(tmp_path / "cloud.ply", Cloud(ingest.ingest_points(rso_log)))
+    n = len(cloud_io.read_cloud(path))
+    monkeypatch.setattr(defaults, "CLOUD_SAMPLES", 1000)
+    monkeypatch.setattr(defaults, "PILOT_SAMPLES", 400)
+    assert main(["score", str(path), "--truth", str(rso_log), "--no-edges"]) == 0
+    text = capsys.readouterr().out
+    assert f" of {n} (a seeded sample sized by the precision)" in text
+    assert "Hausdorff are the sample's" in text
+    assert main(["score", str(path), "--truth", str(rso_log), "--no-edges", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["n_test_points"] == n > report["n_points"]
