@@ -26,6 +26,14 @@ MEMORY_HELP = "address-space limit of each method run, MiB (default: 8192; 0: no
 TARGET_KINDS = ("unknown", "natural")
 
 
+def _add_target_kind(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--target-kind", choices=TARGET_KINDS, default="unknown",
+                   help="what -m auto may assume of the target: 'natural' (an asteroid, a "
+                        "comet) lets a smooth closed model stand for a far side the strikes "
+                        "leave unseen; 'unknown': the strikes and their rays alone decide "
+                        "(default: %(default)s)")
+
+
 def _add_input_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("preprocessing and normals")
     g.add_argument("--remove-outliers", action="store_true",
@@ -93,11 +101,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--holdout", type=float, default=0.25,
                    help="fraction of shots each of -m auto's folds holds out, in time blocks; "
                         "1 / holdout folds (default: %(default)s, 4 folds)")
-    p.add_argument("--target-kind", choices=TARGET_KINDS, default="unknown",
-                   help="what -m auto may assume of the target: 'natural' (an asteroid, a "
-                        "comet) lets a smooth closed model stand for a far side the strikes "
-                        "leave unseen; 'unknown': the strikes and their rays alone decide "
-                        "(default: %(default)s)")
+    _add_target_kind(p)
     p.add_argument("--in-process", action="store_true",
                    help="run the method in this process (no isolation; a crash ends recon)")
     _add_closing_options(p, preprocessing=True, sweep=False)
@@ -125,6 +129,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-meshes", action="store_true", help="do not keep the meshes")
     p.add_argument("--auto", action="store_true",
                    help="also run -m auto and report where its choice ranks on the truth")
+    _add_target_kind(p)
     _add_closing_options(p, preprocessing=True, sweep=True)
     show_required(p, "INPUT")
 
@@ -249,7 +254,8 @@ def run_compare(args) -> int:
     result = api.compare(args.input, truth=args.truth, output=args.output, methods=args.methods,
                          grid="defaults" if args.no_grid else args.grid,
                          truth_scale=args.truth_scale, samples=args.samples, auto=args.auto,
-                         scheduler=args.scheduler, n_workers=args.workers, resume=args.resume,
+                         target_kind=args.target_kind, scheduler=args.scheduler,
+                         n_workers=args.workers, resume=args.resume,
                          keep_meshes=not args.no_meshes, say=None if args.json else print,
                          **_preparation(args), **_limits(args))
     if args.json:

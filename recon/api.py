@@ -1134,9 +1134,10 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
             grid: str = "defaults", truth_scale: float = 1.0, remove_outliers: bool = False,
             voxel: float | None = None, normals_k: int | None = None, orient: str = "centroid",
             seed: int = 0, timeout: float | None = None, memory_limit: int | None = None,
-            samples: int | None = None, auto: bool = False, scheduler: str | None = None,
-            n_workers: int | None = None, resume: bool = False, keep_meshes: bool = True,
-            say: Callable[[str], None] | None = None) -> CompareResult:
+            samples: int | None = None, auto: bool = False, target_kind: str = "unknown",
+            scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
+            keep_meshes: bool = True, say: Callable[[str], None] | None = None
+            ) -> CompareResult:
     """Run every method on one cloud (at its defaults; ``grid="full"`` adds the parameter
     grids), each isolated, and score each surface against the truth: the speed against
     accuracy comparison of ``recon compare``.
@@ -1164,6 +1165,8 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     auto : bool
         Also run ``method="auto"``'s choice (its ladder restricted to ``methods``) and record
         where it ranks on the truth.
+    target_kind : {"unknown", "natural"}
+        What ``auto`` is told of the target, as ``reconstruct``.
     scheduler, n_workers, resume
         ``check_scheduler``'s values, local workers, keep the runs ``output`` already holds.
     say : callable, optional
@@ -1218,7 +1221,8 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
         strikes=points, **limits.kwargs())
     agreement = None
     if auto:
-        agreement = _auto_agreement(points, report["records"], methods, preparation, limits)
+        agreement = _auto_agreement(points, report["records"], methods, preparation, limits,
+                                    target_kind)
         write_text_atomically(output / "auto.json",
                               json.dumps(_jsonable(agreement[0]), indent=2) + "\n",
                               error=ParameterError)
@@ -1232,14 +1236,15 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
                          *(agreement if agreement is not None else (None, None)))
 
 
-def _auto_agreement(cloud: Cloud, records: list, methods, preparation, limits
-                    ) -> tuple[dict, str]:
+def _auto_agreement(cloud: Cloud, records: list, methods, preparation, limits,
+                    target_kind: str) -> tuple[dict, str]:
     """``method="auto"``'s choice on the prepared cloud and where it ranks among the compared
     runs: (``{"choice", "agreement"}``, the candidates table and the agreement line)."""
     from recon.experiments.compare import agreement, format_agreement
     from recon.surfaces.auto import choose_for, format_choice
 
-    choice = choose_for(cloud, methods=methods, preparation=preparation, limits=limits)
+    choice = choose_for(cloud, methods=methods, preparation=preparation, limits=limits,
+                        target_kind=target_kind)
     verdict = agreement(records, choice.run.key)
     return ({"choice": choice.to_dict(), "agreement": verdict},
             format_choice(choice) + "\n" + format_agreement(verdict))

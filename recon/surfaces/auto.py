@@ -544,9 +544,9 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
     shape = "a closed" if c.closed else "an open"
     band = f"within {BAND_SES:g} paired standard error(s) of the best"
     text = (f"chose {c.label}, {shape} surface ({c.n_params:,} parameters, {c.n_faces:,} "
-            f"faces, fitted on a fold's training strikes): held-out chi-square {c.chi2:.3g} per strike (1 = at the recorded noise), "
-            f"{c.violated:.1%} of beams cut before their strike, {c.holes:.1%} of strikes in "
-            f"holes")
+            f"faces, fitted on a fold's training strikes): held-out chi-square {c.chi2:.3g} "
+            f"per strike (1 = at the recorded noise), {c.violated:.1%} of beams cut before "
+            f"their strike, {c.holes:.1%} of strikes in holes")
     others = len(selection.eligible) - 1
     if selection.prior:
         text += _prior_reason(candidates, selection, coverage)

@@ -102,7 +102,8 @@ def test_compare_through_a_real_process(box_files, tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "cli.main", "compare", str(box_files[0]), "--truth",
          str(box_files[1]), "-o", str(out), "--methods", "convex-hull", "planes",
-         "--no-grid", "--scheduler", "threads", "--samples", "4000", "--auto"],
+         "--no-grid", "--scheduler", "threads", "--samples", "4000", "--auto",
+         "--target-kind", "natural"],
         capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "Pareto front (time vs Chamfer)" in proc.stdout
@@ -110,6 +111,7 @@ def test_compare_through_a_real_process(box_files, tmp_path):
     for name in ("results.csv", "results.json", "speed_accuracy.png", "auto.json",
                  "results.jsonl"):
         assert (out / name).is_file()
+    assert json.loads((out / "auto.json").read_text())["choice"]["target_kind"] == "natural"
     saved = json.loads((out / "results.json").read_text())
     assert saved["runs"][0]["method"] == "planes"
     # --resume finds everything done and rewrites the same results.
