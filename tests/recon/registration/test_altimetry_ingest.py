@@ -81,7 +81,7 @@ def test_products_read_back_and_score_against_the_truth(bennu_log, tmp_path, cap
     assert main(["score", str(cloud_path), "--truth", str(bennu_log), "--no-edges",
                  "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["n_points"] == len(ingested.points)
+    assert report["n_test_points"] == len(ingested.points) >= report["n_points"]
     # centimetre ranges: every return within a few cm of the truth surface
     assert report["accuracy_p95_m"] < 0.1 and report["precision"] == 1.0
 
