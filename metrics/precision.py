@@ -152,17 +152,6 @@ class KeySample:
         return np.concatenate(self.points)[rows], normals
 
 
-def mean_se(values: np.ndarray, population: int | None = None) -> float:
-    """Standard error of the mean of ``values`` (n,): ``s / sqrt(n)``, times
-    ``sqrt(1 - n / population)`` when they were drawn without replacement from that many;
-    0 for fewer than two values or a whole population."""
-    n = len(values)
-    if n < 2:
-        return 0.0
-    se = float(np.std(values, ddof=1) / np.sqrt(n))
-    return se if population is None else se * math.sqrt(max(0.0, 1.0 - n / population))
-
-
 def proportion_se(p: float, n: int, population: int | None = None) -> float:
     """Standard error of a proportion ``p`` of ``n`` draws (without replacement from
     ``population`` when given), Agresti and Coull's: that of the proportion of x + 2 in

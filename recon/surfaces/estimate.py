@@ -289,9 +289,6 @@ def _growth(distance: np.ndarray, gap: np.ndarray) -> float:
     return float(np.clip(np.log(max(d_far, 1e-300) / d_near) / np.log(g_far / g_near), 0, 1))
 
 
-_PROXIES: dict[str, Proxy] = {}
-
-
 def proxy(cloud: Cloud, strikes: Strikes, *, tau: float, noise: float,
           target_kind: str = "unknown") -> Proxy:
     """The convex hull of the strikes or their least-squares ellipsoid, whichever predicts

@@ -76,8 +76,6 @@ FLOOR_FRACTION = 1e-3
 # and the nearest training strike of the same track: at 2 sigma the surface's noise-following
 # wiggle under the training strike no longer predicts the tested strike's offset.
 NOISE_LENGTHS = 2.0
-# Fewest held-out blocks (a standard error needs two).
-MIN_BLOCKS = 2
 # A held-out block is at least this many margins long, so that half of it is tested.
 BLOCK_MARGINS = 4
 # Strikes checked for the per-surface fractions and the estimate (a seeded subsample): the
