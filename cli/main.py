@@ -14,8 +14,12 @@ import os
 import shutil
 import signal
 import sys
+from typing import TYPE_CHECKING
 
 from cli import options
+
+if TYPE_CHECKING:
+    from formats.errors import ReconError
 
 # Subcommand modules, in the order `recon --help` lists them: the pipeline's order.
 COMMAND_MODULES = (
@@ -191,9 +195,10 @@ def _leave_now(status: int, *, at_once: bool = False) -> int:
 MAX_MESSAGE_CHARS = 500
 
 
-def _one_line(exc: Exception) -> str:
-    """The message of ``exc`` on one line of at most MAX_MESSAGE_CHARS characters."""
-    text = " ".join(str(exc).split("\n"))
+def _one_line(exc: ReconError) -> str:
+    """The message of ``exc``, in the command line's words (``options.message``), on one line
+    of at most MAX_MESSAGE_CHARS characters."""
+    text = " ".join(options.message(exc).split("\n"))
     if len(text) > MAX_MESSAGE_CHARS:
         # the start names the file or key, the end often says what is wrong: keep both
         keep = (MAX_MESSAGE_CHARS - 40) // 2

@@ -15,8 +15,26 @@ from formats.errors import ReconError
 OUTPUT_DESTS = ("output", "refine_json")
 
 
+# Options whose name is not the API parameter's with "-" for "_" (``memory_limit`` ->
+# ``--memory-limit``): library errors name the parameter (``ReconError.argument``), the command
+# line prints the option.
+FLAGS = {"n_workers": "--workers", "output": "-o", "overrides": "--set", "params": "--param",
+         "timeout_s": "--timeout"}
+
+
 class UsageError(ReconError, ValueError):
     """Arguments that do not go together (an output that is one of the inputs...)."""
+
+
+def flag(argument: str) -> str:
+    """The option that sets the API parameter ``argument`` (``"overrides"`` -> ``"--set"``)."""
+    return FLAGS.get(argument, "--" + argument.replace("_", "-"))
+
+
+def message(exc: ReconError) -> str:
+    """``exc``'s message as the command line says it: the API parameter it starts with, if any,
+    named by its option (``--resume: ...`` where ``recon.api`` says ``resume: ...``)."""
+    return exc.worded(flag)
 
 
 def inputs_of(args: argparse.Namespace) -> list[str]:
@@ -126,7 +144,7 @@ def _scheduler(text: str) -> str:
     try:
         return api.check_scheduler(text)
     except ReconError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+        raise argparse.ArgumentTypeError(message(exc)) from None
 
 
 def add_sweep_options(parser, *, resume_help: str, default: str) -> None:

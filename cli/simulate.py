@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from cli.options import show_required
+from cli.options import message, show_required
 
 
 def register(subparsers) -> None:
@@ -67,7 +67,7 @@ def run(args) -> int:
     try:
         api.check_seed(args.seed)
     except api.ParameterError as exc:
-        args.parser.error(f"--{exc}")   # "--seed must be ..."
+        args.parser.error(message(exc))
     summary = api.simulate(args.scene, args.output, seed=args.seed, overrides=args.overrides,
                            progress=args.progress, live=args.live,
                            compression=args.compression).summary

@@ -5,6 +5,12 @@ The CLI prints a ``ReconError``'s message on one line and exits with status 1; a
 a bug and keeps its traceback. Each class also subclasses the builtin a Python user would expect
 to catch.
 
+A message about one argument starts with the argument's name as the Python API spells it, and
+the error carries that name as ``argument`` (``ParameterError("timeout must be positive, got
+0", argument="timeout")``): a caller of ``recon.api`` reads the parameter it passed, and the CLI
+prints the option it was given instead (``--timeout must be positive, got 0``; ``worded``). A
+library message never names a command-line option.
+
 ==================  ====================  =================================================
 class               builtin               what the caller can do
 ==================  ====================  =================================================
@@ -13,16 +19,45 @@ class               builtin               what the caller can do
                                           results directory)
 ``ParameterError``  ``ValueError``        change the argument, option or name (a method, a
                                           parameter, a limit, a scheduler, an output suffix)
-``SceneError``      ``ValueError``        fix the scene file, preset or ``--set`` override
+``SceneError``      ``ValueError``        fix the scene file, preset or override
+                                          (``section.key=value``)
 ``MethodFailed``    ``RuntimeError``      try another method or other parameters: the method
                                           ran, or declined, and gave no usable surface
 ``ResourceError``   ``OSError``           free or choose another disk or destination
 ==================  ====================  =================================================
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable
+
 
 class ReconError(Exception):
-    """Base class of every error recon reports as one line (not a bug)."""
+    """Base class of every error recon reports as one line (not a bug).
+
+    Parameters
+    ----------
+    *args
+        The message: one line naming the file, key or argument and what is wrong.
+    argument : str, optional
+        The API parameter the message is about, when the message starts with its name
+        (``"resume"``, ``"overrides"``, ``"memory_limit"``).
+    """
+
+    def __init__(self, *args, argument: str | None = None):
+        super().__init__(*args)
+        self.argument = argument
+
+    def worded(self, spell: Callable[[str], str]) -> str:
+        """The message with its leading argument name replaced by ``spell(argument)``.
+
+        The CLI passes the name of the option that sets the parameter (``"memory_limit"`` ->
+        ``"--memory-limit"``). A message without an argument is returned as it is.
+        """
+        text = str(self)
+        if self.argument is None or not text.startswith(self.argument):
+            return text
+        return spell(self.argument) + text[len(self.argument):]
 
 
 class InputError(ReconError, ValueError):
@@ -35,7 +70,8 @@ class ParameterError(ReconError, ValueError):
 
 
 class SceneError(ReconError, ValueError):
-    """A scene file, preset name or ``--set`` override is unknown, mistyped or impossible."""
+    """A scene file, preset name or override (``section.key=value``) is unknown, mistyped or
+    impossible."""
 
 
 class MethodFailed(ReconError, RuntimeError):

@@ -22,6 +22,8 @@ import stat
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+from formats.errors import ParameterError, ReconError
+
 # Files of the inputs the current run reads, by (device, inode): the destinations it must not
 # replace (``protecting``).
 _INPUTS: dict[tuple[int, int], Path] = {}
@@ -168,36 +170,40 @@ def check_destination(path, error: type[Exception] = OSError) -> Path:
             same = "" if source == path else f" ({source})"
             raise error(f"{path}: is an input of this run{same}; writing it would destroy the "
                         "input, give another output name")
-    _check_writable(parent, f"{path}: cannot write in {parent}", error)
+    reason = _unwritable(parent)
+    if reason is not None:
+        raise error(f"{path}: cannot write in {parent} ({reason})")
     return path
 
 
-def _check_writable(directory: Path, what: str, error: type[Exception]) -> None:
-    """Refuse a directory where no new file can be created (read-only, no permission): the
-    writer's temporary file goes there. Tried, not guessed from mode bits, which a privileged
-    user or a read-only mount contradict."""
+def _unwritable(directory: Path) -> str | None:
+    """Why no new file can be created in ``directory`` (read-only, no permission), or None when
+    one can: the writer's temporary file goes there. Tried, not guessed from mode bits, which a
+    privileged user or a read-only mount contradict."""
     try:
         fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
         os.close(fd)
         probe = os.open(directory, os.O_WRONLY | os.O_TMPFILE, 0o600)
         os.close(probe)
     except AttributeError:   # no O_TMPFILE on this system: the writer meets the error itself
-        return
+        return None
     except OSError as exc:
         if exc.errno in (errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL):
-            return   # a file system without O_TMPFILE
-        raise error(f"{what} ({_reason(exc)})") from None
+            return None   # a file system without O_TMPFILE
+        return _reason(exc)
+    return None
 
 
-def output_directory(path, error: type[Exception] = OSError) -> Path:
-    """The output directory ``-o path``, created if missing; refuses a path that is a file or a
-    directory that cannot be written.
+def output_directory(path, error: type[ReconError] = ParameterError) -> Path:
+    """The output directory ``path`` (the argument ``output``), created if missing; refuses a
+    path that is a file or a directory that cannot be written.
 
     Parameters
     ----------
     path : str or Path
-    error : exception class
-        Raised (a ReconError subclass in recon) with one line naming ``path``.
+    error : ReconError subclass
+        Raised with one line starting with ``output`` and naming ``path``
+        (``argument="output"``).
 
     Returns
     -------
@@ -209,12 +215,17 @@ def output_directory(path, error: type[Exception] = OSError) -> Path:
     except FileNotFoundError:
         mode = None
     except OSError as exc:
-        raise error(f"-o {path}: cannot be written ({_reason(exc)})") from None
+        raise error(f"output {path}: cannot be written ({_reason(exc)})",
+                    argument="output") from None
     if mode is not None and not stat.S_ISDIR(mode):
-        raise error(f"-o {path}: is a file, not a directory")
+        raise error(f"output {path}: is a file, not a directory", argument="output")
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise error(f"-o {path}: cannot create the directory ({_reason(exc)})") from None
-    _check_writable(path, f"-o {path}: cannot write in the directory", error)
+        raise error(f"output {path}: cannot create the directory ({_reason(exc)})",
+                    argument="output") from None
+    reason = _unwritable(path)
+    if reason is not None:
+        raise error(f"output {path}: cannot write in the directory ({reason})",
+                    argument="output")
     return path

@@ -516,7 +516,8 @@ def default_truth(test):
 
     check_source(test, ParameterError)
     if not is_strike_log(test):
-        raise ParameterError(f"{test}: is not a strike log with truth; give --truth")
+        raise ParameterError(f"truth must be given: {test} is not a strike log with truth",
+                             argument="truth")
     return test
 
 
@@ -579,7 +580,7 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
     seed : int, >= 0
         Seed of every error model; the same seed gives the same bytes.
     overrides : sequence of str
-        ``section.key=value`` scene overrides, as ``recon simulate --set``.
+        ``section.key=value`` scene overrides, applied after the scene file.
     progress : bool or None
         Progress bar (None: on a terminal only).
     live : bool
@@ -609,7 +610,8 @@ def check_seed(seed: int) -> int:
     from sim.defaults import MAX_SEED
 
     if not 0 <= seed <= MAX_SEED:
-        raise ParameterError(f"seed must be >= 0 and at most {MAX_SEED}, got {seed}")
+        raise ParameterError(f"seed must be >= 0 and at most {MAX_SEED}, got {seed}",
+                             argument="seed")
     return seed
 
 
@@ -710,7 +712,8 @@ def follow(log, output, *, frame: Frame = "body", timeout_s: float = 60.0,
     from recon.registration.ingest import ingest_following
 
     if not timeout_s > 0:
-        raise ParameterError(f"timeout_s must be a positive number of seconds, got {timeout_s:g}")
+        raise ParameterError(f"timeout_s must be a positive number of seconds, got "
+                             f"{timeout_s:g}", argument="timeout_s")
     check_destination(output, ParameterError)
     summary = ingest_following(log, output, frame=frame, progress=progress, timeout_s=timeout_s)
     return IngestResult(summary["n_points"], frame, Path(output))
@@ -1069,13 +1072,13 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
 
     holdout = HOLDOUT_FRACTION if holdout is None else holdout
     if not 0 < holdout <= 0.5:   # checked even when unused: a bad value is a mistake
-        raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}")
+        raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}", argument="holdout")
     if target_kind not in TARGET_KINDS:   # checked even when unused, as the hold-out
         raise ParameterError(f"target_kind must be one of {', '.join(TARGET_KINDS)}, "
-                             f"got {target_kind!r}")
+                             f"got {target_kind!r}", argument="target_kind")
     auto = method == "auto"
     if auto and params:
-        raise ParameterError("params cannot be combined with method='auto'")
+        raise ParameterError("params cannot be combined with method='auto'", argument="params")
     run = None if auto else _bind(method, params)
     preparation = _preparation(*preparation)
     limits = Limits.from_options(timeout, memory_limit)
@@ -1338,14 +1341,16 @@ def _stability_clouds(source, output: Path, truth, truth_scale: float, overrides
     path = Path(source)
     if path.is_file() and path.suffix.lower() != ".toml":
         if overrides:
-            raise sweep.ParameterError("--set applies to scenes only, not to a cloud or a log")
+            raise sweep.ParameterError(f"overrides: a cloud or a log ({path}) takes none, only "
+                                       "a scene does", argument="overrides")
         cloud = load_cloud(path)
         if truth is not None:
             truth_mesh = load_truth(truth, scale=truth_scale)
         elif is_strike_log(path):
             truth_mesh = load_truth(path)
         else:
-            raise sweep.ParameterError(f"{path}: a cloud needs --truth")
+            raise sweep.ParameterError(f"truth must be given: {path} is a cloud, not a strike "
+                                       "log with truth", argument="truth")
         return {"base": (cloud.points, cloud.view_points, False)}, truth_mesh
     clouds, truth_mesh = sweep.simulate_levels(str(source), noise, output, overrides=overrides,
                                                seed=seed)
@@ -1407,7 +1412,7 @@ def study_all(output, *, size: str = "full", scheduler: str | None = None,
 
 def _check_workers(n_workers: int | None) -> None:
     if n_workers is not None and n_workers < 1:
-        raise ParameterError(f"n_workers must be >= 1, got {n_workers}")
+        raise ParameterError(f"n_workers must be >= 1, got {n_workers}", argument="n_workers")
 
 
 def report(directory, output) -> Path:

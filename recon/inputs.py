@@ -115,8 +115,8 @@ def load_truth(path, *, scale: float = 1.0, units: str | None = None) -> Mesh:
 
         with StrikeLog(path) as log:
             if not log.has_truth:
-                raise InputError(f"{path}: strike log has no truth mesh; pass the truth "
-                                      "mesh file with --truth")
+                raise InputError(f"truth: {path} is a strike log without a truth mesh; "
+                                 "give a mesh file as the truth", argument="truth")
             mesh = log.truth_mesh()
     elif path.suffix.lower() in CLOUD_SUFFIXES and path.suffix.lower() != ".ply":
         raise InputError(f"{path}: is not a mesh (truth must be a mesh file or a strike "

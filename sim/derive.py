@@ -178,8 +178,8 @@ def check_cost(run: Cost, limits: dict) -> None:
                               ("disk_mb", run.disk_bytes / 1e6, limits["disk_mb"])):
         if value > limit:
             raise SceneError(f"limits.{key} = {limit:g}: this scene needs {value:.3g} "
-                             f"({run.describe()}); reduce it or raise the limit with --set "
-                             f"limits.{key}=...")
+                             f"({run.describe()}); reduce it or raise limits.{key} in the "
+                             "scene file or an override")
 
 
 def target_mesh(target: dict) -> tuple[np.ndarray, np.ndarray, str]:
@@ -206,7 +206,8 @@ def target_mesh(target: dict) -> tuple[np.ndarray, np.ndarray, str]:
     except InputError as exc:
         hint = ("" if Path(target["path"]).is_absolute() else
                 " (a preset's mesh is looked up in the current directory and the directories "
-                "of RECON_MESH_PATH; or give --set target.path=FILE)")
+                "of RECON_MESH_PATH; or set target.path to the file in the scene file or an "
+                "override)")
         raise SceneError(f"target.path: {exc}{hint}") from None
     return vertices, faces, f"mesh:{Path(target['path']).name}"
 

@@ -1,7 +1,7 @@
 """Scenes: TOML files that state only what differs from the defaults (sim/defaults.py).
 
 A scene is resolved from three layers, each overriding the one before: the defaults, the scene
-file (a built-in preset or a path) and ``--set section.key=value`` overrides. Of a group of
+file (a built-in preset or a path) and ``section.key=value`` overrides. Of a group of
 alternative keys (``time.rotations`` / ``time.duration``; ``orbit.density`` / ``orbit.mu`` /
 ``orbit.period``) a layer gives at most one, and the last layer that gives one wins.
 
@@ -175,18 +175,18 @@ def _parse_override(text: str) -> tuple[str, str, Any]:
     name, sep, raw = text.partition("=")
     section, dot, key = name.strip().partition(".")
     if not sep or not dot or not section or not key:
-        raise SceneError(f"--set {brief(text)}: expected section.key=value, e.g. "
-                         "time.duration=3600")
+        raise SceneError(f"overrides {brief(text)}: expected section.key=value, e.g. "
+                         "time.duration=3600", argument="overrides")
     if any(ord(c) < 32 for c in text):   # a newline would start a new TOML line
-        raise SceneError(f"--set {brief(text)}: control characters (newlines, tabs) are not "
-                         "allowed in a value")
+        raise SceneError(f"overrides {brief(text)}: control characters (newlines, tabs) are "
+                         "not allowed in a value", argument="overrides")
     raw = raw.strip()
-    value = _parse_toml(f"v = {raw}", f"--set {brief(text)}", bare=raw)["v"]
+    value = _parse_toml(f"v = {raw}", f"overrides {brief(text)}", bare=raw)["v"]
     return section, key.strip(), value
 
 
 def _parse_toml(text: str, where: str, *, bare: str | None = None) -> dict:
-    """``tomllib.loads`` with its failures as SceneErrors; ``bare`` is the value of a ``--set``
+    """``tomllib.loads`` with its failures as SceneErrors; ``bare`` is the value of an override
     whose text is not TOML (a bare word such as cross or ../meshes/eros.obj)."""
     try:
         return tomllib.loads(text)
@@ -219,7 +219,7 @@ def _read_source(name_or_path) -> tuple[str, str, Path | None]:
     hint = difflib.get_close_matches(text_name, _preset_names(), n=1)
     raise SceneError(f"scene {text_name!r} is neither a preset nor a .toml file"
                      + (f" (did you mean {hint[0]}?)" if hint else
-                        "; `recon simulate --list` shows the presets"))
+                        f"; presets: {', '.join(_preset_names())}"))
 
 
 # --------------------------------------------------------------------------- loading
@@ -251,12 +251,12 @@ def _resolve_paths(layer: dict, base: Path | None) -> None:
 
 
 def load_scene(name_or_path, overrides=()) -> Scene:
-    """Resolve and validate a scene: a preset name or a TOML path, then ``--set`` overrides.
+    """Resolve and validate a scene: a preset name or a TOML path, then overrides.
 
     Parameters
     ----------
     name_or_path : str or Path
-        A preset name (``recon simulate --list``) or the path of a scene TOML file.
+        A preset name (``list_presets()``) or the path of a scene TOML file.
     overrides : sequence of str
         ``section.key=value`` strings applied after the file; values are TOML
         (``3600``, ``[1.2, 1.2]``, ``true``) or bare words (``cross``).
@@ -281,12 +281,12 @@ def load_scene(name_or_path, overrides=()) -> Scene:
     for text_override in overrides:
         section, key, value = _parse_override(text_override)
         override_layer.setdefault(section, {})[key] = value
-    override_layer = check_layer(override_layer, "--set")
+    override_layer = check_layer(override_layer, "overrides", argument="overrides")
 
     values: dict[str, dict] = {s: {k: copy.deepcopy(spec.default) for k, spec in keys.items()
                                    if spec.default is not None}
                                for s, keys in SCHEMA.items()}
-    user_keys: dict[tuple[str, str], int] = {}   # key -> layer that gave it (1 file, 2 --set)
+    user_keys: dict[tuple[str, str], int] = {}   # key -> layer that gave it (1 file, 2 overrides)
     for number, layer in enumerate((file_layer, override_layer), start=1):
         for section, keys in layer.items():
             for key, value in keys.items():

@@ -3,7 +3,7 @@
 Every key declares its type, unit and accepted values beside its default (``Key``); this module
 only reads those declarations. Checking is in two steps:
 
-- :func:`check_layer`, per layer (scene file, ``--set`` overrides): sections and keys exist,
+- :func:`check_layer`, per layer (scene file, overrides): sections and keys exist,
   values have the declared type (normalised to floats and lists), at most one key of each group
   of alternatives;
 - :func:`check_values`, once the layers are merged: keys that mean nothing for the chosen target
@@ -142,15 +142,18 @@ def _typed(section: str, key: str, value):
     return check(f"{section}.{key}", spec, value, f"got {_kind_name(value)} {brief(value)}")
 
 
-def check_layer(layer: dict, where: str) -> dict:
+def check_layer(layer: dict, where: str, *, argument: str | None = None) -> dict:
     """Check one layer's sections, keys and types; return a normalised copy.
 
     Parameters
     ----------
     layer : dict of section -> dict of key -> value
-        As parsed from TOML or ``--set`` overrides.
+        As parsed from TOML or from overrides.
     where : str
-        What the layer is, for messages (``scene <name>``, ``--set``).
+        What the layer is, for messages (``scene <name>``, ``overrides``).
+    argument : str, optional
+        The API argument that gave the layer (``where`` then starts with its name): the
+        errors' ``argument``.
 
     Returns
     -------
@@ -168,10 +171,10 @@ def check_layer(layer: dict, where: str) -> dict:
             hint = difflib.get_close_matches(section[:SHOWN_CHARS], SCHEMA, n=1)
             raise SceneError(f"{where}: unknown scene section [{brief(section)[1:-1]}]"
                              + (f" (did you mean [{hint[0]}]?)" if hint else
-                                f"; sections are {', '.join(SCHEMA)}"))
+                                f"; sections are {', '.join(SCHEMA)}"), argument=argument)
         if not isinstance(keys, dict):
             raise SceneError(f"{where}: {section} must be a table [{section}] of keys, got "
-                             f"{_kind_name(keys)} {brief(keys)}")
+                             f"{_kind_name(keys)} {brief(keys)}", argument=argument)
         out[section] = {}
         for key, value in keys.items():
             if key not in SCHEMA[section]:
@@ -179,12 +182,13 @@ def check_layer(layer: dict, where: str) -> dict:
                 raise SceneError(
                     f"{where}: unknown scene key {section}.{brief(key)[1:-1]}"
                     + (f" (did you mean {section}.{hint[0]}?)" if hint else
-                       f"; keys of [{section}] are {', '.join(SCHEMA[section])}"))
+                       f"; keys of [{section}] are {', '.join(SCHEMA[section])}"),
+                    argument=argument)
             out[section][key] = _typed(section, key, value)
         given = [k for k in ALTERNATIVES.get(section, ()) if k in out[section]]
         if len(given) > 1:
             raise SceneError(f"{where}: give only one of "
-                             + ", ".join(f"{section}.{k}" for k in given))
+                             + ", ".join(f"{section}.{k}" for k in given), argument=argument)
     return out
 
 
@@ -310,7 +314,7 @@ def _drop_unused(values: dict, user_keys: dict[tuple[str, str], int]) -> None:
     """Apply ``only_with()``: a key that means nothing for the chosen target or pattern.
 
     Given in the layer that made the choice, or later, it is an error; given only by an earlier
-    layer (a preset's grid resolution, when ``--set`` picks a cross) it is dropped.
+    layer (a preset's grid resolution, when an override picks a cross) it is dropped.
     """
     for (section, key), (by_section, by_key, allowed) in only_with().items():
         chosen = values[by_section][by_key]
@@ -350,7 +354,7 @@ def check_values(values: dict, user_keys: dict[tuple[str, str], int]) -> dict:
         Defaults, scene file and overrides merged, each value of its declared type
         (:func:`check_layer`).
     user_keys : dict of (section, key) -> int
-        The layer that gave each key: 1 the scene file, 2 ``--set``; absent: a default.
+        The layer that gave each key: 1 the scene file, 2 the overrides; absent: a default.
 
     Returns
     -------

@@ -72,7 +72,8 @@ def grid_name(grid: bool | str) -> str:
     if isinstance(grid, bool):
         return "full" if grid else "defaults"
     if grid not in GRIDS:
-        raise ParameterError(f"grid must be one of {', '.join(GRIDS)}, got {grid!r}")
+        raise ParameterError(f"grid must be one of {', '.join(GRIDS)}, got {grid!r}",
+                             argument="grid")
     return grid
 
 
@@ -108,7 +109,7 @@ def as_runs(runs: Sequence[Run | tuple[str, dict]]) -> list[Run]:
 
 
 def score_options(samples: int | None = None) -> dict | None:
-    """Keyword arguments of ``metrics.score`` for ``samples`` points per side (``--samples``).
+    """Keyword arguments of ``metrics.score`` for ``samples`` points per side.
 
     None keeps metrics' defaults. The coverage is estimated on twice as many truth points as
     each side's samples, as metrics' own defaults do.
@@ -116,7 +117,8 @@ def score_options(samples: int | None = None) -> dict | None:
     if samples is None:
         return None
     if samples < MIN_SCORE_SAMPLES:
-        raise ParameterError(f"--samples must be at least {MIN_SCORE_SAMPLES}, got {samples}")
+        raise ParameterError(f"samples must be at least {MIN_SCORE_SAMPLES}, got {samples}",
+                             argument="samples")
     return {"n_truth_samples": samples, "n_test_samples": samples,
             "coverage_points": 2 * samples}
 

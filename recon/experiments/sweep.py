@@ -49,6 +49,9 @@ from recon.experiments import progress
 
 RESULTS_NAME = "results.jsonl"
 FINGERPRINT_NAME = "sweep.json"
+# What to do when the output directory cannot be resumed, in words a caller of the API and a
+# user of the command line both act on.
+START_AFRESH = "use a new output directory, or run again without resuming"
 # Seconds to wait for an existing Dask scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
 # Seconds to open a TCP connection to a scheduler address, and then to receive its greeting: a
@@ -66,14 +69,14 @@ LOCAL_HOST = "127.0.0.1"
 
 
 def check_scheduler(scheduler, error: type[Exception] = ParameterError):
-    """A ``--scheduler`` value: None, ``threads``, ``serial`` or a Dask address; returned as it
-    is, or ``error`` (one line) when it is none of them."""
+    """A ``scheduler`` value: None, ``threads``, ``serial`` or a Dask address; returned as it
+    is, or ``error`` (one line, about the argument ``scheduler``) when it is none of them."""
     if scheduler is None or scheduler in ("threads", "serial"):
         return scheduler
     if not isinstance(scheduler, str) or not SCHEDULER_ADDRESS.match(scheduler):
         shown = repr(scheduler)[:80]
-        raise error(f"--scheduler must be a Dask scheduler address (tcp://host:port), "
-                    f"'threads' or 'serial', got {shown}")
+        raise error(f"scheduler must be a Dask scheduler address (tcp://host:port), "
+                    f"'threads' or 'serial', got {shown}", argument="scheduler")
     return scheduler
 
 
@@ -96,13 +99,15 @@ def probe_scheduler(scheduler: str, error: type[Exception] = ParameterError) -> 
     if "://" in scheduler and not scheduler.startswith("tcp://"):
         return
     host, port = _host_port(scheduler)
-    where = f"--scheduler {scheduler}"
+    where = f"scheduler {scheduler}"
     try:
         conn = socket.create_connection((host, port), timeout=PROBE_CONNECT_S)
     except TimeoutError:
-        raise error(f"{where}: cannot connect (no answer in {PROBE_CONNECT_S:g} s)") from None
+        raise error(f"{where}: cannot connect (no answer in {PROBE_CONNECT_S:g} s)",
+                    argument="scheduler") from None
     except OSError as exc:
-        raise error(f"{where}: cannot connect ({exc.strerror or exc})") from None
+        raise error(f"{where}: cannot connect ({exc.strerror or exc})",
+                    argument="scheduler") from None
     with conn:
         conn.settimeout(PROBE_GREETING_S)
         try:
@@ -111,12 +116,13 @@ def probe_scheduler(scheduler: str, error: type[Exception] = ParameterError) -> 
             body = _receive(conn, size) if 0 < size <= PROBE_MAX_BYTES else b""
         except TimeoutError:
             raise error(f"{where}: not a Dask scheduler (it sent no Dask greeting in "
-                        f"{PROBE_GREETING_S:g} s)") from None
+                        f"{PROBE_GREETING_S:g} s)", argument="scheduler") from None
         except OSError as exc:
-            raise error(f"{where}: cannot connect ({exc.strerror or exc})") from None
+            raise error(f"{where}: cannot connect ({exc.strerror or exc})",
+                        argument="scheduler") from None
     if len(body) != size or b"pickle-protocol" not in body:
         raise error(f"{where}: not a Dask scheduler (it answered with something other than "
-                    "Dask's protocol)")
+                    "Dask's protocol)", argument="scheduler")
 
 
 def _receive(conn: socket.socket, n: int) -> bytes:
@@ -147,7 +153,8 @@ def connect(scheduler: str, error: type[Exception] = ParameterError):
             return Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
     except Exception as exc:  # Dask raises many types on a peer that is not a scheduler
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise error(f"--scheduler {scheduler}: cannot connect ({text})") from None
+        raise error(f"scheduler {scheduler}: cannot connect ({text})",
+                    argument="scheduler") from None
 
 
 @contextlib.contextmanager
@@ -229,16 +236,17 @@ def read_results(path) -> dict[str, dict]:
     try:
         lines = path.read_bytes().splitlines()
     except OSError as exc:
-        raise ParameterError(f"--resume: {path}: cannot be read ({exc.strerror})") from None
+        raise ParameterError(f"resume: {path}: cannot be read ({exc.strerror})",
+                             argument="resume") from None
     for number, raw in enumerate(lines, 1):
         try:
             line = raw.decode("utf-8")
         except UnicodeDecodeError:
             if number == len(lines):   # a torn last line may end inside a character
                 continue
-            raise ParameterError(f"--resume: {path}: line {number} is not UTF-8 text (not a "
-                             "results file of recon; use a new output directory or drop "
-                             "--resume)") from None
+            raise ParameterError(f"resume: {path}: line {number} is not UTF-8 text (not a "
+                                 f"results file of recon; {START_AFRESH})",
+                                 argument="resume") from None
         try:
             record = json.loads(line)
         except (json.JSONDecodeError, RecursionError):
@@ -266,13 +274,13 @@ def _check_fingerprint(out_dir: Path, fingerprint: Mapping | None, resume: bool)
         except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
             previous = None
         if not isinstance(previous, dict):
-            raise ParameterError(f"--resume: {file} is damaged (not a JSON object); use a new "
-                             "output directory or drop --resume")
+            raise ParameterError(f"resume: {file} is damaged (not a JSON object); "
+                                 f"{START_AFRESH}", argument="resume")
         if previous != current:
             changed = sorted(k for k in set(previous) | set(current)
                              if previous.get(k) != current.get(k))
-            raise ParameterError(f"--resume: {out_dir} holds a sweep with different "
-                             f"{', '.join(changed)}; use a new output directory or drop --resume")
+            raise ParameterError(f"resume: {out_dir} holds a sweep with different "
+                                 f"{', '.join(changed)}; {START_AFRESH}", argument="resume")
     write_text_atomically(file, json.dumps(current, indent=2) + "\n", error=ParameterError)
 
 
@@ -325,7 +333,7 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
     for name in (RESULTS_NAME, FINGERPRINT_NAME, *outputs):
         check_destination(out_dir / name, ParameterError)
     if n_workers is not None and n_workers < 1:
-        raise ParameterError(f"workers must be >= 1, got {n_workers}")
+        raise ParameterError(f"n_workers must be >= 1, got {n_workers}", argument="n_workers")
     _check_fingerprint(out_dir, fingerprint, resume)
     path = out_dir / RESULTS_NAME
     done = {k: v for k, v in read_results(path).items() if k in cases} if resume else {}

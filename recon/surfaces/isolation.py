@@ -117,19 +117,19 @@ class Limits:
     memory_mb: int | None = DEFAULT_MEMORY_MB
 
     def __post_init__(self):
-        _check_limits(self.timeout_s, self.memory_mb, "timeout_s", "memory_mb")
+        _check_limits(self.timeout_s, self.memory_mb, ("timeout_s", "memory_mb"))
 
     @classmethod
     def from_options(cls, timeout: float | None = None, memory_limit: int | None = None
                      ) -> Limits:
-        """The limits of the command line's ``--timeout`` and ``--memory-limit``.
+        """The limits of the API's ``timeout`` and ``memory_limit`` arguments.
 
         None takes the default (``DEFAULT_TIMEOUT_S``, ``DEFAULT_MEMORY_MB``); a memory limit of
-        0 means none. Errors name the options.
+        0 means none. Errors name these arguments.
         """
         timeout = DEFAULT_TIMEOUT_S if timeout is None else timeout
         memory = DEFAULT_MEMORY_MB if memory_limit is None else memory_limit
-        _check_limits(timeout, memory, "--timeout", "--memory-limit")
+        _check_limits(timeout, memory, ("timeout", "memory_limit"))
         return cls(timeout, memory or None)
 
     def kwargs(self) -> dict[str, Any]:
@@ -137,11 +137,13 @@ class Limits:
         return {"timeout_s": self.timeout_s, "memory_mb": self.memory_mb}
 
 
-def _check_limits(timeout: float, memory: int | None, timeout_name: str, memory_name: str):
+def _check_limits(timeout: float, memory: int | None, names: tuple[str, str]):
+    """Refuse a time limit that is not positive or a negative memory limit, naming the argument
+    (``names``: of the time and of the memory limit)."""
     if not timeout > 0:
-        raise ParameterError(f"{timeout_name} must be positive, got {timeout:g}")
+        raise ParameterError(f"{names[0]} must be positive, got {timeout:g}", argument=names[0])
     if memory is not None and memory < 0:
-        raise ParameterError(f"{memory_name} must be >= 0, got {memory}")
+        raise ParameterError(f"{names[1]} must be >= 0, got {memory}", argument=names[1])
 
 
 class _Failure(Exception):

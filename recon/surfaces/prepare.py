@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from formats.errors import InputError
+from formats.errors import InputError, ParameterError
 from formats.geometry import Cloud
 from recon.registration.uncertainty import COLUMNS as SIGMA_COLUMNS
 from recon.surfaces.methods import MethodInput
@@ -208,7 +208,8 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
 
 def _check_voxel(voxel: float | None, name: str) -> None:
     if voxel is not None and not (voxel > 0 and np.isfinite(voxel)):
-        raise InputError(f"{name} must be a positive size in metres, got {voxel:g}")
+        raise ParameterError(f"{name} must be a positive size in metres, got {voxel:g}",
+                             argument=name)
 
 
 @dataclass(frozen=True)
@@ -237,17 +238,17 @@ class Preparation:
     def __post_init__(self):
         _check_voxel(self.voxel, "voxel")
         if self.k < 1:
-            raise InputError(f"k must be >= 1, got {self.k}")
+            raise ParameterError(f"k must be >= 1, got {self.k}", argument="k")
 
     @classmethod
     def from_options(cls, *, remove_outliers: bool = False, voxel: float | None = None,
                      normals_k: int = DEFAULT_K, orient: Fallback = "centroid", seed: int = 0
                      ) -> Preparation:
-        """The preparation of the command line's ``--remove-outliers``, ``--voxel``,
-        ``--normals-k``, ``--orient`` and ``--seed``; errors name those options."""
-        _check_voxel(voxel, "--voxel")
+        """The preparation of the API's ``remove_outliers``, ``voxel``, ``normals_k``,
+        ``orient`` and ``seed`` arguments; errors name these arguments."""
+        _check_voxel(voxel, "voxel")
         if normals_k < 1:
-            raise InputError(f"--normals-k must be >= 1, got {normals_k}")
+            raise ParameterError(f"normals_k must be >= 1, got {normals_k}", argument="normals_k")
         return cls(remove_outliers=remove_outliers, voxel=voxel, k=normals_k, fallback=orient,
                    seed=seed)
 

@@ -288,7 +288,8 @@ class Method:
             key, sep, text = pair.partition("=")
             key = key.strip()
             if not sep or not key:
-                raise ParameterError(f"--param must be key=value, got {pair!r}")
+                raise ParameterError(f"params must be key=value, got {pair!r}",
+                                     argument="params")
             if key not in self.params:
                 known = ", ".join(self.params) or "none"
                 raise ParameterError(f"method {self.name!r} has no parameter {key!r} "
