@@ -93,7 +93,8 @@ def _error(capsys, argv):
 def test_bad_inputs(box_files, tmp_path, capsys):
     folder, _ = box_files
     cloud, truth = str(folder / "box.ply"), str(folder / "truth.ply")
-    assert "give --truth" in _error(capsys, ["edges", cloud, "-o", str(tmp_path / "a")])
+    assert (f"recon edges: error: --truth must be given: {cloud} is not a strike log with "
+            "truth") in _error(capsys, ["edges", cloud, "-o", str(tmp_path / "a")])
     (tmp_path / "file").write_text("x")
     assert "is a file, not a directory" in _error(
         capsys, ["edges", cloud, "--truth", truth, "-o", str(tmp_path / "file")])

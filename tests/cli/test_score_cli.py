@@ -74,13 +74,16 @@ def test_log_without_truth_and_no_truth_argument(tmp_path, capsys):
 
     path = tmp_path / "bare.h5"
     write_sphere_log(path, with_truth=False)
-    assert "has no truth mesh; pass the truth mesh file with --truth" in _error(
-        capsys, ["score", str(path)])
+    assert _error(capsys, ["score", str(path)]) == (
+        f"recon score: error: --truth: {path} is a strike log without a truth mesh; give a "
+        "mesh file as the truth")
 
 
 def test_cloud_without_truth_argument(tmp_path, capsys):
     write_cloud(tmp_path / "c.ply", Cloud(np.ones((5, 3))))
-    assert "give --truth" in _error(capsys, ["score", str(tmp_path / "c.ply")])
+    assert _error(capsys, ["score", str(tmp_path / "c.ply")]) == (
+        f"recon score: error: --truth must be given: {tmp_path / 'c.ply'} is not a strike log "
+        "with truth")
 
 
 def test_truth_that_is_not_a_mesh(rso_log, tmp_path, capsys):

@@ -135,7 +135,7 @@ def test_resolved_toml_reloads_to_the_same_scene(tmp_path):
     (["errors.dilation_subrays=0"], r"errors\.dilation_subrays must be between 1 and 10000"),
     (["slew.amplitude_deg=90"], r"slew\.amplitude_deg must be at least 0 and below 90"),
     (["slew.period=0"], r"slew\.period must be a positive"),
-    (["orbit.radius"], r"--set 'orbit\.radius': expected section\.key=value"),
+    (["orbit.radius"], r"^overrides 'orbit\.radius': expected section\.key=value"),
 ])
 def test_bad_values_name_the_key(overrides, match):
     with pytest.raises(SceneError, match=match) as info:

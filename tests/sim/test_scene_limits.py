@@ -1,5 +1,5 @@
 """Absurd scenes (issue 13): the cost is estimated before any work and refused above
-``[limits]``; seeds, nesting, string lengths and --set values are bounded."""
+``[limits]``; seeds, nesting, string lengths and override values are bounded."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def test_cost_of_a_preset_is_what_the_run_does(tmp_path):
 def test_costly_scenes_are_refused_before_any_work(overrides, limit):
     with pytest.raises(SceneError, match=rf"{limit} = .*: this scene needs .* rays, .* MiB of "
                                          rf"memory, up to .* MB of log\); reduce it or raise "
-                                         rf"the limit with --set {limit}="):
+                                         rf"{limit} in the scene file or an override$"):
         sim.load_scene("asteroid-lrf", overrides)
 
 

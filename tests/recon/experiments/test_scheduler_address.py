@@ -81,7 +81,7 @@ SERVERS = {"http": (_http_server, "not a Dask scheduler"),
 @pytest.mark.parametrize("kind", sorted(SERVERS))
 def test_an_address_without_a_dask_scheduler_is_one_line(kind):
     server, message = SERVERS[kind]
-    with server() as address, pytest.raises(ParameterError, match=rf"--scheduler {address}: "
+    with server() as address, pytest.raises(ParameterError, match=rf"^scheduler {address}: "
                                                                f"{message}"):
         probe_scheduler(address)
 

@@ -133,7 +133,11 @@ def test_a_plain_cloud_needs_a_truth_and_takes_no_scene_overrides(tmp_path):
     points, _, _ = sphere_points(200)
     path = tmp_path / "sphere.ply"
     write_cloud(path, Cloud(points))
-    with pytest.raises(ParameterError, match=r"sphere\.ply: a cloud needs --truth"):
+    with pytest.raises(ParameterError, match=r"^truth must be given: .*sphere\.ply is a cloud, "
+                                             r"not a strike log with truth$") as info:
         api.stability(path, output=tmp_path / "out", methods=["convex-hull"])
-    with pytest.raises(ParameterError, match="--set applies to scenes only"):
+    assert info.value.argument == "truth"
+    with pytest.raises(ParameterError, match=r"^overrides: a cloud or a log \(.*sphere\.ply\) "
+                                             r"takes none, only a scene does$") as info:
         api.stability(path, output=tmp_path / "out", overrides=["x=1"])
+    assert info.value.argument == "overrides"

@@ -347,23 +347,25 @@ def test_resume_keeps_a_finished_case_untouched(tmp_path):
 
 def test_resume_with_other_cases_is_refused(tmp_path):
     studies.run("duration", tmp_path, size="tiny", scheduler="serial")
-    with pytest.raises(ParameterError, match=r"--resume: .* holds a sweep with different "
-                                         r"cases_sha1"):
+    with pytest.raises(ParameterError, match=r"^resume: .* holds a sweep with different "
+                                         r"cases_sha1.*; use a new output directory, or run "
+                                         r"again without resuming$"):
         studies.run("duration", tmp_path, size="quick", scheduler="serial", resume=True)
 
 
 def test_bad_scheduler_and_output(tmp_path):
     with pytest.raises(studies.ParameterError,
-                       match="--scheduler must be a Dask scheduler address"):
+                       match="^scheduler must be a Dask scheduler address"):
         studies.run("duration", tmp_path, size="tiny", scheduler="my cluster")
     file = tmp_path / "file"
     file.write_text("x")
-    with pytest.raises(studies.ParameterError, match=r"-o .*file: is a file, not a directory"):
+    with pytest.raises(studies.ParameterError,
+                       match=r"^output .*file: is a file, not a directory$"):
         studies.run("duration", file, size="tiny", scheduler="serial")
 
 
 def test_unreachable_scheduler(tmp_path):
-    with pytest.raises(studies.ParameterError, match=r"--scheduler tcp://127.0.0.1:9: cannot "
+    with pytest.raises(studies.ParameterError, match=r"^scheduler tcp://127.0.0.1:9: cannot "
                                                  "connect"):
         studies.run("duration", tmp_path, size="tiny", scheduler="tcp://127.0.0.1:9")
 

@@ -98,13 +98,13 @@ def test_local_dask_cluster_runs_the_cases(tmp_path):
 
 def test_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setattr("recon.experiments.sweep.CONNECT_TIMEOUT_S", 1.0)
-    with pytest.raises(ParameterError, match=r"--scheduler tcp://127\.0\.0\.1:9: cannot connect"):
+    with pytest.raises(ParameterError, match=r"^scheduler tcp://127\.0\.0\.1:9: cannot connect"):
         run_sweep(square, _cases(1), tmp_path, shared={"calls": str(tmp_path / "c")},
                   scheduler="tcp://127.0.0.1:9")
 
 
 def test_workers_must_be_positive(tmp_path):
-    with pytest.raises(ParameterError, match="workers must be >= 1"):
+    with pytest.raises(ParameterError, match="^n_workers must be >= 1"):
         run_sweep(square, _cases(1), tmp_path, n_workers=0)
 
 

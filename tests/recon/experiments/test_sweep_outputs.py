@@ -32,7 +32,7 @@ def test_resume_of_a_results_file_that_is_not_utf8_is_one_line(tmp_path):
     calls = _first_run(tmp_path)
     results = tmp_path / "out" / "results.jsonl"
     results.write_bytes(b"\xff\xfe garbage\n" + results.read_bytes())
-    with pytest.raises(ParameterError, match=r"--resume: .*results.jsonl: line 1 is not UTF-8"):
+    with pytest.raises(ParameterError, match=r"^resume: .*results.jsonl: line 1 is not UTF-8"):
         run_sweep(square, _cases(3), tmp_path / "out", shared={"calls": calls},
                   scheduler="serial", resume=True)
 
@@ -48,7 +48,7 @@ def test_a_torn_last_line_inside_a_character_is_dropped(tmp_path):
 def test_resume_of_a_damaged_fingerprint_is_one_line(tmp_path, damage):
     calls = _first_run(tmp_path)
     (tmp_path / "out" / "sweep.json").write_bytes(damage)
-    with pytest.raises(ParameterError, match=r"--resume: .*sweep.json is damaged"):
+    with pytest.raises(ParameterError, match=r"^resume: .*sweep.json is damaged"):
         run_sweep(square, _cases(3), tmp_path / "out", shared={"calls": calls},
                   scheduler="serial", resume=True)
 

@@ -188,16 +188,18 @@ def test_peak_memory_is_the_childs_own_not_the_parents():
     assert child_mb < 250  # the child imports numpy and scipy, far below the parent's 300 MB
 
 
-def test_limits_take_the_defaults_and_name_the_options():
+def test_limits_take_the_defaults_and_name_the_arguments():
     from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
 
     assert Limits.from_options() == Limits(DEFAULT_TIMEOUT_S, DEFAULT_MEMORY_MB)
     assert Limits.from_options(5, 0) == Limits(5.0, None)  # 0: no memory limit
-    with pytest.raises(ParameterError, match="--timeout must be positive, got 0"):
+    with pytest.raises(ParameterError, match="^timeout must be positive, got 0$") as info:
         Limits.from_options(0)
-    with pytest.raises(ParameterError, match="--memory-limit must be >= 0, got -1"):
+    assert info.value.argument == "timeout"
+    with pytest.raises(ParameterError, match="^memory_limit must be >= 0, got -1$") as info:
         Limits.from_options(memory_limit=-1)
-    with pytest.raises(ParameterError, match="timeout_s must be positive, got -1"):
+    assert info.value.argument == "memory_limit"
+    with pytest.raises(ParameterError, match="^timeout_s must be positive, got -1$"):
         Limits(-1.0)
 
 
