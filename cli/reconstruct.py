@@ -228,8 +228,6 @@ def run_reconstruct(args) -> int:
     auto = args.method == "auto"
     if auto and args.param:
         raise UsageError("--param cannot be combined with -m auto")
-    if not 0 < args.holdout <= 0.5:   # checked even when unused: a bad value is a mistake
-        raise UsageError(f"--holdout must be in (0, 0.5], got {args.holdout}")
     with _StageBar(args.method) as bar:
         result = api.reconstruct_file(
             args.input, args.output, method=args.method, params=args.param,

@@ -132,7 +132,7 @@ def test_score_options_sample_coverage_on_twice_the_samples():
     assert score_options() is None
     assert score_options(4000) == {"n_truth_samples": 4000, "n_test_samples": 4000,
                                    "coverage_points": 8000}
-    with pytest.raises(ParameterError, match="^samples must be at least 100, got 99$"):
+    with pytest.raises(ParameterError, match=r"^samples must be at least 100, got 99$"):
         score_options(99)
 
 

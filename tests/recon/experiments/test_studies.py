@@ -355,7 +355,7 @@ def test_resume_with_other_cases_is_refused(tmp_path):
 
 def test_bad_scheduler_and_output(tmp_path):
     with pytest.raises(studies.ParameterError,
-                       match="^scheduler must be a Dask scheduler address"):
+                       match=r"^scheduler must be a Dask scheduler address"):
         studies.run("duration", tmp_path, size="tiny", scheduler="my cluster")
     file = tmp_path / "file"
     file.write_text("x")

@@ -104,7 +104,7 @@ def test_unreachable_scheduler_is_a_clear_error(tmp_path, monkeypatch):
 
 
 def test_workers_must_be_positive(tmp_path):
-    with pytest.raises(ParameterError, match="^n_workers must be >= 1"):
+    with pytest.raises(ParameterError, match=r"^n_workers must be >= 1"):
         run_sweep(square, _cases(1), tmp_path, n_workers=0)
 
 

@@ -193,13 +193,13 @@ def test_limits_take_the_defaults_and_name_the_arguments():
 
     assert Limits.from_options() == Limits(DEFAULT_TIMEOUT_S, DEFAULT_MEMORY_MB)
     assert Limits.from_options(5, 0) == Limits(5.0, None)  # 0: no memory limit
-    with pytest.raises(ParameterError, match="^timeout must be positive, got 0$") as info:
+    with pytest.raises(ParameterError, match=r"^timeout must be positive, got 0$") as info:
         Limits.from_options(0)
     assert info.value.argument == "timeout"
-    with pytest.raises(ParameterError, match="^memory_limit must be >= 0, got -1$") as info:
+    with pytest.raises(ParameterError, match=r"^memory_limit must be >= 0, got -1$") as info:
         Limits.from_options(memory_limit=-1)
     assert info.value.argument == "memory_limit"
-    with pytest.raises(ParameterError, match="^timeout_s must be positive, got -1$"):
+    with pytest.raises(ParameterError, match=r"^timeout_s must be positive, got -1$"):
         Limits(-1.0)
 
 
