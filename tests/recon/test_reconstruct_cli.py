@@ -139,7 +139,7 @@ def test_stability_on_a_cloud(box_files, tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--noise", "a,b"], "--noise must be comma-separated numbers"),
     (["--density", "2"], "density level 2 is out of range"),
-    (["--set", "x=1"], "--set applies to scenes only"),
+    (["--set", "x=1"], "recon stability: error: --set: a cloud or a log ("),
 ])
 def test_stability_bad_arguments(box_files, tmp_path, capsys, argv, message):
     assert main(["stability", str(box_files[0]), "--truth", str(box_files[1]),

@@ -154,7 +154,7 @@ def test_parameters_parse_check_and_default():
 
 
 @pytest.mark.parametrize("method, pairs, match", [
-    ("poisson", ["depth"], "--param must be key=value"),
+    ("poisson", ["depth"], "^params must be key=value"),
     ("poisson", ["colour=red"], "method 'poisson' has no parameter 'colour'"),
     ("poisson", ["depth=deep"], r"parameter depth='deep' is not an integer"),
     ("poisson", ["depth=0"], "depth must be from 1 to 14, got 0"),
