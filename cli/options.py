@@ -138,13 +138,14 @@ def show_required(parser: argparse.ArgumentParser, *shown: str, alternatives: tu
 
 def _scheduler(text: str) -> str:
     """argparse type of ``--scheduler``: checked before any work starts (an address must answer
-    as a Dask scheduler)."""
+    as a Dask scheduler). argparse names the option (``argument --scheduler: ...``), so the
+    message leaves out the parameter it starts with."""
     from recon import api
 
     try:
         return api.check_scheduler(text)
     except ReconError as exc:
-        raise argparse.ArgumentTypeError(message(exc)) from None
+        raise argparse.ArgumentTypeError(exc.worded(lambda _: "").strip()) from None
 
 
 def add_sweep_options(parser, *, resume_help: str, default: str) -> None:

@@ -156,8 +156,8 @@ def test_argparse_types_and_usage_checks_name_the_option_once(files, capsys):
         main(_compare_argv(files, "-o", str(files / "out"), "--scheduler", "my cluster"))
     assert done.value.code == 1
     assert capsys.readouterr().err.strip().splitlines()[-1] == (
-        "recon compare: error: argument --scheduler: --scheduler must be a Dask scheduler "
-        "address (tcp://host:port), 'threads' or 'serial', got 'my cluster'")
+        "recon compare: error: argument --scheduler: must be a Dask scheduler address "
+        "(tcp://host:port), 'threads' or 'serial', got 'my cluster'")
     with pytest.raises(ParameterError, match=r"^seed must be >= 0") as info:
         api.check_seed(-4)
     assert info.value.argument == "seed"

@@ -304,7 +304,7 @@ def test_bad_scheduler_is_one_line(command, sphere_log, tmp_path, capsys):
               "--scheduler", "garbage://x"])
     assert info.value.code == 1
     err = capsys.readouterr().err
-    assert "--scheduler must be a Dask scheduler address (tcp://host:port)" in err
+    assert "argument --scheduler: must be a Dask scheduler address (tcp://host:port)" in err
     assert "Traceback" not in err
 
 

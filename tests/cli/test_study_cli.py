@@ -60,8 +60,8 @@ def test_output_that_is_a_file(capsys, tmp_path):
 
 def test_bad_scheduler_address(capsys, tmp_path):
     _fails(capsys, ["study", "duration", "-o", str(tmp_path), "--scheduler", "nowhere"],
-           r"--scheduler must be a Dask scheduler address \(tcp://host:port\), 'threads' or "
-           r"'serial', got 'nowhere'")
+           r"argument --scheduler: must be a Dask scheduler address \(tcp://host:port\), "
+           r"'threads' or 'serial', got 'nowhere'")
 
 
 def test_missing_arguments_and_bad_workers(capsys, tmp_path):

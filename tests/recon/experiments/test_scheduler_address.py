@@ -93,7 +93,7 @@ def test_study_with_a_non_dask_scheduler_is_a_usage_error(kind, tmp_path, capsys
         main(["study", "duration", "-o", str(tmp_path / "out"), "--scheduler", address])
     assert done.value.code == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("recon study: error: argument --scheduler: --scheduler ")
+    assert err[-1].startswith(f"recon study: error: argument --scheduler: {address}: ")
     assert message in err[-1] and "Traceback" not in "".join(err)
     assert not (tmp_path / "out").exists()
 
