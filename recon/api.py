@@ -16,7 +16,10 @@ Files are read once per call and written atomically: a file appears only when co
 verb refuses to write over one of its own inputs. The ``recon`` command calls these verbs and
 nothing else of recon, so a script gets what ``recon`` prints: the policy (which truth a log
 implies, what ``auto`` decides, what a comparison writes) lives here and in the modules these
-verbs call. Bad input raises a ``formats.errors.ReconError`` subclass with a one-line message.
+verbs call. Bad input raises a ``formats.errors.ReconError`` subclass with a one-line message;
+a message about one argument starts with the parameter's name as passed here (``resume: ...``,
+``overrides 'orbit.radius': ...``), which the error also carries as ``argument`` (``recon``
+prints the option instead: ``--resume``, ``--set``).
 
 Importing this module is light (no numpy, h5py or Open3D): each verb imports what it needs.
 """
