@@ -238,7 +238,7 @@ class Preparation:
     def __post_init__(self):
         _check_voxel(self.voxel, "voxel")
         if self.k < 1:
-            raise ParameterError(f"k must be >= 1, got {self.k}", argument="k")
+            raise ParameterError(f"k must be >= 1, got {self.k}")
 
     @classmethod
     def from_options(cls, *, remove_outliers: bool = False, voxel: float | None = None,
