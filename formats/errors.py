@@ -52,12 +52,16 @@ class ReconError(Exception):
         """The message with its leading argument name replaced by ``spell(argument)``.
 
         The CLI passes the name of the option that sets the parameter (``"memory_limit"`` ->
-        ``"--memory-limit"``). A message without an argument is returned as it is.
+        ``"--memory-limit"``). A message that does not start with its argument (as a whole
+        word) is returned as it is.
         """
         text = str(self)
         if self.argument is None or not text.startswith(self.argument):
             return text
-        return spell(self.argument) + text[len(self.argument):]
+        rest = text[len(self.argument):]
+        if rest[:1].isalnum() or rest[:1] == "_":   # a longer word: "timeouts", "k_max"
+            return text
+        return spell(self.argument) + rest
 
 
 class InputError(ReconError, ValueError):

@@ -184,6 +184,8 @@ def test_worded_replaces_only_a_leading_argument():
     assert ParameterError("x.ply: no points").worded(spell) == "x.ply: no points"
     assert ParameterError("the memory_limit is odd",
                           argument="memory_limit").worded(spell) == "the memory_limit is odd"
+    assert ParameterError("memory_limits are odd",
+                          argument="memory_limit").worded(spell) == "memory_limits are odd"
 
 
 @pytest.mark.parametrize("cls", [ParameterError, SceneError, ResourceError])
