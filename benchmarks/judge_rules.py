@@ -63,17 +63,9 @@ def records(suite: Path, cloud: str) -> list[dict]:
     return [r for r in rows if r.get("status") == "ok" and r.get("chamfer_m") is not None]
 
 
-# The clouds the rules were tuned on: the suite's first 18, and the 7 held out in the round
-# after them (looked at since). Others in the suite's output (held out, added later) are never
-# read here.
-TUNING = ("asteroid-slew-clean", "asteroid-slew-noisy", "asteroid-cross-noisy",
-          "asteroid-lidar-noisy", "rso-a-cross-clean", "rso-a-cross-noisy", "rso-b-cross-clean",
-          "rso-b-cross-noisy", "itokawa-cross-noisy", "eros-lidar-clean", "comet-cross-clean",
-          "hst-cross-noisy", "satellite-a-cross-noisy", "satellite-b-slew-noisy",
-          "satellite-c-lidar-noisy", "polyhedron-slew-noisy", "polyhedron-x3.5-slew-noisy",
-          "cratered-asteroid-slew-noisy", "satellite-d-cross-noisy", "polyhedron-lidar-noisy",
-          "cratered-asteroid-cross-noisy", "ryugu-slew-noisy", "castalia-lidar-noisy",
-          "near-cross-noisy", "psyche-slew-noisy")
+# The clouds the rules were tuned on: the suite's tuning clouds (``suite.TUNING``). The held-out
+# ones (``suite.HELD_OUT``) are never read here.
+TUNING = suite_clouds.TUNING
 
 
 # The clouds whose target a user would state as a natural body (``auto.choose``'s
@@ -90,6 +82,12 @@ def clouds_of(suite: Path, names) -> list[str]:
     """The tuning clouds (``TUNING``) with results in ``suite``, restricted to ``names``."""
     return [c for c in TUNING if (suite / c / "results.jsonl").exists()
             and (not names or c in names)]
+
+
+def collected(args) -> list[str]:
+    """The tuning clouds of ``clouds_of`` whose folds ``collect`` has kept in ``WORK/folds``."""
+    return [c for c in clouds_of(args.suite, args.clouds)
+            if (args.work / "folds" / f"{c}.json").exists()]
 
 
 def load_cloud(suite: Path, cloud: str):
@@ -241,8 +239,7 @@ def rules(args) -> None:
 
     if args.band is not None:
         auto.BAND_SES = args.band
-    names = [c for c in clouds_of(args.suite, args.clouds)
-             if (args.work / "folds" / f"{c}.json").exists()]
+    names = collected(args)
     good = median = 0
     seconds = []
     for cloud in names:
@@ -336,7 +333,7 @@ def evidence(args) -> None:
     from recon.surfaces.judge import COVERAGE_SPACINGS, SIGMAS
 
     tally: dict[tuple[str, float], list] = {}
-    for cloud in clouds_of(args.suite, args.clouds):
+    for cloud in collected(args):
         rows = records(args.suite, cloud)
         candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
                                                          suite=args.suite)
