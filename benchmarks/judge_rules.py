@@ -146,12 +146,14 @@ STATISTICS = {"chi2": None, "chi": np.sqrt, "cap9": lambda c: np.minimum(c, 9.0)
 
 
 def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
-                  suite: Path | None = None) -> tuple[list, np.ndarray, float, float]:
+                  suite: Path | None = None
+                  ) -> tuple[list, np.ndarray, float, float, int]:
     """The collected candidates of ``cloud`` as ``auto.Candidate`` (on the ladder's levels; with
     ``extra``, the ``EXTRA`` runs join the level of their method's ladder run, else they are left
-    out), the tested strikes' blocks, the coverage and tau [m]. A ``span`` not collected (older
-    collections) is measured, given ``suite``, on the compare's mesh of the run (fitted on all
-    strikes, not fold 0's) for the natural prior's model."""
+    out), the tested strikes' blocks, the coverage, tau [m] and the strikes their ``holes`` were
+    counted over (``checked_count``). A ``span`` not collected (older collections) is measured,
+    given ``suite``, on the compare's mesh of the run (fitted on all strikes, not fold 0's) for
+    the natural prior's model."""
     from dataclasses import fields
 
     from recon.surfaces import auto, judge
@@ -183,7 +185,24 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
             candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
                                                                     arrays["block"])
         out.append(candidate)
-    return out, arrays["block"], data["coverage"], data["tau_m"]
+    return (out, arrays["block"], data["coverage"], data["tau_m"],
+            data.get("n_checked") or checked_count(work, suite, cloud))
+
+
+def checked_count(work: Path, suite: Path | None, cloud: str) -> int:
+    """The strikes ``auto.choose`` counts ``violated`` and ``holes`` over on ``cloud`` (a
+    seeded subsample of ``judge.MAX_CHECKED``), for collections older than ``n_checked`` in
+    ``auto.AutoChoice.to_dict``: read from the cloud once, kept in ``WORK/n_checked.json``."""
+    from recon.surfaces.judge import MAX_CHECKED
+
+    path = work / "n_checked.json"
+    known = json.loads(path.read_text()) if path.exists() else {}
+    if cloud not in known:
+        if suite is None:
+            raise ValueError(f"{cloud}: the collection has no n_checked; pass the suite")
+        known[cloud] = min(len(load_cloud(suite, cloud).points), MAX_CHECKED)
+        path.write_text(json.dumps(known, indent=1))
+    return known[cloud]
 
 
 def compare_span(suite: Path, cloud: str, key: str) -> float | None:
@@ -198,7 +217,7 @@ def compare_span(suite: Path, cloud: str, key: str) -> float | None:
     return auto.span(mesh.vertices, load_cloud(suite, cloud).points)
 
 
-def replay(candidates: list, block: np.ndarray, coverage: float, tau: float,
+def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_checked: int,
            target: str = "unknown"):
     """``auto``'s ladder and choice on collected candidates: the levels in order, stopping as
     ``auto.climb`` does, and the natural-body prior for a ``"natural"`` target; returns the
@@ -213,7 +232,7 @@ def replay(candidates: list, block: np.ndarray, coverage: float, tau: float,
         if n + 1 >= auto.ALWAYS_LEVELS and n + 1 < len(depth_of) and \
                 auto._stops(fitted, before, depth):
             break
-    selection = auto.select(fitted, block)
+    selection = auto.select(fitted, block, n_checked)
     if target == "natural":
         selection = auto.natural_prior(fitted, selection, coverage, tau)
     return fitted[selection.chosen], fitted
@@ -244,9 +263,9 @@ def rules(args) -> None:
     seconds = []
     for cloud in names:
         rows = records(args.suite, cloud)
-        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
-                                                         args.statistic, args.suite)
-        chosen, fitted = replay(candidates, block, coverage, tau,
+        candidates, block, coverage, tau, n_checked = candidates_of(
+            args.work, cloud, args.extra, args.statistic, args.suite)
+        chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
         v = verdict(rows, chosen.run.key)
         good += v.get("ok", False)
@@ -335,9 +354,9 @@ def evidence(args) -> None:
     tally: dict[tuple[str, float], list] = {}
     for cloud in collected(args):
         rows = records(args.suite, cloud)
-        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
-                                                         suite=args.suite)
-        chosen, fitted = replay(candidates, block, coverage, tau,
+        candidates, block, coverage, tau, n_checked = candidates_of(
+            args.work, cloud, args.extra, suite=args.suite)
+        chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
         data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
         points = load_cloud(args.suite, cloud).points
@@ -345,7 +364,7 @@ def evidence(args) -> None:
         reach = max(data["tau_m"], SIGMAS * data["noise_m"], COVERAGE_SPACINGS * spacing)
         scored = [c for c in fitted if c.scored]
         found = mesh_evidence(args, cloud, [c.run.key for c in scored], rows, reach)
-        selection = auto.select(fitted, block)
+        selection = auto.select(fitted, block, n_checked)
         best = fitted[selection.best]
         pool = [c for c in scored if c.chi2 <= CONSENSUS_CHI2 * best.chi2]
         for band in EVIDENCE_BANDS:
@@ -427,9 +446,9 @@ def chosen_key(args, cloud: str) -> str:
     """The run auto chooses on ``cloud``: replayed on the collected folds when there are
     some, else the suite's own choice (``auto.json``)."""
     if (args.work / "folds" / f"{cloud}.json").exists():
-        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
-                                                         suite=args.suite)
-        return replay(candidates, block, coverage, tau,
+        candidates, block, coverage, tau, n_checked = candidates_of(
+            args.work, cloud, args.extra, suite=args.suite)
+        return replay(candidates, block, coverage, tau, n_checked,
                       target_of(cloud, not args.no_prior))[0].run.key
     return suite_choice(args.suite, cloud)
 
