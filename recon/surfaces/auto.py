@@ -161,7 +161,8 @@ class Candidate:
         surface cuts before their strike, and of strikes with no surface within tolerance.
     span : float or None
         How far the surface reaches beyond the strikes (``span``; 1: no farther).
-    eligible, chosen : bool
+    eligible, holed, chosen : bool
+        Within the band (step 3); in it but left out for its holes (step 4); chosen.
     """
 
     run: Run
@@ -182,6 +183,7 @@ class Candidate:
     holes: float | None = None
     span: float | None = None
     eligible: bool = False
+    holed: bool = False
     chosen: bool = False
     heldout: judge.HeldOut | None = field(default=None, repr=False)
     cost: np.ndarray | None = field(default=None, repr=False)
@@ -698,7 +700,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     if target_kind == "natural":
         selection = natural_prior(table, selection, coverage, context.tau)
     for i, c in enumerate(table):
-        c.eligible, c.chosen = i in selection.eligible, i == selection.chosen
+        c.eligible, c.holed = i in selection.eligible, i in selection.holed
+        c.chosen = i == selection.chosen
     fitted = sum(c.status != "skipped" for c in table)
     reason = (explain(table, selection, coverage)
               + f"; {fitted} candidate fit(s) of {len(table)}" + (f"; {note}" if note else "")
@@ -714,7 +717,7 @@ def format_choice(choice: AutoChoice) -> str:
              f"{'chi fit':>7} {'cut':>6} {'holes':>6} {'params':>8} {'faces':>8}", "-" * 104]
     ranked = sorted(choice.candidates, key=lambda c: (not c.scored, c.chi2 or 0.0))
     for c in ranked:
-        mark = "*" if c.chosen else ("~" if c.eligible else " ")
+        mark = "*" if c.chosen else ("x" if c.holed else "~" if c.eligible else " ")
         start = f"{mark:2}{c.label[:30]:<30} {c.level:>3} {c.run.kind:<13}"
         if c.status == "skipped":
             lines.append(f"{start} not fitted (the ladder stopped before its level)")
@@ -728,7 +731,8 @@ def format_choice(choice: AutoChoice) -> str:
                  f"{folds.n_blocks} blocks of {folds.block_shots} shots, "
                  f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "
                  "chi fit: on the training strikes; cut: beams cut before their strike; "
-                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best)")
+                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best, x "
+                 "within them but leaving strikes in holes beyond the noise)")
     lines.append(choice.reason)
     return "\n".join(lines)
 

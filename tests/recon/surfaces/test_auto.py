@@ -95,6 +95,7 @@ def test_auto_on_a_noisy_track_log_chooses_the_sphere(track_sphere):
     record = choice.to_dict()
     assert record["folds"]["margin_shots"] == choice.folds.margin
     assert record["folds"]["k"] == 4
+    assert record["n_checked"] == len(cloud.points)
     assert {"chi2", "chi2_se", "chi_fit", "violated", "holes"} <= set(record["candidates"][0])
 
 
