@@ -14,11 +14,12 @@ seconds instead of a suite run:
   (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
   candidate, the held-out costs of every tested strike, their blocks and the per-candidate
   figures (``WORK/folds/CLOUD.npz`` and ``.json``);
-- ``rules``: replays ``auto.select`` (and the ladder's stop) on those figures, restricted to
-  the ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best
-  F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the
-  median run; the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every
-  cloud "unknown");
+- ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
+  strikes, the smallest model) and the ladder's stop on those figures, restricted to the
+  ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best F-score
+  and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the median run;
+  the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
+  "unknown");
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
@@ -53,8 +54,7 @@ import suite as suite_clouds  # noqa: E402  (the suite's clouds, beside this scr
 F_TOLERANCE, CHAMFER_TOLERANCE = 0.05, 0.10
 # The ladder (recon.surfaces.auto.LADDER) and grid runs that the truth finds best on some suite
 # clouds, by the compare's labels: the rule may be tried on any subset without refitting.
-EXTRA = ("plane cell=0.5", "visibility beta=0.1", "poisson depth=7", "planes threshold=2",
-         "apss filter_scale=4")
+EXTRA = ("visibility beta=0.1", "poisson depth=7", "planes threshold=2", "apss filter_scale=4")
 
 
 def records(suite: Path, cloud: str) -> list[dict]:
