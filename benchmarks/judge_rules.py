@@ -14,11 +14,12 @@ seconds instead of a suite run:
   (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
   candidate, the held-out costs of every tested strike, their blocks and the per-candidate
   figures (``WORK/folds/CLOUD.npz`` and ``.json``);
-- ``rules``: replays ``auto.select`` (and the ladder's stop) on those figures, restricted to
-  the ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best
-  F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the
-  median run; the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every
-  cloud "unknown");
+- ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
+  strikes, the smallest model) and the ladder's stop on those figures, restricted to the
+  ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best F-score
+  and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the median run;
+  the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
+  "unknown");
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
@@ -53,8 +54,7 @@ import suite as suite_clouds  # noqa: E402  (the suite's clouds, beside this scr
 F_TOLERANCE, CHAMFER_TOLERANCE = 0.05, 0.10
 # The ladder (recon.surfaces.auto.LADDER) and grid runs that the truth finds best on some suite
 # clouds, by the compare's labels: the rule may be tried on any subset without refitting.
-EXTRA = ("plane cell=0.5", "visibility beta=0.1", "poisson depth=7", "planes threshold=2",
-         "apss filter_scale=4")
+EXTRA = ("visibility beta=0.1", "poisson depth=7", "planes threshold=2", "apss filter_scale=4")
 
 
 def records(suite: Path, cloud: str) -> list[dict]:
@@ -63,17 +63,9 @@ def records(suite: Path, cloud: str) -> list[dict]:
     return [r for r in rows if r.get("status") == "ok" and r.get("chamfer_m") is not None]
 
 
-# The clouds the rules were tuned on: the suite's first 18, and the 7 held out in the round
-# after them (looked at since). Others in the suite's output (held out, added later) are never
-# read here.
-TUNING = ("asteroid-slew-clean", "asteroid-slew-noisy", "asteroid-cross-noisy",
-          "asteroid-lidar-noisy", "rso-a-cross-clean", "rso-a-cross-noisy", "rso-b-cross-clean",
-          "rso-b-cross-noisy", "itokawa-cross-noisy", "eros-lidar-clean", "comet-cross-clean",
-          "hst-cross-noisy", "satellite-a-cross-noisy", "satellite-b-slew-noisy",
-          "satellite-c-lidar-noisy", "polyhedron-slew-noisy", "polyhedron-x3.5-slew-noisy",
-          "cratered-asteroid-slew-noisy", "satellite-d-cross-noisy", "polyhedron-lidar-noisy",
-          "cratered-asteroid-cross-noisy", "ryugu-slew-noisy", "castalia-lidar-noisy",
-          "near-cross-noisy", "psyche-slew-noisy")
+# The clouds the rules were tuned on: the suite's tuning clouds (``suite.TUNING``). The held-out
+# ones (``suite.HELD_OUT``) are never read here.
+TUNING = suite_clouds.TUNING
 
 
 # The clouds whose target a user would state as a natural body (``auto.choose``'s
@@ -90,6 +82,12 @@ def clouds_of(suite: Path, names) -> list[str]:
     """The tuning clouds (``TUNING``) with results in ``suite``, restricted to ``names``."""
     return [c for c in TUNING if (suite / c / "results.jsonl").exists()
             and (not names or c in names)]
+
+
+def collected(args) -> list[str]:
+    """The tuning clouds of ``clouds_of`` whose folds ``collect`` has kept in ``WORK/folds``."""
+    return [c for c in clouds_of(args.suite, args.clouds)
+            if (args.work / "folds" / f"{c}.json").exists()]
 
 
 def load_cloud(suite: Path, cloud: str):
@@ -148,12 +146,14 @@ STATISTICS = {"chi2": None, "chi": np.sqrt, "cap9": lambda c: np.minimum(c, 9.0)
 
 
 def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
-                  suite: Path | None = None) -> tuple[list, np.ndarray, float, float]:
+                  suite: Path | None = None
+                  ) -> tuple[list, np.ndarray, float, float, int]:
     """The collected candidates of ``cloud`` as ``auto.Candidate`` (on the ladder's levels; with
     ``extra``, the ``EXTRA`` runs join the level of their method's ladder run, else they are left
-    out), the tested strikes' blocks, the coverage and tau [m]. A ``span`` not collected (older
-    collections) is measured, given ``suite``, on the compare's mesh of the run (fitted on all
-    strikes, not fold 0's) for the natural prior's model."""
+    out), the tested strikes' blocks, the coverage, tau [m] and the strikes their ``holes`` were
+    counted over (``checked_count``). A ``span`` not collected (older collections) is measured,
+    given ``suite``, on the compare's mesh of the run (fitted on all strikes, not fold 0's) for
+    the natural prior's model."""
     from dataclasses import fields
 
     from recon.surfaces import auto, judge
@@ -185,7 +185,24 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
             candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
                                                                     arrays["block"])
         out.append(candidate)
-    return out, arrays["block"], data["coverage"], data["tau_m"]
+    return (out, arrays["block"], data["coverage"], data["tau_m"],
+            data.get("n_checked") or checked_count(work, suite, cloud))
+
+
+def checked_count(work: Path, suite: Path | None, cloud: str) -> int:
+    """The strikes ``auto.choose`` counts ``violated`` and ``holes`` over on ``cloud`` (a
+    seeded subsample of ``judge.MAX_CHECKED``), for collections older than ``n_checked`` in
+    ``auto.AutoChoice.to_dict``: read from the cloud once, kept in ``WORK/n_checked.json``."""
+    from recon.surfaces.judge import MAX_CHECKED
+
+    path = work / "n_checked.json"
+    known = json.loads(path.read_text()) if path.exists() else {}
+    if cloud not in known:
+        if suite is None:
+            raise ValueError(f"{cloud}: the collection has no n_checked; pass the suite")
+        known[cloud] = min(len(load_cloud(suite, cloud).points), MAX_CHECKED)
+        path.write_text(json.dumps(known, indent=1))
+    return known[cloud]
 
 
 def compare_span(suite: Path, cloud: str, key: str) -> float | None:
@@ -200,7 +217,7 @@ def compare_span(suite: Path, cloud: str, key: str) -> float | None:
     return auto.span(mesh.vertices, load_cloud(suite, cloud).points)
 
 
-def replay(candidates: list, block: np.ndarray, coverage: float, tau: float,
+def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_checked: int,
            target: str = "unknown"):
     """``auto``'s ladder and choice on collected candidates: the levels in order, stopping as
     ``auto.climb`` does, and the natural-body prior for a ``"natural"`` target; returns the
@@ -215,7 +232,7 @@ def replay(candidates: list, block: np.ndarray, coverage: float, tau: float,
         if n + 1 >= auto.ALWAYS_LEVELS and n + 1 < len(depth_of) and \
                 auto._stops(fitted, before, depth):
             break
-    selection = auto.select(fitted, block)
+    selection = auto.select(fitted, block, n_checked)
     if target == "natural":
         selection = auto.natural_prior(fitted, selection, coverage, tau)
     return fitted[selection.chosen], fitted
@@ -241,15 +258,14 @@ def rules(args) -> None:
 
     if args.band is not None:
         auto.BAND_SES = args.band
-    names = [c for c in clouds_of(args.suite, args.clouds)
-             if (args.work / "folds" / f"{c}.json").exists()]
+    names = collected(args)
     good = median = 0
     seconds = []
     for cloud in names:
         rows = records(args.suite, cloud)
-        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
-                                                         args.statistic, args.suite)
-        chosen, fitted = replay(candidates, block, coverage, tau,
+        candidates, block, coverage, tau, n_checked = candidates_of(
+            args.work, cloud, args.extra, args.statistic, args.suite)
+        chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
         v = verdict(rows, chosen.run.key)
         good += v.get("ok", False)
@@ -336,11 +352,11 @@ def evidence(args) -> None:
     from recon.surfaces.judge import COVERAGE_SPACINGS, SIGMAS
 
     tally: dict[tuple[str, float], list] = {}
-    for cloud in clouds_of(args.suite, args.clouds):
+    for cloud in collected(args):
         rows = records(args.suite, cloud)
-        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
-                                                         suite=args.suite)
-        chosen, fitted = replay(candidates, block, coverage, tau,
+        candidates, block, coverage, tau, n_checked = candidates_of(
+            args.work, cloud, args.extra, suite=args.suite)
+        chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
         data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
         points = load_cloud(args.suite, cloud).points
@@ -348,7 +364,7 @@ def evidence(args) -> None:
         reach = max(data["tau_m"], SIGMAS * data["noise_m"], COVERAGE_SPACINGS * spacing)
         scored = [c for c in fitted if c.scored]
         found = mesh_evidence(args, cloud, [c.run.key for c in scored], rows, reach)
-        selection = auto.select(fitted, block)
+        selection = auto.select(fitted, block, n_checked)
         best = fitted[selection.best]
         pool = [c for c in scored if c.chi2 <= CONSENSUS_CHI2 * best.chi2]
         for band in EVIDENCE_BANDS:
@@ -430,9 +446,9 @@ def chosen_key(args, cloud: str) -> str:
     """The run auto chooses on ``cloud``: replayed on the collected folds when there are
     some, else the suite's own choice (``auto.json``)."""
     if (args.work / "folds" / f"{cloud}.json").exists():
-        candidates, block, coverage, tau = candidates_of(args.work, cloud, args.extra,
-                                                         suite=args.suite)
-        return replay(candidates, block, coverage, tau,
+        candidates, block, coverage, tau, n_checked = candidates_of(
+            args.work, cloud, args.extra, suite=args.suite)
+        return replay(candidates, block, coverage, tau, n_checked,
                       target_of(cloud, not args.no_prior))[0].run.key
     return suite_choice(args.suite, cloud)
 

@@ -25,12 +25,20 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    as the best, whose chi-square exceeds the best's by at most ``BAND_SES`` standard errors
    of that difference (from the spread of the blocks' mean differences), fits the held-out
    passes as well as the best, to within what these passes can tell apart.
-4. **Model size is the penalty**: among those, the fewest free parameters wins
+4. **Strikes the surface leaves in holes** (``hole_test``): a strike with no surface within its
+   tolerance (``holes``, closest-point: the beam's angle does not enter) is what a surface at
+   the truth leaves only in the noise's tail beyond ``judge.SIGMAS`` sigma (``HOLE_RATE``,
+   0.27 % for Gaussian noise). A candidate in the band that leaves more, by more than
+   ``HOLE_SES`` binomial standard errors over the strikes checked, than that rate or the
+   band's fewest (whichever is larger) drops out of the band: it misses surface the strikes
+   show. Beams cut before their strike (``violated``) do not enter: along a grazing beam a
+   surface a fraction of the tolerance off the strikes' surface cuts it (docs/decisions.md).
+5. **Model size is the penalty**: among the rest, the fewest free parameters wins
    (``Method.parameter_count``: 9 for an ellipsoid, 3 per plane, 3 per vertex of a free mesh),
    then the lower ``chi2``. Open and closed surfaces compete alike: on the suite's clouds,
    preferring closed ones where the strikes cover little of the body chose worse surfaces
    (docs/decisions.md). The coverage of the best closed candidate is reported.
-5. **What the caller knows of the target** (``target_kind``, ``TARGET_KINDS``): the held-out
+6. **What the caller knows of the target** (``target_kind``, ``TARGET_KINDS``): the held-out
    passes all lie where strikes are, so they cannot judge what a surface does where none is. For a
    ``"natural"`` body (an asteroid, a comet: a closed solid whose large-scale shape is
    smooth) seen over less than ``NATURAL_COVERAGE`` of the best closed candidate, the
@@ -39,7 +47,7 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    average, and along each of its principal axes it reaches at most ``NATURAL_SPAN`` times
    the strikes' extent (``span``). It then stands for the unseen far side, where an open
    surface leaves the body out and a hull cuts inside it (``natural_prior``). For an
-   ``"unknown"`` target (the default) steps 1-4 alone decide.
+   ``"unknown"`` target (the default) steps 1-5 alone decide.
 
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
@@ -56,6 +64,7 @@ held-out residuals.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
@@ -80,10 +89,17 @@ MIN_HELD_OUT = 30
 # standard errors of the paired difference fits the held-out passes as well (2: chosen on the
 # suite's 18 tuning clouds, docs/decisions.md).
 BAND_SES = 2.0
+# Step 4: a band member leaving strikes in holes beyond HOLE_SES binomial standard errors above
+# the larger of HOLE_RATE (the fraction of Gaussian noise beyond judge.SIGMAS sigma, two-sided:
+# what a surface at the truth leaves) and the band's fewest drops out of the band (3: the usual
+# significance; chosen on the suite's tuning clouds, docs/decisions.md).
+HOLE_SES = 3.0
+HOLE_RATE = math.erfc(judge.SIGMAS / math.sqrt(2.0))
 # The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
 # level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson, the
 # visibility graph cut and a wide-kernel APSS (the truth's best on a faceted body); level 3: the
-# MLS and ball-pivoting surfaces. The runs come from
+# MLS and ball-pivoting surfaces and a fine local-plane grid (the truth's best on satellites of
+# flat panels seen all around). The runs come from
 # ``benchmarks/suite.py``: the truth's best runs on its clouds are among them. A method that is
 # not registered (``visibility`` where it is not installed) is left out.
 LADDER: tuple[tuple[tuple[str, dict], ...], ...] = (
@@ -91,7 +107,7 @@ LADDER: tuple[tuple[tuple[str, dict], ...], ...] = (
     (("poisson", {"depth": 6}), ("plane", {"cell": 2.0})),
     (("plane", {}), ("poisson", {"depth": 9}), ("visibility", {}),
      ("apss", {"filter_scale": 4})),
-    (("rimls", {}), ("ball-pivoting", {})),
+    (("rimls", {}), ("ball-pivoting", {}), ("plane", {"cell": 0.5})),
 )
 MAX_FITS = sum(len(level) for level in LADDER)
 # Levels fitted whatever the earlier ones gave: the primitives, the coarse surfaces and the
@@ -145,7 +161,8 @@ class Candidate:
         surface cuts before their strike, and of strikes with no surface within tolerance.
     span : float or None
         How far the surface reaches beyond the strikes (``span``; 1: no farther).
-    eligible, chosen : bool
+    eligible, holed, chosen : bool
+        Within the band (step 3); in it but left out for its holes (step 4); chosen.
     """
 
     run: Run
@@ -166,6 +183,7 @@ class Candidate:
     holes: float | None = None
     span: float | None = None
     eligible: bool = False
+    holed: bool = False
     chosen: bool = False
     heldout: judge.HeldOut | None = field(default=None, repr=False)
     cost: np.ndarray | None = field(default=None, repr=False)
@@ -213,6 +231,8 @@ class AutoChoice:
         floor.
     target_kind : str
         What was known of the target (``TARGET_KINDS``).
+    n_checked : int
+        Strikes the candidates' ``violated`` and ``holes`` were counted over.
     """
 
     run: Run
@@ -224,6 +244,7 @@ class AutoChoice:
     noise_m: float
     tau_m: float
     target_kind: str = "unknown"
+    n_checked: int = 0
 
     @property
     def method(self) -> str:
@@ -246,6 +267,7 @@ class AutoChoice:
         return {"method": self.method, "params": self.params, "label": self.label,
                 "reason": self.reason, "threshold": self.threshold, "coverage": self.coverage,
                 "noise_m": self.noise_m, "tau_m": self.tau_m, "target_kind": self.target_kind,
+                "n_checked": self.n_checked,
                 "folds": {"k": folds.k, "n_tested": int(folds.tested.sum()),
                           "n_blocks": folds.n_blocks, "block_shots": folds.block_shots,
                           "margin_shots": folds.margin, "step_m": folds.step_m},
@@ -287,14 +309,17 @@ class _Context:
 class Selection:
     """``select``'s answer: the chosen index, the best's, the band's upper edge (the largest
     chi-square in it), the candidates within the band, and each scored candidate's chi-square
-    above the best's with its paired standard error; ``prior``: the natural-body prior
-    (``natural_prior``) made the choice."""
+    above the best's with its paired standard error; ``holed``: the band's candidates that
+    leave too many strikes in holes (``hole_test``) and ``hole_limit`` the fraction they
+    exceed; ``prior``: the natural-body prior (``natural_prior``) made the choice."""
 
     chosen: int
     best: int
     threshold: float
     eligible: tuple[int, ...]
     gaps: dict[int, tuple[float, float]]
+    holed: tuple[int, ...] = ()
+    hole_limit: float = 1.0
     prior: bool = False
 
 
@@ -485,9 +510,19 @@ def paired_gaps(candidates: list[Candidate], best: int, block: np.ndarray
             for i, c in enumerate(candidates) if c.scored}
 
 
-def select(candidates: list[Candidate], block: np.ndarray) -> Selection:
-    """Steps 3 and 4 of the module docstring; ``block`` (k,) is the block of each tested
-    strike, in the order of the candidates' ``cost``.
+def hole_limit(holes: Sequence[float], n_checked: int) -> float:
+    """Step 4 of the module docstring: the largest fraction of strikes in holes that a band
+    member may leave, ``HOLE_SES`` binomial standard errors above the larger of ``HOLE_RATE``
+    and the band's fewest (``holes``, fractions of the ``n_checked`` strikes checked). The
+    band's fewest is always within it."""
+    reference = max(HOLE_RATE, min(holes))
+    return reference + HOLE_SES * math.sqrt(reference * (1.0 - reference) / max(n_checked, 1))
+
+
+def select(candidates: list[Candidate], block: np.ndarray, n_checked: int) -> Selection:
+    """Steps 3 to 5 of the module docstring; ``block`` (k,) is the block of each tested
+    strike, in the order of the candidates' ``cost``; ``n_checked`` the strikes the
+    candidates' ``holes`` were counted over.
 
     Raises
     ------
@@ -502,8 +537,11 @@ def select(candidates: list[Candidate], block: np.ndarray) -> Selection:
     gaps = paired_gaps(candidates, best, block)
     eligible = tuple(i for i in scored if gaps[i][0] <= BAND_SES * gaps[i][1])
     threshold = max(candidates[i].chi2 for i in eligible)
-    chosen = min(eligible, key=lambda i: (candidates[i].n_params, candidates[i].chi2))
-    return Selection(chosen, best, threshold, eligible, gaps)
+    limit = hole_limit([candidates[i].holes for i in eligible], n_checked)
+    holed = tuple(i for i in eligible if candidates[i].holes > limit)
+    chosen = min((i for i in eligible if i not in holed),
+                 key=lambda i: (candidates[i].n_params, candidates[i].chi2))
+    return Selection(chosen, best, threshold, eligible, gaps, holed, limit)
 
 
 def natural_prior(candidates: list[Candidate], selection: Selection, coverage: float,
@@ -537,6 +575,15 @@ def _prior_reason(candidates: list[Candidate], selection: Selection, coverage: f
             f"{'closed' if b.closed else 'open'})")
 
 
+def _holes_reason(candidates: list[Candidate], selection: Selection) -> str:
+    """What the hole test (step 4) took out of the band."""
+    named = ", ".join(f"{candidates[i].label} ({candidates[i].holes:.2%})"
+                      for i in selection.holed)
+    return (f"; left out of the band for the strikes they leave in holes (no surface within "
+            f"tolerance), more than the recorded noise or the band's best explain "
+            f"(at most {selection.hole_limit:.2%}): {named}")
+
+
 def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
     """The reason in words: what was chosen, open or closed, the statistic and the band, and
     what decided among the candidates in the band (only what the rule actually did)."""
@@ -547,20 +594,23 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
             f"faces, fitted on a fold's training strikes): held-out chi-square {c.chi2:.3g} "
             f"per strike (1 = at the recorded noise), {c.violated:.1%} of beams cut before "
             f"their strike, {c.holes:.1%} of strikes in holes")
-    others = len(selection.eligible) - 1
+    kept = len(selection.eligible) - len(selection.holed)   # the chosen one among them
+    holding = "that hold the strikes " if selection.holed else ""
     if selection.prior:
         text += _prior_reason(candidates, selection, coverage)
     elif selection.chosen == selection.best:
-        text += ("; the lowest held-out statistic" + (
-            f"; the {others} other candidate(s) {band} "
-            + "are larger models"
-            if others else f"; no other candidate is {band}"))
+        text += "; the lowest held-out statistic"
+        if kept > 1:
+            text += f"; the {kept - 1} other candidate(s) {band} {holding}are larger models"
+        elif not selection.holed:
+            text += f"; no other candidate is {band}"
     else:
-        rule = "the smallest model"
         gap, se = selection.gaps[selection.chosen]
         text += (f"; {gap:.2g} +- {se:.2g} above the best, {b.label} ({b.chi2:.3g}, "
                  f"{b.n_params:,} parameters), on the same held-out strikes: {band}; of the "
-                 f"{others + 1} candidates in that band it is {rule}")
+                 f"{kept} candidates in that band {holding}it is the smallest model")
+    if selection.holed and not selection.prior:
+        text += _holes_reason(candidates, selection)
     if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
         text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
                  "it follows part of the noise")
@@ -646,17 +696,19 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
                         n_workers=n_workers)
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
         else float("nan")
-    selection = select(table, context.block)
+    selection = select(table, context.block, len(context.checked))
     if target_kind == "natural":
         selection = natural_prior(table, selection, coverage, context.tau)
     for i, c in enumerate(table):
-        c.eligible, c.chosen = i in selection.eligible, i == selection.chosen
+        c.eligible, c.holed = i in selection.eligible, i in selection.holed
+        c.chosen = i == selection.chosen
     fitted = sum(c.status != "skipped" for c in table)
     reason = (explain(table, selection, coverage)
               + f"; {fitted} candidate fit(s) of {len(table)}" + (f"; {note}" if note else "")
               + ".")
     return AutoChoice(table[selection.chosen].run, reason, table, selection.threshold,
-                      coverage, folds, context.noise, context.tau, target_kind)
+                      coverage, folds, context.noise, context.tau, target_kind,
+                      len(context.checked))
 
 
 def format_choice(choice: AutoChoice) -> str:
@@ -665,7 +717,7 @@ def format_choice(choice: AutoChoice) -> str:
              f"{'chi fit':>7} {'cut':>6} {'holes':>6} {'params':>8} {'faces':>8}", "-" * 104]
     ranked = sorted(choice.candidates, key=lambda c: (not c.scored, c.chi2 or 0.0))
     for c in ranked:
-        mark = "*" if c.chosen else ("~" if c.eligible else " ")
+        mark = "*" if c.chosen else ("x" if c.holed else "~" if c.eligible else " ")
         start = f"{mark:2}{c.label[:30]:<30} {c.level:>3} {c.run.kind:<13}"
         if c.status == "skipped":
             lines.append(f"{start} not fitted (the ladder stopped before its level)")
@@ -679,7 +731,8 @@ def format_choice(choice: AutoChoice) -> str:
                  f"{folds.n_blocks} blocks of {folds.block_shots} shots, "
                  f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "
                  "chi fit: on the training strikes; cut: beams cut before their strike; "
-                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best)")
+                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best, x "
+                 "within them but leaving strikes in holes beyond the noise)")
     lines.append(choice.reason)
     return "\n".join(lines)
 

@@ -100,7 +100,7 @@ def test_the_natural_prior_acts_only_where_the_body_is_unseen_and_the_ellipsoid_
         coverage, mean, reach, chosen):
     candidates = [_candidate("poisson", 1.0, 10_000, mean=0.05, closed=False),
                   _candidate("ellipsoid", 5.0, 9, mean=mean, reach=reach, offset=1)]
-    selection = select(candidates, BLOCK)
+    selection = select(candidates, BLOCK, 20_000)
     assert candidates[selection.chosen].run.method == "poisson"
     prior = natural_prior(candidates, selection, coverage, tau=1.0)
     assert candidates[prior.chosen].run.method == chosen
