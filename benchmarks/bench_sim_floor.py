@@ -17,8 +17,8 @@ system of the process. Each is a floor or a part of ours:
   (``sim.pipeline``: numpy, scipy's rotations, h5py, the log's writer);
 - ``ours-no-log``: the imports, the scene, the plan and every chunk computed (rays, first-hit
   cast with barycentrics, float64 refinement, error models), nothing written;
-- ``ours``: ``recon simulate`` as a user types it (the log written, deflate level 1 on the index
-  columns, Fletcher-32 on every dataset);
+- ``ours``: ``recon simulate`` as a user types it (the log written: deflate level 1 on the shot
+  and beam indices, Fletcher-32 on every dataset);
 - ``ours-open3d``: ``sim.simulate(..., backend="open3d")`` from a fresh Python.
 
 The share of raw Embree printed is floor CPU / ours CPU (and the same for wall). What the table
