@@ -16,12 +16,13 @@
    wall times, so the process CPU time per ray is also compared (raw all-cores CPU / end-to-end
    CPU): on an idle machine, with both saturating every core, it equals the wall-time ratio
    against the all-cores raw. What the simulator adds to the cast, per ray: the rays, the
-   float64 hit refinement and the rest of the chunk (~35 ns), writing the log (~58 ns:
-   Fletcher-32, deflate level 1 on the index columns, the copy into the file), which alone
-   keeps the ratio under ~66 %; docs/decisions.md has the breakdown. ``--no-paper-run`` skips
-   part 3; the load average before and after is printed. The same comparison in fresh
-   processes, as a user runs ``recon simulate``, is the ``simulate-lidar`` case of
-   benchmarks/bench_user.py.
+   float64 hit refinement and the rest of the chunk (~35 ns), writing the log (~44-49 ns:
+   Fletcher-32 on every dataset, deflate level 1 on the shot and beam indices, the copy into
+   the file), which alone keeps the ratio under ~70 %; docs/decisions.md has the breakdown.
+   ``--no-paper-run`` skips part 3; the load average before and after is printed. The same
+   comparison in fresh processes, as a user runs ``recon simulate``, is the ``simulate-lidar``
+   case of benchmarks/bench_user.py; benchmarks/bench_sim_floor.py splits that run into its
+   imports, its computing and its log, beside the raw casts.
 2. **Memory**: peak resident memory of a ``--memory-rays`` (default 1e8) LIDAR run in a fresh
    process (target: under 2 GB), with its time.
 3. **The paper's 50-rotation single-beam run** (``asteroid-lrf``, 77,400 shots): in-process and

@@ -59,13 +59,15 @@ def compression_filters(spec: str, where: str | None = None) -> dict:
                          f"(LEVEL 0-9), got {spec!r}")
 
 
-# Per-strike float64 measurements, noise down to their last bits: lzf keeps 80-85 % of their
-# bytes at 10x the CPU of storing them (44-48 ns a value against 4-5, measured on an
-# asteroid-lidar log), which made it 4/5 of the simulator's time; deflate costs more still.
-# Under any compression they are stored unfiltered (Fletcher-32 only); the angle offsets too
-# when an angle error or pulse dilation fills them (without one they are zeros, which either
-# filter stores in 1 % of the bytes, cheaply).
-UNFILTERED_COLUMNS = frozenset({"strikes/range", "truth/point", "truth/range"})
+# Columns stored with Fletcher-32 only, under any compression (docs/decisions.md):
+# - the per-strike float64 measurements, noise down to their last bits: lzf keeps 80-85 % of
+#   their bytes at 10x the CPU of storing them (44-48 ns a value against 4-5, measured on an
+#   asteroid-lidar log), which made it 4/5 of the simulator's time; deflate costs more still;
+#   the angle offsets too when an angle error or pulse dilation fills them (without one they
+#   are zeros, which either filter stores in 1 % of the bytes, cheaply);
+# - the truth's facet ids: deflate level 1 with shuffle kept 17 % of their bytes at a quarter of
+#   the writer's time (15 of 64 ns a ray on an asteroid-lidar log; 8 % more bytes without it).
+UNFILTERED_COLUMNS = frozenset({"strikes/range", "truth/point", "truth/range", "truth/facet"})
 NOISY_ANGLE_COLUMNS = frozenset({"strikes/azimuth_offset", "strikes/elevation_offset"})
 
 _PATTERNS = ("single", "cross", "zigzag", "grid", "custom")

@@ -59,8 +59,9 @@ def test_small_simulated_log_is_sized_to_its_content(tmp_path):
         assert f["strikes/shot"].compression_opts == GZIP_LEVEL
         assert DEFAULT_COMPRESSION == f"gzip:{GZIP_LEVEL}"
         assert f["strikes/shot"].shuffle and f["strikes/shot"].fletcher32
-        # The noisy float64 columns: checksummed, not compressed (schema.UNFILTERED_COLUMNS).
-        for name in ("strikes/range", "truth/point", "truth/range"):
+        # The noisy float64 columns and the truth's facets: checksummed, not compressed
+        # (schema.UNFILTERED_COLUMNS).
+        for name in ("strikes/range", "truth/point", "truth/range", "truth/facet"):
             assert f[name].compression is None and f[name].fletcher32, name
         payload = sum(ds.size * ds.dtype.itemsize for ds in _datasets(f).values())
     # measured before: 1,548 shots, 7,740 strikes in 6,966,084 bytes with fixed chunks
@@ -162,3 +163,74 @@ def test_noisy_columns_are_checksummed_only_under_every_compression():
         assert _filters(compression, "strikes/range", True) == {"fletcher32": True}
     assert _filters("gzip:6", "strikes/shot", False)["compression_opts"] == 6
     assert _filters("none", "strikes/shot", False) == {"fletcher32": True}
+
+
+@pytest.fixture(scope="module")
+def simulated_log(tmp_path_factory):
+    from recon import api
+
+    return api.simulate("asteroid-cross", tmp_path_factory.mktemp("sim") / "log.h5", seed=0,
+                        overrides=["time.duration=600"]).path
+
+
+def _rewrite(path, name: str, **filters) -> None:
+    """Store dataset ``name`` of the log at ``path`` again with other h5py ``filters``, keeping
+    its values, chunks and attributes."""
+    with h5py.File(path, "r+") as f:
+        old = f[name]
+        values, chunks, attrs = old[()], old.chunks, dict(old.attrs)
+        del f[name]
+        new = f.create_dataset(name, data=values, chunks=chunks,
+                               maxshape=(None, *values.shape[1:]), **filters)
+        new.attrs.update(attrs)
+
+
+def test_logs_with_deflated_truth_facets_read_the_same(tmp_path, simulated_log):
+    """Logs written before the truth's facets were stored with Fletcher-32 only (deflate and
+    shuffle on them too) read and validate exactly as the logs written now."""
+    (tmp_path / "now.h5").write_bytes(simulated_log.read_bytes())
+    (tmp_path / "before.h5").write_bytes(simulated_log.read_bytes())
+    _rewrite(tmp_path / "before.h5", "truth/facet", fletcher32=True,
+             **compression_filters(DEFAULT_COMPRESSION))
+    with h5py.File(tmp_path / "before.h5") as f:
+        assert f["truth/facet"].compression == "gzip" and f["truth/facet"].fletcher32
+    with StrikeLog(tmp_path / "now.h5") as now, StrikeLog(tmp_path / "before.h5") as before:
+        before.validate()
+        for key in ("point", "facet", "range"):
+            np.testing.assert_array_equal(getattr(now.truth_strikes(), key),
+                                          getattr(before.truth_strikes(), key))
+        for a, b in zip(now.strikes(), before.strikes(), strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("name", ["truth/facet", "strikes/shot", "truth/point"])
+def test_a_flipped_byte_in_a_stored_chunk_is_caught(tmp_path, simulated_log, name):
+    """Every chunked dataset carries Fletcher-32, compressed or not: one changed byte in a
+    chunk as stored is a one-line InputError on read, never a silently wrong value."""
+    (tmp_path / "log.h5").write_bytes(simulated_log.read_bytes())
+    with h5py.File(tmp_path / "log.h5") as f:
+        info = f[name].id.get_chunk_info(0)
+    data = bytearray((tmp_path / "log.h5").read_bytes())
+    data[info.byte_offset + info.size // 2] ^= 0x10
+    (tmp_path / "log.h5").write_bytes(bytes(data))
+    with StrikeLog(tmp_path / "log.h5") as log, pytest.raises(InputError, match="damaged"):
+        log.validate()
+
+
+def test_same_seed_stores_the_same_chunk_bytes(tmp_path, simulated_log):
+    """Run again with the same seed, every chunk of every chunked dataset is stored with the
+    same bytes (filters and checksums included), not only the same values."""
+    from recon import api
+
+    again = api.simulate("asteroid-cross", tmp_path / "again.h5", seed=0,
+                         overrides=["time.duration=600"]).path
+    with h5py.File(simulated_log) as a, h5py.File(again) as b:
+        chunked = {name: ds for name, ds in _datasets(a).items() if ds.chunks}
+        assert set(chunked) >= {"strikes/shot", "truth/facet", "truth/point"}
+        for name, ds in chunked.items():
+            n = ds.id.get_num_chunks()
+            assert n == b[name].id.get_num_chunks(), name
+            for i in range(n):
+                offset = ds.id.get_chunk_info(i).chunk_offset
+                assert ds.id.read_direct_chunk(offset) == b[name].id.read_direct_chunk(
+                    offset), (name, i)
