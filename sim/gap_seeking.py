@@ -278,10 +278,10 @@ class GapSeeker:
             return turn_from_boresight(np.tile(self.boresight, (len(t), 1)))
         position, target, nominal = poses if poses is not None else self._poses(
             self.pose_times(t))
-        pick, goal, turn, self.map.scratch = kernels.sweep(
+        pick, goal, turn, self.map.depth_room = kernels.sweep(
             len(t), self._centres, self._used, self.map.occupied_centres, self.map.size,
             position, target.as_matrix(), nominal, self.boresight, self.max_offset,
-            self.max_rate * self.step, GAP_BLOCK_VOXELS, self.map.scratch)
+            self.max_rate * self.step, GAP_BLOCK_VOXELS, *self.map.depth_room)
         self.boresight = goal[-1]
         self._short = bool(pick[-1] < 0)
         self._after_interval(bool(pick[0] >= 0))

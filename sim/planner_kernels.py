@@ -333,7 +333,7 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
 
 
 @njit(cache=True)
-def hidden(positions, occupied, targets, size, scratch):
+def hidden(positions, occupied, targets, size, image, stamp, tick):
     """Which ``targets`` lie behind an ``occupied`` centre in the depth image from each of
     ``positions`` (sim/surface_map.py, :meth:`SurfaceMap.visible`).
 
@@ -343,14 +343,16 @@ def hidden(positions, occupied, targets, size, scratch):
     occupied : (o, 3) float64, metres, B: occupied voxel centres (o >= 1)
     targets : (n, 3) float64, metres, B: voxel centres
     size : float, metres: the voxel edge
-    scratch : (s,) float64: room for the image, reused between calls (a fresh array of a
-        megabyte costs more in page faults than filling it)
+    image : (s,) float64; stamp : (s,) int64; tick : int
+        Room for the image, reused from call to call: a pixel holds a distance only where
+        its stamp is the image's own tick (each image takes the next ticks), so no image is
+        ever cleared (clearing or allocating a megabyte costs more than the rest).
 
     Returns
     -------
     out : (p, n) bool: True where a centre in the target's pixel (or the ``SPLAT`` pixels
         around it) lies nearer than the target by more than ``BLOCK_SLACK`` voxel edges
-    scratch : ``scratch``, or a larger one when the image did not fit
+    image, stamp, tick : the room (larger when an image did not fit) and the last tick used
     """
     p, o, n = len(positions), len(occupied), len(targets)
     out = np.zeros((p, n), dtype=np.bool_)
@@ -399,23 +401,26 @@ def hidden(positions, occupied, targets, size, scratch):
                 lo1, hi1 = min(lo1, uv[k, 1]), max(hi1, uv[k, 1])
         lo0, lo1 = lo0 - SPLAT, lo1 - SPLAT
         w0, w1 = hi0 + SPLAT + 1 - lo0, hi1 + SPLAT + 1 - lo1
-        if len(scratch) < w0 * w1:
-            scratch = np.empty(2 * w0 * w1)
-        image = scratch[:w0 * w1]
-        image[:] = np.inf
+        if len(image) < w0 * w1:
+            image = np.empty(2 * w0 * w1)
+            stamp = np.zeros(2 * w0 * w1, dtype=np.int64)
+        tick += 1
         for k in range(o):
             if local[k, 2] > 0:
                 spot = (uv[k, 0] - lo0) * w1 + (uv[k, 1] - lo1)
                 for du in range(-SPLAT, SPLAT + 1):
                     for dv in range(-SPLAT, SPLAT + 1):
                         cell = spot + du * w1 + dv
-                        image[cell] = min(image[cell], distance[k])
+                        if stamp[cell] != tick:
+                            stamp[cell], image[cell] = tick, distance[k]
+                        elif distance[k] < image[cell]:
+                            image[cell] = distance[k]
         for k in range(n):
             j = o + k
             u, v = uv[j, 0] - lo0, uv[j, 1] - lo1
-            if local[j, 2] > 0 and 0 <= u < w0 and 0 <= v < w1:
+            if local[j, 2] > 0 and 0 <= u < w0 and 0 <= v < w1 and stamp[u * w1 + v] == tick:
                 out[q, k] = image[u * w1 + v] < distance[j] - BLOCK_SLACK * size
-    return out, scratch
+    return out, image, stamp, tick
 
 
 @njit(cache=True)
@@ -438,7 +443,7 @@ def _stable_by(order, key):
 
 @njit(cache=True)
 def sweep(n, centres, used, occupied, size, position, target, nominal, boresight, max_offset,
-          reach, block, scratch):
+          reach, block, image, stamp, tick):
     """One interval's aims (sim/gap_seeking.py, :meth:`GapSeeker.command`): the open
     candidates predicted visible from the interval's middle shot and within ``max_offset``,
     those hidden at the look-ahead first, then in a sweep of rows ``block`` voxels wide across
@@ -459,7 +464,7 @@ def sweep(n, centres, used, occupied, size, position, target, nominal, boresight
     max_offset : float, rad: largest angle from the nominal boresight
     reach : float, rad: the largest turn between consecutive shots
     block : int: sweep rows are this many voxels wide
-    scratch : (s,) float64: room for the depth image (:func:`hidden`)
+    image, stamp, tick : room for the depth images (:func:`hidden`)
 
     Returns
     -------
@@ -468,7 +473,7 @@ def sweep(n, centres, used, occupied, size, position, target, nominal, boresight
     goal : (n, 3) float64, unit vectors, nominal sensor frame: the commanded boresights
     turn : (n, 3, 3) float64: the smallest rotations taking ``+z`` onto each ``goal``
         (sim/gap_seeking.py, :func:`turn_from_boresight`)
-    scratch : ``scratch``, or a larger one (:func:`hidden`)
+    image, stamp, tick : the room after (:func:`hidden`)
     """
     # The chaser in B, and matrices sending B vectors to the nominal sensor frame.
     chaser = np.empty((n + 1, 3))
@@ -488,7 +493,7 @@ def sweep(n, centres, used, occupied, size, position, target, nominal, boresight
     if len(occupied) and c:
         views = np.empty((2, 3))
         views[0], views[1] = chaser[middle], chaser[n]
-        behind, scratch = hidden(views, occupied, cent, size, scratch)
+        behind, image, stamp, tick = hidden(views, occupied, cent, size, image, stamp, tick)
         seen = ~behind
     else:
         seen = np.ones((2, c), dtype=np.bool_)
@@ -567,7 +572,7 @@ def sweep(n, centres, used, occupied, size, position, target, nominal, boresight
         turn[s, 0, 0], turn[s, 0, 1], turn[s, 0, 2] = 1.0 - k * x * x, -k * x * y, x
         turn[s, 1, 0], turn[s, 1, 1], turn[s, 1, 2] = -k * x * y, 1.0 - k * y * y, y
         turn[s, 2, 0], turn[s, 2, 1], turn[s, 2, 2] = -x, -y, z
-    return pick, goal, turn, scratch
+    return pick, goal, turn, (image, stamp, tick)
 
 
 @njit(cache=True)

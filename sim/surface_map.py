@@ -135,7 +135,8 @@ class SurfaceMap:
         self._index_lo = np.zeros(3, dtype=np.int64)    # the occupied voxels' index box
         self._index_hi = np.zeros(3, dtype=np.int64)
         self.occupied_centres = np.zeros((0, 3))       # centres of ``occupied`` [m, B]
-        self.scratch = np.zeros(0)                       # room for the depth image
+        # Room for the depth images (sim/planner_kernels.py, hidden): image, stamps, tick.
+        self.depth_room = (np.zeros(0), np.zeros(0, dtype=np.int64), 0)
 
     def keys_of(self, points: np.ndarray) -> np.ndarray:
         """Keys (n,) of the voxels holding ``points`` (n, 3) [m, B]."""
@@ -284,8 +285,9 @@ class SurfaceMap:
         positions = np.atleast_2d(np.asarray(positions, dtype=np.float64))
         seen = np.ones((len(positions), len(targets)), dtype=bool)
         if len(self.occupied) and len(targets):
-            behind, self.scratch = kernels.hidden(positions, self.occupied_centres,
-                                                  np.asarray(targets, dtype=np.float64),
-                                                  self.size, self.scratch)
+            behind, *room = kernels.hidden(positions, self.occupied_centres,
+                                           np.asarray(targets, dtype=np.float64), self.size,
+                                           *self.depth_room)
+            self.depth_room = tuple(room)
             seen = ~behind
         return seen[0] if one else seen
