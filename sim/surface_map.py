@@ -19,7 +19,8 @@ key array with their counts and views; the state of every voxel (occupied, cross
 is a byte in a dense grid over the box of the occupied voxels grown by the traversal margin,
 reallocated larger when that box grows, so that marking a beam's path or looking a voxel up is
 one indexing operation. Beams are traversed by sampling every ``size / TRAVERSAL_STEP`` along
-them, all beams of a batch at once.
+them. The updates (strikes, carving), the frontier's reading and the depth image below are
+compiled kernels (sim/planner_kernels.py), one call each.
 
 The **frontier** is the unknown voxels next to (sharing a face with) an occupied voxel: where
 the seen surface continues into space no beam has examined. It is kept up to date as voxels are
@@ -30,9 +31,9 @@ from its other side strikes it; a solid body keeps its unknown interior, which
 :meth:`SurfaceMap.visible` predicts hidden once the surface around it is struck.
 
 :meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by a
-depth image of the occupied voxels seen from there: pixels of half a voxel edge as seen at the
-nearest occupied voxel, each holding the distance of the nearest occupied voxel centre that
-falls in it or next to it (a beam cast through each pixel against the map, all at once). A
+depth image of the occupied voxels seen from there: pixels of ``PIXEL_EDGES`` voxel edges as
+seen at the nearest occupied voxel, each holding the distance of the nearest occupied voxel
+centre that falls in it or next to it (a beam cast through each pixel against the map). A
 voxel whose pixel holds a centre nearer than its own by more than ``BLOCK_SLACK`` edges is
 behind struck surface.
 """
@@ -88,28 +89,6 @@ def member(keys: np.ndarray, table: np.ndarray) -> np.ndarray:
         return np.zeros(len(keys), dtype=bool)
     at = np.minimum(np.searchsorted(table, keys), len(table) - 1)
     return table[at] == keys
-
-
-def clip_to_box(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Where each ray enters and leaves the box ``lo``..``hi`` (slab method).
-
-    Parameters
-    ----------
-    origins, directions : (n, 3) float64, B; directions unit vectors
-    lo, hi : (3,) float64, metres, B
-
-    Returns
-    -------
-    enter, leave : (n,) float64, metres along each ray (``enter >= leave`` when it misses)
-    """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inverse = 1.0 / directions
-        a = (lo - origins) * inverse
-        b = (hi - origins) * inverse
-    near = np.where(np.isnan(a), -np.inf, np.minimum(a, b))
-    far = np.where(np.isnan(b), np.inf, np.maximum(a, b))
-    return np.maximum(near.max(axis=1), 0.0), far.min(axis=1)
 
 
 class SurfaceMap:

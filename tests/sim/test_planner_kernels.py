@@ -26,13 +26,34 @@ from sim.surface_map import (
     SPLAT,
     TRAVERSAL_STEP,
     SurfaceMap,
-    clip_to_box,
     member,
     pack,
     unpack,
 )
 
 # ---------------------------------------------------------------------- numpy references
+
+
+def clip_to_box(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Where each ray enters and leaves the box ``lo``..``hi`` (slab method).
+
+    Parameters
+    ----------
+    origins, directions : (n, 3) float64, B; directions unit vectors
+    lo, hi : (3,) float64, metres, B
+
+    Returns
+    -------
+    enter, leave : (n,) float64, metres along each ray (``enter >= leave`` when it misses)
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = 1.0 / directions
+        a = (lo - origins) * inverse
+        b = (hi - origins) * inverse
+    near = np.where(np.isnan(a), -np.inf, np.minimum(a, b))
+    far = np.where(np.isnan(b), np.inf, np.maximum(a, b))
+    return np.maximum(near.max(axis=1), 0.0), far.min(axis=1)
 
 
 def ref_strike(m: SurfaceMap, origins, directions, ranges) -> None:
