@@ -6,11 +6,12 @@ gap-seeking law is simulated for ``--hours`` (default 6) with the time spent in 
 (``GapSeeker.command`` and ``GapSeeker.observe``: the voxel map, the frontier, the predicted
 visibility, the plan) summed apart. **The simulation's time** is the closed-loop run's wall time
 without the planner's: everything else the run does (poses, ray casts, errors, the log writer,
-one replanning interval at a time). The target is planner / simulation <= 0.10. Beside it, the
-same scene under the paper's fixed 2 deg slew (no planner, no interval-by-interval loop) is
-simulated as a second baseline. Each target is run ``--repeats`` times (default 3); the printed
-figures are medians over the repeats, and ``--out`` (default ``benchmarks/out/planner.json``)
-holds every run.
+one replanning interval at a time). The interval's poses are computed once, by the simulation,
+and handed to the planner (the law knows its orbit and the target's spin: the same values).
+The target is planner / simulation <= 0.10. Beside it, the same scene under the paper's fixed
+2 deg slew (no planner, no interval-by-interval loop) is simulated as a second baseline. Each
+target is run ``--repeats`` times (default 3); the printed figures are medians over the
+repeats, and ``--out`` (default ``benchmarks/out/planner.json``) holds every run.
 
 The planner's kernels are compiled (numba, sim/planner_kernels.py), so a process pays once,
 before its first plan, for the numba import and for loading the compiled kernels from numba's
