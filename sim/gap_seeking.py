@@ -228,10 +228,12 @@ class GapSeeker:
     def _candidates(self) -> np.ndarray:
         """Sorted keys of the voxels worth a shot: the frontier, and once it is exhausted, the
         least-struck surface voxels too; an even subset of at most ``GAP_MAX_CANDIDATES``."""
+        from sim import planner_kernels as kernels
+
         keys = self.map.frontier()
-        if self.residual:
-            few = self.map.count <= np.quantile(self.map.count, GAP_RESIDUAL_QUANTILE)
-            keys = np.union1d(keys, self.map.occupied[few])
+        if self.residual:     # count <= np.quantile(count, GAP_RESIDUAL_QUANTILE), compiled
+            rank = math.floor((len(self.map.count) - 1) * GAP_RESIDUAL_QUANTILE)
+            keys = kernels.least_struck(keys, self.map.occupied, self.map.count, rank)
         if len(keys) > GAP_MAX_CANDIDATES:
             keys = keys[::-(-len(keys) // GAP_MAX_CANDIDATES)]
         return keys

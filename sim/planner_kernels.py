@@ -630,3 +630,47 @@ def spread(keys, block, size, shape, corner):
         centres[q, 1] = (j + 0.5) * size
         centres[q, 2] = (k + 0.5) * size
     return chosen, centres
+
+
+@njit(cache=True)
+def least_struck(frontier, occupied, count, rank):
+    """The sorted union of ``frontier`` and the occupied voxels struck at most as often as the
+    ``rank``-th least-struck one.
+
+    Parameters
+    ----------
+    frontier : (f,) int64, sorted keys
+    occupied : (o,) int64, sorted keys; count : (o,) int64: their strike counts
+    rank : int: 0-based rank in the sorted counts (0 <= rank < o)
+
+    Returns
+    -------
+    (k,) int64, sorted, each key once.
+
+    Notes
+    -----
+    ``count <= np.quantile(count, q)`` selects exactly the counts up to the one at rank
+    ``floor((o - 1) * q)``: the quantile lies between that count and the next larger one in
+    sorted order, and counts are integers with none between those two.
+    """
+    threshold = np.partition(count, rank)[rank]
+    m = len(frontier)
+    out = np.empty(m + len(occupied), dtype=np.int64)
+    a = k = 0
+    for c in range(len(occupied)):
+        if count[c] > threshold:
+            continue
+        key = occupied[c]
+        while a < m and frontier[a] < key:
+            out[k] = frontier[a]
+            a += 1
+            k += 1
+        if a < m and frontier[a] == key:
+            a += 1
+        out[k] = key
+        k += 1
+    while a < m:
+        out[k] = frontier[a]
+        a += 1
+        k += 1
+    return out[:k]

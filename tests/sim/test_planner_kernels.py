@@ -361,3 +361,15 @@ def test_turn_toward_stays_within_the_angle():
     np.testing.assert_allclose(turned, [math.sin(math.radians(10)), 0, math.cos(math.radians(10))])
     np.testing.assert_array_equal(kernels._turn_toward(b, np.array([0, 0.1, 0.99]), 1.0),
                                   [0, 0.1, 0.99])
+
+
+def test_least_struck_kernel_matches_the_numpy_quantile():
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 5, 40, 333):
+        occupied = np.sort(rng.choice(10_000, n, replace=False)).astype(np.int64)
+        count = rng.integers(1, 6, n)
+        frontier = np.sort(rng.choice(10_000, 50, replace=False)).astype(np.int64)
+        for q in (0.0, 0.25, 0.5, 0.9):
+            expected = np.union1d(frontier, occupied[count <= np.quantile(count, q)])
+            got = kernels.least_struck(frontier, occupied, count, math.floor((n - 1) * q))
+            np.testing.assert_array_equal(got, expected)
