@@ -192,7 +192,8 @@ def strike_index(origins, directions, ranges, size):
 
 
 @njit(cache=True)
-def strike_merge(index, view, occupied, count, occupied_view, frontier, state, shape, corner):
+def strike_merge(index, view, occupied, count, occupied_view, frontier, state, shape, corner,
+                 size):
     """Merge strikes into the occupied voxels and mark the unknown neighbours of new ones.
 
     Parameters
@@ -203,10 +204,12 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
     state : (g,) uint8: the flat state grid, updated in place (it must hold every voxel of
         ``index`` and its face neighbours)
     shape : (3,) int64: the grid's shape; corner : (3,) int64: the voxel index of its first cell
+    size : float, metres: the voxel edge
 
     Returns
     -------
     occupied, count, occupied_view, frontier : the merged arrays (new arrays)
+    centres : (o', 3) float64, metres, B: the centres of the merged occupied voxels
     n_new : int: how many voxels were struck for the first time
     """
     h = len(index)
@@ -286,7 +289,13 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
             joined[m] = fresh[c]
             c += 1
         m += 1
-    return merged, m_count, m_view, joined, n_new
+    centres = np.empty((len(merged), 3))
+    for k in range(len(merged)):
+        i, j, m3 = _unpack(merged[k])
+        centres[k, 0] = (i + 0.5) * size
+        centres[k, 1] = (j + 0.5) * size
+        centres[k, 2] = (m3 + 0.5) * size
+    return merged, m_count, m_view, joined, centres, n_new
 
 
 @njit(cache=True)

@@ -193,14 +193,13 @@ class SurfaceMap:
             return
         self._cover(lo - 1, hi + 1)
         state = self._state.reshape(-1)
-        self.occupied, self.count, self.view, self._frontier, new = kernels.strike_merge(
-            index, view, self.occupied, self.count, self.view, self._frontier, state,
-            self._shape, self._corner)
+        (self.occupied, self.count, self.view, self._frontier, self.occupied_centres,
+         new) = kernels.strike_merge(index, view, self.occupied, self.count, self.view,
+                                     self._frontier, state, self._shape, self._corner, self.size)
         if new:
             first = len(self.occupied) == new
             self._index_lo = lo if first else np.minimum(self._index_lo, lo)
             self._index_hi = hi if first else np.maximum(self._index_hi, hi)
-            self.occupied_centres = self.centres(self.occupied)
 
     def carve(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
               margin: float) -> None:
