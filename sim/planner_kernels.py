@@ -192,6 +192,108 @@ def strike_index(origins, directions, ranges, size):
 
 
 @njit(cache=True)
+def _group(keys, view):
+    """The distinct ``keys`` (h,) sorted, with how often each occurs and the sum of their
+    ``view`` rows (h, 3), summed in input order: (u,) int64, (u,) int64, (u, 3) float64."""
+    h = len(keys)
+    order = np.argsort(keys, kind="mergesort")
+    unique = np.empty(h, dtype=np.int64)
+    u_count = np.zeros(h, dtype=np.int64)
+    u_view = np.zeros((h, 3))
+    u = -1
+    for k in order:
+        if u < 0 or keys[k] != unique[u]:
+            u += 1
+            unique[u] = keys[k]
+        u_count[u] += 1
+        for i in range(3):
+            u_view[u, i] += view[k, i]
+    return unique[:u + 1], u_count[:u + 1], u_view[:u + 1]
+
+
+@njit(cache=True)
+def _merge_counts(occupied, count, occupied_view, unique, u_count, u_view):
+    """Sorted keys with counts and views, merged (both sorted): the merged arrays and the keys
+    of ``unique`` not in ``occupied``."""
+    o, u = len(occupied), len(unique)
+    merged = np.empty(o + u, dtype=np.int64)
+    m_count = np.empty(o + u, dtype=np.int64)
+    m_view = np.empty((o + u, 3))
+    new = np.empty(u, dtype=np.int64)
+    a = c = m = n_new = 0
+    while a < o or c < u:
+        old = c >= u or (a < o and occupied[a] <= unique[c])
+        both = old and c < u and occupied[a] == unique[c]
+        merged[m] = occupied[a] if old else unique[c]
+        m_count[m] = (count[a] if old else 0) + (u_count[c] if both or not old else 0)
+        for i in range(3):
+            if both:
+                m_view[m, i] = occupied_view[a, i] + u_view[c, i]
+            else:
+                m_view[m, i] = occupied_view[a, i] if old else u_view[c, i]
+        if not old:
+            new[n_new] = unique[c]
+            n_new += 1
+        a += old
+        c += both or not old
+        m += 1
+    return merged[:m], m_count[:m], m_view[:m], new[:n_new]
+
+
+@njit(cache=True)
+def _mark_new(new, state, shape, corner):
+    """Mark the voxels ``new`` occupied in the flat ``state`` grid and their unknown face
+    neighbours frontier: the keys of those neighbours, sorted."""
+    s1, s2 = shape[1] * shape[2], shape[2]
+    for key in new:
+        i, j, k = _unpack(key)
+        cell = (i - corner[0]) * s1 + (j - corner[1]) * s2 + (k - corner[2])
+        state[cell] = (state[cell] | _OCC) & _NOT_FRONT
+    fresh = np.empty(6 * len(new), dtype=np.int64)
+    f = 0
+    for key in new:
+        i, j, k = _unpack(key)
+        for axis in range(3):
+            for sign in (1, -1):
+                ni = i + sign if axis == 0 else i
+                nj = j + sign if axis == 1 else j
+                nk = k + sign if axis == 2 else k
+                cell = (ni - corner[0]) * s1 + (nj - corner[1]) * s2 + (nk - corner[2])
+                if state[cell] & _KNOWN == 0:
+                    state[cell] |= _FRONT
+                    fresh[f] = _pack(ni, nj, nk)
+                    f += 1
+    return np.sort(fresh[:f])
+
+
+@njit(cache=True)
+def _join(a, b):
+    """The sorted union of the sorted, disjoint key arrays ``a`` and ``b``."""
+    out = np.empty(len(a) + len(b), dtype=np.int64)
+    i = j = 0
+    for m in range(len(out)):
+        if j >= len(b) or (i < len(a) and a[i] < b[j]):
+            out[m] = a[i]
+            i += 1
+        else:
+            out[m] = b[j]
+            j += 1
+    return out
+
+
+@njit(cache=True)
+def _centres(keys, size):
+    """Centres (k, 3) [m, B] of the voxels ``keys`` (k,) of edge ``size`` [m]."""
+    centres = np.empty((len(keys), 3))
+    for q in range(len(keys)):
+        i, j, k = _unpack(keys[q])
+        centres[q, 0] = (i + 0.5) * size
+        centres[q, 1] = (j + 0.5) * size
+        centres[q, 2] = (k + 0.5) * size
+    return centres
+
+
+@njit(cache=True)
 def strike_merge(index, view, occupied, count, occupied_view, frontier, state, shape, corner,
                  size):
     """Merge strikes into the occupied voxels and mark the unknown neighbours of new ones.
@@ -212,90 +314,14 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
     centres : (o', 3) float64, metres, B: the centres of the merged occupied voxels
     n_new : int: how many voxels were struck for the first time
     """
-    h = len(index)
-    keys = np.empty(h, dtype=np.int64)
-    for k in range(h):
+    keys = np.empty(len(index), dtype=np.int64)
+    for k in range(len(index)):
         keys[k] = _pack(index[k, 0], index[k, 1], index[k, 2])
-    order = np.argsort(keys, kind="mergesort")
-    # The struck voxels once each, with their strike counts and summed views (input order).
-    unique = np.empty(h, dtype=np.int64)
-    u_count = np.zeros(h, dtype=np.int64)
-    u_view = np.zeros((h, 3))
-    u = -1
-    for k in order:
-        if u < 0 or keys[k] != unique[u]:
-            u += 1
-            unique[u] = keys[k]
-        u_count[u] += 1
-        for i in range(3):
-            u_view[u, i] += view[k, i]
-    u += 1
-    # Merge with the occupied voxels (both sorted).
-    o = len(occupied)
-    merged = np.empty(o + u, dtype=np.int64)
-    m_count = np.empty(o + u, dtype=np.int64)
-    m_view = np.empty((o + u, 3))
-    new = np.empty(u, dtype=np.int64)
-    a = c = m = n_new = 0
-    while a < o or c < u:
-        if c >= u or (a < o and occupied[a] < unique[c]):
-            merged[m], m_count[m] = occupied[a], count[a]
-            for i in range(3):
-                m_view[m, i] = occupied_view[a, i]
-            a += 1
-        elif a < o and occupied[a] == unique[c]:
-            merged[m], m_count[m] = occupied[a], count[a] + u_count[c]
-            for i in range(3):
-                m_view[m, i] = occupied_view[a, i] + u_view[c, i]
-            a += 1
-            c += 1
-        else:
-            merged[m], m_count[m] = unique[c], u_count[c]
-            for i in range(3):
-                m_view[m, i] = u_view[c, i]
-            new[n_new] = unique[c]
-            n_new += 1
-            c += 1
-        m += 1
-    merged, m_count, m_view = merged[:m], m_count[:m], m_view[:m]
-    s1, s2 = shape[1] * shape[2], shape[2]
-    for k in range(n_new):
-        i, j, m3 = _unpack(new[k])
-        cell = (i - corner[0]) * s1 + (j - corner[1]) * s2 + (m3 - corner[2])
-        state[cell] = (state[cell] | _OCC) & _NOT_FRONT
-    # The unknown face neighbours of the new voxels join the frontier.
-    fresh = np.empty(6 * n_new, dtype=np.int64)
-    f = 0
-    for k in range(n_new):
-        i, j, m3 = _unpack(new[k])
-        for axis in range(3):
-            for sign in (1, -1):
-                ni = i + sign if axis == 0 else i
-                nj = j + sign if axis == 1 else j
-                nl = m3 + sign if axis == 2 else m3
-                cell = (ni - corner[0]) * s1 + (nj - corner[1]) * s2 + (nl - corner[2])
-                if state[cell] & _KNOWN == 0:
-                    state[cell] |= _FRONT
-                    fresh[f] = _pack(ni, nj, nl)
-                    f += 1
-    fresh = np.sort(fresh[:f])
-    joined = np.empty(len(frontier) + f, dtype=np.int64)
-    a = c = m = 0
-    while a < len(frontier) or c < f:
-        if c >= f or (a < len(frontier) and frontier[a] < fresh[c]):
-            joined[m] = frontier[a]
-            a += 1
-        else:
-            joined[m] = fresh[c]
-            c += 1
-        m += 1
-    centres = np.empty((len(merged), 3))
-    for k in range(len(merged)):
-        i, j, m3 = _unpack(merged[k])
-        centres[k, 0] = (i + 0.5) * size
-        centres[k, 1] = (j + 0.5) * size
-        centres[k, 2] = (m3 + 0.5) * size
-    return merged, m_count, m_view, joined, centres, n_new
+    unique, u_count, u_view = _group(keys, view)
+    merged, m_count, m_view, new = _merge_counts(occupied, count, occupied_view, unique,
+                                                 u_count, u_view)
+    fresh = _mark_new(new, state, shape, corner)
+    return merged, m_count, m_view, _join(frontier, fresh), _centres(merged, size), len(new)
 
 
 @njit(cache=True)
@@ -342,6 +368,74 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
 
 
 @njit(cache=True)
+def _project(position, centre, occupied, targets, local, distance):
+    """Fill ``local`` (o + n, 3) with the occupied centres (o, 3) then the targets (n, 3) in
+    image axes from ``position`` (3,) [m, B] (w toward ``centre``, a and b across) and
+    ``distance`` (o + n,) with their distances [m]; return the nearest occupied one's."""
+    o = len(occupied)
+    w = centre - position
+    w /= math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    a = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    a -= (a[0] * w[0] + a[1] * w[1] + a[2] * w[2]) * w
+    a /= math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    b = np.array([w[1] * a[2] - w[2] * a[1], w[2] * a[0] - w[0] * a[2],
+                  w[0] * a[1] - w[1] * a[0]])
+    nearest = np.inf
+    for k in range(len(local)):
+        x = occupied[k] if k < o else targets[k - o]
+        x0, x1, x2 = x[0] - position[0], x[1] - position[1], x[2] - position[2]
+        local[k, 0] = x0 * a[0] + x1 * a[1] + x2 * a[2]
+        local[k, 1] = x0 * b[0] + x1 * b[1] + x2 * b[2]
+        local[k, 2] = x0 * w[0] + x1 * w[1] + x2 * w[2]
+        distance[k] = math.sqrt(local[k, 0] * local[k, 0] + local[k, 1] * local[k, 1]
+                                + local[k, 2] * local[k, 2])
+        if k < o:
+            nearest = min(nearest, distance[k])
+    return nearest
+
+
+@njit(cache=True)
+def _pixels(local, o, pixel, uv):
+    """Fill ``uv`` (m, 2) with the pixel of each point of ``local`` (m, 3) at ``pixel`` [rad]
+    (0, 0 behind the position); return the image's first pixel and size (4,) int64 over the
+    first ``o`` points and the splat around them."""
+    lo0 = lo1 = np.iinfo(np.int64).max
+    hi0 = hi1 = np.iinfo(np.int64).min
+    for k in range(len(local)):
+        if local[k, 2] > 0:
+            scale = local[k, 2] * pixel
+            uv[k, 0] = np.int64(math.floor(local[k, 0] / scale))
+            uv[k, 1] = np.int64(math.floor(local[k, 1] / scale))
+        else:
+            uv[k, 0] = uv[k, 1] = 0
+        if k < o:
+            lo0, hi0 = min(lo0, uv[k, 0]), max(hi0, uv[k, 0])
+            lo1, hi1 = min(lo1, uv[k, 1]), max(hi1, uv[k, 1])
+    box = np.empty(4, dtype=np.int64)
+    box[0], box[1] = lo0 - SPLAT, lo1 - SPLAT
+    box[2], box[3] = hi0 + SPLAT + 1 - box[0], hi1 + SPLAT + 1 - box[1]
+    return box
+
+
+@njit(cache=True)
+def _splat(local, distance, uv, o, box, image, stamp, tick):
+    """Each of the first ``o`` points in front marks its pixel and the ``SPLAT`` around it with
+    its distance where nearer (pixels whose stamp is not ``tick`` count as empty)."""
+    w1 = box[3]
+    for k in range(o):
+        if local[k, 2] <= 0:
+            continue
+        spot = (uv[k, 0] - box[0]) * w1 + (uv[k, 1] - box[1])
+        for du in range(-SPLAT, SPLAT + 1):
+            for dv in range(-SPLAT, SPLAT + 1):
+                cell = spot + du * w1 + dv
+                if stamp[cell] != tick:
+                    stamp[cell], image[cell] = tick, distance[k]
+                elif distance[k] < image[cell]:
+                    image[cell] = distance[k]
+
+
+@njit(cache=True)
 def hidden(positions, occupied, targets, size, image, stamp, tick):
     """Which ``targets`` lie behind an ``occupied`` centre in the depth image from each of
     ``positions`` (sim/surface_map.py, :meth:`SurfaceMap.visible`).
@@ -372,61 +466,17 @@ def hidden(positions, occupied, targets, size, image, stamp, tick):
     distance = np.empty(o + n)
     uv = np.empty((o + n, 2), dtype=np.int64)
     for q in range(p):
-        # Image axes: w toward the occupied voxels' box centre, a and b across.
-        w = centre - positions[q]
-        w /= math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-        a = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        a -= (a[0] * w[0] + a[1] * w[1] + a[2] * w[2]) * w
-        a /= math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-        b = np.array([w[1] * a[2] - w[2] * a[1], w[2] * a[0] - w[0] * a[2],
-                      w[0] * a[1] - w[1] * a[0]])
-        nearest_occupied = np.inf
-        px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
-        for k in range(o + n):
-            if k < o:
-                x0, x1, x2 = occupied[k, 0] - px, occupied[k, 1] - py, occupied[k, 2] - pz
-            else:
-                x0, x1, x2 = (targets[k - o, 0] - px, targets[k - o, 1] - py,
-                              targets[k - o, 2] - pz)
-            local[k, 0] = x0 * a[0] + x1 * a[1] + x2 * a[2]
-            local[k, 1] = x0 * b[0] + x1 * b[1] + x2 * b[2]
-            local[k, 2] = x0 * w[0] + x1 * w[1] + x2 * w[2]
-            distance[k] = math.sqrt(local[k, 0] * local[k, 0] + local[k, 1] * local[k, 1]
-                                    + local[k, 2] * local[k, 2])
-            if k < o:
-                nearest_occupied = min(nearest_occupied, distance[k])
-        pixel = PIXEL_EDGES * size / nearest_occupied           # rad per pixel
-        lo0 = lo1 = np.iinfo(np.int64).max
-        hi0 = hi1 = np.iinfo(np.int64).min
-        for k in range(o + n):
-            if local[k, 2] > 0:
-                scale = local[k, 2] * pixel
-                uv[k, 0] = np.int64(math.floor(local[k, 0] / scale))
-                uv[k, 1] = np.int64(math.floor(local[k, 1] / scale))
-            else:
-                uv[k, 0] = uv[k, 1] = 0
-            if k < o:
-                lo0, hi0 = min(lo0, uv[k, 0]), max(hi0, uv[k, 0])
-                lo1, hi1 = min(lo1, uv[k, 1]), max(hi1, uv[k, 1])
-        lo0, lo1 = lo0 - SPLAT, lo1 - SPLAT
-        w0, w1 = hi0 + SPLAT + 1 - lo0, hi1 + SPLAT + 1 - lo1
+        nearest = _project(positions[q], centre, occupied, targets, local, distance)
+        box = _pixels(local, o, PIXEL_EDGES * size / nearest, uv)     # rad per pixel
+        w0, w1 = box[2], box[3]
         if len(image) < w0 * w1:
             image = np.empty(2 * w0 * w1)
             stamp = np.zeros(2 * w0 * w1, dtype=np.int64)
         tick += 1
-        for k in range(o):
-            if local[k, 2] > 0:
-                spot = (uv[k, 0] - lo0) * w1 + (uv[k, 1] - lo1)
-                for du in range(-SPLAT, SPLAT + 1):
-                    for dv in range(-SPLAT, SPLAT + 1):
-                        cell = spot + du * w1 + dv
-                        if stamp[cell] != tick:
-                            stamp[cell], image[cell] = tick, distance[k]
-                        elif distance[k] < image[cell]:
-                            image[cell] = distance[k]
+        _splat(local, distance, uv, o, box, image, stamp, tick)
         for k in range(n):
             j = o + k
-            u, v = uv[j, 0] - lo0, uv[j, 1] - lo1
+            u, v = uv[j, 0] - box[0], uv[j, 1] - box[1]
             if local[j, 2] > 0 and 0 <= u < w0 and 0 <= v < w1 and stamp[u * w1 + v] == tick:
                 out[q, k] = image[u * w1 + v] < distance[j] - BLOCK_SLACK * size
     return out, image, stamp, tick
@@ -448,6 +498,115 @@ def _turn_toward(b, goal, angle):
 def _stable_by(order, key):
     """``order`` (m,) int64 re-sorted, stably, by ``key[order]``."""
     return order[np.argsort(key[order], kind="mergesort")]
+
+
+@njit(cache=True)
+def _frames(position, target, nominal):
+    """The chaser in B (m, 3) [m] and matrices (m, 3, 3) sending B vectors to the nominal
+    sensor frame, from ``position`` (m, 3) [m, I], ``target`` (m, 3, 3) B->I and ``nominal``
+    (m, 3, 3) nominal sensor->I."""
+    m = len(position)
+    chaser = np.empty((m, 3))
+    to_nominal = np.empty((m, 3, 3))
+    for s in range(m):
+        for i in range(3):
+            chaser[s, i] = (target[s, 0, i] * position[s, 0] + target[s, 1, i] * position[s, 1]
+                            + target[s, 2, i] * position[s, 2])
+            for j in range(3):
+                to_nominal[s, j, i] = (target[s, 0, i] * nominal[s, 0, j]
+                                       + target[s, 1, i] * nominal[s, 1, j]
+                                       + target[s, 2, i] * nominal[s, 2, j])
+    return chaser, to_nominal
+
+
+@njit(cache=True)
+def _unit(points, origin, rotation):
+    """Unit vectors (c, 3) from ``origin`` (3,) toward ``points`` (c, 3), turned by
+    ``rotation`` (3, 3)."""
+    out = np.empty((len(points), 3))
+    for k in range(len(points)):
+        d0, d1, d2 = (points[k, 0] - origin[0], points[k, 1] - origin[1],
+                      points[k, 2] - origin[2])
+        for i in range(3):
+            out[k, i] = rotation[i, 0] * d0 + rotation[i, 1] * d1 + rotation[i, 2] * d2
+        out[k] /= math.sqrt(out[k, 0] * out[k, 0] + out[k, 1] * out[k, 1]
+                            + out[k, 2] * out[k, 2])
+    return out
+
+
+@njit(cache=True)
+def _sweep_order(aim, seen_later, band, boresight):
+    """The order of the aims (c, 3) (nominal sensor frame) in the sweep: those not seen at the
+    look-ahead (``seen_later`` (c,) bool) first, then rows ``band`` [rad] wide from the
+    boresight's (3,) row on (the rows below it first, then from the top), alternately left and
+    right along each row; ties kept in their order (a stable sort by each key in turn)."""
+    c = len(aim)
+    now = math.floor(boresight[1] / band)
+    row = np.empty(c)
+    across = np.empty(c)
+    earlier = np.empty(c)
+    later_seen = np.empty(c)
+    for q in range(c):
+        r = math.floor(aim[q, 1] / band)
+        row[q] = r
+        across[q] = aim[q, 0] if np.int64(r) & 1 == 0 else -aim[q, 0]
+        earlier[q] = 0.0 if r >= now else 1.0
+        later_seen[q] = 1.0 if seen_later[q] else 0.0
+    order = np.arange(c)
+    for key in (across, row, earlier, later_seen):
+        order = _stable_by(order, key)
+    return order
+
+
+@njit(cache=True)
+def _goals(pick, centres, chaser, to_nominal, boresight, max_offset):
+    """The goal (n, 3) of each shot, nominal sensor frame: toward ``centres[pick]`` from the
+    chaser, within ``max_offset`` [rad] of +z (onto the cone's edge toward it), the last goal
+    held where ``pick`` is -1 (``boresight`` before any)."""
+    n = len(pick)
+    goal = np.empty((n, 3))
+    cos_max, sin_max = math.cos(max_offset), math.sin(max_offset)
+    for s in range(n):
+        if pick[s] < 0:
+            goal[s] = goal[s - 1] if s else boresight
+            continue
+        g = _unit(centres[pick[s]:pick[s] + 1], chaser[s], to_nominal[s])[0]
+        if g[2] < cos_max:
+            side = math.sqrt(g[0] * g[0] + g[1] * g[1])
+            g[0], g[1], g[2] = sin_max * (g[0] / side), sin_max * (g[1] / side), cos_max
+        goal[s] = g
+    return goal
+
+
+@njit(cache=True)
+def _rate_limit(goal, boresight, reach):
+    """From the first goal (n, 3) beyond ``reach`` [rad] of the one before (``boresight`` (3,)
+    before the first), turn toward each goal by at most ``reach`` (in place)."""
+    started = False
+    b = boresight.copy()
+    for s in range(len(goal)):
+        if not started:
+            before = goal[s - 1] if s else boresight
+            dot = goal[s, 0] * before[0] + goal[s, 1] * before[1] + goal[s, 2] * before[2]
+            if math.acos(min(max(dot, -1.0), 1.0)) > reach:
+                started, b = True, before.copy()
+        if started:
+            b = _turn_toward(b, goal[s], reach)
+            goal[s] = b
+
+
+@njit(cache=True)
+def _turns(goal):
+    """The smallest rotations (n, 3, 3) taking +z onto each unit vector of ``goal`` (n, 3)
+    (sim/gap_seeking.py, :func:`turn_from_boresight`)."""
+    turn = np.empty((len(goal), 3, 3))
+    for s in range(len(goal)):
+        x, y, z = goal[s, 0], goal[s, 1], goal[s, 2]
+        k = 1.0 / (1.0 + z)
+        turn[s, 0, 0], turn[s, 0, 1], turn[s, 0, 2] = 1.0 - k * x * x, -k * x * y, x
+        turn[s, 1, 0], turn[s, 1, 1], turn[s, 1, 2] = -k * x * y, 1.0 - k * y * y, y
+        turn[s, 2, 0], turn[s, 2, 1], turn[s, 2, 2] = -x, -y, z
+    return turn
 
 
 @njit(cache=True)
@@ -484,104 +643,29 @@ def sweep(n, centres, used, occupied, size, position, target, nominal, boresight
         (sim/gap_seeking.py, :func:`turn_from_boresight`)
     image, stamp, tick : the room after (:func:`hidden`)
     """
-    # The chaser in B, and matrices sending B vectors to the nominal sensor frame.
-    chaser = np.empty((n + 1, 3))
-    to_nominal = np.empty((n + 1, 3, 3))
-    for s in range(n + 1):
-        for i in range(3):
-            chaser[s, i] = (target[s, 0, i] * position[s, 0] + target[s, 1, i] * position[s, 1]
-                            + target[s, 2, i] * position[s, 2])
-            for j in range(3):
-                to_nominal[s, j, i] = (target[s, 0, i] * nominal[s, 0, j]
-                                       + target[s, 1, i] * nominal[s, 1, j]
-                                       + target[s, 2, i] * nominal[s, 2, j])
+    chaser, to_nominal = _frames(position, target, nominal)
     open_ = np.flatnonzero(~used)
     cent = centres[open_]
-    c = len(cent)
     middle = n // 2
-    if len(occupied) and c:
+    if len(occupied) and len(cent):
         views = np.empty((2, 3))
         views[0], views[1] = chaser[middle], chaser[n]
         behind, image, stamp, tick = hidden(views, occupied, cent, size, image, stamp, tick)
         seen = ~behind
     else:
-        seen = np.ones((2, c), dtype=np.bool_)
-    cos_max = math.cos(max_offset)
-    aim = np.empty((c, 3))
-    ok = np.zeros(c, dtype=np.bool_)
-    m = to_nominal[middle]
-    for k in range(c):
-        d0, d1, d2 = (cent[k, 0] - chaser[middle, 0], cent[k, 1] - chaser[middle, 1],
-                      cent[k, 2] - chaser[middle, 2])
-        for i in range(3):
-            aim[k, i] = m[i, 0] * d0 + m[i, 1] * d1 + m[i, 2] * d2
-        aim[k] /= math.sqrt(aim[k, 0] * aim[k, 0] + aim[k, 1] * aim[k, 1]
-                            + aim[k, 2] * aim[k, 2])
-        ok[k] = seen[0, k] and aim[k, 2] >= cos_max
-    ok_ = np.flatnonzero(ok)
-    # The sweep: rows ``block`` voxels wide as seen from the chaser, alternately left and right,
-    # going on from the boresight's row; those hidden at the look-ahead first.
+        seen = np.ones((2, len(cent)), dtype=np.bool_)
+    aim = _unit(cent, chaser[middle], to_nominal[middle])
+    ok_ = np.flatnonzero(seen[0] & (aim[:, 2] >= math.cos(max_offset)))
     ch = chaser[middle]
     band = block * size / math.sqrt(ch[0] * ch[0] + ch[1] * ch[1] + ch[2] * ch[2])
-    now = math.floor(boresight[1] / band)
-    row = np.empty(len(ok_), dtype=np.int64)
-    across = np.empty(len(ok_))
-    earlier = np.empty(len(ok_), dtype=np.int64)
-    later_seen = np.empty(len(ok_), dtype=np.int64)
-    for q in range(len(ok_)):
-        k = ok_[q]
-        row[q] = math.floor(aim[k, 1] / band)
-        across[q] = aim[k, 0] if row[q] & 1 == 0 else -aim[k, 0]
-        earlier[q] = 0 if row[q] >= now else 1
-        later_seen[q] = 1 if seen[1, k] else 0
-    order = np.arange(len(ok_))
-    for key in (across, row.astype(np.float64), earlier.astype(np.float64),
-                later_seen.astype(np.float64)):
-        order = _stable_by(order, key)
-    chosen = ok_[order[:n]]
+    chosen = ok_[_sweep_order(aim[ok_], seen[1][ok_], band, boresight)[:n]]
     for k in chosen:
         used[open_[k]] = True
     pick = np.full(n, -1, dtype=np.int64)
     pick[:len(chosen)] = chosen
-    # The goals: each aim, within the offset limit (onto the cone's edge toward it), held
-    # where nothing is picked.
-    goal = np.empty((n, 3))
-    sin_max = math.sin(max_offset)
-    for s in range(n):
-        if pick[s] < 0:
-            goal[s] = goal[s - 1] if s else boresight
-            continue
-        d0, d1, d2 = (cent[pick[s], 0] - chaser[s, 0], cent[pick[s], 1] - chaser[s, 1],
-                      cent[pick[s], 2] - chaser[s, 2])
-        r = to_nominal[s]
-        g = np.empty(3)
-        for i in range(3):
-            g[i] = r[i, 0] * d0 + r[i, 1] * d1 + r[i, 2] * d2
-        g /= math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
-        if g[2] < cos_max:
-            side = math.sqrt(g[0] * g[0] + g[1] * g[1])
-            g[0], g[1], g[2] = sin_max * (g[0] / side), sin_max * (g[1] / side), cos_max
-        goal[s] = g
-    # Within the rate limit: from the first goal beyond one step's reach, turn toward each.
-    started = False
-    b = boresight.copy()
-    for s in range(n):
-        if not started:
-            before = goal[s - 1] if s else boresight
-            dot = (goal[s, 0] * before[0] + goal[s, 1] * before[1] + goal[s, 2] * before[2])
-            if math.acos(min(max(dot, -1.0), 1.0)) > reach:
-                started, b = True, before.copy()
-        if started:
-            b = _turn_toward(b, goal[s], reach)
-            goal[s] = b
-    turn = np.empty((n, 3, 3))
-    for s in range(n):
-        x, y, z = goal[s, 0], goal[s, 1], goal[s, 2]
-        k = 1.0 / (1.0 + z)
-        turn[s, 0, 0], turn[s, 0, 1], turn[s, 0, 2] = 1.0 - k * x * x, -k * x * y, x
-        turn[s, 1, 0], turn[s, 1, 1], turn[s, 1, 2] = -k * x * y, 1.0 - k * y * y, y
-        turn[s, 2, 0], turn[s, 2, 1], turn[s, 2, 2] = -x, -y, z
-    return pick, goal, turn, (image, stamp, tick)
+    goal = _goals(pick, cent, chaser, to_nominal, boresight, max_offset)
+    _rate_limit(goal, boresight, reach)
+    return pick, goal, _turns(goal), (image, stamp, tick)
 
 
 @njit(cache=True)
