@@ -422,6 +422,3 @@ GAP_BLOCK_VOXELS = 2
 # instead was measured slower: docs/decisions.md.)
 GAP_IDLE_INTERVALS = 2
 GAP_RESIDUAL_QUANTILE = 0.25
-# A rebuilt map takes the recorded beams this many at a time (bounded memory: a miss crosses
-# a few hundred voxels).
-GAP_REBUILD_BEAMS = 4096

@@ -34,7 +34,11 @@ from the top), so that consecutive aims lie next to each other. A shot
 whose aim is beyond one step's reach (``max_rate * step``) turns toward it at the rate limit;
 shots left over when the visible candidates run out hold the boresight, and the law plans anew
 before the next interval (its candidates are used up; the map has grown). So the map, the
-frontier and the candidates cost once per plan, the prediction and the sweep once per interval.
+frontier and the candidates cost once per plan, the prediction and the sweep once per interval;
+each of these steps is one or a few compiled calls (sim/planner_kernels.py). The poses of an
+interval (where the chaser is, the target's attitude, the nominal sensor frame) are those the
+simulation computes for its shots anyway, handed to :meth:`GapSeeker.command` with the
+look-ahead's (:meth:`GapSeeker.pose_times`).
 
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run
@@ -64,13 +68,12 @@ from sim.defaults import (
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
     GAP_PLAN_INTERVALS,
-    GAP_REBUILD_BEAMS,
     GAP_RESIDUAL_QUANTILE,
     GAP_VOXEL_FRACTION,
     GAP_VOXEL_MIN_DEG,
     GAP_VOXEL_REBUILD,
 )
-from sim.surface_map import SurfaceMap, pack, unpack
+from sim.surface_map import SurfaceMap
 
 
 def turn_from_boresight(boresight: np.ndarray) -> np.ndarray:
@@ -98,8 +101,9 @@ def body_points(chunk: StrikeChunk) -> np.ndarray:
 
 
 def recorded_beams(chunk: StrikeChunk, beams: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every beam of every shot of ``chunk``, from what the log records, in B.
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every beam of every shot of ``chunk``, from what the log records, in B (compiled:
+    sim/planner_kernels.py).
 
     Parameters
     ----------
@@ -112,26 +116,19 @@ def recorded_beams(chunk: StrikeChunk, beams: np.ndarray
     origins : (m, 3) float64, metres, B: the recorded sensor position of each beam
     directions : (m, 3) float64, unit vectors, B: measured for strikes, nominal for misses
     ranges : (m,) float64, metres: recorded range, inf for a beam that struck nothing
+    stats : (9,) float64: the strikes' box low and high corners [m, B], their number, the sum
+        of their ranges [m] and their farthest distance from B's origin [m]
     """
-    shots, b = chunk.shots, len(beams)
-    n = len(shots.time)
-    to_body = Rotation.from_quat(shots.target_attitude).inv()
-    sensor = Rotation.from_quat(shots.sensor_attitude)
-    origin = to_body.apply(shots.sensor_position)
-    row = chunk.shot - chunk.shot_offset
-    missed = np.ones(n * b, dtype=bool)
-    missed[row * b + chunk.beam] = False
-    miss = np.flatnonzero(missed)
-    miss_row, miss_beam = miss // b, miss % b
-    directions = np.concatenate([
-        to_body[row].apply(sensor[row].apply(chunk.direction)) if len(row) else
-        np.zeros((0, 3)),
-        to_body[miss_row].apply(sensor[miss_row].apply(beams[miss_beam])) if len(miss) else
-        np.zeros((0, 3))])
-    origins = np.concatenate([origin[row], origin[miss_row]])
-    ranges = np.concatenate([np.asarray(chunk.range, dtype=np.float64),
-                             np.full(len(miss), np.inf)])
-    return origins, directions, ranges
+    from sim import planner_kernels as kernels
+
+    shots = chunk.shots
+    f64 = np.float64
+    return kernels.recorded_beams(
+        np.asarray(chunk.shot - chunk.shot_offset, dtype=np.int64),
+        np.asarray(chunk.beam, dtype=np.int64), np.asarray(chunk.range, dtype=f64),
+        np.asarray(chunk.direction, dtype=f64), np.asarray(shots.sensor_position, dtype=f64),
+        np.asarray(shots.sensor_attitude, dtype=f64),
+        np.asarray(shots.target_attitude, dtype=f64), beams)
 
 
 class GapSeeker:
@@ -197,19 +194,18 @@ class GapSeeker:
         """Add the intervals observed since the last plan to the map, all at once."""
         if not self._pending:
             return
-        origins, directions, ranges = recorded_beams(merge_chunks(self._pending), self.beams)
+        origins, directions, ranges, stats = recorded_beams(merge_chunks(self._pending),
+                                                            self.beams)
         self._pending = []
         self._origins.append(origins)
         self._directions.append(directions)
         self._ranges.append(ranges)
-        hit = np.isfinite(ranges)
-        if hit.any():
-            end = origins[hit] + ranges[hit, None] * directions[hit]
-            self._lo = np.minimum(self._lo, end.min(axis=0))
-            self._hi = np.maximum(self._hi, end.max(axis=0))
-            self.n_strikes += int(hit.sum())
-            self._range_sum += float(ranges[hit].sum())
-            self._radius = max(self._radius, float(np.sqrt((end * end).sum(axis=1)).max()))
+        if stats[6]:
+            self._lo = np.minimum(self._lo, stats[:3])
+            self._hi = np.maximum(self._hi, stats[3:6])
+            self.n_strikes += int(stats[6])
+            self._range_sum += float(stats[7])
+            self._radius = max(self._radius, float(stats[8]))
         if self.n_strikes == 0:
             return
         size = self.voxel_size()
@@ -220,25 +216,24 @@ class GapSeeker:
 
     def _rebuild(self, size: float) -> None:
         """A new map of edge ``size`` [m] from every recorded beam: all strikes first (so the
-        region traversed is the whole target's), then the free space, a block at a time."""
+        region traversed is the whole target's), then the free space."""
         self.map = SurfaceMap(size)
         self._origins = [np.concatenate(self._origins)]
         self._directions = [np.concatenate(self._directions)]
         self._ranges = [np.concatenate(self._ranges)]
         origins, directions, ranges = self._origins[0], self._directions[0], self._ranges[0]
         self.map.strike(origins, directions, ranges)
-        for start in range(0, len(ranges), GAP_REBUILD_BEAMS):
-            block = slice(start, start + GAP_REBUILD_BEAMS)
-            self.map.carve(origins[block], directions[block], ranges[block],
-                           margin=self._margin())
+        self.map.carve(origins, directions, ranges, margin=self._margin())
 
     def _candidates(self) -> np.ndarray:
         """Sorted keys of the voxels worth a shot: the frontier, and once it is exhausted, the
         least-struck surface voxels too; an even subset of at most ``GAP_MAX_CANDIDATES``."""
+        from sim import planner_kernels as kernels
+
         keys = self.map.frontier()
-        if self.residual:
-            few = self.map.count <= np.quantile(self.map.count, GAP_RESIDUAL_QUANTILE)
-            keys = np.union1d(keys, self.map.occupied[few])
+        if self.residual:     # count <= np.quantile(count, GAP_RESIDUAL_QUANTILE), compiled
+            rank = math.floor((len(self.map.count) - 1) * GAP_RESIDUAL_QUANTILE)
+            keys = kernels.least_struck(keys, self.map.occupied, self.map.count, rank)
         if len(keys) > GAP_MAX_CANDIDATES:
             keys = keys[::-(-len(keys) // GAP_MAX_CANDIDATES)]
         return keys
@@ -252,117 +247,72 @@ class GapSeeker:
 
     # ------------------------------------------------------------------ the plan
 
-    def command(self, t: np.ndarray) -> np.ndarray:
+    def pose_times(self, t: np.ndarray) -> np.ndarray:
+        """The times (n + 1,) [s] whose poses :meth:`command` needs for an interval's shot
+        times ``t`` (n,): those, and the look-ahead ``GAP_HORIZON_INTERVALS`` intervals after
+        the last."""
+        t = np.asarray(t, dtype=np.float64)
+        return np.append(t, t[-1] + GAP_HORIZON_INTERVALS * len(t) * self.step)
+
+    def command(self, t: np.ndarray, poses=None) -> np.ndarray:
         """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
         (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old or ran
         short, then this interval's sweep of its candidates).
+
+        Parameters
+        ----------
+        t : (n,) float64, seconds
+        poses : tuple, optional
+            ``(position, target, nominal)`` at :meth:`pose_times` ``(t)``, as the ``poses``
+            callable returns them (the simulation computes them for its own shots anyway);
+            without it the law calls ``poses`` itself.
 
         Returns
         -------
         (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame
         (the attitude offset the pipeline applies).
         """
+        from sim import planner_kernels as kernels
+
         t = np.asarray(t, dtype=np.float64)
         if self._short or self._age >= GAP_PLAN_INTERVALS:
             self._plan()
-        pick, out = np.full(len(t), -1), np.tile(self.boresight, (len(t), 1))
-        if len(self._keys) and len(t):
-            pick, out = self._sweep(t)
-            self.boresight = out[-1]
         self._age += 1
-        self._short = bool((pick < 0).any())
-        self._after_interval(bool((pick >= 0).any()))
-        return turn_from_boresight(out)
+        if not (len(self._keys) and len(t)):
+            self._short = True
+            self._after_interval(False)
+            return turn_from_boresight(np.tile(self.boresight, (len(t), 1)))
+        position, target, nominal = poses if poses is not None else self._poses(
+            self.pose_times(t))
+        pick, goal, turn, self.map.depth_room = kernels.sweep(
+            len(t), self._centres, self._used, self.map.occupied_centres, self.map.size,
+            position, target.as_matrix(), nominal, self.boresight, self.max_offset,
+            self.max_rate * self.step, GAP_BLOCK_VOXELS, *self.map.depth_room)
+        self.boresight = goal[-1]
+        self._short = bool(pick[-1] < 0)
+        self._after_interval(bool(pick[0] >= 0))
+        return turn
 
     def _plan(self) -> None:
         """Take what was observed into the map and choose the candidates of the next
         ``GAP_PLAN_INTERVALS`` intervals: one per cube of ``GAP_BLOCK_VOXELS`` voxels."""
         self._update()
         self._age = 0
-        keys = np.zeros(0, dtype=np.int64) if self.map is None else self._candidates()
-        self._keys = _spread(keys, GAP_BLOCK_VOXELS)
-        self._centres = self.map.centres(self._keys) if len(keys) else np.zeros((0, 3))
+        self._keys, self._centres = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+        if self.map is not None:
+            self._keys, self._centres = _spread(self._candidates(), GAP_BLOCK_VOXELS, self.map)
         self._used = np.zeros(len(self._keys), dtype=bool)
 
-    def _sweep(self, t: np.ndarray) -> np.ndarray:
-        """Aim the shots at times ``t`` (n,) [s] of one interval: the plan's candidates not yet
-        aimed at, predicted visible from the interval's middle shot and within the offset
-        limit, those predicted hidden ``GAP_HORIZON_INTERVALS`` intervals on first, in a sweep.
 
-        Returns
-        -------
-        pick : (n,) int: the open candidate each shot aims at, or -1 (held)
-        boresight : (n, 3) float64, unit vectors, nominal sensor frame
-        """
-        n = len(t)
-        open_ = np.flatnonzero(~self._used)
-        centres = self._centres[open_]
-        lookahead = t[-1] + GAP_HORIZON_INTERVALS * n * self.step
-        position, target, nominal = self._poses(np.append(t, lookahead))
-        m_ib = target.as_matrix().transpose(0, 2, 1)
-        chaser = np.einsum("nij,nj->ni", m_ib, position)              # B
-        to_nominal = np.matmul(m_ib, nominal).transpose(0, 2, 1)       # sends B to nominal
-        middle = n // 2
-        seen = self.map.visible(chaser[[middle, n]], centres)
-        aim = (centres - chaser[middle]) @ to_nominal[middle].T
-        aim /= np.linalg.norm(aim, axis=1)[:, None]
-        ok = np.flatnonzero(seen[0] & (aim[:, 2] >= math.cos(self.max_offset)))
-        # The sweep: rows two voxels wide as seen from the chaser, alternately left and right.
-        band = GAP_BLOCK_VOXELS * self.map.size / np.linalg.norm(chaser[middle])
-        row = np.floor(aim[ok, 1] / band).astype(np.int64)
-        across = np.where(row % 2 == 0, aim[ok, 0], -aim[ok, 0])
-        # The sweep goes on from the boresight's row: the rows below it first, then from the top.
-        later = row >= math.floor(float(self.boresight[1]) / band)
-        chosen = ok[np.lexsort((across, row, ~later, seen[1, ok]))][:n]
-        self._used[open_[chosen]] = True
-        pick = np.full(n, -1)
-        pick[:len(chosen)] = chosen
-        return pick, self._steer(pick, centres, chaser[:n], to_nominal[:n])
+def _spread(keys: np.ndarray, block: int, surface: SurfaceMap
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The first of ``keys`` (sorted, voxels of ``surface``) in each cube of ``block`` voxels
+    on a side: candidates that one strike each settles, evenly over the map; and their centres
+    (c, 3) [m, B] (compiled: sim/planner_kernels.py)."""
+    from sim import planner_kernels as kernels
 
-    def _steer(self, pick: np.ndarray, centres: np.ndarray, chaser: np.ndarray,
-               to_nominal: np.ndarray) -> np.ndarray:
-        """Boresights (n, 3) that aim shot ``k`` at ``centres[pick[k]]`` (hold where ``pick``
-        is -1), within ``max_offset`` of the nominal one and ``max_rate`` per step.
-
-        Parameters
-        ----------
-        pick : (n,) int: candidate of each shot, or -1
-        centres : (c, 3) float64, metres, B
-        chaser : (n, 3) float64, metres, B: the chaser at each shot
-        to_nominal : (n, 3, 3) float64: sends B vectors to the nominal sensor frame per shot
-        """
-        n = len(pick)
-        aimed = pick >= 0
-        g = np.einsum("nij,nj->ni", to_nominal[aimed], centres[pick[aimed]] - chaser[aimed])
-        g /= np.linalg.norm(g, axis=1)[:, None]
-        # Within the offset limit: a goal beyond it goes onto the cone's edge, toward it.
-        cos = math.cos(self.max_offset)
-        beyond = g[:, 2] < cos
-        side = g[beyond, :2] / np.linalg.norm(g[beyond, :2], axis=1)[:, None]
-        g[beyond] = np.column_stack([math.sin(self.max_offset) * side,
-                                     np.full(len(side), cos)])
-        goal = np.empty((n, 3))
-        goal[aimed] = g
-        # Hold the last goal where nothing is picked.
-        last = np.maximum.accumulate(np.where(aimed, np.arange(n), -1))
-        goal = np.where((last >= 0)[:, None], goal[np.maximum(last, 0)], self.boresight)
-        # Within the rate limit: turn toward a goal beyond one step's reach.
-        reach = self.max_rate * self.step
-        before = np.vstack([self.boresight, goal[:-1]])
-        turn = np.arccos(np.clip(np.einsum("ni,ni->n", goal, before), -1.0, 1.0))
-        late = np.flatnonzero(turn > reach)
-        if len(late):
-            b = goal[late[0] - 1] if late[0] else self.boresight
-            for k in range(late[0], n):          # only once a goal is out of reach
-                b = goal[k] = _turn_toward(b, goal[k], reach)
-        return goal
-
-
-def _spread(keys: np.ndarray, block: int) -> np.ndarray:
-    """The first of ``keys`` (sorted) in each cube of ``block`` voxels on a side: candidates
-    that one strike each settles, evenly over the map."""
-    cube = pack(np.floor_divide(unpack(keys), block))
-    return keys[np.sort(np.unique(cube, return_index=True)[1])]
+    return kernels.spread(np.asarray(keys, dtype=np.int64), block, surface.size,
+                          surface._shape, surface._corner)
 
 
 def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:
@@ -376,15 +326,3 @@ def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:
                        range=np.concatenate([c.range for c in chunks]),
                        direction=np.concatenate([c.direction for c in chunks]), shots=shots,
                        shot_offset=chunks[0].shot_offset)
-
-
-def _turn_toward(b: np.ndarray, goal: np.ndarray, angle: float) -> np.ndarray:
-    """Unit vector ``b`` turned toward ``goal`` by ``angle`` [rad] in their common plane."""
-    (bx, by, bz), (gx, gy, gz) = b.tolist(), goal.tolist()      # three floats: plain Python
-    cos = min(max(bx * gx + by * gy + bz * gz, -1.0), 1.0)
-    if math.acos(cos) <= angle:
-        return goal
-    sx, sy, sz = gx - cos * bx, gy - cos * by, gz - cos * bz
-    norm = math.sqrt(sx * sx + sy * sy + sz * sz)
-    c, s = math.cos(angle), math.sin(angle) / norm
-    return np.array([c * bx + s * sx, c * by + s * sy, c * bz + s * sz])

@@ -267,12 +267,17 @@ class Rays:
 
 
 def chunk_rays(plan: Plan, index: int, first: int, stop: int,
-               offset: np.ndarray | None = None) -> Rays:
-    """Poses of shots ``first .. stop - 1`` and every pulse's ray (chunk number ``index``)."""
+               offset: np.ndarray | None = None, *, nominal: tuple | None = None) -> Rays:
+    """Poses of shots ``first .. stop - 1`` and every pulse's ray (chunk number ``index``);
+    ``nominal``: :func:`poses` of those shots without the ``offset``, when already computed."""
     errors, pattern = plan.errors, plan.pattern
     t = np.arange(first, stop, dtype=np.float64) * plan.step
     n, b = len(t), pattern.n_beams
-    position, rot_bi, m_si = poses(plan, t, offset)
+    if nominal is None:
+        position, rot_bi, m_si = poses(plan, t, offset)
+    else:
+        position, rot_bi, m_si = nominal
+        m_si = m_si if offset is None else m_si @ offset
     m_ib = rot_bi.as_matrix().transpose(0, 2, 1)
     origin = np.einsum("nij,nj->ni", m_ib, position)          # sensor in B
     m_sb = m_ib @ m_si                                         # sends S vectors to B
@@ -290,11 +295,12 @@ def chunk_rays(plan: Plan, index: int, first: int, stop: int,
 
 
 def compute_chunk(plan: Plan, index: int, first: int, stop: int,
-                  offset: np.ndarray | None = None) -> Chunk:
+                  offset: np.ndarray | None = None, *, nominal: tuple | None = None) -> Chunk:
     """Simulate shots ``first .. stop - 1`` (chunk number ``index``), with the attitude
-    ``offset`` of :func:`poses` when a closed-loop law commands it."""
+    ``offset`` of :func:`poses` when a closed-loop law commands it (``nominal``: the poses of
+    those shots without it, when already computed)."""
     errors, pattern = plan.errors, plan.pattern
-    rays = chunk_rays(plan, index, first, stop, offset)
+    rays = chunk_rays(plan, index, first, stop, offset, nominal=nominal)
     t, position, origin, direction, m_sb = (rays.time, rays.position, rays.origin,
                                             rays.direction, rays.to_body)
     n, b = len(t), pattern.n_beams
@@ -409,7 +415,8 @@ def recorded_strikes(plan: Plan, chunk: Chunk, first: int) -> StrikeChunk:
 
 def iter_closed_loop(plan: Plan) -> Iterator[Chunk]:
     """The campaign under the gap-seeking law: one replanning interval at a time, each planned
-    from the strikes recorded before it (sim/gap_seeking.py)."""
+    from the strikes recorded before it (sim/gap_seeking.py). The interval's poses are
+    computed once, for the law (which also looks ahead) and the simulation alike."""
     attitude = plan.scene.values["attitude"]
     law = GapSeeker(step=plan.step, max_rate=math.radians(attitude["max_rate_deg_s"]),
                     max_offset=math.radians(attitude["max_offset_deg"]),
@@ -417,8 +424,12 @@ def iter_closed_loop(plan: Plan) -> Iterator[Chunk]:
     size = max(1, round(attitude["replan_s"] / plan.step))
     for index, first in enumerate(range(0, plan.scene.n_shots, size)):
         stop = min(first + size, plan.scene.n_shots)
-        offset = law.command(np.arange(first, stop, dtype=np.float64) * plan.step)
-        chunk = compute_chunk(plan, index, first, stop, offset)
+        t = np.arange(first, stop, dtype=np.float64) * plan.step
+        position, target, nominal = poses(plan, law.pose_times(t))
+        offset = law.command(t, (position, target, nominal))
+        n = len(t)
+        chunk = compute_chunk(plan, index, first, stop, offset,
+                              nominal=(position[:n], target[:n], nominal[:n]))
         law.observe(recorded_strikes(plan, chunk, first))
         yield chunk
 

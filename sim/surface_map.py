@@ -19,7 +19,8 @@ key array with their counts and views; the state of every voxel (occupied, cross
 is a byte in a dense grid over the box of the occupied voxels grown by the traversal margin,
 reallocated larger when that box grows, so that marking a beam's path or looking a voxel up is
 one indexing operation. Beams are traversed by sampling every ``size / TRAVERSAL_STEP`` along
-them, all beams of a batch at once.
+them. The updates (strikes, carving), the frontier's reading and the depth image below are
+compiled kernels (sim/planner_kernels.py), one call each.
 
 The **frontier** is the unknown voxels next to (sharing a face with) an occupied voxel: where
 the seen surface continues into space no beam has examined. It is kept up to date as voxels are
@@ -30,9 +31,9 @@ from its other side strikes it; a solid body keeps its unknown interior, which
 :meth:`SurfaceMap.visible` predicts hidden once the surface around it is struck.
 
 :meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by a
-depth image of the occupied voxels seen from there: pixels of half a voxel edge as seen at the
-nearest occupied voxel, each holding the distance of the nearest occupied voxel centre that
-falls in it or next to it (a beam cast through each pixel against the map, all at once). A
+depth image of the occupied voxels seen from there: pixels of ``PIXEL_EDGES`` voxel edges as
+seen at the nearest occupied voxel, each holding the distance of the nearest occupied voxel
+centre that falls in it or next to it (a beam cast through each pixel against the map). A
 voxel whose pixel holds a centre nearer than its own by more than ``BLOCK_SLACK`` edges is
 behind struck surface.
 """
@@ -90,28 +91,6 @@ def member(keys: np.ndarray, table: np.ndarray) -> np.ndarray:
     return table[at] == keys
 
 
-def clip_to_box(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Where each ray enters and leaves the box ``lo``..``hi`` (slab method).
-
-    Parameters
-    ----------
-    origins, directions : (n, 3) float64, B; directions unit vectors
-    lo, hi : (3,) float64, metres, B
-
-    Returns
-    -------
-    enter, leave : (n,) float64, metres along each ray (``enter >= leave`` when it misses)
-    """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inverse = 1.0 / directions
-        a = (lo - origins) * inverse
-        b = (hi - origins) * inverse
-    near = np.where(np.isnan(a), -np.inf, np.minimum(a, b))
-    far = np.where(np.isnan(b), np.inf, np.maximum(a, b))
-    return np.maximum(near.max(axis=1), 0.0), far.min(axis=1)
-
-
 class SurfaceMap:
     """Occupied, crossed and frontier voxels of edge ``size`` [m] (see the module docstring).
 
@@ -130,7 +109,13 @@ class SurfaceMap:
         self.view = np.zeros((0, 3))                     # sum of unit vectors strike -> sensor
         self._state = np.zeros((0, 0, 0), dtype=np.uint8)   # OCCUPIED | CROSSED | FRONTIER
         self._corner = np.zeros(3, dtype=np.int64)      # voxel index of _state[0, 0, 0]
+        self._shape = np.zeros(3, dtype=np.int64)       # _state.shape
         self._frontier = np.zeros(0, dtype=np.int64)    # sorted keys, each once a frontier
+        self._index_lo = np.zeros(3, dtype=np.int64)    # the occupied voxels' index box
+        self._index_hi = np.zeros(3, dtype=np.int64)
+        self.occupied_centres = np.zeros((0, 3))       # centres of ``occupied`` [m, B]
+        # Room for the depth images (sim/planner_kernels.py, hidden): image, stamps, tick.
+        self.depth_room = (np.zeros(0), np.zeros(0, dtype=np.int64), 0)
 
     def keys_of(self, points: np.ndarray) -> np.ndarray:
         """Keys (n,) of the voxels holding ``points`` (n, 3) [m, B]."""
@@ -142,18 +127,19 @@ class SurfaceMap:
 
     def bounds(self, margin: float) -> tuple[np.ndarray, np.ndarray]:
         """Box of the occupied voxels grown by ``margin`` [m] on every side."""
-        index = unpack(self.occupied)
-        return (index.min(axis=0) * self.size - margin,
-                (index.max(axis=0) + 1) * self.size + margin)
+        return (self._index_lo * self.size - margin, (self._index_hi + 1) * self.size + margin)
 
     # ------------------------------------------------------------------ the grid
 
     def _cover(self, lo: np.ndarray, hi: np.ndarray) -> None:
         """Grow the grid to hold the voxel indices ``lo`` .. ``hi`` (3,) (inclusive)."""
-        shape = np.array(self._state.shape)
-        old_hi = self._corner + shape - 1
-        if self._state.size and (lo >= self._corner).all() and (hi <= old_hi).all():
+        shape, corner = self._shape, self._corner
+        (c0, c1, c2), (s0, s1, s2) = corner.tolist(), shape.tolist()
+        (l0, l1, l2), (h0, h1, h2) = lo.tolist(), hi.tolist()
+        if (self._state.size and c0 <= l0 and c1 <= l1 and c2 <= l2 and h0 < c0 + s0
+                and h1 < c1 + s1 and h2 < c2 + s2):
             return
+        old_hi = corner + shape - 1
         if self._state.size:
             lo, hi = np.minimum(lo, self._corner), np.maximum(hi, old_hi)
         pad = np.ceil(_GROW * (hi - lo + 1)).astype(np.int64)
@@ -164,6 +150,7 @@ class SurfaceMap:
             state[at[0]:at[0] + shape[0], at[1]:at[1] + shape[1],
                   at[2]:at[2] + shape[2]] = self._state
         self._state, self._corner = state, corner
+        self._shape = np.array(state.shape, dtype=np.int64)
 
     def _cells(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Flat grid positions (n,) of voxel indices (n, 3), and which of them the grid holds."""
@@ -197,67 +184,36 @@ class SurfaceMap:
         self.carve(origins, directions, ranges, margin=margin)
 
     def strike(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray) -> None:
-        """Mark the voxels of the strikes occupied (arguments as :meth:`add`; misses ignored)."""
-        hit = np.isfinite(ranges)
-        if not hit.any():
+        """Mark the voxels of the strikes occupied, their unknown face neighbours frontier
+        (arguments as :meth:`add`; misses ignored; compiled: sim/planner_kernels.py)."""
+        from sim import planner_kernels as kernels
+
+        index, view, lo, hi = kernels.strike_index(origins, directions, ranges, self.size)
+        if not len(index):
             return
-        end = origins[hit] + ranges[hit, None] * directions[hit]
-        keys, inverse = np.unique(self.keys_of(end), return_inverse=True)
-        count = np.bincount(inverse, minlength=len(keys))
-        view = np.stack([np.bincount(inverse, weights=-directions[hit, i],
-                                     minlength=len(keys)) for i in range(3)], axis=1)
-        known = member(keys, self.occupied)
-        row = np.searchsorted(self.occupied, keys[known])
-        self.count[row] += count[known]
-        self.view[row] += view[known]
-        new = keys[~known]
-        at = np.searchsorted(self.occupied, new)
-        self.occupied = np.insert(self.occupied, at, new)
-        self.count = np.insert(self.count, at, count[~known])
-        self.view = np.insert(self.view, at, view[~known], axis=0)
-        if not len(new):
-            return
-        index = unpack(new)
-        self._cover(index.min(axis=0) - 1, index.max(axis=0) + 1)
+        self._cover(lo - 1, hi + 1)
         state = self._state.reshape(-1)
-        cell = self._cells(index)[0]
-        state[cell] = (state[cell] | OCCUPIED) & ~FRONTIER
-        around = self._cells((index[:, None, :] + FACE_STEPS[None]).reshape(-1, 3))[0]
-        fresh = np.unique(around[(state[around] & (OCCUPIED | CROSSED | FRONTIER)) == 0])
-        state[fresh] |= FRONTIER
-        fresh = self._keys_of_cells(fresh)
-        self._frontier = np.insert(self._frontier, np.searchsorted(self._frontier, fresh), fresh)
+        (self.occupied, self.count, self.view, self._frontier, self.occupied_centres,
+         new) = kernels.strike_merge(index, view, self.occupied, self.count, self.view,
+                                     self._frontier, state, self._shape, self._corner, self.size)
+        if new:
+            first = len(self.occupied) == new
+            self._index_lo = lo if first else np.minimum(self._index_lo, lo)
+            self._index_hi = hi if first else np.maximum(self._index_hi, hi)
 
     def carve(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
               margin: float) -> None:
         """Mark the voxels the beams crossed before their strikes free (arguments as
-        :meth:`add`)."""
+        :meth:`add`; compiled: sim/planner_kernels.py)."""
+        from sim import planner_kernels as kernels
+
         if not len(self.occupied):
             return
-        hit = np.isfinite(ranges)
         lo, hi = self.bounds(margin)
         self._cover(np.floor(lo / self.size).astype(np.int64),
                     np.floor(hi / self.size).astype(np.int64))
-        enter, leave = clip_to_box(origins, directions, lo, hi)
-        leave = np.where(hit, np.minimum(leave, ranges - self.size), leave)
-        samples = np.ceil(np.maximum(leave - enter, 0.0) * (TRAVERSAL_STEP / self.size)
-                          ).astype(np.int64)
-        total = int(samples.sum())
-        if not total:
-            return
-        # In grid units (voxel edges from the grid's corner), where truncation is the cell.
-        ray = np.repeat(np.arange(len(origins)), samples)
-        first = np.cumsum(samples) - samples
-        along = (enter[ray] / self.size + (np.arange(total) - first[ray] + 0.5)
-                 / TRAVERSAL_STEP)
-        start = origins / self.size - self._corner
-        shape = self._state.shape
-        cell = np.zeros(total, dtype=np.int64)
-        for axis, stride in enumerate((shape[1] * shape[2], shape[2], 1)):
-            cell += stride * np.clip((start[ray, axis] + along * directions[ray, axis]
-                                      ).astype(np.int64), 0, shape[axis] - 1)
-        state = self._state.reshape(-1)
-        state[cell] = (state[cell] | CROSSED) & ~FRONTIER
+        kernels.carve(origins, directions, ranges, lo, hi, self.size, self._state.reshape(-1),
+                      self._shape, self._corner)
 
     # ------------------------------------------------------------------ reading the map
 
@@ -268,9 +224,12 @@ class SurfaceMap:
 
     def frontier(self) -> np.ndarray:
         """Sorted keys (m,) of the unknown voxels sharing a face with an occupied voxel."""
+        from sim import planner_kernels as kernels
+
         if len(self._frontier):
-            cell = self._cells(unpack(self._frontier))[0]
-            self._frontier = self._frontier[(self._state.reshape(-1)[cell] & FRONTIER) > 0]
+            self._frontier = kernels.frontier_keep(
+                self._frontier, self._state.reshape(-1),
+                self._shape, self._corner)
         return self._frontier
 
     def surface_frontier(self) -> np.ndarray:
@@ -298,49 +257,15 @@ class SurfaceMap:
         centre in the target's pixel lies nearer than the target by more than ``BLOCK_SLACK``
         edges.
         """
+        from sim import planner_kernels as kernels
+
         one = np.ndim(positions) == 1
         positions = np.atleast_2d(np.asarray(positions, dtype=np.float64))
         seen = np.ones((len(positions), len(targets)), dtype=bool)
         if len(self.occupied) and len(targets):
-            seen = ~self._hidden(positions, self.centres(self.occupied), targets)
+            behind, *room = kernels.hidden(positions, self.occupied_centres,
+                                           np.asarray(targets, dtype=np.float64), self.size,
+                                           *self.depth_room)
+            self.depth_room = tuple(room)
+            seen = ~behind
         return seen[0] if one else seen
-
-    def _hidden(self, positions: np.ndarray, occupied: np.ndarray, targets: np.ndarray
-                ) -> np.ndarray:
-        """(p, n) bool: ``targets`` (n, 3) behind one of the ``occupied`` centres (o, 3) in
-        the depth image from each of ``positions`` (p, 3) [m, B]."""
-        o = len(occupied)
-        # Image axes per position: w toward the occupied voxels' box centre, a and b across.
-        w = 0.5 * (occupied.min(axis=0) + occupied.max(axis=0)) - positions
-        w /= np.sqrt((w * w).sum(axis=1))[:, None]
-        a = np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-        a -= (a * w).sum(axis=1)[:, None] * w
-        a /= np.sqrt((a * a).sum(axis=1))[:, None]
-        frame = np.stack([a, np.cross(w, a), w], axis=1)                 # (p, 3, 3)
-        local = np.matmul(np.concatenate([occupied, targets])[None] - positions[:, None],
-                          frame.transpose(0, 2, 1))                       # (p, o + n, 3)
-        distance = np.sqrt(np.einsum("pni,pni->pn", local, local))
-        depth = local[:, :, 2]
-        front = depth > 0
-        pixel = PIXEL_EDGES * self.size / distance[:, :o].min(axis=1)    # rad per pixel
-        scale = np.where(front, depth, 1.0) * pixel[:, None]
-        uv = np.floor(local[:, :, :2] / scale[:, :, None]).astype(np.int64)
-        uv[~front] = 0
-        # Each image spans its occupied voxels' pixels and the splat around them.
-        lo = uv[:, :o].min(axis=1) - SPLAT                               # (p, 2)
-        width = uv[:, :o].max(axis=1) + SPLAT + 1 - lo
-        uv -= lo[:, None]
-        u, v = uv[:, :, 0], uv[:, :, 1]
-        inside = front & (u >= 0) & (v >= 0) & (u < width[:, :1]) & (v < width[:, 1:])
-        start = np.concatenate([[0], np.cumsum(width[:, 0] * width[:, 1])[:-1]])
-        flat = start[:, None] + u * width[:, 1:] + v                       # (p, o + n)
-        keep = front[:, :o]
-        spot, near = flat[:, :o][keep], distance[:, :o][keep]
-        row = np.broadcast_to(width[:, 1:], keep.shape)[keep]
-        span = np.arange(-SPLAT, SPLAT + 1)
-        shift = (span[:, None, None] * row + span[None, :, None]).reshape(-1, len(spot))
-        image = np.full(int((width[:, 0] * width[:, 1]).sum()), np.inf)
-        np.minimum.at(image, (spot + shift).ravel(), np.tile(near, len(shift)))
-        nearest = np.where(inside[:, o:], image[np.where(inside[:, o:], flat[:, o:], 0)],
-                           np.inf)
-        return nearest < distance[:, o:] - BLOCK_SLACK * self.size

@@ -12,7 +12,6 @@ from formats import StrikeLog
 from formats.strike_log import StrikeChunk
 from sim.gap_seeking import (
     GapSeeker,
-    _turn_toward,
     body_points,
     turn_from_boresight,
 )
@@ -27,10 +26,6 @@ def test_turns():
     np.testing.assert_allclose(m[:, :, 2], b, atol=1e-15)        # +z goes onto the boresight
     np.testing.assert_allclose(np.linalg.det(m), 1.0)
     np.testing.assert_allclose(m[0], np.eye(3))                  # no turn: identity
-    turned = _turn_toward(np.array([0, 0, 1.0]), np.array([1.0, 0, 0]), math.radians(10))
-    np.testing.assert_allclose(turned, [math.sin(math.radians(10)), 0, math.cos(math.radians(10))])
-    np.testing.assert_array_equal(_turn_toward(np.array([0, 0, 1.0]), np.array([0, 0.1, 0.99]),
-                                               1.0), [0, 0.1, 0.99])
 
 
 def test_scene_keys_of_the_attitude_law():

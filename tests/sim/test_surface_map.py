@@ -9,7 +9,6 @@ from sim.raycast import EmbreeBackend, ExactHits
 from sim.surface_map import (
     FACE_STEPS,
     SurfaceMap,
-    clip_to_box,
     member,
     pack,
     unpack,
@@ -22,11 +21,6 @@ def test_keys_round_trip_and_membership():
     np.testing.assert_array_equal(unpack(pack(index)), index)
     table = np.sort(pack(index[:2]))
     np.testing.assert_array_equal(member(pack(index), table), [True, True, False])
-    enter, leave = clip_to_box(np.array([[-5.0, 0.5, 0.5], [-5.0, 5.0, 0.5]]),
-                               np.array([[1.0, 0, 0], [1.0, 0, 0]]), np.zeros(3), np.ones(3))
-    np.testing.assert_allclose(enter[0], 5.0)
-    np.testing.assert_allclose(leave[0], 6.0)
-    assert enter[1] >= leave[1]                          # passes beside the box
     with pytest.raises(ValueError, match="size must be positive, got 0"):
         SurfaceMap(0)
 

@@ -1,0 +1,375 @@
+"""The planner's compiled kernels (sim/planner_kernels.py) against the numpy code they replaced.
+
+Each reference below is the numpy implementation the kernel replaced, kept here written the
+numpy way (sorted-key merges with np.unique/np.insert, batched slab clipping, np.minimum.at
+splats, np.lexsort, scipy rotations), run on small maps beside the kernel.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from formats.strike_log import StrikeChunk
+from formats.strike_log.schema import Shots
+from sim import planner_kernels as kernels
+from sim.gap_seeking import recorded_beams, turn_from_boresight
+from sim.surface_map import (
+    BLOCK_SLACK,
+    CROSSED,
+    FACE_STEPS,
+    FRONTIER,
+    OCCUPIED,
+    PIXEL_EDGES,
+    SPLAT,
+    TRAVERSAL_STEP,
+    SurfaceMap,
+    member,
+    pack,
+    unpack,
+)
+
+# ---------------------------------------------------------------------- numpy references
+
+
+def clip_to_box(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Where each ray enters and leaves the box ``lo``..``hi`` (slab method).
+
+    Parameters
+    ----------
+    origins, directions : (n, 3) float64, B; directions unit vectors
+    lo, hi : (3,) float64, metres, B
+
+    Returns
+    -------
+    enter, leave : (n,) float64, metres along each ray (``enter >= leave`` when it misses)
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = 1.0 / directions
+        a = (lo - origins) * inverse
+        b = (hi - origins) * inverse
+    near = np.where(np.isnan(a), -np.inf, np.minimum(a, b))
+    far = np.where(np.isnan(b), np.inf, np.maximum(a, b))
+    return np.maximum(near.max(axis=1), 0.0), far.min(axis=1)
+
+
+def ref_strike(m: SurfaceMap, origins, directions, ranges) -> None:
+    """The numpy strike: unique keys, merged into the sorted occupied keys by np.insert, the
+    new voxels' unknown face neighbours marked frontier. Updates ``m`` (grid grown by
+    ``m._cover``) like :meth:`SurfaceMap.strike`."""
+    hit = np.isfinite(ranges)
+    end = origins[hit] + ranges[hit, None] * directions[hit]
+    keys, inverse = np.unique(m.keys_of(end), return_inverse=True)
+    count = np.bincount(inverse, minlength=len(keys))
+    view = np.stack([np.bincount(inverse, weights=-directions[hit, i], minlength=len(keys))
+                     for i in range(3)], axis=1)
+    known = member(keys, m.occupied)
+    row = np.searchsorted(m.occupied, keys[known])
+    m.count[row] += count[known]
+    m.view[row] += view[known]
+    new = keys[~known]
+    at = np.searchsorted(m.occupied, new)
+    m.occupied = np.insert(m.occupied, at, new)
+    m.count = np.insert(m.count, at, count[~known])
+    m.view = np.insert(m.view, at, view[~known], axis=0)
+    if not len(new):
+        return
+    index = unpack(new)
+    m._cover(index.min(axis=0) - 1, index.max(axis=0) + 1)
+    lo, hi = unpack(m.occupied).min(axis=0), unpack(m.occupied).max(axis=0)
+    m._index_lo, m._index_hi = lo, hi
+    state = m._state.reshape(-1)
+    cell = m._cells(index)[0]
+    state[cell] = (state[cell] | OCCUPIED) & ~FRONTIER
+    around = m._cells((index[:, None, :] + FACE_STEPS[None]).reshape(-1, 3))[0]
+    fresh = np.unique(around[(state[around] & (OCCUPIED | CROSSED | FRONTIER)) == 0])
+    state[fresh] |= FRONTIER
+    fresh = m._keys_of_cells(fresh)
+    m._frontier = np.insert(m._frontier, np.searchsorted(m._frontier, fresh), fresh)
+
+
+def ref_carve(m: SurfaceMap, origins, directions, ranges, *, margin: float) -> None:
+    """The numpy carve: every beam's samples at once (np.repeat), as :meth:`SurfaceMap.carve`."""
+    hit = np.isfinite(ranges)
+    lo, hi = m.bounds(margin)
+    m._cover(np.floor(lo / m.size).astype(np.int64), np.floor(hi / m.size).astype(np.int64))
+    enter, leave = clip_to_box(origins, directions, lo, hi)
+    leave = np.where(hit, np.minimum(leave, ranges - m.size), leave)
+    samples = np.ceil(np.maximum(leave - enter, 0.0) * (TRAVERSAL_STEP / m.size)).astype(np.int64)
+    total = int(samples.sum())
+    ray = np.repeat(np.arange(len(origins)), samples)
+    first = np.cumsum(samples) - samples
+    along = enter[ray] / m.size + (np.arange(total) - first[ray] + 0.5) / TRAVERSAL_STEP
+    start = origins / m.size - m._corner
+    shape = m._state.shape
+    cell = np.zeros(total, dtype=np.int64)
+    for axis, stride in enumerate((shape[1] * shape[2], shape[2], 1)):
+        cell += stride * np.clip((start[ray, axis] + along * directions[ray, axis]
+                                  ).astype(np.int64), 0, shape[axis] - 1)
+    state = m._state.reshape(-1)
+    state[cell] = (state[cell] | CROSSED) & ~FRONTIER
+
+
+def ref_hidden(positions, occupied, targets, size):
+    """The numpy depth image: all positions and points in one batched change of frame, the
+    splat by np.minimum.at. (p, n) bool."""
+    o = len(occupied)
+    w = 0.5 * (occupied.min(axis=0) + occupied.max(axis=0)) - positions
+    w /= np.sqrt((w * w).sum(axis=1))[:, None]
+    a = np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    a -= (a * w).sum(axis=1)[:, None] * w
+    a /= np.sqrt((a * a).sum(axis=1))[:, None]
+    frame = np.stack([a, np.cross(w, a), w], axis=1)
+    local = np.matmul(np.concatenate([occupied, targets])[None] - positions[:, None],
+                      frame.transpose(0, 2, 1))
+    distance = np.sqrt(np.einsum("pni,pni->pn", local, local))
+    depth = local[:, :, 2]
+    front = depth > 0
+    pixel = PIXEL_EDGES * size / distance[:, :o].min(axis=1)
+    scale = np.where(front, depth, 1.0) * pixel[:, None]
+    uv = np.floor(local[:, :, :2] / scale[:, :, None]).astype(np.int64)
+    uv[~front] = 0
+    lo = uv[:, :o].min(axis=1) - SPLAT
+    width = uv[:, :o].max(axis=1) + SPLAT + 1 - lo
+    uv -= lo[:, None]
+    u, v = uv[:, :, 0], uv[:, :, 1]
+    inside = front & (u >= 0) & (v >= 0) & (u < width[:, :1]) & (v < width[:, 1:])
+    start = np.concatenate([[0], np.cumsum(width[:, 0] * width[:, 1])[:-1]])
+    flat = start[:, None] + u * width[:, 1:] + v
+    keep = front[:, :o]
+    spot, near = flat[:, :o][keep], distance[:, :o][keep]
+    row = np.broadcast_to(width[:, 1:], keep.shape)[keep]
+    span = np.arange(-SPLAT, SPLAT + 1)
+    shift = (span[:, None, None] * row + span[None, :, None]).reshape(-1, len(spot))
+    image = np.full(int((width[:, 0] * width[:, 1]).sum()), np.inf)
+    np.minimum.at(image, (spot + shift).ravel(), np.tile(near, len(shift)))
+    nearest = np.where(inside[:, o:], image[np.where(inside[:, o:], flat[:, o:], 0)], np.inf)
+    return nearest < distance[:, o:] - BLOCK_SLACK * size
+
+
+def ref_turn_toward(b, goal, angle):
+    cos = min(max(float(b @ goal), -1.0), 1.0)
+    if math.acos(cos) <= angle:
+        return goal
+    s = goal - cos * b
+    return math.cos(angle) * b + math.sin(angle) / np.linalg.norm(s) * s
+
+
+def ref_sweep(n, centres, used, occupied, size, position, target, nominal, boresight,
+              max_offset, reach, block):
+    """The numpy interval: visibility, np.lexsort of the sweep, the goals by masks and
+    np.maximum.accumulate, the rate limit from the first goal out of reach. Returns pick, goal,
+    the used mask after."""
+    used = used.copy()
+    open_ = np.flatnonzero(~used)
+    centres = centres[open_]
+    m_ib = target.transpose(0, 2, 1)
+    chaser = np.einsum("nij,nj->ni", m_ib, position)
+    to_nominal = np.matmul(m_ib, nominal).transpose(0, 2, 1)
+    middle = n // 2
+    seen = ~ref_hidden(chaser[[middle, n]], occupied, centres, size)
+    aim = (centres - chaser[middle]) @ to_nominal[middle].T
+    aim /= np.linalg.norm(aim, axis=1)[:, None]
+    ok = np.flatnonzero(seen[0] & (aim[:, 2] >= math.cos(max_offset)))
+    band = block * size / np.linalg.norm(chaser[middle])
+    row = np.floor(aim[ok, 1] / band).astype(np.int64)
+    across = np.where(row % 2 == 0, aim[ok, 0], -aim[ok, 0])
+    later = row >= math.floor(float(boresight[1]) / band)
+    chosen = ok[np.lexsort((across, row, ~later, seen[1, ok]))][:n]
+    used[open_[chosen]] = True
+    pick = np.full(n, -1)
+    pick[:len(chosen)] = chosen
+    aimed = pick >= 0
+    g = np.einsum("nij,nj->ni", to_nominal[:n][aimed], centres[pick[aimed]] - chaser[:n][aimed])
+    g /= np.linalg.norm(g, axis=1)[:, None]
+    cos = math.cos(max_offset)
+    beyond = g[:, 2] < cos
+    side = g[beyond, :2] / np.linalg.norm(g[beyond, :2], axis=1)[:, None]
+    g[beyond] = np.column_stack([math.sin(max_offset) * side, np.full(len(side), cos)])
+    goal = np.empty((n, 3))
+    goal[aimed] = g
+    last = np.maximum.accumulate(np.where(aimed, np.arange(n), -1))
+    goal = np.where((last >= 0)[:, None], goal[np.maximum(last, 0)], boresight)
+    before = np.vstack([boresight, goal[:-1]])
+    turn = np.arccos(np.clip(np.einsum("ni,ni->n", goal, before), -1.0, 1.0))
+    late = np.flatnonzero(turn > reach)
+    if len(late):
+        b = goal[late[0] - 1] if late[0] else boresight
+        for k in range(late[0], n):
+            b = goal[k] = ref_turn_toward(b, goal[k], reach)
+    return pick, goal, used
+
+
+# ---------------------------------------------------------------------- small maps
+
+
+def _beams(rng, n, scale, spread=40.0):
+    """Beams from around the origin's box onto points of a flattened cloud: origins,
+    directions, ranges (one in seven a miss)."""
+    points = rng.normal(size=(n, 3)) * scale
+    origins = points + rng.normal(size=(n, 3)) * spread
+    directions = points - origins
+    ranges = np.linalg.norm(directions, axis=1)
+    directions /= ranges[:, None]
+    ranges[::7] = np.inf
+    return origins, directions, ranges
+
+
+def _maps(seed=0, blocks=5):
+    """A map grown block by block by the kernels and one by the numpy references."""
+    rng = np.random.default_rng(seed)
+    compiled, reference = SurfaceMap(0.5), SurfaceMap(0.5)
+    previous = None
+    for block in range(blocks):
+        origins, directions, ranges = _beams(rng, 60, np.array([5.0, 3.0, 1.0]) * (1 + block))
+        # Strike some voxels again (a second strike merges into the known voxel).
+        if previous is not None:
+            again = rng.choice(len(origins), 20, replace=False)
+            ranges[again] = np.inf
+            hit = np.isfinite(previous[2])
+            origins = np.concatenate([origins, previous[0][hit][:20]])
+            directions = np.concatenate([directions, previous[1][hit][:20]])
+            ranges = np.concatenate([ranges, previous[2][hit][:20]])
+        previous = origins, directions, ranges
+        compiled.add(origins, directions, ranges, margin=2.0)
+        ref_strike(reference, origins, directions, ranges)
+        ref_carve(reference, origins, directions, ranges, margin=2.0)
+        yield compiled, reference
+
+
+def test_map_update_kernels_match_the_numpy_reference():
+    for compiled, reference in _maps():
+        np.testing.assert_array_equal(compiled.occupied, reference.occupied)
+        np.testing.assert_array_equal(compiled.count, reference.count)
+        np.testing.assert_array_equal(compiled.view, reference.view)
+        np.testing.assert_array_equal(compiled._corner, reference._corner)
+        np.testing.assert_array_equal(compiled._state, reference._state)
+        np.testing.assert_array_equal(compiled._index_lo, reference._index_lo)
+        np.testing.assert_array_equal(compiled._index_hi, reference._index_hi)
+        np.testing.assert_array_equal(compiled.occupied_centres,
+                                      compiled.centres(compiled.occupied))
+        # The frontier list, read (stale keys dropped) the numpy way and by the kernel.
+        state = reference._state.reshape(-1)
+        cell = reference._cells(unpack(reference._frontier))[0]
+        expected = reference._frontier[(state[cell] & FRONTIER) > 0]
+        np.testing.assert_array_equal(compiled.frontier(), expected)
+    assert compiled.count.max() > 1 and len(expected) > 100     # re-struck voxels, a frontier
+
+
+def test_depth_image_kernel_matches_the_numpy_reference():
+    rng = np.random.default_rng(1)
+    *_, (m, _) = _maps(seed=1)
+    positions = rng.normal(size=(6, 3)) * 60.0
+    positions[0] = m.occupied_centres.mean(axis=0) + np.array([0.0, 0.0, 0.2])   # inside
+    targets = m.centres(m.frontier())
+    room = np.zeros(0), np.zeros(0, dtype=np.int64), 0
+    for _ in range(2):              # the second time in the room the first left (stale pixels)
+        hidden, *room = kernels.hidden(positions, m.occupied_centres, targets, m.size, *room)
+        expected = ref_hidden(positions, m.occupied_centres, targets, m.size)
+        np.testing.assert_array_equal(hidden, expected)
+        positions = positions[::-1] + 5.0
+    assert 0.1 < expected.mean() < 0.9
+    np.testing.assert_array_equal(m.visible(positions, targets),
+                                  ~ref_hidden(positions, m.occupied_centres, targets, m.size))
+
+
+def test_spread_kernel_matches_the_numpy_reference():
+    *_, (m, _) = _maps(seed=2)
+    keys = np.union1d(m.frontier(), m.occupied)
+    for block in (1, 2, 3):
+        chosen, centres = kernels.spread(keys, block, m.size, m._shape, m._corner)
+        cube = pack(np.floor_divide(unpack(keys), block))
+        expected = keys[np.sort(np.unique(cube, return_index=True)[1])]
+        np.testing.assert_array_equal(chosen, expected)
+        np.testing.assert_array_equal(centres, m.centres(expected))
+    assert len(expected) < len(keys)
+
+
+def test_recorded_beams_kernel_matches_scipy_rotations():
+    rng = np.random.default_rng(3)
+    n, b = 12, 3
+    beams = rng.normal(size=(b, 3))
+    beams /= np.linalg.norm(beams, axis=1)[:, None]
+    struck = np.sort(rng.choice(n * b, 20, replace=False))
+    row, beam = struck // b, struck % b
+    direction = beams[beam] + 1e-3 * rng.normal(size=(len(struck), 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    shots = Shots(np.arange(n) * 10.0, rng.normal(size=(n, 3)) * 100.0,
+                  Rotation.random(n, random_state=4).as_quat(),
+                  Rotation.random(n, random_state=5).as_quat())
+    chunk = StrikeChunk(start=0, shot=row + 40, beam=beam, range=rng.uniform(50, 90, len(row)),
+                        direction=direction, shots=shots, shot_offset=40)
+    origins, directions, ranges, stats = recorded_beams(chunk, beams)
+    # scipy: strikes along their measured directions, then the misses along their beams.
+    to_body, sensor = (Rotation.from_quat(shots.target_attitude).inv(),
+                       Rotation.from_quat(shots.sensor_attitude))
+    missed = np.setdiff1d(np.arange(n * b), struck)
+    every_row = np.concatenate([row, missed // b])
+    every_direction = np.concatenate([direction, beams[missed % b]])
+    np.testing.assert_allclose(
+        directions, to_body[every_row].apply(sensor[every_row].apply(every_direction)),
+        atol=1e-14)
+    np.testing.assert_allclose(origins, to_body.apply(shots.sensor_position)[every_row],
+                               rtol=1e-14, atol=1e-12)
+    np.testing.assert_array_equal(ranges[:len(row)], chunk.range)
+    assert np.isinf(ranges[len(row):]).all() and len(ranges) == n * b
+    end = origins[:len(row)] + ranges[:len(row), None] * directions[:len(row)]
+    np.testing.assert_allclose(stats[:3], end.min(axis=0), rtol=1e-14)
+    np.testing.assert_allclose(stats[3:6], end.max(axis=0), rtol=1e-14)
+    np.testing.assert_allclose(stats[6:], [len(row), chunk.range.sum(),
+                                           np.linalg.norm(end, axis=1).max()], rtol=1e-14)
+
+
+def test_sweep_kernel_matches_the_numpy_reference():
+    rng = np.random.default_rng(6)
+    *_, (m, _) = _maps(seed=6)
+    n = 30
+    keys = m.frontier()
+    centres = m.centres(keys)
+    # The chaser circles the map 80 m out; the target turns slowly; nominal looks at the centre.
+    angle = np.linspace(0.0, 0.3, n + 1)
+    position = 80.0 * np.column_stack([np.cos(angle), np.sin(angle), 0.2 * np.ones(n + 1)])
+    target = Rotation.from_rotvec(np.outer(np.linspace(0, 0.05, n + 1), [0.1, 0.3, 1.0]))
+    z = -position / np.linalg.norm(position, axis=1)[:, None]
+    x = np.cross([0.0, 0.0, 1.0], z)
+    x /= np.linalg.norm(x, axis=1)[:, None]
+    nominal = np.stack([x, np.cross(z, x), z], axis=2)          # columns: sensor axes in I
+    for max_offset, reach in ((math.radians(30), math.radians(10)),
+                              (math.radians(3), math.radians(0.2))):
+        used = rng.random(len(keys)) < 0.3
+        boresight = np.array([0.05, -0.02, math.sqrt(1 - 0.05**2 - 0.02**2)])
+        expected = ref_sweep(n, centres, used, m.occupied_centres, m.size, position,
+                             target.as_matrix(), nominal, boresight, max_offset, reach, 2)
+        now = used.copy()
+        pick, goal, turn, _ = kernels.sweep(n, centres, now, m.occupied_centres, m.size,
+                                            position, target.as_matrix(), nominal, boresight,
+                                            max_offset, reach, 2, np.zeros(0),
+                                            np.zeros(0, dtype=np.int64), 0)
+        np.testing.assert_array_equal(pick, expected[0])
+        np.testing.assert_allclose(goal, expected[1], atol=1e-13)
+        np.testing.assert_array_equal(now, expected[2])
+        np.testing.assert_allclose(turn, turn_from_boresight(goal), atol=1e-15)
+        assert (pick >= 0).sum() >= 5
+
+
+def test_turn_toward_stays_within_the_angle():
+    b = np.array([0, 0, 1.0])
+    turned = kernels._turn_toward(b, np.array([1.0, 0, 0]), math.radians(10))
+    np.testing.assert_allclose(turned, [math.sin(math.radians(10)), 0, math.cos(math.radians(10))])
+    np.testing.assert_array_equal(kernels._turn_toward(b, np.array([0, 0.1, 0.99]), 1.0),
+                                  [0, 0.1, 0.99])
+
+
+def test_least_struck_kernel_matches_the_numpy_quantile():
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 5, 40, 333):
+        occupied = np.sort(rng.choice(10_000, n, replace=False)).astype(np.int64)
+        count = rng.integers(1, 6, n)
+        frontier = np.sort(rng.choice(10_000, 50, replace=False)).astype(np.int64)
+        for q in (0.0, 0.25, 0.5, 0.9):
+            expected = np.union1d(frontier, occupied[count <= np.quantile(count, q)])
+            got = kernels.least_struck(frontier, occupied, count, math.floor((n - 1) * q))
+            np.testing.assert_array_equal(got, expected)
