@@ -716,13 +716,7 @@ def spread(keys, block, size, shape, corner):
         if not taken[cell]:
             taken[cell] = keep[q] = True
     chosen = keys[keep]
-    centres = np.empty((len(chosen), 3))
-    for q in range(len(chosen)):
-        i, j, k = _unpack(chosen[q])
-        centres[q, 0] = (i + 0.5) * size
-        centres[q, 1] = (j + 0.5) * size
-        centres[q, 2] = (k + 0.5) * size
-    return chosen, centres
+    return chosen, _centres(chosen, size)
 
 
 @njit(cache=True)
