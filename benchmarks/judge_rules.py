@@ -380,6 +380,51 @@ def evidence(args) -> None:
     print_tally(tally)
 
 
+def misses(args) -> None:
+    """``collect``'s companion for the missed beams: per cloud, the log's missed beams near
+    the strikes (``recon.registration.misses``, as ``recon reconstruct -m auto`` draws them) and
+    the fraction each collected candidate cuts (``recon.surfaces.judge.cut_misses``), measured
+    on the compare's mesh of the run (fitted on all strikes; auto measures fold 0's); kept in
+    ``WORK/misses/CLOUD.json`` for ``rules``."""
+    from formats.mesh_io import read_mesh
+    from recon.registration.misses import missed_beams
+    from recon.surfaces import auto, judge
+
+    out = args.work / "misses"
+    out.mkdir(parents=True, exist_ok=True)
+    for cloud in collected(args):
+        path = out / f"{cloud}.json"
+        if path.exists() and not args.force:
+            continue
+        rows = records(args.suite, cloud)
+        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
+        points = load_cloud(args.suite, cloud).points
+        start = time.perf_counter()
+        beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points, seed=0)
+        spacing = float(np.median(nearest_gaps(points)))
+        reach = auto.miss_reach(data["tau_m"], data["noise_m"], spacing)
+        drawn = time.perf_counter() - start
+        mesh_of = {r["key"]: r["mesh"] for r in rows if r.get("mesh")}
+        cut, cast_s = {}, {}
+        for row in data["candidates"]:
+            if row["key"] in mesh_of and row.get("chi2") is not None:
+                mesh = read_mesh(args.suite / cloud / mesh_of[row["key"]])
+                start = time.perf_counter()
+                hits = judge.cut_misses(beams, judge.Caster(mesh.vertices, mesh.faces), points,
+                                        reach)
+                cast_s[row["key"]] = time.perf_counter() - start
+                cut[row["key"]] = float(hits.mean()) if len(hits) else 0.0
+        path.write_text(json.dumps({"n_misses": len(beams), "n_missed": beams.n_missed,
+                                    "reach_m": reach, "draw_s": drawn, "cast_s": cast_s,
+                                    "cut": cut}, indent=1))
+        ranked = sorted((r for r in data["candidates"] if r["key"] in cut),
+                        key=lambda r: r["chi2"])
+        print(f"{cloud}: {len(beams)} misses ({beams.n_missed} in the log), reach {reach:.3g} m, "
+              f"draw {drawn:.1f} s; " + "; ".join(f"{r['label']} chi2 {r['chi2']:.3g} cut "
+                                               f"{cut[r['key']]:.2%}" for r in ranked[:6]),
+              flush=True)
+
+
 def print_tally(tally: dict[tuple[str, float], list]) -> None:
     """``evidence``'s summary: per tie-break and band, agreement with the truth and misses."""
     for (name, band), picks in tally.items():
@@ -550,7 +595,8 @@ def estimate_all(args) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=("collect", "rules", "evidence", "estimate"))
+    parser.add_argument("command", choices=("collect", "misses", "rules", "evidence",
+                                            "estimate"))
     parser.add_argument("--suite", type=Path, required=True, help="a finished suite's --out")
     parser.add_argument("--work", type=Path, required=True, help="where this script writes")
     parser.add_argument("--clouds", nargs="*", help="only these clouds")
@@ -576,7 +622,7 @@ def main(argv=None) -> int:
                         help="tell auto nothing of the target (every cloud \"unknown\"; "
                         "default: the NATURAL clouds \"natural\")")
     args = parser.parse_args(argv)
-    {"collect": collect, "rules": rules, "evidence": evidence,
+    {"collect": collect, "misses": misses, "rules": rules, "evidence": evidence,
      "estimate": estimate_all}[args.command](args)
     return 0
 

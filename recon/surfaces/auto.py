@@ -124,6 +124,11 @@ NATURAL_COVERAGE = 0.5
 NATURAL_MODEL = "ellipsoid"
 NATURAL_FIT = 0.5
 NATURAL_SPAN = 1.5
+# Missed beams (``recon.registration.misses``) are drawn where their free span passes within
+# MISS_BOX of the strikes' bounding-box diagonal of the box: a membrane a candidate spans
+# beyond the strikes lies there. A missed beam's crossing of a surface counts as a cut only
+# farther than ``miss_reach`` from every strike (judge.cut_misses).
+MISS_BOX = 0.1
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
 # compete for the cores.
 FIT_THREADS = 1
@@ -617,6 +622,25 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
     if np.isfinite(coverage) and not selection.prior:   # the prior's reason says it
         text += f". The strikes cover {coverage:.0%} of the best closed surface"
     return text
+
+
+def miss_reach(tau: float, noise: float, spacing: float) -> float:
+    """How far from the strikes a missed beam's crossing of a surface is no evidence [m]:
+    the reach of a supported surface point (``judge.COVERAGE_SPACINGS`` spacings, ``SIGMAS``
+    noise lengths, at least ``tau``). A beam that grazed past a silhouette meets a surface at
+    the truth within the spacing of its neighbours' strikes and the noise."""
+    return max(tau, judge.SIGMAS * noise, judge.COVERAGE_SPACINGS * spacing)
+
+
+def misses_near(log_path, points: np.ndarray, *, seed: int = 0):
+    """The missed beams of the strike log ``log_path`` whose free span passes within
+    ``MISS_BOX`` of the diagonal of the bounding box of ``points`` (n, 3) [m, body frame]
+    (``recon.registration.misses.missed_beams``)."""
+    from recon.registration.misses import missed_beams
+
+    low, high = points.min(axis=0), points.max(axis=0)
+    margin = MISS_BOX * float(np.linalg.norm(high - low))
+    return missed_beams(log_path, low=low - margin, high=high + margin, seed=seed)
 
 
 def _coverage(candidates: list[Candidate], points: np.ndarray, context: _Context, seed: int

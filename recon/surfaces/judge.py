@@ -418,6 +418,44 @@ def check(strikes: Strikes, caster: Caster, *, tau: float, noise: float,
                  (capped / sigma) ** 2)
 
 
+def cut_misses(misses, caster: Caster, strikes: np.ndarray, reach: float) -> np.ndarray:
+    """Which missed beams a surface cuts where no strike is (module docstring).
+
+    A missed beam crossed free space from ``range_min`` to ``range_max``
+    (``recon.registration.misses``). Each is cast against the surface (one batched Embree
+    cast); it is cut when its first hit lies within that span and farther than ``reach`` from
+    every strike: at a silhouette a beam that grazed past the body meets a surface at the
+    truth near the strikes of its neighbours, within their spacing and the noise.
+
+    Parameters
+    ----------
+    misses : recon.registration.misses.MissedBeams
+    caster : Caster
+        The surface.
+    strikes : (n, 3) float64, metres, body frame
+        The strikes (or a subsample that keeps their spacing).
+    reach : float, metres
+
+    Returns
+    -------
+    (m,) bool
+    """
+    from scipy.spatial import cKDTree
+
+    if len(misses) == 0:
+        return np.zeros(0, dtype=bool)
+    rays = np.hstack([misses.origin - caster.centre, misses.direction]).astype(np.float32)
+    t_hit = caster.scene.cast_rays(caster._o3d.core.Tensor(rays))["t_hit"].numpy()
+    t_hit = t_hit.astype(np.float64)
+    inside = np.isfinite(t_hit) & (t_hit >= misses.range_min) & (t_hit <= misses.range_max)
+    cut = np.zeros(len(misses), dtype=bool)
+    if inside.any():
+        crossing = misses.origin[inside] + t_hit[inside, None] * misses.direction[inside]
+        distance, _ = cKDTree(strikes).query(crossing, distance_upper_bound=reach, workers=-1)
+        cut[inside] = ~np.isfinite(distance)
+    return cut
+
+
 def subsample(n: int, limit: int, seed: int) -> np.ndarray:
     """Sorted indices of at most ``limit`` of ``n`` items (all of them when ``n <= limit``)."""
     if n <= limit:
