@@ -121,9 +121,11 @@ def collect(args) -> None:
         rows = records(args.suite, cloud)
         points = load_cloud(args.suite, cloud)
         start = time.perf_counter()
+        beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points.points, seed=0)
         choice = auto.choose(points.points, view_points=points.view_points,
                              uncertainty=points.attributes, candidates=candidate_runs(rows),
-                             holdout=args.holdout, seed=0, n_workers=args.workers)
+                             holdout=args.holdout, seed=0, n_workers=args.workers,
+                             misses=beams)
         elapsed = time.perf_counter() - start
         table = [c.to_dict() | {"key": c.run.key} for c in choice.candidates]
         arrays = {f"cost/{c.run.key}": c.cost for c in choice.candidates if c.cost is not None}
@@ -187,6 +189,31 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
         out.append(candidate)
     return (out, arrays["block"], data["coverage"], data["tau_m"],
             data.get("n_checked") or checked_count(work, suite, cloud))
+
+
+def with_misses(work: Path, cloud: str, candidates: list) -> int:
+    """Set each candidate's ``misses_cut`` from ``misses``'s record of ``cloud`` (when it has
+    one; else 0 missed beams: the step is skipped); returns the missed beams cast."""
+    path = work / "misses" / f"{cloud}.json"
+    if not path.exists():
+        return 0
+    data = json.loads(path.read_text())
+    for c in candidates:
+        c.misses_cut = data["cut"].get(c.run.key, 0.0 if c.scored else None)
+    return data["n_misses"]
+
+
+def free_space(candidates: list, n_misses: int, rate: float, ses: float) -> list:
+    """The rule ``rules --miss-rate`` tries (not auto's): before the band, every scored
+    candidate that cuts more missed beams than ``ses`` binomial standard errors above the larger
+    of ``rate`` and the fewest any scored candidate cuts is left out (its level stays fitted,
+    so the ladder's stop is unchanged when one remains)."""
+    scored = [c for c in candidates if c.scored and c.misses_cut is not None]
+    if not n_misses or not scored:
+        return candidates
+    reference = max(rate, min(c.misses_cut for c in scored))
+    limit = reference + ses * np.sqrt(reference * (1 - reference) / n_misses)
+    return [c for c in candidates if not (c.scored and (c.misses_cut or 0.0) > limit)]
 
 
 def checked_count(work: Path, suite: Path | None, cloud: str) -> int:
@@ -265,6 +292,9 @@ def rules(args) -> None:
         rows = records(args.suite, cloud)
         candidates, block, coverage, tau, n_checked = candidates_of(
             args.work, cloud, args.extra, args.statistic, args.suite)
+        n_misses = with_misses(args.work, cloud, candidates)
+        if args.miss_rate is not None:
+            candidates = free_space(candidates, n_misses, args.miss_rate, args.miss_ses)
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
         v = verdict(rows, chosen.run.key)
@@ -387,7 +417,6 @@ def misses(args) -> None:
     on the compare's mesh of the run (fitted on all strikes; auto measures fold 0's); kept in
     ``WORK/misses/CLOUD.json`` for ``rules``."""
     from formats.mesh_io import read_mesh
-    from recon.registration.misses import missed_beams
     from recon.surfaces import auto, judge
 
     out = args.work / "misses"
@@ -616,6 +645,11 @@ def main(argv=None) -> int:
                         help="rules: the held-out statistic replayed (default: auto's)")
     parser.add_argument("--band", type=float, help="rules: the band in paired standard "
                         "errors (default: auto.BAND_SES)")
+    parser.add_argument("--miss-rate", type=float, help="rules: leave out, before the band, "
+                        "the candidates cutting missed beams beyond this rate (``free_space``; "
+                        "needs ``misses``; default: auto's rule, which does not)")
+    parser.add_argument("--miss-ses", type=float, default=3.0,
+                        help="rules: standard errors of --miss-rate's test")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
     parser.add_argument("--no-prior", action="store_true",

@@ -164,6 +164,9 @@ class Candidate:
     violated, holes : float or None
         Over all strikes (a seeded subsample of ``judge.MAX_CHECKED``): fraction of beams the
         surface cuts before their strike, and of strikes with no surface within tolerance.
+    misses_cut : float or None
+        Fraction of the log's missed beams near the strikes that the surface cuts away from
+        every strike (``judge.cut_misses``; None without a strike log's misses).
     span : float or None
         How far the surface reaches beyond the strikes (``span``; 1: no farther).
     eligible, holed, chosen : bool
@@ -186,6 +189,7 @@ class Candidate:
     beam_misses: float | None = None
     violated: float | None = None
     holes: float | None = None
+    misses_cut: float | None = None
     span: float | None = None
     eligible: bool = False
     holed: bool = False
@@ -238,6 +242,8 @@ class AutoChoice:
         What was known of the target (``TARGET_KINDS``).
     n_checked : int
         Strikes the candidates' ``violated`` and ``holes`` were counted over.
+    n_misses : int
+        Missed beams the candidates' ``misses_cut`` was counted over (0: no strike log).
     """
 
     run: Run
@@ -250,6 +256,7 @@ class AutoChoice:
     tau_m: float
     target_kind: str = "unknown"
     n_checked: int = 0
+    n_misses: int = 0
 
     @property
     def method(self) -> str:
@@ -272,7 +279,7 @@ class AutoChoice:
         return {"method": self.method, "params": self.params, "label": self.label,
                 "reason": self.reason, "threshold": self.threshold, "coverage": self.coverage,
                 "noise_m": self.noise_m, "tau_m": self.tau_m, "target_kind": self.target_kind,
-                "n_checked": self.n_checked,
+                "n_checked": self.n_checked, "n_misses": self.n_misses,
                 "folds": {"k": folds.k, "n_tested": int(folds.tested.sum()),
                           "n_blocks": folds.n_blocks, "block_shots": folds.block_shots,
                           "margin_shots": folds.margin, "step_m": folds.step_m},
@@ -293,12 +300,17 @@ class _Fold:
 @dataclass(frozen=True)
 class _Context:
     """What every candidate is fitted on and judged against: the folds, a subsample of all
-    strikes (fold 0's surface against them: cuts and holes), tau and the noise length."""
+    strikes (fold 0's surface against them: cuts and holes), tau and the noise length, and the
+    log's missed beams near the strikes (None without a log) with the reach of a strike
+    (``miss_reach``)."""
 
     folds: list[_Fold]
     checked: judge.Strikes
     tau: float
     noise: float
+    points: np.ndarray | None = None
+    misses: Any = None
+    miss_reach: float = 0.0
 
     @property
     def block(self) -> np.ndarray:
@@ -401,15 +413,17 @@ def _fold(cloud: Cloud, strikes: judge.Strikes, folds: judge.Folds, f: int, *, k
     return _Fold(prepared, strikes.take(test), folds.block[test], strikes.take(fit_rows))
 
 
-def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, seed: int
-             ) -> _Context:
-    """Every fold prepared (step 1)."""
+def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, seed: int,
+             misses=None) -> _Context:
+    """Every fold prepared (step 1); ``misses``: the log's missed beams (``misses_near``)."""
     strikes = judge.Strikes.of(cloud)
     every = [_fold(cloud, strikes, folds, f, k=k, fallback=fallback, seed=seed)
              for f in range(folds.k)]
     all_rows = judge.subsample(len(strikes), judge.MAX_CHECKED, seed)
-    return _Context(folds=every, checked=strikes.take(all_rows), tau=judge.tau_of(cloud.points),
-                    noise=every[0].prepared.noise)
+    tau, noise = judge.tau_of(cloud.points), every[0].prepared.noise
+    return _Context(folds=every, checked=strikes.take(all_rows), tau=tau, noise=noise,
+                    points=cloud.points, misses=misses,
+                    miss_reach=miss_reach(tau, noise, every[0].prepared.spacing))
 
 
 def _fit_all(runs: list[Run], folds: list[_Fold], *, limits: Limits, n_workers: int | None,
@@ -459,7 +473,12 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
     tolerance = np.concatenate([h.tolerance for h in held])
     chi2, se = judge.block_mean_se(cost, context.block)
     vertices, faces = results[0]["vertices"], results[0]["faces"]
-    everywhere = judge.check(context.checked, judge.Caster(vertices, faces), **options)
+    caster = judge.Caster(vertices, faces)
+    everywhere = judge.check(context.checked, caster, **options)
+    misses_cut = None
+    if context.misses is not None and len(context.misses):
+        misses_cut = float(judge.cut_misses(context.misses, caster, context.points,
+                                            context.miss_reach).mean())
     return replace(candidate, n_faces=len(faces),
                    n_params=run.method_spec().parameter_count(vertices, faces),
                    closed=closed(faces), chi2=chi2, chi2_se=se, chi_heldout=float(np.sqrt(chi2)),
@@ -467,7 +486,7 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                    heldout_mean_m=float(np.mean(np.minimum(distance, tolerance))),
                    beam_misses=float(np.mean(np.concatenate([h.missed for h in held]))),
                    violated=float(everywhere.violated.mean()),
-                   holes=float(everywhere.hole.mean()),
+                   holes=float(everywhere.hole.mean()), misses_cut=misses_cut,
                    span=span(vertices, context.checked.points),
                    heldout=judge.HeldOut(distance, np.concatenate([h.sigma_normal for h in held]),
                                          context.block),
@@ -660,7 +679,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
            methods: Sequence[str] | None = None, holdout: float = HOLDOUT_FRACTION,
            seed: int = 0, k: int = DEFAULT_K, fallback: Fallback = "centroid",
            timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
-           n_workers: int | None = None, target_kind: str = "unknown") -> AutoChoice:
+           n_workers: int | None = None, target_kind: str = "unknown",
+           misses=None) -> AutoChoice:
     """Choose a method and resolution by held-out passes and the sensor rays, without the truth.
 
     Parameters
@@ -690,6 +710,10 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     target_kind : {"unknown", "natural"}
         What is known of the target (step 5 of the module docstring): ``"natural"`` for an
         asteroid or a comet.
+    misses : recon.registration.misses.MissedBeams, optional
+        The log's missed beams near the strikes (``misses_near``), in the body frame: each
+        candidate's ``misses_cut`` is reported (the choice does not use it:
+        docs/decisions.md).
 
     Returns
     -------
@@ -715,7 +739,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
                         f"{tested} in the smallest fold")
     levels = ([[bind(*r) if isinstance(r, tuple) else bind(r) for r in candidates]]
               if candidates else ladder(methods))
-    context = _context(cloud, folds, k=k, fallback=fallback, seed=seed)
+    context = _context(cloud, folds, k=k, fallback=fallback, seed=seed, misses=misses)
     table, note = climb(levels, context, limits=Limits(timeout_s=timeout_s, memory_mb=memory_mb),
                         n_workers=n_workers)
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
@@ -732,13 +756,14 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
               + ".")
     return AutoChoice(table[selection.chosen].run, reason, table, selection.threshold,
                       coverage, folds, context.noise, context.tau, target_kind,
-                      len(context.checked))
+                      len(context.checked), 0 if misses is None else len(misses))
 
 
 def format_choice(choice: AutoChoice) -> str:
     """The candidates table and the reason, as ``recon reconstruct -m auto`` prints them."""
     lines = [f"{'':2}{'candidate':<30} {'lvl':>3} {'kind':<13} {'chi2':>7} {'+-se':>6} "
-             f"{'chi fit':>7} {'cut':>6} {'holes':>6} {'params':>8} {'faces':>8}", "-" * 104]
+             f"{'chi fit':>7} {'cut':>6} {'holes':>6} {'free':>6} {'params':>8} {'faces':>8}",
+             "-" * 111]
     ranked = sorted(choice.candidates, key=lambda c: (not c.scored, c.chi2 or 0.0))
     for c in ranked:
         mark = "*" if c.chosen else ("x" if c.holed else "~" if c.eligible else " ")
@@ -748,13 +773,17 @@ def format_choice(choice: AutoChoice) -> str:
         elif not c.scored:
             lines.append(f"{start} FAILED: {c.reason[:50]}")
         else:
+            free = "-" if c.misses_cut is None else f"{c.misses_cut:.1%}"
             lines.append(f"{start} {c.chi2:>7.3g} {round(c.chi2_se, 9):>6.2g} {c.chi_fit:>7.2g} "
-                         f"{c.violated:>6.1%} {c.holes:>6.1%} {c.n_params:>8d} {c.n_faces:>8d}")
+                         f"{c.violated:>6.1%} {c.holes:>6.1%} {free:>6} {c.n_params:>8d} "
+                         f"{c.n_faces:>8d}")
     folds = choice.folds
     lines.append(f"(chi2: held-out chi-square per strike over {folds.k} folds, "
                  f"{folds.n_blocks} blocks of {folds.block_shots} shots, "
                  f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "
                  "chi fit: on the training strikes; cut: beams cut before their strike; "
+                 f"free: of {choice.n_misses} missed beams near the strikes, those the surface "
+                 "cuts away from every strike (free space it fills; not used in the choice); "
                  f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best, x "
                  "within them but leaving strikes in holes beyond the noise)")
     lines.append(choice.reason)
@@ -763,7 +792,8 @@ def format_choice(choice: AutoChoice) -> str:
 
 def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
                holdout: float = HOLDOUT_FRACTION, preparation: Preparation | None = None,
-               limits: Limits | None = None, target_kind: str = "unknown") -> AutoChoice:
+               limits: Limits | None = None, target_kind: str = "unknown",
+               misses=None) -> AutoChoice:
     """``choose`` on a cleaned ``Cloud`` (``Preparation.apply``) with a preparation's normals
     options and a run's limits: the choice ``-m auto`` makes.
 
@@ -779,9 +809,11 @@ def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
     limits : Limits, optional
     target_kind : {"unknown", "natural"}
         What is known of the target (``choose``).
+    misses : recon.registration.misses.MissedBeams, optional
+        The log's missed beams (``choose``).
     """
     preparation = preparation or Preparation()
     return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
                   methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
-                  fallback=preparation.fallback, target_kind=target_kind,
+                  fallback=preparation.fallback, target_kind=target_kind, misses=misses,
                   **(limits or Limits()).kwargs())
