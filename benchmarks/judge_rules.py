@@ -127,8 +127,8 @@ def collect(args) -> None:
                              holdout=args.holdout, seed=0, n_workers=args.workers,
                              misses=beams)
         elapsed = time.perf_counter() - start
-        table = [c.to_dict() | {"key": c.run.key} for c in choice.candidates]
-        arrays = {f"cost/{c.run.key}": c.cost for c in choice.candidates if c.cost is not None}
+        table = [c.to_dict() | {"key": c.key} for c in choice.candidates]
+        arrays = {f"cost/{c.key}": c.cost for c in choice.candidates if c.cost is not None}
         folds = choice.folds
         block = np.concatenate([folds.block[folds.test(f)] for f in range(folds.k)])
         np.savez_compressed(out / f"{cloud}.npz", block=block, **arrays)
@@ -171,7 +171,7 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
     names = {f.name for f in fields(auto.Candidate)} - {"run", "level", "heldout", "cost", "mesh"}
     out = []
     for row in data["candidates"]:
-        level = levels.get(row["key"])
+        level = levels.get(row["key"].removesuffix(" carved"))
         if level is None:
             if not extra:
                 continue
@@ -201,6 +201,15 @@ def with_misses(work: Path, cloud: str, candidates: list) -> int:
     for c in candidates:
         c.misses_cut = data["cut"].get(c.run.key, 0.0 if c.scored else None)
     return data["n_misses"]
+
+
+def carved_rows(work: Path, cloud: str) -> list[dict]:
+    """The carved candidates' true scores that ``misses`` kept for ``cloud``, as records."""
+    path = work / "misses" / f"{cloud}.json"
+    if not path.exists():
+        return []
+    carved = json.loads(path.read_text()).get("carved_truth", {})
+    return [{"key": key, "label": key, **scores} for key, scores in carved.items()]
 
 
 def free_space(candidates: list, n_misses: int, rate: float, ses: float) -> list:
@@ -265,13 +274,15 @@ def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_c
     return fitted[selection.chosen], fitted
 
 
-def verdict(rows: list[dict], key: str) -> dict:
-    """Where the run ``key`` stands against the truth (as ``benchmarks/suite.py`` judges)."""
+def verdict(rows: list[dict], key: str, extra: list[dict] = ()) -> dict:
+    """Where the run ``key`` stands against the truth (as ``benchmarks/suite.py`` judges),
+    looked up in ``rows`` and ``extra`` (carved candidates, ``carved_rows``: not compare runs,
+    so not in the best or the median)."""
     best_c = min(r["chamfer_m"] for r in rows)
     best_f = max(r.get("fscore") or 0.0 for r in rows)
     median_c = statistics.median(r["chamfer_m"] for r in rows)
     median_f = statistics.median(r.get("fscore") or 0.0 for r in rows)
-    mine = next((r for r in rows if r["key"] == key), None)
+    mine = next((r for r in [*rows, *extra] if r["key"] == key), None)
     if mine is None:
         return {"found": False}
     f, c = mine.get("fscore") or 0.0, mine["chamfer_m"]
@@ -297,7 +308,7 @@ def rules(args) -> None:
             candidates = free_space(candidates, n_misses, args.miss_rate, args.miss_ses)
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
-        v = verdict(rows, chosen.run.key)
+        v = verdict(rows, chosen.key, carved_rows(args.work, cloud))
         good += v.get("ok", False)
         median += v.get("median", False)
         fit_s = sum(c.fit_s or 0.0 for c in fitted)
@@ -434,24 +445,42 @@ def misses(args) -> None:
         reach = auto.miss_reach(data["tau_m"], data["noise_m"], spacing)
         drawn = time.perf_counter() - start
         mesh_of = {r["key"]: r["mesh"] for r in rows if r.get("mesh")}
-        cut, cast_s = {}, {}
+        cut, cast_s, carved = {}, {}, {}
         for row in data["candidates"]:
-            if row["key"] in mesh_of and row.get("chi2") is not None:
-                mesh = read_mesh(args.suite / cloud / mesh_of[row["key"]])
-                start = time.perf_counter()
-                hits = judge.cut_misses(beams, judge.Caster(mesh.vertices, mesh.faces), points,
-                                        reach)
-                cast_s[row["key"]] = time.perf_counter() - start
-                cut[row["key"]] = float(hits.mean()) if len(hits) else 0.0
+            base = row["key"].removesuffix(" carved")
+            if base not in mesh_of or row.get("chi2") is None:
+                continue
+            mesh = read_mesh(args.suite / cloud / mesh_of[base])
+            if row.get("carved"):   # the truth of the compare's mesh carved as auto carves
+                carved[row["key"]] = carved_truth(args, cloud, mesh, beams, points,
+                                                  data.get("miss_reach_m") or reach)
+                continue
+            start = time.perf_counter()
+            hits = judge.cut_misses(beams, judge.Caster(mesh.vertices, mesh.faces), points,
+                                    reach)
+            cast_s[row["key"]] = time.perf_counter() - start
+            cut[row["key"]] = float(hits.mean()) if len(hits) else 0.0
         path.write_text(json.dumps({"n_misses": len(beams), "n_missed": beams.n_missed,
                                     "reach_m": reach, "draw_s": drawn, "cast_s": cast_s,
-                                    "cut": cut}, indent=1))
+                                    "cut": cut, "carved_truth": carved}, indent=1))
         ranked = sorted((r for r in data["candidates"] if r["key"] in cut),
                         key=lambda r: r["chi2"])
         print(f"{cloud}: {len(beams)} misses ({beams.n_missed} in the log), reach {reach:.3g} m, "
               f"draw {drawn:.1f} s; " + "; ".join(f"{r['label']} chi2 {r['chi2']:.3g} cut "
                                                f"{cut[r['key']]:.2%}" for r in ranked[:6]),
               flush=True)
+
+
+def carved_truth(args, cloud: str, mesh, beams, points: np.ndarray, reach: float) -> dict:
+    """The true scores (``recon.api.score`` against the log's truth mesh, as the compare scores
+    its runs) of the compare's ``mesh`` carved by the missed beams (``judge.carve``)."""
+    from recon import api
+    from recon.surfaces import judge
+
+    vertices, faces = judge.carve(mesh.vertices, mesh.faces, beams, points, reach)
+    report = api.score((vertices, faces), truth=args.suite / "logs" / f"{cloud}.h5").to_dict()
+    return {"fscore": report["fscore"], "chamfer_m": report["chamfer_m"],
+            "n_faces": len(faces), "label": None}
 
 
 def print_tally(tally: dict[tuple[str, float], list]) -> None:

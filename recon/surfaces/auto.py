@@ -129,6 +129,12 @@ NATURAL_SPAN = 1.5
 # beyond the strikes lies there. A missed beam's crossing of a surface counts as a cut only
 # farther than ``miss_reach`` from every strike (judge.cut_misses).
 MISS_BOX = 0.1
+# A candidate cutting more than MISS_RATE of the missed beams, by MISS_SES binomial standard
+# errors, fills free space: it joins the ladder a second time carved (``judge.carve``). The
+# rate: the plane family, open and near the strikes, cuts at most 0.3 % on the suite's
+# spacecraft and the natural bodies' surfaces at most 0.6 % (docs/decisions.md).
+MISS_RATE = 0.01
+MISS_SES = 3.0
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
 # compete for the cores.
 FIT_THREADS = 1
@@ -167,6 +173,8 @@ class Candidate:
     misses_cut : float or None
         Fraction of the log's missed beams near the strikes that the surface cuts away from
         every strike (``judge.cut_misses``; None without a strike log's misses).
+    carved : bool
+        The run's surfaces with the faces cut by missed beams removed (``judge.carve``).
     span : float or None
         How far the surface reaches beyond the strikes (``span``; 1: no farther).
     eligible, holed, chosen : bool
@@ -194,13 +202,19 @@ class Candidate:
     eligible: bool = False
     holed: bool = False
     chosen: bool = False
+    carved: bool = False
     heldout: judge.HeldOut | None = field(default=None, repr=False)
     cost: np.ndarray | None = field(default=None, repr=False)
     mesh: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     @property
     def label(self) -> str:
-        return self.run.label
+        return self.run.label + (" carved" if self.carved else "")
+
+    @property
+    def key(self) -> str:
+        """The run's key, with " carved" for a carved candidate."""
+        return self.run.key + (" carved" if self.carved else "")
 
     @property
     def scored(self) -> bool:
@@ -244,6 +258,10 @@ class AutoChoice:
         Strikes the candidates' ``violated`` and ``holes`` were counted over.
     n_misses : int
         Missed beams the candidates' ``misses_cut`` was counted over (0: no strike log).
+    miss_reach_m : float, metres
+        How near a strike a missed beam's crossing is no evidence (``miss_reach``).
+    misses : recon.registration.misses.MissedBeams or None
+        The missed beams (``carve`` cuts the refitted surface with them).
     """
 
     run: Run
@@ -257,6 +275,8 @@ class AutoChoice:
     target_kind: str = "unknown"
     n_checked: int = 0
     n_misses: int = 0
+    miss_reach_m: float = 0.0
+    misses: Any = field(default=None, repr=False)
 
     @property
     def method(self) -> str:
@@ -268,18 +288,34 @@ class AutoChoice:
 
     @property
     def label(self) -> str:
-        return self.run.label
+        return self.chosen.label
+
+    @property
+    def carved(self) -> bool:
+        """The chosen surface is carved by the missed beams (``judge.carve``, ``carve``)."""
+        return self.chosen.carved
 
     @property
     def chosen(self) -> Candidate:
         return next(c for c in self.candidates if c.chosen)
 
+    def carve(self, vertices: np.ndarray, faces: np.ndarray, points: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """The chosen run's surface refitted on all strikes ``points`` (n, 3) [m], carved by
+        the missed beams as its folds were when the chosen candidate is carved
+        (``judge.carve``); else unchanged. ``vertices`` (v, 3) [m], ``faces`` (f, 3)."""
+        if not self.carved:
+            return vertices, faces
+        return judge.carve(vertices, faces, self.misses, points, self.miss_reach_m)
+
     def to_dict(self) -> dict:
         folds = self.folds
         return {"method": self.method, "params": self.params, "label": self.label,
+                "carved": self.carved,
                 "reason": self.reason, "threshold": self.threshold, "coverage": self.coverage,
                 "noise_m": self.noise_m, "tau_m": self.tau_m, "target_kind": self.target_kind,
                 "n_checked": self.n_checked, "n_misses": self.n_misses,
+                "miss_reach_m": self.miss_reach_m,
                 "folds": {"k": folds.k, "n_tested": int(folds.tested.sum()),
                           "n_blocks": folds.n_blocks, "block_shots": folds.block_shots,
                           "margin_shots": folds.margin, "step_m": folds.step_m},
@@ -451,15 +487,16 @@ def _fit_all(runs: list[Run], folds: list[_Fold], *, limits: Limits, n_workers: 
     return results
 
 
-def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
-                    ) -> Candidate:
+def judge_candidate(run: Run, level: int, results: list[dict], context: _Context,
+                    carved: bool = False) -> Candidate:
     """Step 2 of the module docstring for one run fitted on every fold (``run_isolated``
     results, folds in order): a fold that failed fails the candidate."""
     failed = next((r for r in results if r.get("status", "failed") != "ok"), None)
     candidate = Candidate(run, level, status="ok" if failed is None else
                           failed.get("status", "failed"),
                           reason="" if failed is None else failed.get("reason", "") or "",
-                          fit_s=sum(r.get("process_time_s") or 0.0 for r in results))
+                          fit_s=sum(r.get("process_time_s") or 0.0 for r in results),
+                          carved=carved)
     if failed is not None:
         return candidate
     options = {"tau": context.tau, "noise": context.noise}
@@ -493,6 +530,27 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                    cost=cost, mesh=(vertices, faces))
 
 
+def fills_free_space(candidate: Candidate, context: _Context) -> bool:
+    """Whether a scored candidate cuts more than ``MISS_RATE`` of the missed beams, by
+    ``MISS_SES`` binomial standard errors: it joins the ladder carved."""
+    if candidate.misses_cut is None or candidate.carved:
+        return False
+    n = len(context.misses)
+    return candidate.misses_cut > MISS_RATE + MISS_SES * math.sqrt(
+        MISS_RATE * (1.0 - MISS_RATE) / n)
+
+
+def _carved(results: list[dict], context: _Context) -> list[dict]:
+    """Each fold's surface carved by the missed beams (``judge.carve``), near its own
+    training strikes."""
+    out = []
+    for result, fold in zip(results, context.folds, strict=True):
+        vertices, faces = judge.carve(result["vertices"], result["faces"], context.misses,
+                                      fold.prepared.points, context.miss_reach)
+        out.append(result | {"vertices": vertices, "faces": faces})
+    return out
+
+
 def _best(candidates: list[Candidate]) -> Candidate | None:
     return min((c for c in candidates if c.scored), key=lambda c: c.chi2, default=None)
 
@@ -513,7 +571,11 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
         before = _best(candidates)
         results = _fit_all(level, context.folds, limits=limits, n_workers=n_workers,
                            desc=f"auto level {depth}")
-        candidates += [judge_candidate(run, depth, results[run.key], context) for run in level]
+        for run in level:
+            candidates.append(judge_candidate(run, depth, results[run.key], context))
+            if fills_free_space(candidates[-1], context):
+                candidates.append(judge_candidate(run, depth, _carved(results[run.key], context),
+                                                  context, carved=True))
         rest = levels[depth + 1:]
         if depth + 1 >= ALWAYS_LEVELS and rest and _stops(candidates, before, depth):
             candidates += [Candidate(run, later, status="skipped")
@@ -635,6 +697,11 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
                  f"{kept} candidates in that band {holding}it is the smallest model")
     if selection.holed and not selection.prior:
         text += _holes_reason(candidates, selection)
+    if c.carved:
+        whole = next(o for o in candidates if o.run.key == c.run.key and not o.carved)
+        text += (f"; carved: the uncarved surface cuts {whole.misses_cut:.1%} of the missed "
+                 f"beams near the strikes (free space it fills), the faces they cross away "
+                 f"from every strike are removed ({c.misses_cut:.1%} left)")
     if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
         text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
                  "it follows part of the noise")
@@ -756,7 +823,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
               + ".")
     return AutoChoice(table[selection.chosen].run, reason, table, selection.threshold,
                       coverage, folds, context.noise, context.tau, target_kind,
-                      len(context.checked), 0 if misses is None else len(misses))
+                      len(context.checked), 0 if misses is None else len(misses),
+                      context.miss_reach, misses)
 
 
 def format_choice(choice: AutoChoice) -> str:
