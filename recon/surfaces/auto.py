@@ -21,6 +21,17 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    strikes (fold 0's surface) the fraction of beams the surface cuts before their strike
    (``violated``) and of strikes with no surface within their
    tolerance (``holes``).
+   **Missed beams** (given a strike log: ``misses_near``, ``recon.registration.misses``): a
+   (shot, beam) pair with no strike crossed free space. Each candidate's fold-0 surface is cast
+   against a seeded subsample of the misses near the strikes; ``misses_cut`` is the fraction
+   it cuts farther than ``miss_reach`` from every strike (``judge.cut_misses``). A surface at
+   the truth cuts almost none; a closed membrane across a spacecraft's gaps or unseen side
+   cuts many. A candidate that cuts more than ``MISS_RATE``, by ``MISS_SES`` binomial
+   standard errors (``fills_free_space``), joins the ladder a second time **carved**: each
+   fold's surface without the faces the misses cut (``judge.carve``), judged like any other
+   (held-out strikes, cuts, holes); when it is chosen, the surface refitted on all strikes is
+   carved the same way (``AutoChoice.carve``). Without a strike log (a cloud file) there are
+   no misses and no carved candidates.
 3. **One paired standard error** (``paired_gaps``): every candidate tested on the same strikes
    as the best, whose chi-square exceeds the best's by at most ``BAND_SES`` standard errors
    of that difference (from the spread of the blocks' mean differences), fits the held-out
@@ -779,8 +790,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
         asteroid or a comet.
     misses : recon.registration.misses.MissedBeams, optional
         The log's missed beams near the strikes (``misses_near``), in the body frame: each
-        candidate's ``misses_cut`` is reported (the choice does not use it:
-        docs/decisions.md).
+        candidate's ``misses_cut``, and a carved candidate for each that fills free space
+        (module docstring, step 2). None: neither (a cloud file records no misses).
 
     Returns
     -------
@@ -851,9 +862,10 @@ def format_choice(choice: AutoChoice) -> str:
                  f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "
                  "chi fit: on the training strikes; cut: beams cut before their strike; "
                  f"free: of {choice.n_misses} missed beams near the strikes, those the surface "
-                 "cuts away from every strike (free space it fills; not used in the choice); "
+                 "cuts away from every strike (free space it fills); "
                  f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best, x "
-                 "within them but leaving strikes in holes beyond the noise)")
+                 "within them but leaving strikes in holes beyond the noise; carved: without "
+                 "the faces the missed beams cut)")
     lines.append(choice.reason)
     return "\n".join(lines)
 
