@@ -1,6 +1,7 @@
 """Offline harness of ``-m auto``'s choice rule and of the truth-free estimate, on a finished suite.
 
     python benchmarks/judge_rules.py collect --suite benchmarks/out/suite --work /tmp/judge
+    python benchmarks/judge_rules.py misses  --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py rules   --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py evidence --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py estimate --suite benchmarks/out/suite --work /tmp/judge
@@ -14,6 +15,10 @@ seconds instead of a suite run:
   (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
   candidate, the held-out costs of every tested strike, their blocks and the per-candidate
   figures (``WORK/folds/CLOUD.npz`` and ``.json``);
+- ``misses``: per cloud, the log's missed beams as auto draws them, each collected
+  candidate's fraction of them cut on the compare's mesh (``WORK/misses``), and the true
+  scores of the carved candidates (the compare's mesh carved as auto carves it): ``rules``
+  judges a carved choice by them;
 - ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
   strikes, the smallest model) and the ladder's stop on those figures, restricted to the
   ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best F-score
