@@ -189,7 +189,8 @@ class Candidate:
     span : float or None
         How far the surface reaches beyond the strikes (``span``; 1: no farther).
     eligible, holed, chosen : bool
-        Within the band (step 3); in it but left out for its holes (step 4); chosen.
+        Within the band (step 3); in it but left out for its holes (step 4) or for the free
+        space its carved twin in the band leaves open (step 2); chosen.
     """
 
     run: Run
@@ -375,7 +376,8 @@ class Selection:
     chi-square in it), the candidates within the band, and each scored candidate's chi-square
     above the best's with its paired standard error; ``holed``: the band's candidates that
     leave too many strikes in holes (``hole_test``) and ``hole_limit`` the fraction they
-    exceed; ``prior``: the natural-body prior (``natural_prior``) made the choice."""
+    exceed; ``filled``: the band's candidates whose carved twin is in it (``fills_in_band``);
+    ``prior``: the natural-body prior (``natural_prior``) made the choice."""
 
     chosen: int
     best: int
@@ -384,6 +386,7 @@ class Selection:
     gaps: dict[int, tuple[float, float]]
     holed: tuple[int, ...] = ()
     hole_limit: float = 1.0
+    filled: tuple[int, ...] = ()
     prior: bool = False
 
 
@@ -636,9 +639,18 @@ def select(candidates: list[Candidate], block: np.ndarray, n_checked: int) -> Se
     threshold = max(candidates[i].chi2 for i in eligible)
     limit = hole_limit([candidates[i].holes for i in eligible], n_checked)
     holed = tuple(i for i in eligible if candidates[i].holes > limit)
-    chosen = min((i for i in eligible if i not in holed),
+    filled = fills_in_band(candidates, [i for i in eligible if i not in holed])
+    chosen = min((i for i in eligible if i not in holed and i not in filled),
                  key=lambda i: (candidates[i].n_params, candidates[i].chi2))
-    return Selection(chosen, best, threshold, eligible, gaps, holed, limit)
+    return Selection(chosen, best, threshold, eligible, gaps, holed, limit, filled)
+
+
+def fills_in_band(candidates: list[Candidate], kept: list[int]) -> tuple[int, ...]:
+    """The candidates among ``kept`` (band members that hold the strikes) whose carved twin
+    is kept too: the same surface without the faces free space refutes fits the held-out
+    passes as well, so the uncarved one drops out (step 2 of the module docstring)."""
+    twins = {candidates[i].run.key for i in kept if candidates[i].carved}
+    return tuple(i for i in kept if not candidates[i].carved and candidates[i].run.key in twins)
 
 
 def natural_prior(candidates: list[Candidate], selection: Selection, coverage: float,
@@ -691,7 +703,8 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
             f"faces, fitted on a fold's training strikes): held-out chi-square {c.chi2:.3g} "
             f"per strike (1 = at the recorded noise), {c.violated:.1%} of beams cut before "
             f"their strike, {c.holes:.1%} of strikes in holes")
-    kept = len(selection.eligible) - len(selection.holed)   # the chosen one among them
+    # the chosen one among them
+    kept = len(selection.eligible) - len(selection.holed) - len(selection.filled)
     holding = "that hold the strikes " if selection.holed else ""
     if selection.prior:
         text += _prior_reason(candidates, selection, coverage)
@@ -710,9 +723,11 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
         text += _holes_reason(candidates, selection)
     if c.carved:
         whole = next(o for o in candidates if o.run.key == c.run.key and not o.carved)
+        dropped = (", and drops out of the band, where its carved twin is"
+                   if candidates.index(whole) in selection.filled else "")
         text += (f"; carved: the uncarved surface cuts {whole.misses_cut:.1%} of the missed "
-                 f"beams near the strikes (free space it fills), the faces they cross away "
-                 f"from every strike are removed ({c.misses_cut:.1%} left)")
+                 f"beams near the strikes (free space it fills){dropped}; the faces they cross "
+                 f"away from every strike are removed ({c.misses_cut:.1%} left)")
     if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
         text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
                  "it follows part of the noise")
@@ -826,7 +841,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     if target_kind == "natural":
         selection = natural_prior(table, selection, coverage, context.tau)
     for i, c in enumerate(table):
-        c.eligible, c.holed = i in selection.eligible, i in selection.holed
+        c.eligible = i in selection.eligible
+        c.holed = i in selection.holed or i in selection.filled
         c.chosen = i == selection.chosen
     fitted = sum(c.status != "skipped" for c in table)
     reason = (explain(table, selection, coverage)

@@ -157,3 +157,19 @@ def test_only_a_strike_log_hands_auto_its_misses(tmp_path):
     assert isinstance(from_log, MissedBeams) and set(from_log.beam) <= {2}
     assert _misses(tmp_path / "spin.ply", cloud, 0) is None
     assert _misses(cloud, cloud, 0) is None
+
+
+def test_the_refitted_choice_is_carved_only_when_a_carved_candidate_was_chosen():
+    points, view, misses = plates()
+    hull = box([-1.0, -2.0, -2.0], [1.0, 2.0, 2.0])
+    choice = choose(points, view_points=view, candidates=[("convex-hull", {})], seed=0,
+                    misses=misses)
+    assert choice.carved and choice.label == "convex-hull carved", format_choice(choice)
+    assert "carved: the uncarved surface cuts" in choice.reason
+    vertices, faces = choice.carve(*hull, points)
+    assert len(faces) == 8 and len(vertices) == 8   # the four walls; top and bottom gone
+    assert np.all(np.abs(vertices[faces].mean(axis=1)[:, 2]) < 1.99)
+    plain = choose(points, view_points=view, candidates=[("convex-hull", {})], seed=0)
+    assert not plain.carved
+    same = plain.carve(*hull, points)
+    assert same[0] is hull[0] and same[1] is hull[1]
