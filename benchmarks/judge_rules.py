@@ -15,11 +15,11 @@ seconds instead of a suite run:
   (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
   candidate, the held-out costs of every tested strike, their blocks and the per-candidate
   figures (``WORK/folds/CLOUD.npz`` and ``.json``);
-- ``misses``: per cloud, the log's missed beams as auto draws them, each collected
-  candidate's fraction of them cut on the compare's mesh (``WORK/misses``), and the true
-  scores of the carved candidates (the compare's mesh carved as auto carves it): ``rules``
-  judges a carved choice by them;
-- ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
+- ``misses``: per cloud, the log's missed beams as auto draws them and each collected
+  candidate's fraction of them cut on the compare's mesh (``WORK/misses``), for
+  ``rules --miss-rate``;
+- ``rules``: replays ``auto.select`` (a carved choice judged by ``carved_truth``: the
+  compare's mesh of its run carved as auto carves it, scored on the truth) (the paired band, the hole test over the ``n_checked``
   strikes, the smallest model) and the ladder's stop on those figures, restricted to the
   ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best F-score
   and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the median run;
@@ -208,15 +208,6 @@ def with_misses(work: Path, cloud: str, candidates: list) -> int:
     return data["n_misses"]
 
 
-def carved_rows(work: Path, cloud: str) -> list[dict]:
-    """The carved candidates' true scores that ``misses`` kept for ``cloud``, as records."""
-    path = work / "misses" / f"{cloud}.json"
-    if not path.exists():
-        return []
-    carved = json.loads(path.read_text()).get("carved_truth", {})
-    return [{"key": key, "label": key, **scores} for key, scores in carved.items()]
-
-
 def free_space(candidates: list, n_misses: int, rate: float, ses: float) -> list:
     """The rule ``rules --miss-rate`` tries (not auto's): before the band, every scored
     candidate that cuts more missed beams than ``ses`` binomial standard errors above the larger
@@ -281,7 +272,7 @@ def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_c
 
 def verdict(rows: list[dict], key: str, extra: list[dict] = ()) -> dict:
     """Where the run ``key`` stands against the truth (as ``benchmarks/suite.py`` judges),
-    looked up in ``rows`` and ``extra`` (carved candidates, ``carved_rows``: not compare runs,
+    looked up in ``rows`` and ``extra`` (a carved candidate, ``carved_truth``: not a compare run,
     so not in the best or the median)."""
     best_c = min(r["chamfer_m"] for r in rows)
     best_f = max(r.get("fscore") or 0.0 for r in rows)
@@ -313,7 +304,7 @@ def rules(args) -> None:
             candidates = free_space(candidates, n_misses, args.miss_rate, args.miss_ses)
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
-        v = verdict(rows, chosen.key, carved_rows(args.work, cloud))
+        v = verdict(rows, chosen.key, carved_truth(args, cloud, chosen.key))
         good += v.get("ok", False)
         median += v.get("median", False)
         fit_s = sum(c.fit_s or 0.0 for c in fitted)
@@ -450,16 +441,11 @@ def misses(args) -> None:
         reach = auto.miss_reach(data["tau_m"], data["noise_m"], spacing)
         drawn = time.perf_counter() - start
         mesh_of = {r["key"]: r["mesh"] for r in rows if r.get("mesh")}
-        cut, cast_s, carved = {}, {}, {}
+        cut, cast_s = {}, {}
         for row in data["candidates"]:
-            base = row["key"].removesuffix(" carved")
-            if base not in mesh_of or row.get("chi2") is None:
+            if row["key"] not in mesh_of or row.get("chi2") is None:
                 continue
-            mesh = read_mesh(args.suite / cloud / mesh_of[base])
-            if row.get("carved"):   # the truth of the compare's mesh carved as auto carves
-                carved[row["key"]] = carved_truth(args, cloud, mesh, beams, points,
-                                                  data.get("miss_reach_m") or reach)
-                continue
+            mesh = read_mesh(args.suite / cloud / mesh_of[row["key"]])
             start = time.perf_counter()
             hits = judge.cut_misses(beams, judge.Caster(mesh.vertices, mesh.faces), points,
                                     reach)
@@ -467,7 +453,7 @@ def misses(args) -> None:
             cut[row["key"]] = float(hits.mean()) if len(hits) else 0.0
         path.write_text(json.dumps({"n_misses": len(beams), "n_missed": beams.n_missed,
                                     "reach_m": reach, "draw_s": drawn, "cast_s": cast_s,
-                                    "cut": cut, "carved_truth": carved}, indent=1))
+                                    "cut": cut}, indent=1))
         ranked = sorted((r for r in data["candidates"] if r["key"] in cut),
                         key=lambda r: r["chi2"])
         print(f"{cloud}: {len(beams)} misses ({beams.n_missed} in the log), reach {reach:.3g} m, "
@@ -476,16 +462,36 @@ def misses(args) -> None:
               flush=True)
 
 
-def carved_truth(args, cloud: str, mesh, beams, points: np.ndarray, reach: float) -> dict:
-    """The true scores (``recon.api.score`` against the log's truth mesh, as the compare scores
-    its runs) of the compare's ``mesh`` carved by the missed beams (``judge.carve``)."""
+def carved_truth(args, cloud: str, key: str) -> list[dict]:
+    """The true scores of carved candidate ``key`` (``recon.api.score`` against the log's
+    truth mesh, as the compare scores its runs): the compare's mesh of its run carved by the
+    missed beams as auto carves (``judge.carve`` at the collected reach), as a record; cached
+    in ``WORK/carved/CLOUD.json``. [] when ``key`` is not carved or its run has no mesh."""
+    from formats.mesh_io import read_mesh
     from recon import api
-    from recon.surfaces import judge
+    from recon.surfaces import auto, judge
 
-    vertices, faces = judge.carve(mesh.vertices, mesh.faces, beams, points, reach)
-    report = api.score((vertices, faces), truth=args.suite / "logs" / f"{cloud}.h5").to_dict()
-    return {"fscore": report["fscore"], "chamfer_m": report["chamfer_m"],
-            "n_faces": len(faces), "label": None}
+    base = key.removesuffix(" carved")
+    mesh = next((r["mesh"] for r in records(args.suite, cloud) if r["key"] == base
+                 and r.get("mesh")), None)
+    if base == key or mesh is None:
+        return []
+    path = args.work / "carved" / f"{cloud}.json"
+    cache = json.loads(path.read_text()) if path.exists() else {}
+    if key not in cache:
+        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
+        points = load_cloud(args.suite, cloud).points
+        beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points, seed=0)
+        mesh = read_mesh(args.suite / cloud / mesh)
+        vertices, faces = judge.carve(mesh.vertices, mesh.faces, beams, points,
+                                      data["miss_reach_m"])
+        report = api.score((vertices, faces),
+                           truth=args.suite / "logs" / f"{cloud}.h5").to_dict()
+        cache[key] = {"fscore": report["fscore"], "chamfer_m": report["chamfer_m"],
+                      "n_faces": len(faces)}
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(cache, indent=1))
+    return [{"key": key, "label": key, **cache[key]}]
 
 
 def print_tally(tally: dict[tuple[str, float], list]) -> None:
