@@ -18,11 +18,12 @@ seconds instead of a suite run:
 - ``misses``: per cloud, the log's missed beams as auto draws them and each collected
   candidate's fraction of them cut on the compare's mesh (``WORK/misses``), for
   ``rules --miss-rate``;
-- ``rules``: replays ``auto.select`` (a carved choice judged by ``carved_truth``: the
-  compare's mesh of its run carved as auto carves it, scored on the truth) (the paired band, the hole test over the ``n_checked``
-  strikes, the smallest model) and the ladder's stop on those figures, restricted to the
-  ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best F-score
-  and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the median run;
+- ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
+  strikes, the carved twins, the smallest model) and the ladder's stop on those figures,
+  restricted to the ladder, and compares the choice with the truth (a carved choice by
+  ``carved_truth``: the compare's mesh of its run carved as auto carves it, scored): within
+  ``F_TOLERANCE`` of the best F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all
+  compare runs, not below the median run;
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
   "unknown");
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
