@@ -555,14 +555,14 @@ def fills_free_space(candidate: Candidate, context: _Context) -> bool:
 
 
 def _carved(results: list[dict], context: _Context) -> list[dict]:
-    """Each fold's surface carved by the missed beams (``judge.carve``), near its own
-    training strikes."""
-    out = []
-    for result, fold in zip(results, context.folds, strict=True):
-        vertices, faces = judge.carve(result["vertices"], result["faces"], context.misses,
-                                      fold.prepared.points, context.miss_reach)
-        out.append(result | {"vertices": vertices, "faces": faces})
-    return out
+    """Each fold's surface carved by the missed beams (``judge.carve``) as the surface
+    refitted on all strikes will be: a crossing within reach of any strike, held out or not,
+    is no evidence (carving fits nothing to the held-out strikes; spared near them only
+    by a fold's training strikes, a silhouette a beam grazed past would be cut open where
+    the final surface is not)."""
+    return [result | dict(zip(("vertices", "faces"), judge.carve(
+        result["vertices"], result["faces"], context.misses, context.points,
+        context.miss_reach), strict=True)) for result in results]
 
 
 def _best(candidates: list[Candidate]) -> Candidate | None:
