@@ -311,10 +311,11 @@ def rules(args) -> None:
         fit_s = sum(c.fit_s or 0.0 for c in fitted)
         compare_s = json.loads((args.suite / cloud / "timing.json").read_text())["compare_s"]
         # Load-free: the compare's own wall time of each fitted run, times the folds and
-        # their share of the strikes (a fit's time grows about linearly with the strikes).
+        # their share of the strikes (a fit's time grows about linearly with the strikes); a
+        # carved candidate is no fit (its carving is timed by ``misses``' casts, not here).
         wall = {r["key"]: r.get("wall_time_s") or 0.0 for r in rows}
         folds = round(1 / args.holdout)
-        modelled = sum(wall.get(c.run.key, 0.0) for c in fitted) * (folds - 1)
+        modelled = sum(wall.get(c.run.key, 0.0) for c in fitted if not c.carved) * (folds - 1)
         seconds.append(modelled / compare_s)
         print(f"{cloud:30} {chosen.label[:26]:26} F {v.get('f_ratio', 0):.3f} "
               f"C {v.get('c_ratio', 0):6.3f} {'ok ' if v.get('ok') else 'NO '}"
