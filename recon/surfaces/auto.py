@@ -142,8 +142,8 @@ NATURAL_SPAN = 1.5
 MISS_BOX = 0.1
 # A candidate cutting more than MISS_RATE of the missed beams, by MISS_SES binomial standard
 # errors, fills free space: it joins the ladder a second time carved (``judge.carve``). The
-# rate: the plane family, open and near the strikes, cuts at most 0.3 % on the suite's
-# spacecraft and the natural bodies' surfaces at most 0.6 % (docs/decisions.md).
+# rate: above the 0-0.5 % the plane family, open and near the strikes, cuts on most of the
+# suite's spacecraft, below the 7-70 % a graph cut's membranes cut (docs/decisions.md).
 MISS_RATE = 0.01
 MISS_SES = 3.0
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
