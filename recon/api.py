@@ -1116,7 +1116,7 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
     return ReconstructResult(surface, str(source) if named else None,
                              None if output is None else Path(output), len(prepared.points),
                              prepared.spacing, prepared.noise, cloud.view_points is not None,
-                             run.label)
+                             run.label if choice is None else choice.label)
 
 
 def _misses(source, cloud, seed: int):
