@@ -173,3 +173,18 @@ def test_the_refitted_choice_is_carved_only_when_a_carved_candidate_was_chosen()
     assert not plain.carved
     same = plain.carve(*hull, points)
     assert same[0] is hull[0] and same[1] is hull[1]
+
+
+def test_missed_beams_are_a_seeded_bounded_draw(tmp_path):
+    path = tmp_path / "spin.h5"
+    write_spinning_log(path)
+    box = {"low": np.full(3, -1e4), "high": np.full(3, 1e4)}
+    # 90 pairs fired, 40 drawn (20 a miss kept): about a third of them missed.
+    a = missed_beams(path, limit=2, seed=3, **box)
+    b = missed_beams(path, limit=2, seed=3, **box)
+    assert len(a) == 2 and set(a.beam) == {2}
+    np.testing.assert_array_equal(a.origin, b.origin)
+    np.testing.assert_array_equal(a.shot, b.shot)
+    assert 10 <= a.n_missed <= 60
+    assert not np.array_equal(missed_beams(path, limit=2, seed=4, **box).shot, a.shot) or \
+        not np.array_equal(missed_beams(path, limit=2, seed=5, **box).shot, a.shot)
