@@ -1,6 +1,7 @@
 """Offline harness of ``-m auto``'s choice rule and of the truth-free estimate, on a finished suite.
 
     python benchmarks/judge_rules.py collect --suite benchmarks/out/suite --work /tmp/judge
+    python benchmarks/judge_rules.py misses  --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py rules   --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py evidence --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py estimate --suite benchmarks/out/suite --work /tmp/judge
@@ -14,10 +15,15 @@ seconds instead of a suite run:
   (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
   candidate, the held-out costs of every tested strike, their blocks and the per-candidate
   figures (``WORK/folds/CLOUD.npz`` and ``.json``);
+- ``misses``: per cloud, the log's missed beams as auto draws them and each collected
+  candidate's fraction of them cut on the compare's mesh (``WORK/misses``), for
+  ``rules --miss-rate``;
 - ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
-  strikes, the smallest model) and the ladder's stop on those figures, restricted to the
-  ladder, and compares the choice with the truth: within ``F_TOLERANCE`` of the best F-score
-  and ``CHAMFER_TOLERANCE`` of the best Chamfer of all compare runs, not below the median run;
+  strikes, the carved twins, the smallest model) and the ladder's stop on those figures,
+  restricted to the ladder, and compares the choice with the truth (a carved choice by
+  ``carved_truth``: the compare's mesh of its run carved as auto carves it, scored): within
+  ``F_TOLERANCE`` of the best F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all
+  compare runs, not below the median run;
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
   "unknown");
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
@@ -121,12 +127,14 @@ def collect(args) -> None:
         rows = records(args.suite, cloud)
         points = load_cloud(args.suite, cloud)
         start = time.perf_counter()
+        beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points.points, seed=0)
         choice = auto.choose(points.points, view_points=points.view_points,
                              uncertainty=points.attributes, candidates=candidate_runs(rows),
-                             holdout=args.holdout, seed=0, n_workers=args.workers)
+                             holdout=args.holdout, seed=0, n_workers=args.workers,
+                             misses=beams)
         elapsed = time.perf_counter() - start
-        table = [c.to_dict() | {"key": c.run.key} for c in choice.candidates]
-        arrays = {f"cost/{c.run.key}": c.cost for c in choice.candidates if c.cost is not None}
+        table = [c.to_dict() | {"key": c.key} for c in choice.candidates]
+        arrays = {f"cost/{c.key}": c.cost for c in choice.candidates if c.cost is not None}
         folds = choice.folds
         block = np.concatenate([folds.block[folds.test(f)] for f in range(folds.k)])
         np.savez_compressed(out / f"{cloud}.npz", block=block, **arrays)
@@ -169,7 +177,7 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
     names = {f.name for f in fields(auto.Candidate)} - {"run", "level", "heldout", "cost", "mesh"}
     out = []
     for row in data["candidates"]:
-        level = levels.get(row["key"])
+        level = levels.get(row["key"].removesuffix(" carved"))
         if level is None:
             if not extra:
                 continue
@@ -187,6 +195,31 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
         out.append(candidate)
     return (out, arrays["block"], data["coverage"], data["tau_m"],
             data.get("n_checked") or checked_count(work, suite, cloud))
+
+
+def with_misses(work: Path, cloud: str, candidates: list) -> int:
+    """Set each candidate's ``misses_cut`` from ``misses``'s record of ``cloud`` (when it has
+    one; else 0 missed beams: the step is skipped); returns the missed beams cast."""
+    path = work / "misses" / f"{cloud}.json"
+    if not path.exists():
+        return 0
+    data = json.loads(path.read_text())
+    for c in candidates:
+        c.misses_cut = data["cut"].get(c.run.key, 0.0 if c.scored else None)
+    return data["n_misses"]
+
+
+def free_space(candidates: list, n_misses: int, rate: float, ses: float) -> list:
+    """The rule ``rules --miss-rate`` tries (not auto's): before the band, every scored
+    candidate that cuts more missed beams than ``ses`` binomial standard errors above the larger
+    of ``rate`` and the fewest any scored candidate cuts is left out (its level stays fitted,
+    so the ladder's stop is unchanged when one remains)."""
+    scored = [c for c in candidates if c.scored and c.misses_cut is not None]
+    if not n_misses or not scored:
+        return candidates
+    reference = max(rate, min(c.misses_cut for c in scored))
+    limit = reference + ses * np.sqrt(reference * (1 - reference) / n_misses)
+    return [c for c in candidates if not (c.scored and (c.misses_cut or 0.0) > limit)]
 
 
 def checked_count(work: Path, suite: Path | None, cloud: str) -> int:
@@ -238,13 +271,15 @@ def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_c
     return fitted[selection.chosen], fitted
 
 
-def verdict(rows: list[dict], key: str) -> dict:
-    """Where the run ``key`` stands against the truth (as ``benchmarks/suite.py`` judges)."""
+def verdict(rows: list[dict], key: str, extra: list[dict] = ()) -> dict:
+    """Where the run ``key`` stands against the truth (as ``benchmarks/suite.py`` judges),
+    looked up in ``rows`` and ``extra`` (a carved candidate, ``carved_truth``: not a compare run,
+    so not in the best or the median)."""
     best_c = min(r["chamfer_m"] for r in rows)
     best_f = max(r.get("fscore") or 0.0 for r in rows)
     median_c = statistics.median(r["chamfer_m"] for r in rows)
     median_f = statistics.median(r.get("fscore") or 0.0 for r in rows)
-    mine = next((r for r in rows if r["key"] == key), None)
+    mine = next((r for r in [*rows, *extra] if r["key"] == key), None)
     if mine is None:
         return {"found": False}
     f, c = mine.get("fscore") or 0.0, mine["chamfer_m"]
@@ -265,18 +300,22 @@ def rules(args) -> None:
         rows = records(args.suite, cloud)
         candidates, block, coverage, tau, n_checked = candidates_of(
             args.work, cloud, args.extra, args.statistic, args.suite)
+        n_misses = with_misses(args.work, cloud, candidates)
+        if args.miss_rate is not None:
+            candidates = free_space(candidates, n_misses, args.miss_rate, args.miss_ses)
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
-        v = verdict(rows, chosen.run.key)
+        v = verdict(rows, chosen.key, carved_truth(args, cloud, chosen.key))
         good += v.get("ok", False)
         median += v.get("median", False)
         fit_s = sum(c.fit_s or 0.0 for c in fitted)
         compare_s = json.loads((args.suite / cloud / "timing.json").read_text())["compare_s"]
         # Load-free: the compare's own wall time of each fitted run, times the folds and
-        # their share of the strikes (a fit's time grows about linearly with the strikes).
+        # their share of the strikes (a fit's time grows about linearly with the strikes); a
+        # carved candidate is no fit (its carving is timed by ``misses``' casts, not here).
         wall = {r["key"]: r.get("wall_time_s") or 0.0 for r in rows}
         folds = round(1 / args.holdout)
-        modelled = sum(wall.get(c.run.key, 0.0) for c in fitted) * (folds - 1)
+        modelled = sum(wall.get(c.run.key, 0.0) for c in fitted if not c.carved) * (folds - 1)
         seconds.append(modelled / compare_s)
         print(f"{cloud:30} {chosen.label[:26]:26} F {v.get('f_ratio', 0):.3f} "
               f"C {v.get('c_ratio', 0):6.3f} {'ok ' if v.get('ok') else 'NO '}"
@@ -378,6 +417,83 @@ def evidence(args) -> None:
             f"{c.label} chi2 {c.chi2:.3g} unsupported {found[c.run.key]['unsupported']:.2f}"
             for c in sorted(scored, key=lambda c: c.chi2)[:4] if c.run.key in found), flush=True)
     print_tally(tally)
+
+
+def misses(args) -> None:
+    """``collect``'s companion for the missed beams: per cloud, the log's missed beams near
+    the strikes (``recon.registration.misses``, as ``recon reconstruct -m auto`` draws them) and
+    the fraction each collected candidate cuts (``recon.surfaces.judge.cut_misses``), measured
+    on the compare's mesh of the run (fitted on all strikes; auto measures fold 0's); kept in
+    ``WORK/misses/CLOUD.json`` for ``rules``."""
+    from formats.mesh_io import read_mesh
+    from recon.surfaces import auto, judge
+
+    out = args.work / "misses"
+    out.mkdir(parents=True, exist_ok=True)
+    for cloud in collected(args):
+        path = out / f"{cloud}.json"
+        if path.exists() and not args.force:
+            continue
+        rows = records(args.suite, cloud)
+        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
+        points = load_cloud(args.suite, cloud).points
+        start = time.perf_counter()
+        beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points, seed=0)
+        spacing = float(np.median(nearest_gaps(points)))
+        reach = auto.miss_reach(data["tau_m"], data["noise_m"], spacing)
+        drawn = time.perf_counter() - start
+        mesh_of = {r["key"]: r["mesh"] for r in rows if r.get("mesh")}
+        cut, cast_s = {}, {}
+        for row in data["candidates"]:
+            if row["key"] not in mesh_of or row.get("chi2") is None:
+                continue
+            mesh = read_mesh(args.suite / cloud / mesh_of[row["key"]])
+            start = time.perf_counter()
+            hits = judge.cut_misses(beams, judge.Caster(mesh.vertices, mesh.faces), points,
+                                    reach)
+            cast_s[row["key"]] = time.perf_counter() - start
+            cut[row["key"]] = float(hits.mean()) if len(hits) else 0.0
+        path.write_text(json.dumps({"n_misses": len(beams), "n_missed": beams.n_missed,
+                                    "reach_m": reach, "draw_s": drawn, "cast_s": cast_s,
+                                    "cut": cut}, indent=1))
+        ranked = sorted((r for r in data["candidates"] if r["key"] in cut),
+                        key=lambda r: r["chi2"])
+        print(f"{cloud}: {len(beams)} misses ({beams.n_missed} in the log), reach {reach:.3g} m, "
+              f"draw {drawn:.1f} s; " + "; ".join(f"{r['label']} chi2 {r['chi2']:.3g} cut "
+                                               f"{cut[r['key']]:.2%}" for r in ranked[:6]),
+              flush=True)
+
+
+def carved_truth(args, cloud: str, key: str) -> list[dict]:
+    """The true scores of carved candidate ``key`` (``recon.api.score`` against the log's
+    truth mesh, as the compare scores its runs): the compare's mesh of its run carved by the
+    missed beams as auto carves (``judge.carve`` at the collected reach), as a record; cached
+    in ``WORK/carved/CLOUD.json``. [] when ``key`` is not carved or its run has no mesh."""
+    from formats.mesh_io import read_mesh
+    from recon import api
+    from recon.surfaces import auto, judge
+
+    base = key.removesuffix(" carved")
+    mesh = next((r["mesh"] for r in records(args.suite, cloud) if r["key"] == base
+                 and r.get("mesh")), None)
+    if base == key or mesh is None:
+        return []
+    path = args.work / "carved" / f"{cloud}.json"
+    cache = json.loads(path.read_text()) if path.exists() else {}
+    if key not in cache:
+        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
+        points = load_cloud(args.suite, cloud).points
+        beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points, seed=0)
+        mesh = read_mesh(args.suite / cloud / mesh)
+        vertices, faces = judge.carve(mesh.vertices, mesh.faces, beams, points,
+                                      data["miss_reach_m"])
+        report = api.score((vertices, faces),
+                           truth=args.suite / "logs" / f"{cloud}.h5").to_dict()
+        cache[key] = {"fscore": report["fscore"], "chamfer_m": report["chamfer_m"],
+                      "n_faces": len(faces)}
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(cache, indent=1))
+    return [{"key": key, "label": key, **cache[key]}]
 
 
 def print_tally(tally: dict[tuple[str, float], list]) -> None:
@@ -550,7 +666,8 @@ def estimate_all(args) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=("collect", "rules", "evidence", "estimate"))
+    parser.add_argument("command", choices=("collect", "misses", "rules", "evidence",
+                                            "estimate"))
     parser.add_argument("--suite", type=Path, required=True, help="a finished suite's --out")
     parser.add_argument("--work", type=Path, required=True, help="where this script writes")
     parser.add_argument("--clouds", nargs="*", help="only these clouds")
@@ -570,13 +687,18 @@ def main(argv=None) -> int:
                         help="rules: the held-out statistic replayed (default: auto's)")
     parser.add_argument("--band", type=float, help="rules: the band in paired standard "
                         "errors (default: auto.BAND_SES)")
+    parser.add_argument("--miss-rate", type=float, help="rules: leave out, before the band, "
+                        "the candidates cutting missed beams beyond this rate (``free_space``; "
+                        "needs ``misses``; default: auto's rule, which does not)")
+    parser.add_argument("--miss-ses", type=float, default=3.0,
+                        help="rules: standard errors of --miss-rate's test")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
     parser.add_argument("--no-prior", action="store_true",
                         help="tell auto nothing of the target (every cloud \"unknown\"; "
                         "default: the NATURAL clouds \"natural\")")
     args = parser.parse_args(argv)
-    {"collect": collect, "rules": rules, "evidence": evidence,
+    {"collect": collect, "misses": misses, "rules": rules, "evidence": evidence,
      "estimate": estimate_all}[args.command](args)
     return 0
 

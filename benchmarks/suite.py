@@ -413,10 +413,11 @@ def runs_of(names=None, *, grid: bool = True) -> list:
     return runs
 
 
-def verdict(records: list[dict], key: str) -> dict:
-    """Where the run ``key`` stands on the truth: ratios to the best and to the median."""
+def verdict(records: list[dict], key: str, extra: list[dict] = ()) -> dict:
+    """Where the run ``key`` stands on the truth: ratios to the best and to the median.
+    ``extra``: auto's carved surface (``carved_record``), looked up but not ranked."""
     ok = [r for r in records if r.get("status") == "ok" and r.get("chamfer_m") is not None]
-    mine = next((r for r in ok if r["key"] == key), None)
+    mine = next((r for r in [*ok, *extra] if r["key"] == key), None)
     chamfers = [r["chamfer_m"] for r in ok]
     fscores = [r.get("fscore") or 0.0 for r in ok]
     out = {"n_runs": len(ok), "best_chamfer_label": min(ok, key=lambda r: r["chamfer_m"])["label"],
@@ -425,9 +426,9 @@ def verdict(records: list[dict], key: str) -> dict:
            "median_chamfer_m": statistics.median(chamfers), "median_f": statistics.median(fscores)}
     if mine is None:
         return out | {"failed": True}
-    rank_c = sorted(chamfers).index(mine["chamfer_m"]) + 1
-    rank_f = sorted(fscores, reverse=True).index(mine.get("fscore") or 0.0) + 1
     f = mine.get("fscore") or 0.0
+    rank_c = 1 + sum(c < mine["chamfer_m"] for c in chamfers)
+    rank_f = 1 + sum(x > f for x in fscores)
     return out | {
         "failed": False, "label": mine["label"], "chamfer_m": mine["chamfer_m"], "fscore": f,
         "rank_chamfer": rank_c, "rank_f": rank_f, "n_faces": mine.get("n_faces"),
@@ -588,10 +589,31 @@ def auto_prediction(choice, records: list[dict], cloud, out_dir: Path) -> dict |
     if record is None:
         return None
     mesh = read_mesh(out_dir / record["mesh"])
-    e = estimate((mesh.vertices, mesh.faces), cloud, heldout=choice.chosen.heldout,
+    e = estimate(choice.carve(mesh.vertices, mesh.faces, cloud.points), cloud,
+                 heldout=choice.chosen.heldout,
                  target_kind=choice.target_kind)
     return {"chamfer_m": e.chamfer_m, "lo_m": e.chamfer_low_m, "hi_m": e.chamfer_high_m,
             "source": e.source}
+
+
+def carved_record(choice, records: list[dict], cloud, out_dir: Path, log: Path) -> list[dict]:
+    """Auto's carved choice scored on the truth (``recon.api.score`` against the log's truth
+    mesh): the compare's mesh of the chosen run carved as auto carves it
+    (``AutoChoice.carve``), as a record keyed by the candidate's key; [] when the choice is
+    not carved or the run's mesh was not kept."""
+    from formats.mesh_io import read_mesh
+    from recon import api
+
+    record = next((r for r in _ok(records) if r["key"] == choice.run.key and r.get("mesh")),
+                  None)
+    if not choice.carved or record is None:
+        return []
+    mesh = read_mesh(out_dir / record["mesh"])
+    vertices, faces = choice.carve(mesh.vertices, mesh.faces, cloud.points)
+    scores = api.score((vertices, faces), truth=log).to_dict()
+    return [{"status": "ok", "key": choice.chosen.key, "label": choice.label,
+             "chamfer_m": scores["chamfer_m"], "fscore": scores["fscore"],
+             "n_faces": len(faces), "n_params": choice.chosen.n_params}]
 
 
 def _absent(records: list[dict]) -> str:
@@ -628,16 +650,17 @@ def visibility(report: dict) -> dict:
 def run_cloud(cloud: SuiteCloud, args) -> dict:
     """Compare (or, resumed, its finished runs), auto, the estimate and their agreement on one
     cloud (module docstring)."""
-    from recon.surfaces.auto import choose
+    from recon.surfaces.auto import choose, misses_near
 
     points, prepared, report, timing = compare_cloud(cloud, args)
     names = args.methods or (QUICK_METHODS if args.quick else None)
     out_dir = args.out / cloud.name
+    log = simulate(cloud, args.out, quick=args.quick, meshes=args.meshes)
     start = time.perf_counter()
     choice = choose(points.points, view_points=points.view_points,
                     uncertainty=points.attributes, methods=names, seed=0,
                     timeout_s=args.timeout, n_workers=args.workers,
-                    target_kind=cloud.target_kind)
+                    target_kind=cloud.target_kind, misses=misses_near(log, points.points))
     timing["auto_s"] = time.perf_counter() - start
     (out_dir / "auto.json").write_text(json.dumps(choice.to_dict(), indent=2, default=str))
     records = report["records"]
@@ -645,14 +668,15 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
     predicted = predict_runs(records, points, out_dir)
     auto_band = auto_prediction(choice, records, points, out_dir)
     estimate_s = time.perf_counter() - start
-    truth = {r["key"]: _chamfer(r) for r in _ok(records)}
+    carved = carved_record(choice, records, points, out_dir, log)
+    truth = {r["key"]: _chamfer(r) for r in [*_ok(records), *carved]}
     return {"cloud": cloud.name, "target": cloud.target, "sensor": cloud.sensor,
             "errors": cloud.errors, "density": cloud.density, "held_out": cloud.held_out,
             "n_points": len(points.points),
             "spacing_m": prepared.spacing, "noise_m": prepared.noise,
-            "auto": {"label": choice.label, "reason": choice.reason, "key": choice.run.key,
+            "auto": {"label": choice.label, "reason": choice.reason, "key": choice.chosen.key,
                      "fits": sum(c.status != "skipped" for c in choice.candidates),
-                     "predicted": auto_band, "chamfer_m": truth.get(choice.run.key)},
+                     "predicted": auto_band, "chamfer_m": truth.get(choice.chosen.key)},
             "predicted": {"version": predicted["version"], "note": predicted["note"],
                           "from_records": predicted["from_records"],
                           "from_meshes": predicted["from_meshes"], "estimate_s": estimate_s,
@@ -660,7 +684,8 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
                                     "lo_m": p["lo_m"], "hi_m": p["hi_m"]}
                                    for k, p in predicted["runs"].items() if p is not None]},
             "visibility": visibility(report),
-            "verdict": verdict(records, choice.run.key), "weighting": weighting(records),
+            "verdict": verdict(records, choice.chosen.key, carved),
+            "weighting": weighting(records),
             "compare_s": timing["compare_s"], "auto_s": timing["auto_s"],
             "cost_ratio": timing["auto_s"] / timing["compare_s"],
             "fit_ratio": sum(c.fit_s or 0.0 for c in choice.candidates)

@@ -1069,8 +1069,9 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
     from formats.paths import check_destination, protecting
     from recon.surfaces.auto import HOLDOUT_FRACTION, TARGET_KINDS, choose_for, format_choice
     from recon.surfaces.isolation import Limits
+    from recon.surfaces.methods import watertight
     from recon.surfaces.prepare import load_prepared
-    from recon.surfaces.reconstruct import estimate_of
+    from recon.surfaces.reconstruct import Surface, estimate_of
     from recon.surfaces.reconstruct import reconstruct as run_method
 
     holdout = HOLDOUT_FRACTION if holdout is None else holdout
@@ -1092,12 +1093,17 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
         choice = None
         if auto:
             choice = choose_for(cloud, methods=auto_methods, preparation=preparation,
-                                limits=limits, holdout=holdout, target_kind=target_kind)
+                                limits=limits, holdout=holdout, target_kind=target_kind,
+                                misses=_misses(source, cloud, preparation.seed))
             run = choice.run
             if say is not None:
                 say(format_choice(choice))
         surface = run_method(prepared, method=run, isolate=isolate, on_wait=on_wait,
                              **limits.kwargs())
+        if choice is not None and choice.carved:
+            vertices, faces = choice.carve(surface.vertices, surface.faces, cloud.points)
+            surface = Surface(vertices, faces, surface.method, surface.params,
+                              surface.info | {"carved": True, "watertight": watertight(faces)})
         surface.frame = cloud.frame  # so that scoring against a truth in another frame is refused
         surface.info["estimate"] = estimate_of(
             surface, cloud, heldout=None if choice is None else choice.chosen.heldout,
@@ -1110,7 +1116,18 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
     return ReconstructResult(surface, str(source) if named else None,
                              None if output is None else Path(output), len(prepared.points),
                              prepared.spacing, prepared.noise, cloud.view_points is not None,
-                             run.label)
+                             run.label if choice is None else choice.label)
+
+
+def _misses(source, cloud, seed: int):
+    """The missed beams near ``cloud``'s strikes when ``source`` is a strike log
+    (``recon.surfaces.auto.misses_near``), else None (a cloud file records no misses)."""
+    from recon.inputs import is_strike_log
+    from recon.surfaces.auto import misses_near
+
+    if not isinstance(source, str | os.PathLike) or not is_strike_log(source):
+        return None
+    return misses_near(source, cloud.points, seed=seed)
 
 
 # ------------------------------------------------------------------------------ experiments

@@ -21,6 +21,17 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    strikes (fold 0's surface) the fraction of beams the surface cuts before their strike
    (``violated``) and of strikes with no surface within their
    tolerance (``holes``).
+   **Missed beams** (given a strike log: ``misses_near``, ``recon.registration.misses``): a
+   (shot, beam) pair with no strike crossed free space. Each candidate's fold-0 surface is cast
+   against a seeded subsample of the misses near the strikes; ``misses_cut`` is the fraction
+   it cuts farther than ``miss_reach`` from every strike (``judge.cut_misses``). A surface at
+   the truth cuts almost none; a closed membrane across a spacecraft's gaps or unseen side
+   cuts many. A candidate that cuts more than ``MISS_RATE``, by ``MISS_SES`` binomial
+   standard errors (``fills_free_space``), joins the ladder a second time **carved**: each
+   fold's surface without the faces the misses cut (``judge.carve``), judged like any other
+   (held-out strikes, cuts, holes); when it is chosen, the surface refitted on all strikes is
+   carved the same way (``AutoChoice.carve``). Without a strike log (a cloud file) there are
+   no misses and no carved candidates.
 3. **One paired standard error** (``paired_gaps``): every candidate tested on the same strikes
    as the best, whose chi-square exceeds the best's by at most ``BAND_SES`` standard errors
    of that difference (from the spread of the blocks' mean differences), fits the held-out
@@ -124,6 +135,17 @@ NATURAL_COVERAGE = 0.5
 NATURAL_MODEL = "ellipsoid"
 NATURAL_FIT = 0.5
 NATURAL_SPAN = 1.5
+# Missed beams (``recon.registration.misses``) are drawn where their free span passes within
+# MISS_BOX of the strikes' bounding-box diagonal of the box: a membrane a candidate spans
+# beyond the strikes lies there. A missed beam's crossing of a surface counts as a cut only
+# farther than ``miss_reach`` from every strike (judge.cut_misses).
+MISS_BOX = 0.1
+# A candidate cutting more than MISS_RATE of the missed beams, by MISS_SES binomial standard
+# errors, fills free space: it joins the ladder a second time carved (``judge.carve``). The
+# rate: above the 0-0.5 % the plane family, open and near the strikes, cuts on most of the
+# suite's spacecraft, below the 7-70 % a graph cut's membranes cut (docs/decisions.md).
+MISS_RATE = 0.01
+MISS_SES = 3.0
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
 # compete for the cores.
 FIT_THREADS = 1
@@ -159,10 +181,16 @@ class Candidate:
     violated, holes : float or None
         Over all strikes (a seeded subsample of ``judge.MAX_CHECKED``): fraction of beams the
         surface cuts before their strike, and of strikes with no surface within tolerance.
+    misses_cut : float or None
+        Fraction of the log's missed beams near the strikes that the surface cuts away from
+        every strike (``judge.cut_misses``; None without a strike log's misses).
+    carved : bool
+        The run's surfaces with the faces cut by missed beams removed (``judge.carve``).
     span : float or None
         How far the surface reaches beyond the strikes (``span``; 1: no farther).
     eligible, holed, chosen : bool
-        Within the band (step 3); in it but left out for its holes (step 4); chosen.
+        Within the band (step 3); in it but left out for its holes (step 4) or for the free
+        space its carved twin in the band leaves open (step 2); chosen.
     """
 
     run: Run
@@ -181,17 +209,24 @@ class Candidate:
     beam_misses: float | None = None
     violated: float | None = None
     holes: float | None = None
+    misses_cut: float | None = None
     span: float | None = None
     eligible: bool = False
     holed: bool = False
     chosen: bool = False
+    carved: bool = False
     heldout: judge.HeldOut | None = field(default=None, repr=False)
     cost: np.ndarray | None = field(default=None, repr=False)
     mesh: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     @property
     def label(self) -> str:
-        return self.run.label
+        return self.run.label + (" carved" if self.carved else "")
+
+    @property
+    def key(self) -> str:
+        """The run's key, with " carved" for a carved candidate."""
+        return self.run.key + (" carved" if self.carved else "")
 
     @property
     def scored(self) -> bool:
@@ -233,6 +268,12 @@ class AutoChoice:
         What was known of the target (``TARGET_KINDS``).
     n_checked : int
         Strikes the candidates' ``violated`` and ``holes`` were counted over.
+    n_misses : int
+        Missed beams the candidates' ``misses_cut`` was counted over (0: no strike log).
+    miss_reach_m : float, metres
+        How near a strike a missed beam's crossing is no evidence (``miss_reach``).
+    misses : recon.registration.misses.MissedBeams or None
+        The missed beams (``carve`` cuts the refitted surface with them).
     """
 
     run: Run
@@ -245,6 +286,9 @@ class AutoChoice:
     tau_m: float
     target_kind: str = "unknown"
     n_checked: int = 0
+    n_misses: int = 0
+    miss_reach_m: float = 0.0
+    misses: Any = field(default=None, repr=False)
 
     @property
     def method(self) -> str:
@@ -256,18 +300,34 @@ class AutoChoice:
 
     @property
     def label(self) -> str:
-        return self.run.label
+        return self.chosen.label
+
+    @property
+    def carved(self) -> bool:
+        """The chosen surface is carved by the missed beams (``judge.carve``, ``carve``)."""
+        return self.chosen.carved
 
     @property
     def chosen(self) -> Candidate:
         return next(c for c in self.candidates if c.chosen)
 
+    def carve(self, vertices: np.ndarray, faces: np.ndarray, points: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """The chosen run's surface refitted on all strikes ``points`` (n, 3) [m], carved by
+        the missed beams as its folds were when the chosen candidate is carved
+        (``judge.carve``); else unchanged. ``vertices`` (v, 3) [m], ``faces`` (f, 3)."""
+        if not self.carved:
+            return vertices, faces
+        return judge.carve(vertices, faces, self.misses, points, self.miss_reach_m)
+
     def to_dict(self) -> dict:
         folds = self.folds
         return {"method": self.method, "params": self.params, "label": self.label,
+                "carved": self.carved,
                 "reason": self.reason, "threshold": self.threshold, "coverage": self.coverage,
                 "noise_m": self.noise_m, "tau_m": self.tau_m, "target_kind": self.target_kind,
-                "n_checked": self.n_checked,
+                "n_checked": self.n_checked, "n_misses": self.n_misses,
+                "miss_reach_m": self.miss_reach_m,
                 "folds": {"k": folds.k, "n_tested": int(folds.tested.sum()),
                           "n_blocks": folds.n_blocks, "block_shots": folds.block_shots,
                           "margin_shots": folds.margin, "step_m": folds.step_m},
@@ -288,12 +348,17 @@ class _Fold:
 @dataclass(frozen=True)
 class _Context:
     """What every candidate is fitted on and judged against: the folds, a subsample of all
-    strikes (fold 0's surface against them: cuts and holes), tau and the noise length."""
+    strikes (fold 0's surface against them: cuts and holes), tau and the noise length, and the
+    log's missed beams near the strikes (None without a log) with the reach of a strike
+    (``miss_reach``)."""
 
     folds: list[_Fold]
     checked: judge.Strikes
     tau: float
     noise: float
+    points: np.ndarray | None = None
+    misses: Any = None
+    miss_reach: float = 0.0
 
     @property
     def block(self) -> np.ndarray:
@@ -311,7 +376,8 @@ class Selection:
     chi-square in it), the candidates within the band, and each scored candidate's chi-square
     above the best's with its paired standard error; ``holed``: the band's candidates that
     leave too many strikes in holes (``hole_test``) and ``hole_limit`` the fraction they
-    exceed; ``prior``: the natural-body prior (``natural_prior``) made the choice."""
+    exceed; ``filled``: the band's candidates whose carved twin is in it (``fills_in_band``);
+    ``prior``: the natural-body prior (``natural_prior``) made the choice."""
 
     chosen: int
     best: int
@@ -320,6 +386,7 @@ class Selection:
     gaps: dict[int, tuple[float, float]]
     holed: tuple[int, ...] = ()
     hole_limit: float = 1.0
+    filled: tuple[int, ...] = ()
     prior: bool = False
 
 
@@ -396,15 +463,17 @@ def _fold(cloud: Cloud, strikes: judge.Strikes, folds: judge.Folds, f: int, *, k
     return _Fold(prepared, strikes.take(test), folds.block[test], strikes.take(fit_rows))
 
 
-def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, seed: int
-             ) -> _Context:
-    """Every fold prepared (step 1)."""
+def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, seed: int,
+             misses=None) -> _Context:
+    """Every fold prepared (step 1); ``misses``: the log's missed beams (``misses_near``)."""
     strikes = judge.Strikes.of(cloud)
     every = [_fold(cloud, strikes, folds, f, k=k, fallback=fallback, seed=seed)
              for f in range(folds.k)]
     all_rows = judge.subsample(len(strikes), judge.MAX_CHECKED, seed)
-    return _Context(folds=every, checked=strikes.take(all_rows), tau=judge.tau_of(cloud.points),
-                    noise=every[0].prepared.noise)
+    tau, noise = judge.tau_of(cloud.points), every[0].prepared.noise
+    return _Context(folds=every, checked=strikes.take(all_rows), tau=tau, noise=noise,
+                    points=cloud.points, misses=misses,
+                    miss_reach=miss_reach(tau, noise, every[0].prepared.spacing))
 
 
 def _fit_all(runs: list[Run], folds: list[_Fold], *, limits: Limits, n_workers: int | None,
@@ -432,15 +501,16 @@ def _fit_all(runs: list[Run], folds: list[_Fold], *, limits: Limits, n_workers: 
     return results
 
 
-def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
-                    ) -> Candidate:
+def judge_candidate(run: Run, level: int, results: list[dict], context: _Context,
+                    carved: bool = False) -> Candidate:
     """Step 2 of the module docstring for one run fitted on every fold (``run_isolated``
     results, folds in order): a fold that failed fails the candidate."""
     failed = next((r for r in results if r.get("status", "failed") != "ok"), None)
     candidate = Candidate(run, level, status="ok" if failed is None else
                           failed.get("status", "failed"),
                           reason="" if failed is None else failed.get("reason", "") or "",
-                          fit_s=sum(r.get("process_time_s") or 0.0 for r in results))
+                          fit_s=sum(r.get("process_time_s") or 0.0 for r in results),
+                          carved=carved)
     if failed is not None:
         return candidate
     options = {"tau": context.tau, "noise": context.noise}
@@ -454,7 +524,12 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
     tolerance = np.concatenate([h.tolerance for h in held])
     chi2, se = judge.block_mean_se(cost, context.block)
     vertices, faces = results[0]["vertices"], results[0]["faces"]
-    everywhere = judge.check(context.checked, judge.Caster(vertices, faces), **options)
+    caster = judge.Caster(vertices, faces)
+    everywhere = judge.check(context.checked, caster, **options)
+    misses_cut = None
+    if context.misses is not None and len(context.misses):
+        misses_cut = float(judge.cut_misses(context.misses, caster, context.points,
+                                            context.miss_reach).mean())
     return replace(candidate, n_faces=len(faces),
                    n_params=run.method_spec().parameter_count(vertices, faces),
                    closed=closed(faces), chi2=chi2, chi2_se=se, chi_heldout=float(np.sqrt(chi2)),
@@ -462,11 +537,32 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                    heldout_mean_m=float(np.mean(np.minimum(distance, tolerance))),
                    beam_misses=float(np.mean(np.concatenate([h.missed for h in held]))),
                    violated=float(everywhere.violated.mean()),
-                   holes=float(everywhere.hole.mean()),
+                   holes=float(everywhere.hole.mean()), misses_cut=misses_cut,
                    span=span(vertices, context.checked.points),
                    heldout=judge.HeldOut(distance, np.concatenate([h.sigma_normal for h in held]),
                                          context.block),
                    cost=cost, mesh=(vertices, faces))
+
+
+def fills_free_space(candidate: Candidate, context: _Context) -> bool:
+    """Whether a scored candidate cuts more than ``MISS_RATE`` of the missed beams, by
+    ``MISS_SES`` binomial standard errors: it joins the ladder carved."""
+    if candidate.misses_cut is None or candidate.carved:
+        return False
+    n = len(context.misses)
+    return candidate.misses_cut > MISS_RATE + MISS_SES * math.sqrt(
+        MISS_RATE * (1.0 - MISS_RATE) / n)
+
+
+def _carved(results: list[dict], context: _Context) -> list[dict]:
+    """Each fold's surface carved by the missed beams (``judge.carve``) as the surface
+    refitted on all strikes will be: a crossing within reach of any strike, held out or not,
+    is no evidence (carving fits nothing to the held-out strikes; spared near them only
+    by a fold's training strikes, a silhouette a beam grazed past would be cut open where
+    the final surface is not)."""
+    return [result | dict(zip(("vertices", "faces"), judge.carve(
+        result["vertices"], result["faces"], context.misses, context.points,
+        context.miss_reach), strict=True)) for result in results]
 
 
 def _best(candidates: list[Candidate]) -> Candidate | None:
@@ -489,7 +585,11 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
         before = _best(candidates)
         results = _fit_all(level, context.folds, limits=limits, n_workers=n_workers,
                            desc=f"auto level {depth}")
-        candidates += [judge_candidate(run, depth, results[run.key], context) for run in level]
+        for run in level:
+            candidates.append(judge_candidate(run, depth, results[run.key], context))
+            if fills_free_space(candidates[-1], context):
+                candidates.append(judge_candidate(run, depth, _carved(results[run.key], context),
+                                                  context, carved=True))
         rest = levels[depth + 1:]
         if depth + 1 >= ALWAYS_LEVELS and rest and _stops(candidates, before, depth):
             candidates += [Candidate(run, later, status="skipped")
@@ -539,9 +639,18 @@ def select(candidates: list[Candidate], block: np.ndarray, n_checked: int) -> Se
     threshold = max(candidates[i].chi2 for i in eligible)
     limit = hole_limit([candidates[i].holes for i in eligible], n_checked)
     holed = tuple(i for i in eligible if candidates[i].holes > limit)
-    chosen = min((i for i in eligible if i not in holed),
+    filled = fills_in_band(candidates, [i for i in eligible if i not in holed])
+    chosen = min((i for i in eligible if i not in holed and i not in filled),
                  key=lambda i: (candidates[i].n_params, candidates[i].chi2))
-    return Selection(chosen, best, threshold, eligible, gaps, holed, limit)
+    return Selection(chosen, best, threshold, eligible, gaps, holed, limit, filled)
+
+
+def fills_in_band(candidates: list[Candidate], kept: list[int]) -> tuple[int, ...]:
+    """The candidates among ``kept`` (band members that hold the strikes) whose carved twin
+    is kept too: the same surface without the faces free space refutes fits the held-out
+    passes as well, so the uncarved one drops out (step 2 of the module docstring)."""
+    twins = {candidates[i].run.key for i in kept if candidates[i].carved}
+    return tuple(i for i in kept if not candidates[i].carved and candidates[i].run.key in twins)
 
 
 def natural_prior(candidates: list[Candidate], selection: Selection, coverage: float,
@@ -594,7 +703,8 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
             f"faces, fitted on a fold's training strikes): held-out chi-square {c.chi2:.3g} "
             f"per strike (1 = at the recorded noise), {c.violated:.1%} of beams cut before "
             f"their strike, {c.holes:.1%} of strikes in holes")
-    kept = len(selection.eligible) - len(selection.holed)   # the chosen one among them
+    # the chosen one among them
+    kept = len(selection.eligible) - len(selection.holed) - len(selection.filled)
     holding = "that hold the strikes " if selection.holed else ""
     if selection.prior:
         text += _prior_reason(candidates, selection, coverage)
@@ -611,12 +721,38 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
                  f"{kept} candidates in that band {holding}it is the smallest model")
     if selection.holed and not selection.prior:
         text += _holes_reason(candidates, selection)
+    if c.carved:
+        whole = next(o for o in candidates if o.run.key == c.run.key and not o.carved)
+        dropped = (", and drops out of the band, where its carved twin is"
+                   if candidates.index(whole) in selection.filled else "")
+        text += (f"; carved: the uncarved surface cuts {whole.misses_cut:.1%} of the missed "
+                 f"beams near the strikes (free space it fills){dropped}; the faces they cross "
+                 f"away from every strike are removed ({c.misses_cut:.1%} left)")
     if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
         text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
                  "it follows part of the noise")
     if np.isfinite(coverage) and not selection.prior:   # the prior's reason says it
         text += f". The strikes cover {coverage:.0%} of the best closed surface"
     return text
+
+
+def miss_reach(tau: float, noise: float, spacing: float) -> float:
+    """How far from the strikes a missed beam's crossing of a surface is no evidence [m]:
+    the reach of a supported surface point (``judge.COVERAGE_SPACINGS`` spacings, ``SIGMAS``
+    noise lengths, at least ``tau``). A beam that grazed past a silhouette meets a surface at
+    the truth within the spacing of its neighbours' strikes and the noise."""
+    return max(tau, judge.SIGMAS * noise, judge.COVERAGE_SPACINGS * spacing)
+
+
+def misses_near(log_path, points: np.ndarray, *, seed: int = 0):
+    """The missed beams of the strike log ``log_path`` whose free span passes within
+    ``MISS_BOX`` of the diagonal of the bounding box of ``points`` (n, 3) [m, body frame]
+    (``recon.registration.misses.missed_beams``)."""
+    from recon.registration.misses import missed_beams
+
+    low, high = points.min(axis=0), points.max(axis=0)
+    margin = MISS_BOX * float(np.linalg.norm(high - low))
+    return missed_beams(log_path, low=low - margin, high=high + margin, seed=seed)
 
 
 def _coverage(candidates: list[Candidate], points: np.ndarray, context: _Context, seed: int
@@ -636,7 +772,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
            methods: Sequence[str] | None = None, holdout: float = HOLDOUT_FRACTION,
            seed: int = 0, k: int = DEFAULT_K, fallback: Fallback = "centroid",
            timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
-           n_workers: int | None = None, target_kind: str = "unknown") -> AutoChoice:
+           n_workers: int | None = None, target_kind: str = "unknown",
+           misses=None) -> AutoChoice:
     """Choose a method and resolution by held-out passes and the sensor rays, without the truth.
 
     Parameters
@@ -666,6 +803,10 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     target_kind : {"unknown", "natural"}
         What is known of the target (step 5 of the module docstring): ``"natural"`` for an
         asteroid or a comet.
+    misses : recon.registration.misses.MissedBeams, optional
+        The log's missed beams near the strikes (``misses_near``), in the body frame: each
+        candidate's ``misses_cut``, and a carved candidate for each that fills free space
+        (module docstring, step 2). None: neither (a cloud file records no misses).
 
     Returns
     -------
@@ -691,7 +832,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
                         f"{tested} in the smallest fold")
     levels = ([[bind(*r) if isinstance(r, tuple) else bind(r) for r in candidates]]
               if candidates else ladder(methods))
-    context = _context(cloud, folds, k=k, fallback=fallback, seed=seed)
+    context = _context(cloud, folds, k=k, fallback=fallback, seed=seed, misses=misses)
     table, note = climb(levels, context, limits=Limits(timeout_s=timeout_s, memory_mb=memory_mb),
                         n_workers=n_workers)
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
@@ -700,7 +841,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     if target_kind == "natural":
         selection = natural_prior(table, selection, coverage, context.tau)
     for i, c in enumerate(table):
-        c.eligible, c.holed = i in selection.eligible, i in selection.holed
+        c.eligible = i in selection.eligible
+        c.holed = i in selection.holed or i in selection.filled
         c.chosen = i == selection.chosen
     fitted = sum(c.status != "skipped" for c in table)
     reason = (explain(table, selection, coverage)
@@ -708,13 +850,15 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
               + ".")
     return AutoChoice(table[selection.chosen].run, reason, table, selection.threshold,
                       coverage, folds, context.noise, context.tau, target_kind,
-                      len(context.checked))
+                      len(context.checked), 0 if misses is None else len(misses),
+                      context.miss_reach, misses)
 
 
 def format_choice(choice: AutoChoice) -> str:
     """The candidates table and the reason, as ``recon reconstruct -m auto`` prints them."""
     lines = [f"{'':2}{'candidate':<30} {'lvl':>3} {'kind':<13} {'chi2':>7} {'+-se':>6} "
-             f"{'chi fit':>7} {'cut':>6} {'holes':>6} {'params':>8} {'faces':>8}", "-" * 104]
+             f"{'chi fit':>7} {'cut':>6} {'holes':>6} {'free':>6} {'params':>8} {'faces':>8}",
+             "-" * 111]
     ranked = sorted(choice.candidates, key=lambda c: (not c.scored, c.chi2 or 0.0))
     for c in ranked:
         mark = "*" if c.chosen else ("x" if c.holed else "~" if c.eligible else " ")
@@ -724,22 +868,28 @@ def format_choice(choice: AutoChoice) -> str:
         elif not c.scored:
             lines.append(f"{start} FAILED: {c.reason[:50]}")
         else:
+            free = "-" if c.misses_cut is None else f"{c.misses_cut:.1%}"
             lines.append(f"{start} {c.chi2:>7.3g} {round(c.chi2_se, 9):>6.2g} {c.chi_fit:>7.2g} "
-                         f"{c.violated:>6.1%} {c.holes:>6.1%} {c.n_params:>8d} {c.n_faces:>8d}")
+                         f"{c.violated:>6.1%} {c.holes:>6.1%} {free:>6} {c.n_params:>8d} "
+                         f"{c.n_faces:>8d}")
     folds = choice.folds
     lines.append(f"(chi2: held-out chi-square per strike over {folds.k} folds, "
                  f"{folds.n_blocks} blocks of {folds.block_shots} shots, "
                  f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "
                  "chi fit: on the training strikes; cut: beams cut before their strike; "
+                 f"free: of {choice.n_misses} missed beams near the strikes, those the surface "
+                 "cuts away from every strike (free space it fills); "
                  f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best, x "
-                 "within them but leaving strikes in holes beyond the noise)")
+                 "within them but leaving strikes in holes beyond the noise; carved: without "
+                 "the faces the missed beams cut)")
     lines.append(choice.reason)
     return "\n".join(lines)
 
 
 def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
                holdout: float = HOLDOUT_FRACTION, preparation: Preparation | None = None,
-               limits: Limits | None = None, target_kind: str = "unknown") -> AutoChoice:
+               limits: Limits | None = None, target_kind: str = "unknown",
+               misses=None) -> AutoChoice:
     """``choose`` on a cleaned ``Cloud`` (``Preparation.apply``) with a preparation's normals
     options and a run's limits: the choice ``-m auto`` makes.
 
@@ -755,9 +905,11 @@ def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
     limits : Limits, optional
     target_kind : {"unknown", "natural"}
         What is known of the target (``choose``).
+    misses : recon.registration.misses.MissedBeams, optional
+        The log's missed beams (``choose``).
     """
     preparation = preparation or Preparation()
     return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
                   methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
-                  fallback=preparation.fallback, target_kind=target_kind,
+                  fallback=preparation.fallback, target_kind=target_kind, misses=misses,
                   **(limits or Limits()).kwargs())

@@ -87,6 +87,10 @@ SURFACE_SAMPLES = 20_000
 # COVERAGE_SPACINGS spacing): between the strikes of a uniformly sampled patch no point is
 # farther than about one spacing.
 COVERAGE_SPACINGS = 2.0
+# Passes of ``carve``: each removes the first layer a cut missed beam meets; the membranes of a
+# graph cut across a satellite's gaps are one or two layers deep (6 passes left none on the
+# suite's spacecraft, docs/decisions.md).
+CARVE_PASSES = 8
 
 
 @dataclass(frozen=True)
@@ -416,6 +420,89 @@ def check(strikes: Strikes, caster: Caster, *, tau: float, noise: float,
                       np.minimum(residual, tolerance))
     return Check(distance, sigma, np.hypot(normal, floor), tolerance, violated, missed, hole,
                  (capped / sigma) ** 2)
+
+
+def cut_misses(misses, caster: Caster, strikes: np.ndarray, reach: float) -> np.ndarray:
+    """Which missed beams a surface cuts where no strike is (module docstring).
+
+    A missed beam crossed free space from ``range_min`` to ``range_max``
+    (``recon.registration.misses``). Each is cast against the surface (one batched Embree
+    cast); it is cut when its first hit lies within that span and farther than ``reach`` from
+    every strike: at a silhouette a beam that grazed past the body meets a surface at the
+    truth near the strikes of its neighbours, within their spacing and the noise.
+
+    Parameters
+    ----------
+    misses : recon.registration.misses.MissedBeams
+    caster : Caster
+        The surface.
+    strikes : (n, 3) float64, metres, body frame
+    reach : float, metres
+
+    Returns
+    -------
+    (m,) bool
+    """
+    return _first_cuts(misses, caster, strikes, reach)[0]
+
+
+def _first_cuts(misses, caster: Caster, strikes: np.ndarray, reach: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``cut_misses`` and the face each missed beam first hits (m,) int64 (-1: none)."""
+    from scipy.spatial import cKDTree
+
+    if len(misses) == 0:
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64)
+    rays = np.hstack([misses.origin - caster.centre, misses.direction]).astype(np.float32)
+    cast = caster.scene.cast_rays(caster._o3d.core.Tensor(rays))
+    t_hit = cast["t_hit"].numpy().astype(np.float64)
+    triangle = cast["primitive_ids"].numpy().astype(np.int64)
+    inside = (np.isfinite(t_hit) & (triangle < len(caster.faces))
+              & (t_hit >= misses.range_min) & (t_hit <= misses.range_max))
+    cut = np.zeros(len(misses), dtype=bool)
+    if inside.any():
+        crossing = misses.origin[inside] + t_hit[inside, None] * misses.direction[inside]
+        distance, _ = cKDTree(strikes).query(crossing, distance_upper_bound=reach, workers=-1)
+        cut[inside] = ~np.isfinite(distance)
+    return cut, np.where(inside, triangle, -1)
+
+
+def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, reach: float
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """A surface with the faces that missed beams cut removed (``cut_misses``): free space the
+    surface filled, a membrane across a gap the beams went through.
+
+    Pass after pass (at most ``CARVE_PASSES``), the face each cut beam first hits is removed
+    and the beams are cast again, until no beam cuts the rest (a beam may cross several
+    layers). Vertices no face uses are dropped.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float64, metres
+    faces : (f, 3) int64
+    misses : recon.registration.misses.MissedBeams
+    strikes : (n, 3) float64, metres
+    reach : float, metres
+
+    Returns
+    -------
+    vertices : (v', 3) float64
+    faces : (f', 3) int64
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    for _ in range(CARVE_PASSES):
+        if not len(faces):
+            break
+        cut, triangle = _first_cuts(misses, Caster(vertices, faces), strikes, reach)
+        if not cut.any():
+            break
+        keep = np.ones(len(faces), dtype=bool)
+        keep[triangle[cut]] = False
+        faces = faces[keep]
+    used = np.unique(faces)
+    index = np.full(len(vertices), -1, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    return np.asarray(vertices, dtype=np.float64)[used], index[faces]
 
 
 def subsample(n: int, limit: int, seed: int) -> np.ndarray:
