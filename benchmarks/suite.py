@@ -598,7 +598,7 @@ def auto_prediction(choice, records: list[dict], cloud, out_dir: Path) -> dict |
 
 def carved_record(choice, records: list[dict], cloud, out_dir: Path, log: Path) -> list[dict]:
     """Auto's carved choice scored on the truth (``recon.api.score`` against the log's truth
-    mesh): the compare's mesh of the chosen run carved as auto carves it
+    mesh, with the compare's ``SCORE_OPTIONS``): the compare's mesh of the chosen run carved as auto carves it
     (``AutoChoice.carve``), as a record keyed by the candidate's key; [] when the choice is
     not carved or the run's mesh was not kept."""
     from formats.mesh_io import read_mesh
@@ -610,7 +610,7 @@ def carved_record(choice, records: list[dict], cloud, out_dir: Path, log: Path) 
         return []
     mesh = read_mesh(out_dir / record["mesh"])
     vertices, faces = choice.carve(mesh.vertices, mesh.faces, cloud.points)
-    scores = api.score((vertices, faces), truth=log).to_dict()
+    scores = api.score((vertices, faces), truth=log, **SCORE_OPTIONS).to_dict()
     return [{"status": "ok", "key": choice.chosen.key, "label": choice.label,
              "chamfer_m": scores["chamfer_m"], "fscore": scores["fscore"],
              "n_faces": len(faces), "n_params": choice.chosen.n_params}]

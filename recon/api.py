@@ -1245,7 +1245,8 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     agreement = None
     if auto:
         agreement = _auto_agreement(points, report["records"], methods, preparation, limits,
-                                    target_kind)
+                                    target_kind, misses=_misses(cloud, points, preparation.seed),
+                                    prepared=prepared, truth=truth_mesh, score_options=options)
         write_text_atomically(output / "auto.json",
                               json.dumps(_jsonable(agreement[0]), indent=2) + "\n",
                               error=ParameterError)
@@ -1260,15 +1261,27 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
 
 
 def _auto_agreement(cloud: Cloud, records: list, methods, preparation, limits,
-                    target_kind: str) -> tuple[dict, str]:
+                    target_kind: str, *, misses, prepared, truth, score_options
+                    ) -> tuple[dict, str]:
     """``method="auto"``'s choice on the prepared cloud and where it ranks among the compared
-    runs: (``{"choice", "agreement"}``, the candidates table and the agreement line)."""
-    from recon.experiments.compare import agreement, format_agreement
+    runs: (``{"choice", "agreement"}``, the candidates table and the agreement line). A choice
+    carved by the log's missed beams is a surface no compared run made: it is fitted on every
+    strike, carved as ``recon reconstruct -m auto`` carves it, scored against ``truth`` like the
+    runs (``score_options``) and ranked among them."""
+    from recon.experiments.compare import CHAMFER, agreement, format_agreement
     from recon.surfaces.auto import choose_for, format_choice
+    from recon.surfaces.reconstruct import reconstruct as run_method
 
     choice = choose_for(cloud, methods=methods, preparation=preparation, limits=limits,
-                        target_kind=target_kind)
-    verdict = agreement(records, choice.run.key)
+                        target_kind=target_kind, misses=misses)
+    if choice.carved:
+        surface = run_method(prepared, method=choice.run, **limits.kwargs())
+        carved = choice.carve(surface.vertices, surface.faces, cloud.points)
+        scores = score(carved, truth=truth, **(score_options or {}))
+        records = [*records, {"status": "ok", "key": choice.chosen.key, "label": choice.label,
+                              "method": choice.run.method, CHAMFER: scores.chamfer_m,
+                              "fscore": scores.fscore}]
+    verdict = agreement(records, choice.chosen.key)
     return ({"choice": choice.to_dict(), "agreement": verdict},
             format_choice(choice) + "\n" + format_agreement(verdict))
 

@@ -188,3 +188,32 @@ def test_missed_beams_are_a_seeded_bounded_draw(tmp_path):
     assert 10 <= a.n_missed <= 60
     assert not np.array_equal(missed_beams(path, limit=2, seed=4, **box).shot, a.shot) or \
         not np.array_equal(missed_beams(path, limit=2, seed=5, **box).shot, a.shot)
+
+
+def test_compare_ranks_a_carved_choice_as_the_surface_reconstruct_makes():
+    from formats.geometry import Cloud
+    from recon.api import _auto_agreement
+    from recon.surfaces.isolation import Limits
+    from recon.surfaces.prepare import Preparation, load_prepared
+
+    points, view, misses = plates()
+    cloud = Cloud(points, dict(zip(("view_x", "view_y", "view_z"), view.T, strict=True)))
+    _, prepared = load_prepared(cloud, Preparation())
+    a, b = grid(-1.0, 20), grid(1.0, 20)
+    truth = (np.vstack([a[0], b[0]]), np.vstack([a[1], b[1] + len(a[0])]))
+    # The compared runs: the closed hull far from the open truth, and one open run close to it.
+    records = [{"status": "ok", "key": "hull", "label": "convex-hull", "method": "convex-hull",
+                "chamfer_m": 0.9, "fscore": 0.5},
+               {"status": "ok", "key": "near", "label": "near", "method": "plane",
+                "chamfer_m": 0.05, "fscore": 0.97}]
+    result, text = _auto_agreement(cloud, records, ["convex-hull"], Preparation(),
+                                   Limits.from_options(), "unknown", misses=misses,
+                                   prepared=prepared, truth=truth,
+                                   score_options={"n_truth_samples": 20_000,
+                                                  "n_test_samples": 20_000,
+                                                  "coverage_points": 40_000})
+    verdict = result["agreement"]
+    assert result["choice"]["label"] == "convex-hull carved", text
+    # The carved walls are the plates: scored, it ranks among the runs, ahead of the hull.
+    assert verdict["label"] == "convex-hull carved" and verdict["n_ranked"] == 3
+    assert verdict["rank"] <= 2
