@@ -528,7 +528,7 @@ def prediction(record: dict) -> dict | None:
             "hi_m": record["predicted_chamfer_high_m"]}
 
 
-def predict_runs(records: list[dict], cloud, out_dir: Path) -> dict:
+def predict_runs(records: list[dict], cloud, out_dir: Path, misses=None) -> dict:
     """The truth-free predicted Chamfer (and band) of every successful run of a compare.
 
     From the run's record when the current estimate made its columns (``predicted_by`` is
@@ -559,7 +559,7 @@ def predict_runs(records: list[dict], cloud, out_dir: Path) -> dict:
         elif r.get("mesh") and (out_dir / r["mesh"]).is_file():
             mesh = read_mesh(out_dir / r["mesh"])
             runs[r["key"]] = fresh[r["key"]] = prediction(
-                predicted_columns(mesh.vertices, mesh.faces, cloud))
+                predicted_columns(mesh.vertices, mesh.faces, cloud, misses))
         else:
             runs[r["key"]] = None
     if fresh:
@@ -591,16 +591,16 @@ def auto_prediction(choice, records: list[dict], cloud, out_dir: Path) -> dict |
     mesh = read_mesh(out_dir / record["mesh"])
     e = estimate(choice.carve(mesh.vertices, mesh.faces, cloud.points), cloud,
                  heldout=choice.chosen.heldout,
-                 target_kind=choice.target_kind)
+                 target_kind=choice.target_kind, misses=choice.misses)
     return {"chamfer_m": e.chamfer_m, "lo_m": e.chamfer_low_m, "hi_m": e.chamfer_high_m,
             "source": e.source}
 
 
 def carved_record(choice, records: list[dict], cloud, out_dir: Path, log: Path) -> list[dict]:
     """Auto's carved choice scored on the truth (``recon.api.score`` against the log's truth
-    mesh, with the compare's ``SCORE_OPTIONS``): the compare's mesh of the chosen run carved as auto carves it
-    (``AutoChoice.carve``), as a record keyed by the candidate's key; [] when the choice is
-    not carved or the run's mesh was not kept."""
+    mesh, with the compare's ``SCORE_OPTIONS``): the compare's mesh of the chosen run carved as
+    auto carves it (``AutoChoice.carve``), as a record keyed by the candidate's key; [] when
+    the choice is not carved or the run's mesh was not kept."""
     from formats.mesh_io import read_mesh
     from recon import api
 
@@ -657,15 +657,16 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
     out_dir = args.out / cloud.name
     log = simulate(cloud, args.out, quick=args.quick, meshes=args.meshes)
     start = time.perf_counter()
+    misses = misses_near(log, points.points)
     choice = choose(points.points, view_points=points.view_points,
                     uncertainty=points.attributes, methods=names, seed=0,
                     timeout_s=args.timeout, n_workers=args.workers,
-                    target_kind=cloud.target_kind, misses=misses_near(log, points.points))
+                    target_kind=cloud.target_kind, misses=misses)
     timing["auto_s"] = time.perf_counter() - start
     (out_dir / "auto.json").write_text(json.dumps(choice.to_dict(), indent=2, default=str))
     records = report["records"]
     start = time.perf_counter()
-    predicted = predict_runs(records, points, out_dir)
+    predicted = predict_runs(records, points, out_dir, misses)
     auto_band = auto_prediction(choice, records, points, out_dir)
     estimate_s = time.perf_counter() - start
     carved = carved_record(choice, records, points, out_dir, log)
@@ -688,7 +689,8 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
             "weighting": weighting(records),
             "compare_s": timing["compare_s"], "auto_s": timing["auto_s"],
             "cost_ratio": timing["auto_s"] / timing["compare_s"],
-            "fit_ratio": sum(c.fit_s or 0.0 for c in choice.candidates)
+            # a carved twin shares its candidate's fit: counted once
+            "fit_ratio": sum(c.fit_s or 0.0 for c in choice.candidates if not c.carved)
             / timing["compare_fit_s"],
             "ranking": [{"label": r["label"], "chamfer_m": _chamfer(r),
                          "fscore": r.get("fscore"), "n_faces": r.get("n_faces"),

@@ -1090,11 +1090,12 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
         if output is not None:
             check_destination(output, ParameterError)   # before the work, not after it
         cloud, prepared = load_prepared(_from_library(source), preparation)
+        misses = _misses(source, cloud, preparation.seed)
         choice = None
         if auto:
             choice = choose_for(cloud, methods=auto_methods, preparation=preparation,
                                 limits=limits, holdout=holdout, target_kind=target_kind,
-                                misses=_misses(source, cloud, preparation.seed))
+                                misses=misses)
             run = choice.run
             if say is not None:
                 say(format_choice(choice))
@@ -1107,7 +1108,7 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
         surface.frame = cloud.frame  # so that scoring against a truth in another frame is refused
         surface.info["estimate"] = estimate_of(
             surface, cloud, heldout=None if choice is None else choice.chosen.heldout,
-            seed=preparation.seed, target_kind=target_kind).to_dict()
+            seed=preparation.seed, target_kind=target_kind, misses=misses).to_dict()
         if choice is not None:
             surface.info["auto"] = choice.to_dict()
         named = isinstance(source, str | os.PathLike)
@@ -1231,6 +1232,7 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     if local:  # ... and make the truth ready for scoring while the cloud is prepared
         warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
     points, prepared = load_prepared(_from_library(cloud), preparation)
+    misses = _misses(cloud, points, preparation.seed)
     if say is not None:
         say(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "
             f"{prepared.noise:.3g} m), truth {len(truth_mesh[1])} faces -> {output}")
@@ -1241,11 +1243,11 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
         fingerprint={"input": _name(cloud), "truth": _name(truth), "voxel": preparation.voxel,
                      "remove_outliers": preparation.remove_outliers,
                      "normals_k": preparation.k},
-        strikes=points, **limits.kwargs())
+        strikes=points, misses=misses, **limits.kwargs())
     agreement = None
     if auto:
         agreement = _auto_agreement(points, report["records"], methods, preparation, limits,
-                                    target_kind, misses=_misses(cloud, points, preparation.seed),
+                                    target_kind, misses=misses,
                                     prepared=prepared, truth=truth_mesh, score_options=options)
         write_text_atomically(output / "auto.json",
                               json.dumps(_jsonable(agreement[0]), indent=2) + "\n",

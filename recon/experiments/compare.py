@@ -89,7 +89,8 @@ def estimate_version() -> str:
     return hashlib.sha1(source.encode()).hexdigest()[:12]
 
 
-def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud) -> dict:
+def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud, misses=None
+                      ) -> dict:
     """The truth-free prediction of one surface as record columns (``recon.surfaces.estimate.
     estimate``, in-sample: the fit saw every strike).
 
@@ -99,6 +100,8 @@ def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud) -
     faces : (f, 3) int
     strikes : Cloud
         The strikes with their view points and recorded uncertainty columns.
+    misses : recon.registration.misses.MissedBeams, optional
+        The strike log's missed beams (``estimate``'s).
 
     Returns
     -------
@@ -111,7 +114,7 @@ def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud) -
     from recon.surfaces.estimate import estimate
 
     try:
-        e = estimate((vertices, faces), strikes)
+        e = estimate((vertices, faces), strikes, misses=misses)
     except (ValueError, RuntimeError) as exc:   # e.g. strikes too flat for their hull
         return {"predicted_by": estimate_version(), "prediction_failed": f"{exc}"[:200]}
     return {"predicted_chamfer_m": e.chamfer_m, "predicted_chamfer_low_m": e.chamfer_low_m,
@@ -119,10 +122,11 @@ def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud) -
             "predicted_by": estimate_version()}
 
 
-def flatten(run: Run, result: dict, *, mesh_dir: Path | None, strikes: Cloud | None = None
-            ) -> dict:
+def flatten(run: Run, result: dict, *, mesh_dir: Path | None, strikes: Cloud | None = None,
+            misses=None) -> dict:
     """A result of ``run_isolated`` for ``run`` as one flat record (mesh written, arrays
-    dropped; with ``strikes``, the truth-free prediction columns, ``predicted_columns``)."""
+    dropped; with ``strikes`` (and a log's ``misses``), the truth-free prediction columns,
+    ``predicted_columns``)."""
     from formats.mesh_io import write_mesh
 
     record: dict[str, Any] = {"label": run.label, "method": run.method, "params": run.params,
@@ -138,7 +142,7 @@ def flatten(run: Run, result: dict, *, mesh_dir: Path | None, strikes: Cloud | N
         write_mesh(path, result["vertices"], result["faces"], source=f"recon compare: {run.label}")
         record["mesh"] = str(Path(mesh_dir.name) / path.name)
     if result.get("status") == "ok" and strikes is not None:
-        record.update(predicted_columns(result["vertices"], result["faces"], strikes))
+        record.update(predicted_columns(result["vertices"], result["faces"], strikes, misses))
     record.update(result.get("scores") or {})
     return record
 
@@ -206,8 +210,8 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
             memory_mb: int | None = DEFAULT_MEMORY_MB,
             scheduler: str | None = None, n_workers: int | None = None, resume: bool = False,
             keep_meshes: bool = True, score_options: dict | None = None,
-            fingerprint: dict | None = None, title: str = "", strikes: Cloud | None = None
-            ) -> dict:
+            fingerprint: dict | None = None, title: str = "", strikes: Cloud | None = None,
+            misses=None) -> dict:
     """Run, score and rank every method variant on one prepared cloud.
 
     Parameters
@@ -240,6 +244,8 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
     strikes : Cloud, optional
         The strikes before preparation, with view points and recorded uncertainty: every
         successful run's record then carries its truth-free prediction (``predicted_columns``).
+    misses : recon.registration.misses.MissedBeams, optional
+        The strike log's missed beams, for those predictions.
 
     Returns
     -------
@@ -263,7 +269,8 @@ def compare(cloud: MethodInput, truth: tuple[np.ndarray, np.ndarray], out_dir, *
                              "memory_mb": memory_mb, "score_options": score_options},
                      fingerprint=ident, scheduler=scheduler, n_workers=n_workers, resume=resume,
                      on_result=lambda key, result: flatten(cases[key]["run"], result,
-                                                           mesh_dir=mesh_dir, strikes=strikes),
+                                                           mesh_dir=mesh_dir, strikes=strikes,
+                                                           misses=misses),
                      desc="compare", outputs=("results.csv", "results.json",
                                               "speed_accuracy.png", "auto.json"))
     records = [done[key] for key in cases if key in done]

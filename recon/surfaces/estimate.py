@@ -24,6 +24,7 @@ from recon.surfaces.judge import (
     HeldOut,
     Strikes,
     block_mean_se,
+    carved_faces,
     check,
     pass_folds,
     subsample,
@@ -227,8 +228,9 @@ class Proxy:
         How its held-out error grows with that distance: ``error ~ distance^growth``, from
         the held-out strikes beyond and within the median gap, in [0, 1].
     carved : (f,) bool
-        Faces a recorded beam crossed before its strike (by more than the tolerance): empty
-        space, where the truth is not, whatever the proxy says (the hull across a concavity).
+        Faces a recorded beam crossed before its strike (by more than the tolerance), or a
+        missed beam crossed away from every strike (``judge.carved_faces``): empty space,
+        where the truth is not, whatever the proxy says (the hull across a concavity).
     """
 
     vertices: np.ndarray
@@ -290,14 +292,16 @@ def _growth(distance: np.ndarray, gap: np.ndarray) -> float:
 
 
 def proxy(cloud: Cloud, strikes: Strikes, *, tau: float, noise: float,
-          target_kind: str = "unknown") -> Proxy:
+          target_kind: str = "unknown", misses=None, reach: float = 0.0) -> Proxy:
     """The convex hull of the strikes or their least-squares ellipsoid, whichever predicts
     held-out passes better (``PROXY_FOLDS`` folds of ``pass_folds``, chi-square per strike),
     fitted on all strikes; the ellipsoid only when its held-out error is within ``PROXY_FIT``
     tau. For a target stated ``"natural"`` (an asteroid, a comet: ``recon.surfaces.auto``'s
     ``target_kind``) the ellipsoid is what the caller says the unseen far side is like: it
     stands for the truth whenever its mean capped held-out distance is within
-    ``auto.NATURAL_FIT`` tau, the tolerance under which auto's natural-body prior takes it."""
+    ``auto.NATURAL_FIT`` tau, the tolerance under which auto's natural-body prior takes it.
+    ``misses`` (``recon.registration.misses.MissedBeams``, from a strike log) carve it too:
+    the faces they cross farther than ``reach`` [m] from every strike."""
     from scipy.spatial import cKDTree
 
     from recon.surfaces.auto import NATURAL_FIT
@@ -315,6 +319,8 @@ def proxy(cloud: Cloud, strikes: Strikes, *, tau: float, noise: float,
                 gaps.append(cKDTree(train).query(strikes.points[test], workers=-1)[0])
             whole = fit(strikes.points)
             carved = _carved(strikes, Caster(*whole), tau=tau, noise=noise)
+            if misses is not None and len(misses):
+                carved |= carved_faces(*whole, misses, strikes.points, reach)
         except (MethodFailed, ValueError, RuntimeError, np.linalg.LinAlgError):
             continue   # no ellipsoid through these strikes (or too few for a hull)
         cost = np.concatenate([c.cost for c in checks])
@@ -349,10 +355,17 @@ class _Context:
     proxy: Proxy
 
 
-_CONTEXTS: dict[tuple[str, int, str], _Context] = {}
+_CONTEXTS: dict[tuple[str, int, str, str], _Context] = {}
 
 
-def _context(cloud: Cloud, seed: int, target_kind: str) -> _Context:
+def _digest(*arrays) -> str:
+    digest = hashlib.sha1()
+    for a in arrays:
+        digest.update(np.ascontiguousarray(a).tobytes())
+    return digest.hexdigest()
+
+
+def _context(cloud: Cloud, seed: int, target_kind: str, misses=None) -> _Context:
     """The cloud's ``_Context``, kept for the last ``CONTEXT_CACHE`` clouds judged: every
     surface of one cloud shares it (the proxy and the area weights cost most of an estimate)."""
     from scipy.spatial import cKDTree
@@ -362,7 +375,8 @@ def _context(cloud: Cloud, seed: int, target_kind: str) -> _Context:
     for name in sorted(cloud.attributes):   # view points, error model, shots: all of it
         digest.update(name.encode())
         digest.update(np.ascontiguousarray(cloud.attributes[name]).tobytes())
-    key = (digest.hexdigest(), seed, target_kind)
+    key = (digest.hexdigest(), seed, target_kind,
+           "" if misses is None else _digest(misses.origin, misses.direction))
     if key in _CONTEXTS:
         return _CONTEXTS[key]
     tau = tau_of(strikes.points)
@@ -378,7 +392,8 @@ def _context(cloud: Cloud, seed: int, target_kind: str) -> _Context:
     checked = strikes.take(subsample(len(strikes), MAX_CHECKED, seed))
     context = _Context(strikes, tau, tree, noise, reach, checked,
                        _area_weights(checked.points, reach),
-                       proxy(cloud, strikes, tau=tau, noise=noise, target_kind=target_kind))
+                       proxy(cloud, strikes, tau=tau, noise=noise, target_kind=target_kind,
+                             misses=misses, reach=reach))
     if len(_CONTEXTS) >= CONTEXT_CACHE:
         _CONTEXTS.pop(next(iter(_CONTEXTS)))
     _CONTEXTS[key] = context
@@ -441,7 +456,7 @@ def _unsupported(vertices, faces, tree, reach: float, other: Caster, seed: int, 
 
 
 def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int = 0,
-             target_kind: str = "unknown") -> Estimate:
+             target_kind: str = "unknown", misses=None) -> Estimate:
     """Predict a surface's Chamfer distance and F-score against the unknown truth.
 
     **Where there are strikes** they are noisy samples of the truth, and the recorded error
@@ -520,13 +535,16 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
     target_kind : {"unknown", "natural"}
         What the caller states of the target (``recon.surfaces.auto.TARGET_KINDS``): for a
         natural body the ellipsoid stands for the unseen truth where it fits (``proxy``).
+    misses : recon.registration.misses.MissedBeams, optional
+        A strike log's missed beams: the proxy's faces they cross away from every strike are
+        carved (free space, not unseen truth).
 
     Returns
     -------
     Estimate
     """
     vertices, faces = (np.asarray(a) for a in surface)
-    context = _context(cloud, seed, target_kind)
+    context = _context(cloud, seed, target_kind, misses)
     tau, tree, reach, truth = context.tau, context.tree, context.reach, context.proxy
     caster = Caster(vertices, faces)
     result = check(context.checked, caster, tau=tau, noise=context.noise)

@@ -489,20 +489,29 @@ def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, 
     vertices : (v', 3) float64
     faces : (f', 3) int64
     """
-    faces = np.asarray(faces, dtype=np.int64)
-    for _ in range(CARVE_PASSES):
-        if not len(faces):
-            break
-        cut, triangle = _first_cuts(misses, Caster(vertices, faces), strikes, reach)
-        if not cut.any():
-            break
-        keep = np.ones(len(faces), dtype=bool)
-        keep[triangle[cut]] = False
-        faces = faces[keep]
+    faces = np.asarray(faces, dtype=np.int64)[~carved_faces(vertices, faces, misses, strikes,
+                                                             reach)]
     used = np.unique(faces)
     index = np.full(len(vertices), -1, dtype=np.int64)
     index[used] = np.arange(len(used))
     return np.asarray(vertices, dtype=np.float64)[used], index[faces]
+
+
+def carved_faces(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray,
+                 reach: float) -> np.ndarray:
+    """Which faces ``carve`` removes: (f,) bool, pass after pass (at most ``CARVE_PASSES``) the
+    face each cut missed beam first hits among the faces left (``cut_misses``)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    carved = np.zeros(len(faces), dtype=bool)
+    for _ in range(CARVE_PASSES):
+        left = np.flatnonzero(~carved)
+        if not len(left):
+            break
+        cut, triangle = _first_cuts(misses, Caster(vertices, faces[left]), strikes, reach)
+        if not cut.any():
+            break
+        carved[left[triangle[cut]]] = True
+    return carved
 
 
 def subsample(n: int, limit: int, seed: int) -> np.ndarray:

@@ -20,13 +20,14 @@ from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, waterti
 
 
 def estimate_of(surface: Mesh, cloud: Cloud, *, heldout=None, seed: int = 0,
-                target_kind: str = "unknown"):
-    """``recon.surfaces.estimate.estimate`` of a surface on the (prepared) cloud it was made from:
-    its truth-free predicted Chamfer distance and F-score band."""
+                target_kind: str = "unknown", misses=None):
+    """``recon.surfaces.estimate.estimate`` of a surface on the (prepared) cloud it was made from
+    (and the missed beams of its strike log, if any): its truth-free predicted Chamfer distance
+    and F-score band."""
     from recon.surfaces.estimate import estimate
 
     return estimate((surface.vertices, surface.faces), cloud, heldout=heldout, seed=seed,
-                    target_kind=target_kind)
+                    target_kind=target_kind, misses=misses)
 
 
 class Surface(Mesh):

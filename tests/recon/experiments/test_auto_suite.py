@@ -174,7 +174,7 @@ def test_visibility_on_the_front_or_not_and_against_the_best():
     assert not absent["present"] and "no run of it here" in absent["note"]
 
 
-def _fake_columns(vertices, faces, strikes):
+def _fake_columns(vertices, faces, strikes, misses=None):
     """A stand-in prediction: the mesh's largest extent over 100, and a band of +-10 %."""
     size = float(np.ptp(vertices, axis=0).max()) / 100.0
     return {"predicted_chamfer_m": size, "predicted_chamfer_low_m": 0.9 * size,

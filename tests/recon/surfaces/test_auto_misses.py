@@ -217,3 +217,20 @@ def test_compare_ranks_a_carved_choice_as_the_surface_reconstruct_makes():
     # The carved walls are the plates: scored, it ranks among the runs, ahead of the hull.
     assert verdict["label"] == "convex-hull carved" and verdict["n_ranked"] == 3
     assert verdict["rank"] <= 2
+
+
+def test_the_estimate_does_not_count_free_space_the_misses_show_as_unseen_truth():
+    from formats.geometry import Cloud
+    from recon.surfaces.estimate import estimate
+
+    points, view, misses = plates()
+    cloud = Cloud(points, dict(zip(("view_x", "view_y", "view_z"), view.T, strict=True)))
+    a, b = grid(-1.0, 20), grid(1.0, 20)
+    open_plates = (np.vstack([a[0], b[0]]), np.vstack([a[1], b[1] + len(a[0])]))
+    # The truth is the two plates: their Chamfer distance to it is ~0. Without the misses the
+    # strikes' hull stands for unseen truth across the gap (its top, bottom and ends); the
+    # misses cross about half of the top and the bottom, which are then free space.
+    blind = estimate(open_plates, cloud)
+    seen = estimate(open_plates, cloud, misses=misses)
+    assert seen.chamfer_m < 0.8 * blind.chamfer_m, (seen.describe(), blind.describe())
+    assert seen.unseen < blind.unseen
