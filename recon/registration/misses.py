@@ -116,7 +116,7 @@ def missed_beams(log_path, *, low: np.ndarray, high: np.ndarray,
         shots = log.shots()
         shot, beam, _ = log.strikes()
     fired = len(shots) * n_beams
-    struck = np.sort(shot * n_beams + beam)
+    struck = np.sort(shot.astype(np.int64) * n_beams + beam)   # uint32 would overflow
     draw = min(fired, DRAW_FACTOR * limit)
     rng = np.random.default_rng(seed)
     pair = np.sort(rng.choice(fired, draw, replace=False)) if draw < fired else np.arange(fired)
