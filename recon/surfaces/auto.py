@@ -712,7 +712,7 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
         text += "; the lowest held-out statistic"
         if kept > 1:
             text += f"; the {kept - 1} other candidate(s) {band} {holding}are larger models"
-        elif not selection.holed:
+        elif not selection.holed and not selection.filled:
             text += f"; no other candidate is {band}"
     else:
         gap, se = selection.gaps[selection.chosen]
@@ -880,7 +880,8 @@ def format_choice(choice: AutoChoice) -> str:
                  f"free: of {choice.n_misses} missed beams near the strikes, those the surface "
                  "cuts away from every strike (free space it fills); "
                  f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best, x "
-                 "within them but leaving strikes in holes beyond the noise; carved: without "
+                 "within them but left out (strikes in holes beyond the noise, or its carved "
+                 "twin is within them); carved: without "
                  "the faces the missed beams cut)")
     lines.append(choice.reason)
     return "\n".join(lines)
