@@ -368,37 +368,48 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
 
 
 @njit(cache=True)
-def _project(position, centre, occupied, targets, local, distance):
-    """Fill ``local`` (o + n, 3) with the occupied centres (o, 3) then the targets (n, 3) in
-    image axes from ``position`` (3,) [m, B] (w toward ``centre``, a and b across) and
-    ``distance`` (o + n,) with their distances [m]; return the nearest occupied one's."""
-    o = len(occupied)
+def _image_axes(position, centre):
+    """Image axes (3, 3) from ``position`` (3,) [m, B]: rows a and b across, w toward ``centre``
+    (3,) [m, B]."""
     w = centre - position
     w /= math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
     a = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     a -= (a[0] * w[0] + a[1] * w[1] + a[2] * w[2]) * w
     a /= math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-    b = np.array([w[1] * a[2] - w[2] * a[1], w[2] * a[0] - w[0] * a[2],
-                  w[0] * a[1] - w[1] * a[0]])
+    axes = np.empty((3, 3))
+    axes[0], axes[2] = a, w
+    axes[1, 0] = w[1] * a[2] - w[2] * a[1]
+    axes[1, 1] = w[2] * a[0] - w[0] * a[2]
+    axes[1, 2] = w[0] * a[1] - w[1] * a[0]
+    return axes
+
+
+@njit(cache=True)
+def _project(position, axes, points, local, distance):
+    """Fill ``local`` (m, 3) with ``points`` (m, 3) [m, B] in image axes from ``position``
+    (3,) [m, B] and ``distance`` (m,) with their distances [m]; return the smallest."""
+    a0, a1, a2 = axes[0, 0], axes[0, 1], axes[0, 2]
+    b0, b1, b2 = axes[1, 0], axes[1, 1], axes[1, 2]
+    w0, w1, w2 = axes[2, 0], axes[2, 1], axes[2, 2]
+    p0, p1, p2 = position[0], position[1], position[2]
     nearest = np.inf
-    for k in range(len(local)):
-        x = occupied[k] if k < o else targets[k - o]
-        x0, x1, x2 = x[0] - position[0], x[1] - position[1], x[2] - position[2]
-        local[k, 0] = x0 * a[0] + x1 * a[1] + x2 * a[2]
-        local[k, 1] = x0 * b[0] + x1 * b[1] + x2 * b[2]
-        local[k, 2] = x0 * w[0] + x1 * w[1] + x2 * w[2]
-        distance[k] = math.sqrt(local[k, 0] * local[k, 0] + local[k, 1] * local[k, 1]
-                                + local[k, 2] * local[k, 2])
-        if k < o:
-            nearest = min(nearest, distance[k])
+    for k in range(len(points)):
+        x0, x1, x2 = points[k, 0] - p0, points[k, 1] - p1, points[k, 2] - p2
+        la = x0 * a0 + x1 * a1 + x2 * a2
+        lb = x0 * b0 + x1 * b1 + x2 * b2
+        lw = x0 * w0 + x1 * w1 + x2 * w2
+        local[k, 0], local[k, 1], local[k, 2] = la, lb, lw
+        d = math.sqrt(la * la + lb * lb + lw * lw)
+        distance[k] = d
+        nearest = min(nearest, d)
     return nearest
 
 
 @njit(cache=True)
-def _pixels(local, o, pixel, uv):
+def _pixels(local, pixel, uv):
     """Fill ``uv`` (m, 2) with the pixel of each point of ``local`` (m, 3) at ``pixel`` [rad]
-    (0, 0 behind the position); return the image's first pixel and size (4,) int64 over the
-    first ``o`` points and the splat around them."""
+    (0, 0 behind the position); return the image's first pixel and size (4,) int64: the
+    points' pixels and ``2 SPLAT`` around them (room for the neighbourhoods read)."""
     lo0 = lo1 = np.iinfo(np.int64).max
     hi0 = hi1 = np.iinfo(np.int64).min
     for k in range(len(local)):
@@ -408,31 +419,44 @@ def _pixels(local, o, pixel, uv):
             uv[k, 1] = np.int64(math.floor(local[k, 1] / scale))
         else:
             uv[k, 0] = uv[k, 1] = 0
-        if k < o:
-            lo0, hi0 = min(lo0, uv[k, 0]), max(hi0, uv[k, 0])
-            lo1, hi1 = min(lo1, uv[k, 1]), max(hi1, uv[k, 1])
+        lo0, hi0 = min(lo0, uv[k, 0]), max(hi0, uv[k, 0])
+        lo1, hi1 = min(lo1, uv[k, 1]), max(hi1, uv[k, 1])
     box = np.empty(4, dtype=np.int64)
-    box[0], box[1] = lo0 - SPLAT, lo1 - SPLAT
-    box[2], box[3] = hi0 + SPLAT + 1 - box[0], hi1 + SPLAT + 1 - box[1]
+    box[0], box[1] = lo0 - 2 * SPLAT, lo1 - 2 * SPLAT
+    box[2], box[3] = hi0 + 2 * SPLAT + 1 - box[0], hi1 + 2 * SPLAT + 1 - box[1]
     return box
 
 
 @njit(cache=True)
-def _splat(local, distance, uv, o, box, image, stamp, tick):
-    """Each of the first ``o`` points in front marks its pixel and the ``SPLAT`` around it with
-    its distance where nearer (pixels whose stamp is not ``tick`` count as empty)."""
+def _mark(local, distance, uv, box, image, stamp, tick):
+    """Each point in front marks its own pixel with its distance where nearer (pixels whose
+    stamp is not ``tick`` count as empty)."""
     w1 = box[3]
-    for k in range(o):
+    for k in range(len(local)):
         if local[k, 2] <= 0:
             continue
-        spot = (uv[k, 0] - box[0]) * w1 + (uv[k, 1] - box[1])
-        for du in range(-SPLAT, SPLAT + 1):
-            for dv in range(-SPLAT, SPLAT + 1):
-                cell = spot + du * w1 + dv
-                if stamp[cell] != tick:
-                    stamp[cell], image[cell] = tick, distance[k]
-                elif distance[k] < image[cell]:
-                    image[cell] = distance[k]
+        cell = (uv[k, 0] - box[0]) * w1 + (uv[k, 1] - box[1])
+        if stamp[cell] != tick:
+            stamp[cell], image[cell] = tick, distance[k]
+        elif distance[k] < image[cell]:
+            image[cell] = distance[k]
+
+
+@njit(cache=True)
+def _nearest_around(u, v, box, image, stamp, tick):
+    """The smallest distance marked in pixel (u, v) and the ``SPLAT`` pixels around it (inf
+    when none is); (u, v) within ``SPLAT`` of the marked pixels' range or beyond it."""
+    w0, w1 = box[2], box[3]
+    u, v = u - box[0], v - box[1]
+    nearest = np.inf
+    if u < SPLAT or v < SPLAT or u >= w0 - SPLAT or v >= w1 - SPLAT:
+        return nearest
+    for du in range(-SPLAT, SPLAT + 1):
+        for dv in range(-SPLAT, SPLAT + 1):
+            cell = (u + du) * w1 + (v + dv)
+            if stamp[cell] == tick and image[cell] < nearest:
+                nearest = image[cell]
+    return nearest
 
 
 @njit(cache=True)
@@ -456,29 +480,41 @@ def hidden(positions, occupied, targets, size, image, stamp, tick):
     out : (p, n) bool: True where a centre in the target's pixel (or the ``SPLAT`` pixels
         around it) lies nearer than the target by more than ``BLOCK_SLACK`` voxel edges
     image, stamp, tick : the room (larger when an image did not fit) and the last tick used
+
+    Notes
+    -----
+    Each occupied centre marks its own pixel and each target reads the minimum over its pixel
+    and the ``SPLAT`` around it: the same minimum as marking every pixel around each centre and
+    reading the target's own (sim/surface_map.py), with one write per centre instead of nine.
     """
     p, o, n = len(positions), len(occupied), len(targets)
     out = np.zeros((p, n), dtype=np.bool_)
     centre = np.empty(3)
     for i in range(3):
         centre[i] = 0.5 * (occupied[:, i].min() + occupied[:, i].max())
-    local = np.empty((o + n, 3))
-    distance = np.empty(o + n)
-    uv = np.empty((o + n, 2), dtype=np.int64)
+    local = np.empty((o, 3))
+    distance = np.empty(o)
+    uv = np.empty((o, 2), dtype=np.int64)
+    t_local = np.empty((n, 3))
+    t_distance = np.empty(n)
+    t_uv = np.empty((n, 2), dtype=np.int64)
     for q in range(p):
-        nearest = _project(positions[q], centre, occupied, targets, local, distance)
-        box = _pixels(local, o, PIXEL_EDGES * size / nearest, uv)     # rad per pixel
+        axes = _image_axes(positions[q], centre)
+        nearest = _project(positions[q], axes, occupied, local, distance)
+        pixel = PIXEL_EDGES * size / nearest                # rad per pixel
+        box = _pixels(local, pixel, uv)
         w0, w1 = box[2], box[3]
         if len(image) < w0 * w1:
             image = np.empty(2 * w0 * w1)
             stamp = np.zeros(2 * w0 * w1, dtype=np.int64)
         tick += 1
-        _splat(local, distance, uv, o, box, image, stamp, tick)
+        _mark(local, distance, uv, box, image, stamp, tick)
+        _project(positions[q], axes, targets, t_local, t_distance)
+        _pixels(t_local, pixel, t_uv)
         for k in range(n):
-            j = o + k
-            u, v = uv[j, 0] - box[0], uv[j, 1] - box[1]
-            if local[j, 2] > 0 and 0 <= u < w0 and 0 <= v < w1 and stamp[u * w1 + v] == tick:
-                out[q, k] = image[u * w1 + v] < distance[j] - BLOCK_SLACK * size
+            if t_local[k, 2] > 0:
+                near = _nearest_around(t_uv[k, 0], t_uv[k, 1], box, image, stamp, tick)
+                out[q, k] = near < t_distance[k] - BLOCK_SLACK * size
     return out, image, stamp, tick
 
 
