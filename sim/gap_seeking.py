@@ -63,7 +63,6 @@ from formats.strike_log import StrikeChunk
 from formats.strike_log.schema import Shots
 from sim.defaults import (
     GAP_BLOCK_VOXELS,
-    GAP_HORIZON_INTERVALS,
     GAP_IDLE_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
@@ -247,13 +246,6 @@ class GapSeeker:
 
     # ------------------------------------------------------------------ the plan
 
-    def pose_times(self, t: np.ndarray) -> np.ndarray:
-        """The times (n + 1,) [s] whose poses :meth:`command` needs for an interval's shot
-        times ``t`` (n,): those, and the look-ahead ``GAP_HORIZON_INTERVALS`` intervals after
-        the last."""
-        t = np.asarray(t, dtype=np.float64)
-        return np.append(t, t[-1] + GAP_HORIZON_INTERVALS * len(t) * self.step)
-
     def command(self, t: np.ndarray, poses=None) -> np.ndarray:
         """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
         (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old or ran
@@ -263,9 +255,9 @@ class GapSeeker:
         ----------
         t : (n,) float64, seconds
         poses : tuple, optional
-            ``(position, target, nominal)`` at :meth:`pose_times` ``(t)``, as the ``poses``
-            callable returns them (the simulation computes them for its own shots anyway);
-            without it the law calls ``poses`` itself.
+            ``(position, target, nominal)`` at ``t``, as the ``poses`` callable returns them
+            (the simulation computes them for its own shots anyway); without it the law calls
+            ``poses`` itself.
 
         Returns
         -------
@@ -282,12 +274,11 @@ class GapSeeker:
             self._short = True
             self._after_interval(False)
             return turn_from_boresight(np.tile(self.boresight, (len(t), 1)))
-        position, target, nominal = poses if poses is not None else self._poses(
-            self.pose_times(t))
-        pick, goal, turn, self.map.depth_room = kernels.sweep(
-            len(t), self._centres, self._used, self.map.occupied_centres, self.map.size,
-            position, target.as_matrix(), nominal, self.boresight, self.max_offset,
-            self.max_rate * self.step, GAP_BLOCK_VOXELS, *self.map.depth_room)
+        position, target, nominal = poses if poses is not None else self._poses(t)
+        pick, goal, turn = kernels.sweep(
+            len(t), self._centres, self._used, self.map.size, *self.map.blockers(), position,
+            target.as_matrix(), nominal, self.boresight, self.max_offset,
+            self.max_rate * self.step, GAP_BLOCK_VOXELS)
         self.boresight = goal[-1]
         self._short = bool(pick[-1] < 0)
         self._after_interval(bool(pick[0] >= 0))
@@ -308,11 +299,15 @@ def _spread(keys: np.ndarray, block: int, surface: SurfaceMap
             ) -> tuple[np.ndarray, np.ndarray]:
     """The first of ``keys`` (sorted, voxels of ``surface``) in each cube of ``block`` voxels
     on a side: candidates that one strike each settles, evenly over the map; and their centres
-    (c, 3) [m, B] (compiled: sim/planner_kernels.py)."""
+    (c, 3) [m, B] (compiled: sim/planner_kernels.py, with a mark per cube kept by the map from
+    plan to plan instead of allocated each time)."""
     from sim import planner_kernels as kernels
 
+    need = kernels.cubes(block, surface._shape, surface._corner)
+    if len(surface.cube_marks) < need:
+        surface.cube_marks = np.zeros(need, dtype=bool)
     return kernels.spread(np.asarray(keys, dtype=np.int64), block, surface.size,
-                          surface._shape, surface._corner)
+                          surface._shape, surface._corner, surface.cube_marks)
 
 
 def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:
