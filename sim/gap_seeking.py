@@ -23,22 +23,20 @@ beam has examined, including the far side of a thin plate seen from one side.
 intervals: it takes the intervals observed since into the map (all at once) and chooses the
 plan's candidates, the frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side
 (a strike is expected to settle the frontier around its aim). Every interval it then predicts,
-from its orbit and the known spin, where the chaser is in B at the interval's middle shot and
-``GAP_HORIZON_INTERVALS`` intervals after its end, and which of the candidates not yet aimed at
-a beam from there would reach before striking a struck voxel (a depth image of the map,
-:meth:`SurfaceMap.visible`). Of those visible at the middle shot and within
-``attitude.max_offset_deg`` of the nominal boresight, the interval's shots take one each: first
-those predicted hidden later (see it now or wait), then in a sweep, rows two voxels wide across
-the view, alternately left and right, going on from the boresight's row (the rows below it, then
-from the top), so that consecutive aims lie next to each other. A shot
+from its orbit and the known spin, where the chaser is in B at the interval's middle shot.
+The candidates not yet aimed at and within ``attitude.max_offset_deg`` of the nominal boresight
+are taken in a sweep, rows two voxels wide across the view, alternately left and right, going
+on from the boresight's row (the rows below it, then from the top), so that consecutive aims lie
+next to each other; each is taken by the next shot when a beam from there is predicted to reach
+it before a struck voxel (a walk through the map, :meth:`SurfaceMap.visible`), until every shot
+has one (so a large map costs no more visibility tests than the shots need). A shot
 whose aim is beyond one step's reach (``max_rate * step``) turns toward it at the rate limit;
 shots left over when the visible candidates run out hold the boresight, and the law plans anew
 before the next interval (its candidates are used up; the map has grown). So the map, the
 frontier and the candidates cost once per plan, the prediction and the sweep once per interval;
 each of these steps is one or a few compiled calls (sim/planner_kernels.py). The poses of an
 interval (where the chaser is, the target's attitude, the nominal sensor frame) are those the
-simulation computes for its shots anyway, handed to :meth:`GapSeeker.command` with the
-look-ahead's (:meth:`GapSeeker.pose_times`).
+simulation computes for its shots anyway, handed to :meth:`GapSeeker.command`.
 
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run

@@ -9,13 +9,14 @@ that a process after the first loads them from disk instead of compiling them):
 - :func:`strike_index` and :func:`strike_merge`: the strikes into the occupied voxels and the
   frontier marks around the new ones;
 - :func:`carve`: the voxels the beams crossed before their strikes;
-- :func:`hidden`: the depth image of the occupied voxels from a few positions;
-- :func:`sweep`: one interval's aims (visibility, the sweep's order, the slew limits) and the
-  commanded turns.
+- :func:`hidden`: which voxels beams from a few positions reach (a walk through the map);
+- :func:`sweep`: one interval's aims (the sweep's order, visibility tested in that order until
+  the shots are used, the slew limits) and the commanded turns.
 
 They do what the numpy code they replaced did, in the same order of operations where it
 matters (the same voxel keys, the same sweep order); tests/sim/test_planner_kernels.py holds
-that numpy code and checks each kernel against it on small maps. Only the closed loop imports
+that numpy code (for the visibility walk, a brute-force test of every beam against every
+struck voxel) and checks each kernel against it on small maps. Only the closed loop imports
 this module, so the numba import (a few tenths of a second) is paid by closed-loop runs alone.
 
 Conventions as in sim/surface_map.py: voxel ``(i, j, k)`` of edge ``size`` [m] holds the points

@@ -19,7 +19,7 @@ key array with their counts and views; the state of every voxel (occupied, cross
 is a byte in a dense grid over the box of the occupied voxels grown by the traversal margin,
 reallocated larger when that box grows, so that marking a beam's path or looking a voxel up is
 one indexing operation. Beams are traversed by sampling every ``size / TRAVERSAL_STEP`` along
-them. The updates (strikes, carving), the frontier's reading and the depth image below are
+them. The updates (strikes, carving), the frontier's reading and the visibility walk below are
 compiled kernels (sim/planner_kernels.py), one call each.
 
 The **frontier** is the unknown voxels next to (sharing a face with) an occupied voxel: where
