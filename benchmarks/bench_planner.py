@@ -151,6 +151,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="runs per target (medians)")
     parser.add_argument("--targets", nargs="+", choices=list(TARGETS), default=list(TARGETS))
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "planner.json")
+    parser.add_argument("--skip-one-time", action="store_true",
+                        help="measure the steady state only (the one-time costs compile every "
+                             "kernel in a fresh cache)")
     args = parser.parse_args(argv)
     print(f"planner = GapSeeker.command + observe; simulation = the closed-loop run without "
           f"the planner; CPU time of the run's thread (wall time beside); target planner / "
@@ -159,9 +162,11 @@ def main(argv: list[str] | None = None) -> int:
     rows = {}
     with tempfile.TemporaryDirectory(prefix="recon-bench-planner-") as tmp:
         preset, overrides, _ = TARGETS[args.targets[0]]
-        once = one_time(preset, list(overrides), 0.5, Path(tmp))
+        once = {} if args.skip_one_time else one_time(preset, list(overrides), 0.5, Path(tmp))
         for case, label in (("compile", "no cache (after an install or a change of the "
                                         "kernels)"), ("cached", "from the cache")):
+            if case not in once:
+                continue
             o = once[case]
             total = o["numba_import_s"] + o["kernels_import_s"] + o["kernels_ready_s"]
             print(f"one-time, {label}: {total:.2f} s = numba import {o['numba_import_s']:.2f} "
