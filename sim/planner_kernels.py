@@ -420,25 +420,27 @@ def _blocked(target, position, size, state, shape, corner, lo, hi, slack, radius
     sj, tj, dj = _axis_walk(p1, d1, j, size)
     sk, tk, dk = _axis_walk(p2, d2, k, size)
     s1, s2 = shape[1] * shape[2], shape[2]
+    cell = (i - corner[0]) * s1 + (j - corner[1]) * s2 + (k - corner[2])
+    limit2, radius2 = limit * limit, radius * radius
     while not (i == gi and j == gj and k == gk):
-        if state[(i - corner[0]) * s1 + (j - corner[1]) * s2 + (k - corner[2])] & _OCC:
+        if state[cell] & _OCC:
             c0, c1, c2 = (i + 0.5) * size - p0, (j + 0.5) * size - p1, (k + 0.5) * size - p2
             far = c0 * c0 + c1 * c1 + c2 * c2
             along = c0 * d0 + c1 * d1 + c2 * d2
-            if far < limit * limit and far - along * along < radius * radius:
+            if far < limit2 and far - along * along < radius2:
                 return True
         if ti <= tj and ti <= tk:
             if ti >= leave:
                 return False
-            i, ti = i + si, ti + di
+            i, ti, cell = i + si, ti + di, cell + si * s1
         elif tj <= tk:
             if tj >= leave:
                 return False
-            j, tj = j + sj, tj + dj
+            j, tj, cell = j + sj, tj + dj, cell + sj * s2
         else:
             if tk >= leave:
                 return False
-            k, tk = k + sk, tk + dk
+            k, tk, cell = k + sk, tk + dk, cell + sk
     return False
 
 
@@ -492,13 +494,15 @@ def _unit(points, origin, rotation):
     """Unit vectors (c, 3) from ``origin`` (3,) toward ``points`` (c, 3), turned by
     ``rotation`` (3, 3)."""
     out = np.empty((len(points), 3))
+    r = rotation
     for k in range(len(points)):
         d0, d1, d2 = (points[k, 0] - origin[0], points[k, 1] - origin[1],
                       points[k, 2] - origin[2])
-        for i in range(3):
-            out[k, i] = rotation[i, 0] * d0 + rotation[i, 1] * d1 + rotation[i, 2] * d2
-        out[k] /= math.sqrt(out[k, 0] * out[k, 0] + out[k, 1] * out[k, 1]
-                            + out[k, 2] * out[k, 2])
+        a0 = r[0, 0] * d0 + r[0, 1] * d1 + r[0, 2] * d2
+        a1 = r[1, 0] * d0 + r[1, 1] * d1 + r[1, 2] * d2
+        a2 = r[2, 0] * d0 + r[2, 1] * d1 + r[2, 2] * d2
+        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        out[k, 0], out[k, 1], out[k, 2] = a0 / norm, a1 / norm, a2 / norm
     return out
 
 
