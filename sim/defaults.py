@@ -407,9 +407,6 @@ GAP_MAX_CANDIDATES = 2048
 # not aim every shot at a candidate (sim/gap_seeking.py). Planning everything every interval cost
 # 70-85 % of a closed-loop run (docs/decisions.md).
 GAP_PLAN_INTERVALS = 4
-# A frontier voxel visible during the plan but predicted hidden this many intervals after it is
-# taken first (see it now or wait).
-GAP_HORIZON_INTERVALS = 3
 # One candidate per cube of this many voxels on a side: a strike is expected to settle the
 # frontier around its aim.
 GAP_BLOCK_VOXELS = 2

@@ -23,22 +23,20 @@ beam has examined, including the far side of a thin plate seen from one side.
 intervals: it takes the intervals observed since into the map (all at once) and chooses the
 plan's candidates, the frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side
 (a strike is expected to settle the frontier around its aim). Every interval it then predicts,
-from its orbit and the known spin, where the chaser is in B at the interval's middle shot and
-``GAP_HORIZON_INTERVALS`` intervals after its end, and which of the candidates not yet aimed at
-a beam from there would reach before striking a struck voxel (a depth image of the map,
-:meth:`SurfaceMap.visible`). Of those visible at the middle shot and within
-``attitude.max_offset_deg`` of the nominal boresight, the interval's shots take one each: first
-those predicted hidden later (see it now or wait), then in a sweep, rows two voxels wide across
-the view, alternately left and right, going on from the boresight's row (the rows below it, then
-from the top), so that consecutive aims lie next to each other. A shot
+from its orbit and the known spin, where the chaser is in B at the interval's middle shot.
+The candidates not yet aimed at and within ``attitude.max_offset_deg`` of the nominal boresight
+are taken in a sweep, rows two voxels wide across the view, alternately left and right, going
+on from the boresight's row (the rows below it, then from the top), so that consecutive aims lie
+next to each other; each is taken by the next shot when a beam from there is predicted to reach
+it before a struck voxel (a walk through the map, :meth:`SurfaceMap.visible`), until every shot
+has one (so a large map costs no more visibility tests than the shots need). A shot
 whose aim is beyond one step's reach (``max_rate * step``) turns toward it at the rate limit;
 shots left over when the visible candidates run out hold the boresight, and the law plans anew
 before the next interval (its candidates are used up; the map has grown). So the map, the
 frontier and the candidates cost once per plan, the prediction and the sweep once per interval;
 each of these steps is one or a few compiled calls (sim/planner_kernels.py). The poses of an
 interval (where the chaser is, the target's attitude, the nominal sensor frame) are those the
-simulation computes for its shots anyway, handed to :meth:`GapSeeker.command` with the
-look-ahead's (:meth:`GapSeeker.pose_times`).
+simulation computes for its shots anyway, handed to :meth:`GapSeeker.command`.
 
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run
@@ -63,7 +61,6 @@ from formats.strike_log import StrikeChunk
 from formats.strike_log.schema import Shots
 from sim.defaults import (
     GAP_BLOCK_VOXELS,
-    GAP_HORIZON_INTERVALS,
     GAP_IDLE_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
@@ -247,13 +244,6 @@ class GapSeeker:
 
     # ------------------------------------------------------------------ the plan
 
-    def pose_times(self, t: np.ndarray) -> np.ndarray:
-        """The times (n + 1,) [s] whose poses :meth:`command` needs for an interval's shot
-        times ``t`` (n,): those, and the look-ahead ``GAP_HORIZON_INTERVALS`` intervals after
-        the last."""
-        t = np.asarray(t, dtype=np.float64)
-        return np.append(t, t[-1] + GAP_HORIZON_INTERVALS * len(t) * self.step)
-
     def command(self, t: np.ndarray, poses=None) -> np.ndarray:
         """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
         (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old or ran
@@ -263,9 +253,9 @@ class GapSeeker:
         ----------
         t : (n,) float64, seconds
         poses : tuple, optional
-            ``(position, target, nominal)`` at :meth:`pose_times` ``(t)``, as the ``poses``
-            callable returns them (the simulation computes them for its own shots anyway);
-            without it the law calls ``poses`` itself.
+            ``(position, target, nominal)`` at ``t``, as the ``poses`` callable returns them
+            (the simulation computes them for its own shots anyway); without it the law calls
+            ``poses`` itself.
 
         Returns
         -------
@@ -282,12 +272,11 @@ class GapSeeker:
             self._short = True
             self._after_interval(False)
             return turn_from_boresight(np.tile(self.boresight, (len(t), 1)))
-        position, target, nominal = poses if poses is not None else self._poses(
-            self.pose_times(t))
-        pick, goal, turn, self.map.depth_room = kernels.sweep(
-            len(t), self._centres, self._used, self.map.occupied_centres, self.map.size,
-            position, target.as_matrix(), nominal, self.boresight, self.max_offset,
-            self.max_rate * self.step, GAP_BLOCK_VOXELS, *self.map.depth_room)
+        position, target, nominal = poses if poses is not None else self._poses(t)
+        pick, goal, turn = kernels.sweep(
+            len(t), self._centres, self._used, self.map.size, *self.map.blockers(), position,
+            target.as_matrix(), nominal, self.boresight, self.max_offset,
+            self.max_rate * self.step, GAP_BLOCK_VOXELS)
         self.boresight = goal[-1]
         self._short = bool(pick[-1] < 0)
         self._after_interval(bool(pick[0] >= 0))
@@ -308,11 +297,15 @@ def _spread(keys: np.ndarray, block: int, surface: SurfaceMap
             ) -> tuple[np.ndarray, np.ndarray]:
     """The first of ``keys`` (sorted, voxels of ``surface``) in each cube of ``block`` voxels
     on a side: candidates that one strike each settles, evenly over the map; and their centres
-    (c, 3) [m, B] (compiled: sim/planner_kernels.py)."""
+    (c, 3) [m, B] (compiled: sim/planner_kernels.py, with a mark per cube kept by the map from
+    plan to plan instead of allocated each time)."""
     from sim import planner_kernels as kernels
 
+    need = kernels.cubes(block, surface._shape, surface._corner)
+    if len(surface.cube_marks) < need:
+        surface.cube_marks = np.zeros(need, dtype=bool)
     return kernels.spread(np.asarray(keys, dtype=np.int64), block, surface.size,
-                          surface._shape, surface._corner)
+                          surface._shape, surface._corner, surface.cube_marks)
 
 
 def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:

@@ -416,7 +416,7 @@ def recorded_strikes(plan: Plan, chunk: Chunk, first: int) -> StrikeChunk:
 def iter_closed_loop(plan: Plan) -> Iterator[Chunk]:
     """The campaign under the gap-seeking law: one replanning interval at a time, each planned
     from the strikes recorded before it (sim/gap_seeking.py). The interval's poses are
-    computed once, for the law (which also looks ahead) and the simulation alike."""
+    computed once, for the law and the simulation alike."""
     attitude = plan.scene.values["attitude"]
     law = GapSeeker(step=plan.step, max_rate=math.radians(attitude["max_rate_deg_s"]),
                     max_offset=math.radians(attitude["max_offset_deg"]),
@@ -425,11 +425,10 @@ def iter_closed_loop(plan: Plan) -> Iterator[Chunk]:
     for index, first in enumerate(range(0, plan.scene.n_shots, size)):
         stop = min(first + size, plan.scene.n_shots)
         t = np.arange(first, stop, dtype=np.float64) * plan.step
-        position, target, nominal = poses(plan, law.pose_times(t))
+        position, target, nominal = poses(plan, t)
         offset = law.command(t, (position, target, nominal))
-        n = len(t)
         chunk = compute_chunk(plan, index, first, stop, offset,
-                              nominal=(position[:n], target[:n], nominal[:n]))
+                              nominal=(position, target, nominal))
         law.observe(recorded_strikes(plan, chunk, first))
         yield chunk
 

@@ -9,13 +9,14 @@ that a process after the first loads them from disk instead of compiling them):
 - :func:`strike_index` and :func:`strike_merge`: the strikes into the occupied voxels and the
   frontier marks around the new ones;
 - :func:`carve`: the voxels the beams crossed before their strikes;
-- :func:`hidden`: the depth image of the occupied voxels from a few positions;
-- :func:`sweep`: one interval's aims (visibility, the sweep's order, the slew limits) and the
-  commanded turns.
+- :func:`hidden`: which voxels beams from a few positions reach (a walk through the map);
+- :func:`sweep`: one interval's aims (the sweep's order, visibility tested in that order until
+  the shots are used, the slew limits) and the commanded turns.
 
 They do what the numpy code they replaced did, in the same order of operations where it
 matters (the same voxel keys, the same sweep order); tests/sim/test_planner_kernels.py holds
-that numpy code and checks each kernel against it on small maps. Only the closed loop imports
+that numpy code (for the visibility walk, a brute-force test of every beam against every
+struck voxel) and checks each kernel against it on small maps. Only the closed loop imports
 this module, so the numba import (a few tenths of a second) is paid by closed-loop runs alone.
 
 Conventions as in sim/surface_map.py: voxel ``(i, j, k)`` of edge ``size`` [m] holds the points
@@ -35,12 +36,11 @@ from sim.surface_map import (
     _BITS,
     _MASK,
     _OFFSET,
+    BLOCK_RADIUS,
     BLOCK_SLACK,
     CROSSED,
     FRONTIER,
     OCCUPIED,
-    PIXEL_EDGES,
-    SPLAT,
     TRAVERSAL_STEP,
 )
 
@@ -294,8 +294,7 @@ def _centres(keys, size):
 
 
 @njit(cache=True)
-def strike_merge(index, view, occupied, count, occupied_view, frontier, state, shape, corner,
-                 size):
+def strike_merge(index, view, occupied, count, occupied_view, frontier, state, shape, corner):
     """Merge strikes into the occupied voxels and mark the unknown neighbours of new ones.
 
     Parameters
@@ -306,12 +305,10 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
     state : (g,) uint8: the flat state grid, updated in place (it must hold every voxel of
         ``index`` and its face neighbours)
     shape : (3,) int64: the grid's shape; corner : (3,) int64: the voxel index of its first cell
-    size : float, metres: the voxel edge
 
     Returns
     -------
     occupied, count, occupied_view, frontier : the merged arrays (new arrays)
-    centres : (o', 3) float64, metres, B: the centres of the merged occupied voxels
     n_new : int: how many voxels were struck for the first time
     """
     keys = np.empty(len(index), dtype=np.int64)
@@ -321,7 +318,7 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
     merged, m_count, m_view, new = _merge_counts(occupied, count, occupied_view, unique,
                                                  u_count, u_view)
     fresh = _mark_new(new, state, shape, corner)
-    return merged, m_count, m_view, _join(frontier, fresh), _centres(merged, size), len(new)
+    return merged, m_count, m_view, _join(frontier, fresh), len(new)
 
 
 @njit(cache=True)
@@ -368,118 +365,97 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
 
 
 @njit(cache=True)
-def _project(position, centre, occupied, targets, local, distance):
-    """Fill ``local`` (o + n, 3) with the occupied centres (o, 3) then the targets (n, 3) in
-    image axes from ``position`` (3,) [m, B] (w toward ``centre``, a and b across) and
-    ``distance`` (o + n,) with their distances [m]; return the nearest occupied one's."""
-    o = len(occupied)
-    w = centre - position
-    w /= math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-    a = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    a -= (a[0] * w[0] + a[1] * w[1] + a[2] * w[2]) * w
-    a /= math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-    b = np.array([w[1] * a[2] - w[2] * a[1], w[2] * a[0] - w[0] * a[2],
-                  w[0] * a[1] - w[1] * a[0]])
-    nearest = np.inf
-    for k in range(len(local)):
-        x = occupied[k] if k < o else targets[k - o]
-        x0, x1, x2 = x[0] - position[0], x[1] - position[1], x[2] - position[2]
-        local[k, 0] = x0 * a[0] + x1 * a[1] + x2 * a[2]
-        local[k, 1] = x0 * b[0] + x1 * b[1] + x2 * b[2]
-        local[k, 2] = x0 * w[0] + x1 * w[1] + x2 * w[2]
-        distance[k] = math.sqrt(local[k, 0] * local[k, 0] + local[k, 1] * local[k, 1]
-                                + local[k, 2] * local[k, 2])
-        if k < o:
-            nearest = min(nearest, distance[k])
-    return nearest
+def _axis_walk(p, d, index, size):
+    """The walk along one axis from ``p`` [m] in unit direction component ``d`` from voxel
+    ``index``: the step (-1, 0, 1), the beam parameter [m] of the next voxel boundary and the
+    parameter between boundaries (inf when ``d`` is 0)."""
+    if d > 0.0:
+        return 1, ((index + 1) * size - p) / d, size / d
+    if d < 0.0:
+        return -1, (index * size - p) / d, -size / d
+    return 0, np.inf, np.inf
 
 
 @njit(cache=True)
-def _pixels(local, o, pixel, uv):
-    """Fill ``uv`` (m, 2) with the pixel of each point of ``local`` (m, 3) at ``pixel`` [rad]
-    (0, 0 behind the position); return the image's first pixel and size (4,) int64 over the
-    first ``o`` points and the splat around them."""
-    lo0 = lo1 = np.iinfo(np.int64).max
-    hi0 = hi1 = np.iinfo(np.int64).min
-    for k in range(len(local)):
-        if local[k, 2] > 0:
-            scale = local[k, 2] * pixel
-            uv[k, 0] = np.int64(math.floor(local[k, 0] / scale))
-            uv[k, 1] = np.int64(math.floor(local[k, 1] / scale))
-        else:
-            uv[k, 0] = uv[k, 1] = 0
-        if k < o:
-            lo0, hi0 = min(lo0, uv[k, 0]), max(hi0, uv[k, 0])
-            lo1, hi1 = min(lo1, uv[k, 1]), max(hi1, uv[k, 1])
-    box = np.empty(4, dtype=np.int64)
-    box[0], box[1] = lo0 - SPLAT, lo1 - SPLAT
-    box[2], box[3] = hi0 + SPLAT + 1 - box[0], hi1 + SPLAT + 1 - box[1]
-    return box
+def _slab(p, d, low, high, enter, leave):
+    """The beam parameters [m] ``enter`` .. ``leave`` narrowed to the slab ``low`` .. ``high``
+    [m] of one axis (empty, enter >= leave, when the beam misses it)."""
+    if d == 0.0:
+        return (enter, leave) if low <= p <= high else (1.0, 0.0)
+    a, b = (low - p) / d, (high - p) / d
+    return max(enter, min(a, b)), min(leave, max(a, b))
 
 
 @njit(cache=True)
-def _splat(local, distance, uv, o, box, image, stamp, tick):
-    """Each of the first ``o`` points in front marks its pixel and the ``SPLAT`` around it with
-    its distance where nearer (pixels whose stamp is not ``tick`` count as empty)."""
-    w1 = box[3]
-    for k in range(o):
-        if local[k, 2] <= 0:
-            continue
-        spot = (uv[k, 0] - box[0]) * w1 + (uv[k, 1] - box[1])
-        for du in range(-SPLAT, SPLAT + 1):
-            for dv in range(-SPLAT, SPLAT + 1):
-                cell = spot + du * w1 + dv
-                if stamp[cell] != tick:
-                    stamp[cell], image[cell] = tick, distance[k]
-                elif distance[k] < image[cell]:
-                    image[cell] = distance[k]
+def _blocked(target, position, size, state, shape, corner, lo, hi, slack, radius):
+    """Whether the beam from ``position`` (3,) toward the voxel centre ``target`` (3,) [m, B]
+    crosses, before the target's voxel, an occupied voxel whose centre lies within ``radius``
+    [m] of the beam's line and nearer to ``position`` than ``target`` by more than ``slack``
+    [m].
 
-
-@njit(cache=True)
-def hidden(positions, occupied, targets, size, image, stamp, tick):
-    """Which ``targets`` lie behind an ``occupied`` centre in the depth image from each of
-    ``positions`` (sim/surface_map.py, :meth:`SurfaceMap.visible`).
-
-    Parameters
-    ----------
-    positions : (p, 3) float64, metres, B
-    occupied : (o, 3) float64, metres, B: occupied voxel centres (o >= 1)
-    targets : (n, 3) float64, metres, B: voxel centres
-    size : float, metres: the voxel edge
-    image : (s,) float64; stamp : (s,) int64; tick : int
-        Room for the image, reused from call to call: a pixel holds a distance only where
-        its stamp is the image's own tick (each image takes the next ticks), so no image is
-        ever cleared (clearing or allocating a megabyte costs more than the rest).
-
-    Returns
-    -------
-    out : (p, n) bool: True where a centre in the target's pixel (or the ``SPLAT`` pixels
-        around it) lies nearer than the target by more than ``BLOCK_SLACK`` voxel edges
-    image, stamp, tick : the room (larger when an image did not fit) and the last tick used
+    The occupied voxels of the flat ``state`` grid (shape and first voxel ``shape``,
+    ``corner`` (3,) int64) lie within the voxel index box ``lo`` .. ``hi`` (3,) int64
+    (inclusive), which the grid holds. The walk (voxel by voxel, Amanatides and Woo) starts
+    where the beam enters that box, so a beam stopped by the surface nearest to ``position``
+    costs a few steps whatever the map's size. Scalars only: no allocation per beam.
     """
-    p, o, n = len(positions), len(occupied), len(targets)
-    out = np.zeros((p, n), dtype=np.bool_)
-    centre = np.empty(3)
-    for i in range(3):
-        centre[i] = 0.5 * (occupied[:, i].min() + occupied[:, i].max())
-    local = np.empty((o + n, 3))
-    distance = np.empty(o + n)
-    uv = np.empty((o + n, 2), dtype=np.int64)
-    for q in range(p):
-        nearest = _project(positions[q], centre, occupied, targets, local, distance)
-        box = _pixels(local, o, PIXEL_EDGES * size / nearest, uv)     # rad per pixel
-        w0, w1 = box[2], box[3]
-        if len(image) < w0 * w1:
-            image = np.empty(2 * w0 * w1)
-            stamp = np.zeros(2 * w0 * w1, dtype=np.int64)
-        tick += 1
-        _splat(local, distance, uv, o, box, image, stamp, tick)
-        for k in range(n):
-            j = o + k
-            u, v = uv[j, 0] - box[0], uv[j, 1] - box[1]
-            if local[j, 2] > 0 and 0 <= u < w0 and 0 <= v < w1 and stamp[u * w1 + v] == tick:
-                out[q, k] = image[u * w1 + v] < distance[j] - BLOCK_SLACK * size
-    return out, image, stamp, tick
+    p0, p1, p2 = position[0], position[1], position[2]
+    d0, d1, d2 = target[0] - p0, target[1] - p1, target[2] - p2
+    length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if length == 0.0:
+        return False
+    d0, d1, d2 = d0 / length, d1 / length, d2 / length
+    enter, leave = _slab(p0, d0, lo[0] * size, (hi[0] + 1) * size, 0.0, length)
+    enter, leave = _slab(p1, d1, lo[1] * size, (hi[1] + 1) * size, enter, leave)
+    enter, leave = _slab(p2, d2, lo[2] * size, (hi[2] + 1) * size, enter, leave)
+    if enter >= leave:
+        return False                 # the beam meets no occupied voxel's box before the target
+    limit = max(length - slack, 0.0)     # an occluder's centre must be nearer than this
+    i = min(max(np.int64(math.floor((p0 + enter * d0) / size)), lo[0]), hi[0])
+    j = min(max(np.int64(math.floor((p1 + enter * d1) / size)), lo[1]), hi[1])
+    k = min(max(np.int64(math.floor((p2 + enter * d2) / size)), lo[2]), hi[2])
+    gi, gj, gk = (np.int64(math.floor(target[0] / size)), np.int64(math.floor(target[1] / size)),
+                  np.int64(math.floor(target[2] / size)))
+    si, ti, di = _axis_walk(p0, d0, i, size)
+    sj, tj, dj = _axis_walk(p1, d1, j, size)
+    sk, tk, dk = _axis_walk(p2, d2, k, size)
+    s1, s2 = shape[1] * shape[2], shape[2]
+    cell = (i - corner[0]) * s1 + (j - corner[1]) * s2 + (k - corner[2])
+    limit2, radius2 = limit * limit, radius * radius
+    while not (i == gi and j == gj and k == gk):
+        if state[cell] & _OCC:
+            c0, c1, c2 = (i + 0.5) * size - p0, (j + 0.5) * size - p1, (k + 0.5) * size - p2
+            far = c0 * c0 + c1 * c1 + c2 * c2
+            along = c0 * d0 + c1 * d1 + c2 * d2
+            if far < limit2 and far - along * along < radius2:
+                return True
+        if ti <= tj and ti <= tk:
+            if ti >= leave:
+                return False
+            i, ti, cell = i + si, ti + di, cell + si * s1
+        elif tj <= tk:
+            if tj >= leave:
+                return False
+            j, tj, cell = j + sj, tj + dj, cell + sj * s2
+        else:
+            if tk >= leave:
+                return False
+            k, tk, cell = k + sk, tk + dk, cell + sk
+    return False
+
+
+@njit(cache=True)
+def hidden(positions, targets, size, state, shape, corner, lo, hi):
+    """Which beams from ``positions`` (p, 3) toward the voxel centres ``targets`` (n, 3) [m,
+    B] are stopped by an occupied voxel nearer than the target by more than ``BLOCK_SLACK``
+    edges (sim/surface_map.py, :meth:`SurfaceMap.visible`): (p, n) bool. ``state``,
+    ``shape``, ``corner``, ``lo``, ``hi`` as :func:`_blocked`."""
+    out = np.zeros((len(positions), len(targets)), dtype=np.bool_)
+    for q in range(len(positions)):
+        for k in range(len(targets)):
+            out[q, k] = _blocked(targets[k], positions[q], size, state, shape, corner, lo, hi,
+                                 BLOCK_SLACK * size, BLOCK_RADIUS * size)
+    return out
 
 
 @njit(cache=True)
@@ -492,12 +468,6 @@ def _turn_toward(b, goal, angle):
     s = goal - cos * b
     c, k = math.cos(angle), math.sin(angle) / math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
     return c * b + k * s
-
-
-@njit(cache=True)
-def _stable_by(order, key):
-    """``order`` (m,) int64 re-sorted, stably, by ``key[order]``."""
-    return order[np.argsort(key[order], kind="mergesort")]
 
 
 @njit(cache=True)
@@ -524,38 +494,45 @@ def _unit(points, origin, rotation):
     """Unit vectors (c, 3) from ``origin`` (3,) toward ``points`` (c, 3), turned by
     ``rotation`` (3, 3)."""
     out = np.empty((len(points), 3))
+    r = rotation
     for k in range(len(points)):
         d0, d1, d2 = (points[k, 0] - origin[0], points[k, 1] - origin[1],
                       points[k, 2] - origin[2])
-        for i in range(3):
-            out[k, i] = rotation[i, 0] * d0 + rotation[i, 1] * d1 + rotation[i, 2] * d2
-        out[k] /= math.sqrt(out[k, 0] * out[k, 0] + out[k, 1] * out[k, 1]
-                            + out[k, 2] * out[k, 2])
+        a0 = r[0, 0] * d0 + r[0, 1] * d1 + r[0, 2] * d2
+        a1 = r[1, 0] * d0 + r[1, 1] * d1 + r[1, 2] * d2
+        a2 = r[2, 0] * d0 + r[2, 1] * d1 + r[2, 2] * d2
+        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        out[k, 0], out[k, 1], out[k, 2] = a0 / norm, a1 / norm, a2 / norm
     return out
 
 
 @njit(cache=True)
-def _sweep_order(aim, seen_later, band, boresight):
-    """The order of the aims (c, 3) (nominal sensor frame) in the sweep: those not seen at the
-    look-ahead (``seen_later`` (c,) bool) first, then rows ``band`` [rad] wide from the
-    boresight's (3,) row on (the rows below it first, then from the top), alternately left and
-    right along each row; ties kept in their order (a stable sort by each key in turn)."""
+def _sweep_rows(aim, band, boresight):
+    """The sweep's rows of the aims (c, 3) (nominal sensor frame), ``band`` [rad] wide: the
+    aims grouped by row in the sweep's order (the boresight's (3,) row and those below it
+    first, then from the top) and the start of each group, (c,) int64 and (g + 1,) int64; and
+    the key along each row (c,), alternately left and right."""
     c = len(aim)
     now = math.floor(boresight[1] / band)
-    row = np.empty(c)
+    row = np.empty(c, dtype=np.int64)
     across = np.empty(c)
-    earlier = np.empty(c)
-    later_seen = np.empty(c)
     for q in range(c):
         r = math.floor(aim[q, 1] / band)
-        row[q] = r
+        row[q] = np.int64(r)
         across[q] = aim[q, 0] if np.int64(r) & 1 == 0 else -aim[q, 0]
-        earlier[q] = 0.0 if r >= now else 1.0
-        later_seen[q] = 1.0 if seen_later[q] else 0.0
-    order = np.arange(c)
-    for key in (across, row, earlier, later_seen):
-        order = _stable_by(order, key)
-    return order
+    low = row.min() if c else 0
+    span = (row.max() - low + 1) if c else 0
+    group = np.where(row >= now, row - low, row - low + span)
+    start = np.zeros(2 * span + 1, dtype=np.int64)
+    for g in group:
+        start[g + 1] += 1
+    start = np.cumsum(start)
+    fill = start[:-1].copy()
+    order = np.empty(c, dtype=np.int64)
+    for q in range(c):                       # a stable counting sort by group
+        order[fill[group[q]]] = q
+        fill[group[q]] += 1
+    return order, start, across
 
 
 @njit(cache=True)
@@ -610,29 +587,29 @@ def _turns(goal):
 
 
 @njit(cache=True)
-def sweep(n, centres, used, occupied, size, position, target, nominal, boresight, max_offset,
-          reach, block, image, stamp, tick):
+def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target, nominal,
+          boresight, max_offset, reach, block):
     """One interval's aims (sim/gap_seeking.py, :meth:`GapSeeker.command`): the open
-    candidates predicted visible from the interval's middle shot and within ``max_offset``,
-    those hidden at the look-ahead first, then in a sweep of rows ``block`` voxels wide across
-    the view from the boresight's row on; each shot turned toward its aim within ``reach``.
+    candidates within ``max_offset`` from the interval's middle shot, in a sweep of rows
+    ``block`` voxels wide across the view from the boresight's row on, each taken when
+    predicted visible from there (:func:`_blocked`), until every shot has one; each shot
+    turned toward its aim within ``reach``.
 
     Parameters
     ----------
     n : int: shots in the interval
     centres : (c, 3) float64, metres, B: the plan's candidates
     used : (c,) bool: candidates already aimed at; those aimed at now are set (in place)
-    occupied : (o, 3) float64, metres, B: occupied voxel centres
     size : float, metres: the voxel edge
-    position : (n + 1, 3) float64, metres, I: the chaser at the interval's shots and at the
-        look-ahead time
-    target : (n + 1, 3, 3) float64: matrices sending B vectors to I, at the same times
-    nominal : (n + 1, 3, 3) float64: matrices sending nominal-sensor vectors to I
+    state, shape, corner, lo, hi : the map's flat state grid, its shape and first voxel, the
+        occupied voxels' index box (:func:`_blocked`)
+    position : (n, 3) float64, metres, I: the chaser at the interval's shots
+    target : (n, 3, 3) float64: matrices sending B vectors to I, at the same times
+    nominal : (n, 3, 3) float64: matrices sending nominal-sensor vectors to I
     boresight : (3,) float64, unit vector, nominal sensor frame: the commanded one so far
     max_offset : float, rad: largest angle from the nominal boresight
     reach : float, rad: the largest turn between consecutive shots
     block : int: sweep rows are this many voxels wide
-    image, stamp, tick : room for the depth images (:func:`hidden`)
 
     Returns
     -------
@@ -641,31 +618,39 @@ def sweep(n, centres, used, occupied, size, position, target, nominal, boresight
     goal : (n, 3) float64, unit vectors, nominal sensor frame: the commanded boresights
     turn : (n, 3, 3) float64: the smallest rotations taking ``+z`` onto each ``goal``
         (sim/gap_seeking.py, :func:`turn_from_boresight`)
-    image, stamp, tick : the room after (:func:`hidden`)
+
+    Notes
+    -----
+    Visibility is tested in the sweep's order and only until the shots are used up: a few
+    dozen walks through the map per interval, whatever its size.
     """
     chaser, to_nominal = _frames(position, target, nominal)
     open_ = np.flatnonzero(~used)
     cent = centres[open_]
     middle = n // 2
-    if len(occupied) and len(cent):
-        views = np.empty((2, 3))
-        views[0], views[1] = chaser[middle], chaser[n]
-        behind, image, stamp, tick = hidden(views, occupied, cent, size, image, stamp, tick)
-        seen = ~behind
-    else:
-        seen = np.ones((2, len(cent)), dtype=np.bool_)
-    aim = _unit(cent, chaser[middle], to_nominal[middle])
-    ok_ = np.flatnonzero(seen[0] & (aim[:, 2] >= math.cos(max_offset)))
     ch = chaser[middle]
+    aim = _unit(cent, ch, to_nominal[middle])
+    ok_ = np.flatnonzero(aim[:, 2] >= math.cos(max_offset))
     band = block * size / math.sqrt(ch[0] * ch[0] + ch[1] * ch[1] + ch[2] * ch[2])
-    chosen = ok_[_sweep_order(aim[ok_], seen[1][ok_], band, boresight)[:n]]
-    for k in chosen:
-        used[open_[k]] = True
+    order, start, across = _sweep_rows(aim[ok_], band, boresight)
     pick = np.full(n, -1, dtype=np.int64)
-    pick[:len(chosen)] = chosen
+    m = 0
+    for g in range(len(start) - 1):
+        if m == n:
+            break
+        members = order[start[g]:start[g + 1]]
+        for q in members[np.argsort(across[members], kind="mergesort")]:
+            k = ok_[q]
+            if not _blocked(cent[k], ch, size, state, shape, corner, lo, hi,
+                            BLOCK_SLACK * size, BLOCK_RADIUS * size):
+                pick[m] = k
+                used[open_[k]] = True
+                m += 1
+                if m == n:
+                    break
     goal = _goals(pick, cent, chaser, to_nominal, boresight, max_offset)
     _rate_limit(goal, boresight, reach)
-    return pick, goal, _turns(goal), (image, stamp, tick)
+    return pick, goal, _turns(goal)
 
 
 @njit(cache=True)
@@ -685,7 +670,7 @@ def frontier_keep(frontier, state, shape, corner):
 
 
 @njit(cache=True)
-def spread(keys, block, size, shape, corner):
+def spread(keys, block, size, shape, corner, taken):
     """The first of ``keys`` (sorted) in each cube of ``block`` voxels on a side, and their
     centres.
 
@@ -695,6 +680,8 @@ def spread(keys, block, size, shape, corner):
     block : int: the cube's edge in voxels
     size : float, metres: the voxel edge
     shape, corner : (3,) int64: the grid's shape and the voxel index of its first cell
+    taken : (t,) bool, all False: room for a mark per cube of the grid (t at least the number
+        of cubes, :func:`cubes`); left all False again
 
     Returns
     -------
@@ -707,16 +694,29 @@ def spread(keys, block, size, shape, corner):
     for i in range(3):
         first[i] = corner[i] // block
         extent[i] = (corner[i] + shape[i] - 1) // block - first[i] + 1
-    taken = np.zeros(extent[0] * extent[1] * extent[2], dtype=np.bool_)
     keep = np.zeros(len(keys), dtype=np.bool_)
+    cells = np.empty(len(keys), dtype=np.int64)
     for q in range(len(keys)):
         i, j, k = _unpack(keys[q])
         cell = (((i // block - first[0]) * extent[1] + (j // block - first[1])) * extent[2]
                 + (k // block - first[2]))
+        cells[q] = cell
         if not taken[cell]:
             taken[cell] = keep[q] = True
+    for cell in cells:
+        taken[cell] = False
     chosen = keys[keep]
     return chosen, _centres(chosen, size)
+
+
+@njit(cache=True)
+def cubes(block, shape, corner):
+    """How many cubes of ``block`` voxels on a side :func:`spread` marks for a grid of
+    ``shape`` and first voxel ``corner`` (3,) int64."""
+    n = 1
+    for i in range(3):
+        n *= (corner[i] + shape[i] - 1) // block - corner[i] // block + 1
+    return n
 
 
 @njit(cache=True)

@@ -19,7 +19,7 @@ key array with their counts and views; the state of every voxel (occupied, cross
 is a byte in a dense grid over the box of the occupied voxels grown by the traversal margin,
 reallocated larger when that box grows, so that marking a beam's path or looking a voxel up is
 one indexing operation. Beams are traversed by sampling every ``size / TRAVERSAL_STEP`` along
-them. The updates (strikes, carving), the frontier's reading and the depth image below are
+them. The updates (strikes, carving), the frontier's reading and the visibility walk below are
 compiled kernels (sim/planner_kernels.py), one call each.
 
 The **frontier** is the unknown voxels next to (sharing a face with) an occupied voxel: where
@@ -30,12 +30,10 @@ seen from one side keeps the unknown voxels behind it, so it stays on the fronti
 from its other side strikes it; a solid body keeps its unknown interior, which
 :meth:`SurfaceMap.visible` predicts hidden once the surface around it is struck.
 
-:meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by a
-depth image of the occupied voxels seen from there: pixels of ``PIXEL_EDGES`` voxel edges as
-seen at the nearest occupied voxel, each holding the distance of the nearest occupied voxel
-centre that falls in it or next to it (a beam cast through each pixel against the map). A
-voxel whose pixel holds a centre nearer than its own by more than ``BLOCK_SLACK`` edges is
-behind struck surface.
+:meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by
+walking the beam's line voxel by voxel, from where it enters the occupied voxels' box toward the
+voxel: it is hidden when the beam passes close to the centre of an occupied voxel nearer than
+itself (``BLOCK_RADIUS``, ``BLOCK_SLACK``).
 """
 
 from __future__ import annotations
@@ -49,17 +47,14 @@ _MASK = (1 << _BITS) - 1
 # Samples per voxel edge along a beam: at half a voxel, a beam skips only voxels it clips by
 # less than a quarter of their edge.
 TRAVERSAL_STEP = 2.0
-# The depth image: pixels of this many voxel edges as seen at the nearest occupied voxel, each
-# occupied voxel centre marking its pixel and the SPLAT pixels around it (a voxel's outline is
-# 1 to 1.7 edges wide). A voxel is hidden when its pixel holds a centre nearer than its own by
-# more than BLOCK_SLACK edges: the voxel right behind a struck one (one edge) is hidden, one beside
-# it is not. Against beams cast at the voxels as boxes (tests/sim/test_surface_map.py) 90 % of
-# what these values predict visible is, and 90 % of what is visible is predicted so. Measured in
-# the closed-loop study (docs/decisions.md): a stricter image (0.5 edge, slack 0.8: 98 % and 80 %)
-# reached 95 % sooner on the 60 deg asteroid and later on the spacecraft; a looser one (1 edge, no
-# splat) the other way round.
-PIXEL_EDGES = 0.35
-SPLAT = 1
+# A beam toward a voxel is stopped by an occupied voxel it crosses whose centre lies within
+# BLOCK_RADIUS edges of the beam's line and nearer than the voxel's by more than BLOCK_SLACK edges:
+# the voxel right behind a struck one (one edge) is hidden, one beside it is not, and a beam
+# clipping the corner of a struck voxel passes (a struck voxel holds surface somewhere in it, not
+# everywhere). Against beams cast at the voxels as boxes (tests/sim/test_surface_map.py) 89 % of
+# what these values predict visible is, and 93 % of what is visible is predicted so (radius 0.5:
+# 77 % and 100 %; 0.7: 98 % and 79 %), as the depth image they replace (90 % and 90 %).
+BLOCK_RADIUS = 0.62
 BLOCK_SLACK = 0.5
 # The six face neighbours.
 FACE_STEPS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
@@ -113,9 +108,12 @@ class SurfaceMap:
         self._frontier = np.zeros(0, dtype=np.int64)    # sorted keys, each once a frontier
         self._index_lo = np.zeros(3, dtype=np.int64)    # the occupied voxels' index box
         self._index_hi = np.zeros(3, dtype=np.int64)
-        self.occupied_centres = np.zeros((0, 3))       # centres of ``occupied`` [m, B]
-        # Room for the depth images (sim/planner_kernels.py, hidden): image, stamps, tick.
-        self.depth_room = (np.zeros(0), np.zeros(0, dtype=np.int64), 0)
+        self.cube_marks = np.zeros(0, dtype=bool)       # room for the planner's spread, all False
+
+    @property
+    def occupied_centres(self) -> np.ndarray:
+        """Centres (o, 3) [m, B] of the occupied voxels, in the order of ``occupied``."""
+        return self.centres(self.occupied)
 
     def keys_of(self, points: np.ndarray) -> np.ndarray:
         """Keys (n,) of the voxels holding ``points`` (n, 3) [m, B]."""
@@ -193,9 +191,9 @@ class SurfaceMap:
             return
         self._cover(lo - 1, hi + 1)
         state = self._state.reshape(-1)
-        (self.occupied, self.count, self.view, self._frontier, self.occupied_centres,
-         new) = kernels.strike_merge(index, view, self.occupied, self.count, self.view,
-                                     self._frontier, state, self._shape, self._corner, self.size)
+        self.occupied, self.count, self.view, self._frontier, new = kernels.strike_merge(
+            index, view, self.occupied, self.count, self.view, self._frontier, state,
+            self._shape, self._corner)
         if new:
             first = len(self.occupied) == new
             self._index_lo = lo if first else np.minimum(self._index_lo, lo)
@@ -242,9 +240,15 @@ class SurfaceMap:
             near |= member(pack(index + step), frontier)
         return self.occupied[near]
 
+    def blockers(self) -> tuple:
+        """What a walk through the map reads (sim/planner_kernels.py, ``_blocked``): the flat
+        state grid, its shape and first voxel, the occupied voxels' index box (low, high)."""
+        return (self._state.reshape(-1), self._shape, self._corner, self._index_lo,
+                self._index_hi)
+
     def visible(self, positions: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """Predict which beams from ``positions`` reach the voxels centred at ``targets``
-        before striking an occupied voxel (a depth image per position: module docstring).
+        before entering an occupied voxel (a walk through the map: module docstring).
 
         Parameters
         ----------
@@ -253,9 +257,9 @@ class SurfaceMap:
 
         Returns
         -------
-        (p, n) bool, or (n,) for one position given as (3,): False where an occupied voxel
-        centre in the target's pixel lies nearer than the target by more than ``BLOCK_SLACK``
-        edges.
+        (p, n) bool, or (n,) for one position given as (3,): False where the beam from the
+        position toward the target's centre enters an occupied voxel other than the target's
+        own before reaching it.
         """
         from sim import planner_kernels as kernels
 
@@ -263,9 +267,6 @@ class SurfaceMap:
         positions = np.atleast_2d(np.asarray(positions, dtype=np.float64))
         seen = np.ones((len(positions), len(targets)), dtype=bool)
         if len(self.occupied) and len(targets):
-            behind, *room = kernels.hidden(positions, self.occupied_centres,
-                                           np.asarray(targets, dtype=np.float64), self.size,
-                                           *self.depth_room)
-            self.depth_room = tuple(room)
-            seen = ~behind
+            seen = ~kernels.hidden(positions, np.asarray(targets, dtype=np.float64), self.size,
+                                   *self.blockers())
         return seen[0] if one else seen

@@ -1,8 +1,9 @@
 """The planner's compiled kernels (sim/planner_kernels.py) against the numpy code they replaced.
 
 Each reference below is the numpy implementation the kernel replaced, kept here written the
-numpy way (sorted-key merges with np.unique/np.insert, batched slab clipping, np.minimum.at
-splats, np.lexsort, scipy rotations), run on small maps beside the kernel.
+numpy way (sorted-key merges with np.unique/np.insert, batched slab clipping, np.lexsort, scipy
+rotations), or for the visibility walk a brute-force test of every beam against every occupied
+voxel; run on small maps beside the kernel.
 """
 
 from __future__ import annotations
@@ -17,13 +18,12 @@ from formats.strike_log.schema import Shots
 from sim import planner_kernels as kernels
 from sim.gap_seeking import recorded_beams, turn_from_boresight
 from sim.surface_map import (
+    BLOCK_RADIUS,
     BLOCK_SLACK,
     CROSSED,
     FACE_STEPS,
     FRONTIER,
     OCCUPIED,
-    PIXEL_EDGES,
-    SPLAT,
     TRAVERSAL_STEP,
     SurfaceMap,
     member,
@@ -114,40 +114,28 @@ def ref_carve(m: SurfaceMap, origins, directions, ranges, *, margin: float) -> N
 
 
 def ref_hidden(positions, occupied, targets, size):
-    """The numpy depth image: all positions and points in one batched change of frame, the
-    splat by np.minimum.at. (p, n) bool."""
-    o = len(occupied)
-    w = 0.5 * (occupied.min(axis=0) + occupied.max(axis=0)) - positions
-    w /= np.sqrt((w * w).sum(axis=1))[:, None]
-    a = np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-    a -= (a * w).sum(axis=1)[:, None] * w
-    a /= np.sqrt((a * a).sum(axis=1))[:, None]
-    frame = np.stack([a, np.cross(w, a), w], axis=1)
-    local = np.matmul(np.concatenate([occupied, targets])[None] - positions[:, None],
-                      frame.transpose(0, 2, 1))
-    distance = np.sqrt(np.einsum("pni,pni->pn", local, local))
-    depth = local[:, :, 2]
-    front = depth > 0
-    pixel = PIXEL_EDGES * size / distance[:, :o].min(axis=1)
-    scale = np.where(front, depth, 1.0) * pixel[:, None]
-    uv = np.floor(local[:, :, :2] / scale[:, :, None]).astype(np.int64)
-    uv[~front] = 0
-    lo = uv[:, :o].min(axis=1) - SPLAT
-    width = uv[:, :o].max(axis=1) + SPLAT + 1 - lo
-    uv -= lo[:, None]
-    u, v = uv[:, :, 0], uv[:, :, 1]
-    inside = front & (u >= 0) & (v >= 0) & (u < width[:, :1]) & (v < width[:, 1:])
-    start = np.concatenate([[0], np.cumsum(width[:, 0] * width[:, 1])[:-1]])
-    flat = start[:, None] + u * width[:, 1:] + v
-    keep = front[:, :o]
-    spot, near = flat[:, :o][keep], distance[:, :o][keep]
-    row = np.broadcast_to(width[:, 1:], keep.shape)[keep]
-    span = np.arange(-SPLAT, SPLAT + 1)
-    shift = (span[:, None, None] * row + span[None, :, None]).reshape(-1, len(spot))
-    image = np.full(int((width[:, 0] * width[:, 1]).sum()), np.inf)
-    np.minimum.at(image, (spot + shift).ravel(), np.tile(near, len(shift)))
-    nearest = np.where(inside[:, o:], image[np.where(inside[:, o:], flat[:, o:], 0)], np.inf)
-    return nearest < distance[:, o:] - BLOCK_SLACK * size
+    """Brute force: every beam from each position to each target against every occupied voxel
+    centre (o, 3) at once: hidden when the beam crosses the voxel's box, passes within
+    ``BLOCK_RADIUS`` edges of its centre and the centre is nearer than the target by more than
+    ``BLOCK_SLACK`` edges. (p, n) bool."""
+    out = np.zeros((len(positions), len(targets)), dtype=bool)
+    for q, position in enumerate(positions):
+        line = targets - position                                   # (n, 3)
+        length = np.linalg.norm(line, axis=1)
+        d = line / length[:, None]
+        c = occupied[None] - position                               # (1, o, 3)
+        along = np.einsum("noi,ni->no", np.broadcast_to(c, (len(targets), *c.shape[1:])), d)
+        far = (c * c).sum(axis=2)                                   # (1, o)
+        near = far < np.maximum(length - BLOCK_SLACK * size, 0.0)[:, None] ** 2
+        close = far - along**2 < (BLOCK_RADIUS * size) ** 2
+        with np.errstate(divide="ignore", invalid="ignore"):        # the slabs of each box
+            a = (c - 0.5 * size)[:, :, :] / d[:, None, :]
+            b = (c + 0.5 * size)[:, :, :] / d[:, None, :]
+        enter = np.nanmax(np.minimum(a, b), axis=2)
+        leave = np.nanmin(np.maximum(a, b), axis=2)
+        crossed = (enter < leave) & (leave > 0) & (enter < length[:, None])
+        out[q] = (near & close & crossed).any(axis=1)
+    return out
 
 
 def ref_turn_toward(b, goal, angle):
@@ -160,9 +148,9 @@ def ref_turn_toward(b, goal, angle):
 
 def ref_sweep(n, centres, used, occupied, size, position, target, nominal, boresight,
               max_offset, reach, block):
-    """The numpy interval: visibility, np.lexsort of the sweep, the goals by masks and
-    np.maximum.accumulate, the rate limit from the first goal out of reach. Returns pick, goal,
-    the used mask after."""
+    """The numpy interval: visibility from the middle shot, np.lexsort of the sweep, the goals
+    by masks and np.maximum.accumulate, the rate limit from the first goal out of reach.
+    Returns pick, goal, the used mask after."""
     used = used.copy()
     open_ = np.flatnonzero(~used)
     centres = centres[open_]
@@ -170,15 +158,15 @@ def ref_sweep(n, centres, used, occupied, size, position, target, nominal, bores
     chaser = np.einsum("nij,nj->ni", m_ib, position)
     to_nominal = np.matmul(m_ib, nominal).transpose(0, 2, 1)
     middle = n // 2
-    seen = ~ref_hidden(chaser[[middle, n]], occupied, centres, size)
+    seen = ~ref_hidden(chaser[[middle]], occupied, centres, size)[0]
     aim = (centres - chaser[middle]) @ to_nominal[middle].T
     aim /= np.linalg.norm(aim, axis=1)[:, None]
-    ok = np.flatnonzero(seen[0] & (aim[:, 2] >= math.cos(max_offset)))
+    ok = np.flatnonzero(seen & (aim[:, 2] >= math.cos(max_offset)))
     band = block * size / np.linalg.norm(chaser[middle])
     row = np.floor(aim[ok, 1] / band).astype(np.int64)
     across = np.where(row % 2 == 0, aim[ok, 0], -aim[ok, 0])
     later = row >= math.floor(float(boresight[1]) / band)
-    chosen = ok[np.lexsort((across, row, ~later, seen[1, ok]))][:n]
+    chosen = ok[np.lexsort((across, row, ~later))][:n]
     used[open_[chosen]] = True
     pick = np.full(n, -1)
     pick[:len(chosen)] = chosen
@@ -259,28 +247,26 @@ def test_map_update_kernels_match_the_numpy_reference():
     assert compiled.count.max() > 1 and len(expected) > 100     # re-struck voxels, a frontier
 
 
-def test_depth_image_kernel_matches_the_numpy_reference():
+def test_visibility_walk_matches_the_brute_force_reference():
     rng = np.random.default_rng(1)
     *_, (m, _) = _maps(seed=1)
     positions = rng.normal(size=(6, 3)) * 60.0
     positions[0] = m.occupied_centres.mean(axis=0) + np.array([0.0, 0.0, 0.2])   # inside
-    targets = m.centres(m.frontier())
-    room = np.zeros(0), np.zeros(0, dtype=np.int64), 0
-    for _ in range(2):              # the second time in the room the first left (stale pixels)
-        hidden, *room = kernels.hidden(positions, m.occupied_centres, targets, m.size, *room)
-        expected = ref_hidden(positions, m.occupied_centres, targets, m.size)
-        np.testing.assert_array_equal(hidden, expected)
-        positions = positions[::-1] + 5.0
+    targets = m.centres(np.concatenate([m.frontier(), m.occupied]))
+    hidden = kernels.hidden(positions, targets, m.size, *m.blockers())
+    expected = ref_hidden(positions, m.occupied_centres, targets, m.size)
+    np.testing.assert_array_equal(hidden, expected)
     assert 0.1 < expected.mean() < 0.9
-    np.testing.assert_array_equal(m.visible(positions, targets),
-                                  ~ref_hidden(positions, m.occupied_centres, targets, m.size))
+    np.testing.assert_array_equal(m.visible(positions, targets), ~expected)
 
 
 def test_spread_kernel_matches_the_numpy_reference():
     *_, (m, _) = _maps(seed=2)
     keys = np.union1d(m.frontier(), m.occupied)
     for block in (1, 2, 3):
-        chosen, centres = kernels.spread(keys, block, m.size, m._shape, m._corner)
+        marks = np.zeros(kernels.cubes(block, m._shape, m._corner), dtype=bool)
+        chosen, centres = kernels.spread(keys, block, m.size, m._shape, m._corner, marks)
+        assert not marks.any()                                      # left as it was given
         cube = pack(np.floor_divide(unpack(keys), block))
         expected = keys[np.sort(np.unique(cube, return_index=True)[1])]
         np.testing.assert_array_equal(chosen, expected)
@@ -344,10 +330,9 @@ def test_sweep_kernel_matches_the_numpy_reference():
         expected = ref_sweep(n, centres, used, m.occupied_centres, m.size, position,
                              target.as_matrix(), nominal, boresight, max_offset, reach, 2)
         now = used.copy()
-        pick, goal, turn, _ = kernels.sweep(n, centres, now, m.occupied_centres, m.size,
-                                            position, target.as_matrix(), nominal, boresight,
-                                            max_offset, reach, 2, np.zeros(0),
-                                            np.zeros(0, dtype=np.int64), 0)
+        pick, goal, turn = kernels.sweep(n, centres, now, m.size, *m.blockers(), position[:n],
+                                         target.as_matrix()[:n], nominal[:n], boresight,
+                                         max_offset, reach, 2)
         np.testing.assert_array_equal(pick, expected[0])
         np.testing.assert_allclose(goal, expected[1], atol=1e-13)
         np.testing.assert_array_equal(now, expected[2])
