@@ -63,8 +63,10 @@ which beam each strike was taken, its sensor position, and its recorded error mo
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
 visibility graph cut when that method is registered), then fine ones. The first
-``ALWAYS_LEVELS`` levels always run; after that the search stops as soon as a level's best is
-not measurably better (by ``se``) than the best before it. The ladder leaves out the methods
+``ALWAYS_LEVELS`` levels always run, and are fitted together (the finest first: the workers
+stay busy while the main process judges each run as soon as its folds are in); after that the
+search stops as soon as a level's best is not measurably better (by ``se``) than the best
+before it. The ladder leaves out the methods
 that cost the most for what they add on the suite's clouds (``delaunay-balls``,
 ``screened-poisson``: a few seconds a fit, where the visibility cut and Poisson take one).
 
