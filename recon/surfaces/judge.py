@@ -521,7 +521,9 @@ def carved_faces(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.nd
     first = np.full(len(misses), -1)        # each beam's first hit among the faces left
     t_first = np.full(len(misses), np.inf)
     listed = None
-    for _ in range(CARVE_PASSES):
+    for done in range(CARVE_PASSES):
+        if done:   # the scene of the faces left, built only for a pass that is cast
+            caster = Caster(vertices, faces[left])
         t_hit, triangle, cut = _cast_misses(misses, beams, caster, tree, reach)
         first[beams], t_first[beams] = np.where(triangle >= 0, left[triangle], -1), t_hit
         if not cut.any():
@@ -533,7 +535,6 @@ def carved_faces(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.nd
             listed = _crossings(misses, caster, tree, reach)
         if not len(left) or not _may_cut(listed, beams, t_first):
             break
-        caster = Caster(vertices, faces[left])
     return carved
 
 
