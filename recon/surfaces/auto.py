@@ -63,8 +63,10 @@ which beam each strike was taken, its sensor position, and its recorded error mo
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
 visibility graph cut when that method is registered), then fine ones. The first
-``ALWAYS_LEVELS`` levels always run; after that the search stops as soon as a level's best is
-not measurably better (by ``se``) than the best before it. The ladder leaves out the methods
+``ALWAYS_LEVELS`` levels always run, and are fitted together (the finest first: the workers
+stay busy while the main process judges each run as soon as its folds are in); after that the
+search stops as soon as a level's best is not measurably better (by ``se``) than the best
+before it. The ladder leaves out the methods
 that cost the most for what they add on the suite's clouds (``delaunay-balls``,
 ``screened-poisson``: a few seconds a fit, where the visibility cut and Poisson take one).
 
@@ -393,9 +395,12 @@ class Selection:
 def closed(faces: np.ndarray) -> bool:
     """True when no edge borders a single face: the surface encloses a volume (non-manifold
     edges of a minimum cut allowed, unlike ``recon.surfaces.checks.watertight``)."""
+    faces = np.asarray(faces, dtype=np.int64)
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
                     axis=1)
-    _, count = np.unique(edges, axis=0, return_counts=True)
+    # one integer an edge: np.unique over rows sorts them as bytes, ten times slower
+    _, count = np.unique(edges[:, 0] * (int(faces.max(initial=0)) + 1) + edges[:, 1],
+                         return_counts=True)
     return bool(len(faces)) and not np.any(count == 1)
 
 
@@ -476,10 +481,14 @@ def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, se
                     miss_reach=miss_reach(tau, noise, every[0].prepared.spacing))
 
 
-def _fit_all(runs: list[Run], folds: list[_Fold], *, limits: Limits, n_workers: int | None,
-             desc: str) -> dict[str, list[dict]]:
-    """Fit every run on every fold, each fit in its own limited process, a few at a time.
-    Returns run key -> the ``run_isolated`` results, folds in order."""
+def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, limits: Limits,
+                   n_workers: int | None) -> dict[int, list[list[Candidate]]]:
+    """Fit every run of ``levels`` ((depth, runs) pairs) on every fold, each fit in its own
+    limited process, a few at a time, and judge each run (``_judged``) as soon as its folds
+    are fitted, while the other fits go on. The finest level's fits are handed out first (they
+    take the longest: the workers stay busy to the end, and the largest surfaces are judged
+    while the small ones are fitted). Returns, per depth and run in order, the run's candidate
+    and its carved twin if any."""
     from concurrent.futures import ThreadPoolExecutor, as_completed
 
     from tqdm import tqdm
@@ -487,24 +496,45 @@ def _fit_all(runs: list[Run], folds: list[_Fold], *, limits: Limits, n_workers: 
     from recon.surfaces.isolation import run_isolated
 
     workers = n_workers or max(1, len(os.sched_getaffinity(0)))
-    results: dict[str, list] = {run.key: [None] * len(folds) for run in runs}
+    folds = context.folds
+    jobs = [(i, j) for i in reversed(range(len(levels))) for j in range(len(levels[i][1]))]
+    results = {job: [None] * len(folds) for job in jobs}
+    judged: list[list[list[Candidate]]] = [[[] for _ in runs] for _, runs in levels]
+    depths = ", ".join(str(depth) for depth, _ in levels)
     with ThreadPoolExecutor(max_workers=workers) as pool, \
-            tqdm(total=len(runs) * len(folds), desc=desc, unit="fit", disable=None,
-                 leave=False) as bar:
-        futures = {pool.submit(run_isolated, run, fold.prepared, threads=FIT_THREADS,
-                               **limits.kwargs()): (run.key, f)
-                   for run in runs for f, fold in enumerate(folds)}
+            tqdm(total=len(jobs) * len(folds), desc=f"auto level {depths}", unit="fit",
+                 disable=None, leave=False) as bar:
+        futures = {pool.submit(run_isolated, levels[i][1][j], fold.prepared,
+                               threads=FIT_THREADS, **limits.kwargs()): ((i, j), f)
+                   for i, j in jobs for f, fold in enumerate(folds)}
         for future in as_completed(futures):
-            key, f = futures[future]
-            results[key][f] = future.result()
+            (i, j), f = futures[future]
+            results[i, j][f] = future.result()
             bar.update(1)
-    return results
+            if all(r is not None for r in results[i, j]):
+                judged[i][j] = _judged(levels[i][1][j], levels[i][0], results.pop((i, j)),
+                                       context)
+    return {depth: judged[i] for i, (depth, _) in enumerate(levels)}
+
+
+def _judged(run: Run, level: int, results: list[dict], context: _Context) -> list[Candidate]:
+    """A run fitted on every fold, judged (``judge_candidate``), and its carved twin when it
+    fills free space (``fills_free_space``). Each fold's surface is built for the casts once:
+    the twin is carved on the scenes its candidate was judged on."""
+    casters = ([judge.Caster(r["vertices"], r["faces"]) for r in results]
+               if all(r.get("status") == "ok" for r in results) else None)
+    candidate = judge_candidate(run, level, results, context, casters=casters)
+    if not fills_free_space(candidate, context):
+        return [candidate]
+    return [candidate, judge_candidate(run, level, _carved(results, context, casters), context,
+                                       carved=True)]
 
 
 def judge_candidate(run: Run, level: int, results: list[dict], context: _Context,
-                    carved: bool = False) -> Candidate:
+                    carved: bool = False, casters: list | None = None) -> Candidate:
     """Step 2 of the module docstring for one run fitted on every fold (``run_isolated``
-    results, folds in order): a fold that failed fails the candidate."""
+    results, folds in order): a fold that failed fails the candidate. ``casters``: each fold's
+    surface already built (``judge.Caster``), when the caller has them."""
     failed = next((r for r in results if r.get("status", "failed") != "ok"), None)
     candidate = Candidate(run, level, status="ok" if failed is None else
                           failed.get("status", "failed"),
@@ -514,9 +544,9 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
     if failed is not None:
         return candidate
     options = {"tau": context.tau, "noise": context.noise}
+    casters = casters or [judge.Caster(r["vertices"], r["faces"]) for r in results]
     held, fit = [], []
-    for result, fold in zip(results, context.folds, strict=True):
-        caster = judge.Caster(result["vertices"], result["faces"])
+    for caster, fold in zip(casters, context.folds, strict=True):
         held.append(judge.check(fold.test, caster, **options))
         fit.append(judge.check(fold.train, caster, fitted=True, **options))
     cost = np.concatenate([h.cost for h in held])
@@ -524,7 +554,7 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
     tolerance = np.concatenate([h.tolerance for h in held])
     chi2, se = judge.block_mean_se(cost, context.block)
     vertices, faces = results[0]["vertices"], results[0]["faces"]
-    caster = judge.Caster(vertices, faces)
+    caster = casters[0]
     everywhere = judge.check(context.checked, caster, **options)
     misses_cut = None
     if context.misses is not None and len(context.misses):
@@ -554,15 +584,16 @@ def fills_free_space(candidate: Candidate, context: _Context) -> bool:
         MISS_RATE * (1.0 - MISS_RATE) / n)
 
 
-def _carved(results: list[dict], context: _Context) -> list[dict]:
+def _carved(results: list[dict], context: _Context, casters: list) -> list[dict]:
     """Each fold's surface carved by the missed beams (``judge.carve``) as the surface
     refitted on all strikes will be: a crossing within reach of any strike, held out or not,
     is no evidence (carving fits nothing to the held-out strikes; spared near them only
     by a fold's training strikes, a silhouette a beam grazed past would be cut open where
-    the final surface is not)."""
+    the final surface is not). ``casters``: each fold's surface, built."""
     return [result | dict(zip(("vertices", "faces"), judge.carve(
         result["vertices"], result["faces"], context.misses, context.points,
-        context.miss_reach), strict=True)) for result in results]
+        context.miss_reach, caster=caster), strict=True))
+        for result, caster in zip(results, casters, strict=True)]
 
 
 def _best(candidates: list[Candidate]) -> Candidate | None:
@@ -579,17 +610,18 @@ def _stops(candidates: list[Candidate], before: Candidate | None, depth: int) ->
 def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
           n_workers: int | None) -> tuple[list[Candidate], str]:
     """Fit and judge the ladder's levels, coarse to fine, until one is not measurably better
-    (module docstring). Returns the candidates and a note on where the ladder stopped."""
+    (module docstring). The levels fitted whatever the earlier ones gave (``ALWAYS_LEVELS``)
+    are fitted together; each later one once the ladder has not stopped before it. Returns
+    the candidates and a note on where the ladder stopped."""
     candidates: list[Candidate] = []
+    fitted = _fit_and_judge(list(enumerate(levels[:ALWAYS_LEVELS])), context, limits=limits,
+                            n_workers=n_workers)
     for depth, level in enumerate(levels):
         before = _best(candidates)
-        results = _fit_all(level, context.folds, limits=limits, n_workers=n_workers,
-                           desc=f"auto level {depth}")
-        for run in level:
-            candidates.append(judge_candidate(run, depth, results[run.key], context))
-            if fills_free_space(candidates[-1], context):
-                candidates.append(judge_candidate(run, depth, _carved(results[run.key], context),
-                                                  context, carved=True))
+        if depth not in fitted:
+            fitted |= _fit_and_judge([(depth, level)], context, limits=limits,
+                                     n_workers=n_workers)
+        candidates += [c for judged in fitted[depth] for c in judged]
         rest = levels[depth + 1:]
         if depth + 1 >= ALWAYS_LEVELS and rest and _stops(candidates, before, depth):
             candidates += [Candidate(run, later, status="skipped")

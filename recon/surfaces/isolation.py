@@ -84,8 +84,11 @@ START_TIMEOUT_S = 300.0
 WORKER_RUNS = 50
 # Modules a worker imports before its first job (the methods' and scoring's heavy imports).
 WORKER_PRELOAD = ("numpy", "scipy.spatial", "open3d", "pymeshlab", "metrics.score")
-# How often the parent polls the worker, seconds (start, growing to the maximum).
-POLL_START_S, POLL_MAX_S = 0.02, 0.25
+# How often the parent polls the worker, seconds (start, growing to the maximum). A finished run
+# waits half the maximum on average before its worker gets the next job: at 0.25 s that was a
+# tenth of auto's fits (about fifty runs of a second or less, docs/decisions.md); a poll reads two
+# small files, a few tens of microseconds.
+POLL_START_S, POLL_MAX_S = 0.02, 0.05
 # Lines of the worker's output kept in a failure's reason.
 OUTPUT_TAIL_LINES = 3
 

@@ -91,6 +91,9 @@ COVERAGE_SPACINGS = 2.0
 # graph cut across a satellite's gaps are one or two layers deep (6 passes left none on the
 # suite's spacecraft, docs/decisions.md).
 CARVE_PASSES = 8
+# Relative slack of ``carved_faces``'s test whether a beam may still be cut: the distances of a
+# listing and of a cast of the same face agree (one Embree intersector), float32 rounding aside.
+CROSSING_SLACK = 1e-6
 
 
 @dataclass(frozen=True)
@@ -443,38 +446,21 @@ def cut_misses(misses, caster: Caster, strikes: np.ndarray, reach: float) -> np.
     -------
     (m,) bool
     """
-    return _first_cuts(misses, caster, strikes, reach)[0]
-
-
-def _first_cuts(misses, caster: Caster, strikes: np.ndarray, reach: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """``cut_misses`` and the face each missed beam first hits (m,) int64 (-1: none)."""
     from scipy.spatial import cKDTree
 
     if len(misses) == 0:
-        return np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64)
-    rays = np.hstack([misses.origin - caster.centre, misses.direction]).astype(np.float32)
-    cast = caster.scene.cast_rays(caster._o3d.core.Tensor(rays))
-    t_hit = cast["t_hit"].numpy().astype(np.float64)
-    triangle = cast["primitive_ids"].numpy().astype(np.int64)
-    inside = (np.isfinite(t_hit) & (triangle < len(caster.faces))
-              & (t_hit >= misses.range_min) & (t_hit <= misses.range_max))
-    cut = np.zeros(len(misses), dtype=bool)
-    if inside.any():
-        crossing = misses.origin[inside] + t_hit[inside, None] * misses.direction[inside]
-        distance, _ = cKDTree(strikes).query(crossing, distance_upper_bound=reach, workers=-1)
-        cut[inside] = ~np.isfinite(distance)
-    return cut, np.where(inside, triangle, -1)
+        return np.zeros(0, dtype=bool)
+    return _cast_misses(misses, np.arange(len(misses)), caster, cKDTree(strikes), reach)[2]
 
 
-def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, reach: float
-          ) -> tuple[np.ndarray, np.ndarray]:
+def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, reach: float,
+          *, caster: Caster | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A surface with the faces that missed beams cut removed (``cut_misses``): free space the
     surface filled, a membrane across a gap the beams went through.
 
-    Pass after pass (at most ``CARVE_PASSES``), the face each cut beam first hits is removed
-    and the beams are cast again, until no beam cuts the rest (a beam may cross several
-    layers). Vertices no face uses are dropped.
+    Pass after pass (at most ``CARVE_PASSES``), the face each cut beam first hits among the
+    faces left is removed (``carved_faces``), until no beam cuts the rest (a beam may cross
+    several layers). Vertices no face uses are dropped.
 
     Parameters
     ----------
@@ -483,6 +469,8 @@ def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, 
     misses : recon.registration.misses.MissedBeams
     strikes : (n, 3) float64, metres
     reach : float, metres
+    caster : Caster, optional
+        The same surface, already built (``carved_faces``).
 
     Returns
     -------
@@ -490,7 +478,7 @@ def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, 
     faces : (f', 3) int64
     """
     faces = np.asarray(faces, dtype=np.int64)[~carved_faces(vertices, faces, misses, strikes,
-                                                             reach)]
+                                                             reach, caster=caster)]
     used = np.unique(faces)
     index = np.full(len(vertices), -1, dtype=np.int64)
     index[used] = np.arange(len(used))
@@ -498,20 +486,109 @@ def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, 
 
 
 def carved_faces(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray,
-                 reach: float) -> np.ndarray:
+                 reach: float, *, caster: Caster | None = None) -> np.ndarray:
     """Which faces ``carve`` removes: (f,) bool, pass after pass (at most ``CARVE_PASSES``) the
-    face each cut missed beam first hits among the faces left (``cut_misses``)."""
+    face each cut missed beam first hits among the faces left (``cut_misses``).
+
+    Removing faces never brings a hit nearer, so a beam whose first hit is left keeps it (and
+    is not cut: a cut beam's face is removed). A pass therefore casts again only the beams
+    whose first hit was removed, against the faces left (one Embree scene a pass). Before a
+    pass is cast, the crossings of those beams with the whole surface, listed once
+    (``RaycastingScene.list_intersections`` on the first scene), say whether any of them can
+    still be cut beyond the face it lost; when none can, the carving is over without building
+    the scene of the faces left.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float64, metres
+    faces : (f, 3) int64
+    misses : recon.registration.misses.MissedBeams
+    strikes : (n, 3) float64, metres
+    reach : float, metres
+    caster : Caster, optional
+        ``Caster(vertices, faces)``, when the caller has it (its scene is not built again).
+    """
+    from scipy.spatial import cKDTree
+
     faces = np.asarray(faces, dtype=np.int64)
     carved = np.zeros(len(faces), dtype=bool)
-    for _ in range(CARVE_PASSES):
-        left = np.flatnonzero(~carved)
-        if not len(left):
-            break
-        cut, triangle = _first_cuts(misses, Caster(vertices, faces[left]), strikes, reach)
+    if len(misses) == 0:
+        return carved
+    caster = caster or Caster(vertices, faces)
+    tree = cKDTree(strikes)
+    left = np.arange(len(faces))
+    beams = np.arange(len(misses))          # the beams cast in this pass
+    first = np.full(len(misses), -1)        # each beam's first hit among the faces left
+    t_first = np.full(len(misses), np.inf)
+    listed = None
+    for done in range(CARVE_PASSES):
+        if done:   # the scene of the faces left, built only for a pass that is cast
+            caster = Caster(vertices, faces[left])
+        t_hit, triangle, cut = _cast_misses(misses, beams, caster, tree, reach)
+        first[beams], t_first[beams] = np.where(triangle >= 0, left[triangle], -1), t_hit
         if not cut.any():
             break
-        carved[left[triangle[cut]]] = True
+        carved[first[beams[cut]]] = True
+        left = np.flatnonzero(~carved)
+        beams = np.flatnonzero((first >= 0) & carved[np.maximum(first, 0)])
+        if listed is None:   # the first scene is still the whole surface's
+            listed = _crossings(misses, caster, tree, reach)
+        if not len(left) or not _may_cut(listed, beams, t_first):
+            break
     return carved
+
+
+def _cast_misses(misses, beams: np.ndarray, caster: Caster, tree, reach: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cast the missed beams ``beams`` (k,) against a surface: the distance of each's first
+    hit [m] (inf: none), its face (-1: none) and whether the beam is cut there (``cut_misses``;
+    ``tree``: a ``cKDTree`` of the strikes)."""
+    origin, direction = misses.origin[beams], misses.direction[beams]
+    rays = np.hstack([origin - caster.centre, direction]).astype(np.float32)
+    cast = caster.scene.cast_rays(caster._o3d.core.Tensor(rays))
+    t_hit = cast["t_hit"].numpy().astype(np.float64)
+    triangle = cast["primitive_ids"].numpy().astype(np.int64)
+    hit = np.isfinite(t_hit) & (triangle < len(caster.faces))
+    t_hit[~hit], triangle[~hit] = np.inf, -1
+    inside = hit & (t_hit >= misses.range_min) & (t_hit <= misses.range_max)
+    cut = np.zeros(len(beams), dtype=bool)
+    if inside.any():
+        crossing = origin[inside] + t_hit[inside, None] * direction[inside]
+        distance, _ = tree.query(crossing, distance_upper_bound=reach, workers=-1)
+        cut[inside] = ~np.isfinite(distance)
+    return t_hit, triangle, cut
+
+
+def _crossings(misses, caster: Caster, tree, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every crossing of the missed beams with a whole surface (``list_intersections``, which
+    lists one of several faces met at the same distance): the beam (h,) int64, its distance
+    along it [m] (h,) float64 and whether a first hit there would cut the beam (h,) bool."""
+    rays = np.hstack([misses.origin - caster.centre, misses.direction]).astype(np.float32)
+    listed = caster.scene.list_intersections(caster._o3d.core.Tensor(rays))
+    beam = listed["ray_ids"].numpy().astype(np.int64)
+    t_hit = listed["t_hit"].numpy().astype(np.float64)
+    cuts = np.zeros(len(beam), dtype=bool)
+    inside = (t_hit >= misses.range_min) & (t_hit <= misses.range_max)
+    if inside.any():
+        crossing = misses.origin[beam[inside]] + t_hit[inside, None] * \
+            misses.direction[beam[inside]]
+        distance, _ = tree.query(crossing, distance_upper_bound=reach, workers=-1)
+        cuts[inside] = ~np.isfinite(distance)
+    return beam, t_hit, cuts
+
+
+def _may_cut(listed, beams: np.ndarray, t_first: np.ndarray) -> bool:
+    """Whether any of ``beams`` (k,) may be cut once its first hit, at ``t_first`` [m] (m,),
+    is removed: a crossing listed at or beyond that distance would cut it. A face met at the
+    same distance as a listed one, left out of the list, crosses the beam at the same point,
+    so it cuts exactly when the listed one does (``CROSSING_SLACK``: a crossing a hair nearer
+    counts too, so the answer errs towards casting)."""
+    beam, t_hit, cuts = listed
+    wanted = np.zeros(len(t_first), dtype=bool)
+    wanted[beams] = True
+    mine = np.flatnonzero(cuts & wanted[beam])   # a removed first hit is finite
+    start = t_first[beam[mine]]
+    return bool(np.any(t_hit[mine] >= start - CROSSING_SLACK * np.maximum(start, 1.0)))
 
 
 def subsample(n: int, limit: int, seed: int) -> np.ndarray:
