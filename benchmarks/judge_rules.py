@@ -13,8 +13,9 @@ seconds instead of a suite run:
 
 - ``collect``: per cloud, ``recon.surfaces.auto.choose`` fits a fixed, wide candidate set
   (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
-  candidate, the held-out costs of every tested strike, their blocks and the per-candidate
-  figures (``WORK/folds/CLOUD.npz`` and ``.json``);
+  candidate, the held-out costs of every tested strike, their blocks, the per-strike arrays of
+  its held-out checks (``PER_STRIKE``: ``rules --statistic`` replays other statistics from
+  them) and the per-candidate figures (``WORK/folds/CLOUD.npz`` and ``.json``);
 - ``misses``: per cloud, the log's missed beams as auto draws them and each collected
   candidate's fraction of them cut on the compare's mesh (``WORK/misses``), for
   ``rules --miss-rate``;
@@ -25,7 +26,8 @@ seconds instead of a suite run:
   ``F_TOLERANCE`` of the best F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all
   compare runs, not below the median run;
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
-  "unknown");
+  "unknown"); ``--statistic``, ``--band``, ``--miss-rate``, ``--holes-first`` and ``--extra``
+  replay rules that are not auto's;
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
@@ -47,6 +49,7 @@ import json
 import statistics
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -128,13 +131,15 @@ def collect(args) -> None:
         points = load_cloud(args.suite, cloud)
         start = time.perf_counter()
         beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points.points, seed=0)
-        choice = auto.choose(points.points, view_points=points.view_points,
-                             uncertainty=points.attributes, candidates=candidate_runs(rows),
-                             holdout=args.holdout, seed=0, n_workers=args.workers,
-                             misses=beams)
+        with recording_checks():
+            choice = auto.choose(points.points, view_points=points.view_points,
+                                 uncertainty=points.attributes, candidates=candidate_runs(rows),
+                                 holdout=args.holdout, seed=0, n_workers=args.workers,
+                                 misses=beams)
         elapsed = time.perf_counter() - start
         table = [c.to_dict() | {"key": c.key} for c in choice.candidates]
         arrays = {f"cost/{c.key}": c.cost for c in choice.candidates if c.cost is not None}
+        arrays |= per_strike_arrays(choice.candidates)
         folds = choice.folds
         block = np.concatenate([folds.block[folds.test(f)] for f in range(folds.k)])
         np.savez_compressed(out / f"{cloud}.npz", block=block, **arrays)
@@ -144,13 +149,79 @@ def collect(args) -> None:
         print(f"{cloud}: {len(table)} candidates in {elapsed:.0f} s", flush=True)
 
 
+# The per-strike arrays of a candidate's held-out checks (``judge.Check``) that ``collect``
+# keeps beside its cost, for the statistics that are not functions of the cost alone.
+PER_STRIKE = ("distance", "tolerance", "sigma", "missed", "violated")
+
+
+@contextmanager
+def recording_checks():
+    """While active, every candidate ``auto.choose`` judges gets ``held_checks``: the
+    ``judge.Check`` of each fold's tested strikes, folds in order. ``auto.judge_candidate``
+    checks the tested strikes of every fold, then all strikes (both not ``fitted``): the calls
+    before its last. ``per_strike_arrays`` keeps them only where their costs are the
+    candidate's (so a change of that order is caught, not replayed wrongly)."""
+    from recon.surfaces import auto, judge
+
+    calls: list = []
+    check, judge_candidate = judge.check, auto.judge_candidate
+
+    def recorded_check(*args, **kwargs):
+        result = check(*args, **kwargs)
+        if not kwargs.get("fitted", False):
+            calls.append(result)
+        return result
+
+    def recorded_judge(*args, **kwargs):
+        calls.clear()
+        candidate = judge_candidate(*args, **kwargs)
+        candidate.held_checks = calls[:-1]
+        return candidate
+
+    judge.check, auto.judge_candidate = recorded_check, recorded_judge
+    try:
+        yield
+    finally:
+        judge.check, auto.judge_candidate = check, judge_candidate
+
+
+def per_strike_arrays(candidates: list) -> dict[str, np.ndarray]:
+    """``PER_STRIKE`` arrays of each scored candidate's held-out strikes, keyed
+    ``NAME/KEY`` (``recording_checks``), for the candidates whose recorded costs are theirs."""
+    out = {}
+    for c in candidates:
+        held = getattr(c, "held_checks", None)
+        if c.cost is None or not held or not np.array_equal(
+                np.concatenate([h.cost for h in held]), c.cost):
+            continue
+        out |= {f"{name}/{c.key}": np.concatenate([getattr(h, name) for h in held])
+                for name in PER_STRIKE}
+    return out
+
+
+def closest_cost(per: dict[str, np.ndarray], where: np.ndarray) -> np.ndarray:
+    """Each held-out strike's cost with, where ``where``, the beam's residual (or the cap of a
+    beam cut or missed) replaced by the closest-point distance, capped at the tolerance, in the
+    same recorded sigma: ``(min(distance, tolerance) / sigma)^2``."""
+    closest = (np.minimum(per["distance"], per["tolerance"]) / per["sigma"]) ** 2
+    return np.where(where, closest, per["cost"])
+
+
 # Other held-out statistics ``rules --statistic`` may replay in place of the capped chi-square
-# (each a function of a strike's cost, the capped squared distance in recorded sigmas): the
-# mean chi (L1, less led by the strikes at the cap), the chi-square capped at 3 and 5 sigma,
-# and the fraction of strikes at the cap.
-STATISTICS = {"chi2": None, "chi": np.sqrt, "cap9": lambda c: np.minimum(c, 9.0),
-              "cap25": lambda c: np.minimum(c, 25.0),
-              "capped": lambda c: (c >= 0.999 * c.max()).astype(float)}
+# (each a function of a strike's cost, the capped squared distance in recorded sigmas, and the
+# per-strike arrays ``collect`` keeps): the mean chi (L1, less led by the strikes at the cap),
+# the chi-square capped at 3 and 5 sigma, the fraction of strikes at the cap; and the
+# closest-point residual in place of the beam's for the beams that miss the fold's surface
+# (``closest-missed``: a pass held out leaves a local surface a gap there that the surface
+# refitted on all strikes does not have), for those and the beams cut before their strike
+# (``closest-cut-missed``), or for every strike (``closest``: no ray in the statistic).
+STATISTICS = {"chi2": None, "chi": lambda c, p: np.sqrt(c),
+              "cap9": lambda c, p: np.minimum(c, 9.0),
+              "cap25": lambda c, p: np.minimum(c, 25.0),
+              "capped": lambda c, p: (c >= 0.999 * c.max()).astype(float),
+              "closest-missed": lambda c, p: closest_cost(p, p["missed"]),
+              "closest-cut-missed": lambda c, p: closest_cost(p, p["missed"] | p["violated"]),
+              "closest": lambda c, p: closest_cost(p, np.ones(len(c), dtype=bool))}
 
 
 def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
@@ -189,7 +260,13 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
                 row["method"] == auto.NATURAL_MODEL:
             candidate.span = compare_span(suite, cloud, row["key"])
         if STATISTICS[statistic] is not None and candidate.cost is not None:
-            candidate.cost = STATISTICS[statistic](candidate.cost)
+            per = {name: arrays[f"{name}/{row['key']}"] for name in PER_STRIKE
+                   if f"{name}/{row['key']}" in arrays} | {"cost": candidate.cost}
+            if statistic.startswith("closest") and len(per) == 1:
+                raise SystemExit(f"{cloud}: {row['label']} was collected without the "
+                                 f"per-strike arrays --statistic {statistic} needs; "
+                                 "collect it again (--force)")
+            candidate.cost = STATISTICS[statistic](candidate.cost, per)
             candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
                                                                     arrays["block"])
         out.append(candidate)
@@ -220,6 +297,21 @@ def free_space(candidates: list, n_misses: int, rate: float, ses: float) -> list
     reference = max(rate, min(c.misses_cut for c in scored))
     limit = reference + ses * np.sqrt(reference * (1 - reference) / n_misses)
     return [c for c in candidates if not (c.scored and (c.misses_cut or 0.0) > limit)]
+
+
+def holes_first(candidates: list, n_checked: int) -> list:
+    """The rule ``rules --holes-first`` tries (not auto's): before the band, every scored
+    candidate leaving more strikes in holes than ``auto.HOLE_SES`` binomial standard errors
+    above the larger of ``auto.HOLE_RATE`` and the fewest any scored candidate leaves is left
+    out (``auto.hole_limit`` over all of them, not the band's), unless none would remain."""
+    from recon.surfaces import auto
+
+    scored = [c for c in candidates if c.scored]
+    if not scored:
+        return candidates
+    limit = auto.hole_limit([c.holes for c in scored], n_checked)
+    kept = [c for c in candidates if not (c.scored and c.holes > limit)]
+    return kept if any(c.scored for c in kept) else candidates
 
 
 def checked_count(work: Path, suite: Path | None, cloud: str) -> int:
@@ -303,6 +395,8 @@ def rules(args) -> None:
         n_misses = with_misses(args.work, cloud, candidates)
         if args.miss_rate is not None:
             candidates = free_space(candidates, n_misses, args.miss_rate, args.miss_ses)
+        if args.holes_first:
+            candidates = holes_first(candidates, n_checked)
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
         v = verdict(rows, chosen.key, carved_truth(args, cloud, chosen.key))
@@ -692,6 +786,10 @@ def main(argv=None) -> int:
                         "needs ``misses``; default: auto's rule, which does not)")
     parser.add_argument("--miss-ses", type=float, default=3.0,
                         help="rules: standard errors of --miss-rate's test")
+    parser.add_argument("--holes-first", action="store_true",
+                        help="rules: leave out, before the band, the candidates leaving strikes "
+                        "in holes beyond the noise or the fewest any candidate leaves "
+                        "(``holes_first``; default: auto's rule, which tests only the band)")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
     parser.add_argument("--no-prior", action="store_true",
