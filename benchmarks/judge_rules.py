@@ -224,6 +224,19 @@ STATISTICS = {"chi2": None, "chi": lambda c, p: np.sqrt(c),
               "closest": lambda c, p: closest_cost(p, np.ones(len(c), dtype=bool))}
 
 
+def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str
+                  ) -> np.ndarray:
+    """``STATISTICS[statistic]`` of the candidate ``key``'s held-out ``cost`` and its
+    per-strike ``arrays`` (``collect``'s npz); ``name`` names it in the error of a collection
+    without the arrays a statistic needs."""
+    per = {field: arrays[f"{field}/{key}"] for field in PER_STRIKE
+           if f"{field}/{key}" in arrays} | {"cost": cost}
+    if statistic.startswith("closest") and len(per) == 1:
+        raise SystemExit(f"{name} was collected without the per-strike arrays --statistic "
+                         f"{statistic} needs; collect it again (--force)")
+    return STATISTICS[statistic](cost, per)
+
+
 def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
                   suite: Path | None = None
                   ) -> tuple[list, np.ndarray, float, float, int]:
@@ -260,13 +273,8 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
                 row["method"] == auto.NATURAL_MODEL:
             candidate.span = compare_span(suite, cloud, row["key"])
         if STATISTICS[statistic] is not None and candidate.cost is not None:
-            per = {name: arrays[f"{name}/{row['key']}"] for name in PER_STRIKE
-                   if f"{name}/{row['key']}" in arrays} | {"cost": candidate.cost}
-            if statistic.startswith("closest") and len(per) == 1:
-                raise SystemExit(f"{cloud}: {row['label']} was collected without the "
-                                 f"per-strike arrays --statistic {statistic} needs; "
-                                 "collect it again (--force)")
-            candidate.cost = STATISTICS[statistic](candidate.cost, per)
+            candidate.cost = replayed_cost(statistic, candidate.cost, arrays, row["key"],
+                                           f"{cloud}: {row['label']}")
             candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
                                                                     arrays["block"])
         out.append(candidate)
