@@ -221,16 +221,21 @@ STATISTICS = {"chi2": None, "chi": lambda c, p: np.sqrt(c),
               "capped": lambda c, p: (c >= 0.999 * c.max()).astype(float),
               "closest-missed": lambda c, p: closest_cost(p, p["missed"]),
               "closest-cut-missed": lambda c, p: closest_cost(p, p["missed"] | p["violated"]),
-              "closest": lambda c, p: closest_cost(p, np.ones(len(c), dtype=bool))}
+              "closest": lambda c, p: closest_cost(p, np.ones(len(c), dtype=bool)),
+              "closest-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"])}
 
 
-def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str
-                  ) -> np.ndarray:
+def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str,
+                  cracks=None) -> np.ndarray:
     """``STATISTICS[statistic]`` of the candidate ``key``'s held-out ``cost`` and its
-    per-strike ``arrays`` (``collect``'s npz); ``name`` names it in the error of a collection
-    without the arrays a statistic needs."""
+    per-strike ``arrays`` (``collect``'s npz) and ``cracks`` (``openings``'s npz: a candidate
+    without a compare mesh has none, and its missed beams stay holes); ``name`` names it in the
+    error of a collection without the arrays a statistic needs."""
     per = {field: arrays[f"{field}/{key}"] for field in PER_STRIKE
            if f"{field}/{key}" in arrays} | {"cost": cost}
+    if cracks is not None:
+        per["crack"] = cracks[f"crack/{key}"] if f"crack/{key}" in cracks else \
+            np.zeros(len(cost), dtype=bool)
     if statistic.startswith("closest") and len(per) == 1:
         raise SystemExit(f"{name} was collected without the per-strike arrays --statistic "
                          f"{statistic} needs; collect it again (--force)")
@@ -253,6 +258,12 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
 
     data = json.loads((work / "folds" / f"{cloud}.json").read_text())["auto"]
     arrays = np.load(work / "folds" / f"{cloud}.npz")
+    cracks = None
+    if "crack" in statistic:
+        path = work / "openings" / f"{cloud}.npz"
+        if not path.exists():
+            raise SystemExit(f"{cloud}: --statistic {statistic} needs the openings command first")
+        cracks = np.load(path)
     levels = {run.key: depth for depth, level in enumerate(auto.ladder()) for run in level}
     method_level = {}
     for depth, level in enumerate(auto.ladder()):
@@ -274,7 +285,7 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
             candidate.span = compare_span(suite, cloud, row["key"])
         if STATISTICS[statistic] is not None and candidate.cost is not None:
             candidate.cost = replayed_cost(statistic, candidate.cost, arrays, row["key"],
-                                           f"{cloud}: {row['label']}")
+                                           f"{cloud}: {row['label']}", cracks)
             candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
                                                                     arrays["block"])
         out.append(candidate)
@@ -566,6 +577,102 @@ def misses(args) -> None:
               flush=True)
 
 
+# ``openings``: a held-out beam that misses its fold's surface passed through an opening of
+# it. The opening counts as a crack (the surface is there; ``rules --statistic closest-cracks``
+# then charges the beam its closest-point residual) when, on the compare's mesh of the run
+# (fitted on all strikes, carved as auto carves for a carved candidate), the beam itself meets
+# the surface near its strike or at least RING_SHARE of RING_RAYS parallel beams offset by the
+# radius ``auto.miss_reach`` around it do: an opening narrower than the reach of a supported
+# surface point (2 strike spacings, 3 recorded noise lengths, tau) on both sides. "Near": the
+# hit within the strike's tolerance plus that radius along the beam (a face tilted up to 45
+# degrees to the beam). Set before any replay of the statistic.
+RING_RAYS, RING_SHARE = 8, 0.5
+
+
+def ring_share(caster, view: np.ndarray, points: np.ndarray, radius: float,
+               window: np.ndarray) -> np.ndarray:
+    """Per beam from ``view`` (n, 3) through ``points`` (n, 3) [m]: the share of ``RING_RAYS``
+    parallel beams offset ``radius`` [m] around it whose first hit on ``caster``'s surface lies
+    within ``window`` (n,) [m] of the strike's range."""
+    ray = points - view
+    direction = ray / np.linalg.norm(ray, axis=1)[:, None]
+    helper = np.where(np.abs(direction[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(direction, helper)
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    w = np.cross(direction, u)
+    angle = 2.0 * np.pi * np.arange(RING_RAYS) / RING_RAYS
+    offset = radius * (np.cos(angle)[None, :, None] * u[:, None, :]
+                       + np.sin(angle)[None, :, None] * w[:, None, :])
+    t_hit, beam_range, _, _ = caster.beams((view[:, None, :] + offset).reshape(-1, 3),
+                                           (points[:, None, :] + offset).reshape(-1, 3))
+    near = np.abs(t_hit - beam_range) <= np.repeat(window, RING_RAYS)
+    return near.reshape(len(points), RING_RAYS).mean(axis=1)
+
+
+def tested_order(suite: Path, cloud: str, holdout: float):
+    """The cloud as ``collect`` handed it to ``auto.choose`` and the indices of the tested
+    strikes in ``collect``'s order (fold 0's, then fold 1's, ...)."""
+    from formats.geometry import Cloud
+    from recon.surfaces import auto, judge
+
+    points = load_cloud(suite, cloud)
+    attributes = auto._columns(points.attributes) | dict(
+        zip(("view_x", "view_y", "view_z"), np.asarray(points.view_points).T, strict=True))
+    folds = judge.pass_folds(Cloud(points.points, attributes), max(2, round(1 / holdout)),
+                             seed=0)
+    return points, folds, np.concatenate([folds.test(f) for f in range(folds.k)])
+
+
+def openings(args) -> None:
+    """``collect``'s companion for ``rules --statistic closest-cracks``: per cloud and
+    collected candidate, which of its missed held-out beams passed a crack (``RING_RAYS``),
+    measured on the compare's mesh of the run; kept in ``WORK/openings/CLOUD.npz``."""
+    from formats.mesh_io import read_mesh
+    from recon.surfaces import auto, judge
+
+    out = args.work / "openings"
+    out.mkdir(parents=True, exist_ok=True)
+    for cloud in collected(args):
+        path = out / f"{cloud}.npz"
+        if path.exists() and not args.force:
+            continue
+        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
+        arrays = np.load(args.work / "folds" / f"{cloud}.npz")
+        points, folds, order = tested_order(args.suite, cloud, args.holdout)
+        if not np.array_equal(folds.block[order], arrays["block"]):
+            raise SystemExit(f"{cloud}: the folds rebuilt differ from the collected ones")
+        mesh_of = {r["key"]: r["mesh"] for r in records(args.suite, cloud) if r.get("mesh")}
+        radius = data["miss_reach_m"]
+        beams = None
+        cracks, shares = {}, []
+        for row in data["candidates"]:
+            key, base = row["key"], row["key"].removesuffix(" carved")
+            if f"missed/{key}" not in arrays or base not in mesh_of:
+                continue
+            mesh = read_mesh(args.suite / cloud / mesh_of[base])
+            vertices, faces = mesh.vertices, mesh.faces
+            if key != base:
+                if beams is None:
+                    beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5",
+                                             points.points, seed=0)
+                vertices, faces = judge.carve(vertices, faces, beams, points.points, radius)
+            missed = np.flatnonzero(arrays[f"missed/{key}"])
+            rows = order[missed]
+            view, strike = points.view_points[rows], points.points[rows]
+            window = arrays[f"tolerance/{key}"][missed] + radius
+            caster = judge.Caster(vertices, faces)
+            t_hit, beam_range, _, _ = caster.beams(view, strike)
+            share = ring_share(caster, view, strike, radius, window)
+            crack = np.zeros(len(order), dtype=bool)
+            crack[missed] = (np.abs(t_hit - beam_range) <= window) | (share >= RING_SHARE)
+            cracks[f"crack/{key}"] = crack
+            shares.append(f"{row['label']}{' carved' if key != base else ''} missed "
+                          f"{len(missed) / len(order):.1%}, cracks {crack[missed].mean():.0%}"
+                          if len(missed) else f"{row['label']} missed 0")
+        np.savez_compressed(path, **cracks)
+        print(f"{cloud} (radius {radius:.3g} m): " + "; ".join(shares), flush=True)
+
+
 def carved_truth(args, cloud: str, key: str) -> list[dict]:
     """The true scores of carved candidate ``key`` (``recon.api.score`` against the log's
     truth mesh, as the compare scores its runs): the compare's mesh of its run carved by the
@@ -768,8 +875,8 @@ def estimate_all(args) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=("collect", "misses", "rules", "evidence",
-                                            "estimate"))
+    parser.add_argument("command", choices=("collect", "misses", "openings", "rules",
+                                            "evidence", "estimate"))
     parser.add_argument("--suite", type=Path, required=True, help="a finished suite's --out")
     parser.add_argument("--work", type=Path, required=True, help="where this script writes")
     parser.add_argument("--clouds", nargs="*", help="only these clouds")
@@ -804,8 +911,8 @@ def main(argv=None) -> int:
                         help="tell auto nothing of the target (every cloud \"unknown\"; "
                         "default: the NATURAL clouds \"natural\")")
     args = parser.parse_args(argv)
-    {"collect": collect, "misses": misses, "rules": rules, "evidence": evidence,
-     "estimate": estimate_all}[args.command](args)
+    {"collect": collect, "misses": misses, "openings": openings, "rules": rules,
+     "evidence": evidence, "estimate": estimate_all}[args.command](args)
     return 0
 
 
