@@ -150,26 +150,42 @@ def collect(args) -> None:
 
 
 # The per-strike arrays of a candidate's held-out checks (``judge.Check``) that ``collect``
-# keeps beside its cost, for the statistics that are not functions of the cost alone.
-PER_STRIKE = ("distance", "tolerance", "sigma", "missed", "violated")
+# keeps beside its cost, for the statistics that are not functions of the cost alone; and
+# ``crack``: the missed held-out beam passed a crack of the fold's surface (``crack_of``).
+PER_STRIKE = ("distance", "tolerance", "sigma", "missed", "violated", "crack", "opening")
 
 
 @contextmanager
 def recording_checks():
     """While active, every candidate ``auto.choose`` judges gets ``held_checks``: the
-    ``judge.Check`` of each fold's tested strikes, folds in order. ``auto.judge_candidate``
+    ``judge.Check`` of each fold's tested strikes, folds in order, each with its ``crack``
+    array (``crack_of`` at the context's ``miss_reach``). ``auto.judge_candidate``
     checks the tested strikes of every fold, then all strikes (both not ``fitted``): the calls
     before its last. ``per_strike_arrays`` keeps them only where their costs are the
     candidate's (so a change of that order is caught, not replayed wrongly)."""
+    from dataclasses import dataclass
+
     from recon.surfaces import auto, judge
 
+    @dataclass(frozen=True)
+    class Recorded(judge.Check):
+        crack: np.ndarray | None = None
+        opening: np.ndarray | None = None
+
     calls: list = []
-    check, judge_candidate = judge.check, auto.judge_candidate
+    reach: list = []
+    check, judge_candidate, context = judge.check, auto.judge_candidate, auto._context
+
+    def recorded_context(*args, **kwargs):
+        result = context(*args, **kwargs)
+        reach[:] = [result.miss_reach]
+        return result
 
     def recorded_check(*args, **kwargs):
         result = check(*args, **kwargs)
         if not kwargs.get("fitted", False):
-            calls.append(result)
+            crack, opening = crack_of(*args[:2], result, reach[0])
+            calls.append(Recorded(**vars(result), crack=crack, opening=opening))
         return result
 
     def recorded_judge(*args, **kwargs):
@@ -178,11 +194,42 @@ def recording_checks():
         candidate.held_checks = calls[:-1]
         return candidate
 
-    judge.check, auto.judge_candidate = recorded_check, recorded_judge
+    judge.check, auto.judge_candidate, auto._context = (recorded_check, recorded_judge,
+                                                        recorded_context)
     try:
         yield
     finally:
-        judge.check, auto.judge_candidate = check, judge_candidate
+        judge.check, auto.judge_candidate, auto._context = check, judge_candidate, context
+
+
+def crack_of(strikes, caster, result, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per strike of ``result`` (``judge.check`` of ``strikes`` on ``caster``'s surface): its
+    beam missed the surface through a crack, an opening narrower than ``radius`` [m] on both
+    sides: at least ``RING_SHARE`` of ``RING_RAYS`` parallel beams offset ``radius`` around it
+    meet the surface within the strike's tolerance plus ``radius`` of its range
+    (``ring_share``). Also the opening's size (``opening_of``)."""
+    opening = opening_of(strikes, caster, result, radius)
+    return opening <= 1.0, opening
+
+
+# The ring radii, in miss_reach, at which ``opening_of`` sizes a missed beam's opening.
+OPENING_SCALES = (0.25, 0.5, 1.0, 2.0, 4.0)
+
+
+def opening_of(strikes, caster, result, radius: float) -> np.ndarray:
+    """Per strike of ``result``: the smallest of ``OPENING_SCALES`` times ``radius`` [m] at
+    which ``ring_share`` reaches ``RING_SHARE`` for a missed beam, in units of ``radius``
+    (inf when none does; 0 for a beam that met the surface)."""
+    opening = np.zeros(len(result.missed))
+    missed = np.flatnonzero(result.missed)
+    if strikes.view is None or not len(missed):
+        return opening
+    opening[missed] = np.inf
+    for scale in OPENING_SCALES[::-1]:
+        share = ring_share(caster, strikes.view[missed], strikes.points[missed],
+                           scale * radius, result.tolerance[missed] + scale * radius)
+        opening[missed[share >= RING_SHARE]] = scale
+    return opening
 
 
 def per_strike_arrays(candidates: list) -> dict[str, np.ndarray]:
@@ -222,7 +269,8 @@ STATISTICS = {"chi2": None, "chi": lambda c, p: np.sqrt(c),
               "closest-missed": lambda c, p: closest_cost(p, p["missed"]),
               "closest-cut-missed": lambda c, p: closest_cost(p, p["missed"] | p["violated"]),
               "closest": lambda c, p: closest_cost(p, np.ones(len(c), dtype=bool)),
-              "closest-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"])}
+              "closest-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"]),
+              "closest-fold-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"])}
 
 
 def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str,
@@ -236,6 +284,9 @@ def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str,
     if cracks is not None:
         per["crack"] = cracks[f"crack/{key}"] if f"crack/{key}" in cracks else \
             np.zeros(len(cost), dtype=bool)
+    if statistic == "closest-fold-cracks" and "crack" not in per:
+        raise SystemExit(f"{name} was collected without the crack arrays --statistic "
+                         f"{statistic} needs; collect it again (--force)")
     if statistic.startswith("closest") and len(per) == 1:
         raise SystemExit(f"{name} was collected without the per-strike arrays --statistic "
                          f"{statistic} needs; collect it again (--force)")
@@ -259,7 +310,7 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
     data = json.loads((work / "folds" / f"{cloud}.json").read_text())["auto"]
     arrays = np.load(work / "folds" / f"{cloud}.npz")
     cracks = None
-    if "crack" in statistic:
+    if statistic == "closest-cracks":
         path = work / "openings" / f"{cloud}.npz"
         if not path.exists():
             raise SystemExit(f"{cloud}: --statistic {statistic} needs the openings command first")
@@ -666,7 +717,7 @@ def openings(args) -> None:
             crack = np.zeros(len(order), dtype=bool)
             crack[missed] = (np.abs(t_hit - beam_range) <= window) | (share >= RING_SHARE)
             cracks[f"crack/{key}"] = crack
-            shares.append(f"{row['label']}{' carved' if key != base else ''} missed "
+            shares.append(f"{row['label']} missed "
                           f"{len(missed) / len(order):.1%}, cracks {crack[missed].mean():.0%}"
                           if len(missed) else f"{row['label']} missed 0")
         np.savez_compressed(path, **cracks)
