@@ -2,6 +2,7 @@
 
     python benchmarks/judge_rules.py collect --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py misses  --suite benchmarks/out/suite --work /tmp/judge
+    python benchmarks/judge_rules.py openings --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py rules   --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py evidence --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py estimate --suite benchmarks/out/suite --work /tmp/judge
@@ -15,10 +16,15 @@ seconds instead of a suite run:
   (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
   candidate, the held-out costs of every tested strike, their blocks, the per-strike arrays of
   its held-out checks (``PER_STRIKE``: ``rules --statistic`` replays other statistics from
-  them) and the per-candidate figures (``WORK/folds/CLOUD.npz`` and ``.json``);
+  them; among them the size of the opening of the fold's surface each missed held-out beam
+  passed, ``opening_of``) and the per-candidate figures (``WORK/folds/CLOUD.npz`` and
+  ``.json``);
 - ``misses``: per cloud, the log's missed beams as auto draws them and each collected
   candidate's fraction of them cut on the compare's mesh (``WORK/misses``), for
   ``rules --miss-rate``;
+- ``openings``: per cloud and collected candidate, which missed held-out beams passed a crack
+  of the compare's mesh of the run (``RING_RAYS``; ``WORK/openings``), for ``rules
+  --statistic closest-cracks``;
 - ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
   strikes, the carved twins, the smallest model) and the ladder's stop on those figures,
   restricted to the ladder, and compares the choice with the truth (a carved choice by
@@ -209,7 +215,7 @@ def crack_of(strikes, caster, result, radius: float) -> tuple[np.ndarray, np.nda
     meet the surface within the strike's tolerance plus ``radius`` of its range
     (``ring_share``). Also the opening's size (``opening_of``)."""
     opening = opening_of(strikes, caster, result, radius)
-    return opening <= 1.0, opening
+    return result.missed & (opening <= 1.0), opening
 
 
 # The ring radii, in miss_reach, at which ``opening_of`` sizes a missed beam's opening.
@@ -261,7 +267,10 @@ def closest_cost(per: dict[str, np.ndarray], where: np.ndarray) -> np.ndarray:
 # closest-point residual in place of the beam's for the beams that miss the fold's surface
 # (``closest-missed``: a pass held out leaves a local surface a gap there that the surface
 # refitted on all strikes does not have), for those and the beams cut before their strike
-# (``closest-cut-missed``), or for every strike (``closest``: no ray in the statistic).
+# (``closest-cut-missed``), or for every strike (``closest``: no ray in the statistic); for the
+# missed beams that passed a crack, narrower than ``auto.miss_reach``, of the compare's mesh
+# (``closest-cracks``, ``openings``) or of the fold's own surface (``closest-fold-cracks``,
+# ``collect``).
 STATISTICS = {"chi2": None, "chi": lambda c, p: np.sqrt(c),
               "cap9": lambda c, p: np.minimum(c, 9.0),
               "cap25": lambda c, p: np.minimum(c, 25.0),
@@ -271,6 +280,9 @@ STATISTICS = {"chi2": None, "chi": lambda c, p: np.sqrt(c),
               "closest": lambda c, p: closest_cost(p, np.ones(len(c), dtype=bool)),
               "closest-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"]),
               "closest-fold-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"])}
+# ``rules --opening S``: with ``closest-fold-cracks``, a crack is an opening of at most S times
+# ``auto.miss_reach`` (one of ``OPENING_SCALES``; 1 as fixed before the replay).
+OPENING = 1.0
 
 
 def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str,
@@ -284,9 +296,11 @@ def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str,
     if cracks is not None:
         per["crack"] = cracks[f"crack/{key}"] if f"crack/{key}" in cracks else \
             np.zeros(len(cost), dtype=bool)
-    if statistic == "closest-fold-cracks" and "crack" not in per:
-        raise SystemExit(f"{name} was collected without the crack arrays --statistic "
-                         f"{statistic} needs; collect it again (--force)")
+    if statistic == "closest-fold-cracks":
+        if "opening" not in per:
+            raise SystemExit(f"{name} was collected without the opening arrays --statistic "
+                             f"{statistic} needs; collect it again (--force)")
+        per["crack"] = per["missed"] & (per["opening"] <= OPENING)
     if statistic.startswith("closest") and len(per) == 1:
         raise SystemExit(f"{name} was collected without the per-strike arrays --statistic "
                          f"{statistic} needs; collect it again (--force)")
@@ -453,8 +467,10 @@ def verdict(rows: list[dict], key: str, extra: list[dict] = ()) -> dict:
 def rules(args) -> None:
     from recon.surfaces import auto
 
+    global OPENING
     if args.band is not None:
         auto.BAND_SES = args.band
+    OPENING = args.opening
     names = collected(args)
     good = median = 0
     seconds = []
@@ -945,6 +961,9 @@ def main(argv=None) -> int:
         "screened-poisson"], help="estimate: the runs --per-cloud estimates")
     parser.add_argument("--statistic", choices=tuple(STATISTICS), default="chi2",
                         help="rules: the held-out statistic replayed (default: auto's)")
+    parser.add_argument("--opening", type=float, default=1.0, choices=OPENING_SCALES,
+                        help="rules: with --statistic closest-fold-cracks, the widest crack in "
+                        "auto.miss_reach (default 1)")
     parser.add_argument("--band", type=float, help="rules: the band in paired standard "
                         "errors (default: auto.BAND_SES)")
     parser.add_argument("--miss-rate", type=float, help="rules: leave out, before the band, "
