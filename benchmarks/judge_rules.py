@@ -2,6 +2,7 @@
 
     python benchmarks/judge_rules.py collect --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py misses  --suite benchmarks/out/suite --work /tmp/judge
+    python benchmarks/judge_rules.py openings --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py rules   --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py evidence --suite benchmarks/out/suite --work /tmp/judge
     python benchmarks/judge_rules.py estimate --suite benchmarks/out/suite --work /tmp/judge
@@ -13,11 +14,17 @@ seconds instead of a suite run:
 
 - ``collect``: per cloud, ``recon.surfaces.auto.choose`` fits a fixed, wide candidate set
   (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
-  candidate, the held-out costs of every tested strike, their blocks and the per-candidate
-  figures (``WORK/folds/CLOUD.npz`` and ``.json``);
+  candidate, the held-out costs of every tested strike, their blocks, the per-strike arrays of
+  its held-out checks (``PER_STRIKE``: ``rules --statistic`` replays other statistics from
+  them; among them the size of the opening of the fold's surface each missed held-out beam
+  passed, ``opening_of``) and the per-candidate figures (``WORK/folds/CLOUD.npz`` and
+  ``.json``);
 - ``misses``: per cloud, the log's missed beams as auto draws them and each collected
   candidate's fraction of them cut on the compare's mesh (``WORK/misses``), for
   ``rules --miss-rate``;
+- ``openings``: per cloud and collected candidate, which missed held-out beams passed a crack
+  of the compare's mesh of the run (``RING_RAYS``; ``WORK/openings``), for ``rules
+  --statistic closest-cracks``;
 - ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
   strikes, the carved twins, the smallest model) and the ladder's stop on those figures,
   restricted to the ladder, and compares the choice with the truth (a carved choice by
@@ -25,7 +32,8 @@ seconds instead of a suite run:
   ``F_TOLERANCE`` of the best F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all
   compare runs, not below the median run;
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
-  "unknown");
+  "unknown"); ``--statistic``, ``--band``, ``--miss-rate``, ``--holes-first`` and ``--extra``
+  replay rules that are not auto's;
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
@@ -47,6 +55,7 @@ import json
 import statistics
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -128,13 +137,15 @@ def collect(args) -> None:
         points = load_cloud(args.suite, cloud)
         start = time.perf_counter()
         beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points.points, seed=0)
-        choice = auto.choose(points.points, view_points=points.view_points,
-                             uncertainty=points.attributes, candidates=candidate_runs(rows),
-                             holdout=args.holdout, seed=0, n_workers=args.workers,
-                             misses=beams)
+        with recording_checks():
+            choice = auto.choose(points.points, view_points=points.view_points,
+                                 uncertainty=points.attributes, candidates=candidate_runs(rows),
+                                 holdout=args.holdout, seed=0, n_workers=args.workers,
+                                 misses=beams)
         elapsed = time.perf_counter() - start
         table = [c.to_dict() | {"key": c.key} for c in choice.candidates]
         arrays = {f"cost/{c.key}": c.cost for c in choice.candidates if c.cost is not None}
+        arrays |= per_strike_arrays(choice.candidates)
         folds = choice.folds
         block = np.concatenate([folds.block[folds.test(f)] for f in range(folds.k)])
         np.savez_compressed(out / f"{cloud}.npz", block=block, **arrays)
@@ -144,13 +155,156 @@ def collect(args) -> None:
         print(f"{cloud}: {len(table)} candidates in {elapsed:.0f} s", flush=True)
 
 
+# The per-strike arrays of a candidate's held-out checks (``judge.Check``) that ``collect``
+# keeps beside its cost, for the statistics that are not functions of the cost alone; and
+# ``crack``: the missed held-out beam passed a crack of the fold's surface (``crack_of``).
+PER_STRIKE = ("distance", "tolerance", "sigma", "missed", "violated", "crack", "opening")
+
+
+@contextmanager
+def recording_checks():
+    """While active, every candidate ``auto.choose`` judges gets ``held_checks``: the
+    ``judge.Check`` of each fold's tested strikes, folds in order, each with its ``crack``
+    array (``crack_of`` at the context's ``miss_reach``). ``auto.judge_candidate``
+    checks the tested strikes of every fold, then all strikes (both not ``fitted``): the calls
+    before its last. ``per_strike_arrays`` keeps them only where their costs are the
+    candidate's (so a change of that order is caught, not replayed wrongly)."""
+    from dataclasses import dataclass
+
+    from recon.surfaces import auto, judge
+
+    @dataclass(frozen=True)
+    class Recorded(judge.Check):
+        crack: np.ndarray | None = None
+        opening: np.ndarray | None = None
+
+    calls: list = []
+    reach: list = []
+    check, judge_candidate, context = judge.check, auto.judge_candidate, auto._context
+
+    def recorded_context(*args, **kwargs):
+        result = context(*args, **kwargs)
+        reach[:] = [result.miss_reach]
+        return result
+
+    def recorded_check(*args, **kwargs):
+        result = check(*args, **kwargs)
+        if not kwargs.get("fitted", False):
+            crack, opening = crack_of(*args[:2], result, reach[0])
+            calls.append(Recorded(**vars(result), crack=crack, opening=opening))
+        return result
+
+    def recorded_judge(*args, **kwargs):
+        calls.clear()
+        candidate = judge_candidate(*args, **kwargs)
+        candidate.held_checks = calls[:-1]
+        return candidate
+
+    judge.check, auto.judge_candidate, auto._context = (recorded_check, recorded_judge,
+                                                        recorded_context)
+    try:
+        yield
+    finally:
+        judge.check, auto.judge_candidate, auto._context = check, judge_candidate, context
+
+
+def crack_of(strikes, caster, result, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per strike of ``result`` (``judge.check`` of ``strikes`` on ``caster``'s surface): its
+    beam missed the surface through a crack, an opening narrower than ``radius`` [m] on both
+    sides: at least ``RING_SHARE`` of ``RING_RAYS`` parallel beams offset ``radius`` around it
+    meet the surface within the strike's tolerance plus ``radius`` of its range
+    (``ring_share``). Also the opening's size (``opening_of``)."""
+    opening = opening_of(strikes, caster, result, radius)
+    return result.missed & (opening <= 1.0), opening
+
+
+# The ring radii, in miss_reach, at which ``opening_of`` sizes a missed beam's opening.
+OPENING_SCALES = (0.25, 0.5, 1.0, 2.0, 4.0)
+
+
+def opening_of(strikes, caster, result, radius: float) -> np.ndarray:
+    """Per strike of ``result``: the smallest of ``OPENING_SCALES`` times ``radius`` [m] at
+    which ``ring_share`` reaches ``RING_SHARE`` for a missed beam, in units of ``radius``
+    (inf when none does; 0 for a beam that met the surface)."""
+    opening = np.zeros(len(result.missed))
+    missed = np.flatnonzero(result.missed)
+    if strikes.view is None or not len(missed):
+        return opening
+    opening[missed] = np.inf
+    for scale in OPENING_SCALES[::-1]:
+        share = ring_share(caster, strikes.view[missed], strikes.points[missed],
+                           scale * radius, result.tolerance[missed] + scale * radius)
+        opening[missed[share >= RING_SHARE]] = scale
+    return opening
+
+
+def per_strike_arrays(candidates: list) -> dict[str, np.ndarray]:
+    """``PER_STRIKE`` arrays of each scored candidate's held-out strikes, keyed
+    ``NAME/KEY`` (``recording_checks``), for the candidates whose recorded costs are theirs."""
+    out = {}
+    for c in candidates:
+        held = getattr(c, "held_checks", None)
+        if c.cost is None or not held or not np.array_equal(
+                np.concatenate([h.cost for h in held]), c.cost):
+            continue
+        out |= {f"{name}/{c.key}": np.concatenate([getattr(h, name) for h in held])
+                for name in PER_STRIKE}
+    return out
+
+
+def closest_cost(per: dict[str, np.ndarray], where: np.ndarray) -> np.ndarray:
+    """Each held-out strike's cost with, where ``where``, the beam's residual (or the cap of a
+    beam cut or missed) replaced by the closest-point distance, capped at the tolerance, in the
+    same recorded sigma: ``(min(distance, tolerance) / sigma)^2``."""
+    closest = (np.minimum(per["distance"], per["tolerance"]) / per["sigma"]) ** 2
+    return np.where(where, closest, per["cost"])
+
+
 # Other held-out statistics ``rules --statistic`` may replay in place of the capped chi-square
-# (each a function of a strike's cost, the capped squared distance in recorded sigmas): the
-# mean chi (L1, less led by the strikes at the cap), the chi-square capped at 3 and 5 sigma,
-# and the fraction of strikes at the cap.
-STATISTICS = {"chi2": None, "chi": np.sqrt, "cap9": lambda c: np.minimum(c, 9.0),
-              "cap25": lambda c: np.minimum(c, 25.0),
-              "capped": lambda c: (c >= 0.999 * c.max()).astype(float)}
+# (each a function of a strike's cost, the capped squared distance in recorded sigmas, and the
+# per-strike arrays ``collect`` keeps): the mean chi (L1, less led by the strikes at the cap),
+# the chi-square capped at 3 and 5 sigma, the fraction of strikes at the cap; and the
+# closest-point residual in place of the beam's for the beams that miss the fold's surface
+# (``closest-missed``: a pass held out leaves a local surface a gap there that the surface
+# refitted on all strikes does not have), for those and the beams cut before their strike
+# (``closest-cut-missed``), or for every strike (``closest``: no ray in the statistic); for the
+# missed beams that passed a crack, narrower than ``auto.miss_reach``, of the compare's mesh
+# (``closest-cracks``, ``openings``) or of the fold's own surface (``closest-fold-cracks``,
+# ``collect``).
+STATISTICS = {"chi2": None, "chi": lambda c, p: np.sqrt(c),
+              "cap9": lambda c, p: np.minimum(c, 9.0),
+              "cap25": lambda c, p: np.minimum(c, 25.0),
+              "capped": lambda c, p: (c >= 0.999 * c.max()).astype(float),
+              "closest-missed": lambda c, p: closest_cost(p, p["missed"]),
+              "closest-cut-missed": lambda c, p: closest_cost(p, p["missed"] | p["violated"]),
+              "closest": lambda c, p: closest_cost(p, np.ones(len(c), dtype=bool)),
+              "closest-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"]),
+              "closest-fold-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"])}
+# ``rules --opening S``: with ``closest-fold-cracks``, a crack is an opening of at most S times
+# ``auto.miss_reach`` (one of ``OPENING_SCALES``; 1 as fixed before the replay).
+OPENING = 1.0
+
+
+def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str,
+                  cracks=None) -> np.ndarray:
+    """``STATISTICS[statistic]`` of the candidate ``key``'s held-out ``cost`` and its
+    per-strike ``arrays`` (``collect``'s npz) and ``cracks`` (``openings``'s npz: a candidate
+    without a compare mesh has none, and its missed beams stay holes); ``name`` names it in the
+    error of a collection without the arrays a statistic needs."""
+    per = {field: arrays[f"{field}/{key}"] for field in PER_STRIKE
+           if f"{field}/{key}" in arrays} | {"cost": cost}
+    if cracks is not None:
+        per["crack"] = cracks[f"crack/{key}"] if f"crack/{key}" in cracks else \
+            np.zeros(len(cost), dtype=bool)
+    if statistic == "closest-fold-cracks":
+        if "opening" not in per:
+            raise SystemExit(f"{name} was collected without the opening arrays --statistic "
+                             f"{statistic} needs; collect it again (--force)")
+        per["crack"] = per["missed"] & (per["opening"] <= OPENING)
+    if statistic.startswith("closest") and len(per) == 1:
+        raise SystemExit(f"{name} was collected without the per-strike arrays --statistic "
+                         f"{statistic} needs; collect it again (--force)")
+    return STATISTICS[statistic](cost, per)
 
 
 def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
@@ -169,6 +323,12 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
 
     data = json.loads((work / "folds" / f"{cloud}.json").read_text())["auto"]
     arrays = np.load(work / "folds" / f"{cloud}.npz")
+    cracks = None
+    if statistic == "closest-cracks":
+        path = work / "openings" / f"{cloud}.npz"
+        if not path.exists():
+            raise SystemExit(f"{cloud}: --statistic {statistic} needs the openings command first")
+        cracks = np.load(path)
     levels = {run.key: depth for depth, level in enumerate(auto.ladder()) for run in level}
     method_level = {}
     for depth, level in enumerate(auto.ladder()):
@@ -189,7 +349,8 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
                 row["method"] == auto.NATURAL_MODEL:
             candidate.span = compare_span(suite, cloud, row["key"])
         if STATISTICS[statistic] is not None and candidate.cost is not None:
-            candidate.cost = STATISTICS[statistic](candidate.cost)
+            candidate.cost = replayed_cost(statistic, candidate.cost, arrays, row["key"],
+                                           f"{cloud}: {row['label']}", cracks)
             candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
                                                                     arrays["block"])
         out.append(candidate)
@@ -220,6 +381,21 @@ def free_space(candidates: list, n_misses: int, rate: float, ses: float) -> list
     reference = max(rate, min(c.misses_cut for c in scored))
     limit = reference + ses * np.sqrt(reference * (1 - reference) / n_misses)
     return [c for c in candidates if not (c.scored and (c.misses_cut or 0.0) > limit)]
+
+
+def holes_first(candidates: list, n_checked: int) -> list:
+    """The rule ``rules --holes-first`` tries (not auto's): before the band, every scored
+    candidate leaving more strikes in holes than ``auto.HOLE_SES`` binomial standard errors
+    above the larger of ``auto.HOLE_RATE`` and the fewest any scored candidate leaves is left
+    out (``auto.hole_limit`` over all of them, not the band's), unless none would remain."""
+    from recon.surfaces import auto
+
+    scored = [c for c in candidates if c.scored]
+    if not scored:
+        return candidates
+    limit = auto.hole_limit([c.holes for c in scored], n_checked)
+    kept = [c for c in candidates if not (c.scored and c.holes > limit)]
+    return kept if any(c.scored for c in kept) else candidates
 
 
 def checked_count(work: Path, suite: Path | None, cloud: str) -> int:
@@ -291,8 +467,10 @@ def verdict(rows: list[dict], key: str, extra: list[dict] = ()) -> dict:
 def rules(args) -> None:
     from recon.surfaces import auto
 
+    global OPENING
     if args.band is not None:
         auto.BAND_SES = args.band
+    OPENING = args.opening
     names = collected(args)
     good = median = 0
     seconds = []
@@ -303,6 +481,8 @@ def rules(args) -> None:
         n_misses = with_misses(args.work, cloud, candidates)
         if args.miss_rate is not None:
             candidates = free_space(candidates, n_misses, args.miss_rate, args.miss_ses)
+        if args.holes_first:
+            candidates = holes_first(candidates, n_checked)
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
         v = verdict(rows, chosen.key, carved_truth(args, cloud, chosen.key))
@@ -462,6 +642,102 @@ def misses(args) -> None:
               f"draw {drawn:.1f} s; " + "; ".join(f"{r['label']} chi2 {r['chi2']:.3g} cut "
                                                f"{cut[r['key']]:.2%}" for r in ranked[:6]),
               flush=True)
+
+
+# ``openings``: a held-out beam that misses its fold's surface passed through an opening of
+# it. The opening counts as a crack (the surface is there; ``rules --statistic closest-cracks``
+# then charges the beam its closest-point residual) when, on the compare's mesh of the run
+# (fitted on all strikes, carved as auto carves for a carved candidate), the beam itself meets
+# the surface near its strike or at least RING_SHARE of RING_RAYS parallel beams offset by the
+# radius ``auto.miss_reach`` around it do: an opening narrower than the reach of a supported
+# surface point (2 strike spacings, 3 recorded noise lengths, tau) on both sides. "Near": the
+# hit within the strike's tolerance plus that radius along the beam (a face tilted up to 45
+# degrees to the beam). Set before any replay of the statistic.
+RING_RAYS, RING_SHARE = 8, 0.5
+
+
+def ring_share(caster, view: np.ndarray, points: np.ndarray, radius: float,
+               window: np.ndarray) -> np.ndarray:
+    """Per beam from ``view`` (n, 3) through ``points`` (n, 3) [m]: the share of ``RING_RAYS``
+    parallel beams offset ``radius`` [m] around it whose first hit on ``caster``'s surface lies
+    within ``window`` (n,) [m] of the strike's range."""
+    ray = points - view
+    direction = ray / np.linalg.norm(ray, axis=1)[:, None]
+    helper = np.where(np.abs(direction[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(direction, helper)
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    w = np.cross(direction, u)
+    angle = 2.0 * np.pi * np.arange(RING_RAYS) / RING_RAYS
+    offset = radius * (np.cos(angle)[None, :, None] * u[:, None, :]
+                       + np.sin(angle)[None, :, None] * w[:, None, :])
+    t_hit, beam_range, _, _ = caster.beams((view[:, None, :] + offset).reshape(-1, 3),
+                                           (points[:, None, :] + offset).reshape(-1, 3))
+    near = np.abs(t_hit - beam_range) <= np.repeat(window, RING_RAYS)
+    return near.reshape(len(points), RING_RAYS).mean(axis=1)
+
+
+def tested_order(suite: Path, cloud: str, holdout: float):
+    """The cloud as ``collect`` handed it to ``auto.choose`` and the indices of the tested
+    strikes in ``collect``'s order (fold 0's, then fold 1's, ...)."""
+    from formats.geometry import Cloud
+    from recon.surfaces import auto, judge
+
+    points = load_cloud(suite, cloud)
+    attributes = auto._columns(points.attributes) | dict(
+        zip(("view_x", "view_y", "view_z"), np.asarray(points.view_points).T, strict=True))
+    folds = judge.pass_folds(Cloud(points.points, attributes), max(2, round(1 / holdout)),
+                             seed=0)
+    return points, folds, np.concatenate([folds.test(f) for f in range(folds.k)])
+
+
+def openings(args) -> None:
+    """``collect``'s companion for ``rules --statistic closest-cracks``: per cloud and
+    collected candidate, which of its missed held-out beams passed a crack (``RING_RAYS``),
+    measured on the compare's mesh of the run; kept in ``WORK/openings/CLOUD.npz``."""
+    from formats.mesh_io import read_mesh
+    from recon.surfaces import auto, judge
+
+    out = args.work / "openings"
+    out.mkdir(parents=True, exist_ok=True)
+    for cloud in collected(args):
+        path = out / f"{cloud}.npz"
+        if path.exists() and not args.force:
+            continue
+        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
+        arrays = np.load(args.work / "folds" / f"{cloud}.npz")
+        points, folds, order = tested_order(args.suite, cloud, args.holdout)
+        if not np.array_equal(folds.block[order], arrays["block"]):
+            raise SystemExit(f"{cloud}: the folds rebuilt differ from the collected ones")
+        mesh_of = {r["key"]: r["mesh"] for r in records(args.suite, cloud) if r.get("mesh")}
+        radius = data["miss_reach_m"]
+        beams = None
+        cracks, shares = {}, []
+        for row in data["candidates"]:
+            key, base = row["key"], row["key"].removesuffix(" carved")
+            if f"missed/{key}" not in arrays or base not in mesh_of:
+                continue
+            mesh = read_mesh(args.suite / cloud / mesh_of[base])
+            vertices, faces = mesh.vertices, mesh.faces
+            if key != base:
+                if beams is None:
+                    beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5",
+                                             points.points, seed=0)
+                vertices, faces = judge.carve(vertices, faces, beams, points.points, radius)
+            missed = np.flatnonzero(arrays[f"missed/{key}"])
+            rows = order[missed]
+            view, strike = points.view_points[rows], points.points[rows]
+            window = arrays[f"tolerance/{key}"][missed] + radius
+            caster = judge.Caster(vertices, faces)
+            t_hit, beam_range, _, _ = caster.beams(view, strike)
+            share = ring_share(caster, view, strike, radius, window)
+            crack = np.zeros(len(order), dtype=bool)
+            crack[missed] = (np.abs(t_hit - beam_range) <= window) | (share >= RING_SHARE)
+            cracks[f"crack/{key}"] = crack
+            shares.append(f"{row['label']} missed "
+                          f"{len(missed) / len(order):.1%}, cracks {crack[missed].mean():.0%}"
+                          if len(missed) else f"{row['label']} missed 0")
+        np.savez_compressed(path, **cracks)
+        print(f"{cloud} (radius {radius:.3g} m): " + "; ".join(shares), flush=True)
 
 
 def carved_truth(args, cloud: str, key: str) -> list[dict]:
@@ -666,8 +942,8 @@ def estimate_all(args) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=("collect", "misses", "rules", "evidence",
-                                            "estimate"))
+    parser.add_argument("command", choices=("collect", "misses", "openings", "rules",
+                                            "evidence", "estimate"))
     parser.add_argument("--suite", type=Path, required=True, help="a finished suite's --out")
     parser.add_argument("--work", type=Path, required=True, help="where this script writes")
     parser.add_argument("--clouds", nargs="*", help="only these clouds")
@@ -685,6 +961,9 @@ def main(argv=None) -> int:
         "screened-poisson"], help="estimate: the runs --per-cloud estimates")
     parser.add_argument("--statistic", choices=tuple(STATISTICS), default="chi2",
                         help="rules: the held-out statistic replayed (default: auto's)")
+    parser.add_argument("--opening", type=float, default=1.0, choices=OPENING_SCALES,
+                        help="rules: with --statistic closest-fold-cracks, the widest crack in "
+                        "auto.miss_reach (default 1)")
     parser.add_argument("--band", type=float, help="rules: the band in paired standard "
                         "errors (default: auto.BAND_SES)")
     parser.add_argument("--miss-rate", type=float, help="rules: leave out, before the band, "
@@ -692,14 +971,18 @@ def main(argv=None) -> int:
                         "needs ``misses``; default: auto's rule, which does not)")
     parser.add_argument("--miss-ses", type=float, default=3.0,
                         help="rules: standard errors of --miss-rate's test")
+    parser.add_argument("--holes-first", action="store_true",
+                        help="rules: leave out, before the band, the candidates leaving strikes "
+                        "in holes beyond the noise or the fewest any candidate leaves "
+                        "(``holes_first``; default: auto's rule, which tests only the band)")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
     parser.add_argument("--no-prior", action="store_true",
                         help="tell auto nothing of the target (every cloud \"unknown\"; "
                         "default: the NATURAL clouds \"natural\")")
     args = parser.parse_args(argv)
-    {"collect": collect, "misses": misses, "rules": rules, "evidence": evidence,
-     "estimate": estimate_all}[args.command](args)
+    {"collect": collect, "misses": misses, "openings": openings, "rules": rules,
+     "evidence": evidence, "estimate": estimate_all}[args.command](args)
     return 0
 
 

@@ -1,0 +1,63 @@
+"""The opening a missed held-out beam passed (``benchmarks/judge_rules.py``'s crack statistic):
+a beam through a narrow crack of a surface is told from a beam through a wide hole."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from benchmarks import judge_rules
+from recon.surfaces import judge
+
+
+def _plate(rectangles) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned rectangles (x0, x1, y0, y1) in the plane z = 0, two triangles each."""
+    vertices, faces = [], []
+    for n, (x0, x1, y0, y1) in enumerate(rectangles):
+        vertices += [(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0)]
+        faces += [(4 * n, 4 * n + 1, 4 * n + 2), (4 * n, 4 * n + 2, 4 * n + 3)]
+    return np.array(vertices, dtype=float), np.array(faces, dtype=np.int64)
+
+
+# A 4 x 4 m plate with a 0.1 m crack along x = 0; another with a 1.4 m square hole at the centre.
+CRACKED = _plate([(-2.0, -0.05, -2.0, 2.0), (0.05, 2.0, -2.0, 2.0)])
+HOLED = _plate([(-2.0, -0.7, -2.0, 2.0), (0.7, 2.0, -2.0, 2.0),
+                (-0.7, 0.7, -2.0, -0.7), (-0.7, 0.7, 0.7, 2.0)])
+RADIUS = 0.3   # the crack's limit [m] (auto.miss_reach in the harness)
+
+
+def _missed_beam(surface):
+    """A beam straight down through the plate's centre, its strike 0.02 m below the plane."""
+    strikes = judge.Strikes(np.array([[0.0, 0.0, -0.02]]), np.array([[0.0, 0.0, 10.0]]))
+    caster = judge.Caster(*surface)
+    return strikes, caster, judge.check(strikes, caster, tau=0.1, noise=0.01)
+
+
+def test_a_beam_through_a_crack_is_told_from_a_beam_through_a_hole():
+    for surface, crack, opening in ((CRACKED, True, 0.25), (HOLED, False, 4.0)):
+        strikes, caster, result = _missed_beam(surface)
+        assert result.missed.all()
+        found, size = judge_rules.crack_of(strikes, caster, result, RADIUS)
+        assert found.tolist() == [crack]
+        # The smallest ring that meets the surface on at least half its rays: 0.075 m crosses
+        # the crack's 0.05 m half-width; only 1.2 m reaches past the hole's 0.7 m.
+        assert size.tolist() == [opening]
+
+
+def test_the_crack_statistic_forgives_a_crack_and_charges_a_hole_the_cap():
+    costs = []
+    for surface in (CRACKED, HOLED):
+        strikes, caster, result = _missed_beam(surface)
+        crack, opening = judge_rules.crack_of(strikes, caster, result, RADIUS)
+        per = {"distance": result.distance, "tolerance": result.tolerance,
+               "sigma": result.sigma, "missed": result.missed, "cost": result.cost,
+               "crack": crack, "opening": opening}
+        costs.append(judge_rules.STATISTICS["closest-fold-cracks"](result.cost, per)[0])
+        assert result.cost[0] == (result.tolerance[0] / result.sigma[0]) ** 2   # auto's cap
+    crack_cost, hole_cost = costs
+    # Through the crack: the strike's closest-point distance to the plate (0.05 m of the crack
+    # and 0.02 m below it), in sigmas; through the hole: the cap.
+    _, _, cracked = _missed_beam(CRACKED)
+    assert np.isclose(crack_cost, (np.hypot(0.05, 0.02) / cracked.sigma[0]) ** 2, rtol=1e-4)
+    assert crack_cost < hole_cost
+    _, _, holed = _missed_beam(HOLED)
+    assert hole_cost == (holed.tolerance[0] / holed.sigma[0]) ** 2
