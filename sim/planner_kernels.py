@@ -214,30 +214,49 @@ def _group(keys, view):
 @njit(cache=True)
 def _merge_counts(occupied, count, occupied_view, unique, u_count, u_view):
     """Sorted keys with counts and views, merged (both sorted): the merged arrays and the keys
-    of ``unique`` not in ``occupied``."""
+    of ``unique`` not in ``occupied``.
+
+    The keys already occupied are found by binary search and updated in place; only when some
+    are new are the arrays copied, a run of old entries at a time between the new ones (so a
+    plan costs its strikes and one copy, not a step per occupied voxel)."""
     o, u = len(occupied), len(unique)
-    merged = np.empty(o + u, dtype=np.int64)
-    m_count = np.empty(o + u, dtype=np.int64)
-    m_view = np.empty((o + u, 3))
-    new = np.empty(u, dtype=np.int64)
-    a = c = m = n_new = 0
-    while a < o or c < u:
-        old = c >= u or (a < o and occupied[a] <= unique[c])
-        both = old and c < u and occupied[a] == unique[c]
-        merged[m] = occupied[a] if old else unique[c]
-        m_count[m] = (count[a] if old else 0) + (u_count[c] if both or not old else 0)
-        for i in range(3):
-            if both:
-                m_view[m, i] = occupied_view[a, i] + u_view[c, i]
-            else:
-                m_view[m, i] = occupied_view[a, i] if old else u_view[c, i]
-        if not old:
-            new[n_new] = unique[c]
-            n_new += 1
-        a += old
-        c += both or not old
+    at = np.searchsorted(occupied, unique)
+    is_new = np.empty(u, dtype=np.bool_)
+    n_new = 0
+    for c in range(u):
+        is_new[c] = at[c] >= o or occupied[at[c]] != unique[c]
+        n_new += is_new[c]
+    for c in range(u):
+        if not is_new[c]:
+            a = at[c]
+            count[a] += u_count[c]
+            for i in range(3):
+                occupied_view[a, i] = occupied_view[a, i] + u_view[c, i]
+    new = np.empty(n_new, dtype=np.int64)
+    if n_new == 0:
+        return occupied, count, occupied_view, new
+    merged = np.empty(o + n_new, dtype=np.int64)
+    m_count = np.empty(o + n_new, dtype=np.int64)
+    m_view = np.empty((o + n_new, 3))
+    a = m = n = 0
+    for c in range(u):
+        if not is_new[c]:
+            continue
+        run = at[c] - a                      # old entries before this new key
+        merged[m:m + run] = occupied[a:at[c]]
+        m_count[m:m + run] = count[a:at[c]]
+        m_view[m:m + run] = occupied_view[a:at[c]]
+        m += run
+        a = at[c]
+        merged[m], m_count[m] = unique[c], u_count[c]
+        m_view[m] = u_view[c]
+        new[n] = unique[c]
         m += 1
-    return merged[:m], m_count[:m], m_view[:m], new[:n_new]
+        n += 1
+    merged[m:] = occupied[a:]
+    m_count[m:] = count[a:]
+    m_view[m:] = occupied_view[a:]
+    return merged, m_count, m_view, new
 
 
 @njit(cache=True)
@@ -268,7 +287,10 @@ def _mark_new(new, state, shape, corner):
 
 @njit(cache=True)
 def _join(a, b):
-    """The sorted union of the sorted, disjoint key arrays ``a`` and ``b``."""
+    """The sorted union of the sorted, disjoint key arrays ``a`` and ``b`` (``a`` itself when
+    ``b`` is empty)."""
+    if not len(b):
+        return a
     out = np.empty(len(a) + len(b), dtype=np.int64)
     i = j = 0
     for m in range(len(out)):
@@ -308,7 +330,9 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
 
     Returns
     -------
-    occupied, count, occupied_view, frontier : the merged arrays (new arrays)
+    occupied, count, occupied_view, frontier : the merged arrays (``count`` and
+        ``occupied_view`` are updated in place for the voxels struck before; new arrays when
+        a voxel is struck for the first time)
     n_new : int: how many voxels were struck for the first time
     """
     keys = np.empty(len(index), dtype=np.int64)
@@ -719,6 +743,28 @@ def cubes(block, shape, corner):
     return n
 
 
+# Strike counts below this are ranked by a histogram (the least-struck quantile's count is a
+# few strikes); a rank among larger counts falls back to a partition.
+_HISTOGRAM_COUNTS = 64
+
+
+@njit(cache=True)
+def _kth_smallest(count, rank):
+    """The ``rank``-th (0-based) smallest of the non-negative integers ``count`` (o,), as
+    ``np.partition(count, rank)[rank]``: from a histogram of the counts below
+    ``_HISTOGRAM_COUNTS`` when the rank falls among them (one pass, no copy)."""
+    histogram = np.zeros(_HISTOGRAM_COUNTS, dtype=np.int64)
+    for c in count:
+        if c < _HISTOGRAM_COUNTS:
+            histogram[c] += 1
+    below = 0
+    for value in range(_HISTOGRAM_COUNTS):
+        below += histogram[value]
+        if below > rank:
+            return np.int64(value)
+    return np.partition(count, rank)[rank]
+
+
 @njit(cache=True)
 def least_struck(frontier, occupied, count, rank):
     """The sorted union of ``frontier`` and the occupied voxels struck at most as often as the
@@ -740,7 +786,7 @@ def least_struck(frontier, occupied, count, rank):
     ``floor((o - 1) * q)``: the quantile lies between that count and the next larger one in
     sorted order, and counts are integers with none between those two.
     """
-    threshold = np.partition(count, rank)[rank]
+    threshold = _kth_smallest(count, rank)
     m = len(frontier)
     out = np.empty(m + len(occupied), dtype=np.int64)
     a = k = 0
