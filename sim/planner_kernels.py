@@ -365,6 +365,7 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
     the middles of those steps (sim/surface_map.py).
     """
     s1, s2 = shape[1] * shape[2], shape[2]
+    n0, n1, n2 = shape[0] - 1, shape[1] - 1, shape[2] - 1
     for k in range(len(ranges)):
         enter, leave = 0.0, np.inf
         for i in range(3):
@@ -379,12 +380,16 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
             leave = min(leave, ranges[k] - size)
         samples = math.ceil(max(leave - enter, 0.0) * (TRAVERSAL_STEP / size))
         start = enter / size
+        # The beam's origin in grid cells and its direction, read once per beam (the compiler
+        # reloads them per sample otherwise: the writes to ``state`` might alias them).
+        o0, o1, o2 = (origins[k, 0] / size - corner[0], origins[k, 1] / size - corner[1],
+                      origins[k, 2] / size - corner[2])
+        d0, d1, d2 = directions[k, 0], directions[k, 1], directions[k, 2]
         for s in range(samples):
             along = start + (s + 0.5) / TRAVERSAL_STEP
-            cell = 0
-            for i, stride in ((0, s1), (1, s2), (2, 1)):
-                c = np.int64(origins[k, i] / size - corner[i] + along * directions[k, i])
-                cell += stride * min(max(c, 0), shape[i] - 1)
+            cell = (s1 * min(max(np.int64(o0 + along * d0), 0), n0)
+                    + s2 * min(max(np.int64(o1 + along * d1), 0), n1)
+                    + min(max(np.int64(o2 + along * d2), 0), n2))
             state[cell] = (state[cell] | _CROSSED) & _NOT_FRONT
 
 
