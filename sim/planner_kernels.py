@@ -216,47 +216,45 @@ def _merge_counts(occupied, count, occupied_view, unique, u_count, u_view):
     """Sorted keys with counts and views, merged (both sorted): the merged arrays and the keys
     of ``unique`` not in ``occupied``.
 
-    The keys already occupied are found by binary search and updated in place; only when some
-    are new are the arrays copied, a run of old entries at a time between the new ones (so a
-    plan costs its strikes and one copy, not a step per occupied voxel)."""
+    When every key of ``unique`` is occupied already (most plans late in a run), they are found
+    by binary search and their counts and views updated in place, without a pass over every
+    occupied voxel; otherwise the two are merged into new arrays in one pass."""
     o, u = len(occupied), len(unique)
     at = np.searchsorted(occupied, unique)
-    is_new = np.empty(u, dtype=np.bool_)
-    n_new = 0
+    known = True
     for c in range(u):
-        is_new[c] = at[c] >= o or occupied[at[c]] != unique[c]
-        n_new += is_new[c]
-    for c in range(u):
-        if not is_new[c]:
+        if at[c] >= o or occupied[at[c]] != unique[c]:
+            known = False
+            break
+    if known:
+        for c in range(u):
             a = at[c]
             count[a] += u_count[c]
             for i in range(3):
                 occupied_view[a, i] = occupied_view[a, i] + u_view[c, i]
-    new = np.empty(n_new, dtype=np.int64)
-    if n_new == 0:
-        return occupied, count, occupied_view, new
-    merged = np.empty(o + n_new, dtype=np.int64)
-    m_count = np.empty(o + n_new, dtype=np.int64)
-    m_view = np.empty((o + n_new, 3))
-    a = m = n = 0
-    for c in range(u):
-        if not is_new[c]:
-            continue
-        run = at[c] - a                      # old entries before this new key
-        merged[m:m + run] = occupied[a:at[c]]
-        m_count[m:m + run] = count[a:at[c]]
-        m_view[m:m + run] = occupied_view[a:at[c]]
-        m += run
-        a = at[c]
-        merged[m], m_count[m] = unique[c], u_count[c]
-        m_view[m] = u_view[c]
-        new[n] = unique[c]
+        return occupied, count, occupied_view, np.empty(0, dtype=np.int64)
+    merged = np.empty(o + u, dtype=np.int64)
+    m_count = np.empty(o + u, dtype=np.int64)
+    m_view = np.empty((o + u, 3))
+    new = np.empty(u, dtype=np.int64)
+    a = c = m = n_new = 0
+    while a < o or c < u:
+        old = c >= u or (a < o and occupied[a] <= unique[c])
+        both = old and c < u and occupied[a] == unique[c]
+        merged[m] = occupied[a] if old else unique[c]
+        m_count[m] = (count[a] if old else 0) + (u_count[c] if both or not old else 0)
+        for i in range(3):
+            if both:
+                m_view[m, i] = occupied_view[a, i] + u_view[c, i]
+            else:
+                m_view[m, i] = occupied_view[a, i] if old else u_view[c, i]
+        if not old:
+            new[n_new] = unique[c]
+            n_new += 1
+        a += old
+        c += both or not old
         m += 1
-        n += 1
-    merged[m:] = occupied[a:]
-    m_count[m:] = count[a:]
-    m_view[m:] = occupied_view[a:]
-    return merged, m_count, m_view, new
+    return merged[:m], m_count[:m], m_view[:m], new[:n_new]
 
 
 @njit(cache=True)
@@ -330,9 +328,9 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
 
     Returns
     -------
-    occupied, count, occupied_view, frontier : the merged arrays (``count`` and
-        ``occupied_view`` are updated in place for the voxels struck before; new arrays when
-        a voxel is struck for the first time)
+    occupied, count, occupied_view, frontier : the merged arrays (when no voxel is struck for
+        the first time, ``occupied`` and ``frontier`` themselves with ``count`` and
+        ``occupied_view`` updated in place; new arrays otherwise)
     n_new : int: how many voxels were struck for the first time
     """
     keys = np.empty(len(index), dtype=np.int64)
