@@ -163,6 +163,7 @@ class GapSeeker:
         self._short = True                                   # the last interval held a shot
         self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
         self._hi = np.full(3, -np.inf)
+        self._diagonal = math.nan                            # of that box [m] (nan: stale)
         self.n_strikes = 0
         self._range_sum = 0.0
         self._radius = 0.0                                   # farthest strike from the centre
@@ -173,13 +174,19 @@ class GapSeeker:
 
     def voxel_size(self) -> float:
         """The voxel edge [m] the strikes so far call for (module docstring)."""
-        diagonal = max(float(np.linalg.norm(self._hi - self._lo)), 2.0 * self._radius)
+        diagonal = max(self._box_diagonal(), 2.0 * self._radius)
         distance = self._range_sum / self.n_strikes
         return max(GAP_VOXEL_FRACTION * diagonal,
                    distance * math.tan(math.radians(GAP_VOXEL_MIN_DEG)))
 
+    def _box_diagonal(self) -> float:
+        """The diagonal [m] of the strikes' bounding box (computed again only when it grew)."""
+        if math.isnan(self._diagonal):
+            self._diagonal = float(np.linalg.norm(self._hi - self._lo))
+        return self._diagonal
+
     def _margin(self) -> float:
-        return GAP_MARGIN_FRACTION * float(np.linalg.norm(self._hi - self._lo))
+        return GAP_MARGIN_FRACTION * self._box_diagonal()
 
     def observe(self, chunk: StrikeChunk) -> None:
         """Take the recorded shots and strikes of an interval (a block as
@@ -198,8 +205,9 @@ class GapSeeker:
         self._directions.append(directions)
         self._ranges.append(ranges)
         if stats[6]:
-            self._lo = np.minimum(self._lo, stats[:3])
-            self._hi = np.maximum(self._hi, stats[3:6])
+            lo, hi = np.minimum(self._lo, stats[:3]), np.maximum(self._hi, stats[3:6])
+            if lo.tolist() != self._lo.tolist() or hi.tolist() != self._hi.tolist():
+                self._lo, self._hi, self._diagonal = lo, hi, math.nan
             self.n_strikes += int(stats[6])
             self._range_sum += float(stats[7])
             self._radius = max(self._radius, float(stats[8]))

@@ -214,8 +214,25 @@ def _group(keys, view):
 @njit(cache=True)
 def _merge_counts(occupied, count, occupied_view, unique, u_count, u_view):
     """Sorted keys with counts and views, merged (both sorted): the merged arrays and the keys
-    of ``unique`` not in ``occupied``."""
+    of ``unique`` not in ``occupied``.
+
+    When every key of ``unique`` is occupied already (most plans late in a run), they are found
+    by binary search and their counts and views updated in place, without a pass over every
+    occupied voxel; otherwise the two are merged into new arrays in one pass."""
     o, u = len(occupied), len(unique)
+    at = np.searchsorted(occupied, unique)
+    known = True
+    for c in range(u):
+        if at[c] >= o or occupied[at[c]] != unique[c]:
+            known = False
+            break
+    if known:
+        for c in range(u):
+            a = at[c]
+            count[a] += u_count[c]
+            for i in range(3):
+                occupied_view[a, i] = occupied_view[a, i] + u_view[c, i]
+        return occupied, count, occupied_view, np.empty(0, dtype=np.int64)
     merged = np.empty(o + u, dtype=np.int64)
     m_count = np.empty(o + u, dtype=np.int64)
     m_view = np.empty((o + u, 3))
@@ -268,7 +285,10 @@ def _mark_new(new, state, shape, corner):
 
 @njit(cache=True)
 def _join(a, b):
-    """The sorted union of the sorted, disjoint key arrays ``a`` and ``b``."""
+    """The sorted union of the sorted, disjoint key arrays ``a`` and ``b`` (``a`` itself when
+    ``b`` is empty)."""
+    if not len(b):
+        return a
     out = np.empty(len(a) + len(b), dtype=np.int64)
     i = j = 0
     for m in range(len(out)):
@@ -308,7 +328,9 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
 
     Returns
     -------
-    occupied, count, occupied_view, frontier : the merged arrays (new arrays)
+    occupied, count, occupied_view, frontier : the merged arrays (when no voxel is struck for
+        the first time, ``occupied`` and ``frontier`` themselves with ``count`` and
+        ``occupied_view`` updated in place; new arrays otherwise)
     n_new : int: how many voxels were struck for the first time
     """
     keys = np.empty(len(index), dtype=np.int64)
@@ -341,6 +363,7 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
     the middles of those steps (sim/surface_map.py).
     """
     s1, s2 = shape[1] * shape[2], shape[2]
+    n0, n1, n2 = shape[0] - 1, shape[1] - 1, shape[2] - 1
     for k in range(len(ranges)):
         enter, leave = 0.0, np.inf
         for i in range(3):
@@ -355,12 +378,16 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
             leave = min(leave, ranges[k] - size)
         samples = math.ceil(max(leave - enter, 0.0) * (TRAVERSAL_STEP / size))
         start = enter / size
+        # The beam's origin in grid cells and its direction, read once per beam (the compiler
+        # reloads them per sample otherwise: the writes to ``state`` might alias them).
+        o0, o1, o2 = (origins[k, 0] / size - corner[0], origins[k, 1] / size - corner[1],
+                      origins[k, 2] / size - corner[2])
+        d0, d1, d2 = directions[k, 0], directions[k, 1], directions[k, 2]
         for s in range(samples):
             along = start + (s + 0.5) / TRAVERSAL_STEP
-            cell = 0
-            for i, stride in ((0, s1), (1, s2), (2, 1)):
-                c = np.int64(origins[k, i] / size - corner[i] + along * directions[k, i])
-                cell += stride * min(max(c, 0), shape[i] - 1)
+            cell = (s1 * min(max(np.int64(o0 + along * d0), 0), n0)
+                    + s2 * min(max(np.int64(o1 + along * d1), 0), n1)
+                    + min(max(np.int64(o2 + along * d2), 0), n2))
             state[cell] = (state[cell] | _CROSSED) & _NOT_FRONT
 
 
@@ -719,6 +746,28 @@ def cubes(block, shape, corner):
     return n
 
 
+# Strike counts below this are ranked by a histogram (the least-struck quantile's count is a
+# few strikes); a rank among larger counts falls back to a partition.
+_HISTOGRAM_COUNTS = 64
+
+
+@njit(cache=True)
+def _kth_smallest(count, rank):
+    """The ``rank``-th (0-based) smallest of the non-negative integers ``count`` (o,), as
+    ``np.partition(count, rank)[rank]``: from a histogram of the counts below
+    ``_HISTOGRAM_COUNTS`` when the rank falls among them (one pass, no copy)."""
+    histogram = np.zeros(_HISTOGRAM_COUNTS, dtype=np.int64)
+    for c in count:
+        if c < _HISTOGRAM_COUNTS:
+            histogram[c] += 1
+    below = 0
+    for value in range(_HISTOGRAM_COUNTS):
+        below += histogram[value]
+        if below > rank:
+            return np.int64(value)
+    return np.partition(count, rank)[rank]
+
+
 @njit(cache=True)
 def least_struck(frontier, occupied, count, rank):
     """The sorted union of ``frontier`` and the occupied voxels struck at most as often as the
@@ -740,7 +789,7 @@ def least_struck(frontier, occupied, count, rank):
     ``floor((o - 1) * q)``: the quantile lies between that count and the next larger one in
     sorted order, and counts are integers with none between those two.
     """
-    threshold = np.partition(count, rank)[rank]
+    threshold = _kth_smallest(count, rank)
     m = len(frontier)
     out = np.empty(m + len(occupied), dtype=np.int64)
     a = k = 0

@@ -109,6 +109,8 @@ class SurfaceMap:
         self._index_lo = np.zeros(3, dtype=np.int64)    # the occupied voxels' index box
         self._index_hi = np.zeros(3, dtype=np.int64)
         self.cube_marks = np.zeros(0, dtype=bool)       # room for the planner's spread, all False
+        self._box_version = 0                           # bumped when the index box changes
+        self._carve_box = (None, None, None)            # (margin, version) -> box traversed
 
     @property
     def occupied_centres(self) -> np.ndarray:
@@ -196,8 +198,12 @@ class SurfaceMap:
             self._shape, self._corner)
         if new:
             first = len(self.occupied) == new
-            self._index_lo = lo if first else np.minimum(self._index_lo, lo)
-            self._index_hi = hi if first else np.maximum(self._index_hi, hi)
+            box_lo = lo if first else np.minimum(self._index_lo, lo)
+            box_hi = hi if first else np.maximum(self._index_hi, hi)
+            if (first or box_lo.tolist() != self._index_lo.tolist()
+                    or box_hi.tolist() != self._index_hi.tolist()):
+                self._index_lo, self._index_hi = box_lo, box_hi
+                self._box_version += 1
 
     def carve(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
               margin: float) -> None:
@@ -207,9 +213,12 @@ class SurfaceMap:
 
         if not len(self.occupied):
             return
-        lo, hi = self.bounds(margin)
-        self._cover(np.floor(lo / self.size).astype(np.int64),
-                    np.floor(hi / self.size).astype(np.int64))
+        key, lo, hi = self._carve_box
+        if key != (margin, self._box_version):     # the box or the margin changed: grow the grid
+            lo, hi = self.bounds(margin)           # (it never shrinks, so it still holds the box)
+            self._cover(np.floor(lo / self.size).astype(np.int64),
+                        np.floor(hi / self.size).astype(np.int64))
+            self._carve_box = ((margin, self._box_version), lo, hi)
         kernels.carve(origins, directions, ranges, lo, hi, self.size, self._state.reshape(-1),
                       self._shape, self._corner)
 

@@ -247,6 +247,25 @@ def test_map_update_kernels_match_the_numpy_reference():
     assert compiled.count.max() > 1 and len(expected) > 100     # re-struck voxels, a frontier
 
 
+def test_strikes_on_known_voxels_only_match_the_numpy_reference():
+    # No voxel struck for the first time: the kernel updates the counts and views in place.
+    rng = np.random.default_rng(2)
+    *_, (compiled, reference) = _maps(seed=2)
+    occupied, frontier = compiled.occupied.copy(), compiled.frontier().copy()
+    pick = rng.choice(len(occupied), 40)                   # some voxels twice
+    directions = rng.normal(size=(40, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    ranges = np.full(40, 3.0)
+    ranges[::9] = np.inf                                   # misses are ignored
+    origins = compiled.centres(occupied[pick]) - 3.0 * directions
+    compiled.strike(origins, directions, ranges)
+    ref_strike(reference, origins, directions, ranges)
+    np.testing.assert_array_equal(compiled.occupied, occupied)
+    np.testing.assert_array_equal(compiled.count, reference.count)
+    np.testing.assert_array_equal(compiled.view, reference.view)
+    np.testing.assert_array_equal(compiled.frontier(), frontier)
+
+
 def test_visibility_walk_matches_the_brute_force_reference():
     rng = np.random.default_rng(1)
     *_, (m, _) = _maps(seed=1)
@@ -358,3 +377,14 @@ def test_least_struck_kernel_matches_the_numpy_quantile():
             expected = np.union1d(frontier, occupied[count <= np.quantile(count, q)])
             got = kernels.least_struck(frontier, occupied, count, math.floor((n - 1) * q))
             np.testing.assert_array_equal(got, expected)
+
+
+def test_kth_smallest_count_matches_the_partition():
+    # Counts below the histogram's reach, above it (the partition's fallback) and across it.
+    rng = np.random.default_rng(8)
+    top = kernels._HISTOGRAM_COUNTS
+    for low, high in ((1, 6), (top - 3, top + 3), (top, 10 * top), (0, 3 * top)):
+        for n in (1, 7, 500):
+            count = rng.integers(low, high, n)
+            for rank in {0, n // 4, n // 2, n - 1}:
+                assert kernels._kth_smallest(count, rank) == np.partition(count, rank)[rank]
