@@ -21,6 +21,7 @@ from __future__ import annotations
 import importlib
 import json
 import math
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -368,6 +369,9 @@ def _fmt(value: Any) -> str:
 
 _REGISTRY: dict[str, Method] = {}
 _LOADED = False
+# Held while the built-in modules are imported: a second thread asking for a method waits for
+# the registry to be whole instead of reading it half filled.
+_LOADING = threading.RLock()
 
 
 def register(method: Method) -> Method:
@@ -378,10 +382,13 @@ def register(method: Method) -> Method:
 
 def _load_builtins() -> None:
     global _LOADED
-    if not _LOADED:
-        _LOADED = True
-        for name in BUILTIN_MODULES:
-            importlib.import_module(name)
+    if _LOADED:
+        return
+    with _LOADING:
+        if not _LOADED:
+            for name in BUILTIN_MODULES:
+                importlib.import_module(name)
+            _LOADED = True
 
 
 def available(*, include_hidden: bool = False) -> list[str]:

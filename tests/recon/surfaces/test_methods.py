@@ -270,3 +270,32 @@ def test_a_run_is_resolved_once_and_travels_as_a_value():
         methods.bind(run, {"depth": 7})
     with pytest.raises(ParameterError, match="has no parameter 'depht'"):
         methods.bind("poisson", {"depht": 6})
+
+
+def test_a_thread_asking_for_a_method_while_another_loads_them_waits_for_the_whole_registry(
+        monkeypatch):
+    import threading
+    import time
+
+    from recon.surfaces.methods import Method
+
+    # A fresh registry whose one built-in module takes a while to import: the second thread
+    # arrives while the first is importing it.
+    monkeypatch.setattr(methods, "_REGISTRY", {})
+    monkeypatch.setattr(methods, "_LOADED", False)
+    monkeypatch.setattr(methods, "BUILTIN_MODULES", ("slow_builtin",))
+    started = threading.Event()
+
+    def slow_import(name):
+        started.set()
+        time.sleep(0.3)
+        methods.register(Method(name="slow", run=lambda cloud: None, params={}))
+
+    monkeypatch.setattr(methods.importlib, "import_module", slow_import)
+    seen = {}
+    first = threading.Thread(target=lambda: seen.setdefault("first", methods.available()))
+    first.start()
+    started.wait(5)
+    seen["second"] = methods.available()
+    first.join(5)
+    assert seen["second"] == ["slow"] and seen["first"] == ["slow"]
