@@ -318,9 +318,10 @@ def proxy(cloud: Cloud, strikes: Strikes, *, tau: float, noise: float,
                                     noise=noise))
                 gaps.append(cKDTree(train).query(strikes.points[test], workers=-1)[0])
             whole = fit(strikes.points)
-            carved = _carved(strikes, Caster(*whole), tau=tau, noise=noise)
+            surface = Caster(*whole)
+            carved = _carved(strikes, surface, tau=tau, noise=noise)
             if misses is not None and len(misses):
-                carved |= carved_faces(*whole, misses, strikes.points, reach)
+                carved |= carved_faces(*whole, misses, strikes.points, reach, caster=surface)
         except (MethodFailed, ValueError, RuntimeError, np.linalg.LinAlgError):
             continue   # no ellipsoid through these strikes (or too few for a hull)
         cost = np.concatenate([c.cost for c in checks])
