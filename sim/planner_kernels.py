@@ -219,20 +219,37 @@ def _merge_counts(occupied, count, occupied_view, unique, u_count, u_view):
     When every key of ``unique`` is occupied already (most plans late in a run), they are found
     by binary search and their counts and views updated in place, without a pass over every
     occupied voxel; otherwise the two are merged into new arrays in one pass."""
-    o, u = len(occupied), len(unique)
     at = np.searchsorted(occupied, unique)
-    known = True
-    for c in range(u):
-        if at[c] >= o or occupied[at[c]] != unique[c]:
-            known = False
-            break
-    if known:
-        for c in range(u):
-            a = at[c]
-            count[a] += u_count[c]
-            for i in range(3):
-                occupied_view[a, i] = occupied_view[a, i] + u_view[c, i]
+    if _all_known(occupied, unique, at):
+        _add_in_place(count, occupied_view, at, u_count, u_view)
         return occupied, count, occupied_view, np.empty(0, dtype=np.int64)
+    return _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view)
+
+
+@njit(cache=True)
+def _all_known(occupied, unique, at):
+    """Whether every key of ``unique`` is in ``occupied``, at its ``searchsorted`` place ``at``."""
+    o = len(occupied)
+    for c in range(len(unique)):
+        if at[c] >= o or occupied[at[c]] != unique[c]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _add_in_place(count, occupied_view, at, u_count, u_view):
+    """Add the counts and views of keys already occupied, at their places ``at``."""
+    for c in range(len(at)):
+        a = at[c]
+        count[a] += u_count[c]
+        for i in range(3):
+            occupied_view[a, i] = occupied_view[a, i] + u_view[c, i]
+
+
+@njit(cache=True)
+def _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view):
+    """``_merge_counts`` when some key is new: one pass over both sorted key arrays."""
+    o, u = len(occupied), len(unique)
     merged = np.empty(o + u, dtype=np.int64)
     m_count = np.empty(o + u, dtype=np.int64)
     m_view = np.empty((o + u, 3))
