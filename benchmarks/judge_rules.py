@@ -141,7 +141,8 @@ def collect(args) -> None:
         with recording_checks():
             choice = auto.choose(points.points, view_points=points.view_points,
                                  uncertainty=points.attributes, candidates=candidate_runs(rows),
-                                 holdout=args.holdout, seed=0, n_workers=args.workers,
+                                 holdout=args.holdout, seed=args.seed,
+                                 n_workers=args.workers,
                                  misses=beams)
         elapsed = time.perf_counter() - start
         table = [c.to_dict() | {"key": c.key} for c in choice.candidates]
@@ -680,7 +681,7 @@ def ring_share(caster, view: np.ndarray, points: np.ndarray, radius: float,
     return near.reshape(len(points), RING_RAYS).mean(axis=1)
 
 
-def tested_order(suite: Path, cloud: str, holdout: float):
+def tested_order(suite: Path, cloud: str, holdout: float, seed: int = 0):
     """The cloud as ``collect`` handed it to ``auto.choose`` and the indices of the tested
     strikes in ``collect``'s order (fold 0's, then fold 1's, ...)."""
     from formats.geometry import Cloud
@@ -690,7 +691,7 @@ def tested_order(suite: Path, cloud: str, holdout: float):
     attributes = auto._columns(points.attributes) | dict(
         zip(("view_x", "view_y", "view_z"), np.asarray(points.view_points).T, strict=True))
     folds = judge.pass_folds(Cloud(points.points, attributes), max(2, round(1 / holdout)),
-                             seed=0)
+                             seed=seed)
     return points, folds, np.concatenate([folds.test(f) for f in range(folds.k)])
 
 
@@ -709,7 +710,7 @@ def openings(args) -> None:
             continue
         data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
         arrays = np.load(args.work / "folds" / f"{cloud}.npz")
-        points, folds, order = tested_order(args.suite, cloud, args.holdout)
+        points, folds, order = tested_order(args.suite, cloud, args.holdout, args.seed)
         if not np.array_equal(folds.block[order], arrays["block"]):
             raise SystemExit(f"{cloud}: the folds rebuilt differ from the collected ones")
         mesh_of = {r["key"]: r["mesh"] for r in records(args.suite, cloud) if r.get("mesh")}
@@ -954,6 +955,9 @@ def main(argv=None) -> int:
     parser.add_argument("--holdout", type=float, default=0.25,
                         help="collect, openings: auto's held-out share of the strikes, i.e. "
                              "round(1 / holdout) folds (rules reads the folds collected)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="collect, openings: auto's seed (the folds' dealing of the blocks "
+                             "and the checked strikes; the missed beams keep seed 0)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--force", action="store_true", help="collect again")
     parser.add_argument("--heldout", action="store_true",
