@@ -31,6 +31,7 @@ seconds instead of a suite run:
   ``carved_truth``: the compare's mesh of its run carved as auto carves it, scored): within
   ``F_TOLERANCE`` of the best F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all
   compare runs, not below the median run;
+  the modelled time counts the collection's folds (``collect --holdout 0.3333``: 3 folds);
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
   "unknown"); ``--statistic``, ``--band``, ``--miss-rate``, ``--holes-first`` and ``--extra``
   replay rules that are not auto's;
@@ -140,7 +141,8 @@ def collect(args) -> None:
         with recording_checks():
             choice = auto.choose(points.points, view_points=points.view_points,
                                  uncertainty=points.attributes, candidates=candidate_runs(rows),
-                                 holdout=args.holdout, seed=0, n_workers=args.workers,
+                                 holdout=args.holdout, seed=args.seed,
+                                 n_workers=args.workers,
                                  misses=beams)
         elapsed = time.perf_counter() - start
         table = [c.to_dict() | {"key": c.key} for c in choice.candidates]
@@ -152,7 +154,8 @@ def collect(args) -> None:
         (out / f"{cloud}.json").write_text(json.dumps(
             {"cloud": cloud, "seconds": elapsed, "auto": choice.to_dict() | {
                 "candidates": table}}, indent=1, default=str))
-        print(f"{cloud}: {len(table)} candidates in {elapsed:.0f} s", flush=True)
+        print(f"{cloud}: {len(table)} candidates on {folds.k} folds in {elapsed:.0f} s",
+              flush=True)
 
 
 # The per-strike arrays of a candidate's held-out checks (``judge.Check``) that ``collect``
@@ -493,8 +496,10 @@ def rules(args) -> None:
         # Load-free: the compare's own wall time of each fitted run, times the folds and
         # their share of the strikes (a fit's time grows about linearly with the strikes); a
         # carved candidate is no fit (its carving is timed by ``misses``' casts, not here).
+        # The folds are the collection's (``collect --holdout``), not this command's option.
         wall = {r["key"]: r.get("wall_time_s") or 0.0 for r in rows}
-        folds = round(1 / args.holdout)
+        folds = json.loads((args.work / "folds" / f"{cloud}.json").read_text()
+                           )["auto"]["folds"]["k"]
         modelled = sum(wall.get(c.run.key, 0.0) for c in fitted if not c.carved) * (folds - 1)
         seconds.append(modelled / compare_s)
         print(f"{cloud:30} {chosen.label[:26]:26} F {v.get('f_ratio', 0):.3f} "
@@ -676,7 +681,7 @@ def ring_share(caster, view: np.ndarray, points: np.ndarray, radius: float,
     return near.reshape(len(points), RING_RAYS).mean(axis=1)
 
 
-def tested_order(suite: Path, cloud: str, holdout: float):
+def tested_order(suite: Path, cloud: str, holdout: float, seed: int = 0):
     """The cloud as ``collect`` handed it to ``auto.choose`` and the indices of the tested
     strikes in ``collect``'s order (fold 0's, then fold 1's, ...)."""
     from formats.geometry import Cloud
@@ -686,7 +691,7 @@ def tested_order(suite: Path, cloud: str, holdout: float):
     attributes = auto._columns(points.attributes) | dict(
         zip(("view_x", "view_y", "view_z"), np.asarray(points.view_points).T, strict=True))
     folds = judge.pass_folds(Cloud(points.points, attributes), max(2, round(1 / holdout)),
-                             seed=0)
+                             seed=seed)
     return points, folds, np.concatenate([folds.test(f) for f in range(folds.k)])
 
 
@@ -705,7 +710,7 @@ def openings(args) -> None:
             continue
         data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
         arrays = np.load(args.work / "folds" / f"{cloud}.npz")
-        points, folds, order = tested_order(args.suite, cloud, args.holdout)
+        points, folds, order = tested_order(args.suite, cloud, args.holdout, args.seed)
         if not np.array_equal(folds.block[order], arrays["block"]):
             raise SystemExit(f"{cloud}: the folds rebuilt differ from the collected ones")
         mesh_of = {r["key"]: r["mesh"] for r in records(args.suite, cloud) if r.get("mesh")}
@@ -947,7 +952,12 @@ def main(argv=None) -> int:
     parser.add_argument("--suite", type=Path, required=True, help="a finished suite's --out")
     parser.add_argument("--work", type=Path, required=True, help="where this script writes")
     parser.add_argument("--clouds", nargs="*", help="only these clouds")
-    parser.add_argument("--holdout", type=float, default=0.25)
+    parser.add_argument("--holdout", type=float, default=0.25,
+                        help="collect, openings: auto's held-out share of the strikes, i.e. "
+                             "round(1 / holdout) folds (rules reads the folds collected)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="collect, openings: auto's seed (the folds' dealing of the blocks "
+                             "and the checked strikes; the missed beams keep seed 0)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--force", action="store_true", help="collect again")
     parser.add_argument("--heldout", action="store_true",
