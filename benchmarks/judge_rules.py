@@ -106,6 +106,18 @@ def collected(args) -> list[str]:
             if (args.work / "folds" / f"{c}.json").exists()]
 
 
+def pending(args, folder: str, suffix: str):
+    """The collected clouds whose ``WORK/FOLDER/CLOUD.SUFFIX`` is still to be measured (every
+    one with ``--force``), each with that path and its collected auto record."""
+    out = args.work / folder
+    out.mkdir(parents=True, exist_ok=True)
+    for cloud in collected(args):
+        path = out / f"{cloud}.{suffix}"
+        if args.force or not path.exists():
+            yield cloud, path, json.loads((args.work / "folds" / f"{cloud}.json").read_text())[
+                "auto"]
+
+
 def load_cloud(suite: Path, cloud: str):
     from recon.registration.ingest import ingest
 
@@ -613,14 +625,8 @@ def misses(args) -> None:
     from formats.mesh_io import read_mesh
     from recon.surfaces import auto, judge
 
-    out = args.work / "misses"
-    out.mkdir(parents=True, exist_ok=True)
-    for cloud in collected(args):
-        path = out / f"{cloud}.json"
-        if path.exists() and not args.force:
-            continue
+    for cloud, path, data in pending(args, "misses", "json"):
         rows = records(args.suite, cloud)
-        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
         points = load_cloud(args.suite, cloud).points
         start = time.perf_counter()
         beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points, seed=0)
@@ -702,13 +708,7 @@ def openings(args) -> None:
     from formats.mesh_io import read_mesh
     from recon.surfaces import auto, judge
 
-    out = args.work / "openings"
-    out.mkdir(parents=True, exist_ok=True)
-    for cloud in collected(args):
-        path = out / f"{cloud}.npz"
-        if path.exists() and not args.force:
-            continue
-        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
+    for cloud, path, data in pending(args, "openings", "npz"):
         arrays = np.load(args.work / "folds" / f"{cloud}.npz")
         points, folds, order = tested_order(args.suite, cloud, args.holdout, args.seed)
         if not np.array_equal(folds.block[order], arrays["block"]):

@@ -459,18 +459,8 @@ def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, 
     surface filled, a membrane across a gap the beams went through.
 
     Pass after pass (at most ``CARVE_PASSES``), the face each cut beam first hits among the
-    faces left is removed (``carved_faces``), until no beam cuts the rest (a beam may cross
-    several layers). Vertices no face uses are dropped.
-
-    Parameters
-    ----------
-    vertices : (v, 3) float64, metres
-    faces : (f, 3) int64
-    misses : recon.registration.misses.MissedBeams
-    strikes : (n, 3) float64, metres
-    reach : float, metres
-    caster : Caster, optional
-        The same surface, already built (``carved_faces``).
+    faces left is removed (``carved_faces``, whose parameters these are), until no beam cuts
+    the rest (a beam may cross several layers). Vertices no face uses are dropped.
 
     Returns
     -------
