@@ -190,7 +190,6 @@ def recording_checks():
 
     @dataclass(frozen=True)
     class Recorded(judge.Check):
-        crack: np.ndarray | None = None
         opening: np.ndarray | None = None
 
     calls: list = []
@@ -206,7 +205,7 @@ def recording_checks():
         result = check(*args, **kwargs)
         if not kwargs.get("fitted", False):
             crack, opening = crack_of(*args[:2], result, reach[0])
-            calls.append(Recorded(**vars(result), crack=crack, opening=opening))
+            calls.append(Recorded(**(vars(result) | {"crack": crack}), opening=opening))
         return result
 
     def recorded_judge(*args, **kwargs):
@@ -241,15 +240,17 @@ def opening_of(strikes, caster, result, radius: float) -> np.ndarray:
     """Per strike of ``result``: the smallest of ``OPENING_SCALES`` times ``radius`` [m] at
     which ``ring_share`` reaches ``RING_SHARE`` for a missed beam, in units of ``radius``
     (inf when none does; 0 for a beam that met the surface)."""
+    from recon.surfaces import judge
+
     opening = np.zeros(len(result.missed))
     missed = np.flatnonzero(result.missed)
     if strikes.view is None or not len(missed):
         return opening
     opening[missed] = np.inf
     for scale in OPENING_SCALES[::-1]:
-        share = ring_share(caster, strikes.view[missed], strikes.points[missed],
-                           scale * radius, result.tolerance[missed] + scale * radius)
-        opening[missed[share >= RING_SHARE]] = scale
+        share = judge.ring_share(caster, strikes.view[missed], strikes.points[missed],
+                                 scale * radius, result.tolerance[missed] + scale * radius)
+        opening[missed[share >= judge.RING_SHARE]] = scale
     return opening
 
 
@@ -664,27 +665,7 @@ def misses(args) -> None:
 # surface point (2 strike spacings, 3 recorded noise lengths, tau) on both sides. "Near": the
 # hit within the strike's tolerance plus that radius along the beam (a face tilted up to 45
 # degrees to the beam). Set before any replay of the statistic.
-RING_RAYS, RING_SHARE = 8, 0.5
-
-
-def ring_share(caster, view: np.ndarray, points: np.ndarray, radius: float,
-               window: np.ndarray) -> np.ndarray:
-    """Per beam from ``view`` (n, 3) through ``points`` (n, 3) [m]: the share of ``RING_RAYS``
-    parallel beams offset ``radius`` [m] around it whose first hit on ``caster``'s surface lies
-    within ``window`` (n,) [m] of the strike's range."""
-    ray = points - view
-    direction = ray / np.linalg.norm(ray, axis=1)[:, None]
-    helper = np.where(np.abs(direction[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    u = np.cross(direction, helper)
-    u /= np.linalg.norm(u, axis=1)[:, None]
-    w = np.cross(direction, u)
-    angle = 2.0 * np.pi * np.arange(RING_RAYS) / RING_RAYS
-    offset = radius * (np.cos(angle)[None, :, None] * u[:, None, :]
-                       + np.sin(angle)[None, :, None] * w[:, None, :])
-    t_hit, beam_range, _, _ = caster.beams((view[:, None, :] + offset).reshape(-1, 3),
-                                           (points[:, None, :] + offset).reshape(-1, 3))
-    near = np.abs(t_hit - beam_range) <= np.repeat(window, RING_RAYS)
-    return near.reshape(len(points), RING_RAYS).mean(axis=1)
+# (``judge.RING_RAYS``, ``judge.RING_SHARE``, ``judge.ring_share``: the product's crack test.)
 
 
 def tested_order(suite: Path, cloud: str, holdout: float, seed: int = 0):
@@ -734,9 +715,9 @@ def openings(args) -> None:
             window = arrays[f"tolerance/{key}"][missed] + radius
             caster = judge.Caster(vertices, faces)
             t_hit, beam_range, _, _ = caster.beams(view, strike)
-            share = ring_share(caster, view, strike, radius, window)
+            share = judge.ring_share(caster, view, strike, radius, window)
             crack = np.zeros(len(order), dtype=bool)
-            crack[missed] = (np.abs(t_hit - beam_range) <= window) | (share >= RING_SHARE)
+            crack[missed] = (np.abs(t_hit - beam_range) <= window) | (share >= judge.RING_SHARE)
             cracks[f"crack/{key}"] = crack
             shares.append(f"{row['label']} missed "
                           f"{len(missed) / len(order):.1%}, cracks {crack[missed].mean():.0%}"

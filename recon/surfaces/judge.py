@@ -43,8 +43,18 @@ through the strike, is cast against the mesh (Open3D's Embree ray caster, batche
   beam is near it);
 - ``hole``: no surface within the tolerance of the strike (the beam stopped where the surface
   has nothing);
+- ``crack``: the beam missed through a crack, an opening narrower than ``crack`` metres (when
+  given: the reach of a supported surface point, ``recon.surfaces.auto.miss_reach``): around
+  it, at a radius of ``CRACK_SCALES`` times that width, at least ``RING_SHARE`` of
+  ``RING_RAYS`` parallel beams meet the surface within the strike's tolerance plus the radius
+  of its range (a face tilted up to 45 degrees to the beam). A straight crack lets the two
+  ring beams along it through, a junction of cells the four along both cracks, a hole wider
+  than the radius all eight. A surface of local cells (a fine local-plane grid) has such
+  cracks between its cells; the strikes cannot resolve them, and the surface refitted on all
+  strikes keeps them without losing recall, where a hole loses it;
 - ``cost``: ``(min(residual, tolerance) / sigma)^2``, and the full ``(tolerance / sigma)^2``
-  for a violated beam and, on strikes the surface was not fitted on, a missed one. Its mean is
+  for a violated beam and, on strikes the surface was not fitted on, a missed one, except a
+  beam missed through a crack, whose residual is the strike's closest-point distance. Its mean is
   a chi-square per strike: about 1 for the true surface judged on independent strikes, above
   1 for a surface that follows the noise of other strikes (its error adds to theirs). On the
   strikes it was fitted on (``fitted=True``) the residual is the closest-point distance, and a
@@ -76,6 +86,13 @@ FLOOR_FRACTION = 1e-3
 # and the nearest training strike of the same track: at 2 sigma the surface's noise-following
 # wiggle under the training strike no longer predicts the tested strike's offset.
 NOISE_LENGTHS = 2.0
+# The crack test (``through_cracks``): rings of RING_RAYS parallel beams around a missed beam, at
+# CRACK_SCALES times the crack's width; a crack where at least RING_SHARE of one ring meets the
+# surface near the strike. 8 rays: a straight crack lets 2 through, a junction of cells 4. The
+# scales and the width (auto.miss_reach) were fixed before the crack test was first replayed on
+# the suite's clouds (docs/decisions.md).
+RING_RAYS, RING_SHARE = 8, 0.5
+CRACK_SCALES = (0.25, 0.5, 1.0)
 # A held-out block is at least this many margins long, so that half of it is tested.
 BLOCK_MARGINS = 4
 # Strikes checked for the per-surface fractions and the estimate (a seeded subsample): the
@@ -294,7 +311,7 @@ class Check:
         Recorded 1-sigma error along the normal of the triangle the beam meets (with the
         floor; head-on where it misses): the noise in ``distance`` if this surface is right.
     tolerance : float64, metres
-    violated, missed, hole : bool
+    violated, missed, hole, crack : bool
     cost : float64
         Capped chi-square of each strike.
     """
@@ -306,6 +323,7 @@ class Check:
     violated: np.ndarray
     missed: np.ndarray
     hole: np.ndarray
+    crack: np.ndarray
     cost: np.ndarray
 
     def chi(self) -> float:
@@ -373,7 +391,7 @@ class Caster:
 
 
 def check(strikes: Strikes, caster: Caster, *, tau: float, noise: float,
-          fitted: bool = False) -> Check:
+          fitted: bool = False, crack: float | None = None) -> Check:
     """Strikes against a surface (module docstring).
 
     Parameters
@@ -391,7 +409,9 @@ def check(strikes: Strikes, caster: Caster, *, tau: float, noise: float,
         a missed beam is no error (a beam aimed at a vertex can slip between its triangles).
         Otherwise the residual is along the beam and a missed beam costs the full cap: where
         the beam meets no surface, the surface does not predict the strike, however close its
-        edge is.
+        edge is; unless it passed a crack (``crack``).
+    crack : float, metres, optional
+        The widest opening that counts as a crack (module docstring); None: none does.
 
     Returns
     -------
@@ -419,10 +439,48 @@ def check(strikes: Strikes, caster: Caster, *, tau: float, noise: float,
     if strikes.view is not None:
         violated = ~missed & (t_hit < beam_range - tolerance)
     hole = distance > tolerance
-    capped = np.where(violated | (missed & ~fitted), tolerance,
+    cracked = np.zeros(n, dtype=bool)
+    if crack is not None and not fitted and strikes.view is not None:
+        cracked[missed] = through_cracks(caster, strikes.view[missed], strikes.points[missed],
+                                         tolerance[missed], crack)
+    capped = np.where(violated | (missed & ~fitted & ~cracked), tolerance,
                       np.minimum(residual, tolerance))
     return Check(distance, sigma, np.hypot(normal, floor), tolerance, violated, missed, hole,
-                 (capped / sigma) ** 2)
+                 cracked, (capped / sigma) ** 2)
+
+
+def ring_share(caster: Caster, view: np.ndarray, points: np.ndarray, radius: float,
+               window: np.ndarray) -> np.ndarray:
+    """Per beam from ``view`` (n, 3) through ``points`` (n, 3) [m]: the share of ``RING_RAYS``
+    parallel beams offset ``radius`` [m] around it whose first hit on ``caster``'s surface lies
+    within ``window`` (n,) [m] of the strike's range (one batched cast)."""
+    ray = points - view
+    direction = ray / np.linalg.norm(ray, axis=1)[:, None]
+    helper = np.where(np.abs(direction[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(direction, helper)
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    w = np.cross(direction, u)
+    angle = 2.0 * np.pi * np.arange(RING_RAYS) / RING_RAYS
+    offset = radius * (np.cos(angle)[None, :, None] * u[:, None, :]
+                       + np.sin(angle)[None, :, None] * w[:, None, :])
+    t_hit, beam_range, _, _ = caster.beams((view[:, None, :] + offset).reshape(-1, 3),
+                                           (points[:, None, :] + offset).reshape(-1, 3))
+    near = np.abs(t_hit - beam_range) <= np.repeat(window, RING_RAYS)
+    return near.reshape(len(points), RING_RAYS).mean(axis=1)
+
+
+def through_cracks(caster: Caster, view: np.ndarray, points: np.ndarray,
+                   tolerance: np.ndarray, width: float) -> np.ndarray:
+    """Which beams from ``view`` (m, 3) through ``points`` (m, 3) [m], that missed the surface,
+    passed a crack no wider than ``width`` [m] (module docstring): (m,) bool, one batched cast
+    per scale of ``CRACK_SCALES``."""
+    cracked = np.zeros(len(points), dtype=bool)
+    if not len(points):
+        return cracked
+    for scale in CRACK_SCALES:
+        radius = scale * width
+        cracked |= ring_share(caster, view, points, radius, tolerance + radius) >= RING_SHARE
+    return cracked
 
 
 def cut_misses(misses, caster: Caster, strikes: np.ndarray, reach: float) -> np.ndarray:
