@@ -60,6 +60,8 @@ from scipy.spatial.transform import Rotation
 from formats.strike_log import StrikeChunk
 from formats.strike_log.schema import Shots
 from sim.defaults import (
+    GAP_ASIDE_INTERVALS,
+    GAP_ASIDE_WALKS,
     GAP_BLOCK_VOXELS,
     GAP_IDLE_INTERVALS,
     GAP_MARGIN_FRACTION,
@@ -158,7 +160,8 @@ class GapSeeker:
         self._pending: list[StrikeChunk] = []                # observed since the last plan
         self._keys = np.zeros(0, dtype=np.int64)             # the plan's candidates,
         self._centres = np.zeros((0, 3))                     # their centres [m, B]
-        self._used = np.zeros(0, dtype=bool)                 # and those aimed at
+        self._used = np.zeros(0, dtype=bool)                 # and those aimed at or set aside
+        self._hidden = np.zeros(0, dtype=np.int64)           # walks that found them hidden
         self._age = 0                                        # intervals since the plan
         self._short = True                                   # the last interval held a shot
         self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
@@ -169,6 +172,8 @@ class GapSeeker:
         self._radius = 0.0                                   # farthest strike from the centre
         self.residual = False                                # frontier exhausted
         self._idle = 0                                       # intervals with nothing to aim at
+        self._interval = 0                                   # intervals commanded so far
+        self._readmitted = 0                                 # at the last re-admission
 
     # ------------------------------------------------------------------ the map
 
@@ -239,6 +244,11 @@ class GapSeeker:
         if self.residual:     # count <= np.quantile(count, GAP_RESIDUAL_QUANTILE), compiled
             rank = math.floor((len(self.map.count) - 1) * GAP_RESIDUAL_QUANTILE)
             keys = kernels.least_struck(keys, self.map.occupied, self.map.count, rank)
+        readmit = self._interval - self._readmitted >= GAP_ASIDE_INTERVALS
+        if readmit:
+            self._readmitted = self._interval
+        state, shape, corner = self.map.blockers()[:3]
+        keys = kernels.not_aside(keys, state, shape, corner, GAP_ASIDE_WALKS, readmit)
         if len(keys) > GAP_MAX_CANDIDATES:
             keys = keys[::-(-len(keys) // GAP_MAX_CANDIDATES)]
         return keys
@@ -276,6 +286,7 @@ class GapSeeker:
         if self._short or self._age >= GAP_PLAN_INTERVALS:
             self._plan()
         self._age += 1
+        self._interval += 1
         if not (len(self._keys) and len(t)):
             self._short = True
             self._after_interval(False)
@@ -284,7 +295,7 @@ class GapSeeker:
         pick, goal, turn = kernels.sweep(
             len(t), self._centres, self._used, self.map.size, *self.map.blockers(), position,
             target.as_matrix(), nominal, self.boresight, self.max_offset,
-            self.max_rate * self.step, GAP_BLOCK_VOXELS)
+            self.max_rate * self.step, GAP_BLOCK_VOXELS, self._hidden, GAP_ASIDE_WALKS)
         self.boresight = goal[-1]
         self._short = bool(pick[-1] < 0)
         self._after_interval(bool(pick[0] >= 0))
@@ -293,11 +304,17 @@ class GapSeeker:
     def _plan(self) -> None:
         """Take what was observed into the map and choose the candidates of the next
         ``GAP_PLAN_INTERVALS`` intervals: one per cube of ``GAP_BLOCK_VOXELS`` voxels."""
+        from sim import planner_kernels as kernels
+
+        if len(self._keys):     # the last plan's hidden counts, kept in the map's grid
+            kernels.store_hidden(self._keys, self._hidden, *self.map.blockers()[:3])
         self._update()
         self._age = 0
         self._keys, self._centres = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+        self._hidden = np.zeros(0, dtype=np.int64)
         if self.map is not None:
             self._keys, self._centres = _spread(self._candidates(), GAP_BLOCK_VOXELS, self.map)
+            self._hidden = kernels.hidden_counts(self._keys, *self.map.blockers()[:3])
         self._used = np.zeros(len(self._keys), dtype=bool)
 
 

@@ -60,6 +60,9 @@ BLOCK_SLACK = 0.5
 FACE_STEPS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
 # Bits of a voxel's state in the grid.
 OCCUPIED, CROSSED, FRONTIER = np.uint8(1), np.uint8(2), np.uint8(4)
+# The state's upper five bits are the planner's: how many times a walk toward the voxel found it
+# hidden (sim/gap_seeking.py, the set-aside candidates), in steps of HIDDEN_STEP up to HIDDEN_MAX.
+HIDDEN_STEP, HIDDEN_MAX = 8, 31
 # When the grid must grow, it grows by this fraction of its edge on every side beyond what is
 # needed, so that a map seen piece by piece is reallocated a few times only.
 _GROW = 0.25

@@ -351,7 +351,8 @@ def test_sweep_kernel_matches_the_numpy_reference():
         now = used.copy()
         pick, goal, turn = kernels.sweep(n, centres, now, m.size, *m.blockers(), position[:n],
                                          target.as_matrix()[:n], nominal[:n], boresight,
-                                         max_offset, reach, 2)
+                                         max_offset, reach, 2,
+                                         np.zeros(len(keys), dtype=np.int64), 2)
         np.testing.assert_array_equal(pick, expected[0])
         np.testing.assert_allclose(goal, expected[1], atol=1e-13)
         np.testing.assert_array_equal(now, expected[2])
