@@ -38,6 +38,15 @@ each of these steps is one or a few compiled calls (sim/planner_kernels.py). The
 interval (where the chaser is, the target's attitude, the nominal sensor frame) are those the
 simulation computes for its shots anyway, handed to :meth:`GapSeeker.command`.
 
+**Candidates set aside.** Late in a run most candidates are hidden from any one place (a body's
+unknown interior behind its struck shell, least-struck voxels hard to see), and an interval that
+finds fewer visible than it has shots walks them all. So each candidate keeps a count of the
+walks that found it hidden (in the map's grid, from plan to plan); one found hidden
+``GAP_ASIDE_WALKS`` times is set aside: not walked again by the plan that holds it, not chosen
+by the next ones. A plan re-admits every set-aside candidate of its pool (their counts cleared)
+once ``GAP_ASIDE_INTERVALS`` intervals have passed since the last re-admission, as the chaser's
+view of the target turns with its orbit and the target's spin; a rebuilt map starts with none.
+
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run
 (``GAP_RESIDUAL_QUANTILE``): a voxel holding one strike can hold surface farther than the
@@ -237,7 +246,9 @@ class GapSeeker:
 
     def _candidates(self) -> np.ndarray:
         """Sorted keys of the voxels worth a shot: the frontier, and once it is exhausted, the
-        least-struck surface voxels too; an even subset of at most ``GAP_MAX_CANDIDATES``."""
+        least-struck surface voxels too, less those set aside (all re-admitted when
+        ``GAP_ASIDE_INTERVALS`` have passed since the last time); an even subset of at most
+        ``GAP_MAX_CANDIDATES``."""
         from sim import planner_kernels as kernels
 
         keys = self.map.frontier()
