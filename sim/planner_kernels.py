@@ -11,7 +11,9 @@ that a process after the first loads them from disk instead of compiling them):
 - :func:`carve`: the voxels the beams crossed before their strikes;
 - :func:`hidden`: which voxels beams from a few positions reach (a walk through the map);
 - :func:`sweep`: one interval's aims (the sweep's order, visibility tested in that order until
-  the shots are used, the slew limits) and the commanded turns.
+  the shots are used, the slew limits) and the commanded turns; it counts, per voxel, the walks
+  that found a candidate hidden, and :func:`not_aside` leaves out of a plan the candidates
+  hidden too often (or re-admits them).
 
 They do what the numpy code they replaced did, in the same order of operations where it
 matters (the same voxel keys, the same sweep order); tests/sim/test_planner_kernels.py holds
@@ -40,6 +42,8 @@ from sim.surface_map import (
     BLOCK_SLACK,
     CROSSED,
     FRONTIER,
+    HIDDEN_MAX,
+    HIDDEN_STEP,
     OCCUPIED,
     TRAVERSAL_STEP,
 )
@@ -631,8 +635,50 @@ def _turns(goal):
 
 
 @njit(cache=True)
+def not_aside(keys, state, shape, corner, aside, readmit):
+    """The ``keys`` (k,) int64 whose voxels' hidden count (the upper bits of the flat ``state``
+    grid, shape and first voxel ``shape``, ``corner`` (3,) int64) is below ``aside``, in their
+    order; with ``readmit``, every key, its count cleared (in place)."""
+    keep = np.empty(len(keys), dtype=np.int64)
+    m = 0
+    s1, s2 = shape[1] * shape[2], shape[2]
+    for key in keys:
+        i, j, k = _unpack(key)
+        cell = (i - corner[0]) * s1 + (j - corner[1]) * s2 + (k - corner[2])
+        if readmit:
+            state[cell] &= HIDDEN_STEP - 1
+        if state[cell] < aside * HIDDEN_STEP:
+            keep[m] = key
+            m += 1
+    return keep[:m]
+
+
+@njit(cache=True)
+def hidden_counts(keys, state, shape, corner):
+    """The hidden count of each voxel of ``keys`` (k,) int64 (the upper bits of the flat
+    ``state`` grid, shape and first voxel ``shape``, ``corner`` (3,) int64): (k,) int64."""
+    out = np.empty(len(keys), dtype=np.int64)
+    s1, s2 = shape[1] * shape[2], shape[2]
+    for q in range(len(keys)):
+        i, j, k = _unpack(keys[q])
+        out[q] = state[(i - corner[0]) * s1 + (j - corner[1]) * s2 + (k - corner[2])] // HIDDEN_STEP
+    return out
+
+
+@njit(cache=True)
+def store_hidden(keys, hidden, state, shape, corner):
+    """Write the hidden counts ``hidden`` (k,) int64 of the voxels ``keys`` (k,) int64 into the
+    upper bits of the flat ``state`` grid (at most ``HIDDEN_MAX``; in place)."""
+    s1, s2 = shape[1] * shape[2], shape[2]
+    for q in range(len(keys)):
+        i, j, k = _unpack(keys[q])
+        cell = (i - corner[0]) * s1 + (j - corner[1]) * s2 + (k - corner[2])
+        state[cell] = (state[cell] & (HIDDEN_STEP - 1)) + min(hidden[q], HIDDEN_MAX) * HIDDEN_STEP
+
+
+@njit(cache=True)
 def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target, nominal,
-          boresight, max_offset, reach, block):
+          boresight, max_offset, reach, block, hidden, aside):
     """One interval's aims (sim/gap_seeking.py, :meth:`GapSeeker.command`): the open
     candidates within ``max_offset`` from the interval's middle shot, in a sweep of rows
     ``block`` voxels wide across the view from the boresight's row on, each taken when
@@ -643,7 +689,8 @@ def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target
     ----------
     n : int: shots in the interval
     centres : (c, 3) float64, metres, B: the plan's candidates
-    used : (c,) bool: candidates already aimed at; those aimed at now are set (in place)
+    used : (c,) bool: candidates already aimed at or set aside; those aimed at or set aside
+        now are set (in place)
     size : float, metres: the voxel edge
     state, shape, corner, lo, hi : the map's flat state grid, its shape and first voxel, the
         occupied voxels' index box (:func:`_blocked`)
@@ -654,6 +701,10 @@ def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target
     max_offset : float, rad: largest angle from the nominal boresight
     reach : float, rad: the largest turn between consecutive shots
     block : int: sweep rows are this many voxels wide
+    hidden : (c,) int64: how many walks found each candidate hidden; one found hidden now
+        counts one more (in place)
+    aside : int: a candidate whose hidden count reaches this is set aside: marked used (in
+        place), not walked again
 
     Returns
     -------
@@ -685,8 +736,11 @@ def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target
         members = order[start[g]:start[g + 1]]
         for q in members[np.argsort(across[members], kind="mergesort")]:
             k = ok_[q]
-            if not _blocked(cent[k], ch, size, state, shape, corner, lo, hi,
-                            BLOCK_SLACK * size, BLOCK_RADIUS * size):
+            if _blocked(cent[k], ch, size, state, shape, corner, lo, hi, BLOCK_SLACK * size,
+                        BLOCK_RADIUS * size):
+                hidden[open_[k]] += 1
+                used[open_[k]] = hidden[open_[k]] >= aside
+            else:
                 pick[m] = k
                 used[open_[k]] = True
                 m += 1

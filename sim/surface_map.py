@@ -15,8 +15,9 @@ the points ``size * ((i, j, k) + [0, 1)^3)``. A voxel is
 - **unknown** otherwise.
 
 Voxel keys are the three integer indices packed into one int64. The occupied voxels are a sorted
-key array with their counts and views; the state of every voxel (occupied, crossed, frontier)
-is a byte in a dense grid over the box of the occupied voxels grown by the traversal margin,
+key array with their counts and views; the state of every voxel (occupied, crossed, frontier;
+in its upper bits the planner's count of walks that found the voxel hidden) is a byte in a
+dense grid over the box of the occupied voxels grown by the traversal margin,
 reallocated larger when that box grows, so that marking a beam's path or looking a voxel up is
 one indexing operation. Beams are traversed by sampling every ``size / TRAVERSAL_STEP`` along
 them. The updates (strikes, carving), the frontier's reading and the visibility walk below are
@@ -60,6 +61,9 @@ BLOCK_SLACK = 0.5
 FACE_STEPS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
 # Bits of a voxel's state in the grid.
 OCCUPIED, CROSSED, FRONTIER = np.uint8(1), np.uint8(2), np.uint8(4)
+# The state's upper five bits are the planner's: how many times a walk toward the voxel found it
+# hidden (sim/gap_seeking.py, the set-aside candidates), in steps of HIDDEN_STEP up to HIDDEN_MAX.
+HIDDEN_STEP, HIDDEN_MAX = 8, 31
 # When the grid must grow, it grows by this fraction of its edge on every side beyond what is
 # needed, so that a map seen piece by piece is reallocated a few times only.
 _GROW = 0.25

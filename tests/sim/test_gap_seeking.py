@@ -149,3 +149,42 @@ def test_an_exhausted_frontier_turns_the_law_to_the_least_struck_surface():
     np.testing.assert_array_equal(law._candidates(), np.union1d(frontier, once))
     assert len(once) == 8 and not np.isin(law.map.occupied[law.map.count == 3],
                                           law._candidates()).any()
+
+
+def test_candidates_found_hidden_are_set_aside_and_readmitted():
+    from sim import planner_kernels as kernels
+    from sim.defaults import GAP_ASIDE_INTERVALS, GAP_ASIDE_WALKS
+    from sim.surface_map import SurfaceMap
+
+    law = GapSeeker(step=10.0, max_rate=math.radians(1), max_offset=math.radians(30),
+                    poses=None, beams=np.array([[0.0, 0.0, 1.0]]))
+    law.map = SurfaceMap(1.0)
+    # A 4 x 4 plate struck once per voxel from above; the layer below it is the frontier.
+    x, y = np.meshgrid(np.arange(4) + 0.5, np.arange(4) + 0.5)
+    points = np.column_stack([x.ravel(), y.ravel(), np.full(16, 0.5)])
+    law.map.add(points + np.array([0.0, 0.0, 20.0]), np.tile([0.0, 0.0, -1.0], (16, 1)),
+                np.full(16, 19.5), margin=2.0)
+    frontier = law.map.frontier()
+    grid = law.map.blockers()[:3]
+    # While the frontier lasts nothing is set aside, whatever the counts.
+    kernels.store_hidden(frontier, np.full(len(frontier), GAP_ASIDE_WALKS), *grid)
+    np.testing.assert_array_equal(law._candidates(), frontier)
+    kernels.store_hidden(frontier, np.zeros(len(frontier), dtype=np.int64), *grid)
+    # The least-struck phase: every voxel struck once, so all of them are candidates.
+    law.residual = True
+    pool = np.union1d(frontier, law.map.occupied)
+    law._plan()
+    planned = law._keys.copy()
+    assert len(planned) > 4 and np.isin(planned, pool).all()
+    # The sweeps found half of them hidden often enough: the next plan leaves them aside.
+    law._hidden[::2] = GAP_ASIDE_WALKS
+    aside = planned[::2]
+    law._plan()
+    assert len(law._keys) and not np.isin(aside, law._keys).any()
+    np.testing.assert_array_equal(law._candidates(), np.setdiff1d(pool, aside))
+    # Once GAP_ASIDE_INTERVALS intervals have passed, a plan takes them again, counts cleared.
+    law._interval += GAP_ASIDE_INTERVALS
+    law._plan()
+    assert np.isin(aside, law._keys).all()
+    assert not kernels.hidden_counts(pool, *grid).any()
+    np.testing.assert_array_equal(law._candidates(), pool)

@@ -23,6 +23,8 @@ from sim.surface_map import (
     CROSSED,
     FACE_STEPS,
     FRONTIER,
+    HIDDEN_MAX,
+    HIDDEN_STEP,
     OCCUPIED,
     TRAVERSAL_STEP,
     SurfaceMap,
@@ -351,7 +353,8 @@ def test_sweep_kernel_matches_the_numpy_reference():
         now = used.copy()
         pick, goal, turn = kernels.sweep(n, centres, now, m.size, *m.blockers(), position[:n],
                                          target.as_matrix()[:n], nominal[:n], boresight,
-                                         max_offset, reach, 2)
+                                         max_offset, reach, 2,
+                                         np.zeros(len(keys), dtype=np.int64), 2)
         np.testing.assert_array_equal(pick, expected[0])
         np.testing.assert_allclose(goal, expected[1], atol=1e-13)
         np.testing.assert_array_equal(now, expected[2])
@@ -388,3 +391,57 @@ def test_kth_smallest_count_matches_the_partition():
             count = rng.integers(low, high, n)
             for rank in {0, n // 4, n // 2, n - 1}:
                 assert kernels._kth_smallest(count, rank) == np.partition(count, rank)[rank]
+
+
+def test_hidden_counts_live_in_the_state_s_upper_bits():
+    *_, (m, _) = _maps(seed=3)
+    keys = np.union1d(m.frontier(), m.occupied)[::3]
+    state = m._state.reshape(-1)
+    before = state.copy()
+    counts = np.arange(len(keys)) % (HIDDEN_MAX + 5)             # some beyond the largest
+    kernels.store_hidden(keys, counts, *m.blockers()[:3])
+    np.testing.assert_array_equal(kernels.hidden_counts(keys, *m.blockers()[:3]),
+                                  np.minimum(counts, HIDDEN_MAX))
+    np.testing.assert_array_equal(state & (HIDDEN_STEP - 1), before & (HIDDEN_STEP - 1))
+    aside = 4
+    kept = kernels.not_aside(keys, *m.blockers()[:3], aside, False)
+    np.testing.assert_array_equal(kept, keys[np.minimum(counts, HIDDEN_MAX) < aside])
+    # Re-admitted: every key back, its count cleared, the map's own bits as they were.
+    np.testing.assert_array_equal(kernels.not_aside(keys, *m.blockers()[:3], aside, True), keys)
+    assert not kernels.hidden_counts(keys, *m.blockers()[:3]).any()
+    np.testing.assert_array_equal(state, before & (HIDDEN_STEP - 1))
+
+
+def test_the_sweep_sets_aside_candidates_found_hidden_and_keeps_its_picks():
+    rng = np.random.default_rng(6)
+    *_, (m, _) = _maps(seed=6)
+    n = 30
+    keys = np.union1d(m.frontier(), m.occupied)
+    centres = m.centres(keys)
+    position = np.tile([80.0, 10.0, 16.0], (n, 1))
+    target = np.tile(np.eye(3), (n, 1, 1))
+    z = -position[0] / np.linalg.norm(position[0])
+    x = np.cross([0.0, 0.0, 1.0], z)
+    x /= np.linalg.norm(x)
+    nominal = np.tile(np.stack([x, np.cross(z, x), z], axis=1), (n, 1, 1))
+    boresight = np.array([0.0, 0.0, 1.0])
+    args = (m.size, *m.blockers(), position, target, nominal, boresight, math.radians(30),
+            math.radians(10), 2)
+    seen = m.visible(position[n // 2], centres)
+    used = rng.random(len(keys)) < 0.3
+    # Hidden counts one short of being set aside: those walked and found hidden are set aside
+    # (marked used); the picks are those of the sweep without counts.
+    hidden = np.full(len(keys), 2, dtype=np.int64)
+    free, aside = used.copy(), used.copy()
+    pick_free = kernels.sweep(n, centres, free, *args, np.zeros(len(keys), dtype=np.int64),
+                              HIDDEN_MAX + 1)[0]
+    pick = kernels.sweep(n, centres, aside, *args, hidden, 3)[0]
+    np.testing.assert_array_equal(pick, pick_free)
+    walked_hidden = hidden == 3
+    assert walked_hidden.any() and not seen[walked_hidden].any()
+    np.testing.assert_array_equal(aside, free | walked_hidden)
+    np.testing.assert_array_equal(hidden[~walked_hidden], 2)
+    # Set aside, they are not walked again: a second sweep leaves their counts alone.
+    again = hidden.copy()
+    kernels.sweep(n, centres, aside, *args, again, 3)
+    np.testing.assert_array_equal(again[walked_hidden], 3)
