@@ -23,7 +23,7 @@ seconds instead of a suite run:
   candidate's fraction of them cut on the compare's mesh (``WORK/misses``), for
   ``rules --miss-rate``;
 - ``openings``: per cloud and collected candidate, which missed held-out beams passed a crack
-  of the compare's mesh of the run (``RING_RAYS``; ``WORK/openings``), for ``rules
+  of the compare's mesh of the run (``judge.RING_RAYS``; ``WORK/openings``), for ``rules
   --statistic closest-cracks``;
 - ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
   strikes, the carved twins, the smallest model) and the ladder's stop on those figures,
@@ -684,7 +684,7 @@ def tested_order(suite: Path, cloud: str, holdout: float, seed: int = 0):
 
 def openings(args) -> None:
     """``collect``'s companion for ``rules --statistic closest-cracks``: per cloud and
-    collected candidate, which of its missed held-out beams passed a crack (``RING_RAYS``),
+    collected candidate, which of its missed held-out beams passed a crack (``judge.RING_RAYS``),
     measured on the compare's mesh of the run; kept in ``WORK/openings/CLOUD.npz``."""
     from formats.mesh_io import read_mesh
     from recon.surfaces import auto, judge
