@@ -567,11 +567,17 @@ class _Race:
         for job, gap in zip(running, leaves, strict=True):
             if gap is not None:
                 self.judged[job] = [self._outpaced(job, *gap)]
-        return [job for job in running if job not in self.judged]
+        # the longest first, by their racing folds' times: the workers finish together
+        return sorted((job for job in running if job not in self.judged),
+                      key=lambda job: -self._fit_s(job))
+
+    def _fit_s(self, job: tuple[int, int]) -> float:
+        """The run's fit time on the racing folds [s, process time]."""
+        return sum(r.get("process_time_s") or 0.0 for r in self.results[job][:self.first])
 
     def _outpaced(self, job: tuple[int, int], gap: float, se: float) -> Candidate:
-        fit_s = sum(r.get("process_time_s") or 0.0 for r in self.results[job][:self.first])
-        return Candidate(self.run(job), self.level(job), status="outpaced", fit_s=fit_s,
+        return Candidate(self.run(job), self.level(job), status="outpaced",
+                         fit_s=self._fit_s(job),
                          reason=f"on the first {self.first} folds its held-out chi-square was "
                                 f"{gap:.3g} +- {se:.2g} above the best's (more than "
                                 f"{RACE_SES:g} standard errors): not fitted on the others")
@@ -590,7 +596,8 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
     candidates) on the other folds, each fit in its own limited process, a few at a time; each
     run is judged (``_judged``) as soon as its folds are fitted, while the other fits go on.
     The finest level's fits are handed out first (they take the longest: the workers stay busy,
-    and the largest surfaces are judged while the small ones are fitted). Returns, per depth
+    and the largest surfaces are judged while the small ones are fitted), and on the other
+    folds the runs that took longest on the first ones. Returns, per depth
     and run in order, the run's candidate and its carved twin if any."""
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
