@@ -480,7 +480,7 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
     together (``auto.ALWAYS_LEVELS``) race at once, each later level against the runs left
     before it; ``folds``: the collection's ``folds`` record, ``seed`` its seed
     (``fold_of``). Returns the candidates left (a run that leaves takes its carved twin with
-    it) and the runs that left (uncarved)."""
+    it; in its place the run, unscored, with the status "outpaced") and the runs that left."""
     from recon.surfaces import auto
 
     first = fold_of(block, folds, seed) < auto.RACE_FOLDS
@@ -492,7 +492,8 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
         members = [c for c in candidates if c.level in group]
         out = race_group([c for c in kept if c.scored and not c.carved], members, first, block)
         gone += [c for c in members if c.run.key in out and not c.carved]
-        kept += [c for c in members if c.run.key not in out]
+        kept += [c if c.run.key not in out else auto.Candidate(c.run, c.level, "outpaced")
+                 for c in members if c.run.key not in out or not c.carved]
     return kept, gone
 
 
@@ -509,20 +510,19 @@ def race_group(before: list, members: list, first: np.ndarray, block: np.ndarray
     return {c.run.key for c, left in zip(pool, leaves, strict=True) if left is not None}
 
 
-def raced(args, cloud: str, candidates: list, block: np.ndarray, replayed) -> tuple[list, list]:
+def raced(args, cloud: str, candidates: list, block: np.ndarray, replayed) -> list:
     """``race`` on ``cloud``'s candidates, printing the runs that left before the ladder's stop
     and whether the best closed candidate (the coverage's, not replayed) moved; ``replayed``:
     ``replay`` with the cloud's other arguments."""
     whole = best_closed(replayed(candidates)[1])
-    candidates, gone = race(candidates, block, json.loads(
+    candidates, _ = race(candidates, block, json.loads(
         (args.work / "folds" / f"{cloud}.json").read_text())["auto"]["folds"], args.seed)
     fitted = replayed(candidates)[1]
-    reached = max(c.level for c in fitted)
-    left = ", ".join(c.label for c in gone if c.level <= reached)
+    left = ", ".join(c.label for c in fitted if c.status == "outpaced")
     moved = "" if best_closed(fitted) == whole else \
         f"; best closed {whole} -> {best_closed(fitted)} (coverage not replayed)"
     print(f"{cloud:30} raced out: {left or '-'}{moved}")
-    return candidates, [c for c in gone if c.level <= reached]
+    return candidates
 
 
 def best_closed(candidates: list) -> str | None:
@@ -567,9 +567,8 @@ def rules(args) -> None:
             candidates = free_space(candidates, n_misses, args.miss_rate, args.miss_ses)
         if args.holes_first:
             candidates = holes_first(candidates, n_checked)
-        gone = []
         if args.race:
-            candidates, gone = raced(args, cloud, candidates, block, partial(
+            candidates = raced(args, cloud, candidates, block, partial(
                 replay, block=block, coverage=coverage, tau=tau, n_checked=n_checked,
                 target=target_of(cloud, not args.no_prior)))
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
@@ -586,9 +585,10 @@ def rules(args) -> None:
         wall = {r["key"]: r.get("wall_time_s") or 0.0 for r in rows}
         folds = json.loads((args.work / "folds" / f"{cloud}.json").read_text()
                            )["auto"]["folds"]["k"]
-        modelled = sum(wall.get(c.run.key, 0.0) for c in fitted if not c.carved) * (folds - 1)
-        modelled += sum(wall.get(c.run.key, 0.0) for c in gone) * auto.RACE_FOLDS * (
-            folds - 1) / folds
+        # a run raced out (``--race``) was fitted on ``auto.RACE_FOLDS`` folds
+        modelled = sum(wall.get(c.run.key, 0.0) * (
+            auto.RACE_FOLDS / folds if c.status == "outpaced" else 1.0)
+            for c in fitted if not c.carved) * (folds - 1)
         seconds.append(modelled / compare_s)
         print(f"{cloud:30} {chosen.label[:26]:26} F {v.get('f_ratio', 0):.3f} "
               f"C {v.get('c_ratio', 0):6.3f} {'ok ' if v.get('ok') else 'NO '}"
