@@ -533,12 +533,16 @@ class _Race:
                                                 [r for r in results if r is not None],
                                                 self.context)]
             return
+        if job not in self.partial:
+            self.partial[job] = self._costs(job)
         if all(r is not None for r in results):
             self.judged[job] = _judged(self.run(job), self.level(job), results, self.context,
                                        self.casters[job])
-            return
-        if job not in self.partial:
-            self.partial[job] = self._costs(job)
+
+    def raced(self, job: tuple[int, int]) -> bool:
+        """Whether the run may leave the race (its level is raced, ``RACE_LEVEL``); the others
+        are fitted on every fold at once."""
+        return self.level(job) >= RACE_LEVEL and self.first < len(self.context.folds)
 
     def _costs(self, job: tuple[int, int]) -> np.ndarray:
         """The run's held-out costs on the racing folds, its surfaces built for later."""
@@ -558,17 +562,20 @@ class _Race:
         folds = self.context.folds[:self.first]
         m = sum(len(f.block) for f in folds)
         block = np.concatenate([f.block for f in folds])
-        running = [job for job in self.jobs if job not in self.judged]
-        partial = [c.cost[:m] for c in reference] + [self.partial[job] for job in running]
-        racing = [False] * len(reference) + [self.level(job) >= RACE_LEVEL for job in running]
+        # every run fitted on the racing folds and not failed since
+        pool = [job for job in self.jobs if job in self.partial
+                and (job not in self.judged or self.judged[job][0].scored)]
+        partial = [c.cost[:m] for c in reference] + [self.partial[job] for job in pool]
+        racing = [False] * len(reference) + [
+            self.raced(job) and job not in self.judged for job in pool]
         shut = [bool(c.closed) for c in reference] + [
-            closed(self.results[job][0]["faces"]) for job in running]
+            closed(self.results[job][0]["faces"]) for job in pool]
         leaves = outpaced(partial, block, racing, shut)[len(reference):]
-        for job, gap in zip(running, leaves, strict=True):
+        for job, gap in zip(pool, leaves, strict=True):
             if gap is not None:
                 self.judged[job] = [self._outpaced(job, *gap)]
         # the longest first, by their racing folds' times: the workers finish together
-        return sorted((job for job in running if job not in self.judged),
+        return sorted((job for job in self.jobs if job not in self.judged),
                       key=lambda job: -self._fit_s(job))
 
     def _fit_s(self, job: tuple[int, int]) -> float:
@@ -593,7 +600,8 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
                    ) -> dict[int, list[list[Candidate]]]:
     """Fit every run of ``levels`` ((depth, runs) pairs) on the first ``RACE_FOLDS`` folds,
     then the runs the race leaves in (``outpaced``, against each other and the ``reference``
-    candidates) on the other folds, each fit in its own limited process, a few at a time; each
+    candidates) on the other folds (a run of a level not raced on every fold at once), each
+    fit in its own limited process, a few at a time; each
     run is judged (``_judged``) as soon as its folds are fitted, while the other fits go on.
     The finest level's fits are handed out first (they take the longest: the workers stay busy,
     and the largest surfaces are judged while the small ones are fitted), and on the other
@@ -617,7 +625,8 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
                                 threads=FIT_THREADS, **limits.kwargs()): (job, f)
                     for job in jobs for f in fold_range}
 
-        pending = submit(state.jobs, range(state.first))
+        pending = submit([job for job in state.jobs if state.raced(job)], range(state.first))
+        pending |= submit([job for job in state.jobs if not state.raced(job)], range(len(folds)))
         raced = state.first == len(folds)
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -627,7 +636,8 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
             if not pending and not raced:
                 raced = True
                 going = state.race(reference)
-                bar.total -= (len(state.jobs) - len(going)) * (len(folds) - state.first)
+                left = sum(map(state.raced, state.jobs)) - len(going)
+                bar.total -= left * (len(folds) - state.first)
                 bar.refresh()
                 pending = submit(going, range(state.first, len(folds)))
     return state.candidates()
