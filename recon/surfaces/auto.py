@@ -522,8 +522,8 @@ class _Race:
         return self.levels[job[0]][0]
 
     def arrived(self, job: tuple[int, int], f: int, result: dict) -> None:
-        """Fold ``f``'s fit of ``job`` is in: judge the run once its racing folds are (its
-        costs there, or its failure) and once all its folds are (``_judged``)."""
+        """Fold ``f``'s fit of ``job`` is in: once its racing folds are, its costs there (or
+        its failure); its judging once all its folds are waits for ``judge_complete``."""
         results = self.results[job]
         results[f] = result
         if job in self.judged or any(r is None for r in results[:self.first]):
@@ -532,12 +532,16 @@ class _Race:
             self.judged[job] = [judge_candidate(self.run(job), self.level(job),
                                                 [r for r in results if r is not None],
                                                 self.context)]
-            return
-        if job not in self.partial:
+        elif job not in self.partial:
             self.partial[job] = self._costs(job)
-        if all(r is not None for r in results):
-            self.judged[job] = _judged(self.run(job), self.level(job), results, self.context,
-                                       self.casters[job])
+
+    def judge_complete(self) -> None:
+        """Judge (``_judged``) every run whose folds are all fitted and not judged yet."""
+        for job in self.jobs:
+            results = self.results[job]
+            if job not in self.judged and all(r is not None for r in results):
+                self.judged[job] = _judged(self.run(job), self.level(job), results,
+                                           self.context, self.casters[job])
 
     def raced(self, job: tuple[int, int]) -> bool:
         """Whether the run may leave the race (its level is raced, ``RACE_LEVEL``); the others
@@ -562,12 +566,12 @@ class _Race:
         folds = self.context.folds[:self.first]
         m = sum(len(f.block) for f in folds)
         block = np.concatenate([f.block for f in folds])
-        # every run fitted on the racing folds and not failed since
-        pool = [job for job in self.jobs if job in self.partial
-                and (job not in self.judged or self.judged[job][0].scored)]
+        # the runs fitted on the racing folds, none of their fits failed (a run fitted on
+        # every fold may have failed on a later one)
+        pool = [job for job in self.jobs if job in self.partial and all(
+            r is None or r.get("status") == "ok" for r in self.results[job])]
         partial = [c.cost[:m] for c in reference] + [self.partial[job] for job in pool]
-        racing = [False] * len(reference) + [
-            self.raced(job) and job not in self.judged for job in pool]
+        racing = [False] * len(reference) + [self.raced(job) for job in pool]
         shut = [bool(c.closed) for c in reference] + [
             closed(self.results[job][0]["faces"]) for job in pool]
         leaves = outpaced(partial, block, racing, shut)[len(reference):]
@@ -575,7 +579,7 @@ class _Race:
             if gap is not None:
                 self.judged[job] = [self._outpaced(job, *gap)]
         # the longest first, by their racing folds' times: the workers finish together
-        return sorted((job for job in self.jobs if job not in self.judged),
+        return sorted((job for job in self.jobs if self.raced(job) and job not in self.judged),
                       key=lambda job: -self._fit_s(job))
 
     def _fit_s(self, job: tuple[int, int]) -> float:
@@ -640,6 +644,7 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
                 bar.total -= left * (len(folds) - state.first)
                 bar.refresh()
                 pending = submit(going, range(state.first, len(folds)))
+            state.judge_complete()   # while the workers fit
     return state.candidates()
 
 

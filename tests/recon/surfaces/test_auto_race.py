@@ -58,7 +58,20 @@ def test_racing_leaves_the_far_run_after_two_folds_and_chooses_as_the_full_ladde
                                          (("planes", {}), ("ellipsoid", {"subdivisions": 3}))))
     monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
     options = {"view_points": view, "uncertainty": cloud.attributes, "seed": 0}
+    from recon.surfaces import isolation
+
+    fits = []
+    fit = isolation.run_isolated
+
+    def counted(run, *args, **kwargs):
+        fits.append(run.label)
+        return fit(run, *args, **kwargs)
+
+    monkeypatch.setattr(isolation, "run_isolated", counted)
     raced = choose(cloud.points, **options)
+    # each run fitted once a fold: the planes on the two racing folds only
+    assert sorted(fits) == sorted(["ellipsoid"] * 4 + ["ellipsoid subdivisions=3"] * 4
+                                  + ["planes"] * 2)
     monkeypatch.setattr(auto, "RACE_SES", float("inf"))
     full = choose(cloud.points, **options)
     table = {c.label: c for c in raced.candidates}
