@@ -747,7 +747,7 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
     """Fit and judge the ladder's levels, coarse to fine, until one is not measurably better
     (module docstring). The levels fitted whatever the earlier ones gave (``ALWAYS_LEVELS``)
     are fitted together; each later one once the ladder has not stopped before it. Returns
-    the candidates and a note on where the ladder stopped."""
+    the candidates and a note on the runs the race left out and where the ladder stopped."""
     candidates: list[Candidate] = []
     fitted = _fit_and_judge(list(enumerate(levels[:ALWAYS_LEVELS])), context, limits=limits,
                             n_workers=n_workers)
@@ -762,10 +762,18 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
         if depth + 1 >= ALWAYS_LEVELS and rest and _stops(candidates, before, depth):
             candidates += [Candidate(run, later, status="skipped")
                            for later, runs in enumerate(rest, start=depth + 1) for run in runs]
-            return candidates, (f"the ladder stopped after level {depth} of {len(levels) - 1} "
-                                f"({sum(map(len, rest))} finer candidates not fitted): it was "
-                                "not measurably better than the levels before it")
-    return candidates, ""
+            return candidates, _race_note(candidates) + (
+                f"the ladder stopped after level {depth} of {len(levels) - 1} "
+                f"({sum(map(len, rest))} finer candidates not fitted): it was not measurably "
+                "better than the levels before it")
+    return candidates, _race_note(candidates).removesuffix("; ")
+
+
+def _race_note(candidates: list[Candidate]) -> str:
+    """The runs the race left out, for the reason (empty, or ending in "; ")."""
+    out = [c.label for c in candidates if c.status == "outpaced"]
+    return (f"{len(out)} of them fitted on the first {RACE_FOLDS} folds only, far worse than the "
+            f"best there ({', '.join(out)}); ") if out else ""
 
 
 def _far(partial: Sequence[np.ndarray | None], block: np.ndarray, among: Sequence[bool]

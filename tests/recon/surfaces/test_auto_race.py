@@ -87,3 +87,5 @@ def test_racing_leaves_the_far_run_after_two_folds_and_chooses_as_the_full_ladde
                 (whole[label].chi2, whole[label].chi2_se, whole[label].holes,
                  whole[label].n_faces)
     assert "left after 2 folds" in format_choice(raced)
+    assert "1 of them fitted on the first 2 folds only, far worse than the best there " \
+        "(planes)" in raced.reason
