@@ -541,7 +541,7 @@ class _Race:
             results = self.results[job]
             if job not in self.judged and all(r is not None for r in results):
                 self.judged[job] = _judged(self.run(job), self.level(job), results,
-                                           self.context, self.casters[job])
+                                           self.context, self.casters.pop(job))
 
     def raced(self, job: tuple[int, int]) -> bool:
         """Whether the run may leave the race (its level is raced, ``RACE_LEVEL``); the others
@@ -578,6 +578,7 @@ class _Race:
         for job, gap in zip(pool, leaves, strict=True):
             if gap is not None:
                 self.judged[job] = [self._outpaced(job, *gap)]
+                del self.casters[job]   # its surfaces' scenes are not cast against again
         # the longest first, by their racing folds' times: the workers finish together
         return sorted((job for job in self.jobs if self.raced(job) and job not in self.judged),
                       key=lambda job: -self._fit_s(job))
