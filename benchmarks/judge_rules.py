@@ -57,6 +57,7 @@ import statistics
 import sys
 import time
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -463,6 +464,74 @@ def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_c
     return fitted[selection.chosen], fitted
 
 
+def fold_of(block: np.ndarray, folds: dict, seed: int) -> np.ndarray:
+    """The fold of each collected tested strike, from its ``block`` (k,), the collection's
+    ``folds`` record and its seed (the blocks' deal, ``judge.pass_folds``)."""
+    k, n_blocks = folds["k"], folds["n_blocks"]
+    rng = np.random.default_rng(seed)
+    deal = np.concatenate([rng.permutation(k) for _ in range(-(-n_blocks // k))])[:n_blocks]
+    fold = deal[block]
+    if np.any(np.diff(fold) < 0):
+        raise SystemExit("the collection's tested strikes are not in fold order: wrong --seed?")
+    return fold
+
+
+def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[list, list]:
+    """``auto``'s race (``auto.outpaced``) replayed on collected candidates: the levels fitted
+    together (``auto.ALWAYS_LEVELS``) race at once, each later level against the runs left
+    before it; ``folds``: the collection's ``folds`` record, ``seed`` its seed
+    (``fold_of``). Returns the candidates left (a run that leaves takes its carved twin with
+    it; in its place the run, unscored, with the status "outpaced") and the runs that left."""
+    from recon.surfaces import auto
+
+    first = fold_of(block, folds, seed) < auto.RACE_FOLDS
+    depths = sorted({c.level for c in candidates})
+    groups = [[d for d in depths if d < auto.ALWAYS_LEVELS]] + [
+        [d] for d in depths if d >= auto.ALWAYS_LEVELS]
+    kept, gone = [], []
+    for group in groups:
+        members = [c for c in candidates if c.level in group]
+        out = race_group([c for c in kept if c.scored and not c.carved], members, first, block)
+        gone += [c for c in members if c.run.key in out and not c.carved]
+        kept += [c if c.run.key not in out else auto.Candidate(c.run, c.level, "outpaced")
+                 for c in members if c.run.key not in out or not c.carved]
+    return kept, gone
+
+
+def race_group(before: list, members: list, first: np.ndarray, block: np.ndarray) -> set:
+    """The keys of the runs among ``members`` (one race: levels fitted together) that
+    ``auto.outpaced`` takes out against each other and the runs left ``before``; ``first``:
+    the tested strikes of the racing folds."""
+    from recon.surfaces import auto
+
+    pool = before + [c for c in members if not c.carved]
+    racing = [False] * len(before) + [c.level >= auto.RACE_LEVEL for c in pool[len(before):]]
+    leaves = auto.outpaced([c.cost[first] if c.scored else None for c in pool], block[first],
+                           racing, [bool(c.closed) for c in pool])
+    return {c.run.key for c, left in zip(pool, leaves, strict=True) if left is not None}
+
+
+def raced(args, cloud: str, candidates: list, block: np.ndarray, replayed) -> list:
+    """``race`` on ``cloud``'s candidates, printing the runs that left before the ladder's stop
+    and whether the best closed candidate (the coverage's, not replayed) moved; ``replayed``:
+    ``replay`` with the cloud's other arguments."""
+    whole = best_closed(replayed(candidates)[1])
+    candidates, _ = race(candidates, block, json.loads(
+        (args.work / "folds" / f"{cloud}.json").read_text())["auto"]["folds"], args.seed)
+    fitted = replayed(candidates)[1]
+    left = ", ".join(c.label for c in fitted if c.status == "outpaced")
+    moved = "" if best_closed(fitted) == whole else \
+        f"; best closed {whole} -> {best_closed(fitted)} (coverage not replayed)"
+    print(f"{cloud:30} raced out: {left or '-'}{moved}")
+    return candidates
+
+
+def best_closed(candidates: list) -> str | None:
+    """The label of the scored closed candidate of lowest chi-square (auto's coverage)."""
+    closed = [c for c in candidates if c.scored and c.closed]
+    return min(closed, key=lambda c: c.chi2).label if closed else None
+
+
 def verdict(rows: list[dict], key: str, extra: list[dict] = ()) -> dict:
     """Where the run ``key`` stands against the truth (as ``benchmarks/suite.py`` judges),
     looked up in ``rows`` and ``extra`` (a carved candidate, ``carved_truth``: not a compare run,
@@ -499,6 +568,10 @@ def rules(args) -> None:
             candidates = free_space(candidates, n_misses, args.miss_rate, args.miss_ses)
         if args.holes_first:
             candidates = holes_first(candidates, n_checked)
+        if args.race:
+            candidates = raced(args, cloud, candidates, block, partial(
+                replay, block=block, coverage=coverage, tau=tau, n_checked=n_checked,
+                target=target_of(cloud, not args.no_prior)))
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
                                 target_of(cloud, not args.no_prior))
         v = verdict(rows, chosen.key, carved_truth(args, cloud, chosen.key))
@@ -513,7 +586,10 @@ def rules(args) -> None:
         wall = {r["key"]: r.get("wall_time_s") or 0.0 for r in rows}
         folds = json.loads((args.work / "folds" / f"{cloud}.json").read_text()
                            )["auto"]["folds"]["k"]
-        modelled = sum(wall.get(c.run.key, 0.0) for c in fitted if not c.carved) * (folds - 1)
+        # a run raced out (``--race``) was fitted on ``auto.RACE_FOLDS`` folds
+        modelled = sum(wall.get(c.run.key, 0.0) * (
+            auto.RACE_FOLDS / folds if c.status == "outpaced" else 1.0)
+            for c in fitted if not c.carved) * (folds - 1)
         seconds.append(modelled / compare_s)
         print(f"{cloud:30} {chosen.label[:26]:26} F {v.get('f_ratio', 0):.3f} "
               f"C {v.get('c_ratio', 0):6.3f} {'ok ' if v.get('ok') else 'NO '}"
@@ -937,8 +1013,9 @@ def main(argv=None) -> int:
                         help="collect, openings: auto's held-out share of the strikes, i.e. "
                              "round(1 / holdout) folds (rules reads the folds collected)")
     parser.add_argument("--seed", type=int, default=0,
-                        help="collect, openings: auto's seed (the folds' dealing of the blocks "
-                             "and the checked strikes; the missed beams keep seed 0)")
+                        help="collect, openings, rules --race: auto's seed (the folds' "
+                             "dealing of the blocks and the checked strikes; the missed beams "
+                             "keep seed 0)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--force", action="store_true", help="collect again")
     parser.add_argument("--heldout", action="store_true",
@@ -968,6 +1045,9 @@ def main(argv=None) -> int:
                         "(``holes_first``; default: auto's rule, which tests only the band)")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
+    parser.add_argument("--race", action="store_true",
+                        help="rules: auto's race (``auto.outpaced``): the runs far worse than "
+                        "the best on the first folds leave (needs the collection's --seed)")
     parser.add_argument("--no-prior", action="store_true",
                         help="tell auto nothing of the target (every cloud \"unknown\"; "
                         "default: the NATURAL clouds \"natural\")")

@@ -70,7 +70,12 @@ visibility graph cut when that method is registered), then fine ones. The first
 ``ALWAYS_LEVELS`` levels always run, and are fitted together (the finest first: the workers
 stay busy while the main process judges each run as soon as its folds are in); after that the
 search stops as soon as a level's best is not measurably better (by ``se``) than the best
-before it. The ladder leaves out the methods
+before it. **Racing**: the runs of a level are fitted on the first ``RACE_FOLDS`` folds, and a
+run whose held-out chi-square there is more than ``RACE_SES`` paired standard errors above the
+best's (of every run fitted so far; for a closed surface, also above the best closed one's) is
+not fitted on the other folds and leaves the choice (``outpaced``): far outside the band, it
+could not be chosen. The models of a few numbers are fitted on every fold. The ladder leaves
+out the methods
 that cost the most for what they add on the suite's clouds (``delaunay-balls``,
 ``screened-poisson``: a few seconds a fit, where the visibility cut and Poisson take one;
 ``rimls``, ``ball-pivoting``: never the held-out best nor in the band there).
@@ -149,6 +154,15 @@ NATURAL_SPAN = 1.5
 # beyond the strikes lies there. A missed beam's crossing of a surface counts as a cut only
 # farther than ``miss_reach`` from every strike (judge.cut_misses).
 MISS_BOX = 0.1
+# Racing (successive halving): every run of a level is fitted on the first RACE_FOLDS folds;
+# a run whose held-out chi-square there exceeds the best's (among every run fitted so far) by
+# more than RACE_SES paired standard errors is not fitted on the other folds and leaves the
+# choice (``outpaced``). RACE_SES: three times BAND_SES, fixed before the replay on the tuning
+# clouds (docs/decisions.md). The models of a few numbers (levels before RACE_LEVEL) are fitted
+# on every fold: they cost little, and the natural body's model is among them.
+RACE_FOLDS = 2
+RACE_SES = 3.0 * BAND_SES
+RACE_LEVEL = 1
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
 # compete for the cores.
 FIT_THREADS = 1
@@ -163,8 +177,9 @@ class Candidate:
     run : Run
     level : int
         Its level on the ladder.
-    status : {"ok", "failed", "skipped"}
-        "skipped": a level the ladder did not need.
+    status : {"ok", "failed", "skipped", "outpaced"}
+        "skipped": a level the ladder did not need; "outpaced": far worse than the best on the
+        first folds, not fitted on the others (``outpaced``).
     reason : str
         Why it failed (empty otherwise).
     fit_s : float or None
@@ -482,15 +497,120 @@ def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, se
                     miss_reach=miss_reach(tau, noise, every[0].prepared.spacing))
 
 
+class _Race:
+    """The fits of ``_fit_and_judge`` and what is known of each run: its results and built
+    surfaces per fold, its held-out costs on the racing folds, and its candidates once judged.
+    A run is a job ``(i, j)``: run ``j`` of the ``i``-th (depth, runs) pair."""
+
+    def __init__(self, levels: list[tuple[int, list[Run]]], context: _Context):
+        self.levels, self.context = levels, context
+        k = len(context.folds)
+        self.first = min(RACE_FOLDS, k)
+        # the finest level first (module docstring)
+        self.jobs = [(i, j) for i in reversed(range(len(levels))) for j in range(len(levels[i][1]))]
+        self.results = {job: [None] * k for job in self.jobs}
+        self.casters = {job: [None] * k for job in self.jobs}
+        self.partial: dict[tuple[int, int], np.ndarray] = {}
+        self.judged: dict[tuple[int, int], list[Candidate]] = {}
+
+    def run(self, job: tuple[int, int]) -> Run:
+        return self.levels[job[0]][1][job[1]]
+
+    def level(self, job: tuple[int, int]) -> int:
+        return self.levels[job[0]][0]
+
+    def arrived(self, job: tuple[int, int], f: int, result: dict) -> None:
+        """Fold ``f``'s fit of ``job`` is in: once its racing folds are, its costs there (or
+        its failure); its judging once all its folds are waits for ``judge_complete``."""
+        results = self.results[job]
+        results[f] = result
+        if job in self.judged or any(r is None for r in results[:self.first]):
+            return
+        if any(r.get("status") != "ok" for r in results[:self.first]):
+            self.judged[job] = [judge_candidate(self.run(job), self.level(job),
+                                                [r for r in results if r is not None],
+                                                self.context)]
+        elif job not in self.partial:
+            self.partial[job] = self._costs(job)
+
+    def judge_complete(self) -> None:
+        """Judge (``_judged``) every run whose folds are all fitted and not judged yet."""
+        for job in self.jobs:
+            results = self.results[job]
+            if job not in self.judged and all(r is not None for r in results):
+                self.judged[job] = _judged(self.run(job), self.level(job), results,
+                                           self.context, self.casters.pop(job))
+
+    def raced(self, job: tuple[int, int]) -> bool:
+        """Whether the run may leave the race (its level is raced, ``RACE_LEVEL``); the others
+        are fitted on every fold at once."""
+        return self.level(job) >= RACE_LEVEL and self.first < len(self.context.folds)
+
+    def _costs(self, job: tuple[int, int]) -> np.ndarray:
+        """The run's held-out costs on the racing folds, its surfaces built for later."""
+        options = {"tau": self.context.tau, "noise": self.context.noise}
+        out = []
+        for f in range(self.first):
+            result = self.results[job][f]
+            self.casters[job][f] = judge.Caster(result["vertices"], result["faces"])
+            out.append(judge.check(self.context.folds[f].test, self.casters[job][f],
+                                   **options).cost)
+        return np.concatenate(out)
+
+    def race(self, reference: Sequence[Candidate]) -> list[tuple[int, int]]:
+        """``outpaced`` over the runs still in and the ``reference`` candidates (scored,
+        fitted before, uncarved): the runs that leave are judged "outpaced"; returns the runs
+        to fit on the other folds."""
+        folds = self.context.folds[:self.first]
+        m = sum(len(f.block) for f in folds)
+        block = np.concatenate([f.block for f in folds])
+        # the runs fitted on the racing folds, none of their fits failed (a run fitted on
+        # every fold may have failed on a later one)
+        pool = [job for job in self.jobs if job in self.partial and all(
+            r is None or r.get("status") == "ok" for r in self.results[job])]
+        partial = [c.cost[:m] for c in reference] + [self.partial[job] for job in pool]
+        racing = [False] * len(reference) + [self.raced(job) for job in pool]
+        shut = [bool(c.closed) for c in reference] + [
+            closed(self.results[job][0]["faces"]) for job in pool]
+        leaves = outpaced(partial, block, racing, shut)[len(reference):]
+        for job, gap in zip(pool, leaves, strict=True):
+            if gap is not None:
+                self.judged[job] = [self._outpaced(job, *gap)]
+                del self.casters[job]   # its surfaces' scenes are not cast against again
+        # the longest first, by their racing folds' times: the workers finish together
+        return sorted((job for job in self.jobs if self.raced(job) and job not in self.judged),
+                      key=lambda job: -self._fit_s(job))
+
+    def _fit_s(self, job: tuple[int, int]) -> float:
+        """The run's fit time on the racing folds [s, process time]."""
+        return sum(r.get("process_time_s") or 0.0 for r in self.results[job][:self.first])
+
+    def _outpaced(self, job: tuple[int, int], gap: float, se: float) -> Candidate:
+        return Candidate(self.run(job), self.level(job), status="outpaced",
+                         fit_s=self._fit_s(job),
+                         reason=f"on the first {self.first} folds its held-out chi-square was "
+                                f"{gap:.3g} +- {se:.2g} above the best's (more than "
+                                f"{RACE_SES:g} standard errors): not fitted on the others")
+
+    def candidates(self) -> dict[int, list[list[Candidate]]]:
+        """Per depth and run in order, the run's candidate and its carved twin if any."""
+        return {depth: [self.judged[i, j] for j in range(len(runs))]
+                for i, (depth, runs) in enumerate(self.levels)}
+
+
 def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, limits: Limits,
-                   n_workers: int | None) -> dict[int, list[list[Candidate]]]:
-    """Fit every run of ``levels`` ((depth, runs) pairs) on every fold, each fit in its own
-    limited process, a few at a time, and judge each run (``_judged``) as soon as its folds
-    are fitted, while the other fits go on. The finest level's fits are handed out first (they
-    take the longest: the workers stay busy to the end, and the largest surfaces are judged
-    while the small ones are fitted). Returns, per depth and run in order, the run's candidate
-    and its carved twin if any."""
-    from concurrent.futures import ThreadPoolExecutor, as_completed
+                   n_workers: int | None, reference: Sequence[Candidate] = ()
+                   ) -> dict[int, list[list[Candidate]]]:
+    """Fit every run of ``levels`` ((depth, runs) pairs) on the first ``RACE_FOLDS`` folds,
+    then the runs the race leaves in (``outpaced``, against each other and the ``reference``
+    candidates) on the other folds (a run of a level not raced on every fold at once), each
+    fit in its own limited process, a few at a time; each
+    run is judged (``_judged``) as soon as its folds are fitted, while the other fits go on.
+    The finest level's fits are handed out first (they take the longest: the workers stay busy,
+    and the largest surfaces are judged while the small ones are fitted), and on the other
+    folds the runs that took longest on the first ones. Returns, per depth
+    and run in order, the run's candidate and its carved twin if any."""
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
     from tqdm import tqdm
 
@@ -498,31 +618,44 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
 
     workers = n_workers or max(1, len(os.sched_getaffinity(0)))
     folds = context.folds
-    jobs = [(i, j) for i in reversed(range(len(levels))) for j in range(len(levels[i][1]))]
-    results = {job: [None] * len(folds) for job in jobs}
-    judged: list[list[list[Candidate]]] = [[[] for _ in runs] for _, runs in levels]
+    state = _Race(levels, context)
     depths = ", ".join(str(depth) for depth, _ in levels)
     with ThreadPoolExecutor(max_workers=workers) as pool, \
-            tqdm(total=len(jobs) * len(folds), desc=f"auto level {depths}", unit="fit",
+            tqdm(total=len(state.jobs) * len(folds), desc=f"auto level {depths}", unit="fit",
                  disable=None, leave=False) as bar:
-        futures = {pool.submit(run_isolated, levels[i][1][j], fold.prepared,
-                               threads=FIT_THREADS, **limits.kwargs()): ((i, j), f)
-                   for i, j in jobs for f, fold in enumerate(folds)}
-        for future in as_completed(futures):
-            (i, j), f = futures[future]
-            results[i, j][f] = future.result()
-            bar.update(1)
-            if all(r is not None for r in results[i, j]):
-                judged[i][j] = _judged(levels[i][1][j], levels[i][0], results.pop((i, j)),
-                                       context)
-    return {depth: judged[i] for i, (depth, _) in enumerate(levels)}
+        def submit(jobs, fold_range):
+            return {pool.submit(run_isolated, state.run(job), folds[f].prepared,
+                                threads=FIT_THREADS, **limits.kwargs()): (job, f)
+                    for job in jobs for f in fold_range}
+
+        pending = submit([job for job in state.jobs if state.raced(job)], range(state.first))
+        pending |= submit([job for job in state.jobs if not state.raced(job)], range(len(folds)))
+        raced = state.first == len(folds)
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                state.arrived(*pending.pop(future), future.result())
+                bar.update(1)
+            if not pending and not raced:
+                raced = True
+                going = state.race(reference)
+                left = sum(map(state.raced, state.jobs)) - len(going)
+                bar.total -= left * (len(folds) - state.first)
+                bar.refresh()
+                pending = submit(going, range(state.first, len(folds)))
+            state.judge_complete()   # while the workers fit
+    return state.candidates()
 
 
-def _judged(run: Run, level: int, results: list[dict], context: _Context) -> list[Candidate]:
+def _judged(run: Run, level: int, results: list[dict], context: _Context,
+            built: list | None = None) -> list[Candidate]:
     """A run fitted on every fold, judged (``judge_candidate``), and its carved twin when it
-    fills free space (``fills_free_space``). Each fold's surface is built for the casts once:
-    the twin is carved on the scenes its candidate was judged on."""
-    casters = ([judge.Caster(r["vertices"], r["faces"]) for r in results]
+    fills free space (``fills_free_space``). Each fold's surface is built for the casts once
+    (``built``: the folds' surfaces already built, None where not): the twin is carved on the
+    scenes its candidate was judged on."""
+    built = built or [None] * len(results)
+    casters = ([b or judge.Caster(r["vertices"], r["faces"]) for r, b in zip(results, built,
+                                                                          strict=True)]
                if all(r.get("status") == "ok" for r in results) else None)
     candidate = judge_candidate(run, level, results, context, casters=casters)
     if not fills_free_space(candidate):
@@ -612,7 +745,7 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
     """Fit and judge the ladder's levels, coarse to fine, until one is not measurably better
     (module docstring). The levels fitted whatever the earlier ones gave (``ALWAYS_LEVELS``)
     are fitted together; each later one once the ladder has not stopped before it. Returns
-    the candidates and a note on where the ladder stopped."""
+    the candidates and a note on the runs the race left out and where the ladder stopped."""
     candidates: list[Candidate] = []
     fitted = _fit_and_judge(list(enumerate(levels[:ALWAYS_LEVELS])), context, limits=limits,
                             n_workers=n_workers)
@@ -620,16 +753,76 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
         before = _best(candidates)
         if depth not in fitted:
             fitted |= _fit_and_judge([(depth, level)], context, limits=limits,
-                                     n_workers=n_workers)
+                                     n_workers=n_workers, reference=[
+                                         c for c in candidates if c.scored and not c.carved])
         candidates += [c for judged in fitted[depth] for c in judged]
         rest = levels[depth + 1:]
         if depth + 1 >= ALWAYS_LEVELS and rest and _stops(candidates, before, depth):
             candidates += [Candidate(run, later, status="skipped")
                            for later, runs in enumerate(rest, start=depth + 1) for run in runs]
-            return candidates, (f"the ladder stopped after level {depth} of {len(levels) - 1} "
-                                f"({sum(map(len, rest))} finer candidates not fitted): it was "
-                                "not measurably better than the levels before it")
-    return candidates, ""
+            return candidates, _race_note(candidates) + (
+                f"the ladder stopped after level {depth} of {len(levels) - 1} "
+                f"({sum(map(len, rest))} finer candidates not fitted): it was not measurably "
+                "better than the levels before it")
+    return candidates, _race_note(candidates).removesuffix("; ")
+
+
+def _race_note(candidates: list[Candidate]) -> str:
+    """The runs the race left out, for the reason (empty, or ending in "; ")."""
+    out = [c.label for c in candidates if c.status == "outpaced"]
+    return (f"{len(out)} of them fitted on the first {RACE_FOLDS} folds only, far worse than the "
+            f"best there ({', '.join(out)}); ") if out else ""
+
+
+def _far(partial: Sequence[np.ndarray | None], block: np.ndarray, among: Sequence[bool]
+         ) -> list[tuple[float, float] | None]:
+    """Per run of ``among`` (``outpaced``), its excess over the lowest mean cost of ``among``
+    and the paired standard error of that excess when it exceeds ``RACE_SES`` of them."""
+    means = [float(np.mean(p)) if p is not None and a else np.inf
+             for p, a in zip(partial, among, strict=True)]
+    out: list[tuple[float, float] | None] = [None] * len(partial)
+    best = int(np.argmin(means)) if means else 0
+    if not means or not np.isfinite(means[best]):
+        return out
+    for i in np.flatnonzero(np.isfinite(means)):
+        gap, se = judge.block_mean_se(partial[i] - partial[best], block)
+        if se > 0.0 and gap > RACE_SES * se:
+            out[i] = (gap, se)
+    return out
+
+
+def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
+             racing: Sequence[bool], closed: Sequence[bool]
+             ) -> list[tuple[float, float] | None]:
+    """The race (``RACE_SES``): which runs leave the choice after the first folds.
+
+    A raced run leaves when its mean held-out cost exceeds the best run's by more than
+    ``RACE_SES`` paired standard errors; a closed one only when it also exceeds the best closed
+    run's so (the best closed candidate measures the coverage, ``choose``).
+
+    Parameters
+    ----------
+    partial : sequence of (m,) float64 or None
+        Each run's held-out costs on the racing folds' tested strikes (the same strikes, in
+        the same order, for every run); None: the run failed there.
+    block : (m,) int64
+        The block of each of those strikes.
+    racing : sequence of bool
+        Whether each run may leave (its level is raced, ``RACE_LEVEL``).
+    closed : sequence of bool
+        Whether each run's surface on the first fold is closed (``closed``).
+
+    Returns
+    -------
+    list of (float, float) or None
+        Per run that leaves, its mean cost's excess over the best's and the paired standard
+        error of that excess; None for the others.
+    """
+    every = _far(partial, block, [True] * len(partial))
+    enclosing = _far(partial, block, closed)
+    return [gap if raced and gap is not None and (not shut or enclosing[i] is not None)
+            else None
+            for i, (gap, raced, shut) in enumerate(zip(every, racing, closed, strict=True))]
 
 
 def paired_gaps(candidates: list[Candidate], best: int, block: np.ndarray
@@ -897,6 +1090,8 @@ def format_choice(choice: AutoChoice) -> str:
         start = f"{mark:2}{c.label[:30]:<30} {c.level:>3} {c.run.kind:<13}"
         if c.status == "skipped":
             lines.append(f"{start} not fitted (the ladder stopped before its level)")
+        elif c.status == "outpaced":
+            lines.append(f"{start} left after {RACE_FOLDS} folds, far worse than the best")
         elif not c.scored:
             lines.append(f"{start} FAILED: {c.reason[:50]}")
         else:

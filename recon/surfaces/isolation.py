@@ -21,7 +21,8 @@ interpreter nor fresh imports:
 - ``warm_truth`` has idle workers build a truth's ``metrics.Truth`` ahead of the runs, while
   the caller still reads and prepares the cloud;
 - a worker is replaced after a crash, a hang, a memory failure, or ``WORKER_RUNS`` runs (Open3D's
-  Poisson is known to crash after hundreds of calls in one process);
+  Poisson is known to crash after hundreds of calls in one process); in the last case its
+  replacement is started ``WARM_AHEAD`` runs ahead, so that no run waits for its imports;
 - every outcome becomes a result dict: ``status`` "ok" or "failed", and for a failure its
   ``failure`` kind and a one-line ``reason``.
 
@@ -82,6 +83,9 @@ START_TIMEOUT_S = 300.0
 # Runs a worker does before it is replaced (Open3D's Poisson crashes after hundreds of calls in
 # one process, reported upstream; 50 keeps far from that and costs one start-up per 50 runs).
 WORKER_RUNS = 50
+# Runs before a worker's last at which its replacement is started, so that the replacement has
+# imported its modules (3 to 8 s) by the time the worker ends instead of delaying the next run.
+WARM_AHEAD = 3
 # Modules a worker imports before its first job (the methods' and scoring's heavy imports).
 WORKER_PRELOAD = ("numpy", "scipy.spatial", "open3d", "pymeshlab", "metrics.score")
 # How often the parent polls the worker, seconds (start, growing to the maximum). A finished run
@@ -485,13 +489,19 @@ def warm_truth(truth: tuple[np.ndarray, np.ndarray], score_options: dict | None 
 
 def _give_back(worker: _Worker, healthy: bool) -> None:
     """Return a worker to the pool, or end it (after a failure that may have left it unwell,
-    or after ``WORKER_RUNS`` runs)."""
+    or after ``WORKER_RUNS`` runs); ``WARM_AHEAD`` runs before its end, start its replacement
+    (idle behind the warm workers, ``_take`` takes the last)."""
     with _POOL_LOCK:
         _BUSY.discard(worker)
-        if healthy and worker.alive() and worker.runs < WORKER_RUNS:
+        kept = healthy and worker.alive() and worker.runs < WORKER_RUNS
+        if kept:
             _IDLE.setdefault(worker.threads, []).append(worker)
-            return
-    worker.stop()
+    if not kept:
+        worker.stop()
+    elif worker.runs == WORKER_RUNS - WARM_AHEAD:
+        spare = _Worker(worker.threads)
+        with _POOL_LOCK:
+            _IDLE.setdefault(worker.threads, []).insert(0, spare)
 
 
 @atexit.register

@@ -252,3 +252,27 @@ def test_a_stopped_sweep_kills_its_runs_and_starts_no_more_until_resumed(cloud):
         resume_runs()
         waiting.join(60)
     assert run_isolated("convex-hull", cloud)["status"] == "ok"
+
+
+def test_a_worker_s_replacement_is_started_before_it_ends(cloud, monkeypatch):
+    """``WARM_AHEAD`` runs before a worker's last, its replacement starts and waits behind it;
+    the worker does its remaining runs, and the run after its last goes to the replacement."""
+    from recon.surfaces import isolation
+
+    def idle_pids():
+        return [w.proc.pid for w in isolation._IDLE.get(None, [])]
+
+    monkeypatch.setattr(isolation, "WORKER_RUNS", 4)
+    monkeypatch.setattr(isolation, "WARM_AHEAD", 2)
+    isolation.shutdown_workers()
+    assert run_isolated("convex-hull", cloud)["status"] == "ok"
+    [old] = idle_pids()
+    assert run_isolated("convex-hull", cloud)["status"] == "ok"   # run 2 of 4: a spare starts
+    spare, again = idle_pids()
+    assert again == old and spare != old
+    for _ in range(2):   # runs 3 and 4 on the old worker, which then ends
+        assert run_isolated("convex-hull", cloud)["status"] == "ok"
+    assert idle_pids() == [spare]
+    assert run_isolated("convex-hull", cloud)["status"] == "ok"
+    assert idle_pids() == [spare]
+    isolation.shutdown_workers()
