@@ -4,24 +4,11 @@ a beam through a narrow crack of a surface is told from a beam through a wide ho
 from __future__ import annotations
 
 import numpy as np
+from cracked_plates import CRACKED, HOLED
 
 from benchmarks import judge_rules
 from recon.surfaces import judge
 
-
-def _plate(rectangles) -> tuple[np.ndarray, np.ndarray]:
-    """Axis-aligned rectangles (x0, x1, y0, y1) in the plane z = 0, two triangles each."""
-    vertices, faces = [], []
-    for n, (x0, x1, y0, y1) in enumerate(rectangles):
-        vertices += [(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0)]
-        faces += [(4 * n, 4 * n + 1, 4 * n + 2), (4 * n, 4 * n + 2, 4 * n + 3)]
-    return np.array(vertices, dtype=float), np.array(faces, dtype=np.int64)
-
-
-# A 4 x 4 m plate with a 0.1 m crack along x = 0; another with a 1.4 m square hole at the centre.
-CRACKED = _plate([(-2.0, -0.05, -2.0, 2.0), (0.05, 2.0, -2.0, 2.0)])
-HOLED = _plate([(-2.0, -0.7, -2.0, 2.0), (0.7, 2.0, -2.0, 2.0),
-                (-0.7, 0.7, -2.0, -0.7), (-0.7, 0.7, 0.7, 2.0)])
 RADIUS = 0.3   # the crack's limit [m] (auto.miss_reach in the harness)
 
 
