@@ -548,13 +548,12 @@ class _Race:
 
     def _costs(self, job: tuple[int, int]) -> np.ndarray:
         """The run's held-out costs on the racing folds, its surfaces built for later."""
-        options = {"tau": self.context.tau, "noise": self.context.noise}
         out = []
         for f in range(self.first):
             result = self.results[job][f]
             self.casters[job][f] = judge.Caster(result["vertices"], result["faces"])
-            out.append(judge.check(self.context.folds[f].test, self.casters[job][f],
-                                   **options).cost)
+            out.append(held_out_check(self.context.folds[f], self.casters[job][f],
+                                      self.context).cost)
         return np.concatenate(out)
 
     def race(self, reference: Sequence[Candidate]) -> list[tuple[int, int]]:
@@ -681,7 +680,7 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
     casters = casters or [judge.Caster(r["vertices"], r["faces"]) for r in results]
     held, fit = [], []
     for caster, fold in zip(casters, context.folds, strict=True):
-        held.append(judge.check(fold.test, caster, crack=context.miss_reach, **options))
+        held.append(held_out_check(fold, caster, context))
         fit.append(judge.check(fold.train, caster, fitted=True, **options))
     cost = np.concatenate([h.cost for h in held])
     distance = np.concatenate([h.distance for h in held])
@@ -706,6 +705,13 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                    heldout=judge.HeldOut(distance, np.concatenate([h.sigma_normal for h in held]),
                                          context.block),
                    cost=cost, mesh=(vertices, faces))
+
+
+def held_out_check(fold: _Fold, caster: judge.Caster, context: _Context) -> judge.Check:
+    """A fold's tested strikes against the surface fitted on the others (step 2 of the module
+    docstring): what every candidate's statistic, raced or judged, is made of."""
+    return judge.check(fold.test, caster, tau=context.tau, noise=context.noise,
+                       crack=context.miss_reach)
 
 
 def fills_free_space(candidate: Candidate) -> bool:
