@@ -1039,8 +1039,9 @@ def markdown(summaries: list[dict], totals_by: dict, preds: dict, *, command: st
         "the truth. F: auto's F-score over the best run's; C: auto's Chamfer distance over the "
         "best's; rank among the successful runs (1 = best); cost: auto's wall time over the "
         "compare's on the same cloud (wall clock on shared cores; a resumed suite times auto "
-        "anew and keeps the compare's time from the run that did it; fits: the summed process "
-        "time of auto's isolated fits over the compare's runs, less sensitive to the load).",
+        "anew and keeps the compare's time from the run that did it; fits: the summed job "
+        "time (hand-over to result, elapsed) of auto's isolated fits over the compare's runs', "
+        "which leaves out the main processes' work).",
         "",
         "**Held out** (marked * below): " + (", ".join(held) if held else "none in this run")
         + ". Chosen and fixed (new seeds of the generated bodies, a new polyhedron size, real "

@@ -64,7 +64,7 @@ nav ul { columns: 2; }
 # Column headers a reader knows, by key; other keys read as words with their unit in brackets
 # (``header``).
 HEADERS = {
-    "wall_time_s": "wall time [s]", "process_time_s": "CPU time [s]",
+    "wall_time_s": "wall time [s]", "process_time_s": "job time [s]",
     "load_time_s": "load time [s]", "score_time_s": "scoring time [s]",
     "case_wall_time_s": "worker time [s]", "peak_memory_mb": "peak memory [MB]",
     "n_faces": "faces", "n_points": "points", "n_cases": "cases", "n_failed": "failed",

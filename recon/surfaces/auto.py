@@ -183,7 +183,8 @@ class Candidate:
     reason : str
         Why it failed (empty otherwise).
     fit_s : float or None
-        The isolated fit's process time [s].
+        The isolated fits' job time [s]: hand-over to result in their workers, summed over
+        the folds (``run_isolated``'s ``process_time_s``; elapsed, not CPU).
     n_faces, n_params : int or None
     closed : bool or None
         No edge borders a single face.
@@ -581,7 +582,7 @@ class _Race:
                       key=lambda job: -self._fit_s(job))
 
     def _fit_s(self, job: tuple[int, int]) -> float:
-        """The run's fit time on the racing folds [s, process time]."""
+        """The run's fit time on the racing folds [s, job time: hand-over to result]."""
         return sum(r.get("process_time_s") or 0.0 for r in self.results[job][:self.first])
 
     def _outpaced(self, job: tuple[int, int], gap: float, se: float) -> Candidate:
