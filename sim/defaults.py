@@ -427,3 +427,7 @@ GAP_RESIDUAL_QUANTILE = 0.25
 # last re-admission: the chaser's view of the target turns as it orbits and the target spins.
 GAP_ASIDE_WALKS = 3
 GAP_ASIDE_INTERVALS = 24
+# The unknown voxels the struck ones enclose (a body's interior behind its struck shell) leave
+# the frontier (sim/surface_map.py, SurfaceMap.enclose): a flood fill over the occupied voxels'
+# box, run by a plan when this many intervals have passed since the last one.
+GAP_ENCLOSE_INTERVALS = 24
