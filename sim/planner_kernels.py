@@ -471,52 +471,49 @@ def _walls(state, base, s1, s2, extent):
 @njit(cache=True)
 def _reach(wall, extent):
     """The cells (flat mask over a box of ``extent`` (3,) cells) that a path of face
-    neighbours through cells not ``wall`` joins to the box's faces (a breadth-first fill)."""
+    neighbours through cells not ``wall`` joins to the box's faces: raster sweeps forward and
+    back over the box, each carrying reach from the three neighbours already swept, until one
+    changes nothing (a few, for space outside a body)."""
     e0, e1, e2 = extent
     f1 = e1 * e2
     reached = np.zeros(e0 * f1, dtype=np.bool_)
-    queue = np.empty(e0 * f1, dtype=np.int64)
-    n = 0
     for x in range(e0):
         for y in range(e1):
             for z in range(e2):
                 if x == 0 or y == 0 or z == 0 or x == e0 - 1 or y == e1 - 1 or z == e2 - 1:
                     reached[x * f1 + y * e2 + z] = True
-                    queue[n] = x * f1 + y * e2 + z
-                    n += 1
-    head = 0
-    while head < n:
-        local = queue[head]
-        head += 1
-        x, rest = divmod(local, f1)
-        y, z = divmod(rest, e2)
-        for at, end, step in ((x, e0, f1), (y, e1, e2), (z, e2, 1)):
-            for there, ok in ((local + step, at < end - 1), (local - step, at > 0)):
-                if ok and not (reached[there] or wall[there]):
-                    reached[there] = True
-                    queue[n] = there
-                    n += 1
+    changed = True
+    while changed:
+        changed = False
+        for sign in (1, -1):
+            for x in range(1, e0 - 1) if sign > 0 else range(e0 - 2, 0, -1):
+                for y in range(1, e1 - 1) if sign > 0 else range(e1 - 2, 0, -1):
+                    row = x * f1 + y * e2
+                    for z in range(1, e2 - 1) if sign > 0 else range(e2 - 2, 0, -1):
+                        c = row + z
+                        if not reached[c] and not wall[c] and (
+                                reached[c - sign] or reached[c - sign * e2]
+                                or reached[c - sign * f1]):
+                            reached[c] = True
+                            changed = True
     return reached
 
 
 @njit(cache=True)
 def _grow(mask, extent):
     """``mask`` (flat, over a box of ``extent`` (3,) cells) grown by one cell toward its 26
-    neighbours (the 3 x 3 x 3 cube, one axis at a time): a new array."""
+    neighbours (the 3 x 3 x 3 cube, one axis at a time): a new array. Every face cell of the box
+    must be set already: a step along the flat array that wraps across the box's edge lands on
+    one of them."""
     e0, e1, e2 = extent
-    f1 = e1 * e2
+    n = e0 * e1 * e2
     out = mask.copy()
-    for stride, length in ((f1, e0), (e2, e1), (1, e2)):
+    for stride in (1, e2, e1 * e2):
         src = out.copy()
-        for first in range(0, e0 * f1, stride * length):   # cell = first + t * stride + i
-            for t in range(length):
-                row = first + t * stride
-                for cell in range(row, row + stride):
-                    if src[cell]:
-                        if t:
-                            out[cell - stride] = True
-                        if t < length - 1:
-                            out[cell + stride] = True
+        for c in range(stride, n):
+            out[c] = out[c] | src[c - stride]
+        for c in range(n - stride):
+            out[c] = out[c] | src[c + stride]
     return out
 
 
