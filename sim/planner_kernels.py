@@ -479,24 +479,32 @@ def _reach(wall, extent):
     reached = np.zeros(e0 * f1, dtype=np.bool_)
     for x in range(e0):
         for y in range(e1):
+            edge = x == 0 or y == 0 or x == e0 - 1 or y == e1 - 1
+            row = x * f1 + y * e2
             for z in range(e2):
-                if x == 0 or y == 0 or z == 0 or x == e0 - 1 or y == e1 - 1 or z == e2 - 1:
-                    reached[x * f1 + y * e2 + z] = True
-    changed = True
-    while changed:
-        changed = False
-        for sign in (1, -1):
-            for x in range(1, e0 - 1) if sign > 0 else range(e0 - 2, 0, -1):
-                for y in range(1, e1 - 1) if sign > 0 else range(e1 - 2, 0, -1):
-                    row = x * f1 + y * e2
-                    for z in range(1, e2 - 1) if sign > 0 else range(e2 - 2, 0, -1):
-                        c = row + z
-                        if not reached[c] and not wall[c] and (
-                                reached[c - sign] or reached[c - sign * e2]
-                                or reached[c - sign * f1]):
-                            reached[c] = True
-                            changed = True
+                reached[row + z] = edge or z == 0 or z == e2 - 1
+    while _raster(reached, wall, extent, 1) | _raster(reached, wall, extent, -1):
+        pass
     return reached
+
+
+@njit(cache=True)
+def _raster(reached, wall, extent, sign):
+    """One sweep of :func:`_reach` over the box's inner cells, forward (``sign`` 1) or back
+    (-1): whether it reached a cell."""
+    e0, e1, e2 = extent
+    f1 = e1 * e2
+    changed = False
+    for x in range(1, e0 - 1) if sign > 0 else range(e0 - 2, 0, -1):
+        for y in range(1, e1 - 1) if sign > 0 else range(e1 - 2, 0, -1):
+            row = x * f1 + y * e2
+            for z in range(1, e2 - 1) if sign > 0 else range(e2 - 2, 0, -1):
+                c = row + z
+                if not reached[c] and not wall[c] and (
+                        reached[c - sign] or reached[c - sign * e2] or reached[c - sign * f1]):
+                    reached[c] = True
+                    changed = True
+    return changed
 
 
 @njit(cache=True)
