@@ -432,8 +432,8 @@ GAP_ASIDE_INTERVALS = 24
 # box, run by a plan when GAP_ENCLOSE_INTERVALS intervals have passed since the last one; the
 # wait doubles after a fill that enclosed nothing, up to GAP_ENCLOSE_MAX_INTERVALS, and is back
 # to GAP_ENCLOSE_INTERVALS after one that enclosed some. A shell closes once, most of the way
-# (the asteroid's interior, 33,000 voxels, was enclosed by one fill at 22 h, then a hundred more
-# in the next 80 h; on RSO-A 6,000 by one fill, then none), and a fill costs about as much as
-# three plans.
+# (with a fill every 24 intervals the 85 deg asteroid's interior, 33,000 voxels, was enclosed by
+# one fill at about 23 h and 108 more voxels by the next 35 fills; RSO-A's inside, 6,000, by one
+# fill, then none), and a fill costs about as much as two or three plans (docs/decisions.md).
 GAP_ENCLOSE_INTERVALS = 24
 GAP_ENCLOSE_MAX_INTERVALS = 96

@@ -31,10 +31,12 @@ struck or crossed voxel leaves the frontier, and the list when it is next read).
 seen from one side keeps the unknown voxels behind it, so it stays on the frontier until a beam
 from its other side strikes it (space behind a plate is joined to the outside around its rim).
 A solid body's unknown interior is frontier too until :meth:`SurfaceMap.enclose` finds it
-enclosed: once no path of face neighbours through voxels not occupied leads from it out of the
-occupied voxels' box (its struck shell is closed), it is marked ``ENCLOSED`` and is frontier no
-more. A shell with a hole a voxel wide still joins its interior to the outside, so the interior
-stays frontier until the hole is struck.
+enclosed: once the space outside, filled from the faces of the occupied voxels' box through
+voxels not occupied with gaps of up to two voxels between occupied ones taken as closed (a
+surface struck voxel by voxel leaves unstruck voxels at its corners), comes nowhere near it
+(its struck shell is closed), it is marked ``ENCLOSED`` and is frontier no more, for good. An
+unknown voxel in a gap of the struck surface lies next to that outside space and stays
+frontier, as does the space behind a plate.
 
 :meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by
 walking the beam's line voxel by voxel, from where it enters the occupied voxels' box toward the
@@ -250,12 +252,12 @@ class SurfaceMap:
         return self._frontier
 
     def enclose(self) -> int:
-        """Mark the unknown voxels the occupied ones enclose (no path of face neighbours through
-        voxels not occupied leads from them out of the occupied voxels' box: a body's interior
-        behind its struck shell) as no frontier, for good (voxels only ever become occupied, so
-        an enclosed voxel stays enclosed; with no voxel struck for the first time since the
-        last call there is nothing new to mark). A flood fill over the box, compiled
-        (sim/planner_kernels.py). Returns how many voxels were marked now."""
+        """Mark the unknown voxels the occupied ones enclose (a body's interior behind its
+        struck shell; gaps of up to two voxels in the shell taken as closed, an unknown voxel
+        in such a gap kept: sim/planner_kernels.py, ``enclose``) as no frontier, for good
+        (voxels only ever become occupied, so an enclosed voxel stays enclosed; with no voxel
+        struck for the first time since the last call there is nothing new to mark). A flood
+        fill over the occupied voxels' box, compiled. Returns how many voxels were marked now."""
         from sim import planner_kernels as kernels
 
         if len(self.occupied) == self._enclosed_at:     # nothing struck since: nothing new
