@@ -427,3 +427,13 @@ GAP_RESIDUAL_QUANTILE = 0.25
 # last re-admission: the chaser's view of the target turns as it orbits and the target spins.
 GAP_ASIDE_WALKS = 3
 GAP_ASIDE_INTERVALS = 24
+# The unknown voxels the struck ones enclose (a body's interior behind its struck shell) leave
+# the frontier (sim/surface_map.py, SurfaceMap.enclose): a flood fill over the occupied voxels'
+# box, run by a plan when GAP_ENCLOSE_INTERVALS intervals have passed since the last one; the
+# wait doubles after a fill that enclosed nothing, up to GAP_ENCLOSE_MAX_INTERVALS, and is back
+# to GAP_ENCLOSE_INTERVALS after one that enclosed some. A shell closes once, most of the way
+# (with a fill every 24 intervals the 85 deg asteroid's interior, 33,000 voxels, was enclosed by
+# one fill at about 23 h and 108 more voxels by the next 35 fills; RSO-A's inside, 6,000, by one
+# fill, then none), and a fill costs about as much as two or three plans (docs/decisions.md).
+GAP_ENCLOSE_INTERVALS = 24
+GAP_ENCLOSE_MAX_INTERVALS = 96

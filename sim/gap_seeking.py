@@ -17,7 +17,11 @@ range; when that edge drifts by more than ``GAP_VOXEL_REBUILD`` as the target is
 rebuilt from every beam so far.
 
 The **frontier** is the unknown voxels next to a struck one: surface continuing into space no
-beam has examined, including the far side of a thin plate seen from one side.
+beam has examined, including the far side of a thin plate seen from one side; less the unknown
+voxels the struck ones enclose (a body's interior once its struck shell is closed,
+:meth:`SurfaceMap.enclose`), which a plan finds again when ``GAP_ENCLOSE_INTERVALS`` intervals
+have passed since the last time (a flood fill over the map: too costly for every plan), the
+wait doubled after a fill that found nothing new, up to ``GAP_ENCLOSE_MAX_INTERVALS``.
 
 **The plan** (:meth:`GapSeeker.command`). The law plans at most every ``GAP_PLAN_INTERVALS``
 intervals: it takes the intervals observed since into the map (all at once) and chooses the
@@ -47,8 +51,8 @@ least, where a fixed slew would keep sweeping, and never idles. With no candidat
 boresight holds its offset (no slew).
 
 **Candidates set aside** (in that least-struck phase). Late in a run most candidates are hidden
-from any one place (a body's unknown interior behind its struck shell, least-struck voxels hard
-to see), and an interval that finds fewer visible than it has shots walks them all. So each
+from any one place (least-struck voxels hard to see, unknown voxels inside a shell not yet
+closed), and an interval that finds fewer visible than it has shots walks them all. So each
 candidate keeps a count of the walks that found it hidden (in the map's grid, from plan to
 plan); one found hidden ``GAP_ASIDE_WALKS`` times is set aside: not walked again by the plan
 that holds it, not chosen by the next ones. A plan re-admits every set-aside candidate of its
@@ -74,6 +78,8 @@ from sim.defaults import (
     GAP_ASIDE_INTERVALS,
     GAP_ASIDE_WALKS,
     GAP_BLOCK_VOXELS,
+    GAP_ENCLOSE_INTERVALS,
+    GAP_ENCLOSE_MAX_INTERVALS,
     GAP_IDLE_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
@@ -188,6 +194,8 @@ class GapSeeker:
         self._idle = 0                                       # intervals with nothing to aim at
         self._interval = 0                                   # intervals commanded so far
         self._readmitted = 0                                 # at the last re-admission
+        self._enclosed = -GAP_ENCLOSE_INTERVALS              # at the last enclose,
+        self._enclose_wait = GAP_ENCLOSE_INTERVALS           # and intervals until the next
 
     # ------------------------------------------------------------------ the map
 
@@ -256,6 +264,11 @@ class GapSeeker:
         at most ``GAP_MAX_CANDIDATES``."""
         from sim import planner_kernels as kernels
 
+        if self._interval - self._enclosed >= self._enclose_wait:
+            marked = self.map.enclose()
+            self._enclosed = self._interval
+            self._enclose_wait = (GAP_ENCLOSE_INTERVALS if marked else
+                                  min(2 * self._enclose_wait, GAP_ENCLOSE_MAX_INTERVALS))
         keys = self.map.frontier()
         if self.residual:     # count <= np.quantile(count, GAP_RESIDUAL_QUANTILE), compiled
             rank = math.floor((len(self.map.count) - 1) * GAP_RESIDUAL_QUANTILE)

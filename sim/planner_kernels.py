@@ -9,6 +9,8 @@ that a process after the first loads them from disk instead of compiling them):
 - :func:`strike_index` and :func:`strike_merge`: the strikes into the occupied voxels and the
   frontier marks around the new ones;
 - :func:`carve`: the voxels the beams crossed before their strikes;
+- :func:`enclose`: the unknown voxels the struck voxels enclose (a flood fill from outside,
+  gaps of two voxels closed);
 - :func:`hidden`: which voxels beams from a few positions reach (a walk through the map);
 - :func:`sweep`: one interval's aims (the sweep's order, visibility tested in that order until
   the shots are used, the slew limits) and the commanded turns; it counts, per voxel, the walks
@@ -41,6 +43,7 @@ from sim.surface_map import (
     BLOCK_RADIUS,
     BLOCK_SLACK,
     CROSSED,
+    ENCLOSED,
     FRONTIER,
     HIDDEN_MAX,
     HIDDEN_STEP,
@@ -48,8 +51,8 @@ from sim.surface_map import (
     TRAVERSAL_STEP,
 )
 
-_OCC, _CROSSED, _FRONT = int(OCCUPIED), int(CROSSED), int(FRONTIER)
-_KNOWN = _OCC | _CROSSED | _FRONT
+_OCC, _CROSSED, _FRONT, _ENCLOSED = int(OCCUPIED), int(CROSSED), int(FRONTIER), int(ENCLOSED)
+_KNOWN = _OCC | _CROSSED | _FRONT | _ENCLOSED
 _NOT_FRONT = 0xFF ^ _FRONT          # uint8 bit masks, as plain ints
 
 
@@ -410,6 +413,138 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
                     + s2 * min(max(np.int64(o1 + along * d1), 0), n1)
                     + min(max(np.int64(o2 + along * d2), 0), n2))
             state[cell] = (state[cell] | _CROSSED) & _NOT_FRONT
+
+
+@njit(cache=True)
+def enclose(state, shape, corner, lo, hi):
+    """Mark the unknown voxels enclosed by occupied ones, gaps of up to two voxels closed.
+
+    The occupied voxels grown by one voxel (their 26 neighbours) are walls; the voxels that a
+    path of face neighbours through voxels not walls joins to the faces of the occupied voxels'
+    box grown by two are reached; the voxels reached or next to one (26 neighbours) are near
+    the outside (the space outside, opened by the 3 x 3 x 3 cube). An unknown voxel is
+    enclosed unless it or one of its face neighbours not occupied is near the outside (so an
+    unknown voxel in a gap of the struck surface stays frontier, the unknown layer behind a
+    closed shell does not): it gets ``ENCLOSED`` and loses ``FRONTIER``. Voxels enclosed
+    already are walls too (none is reached).
+
+    Parameters
+    ----------
+    state : (g,) uint8: the flat state grid, updated in place
+    shape, corner : (3,) int64: the grid's shape and the voxel index of its first cell (the
+        grid holds the box ``lo - 2`` .. ``hi + 2``)
+    lo, hi : (3,) int64: the occupied voxels' index box (inclusive)
+
+    Returns
+    -------
+    int: how many voxels were marked enclosed now.
+    """
+    s1, s2 = shape[1] * shape[2], shape[2]
+    extent = (hi[0] - lo[0] + 5, hi[1] - lo[1] + 5, hi[2] - lo[2] + 5)
+    base = (lo[0] - 2 - corner[0]) * s1 + (lo[1] - 2 - corner[1]) * s2 + (lo[2] - 2 - corner[2])
+    wall = _walls(state, base, s1, s2, extent)
+    near = _grow(_reach(wall, extent), extent)
+    return _mark_enclosed(state, base, s1, s2, near, extent)
+
+
+@njit(cache=True)
+def _walls(state, base, s1, s2, extent):
+    """The walls of :func:`enclose`, a flat mask over the box of ``extent`` (3,) cells whose
+    first cell is ``state[base]`` (strides ``s1``, ``s2`` in ``state``): the occupied voxels
+    (none on the box's two outer layers) and their 26 neighbours, and the enclosed voxels."""
+    e0, e1, e2 = extent
+    f1 = e1 * e2
+    wall = np.zeros(e0 * f1, dtype=np.bool_)
+    for x in range(1, e0 - 1):
+        for y in range(1, e1 - 1):
+            for z in range(1, e2 - 1):
+                v = state[base + x * s1 + y * s2 + z]
+                if v & _ENCLOSED:
+                    wall[x * f1 + y * e2 + z] = True
+                elif v & _OCC:
+                    for a in range(x - 1, x + 2):
+                        for b in range(y - 1, y + 2):
+                            wall[a * f1 + b * e2 + z - 1:a * f1 + b * e2 + z + 2] = True
+    return wall
+
+
+@njit(cache=True)
+def _reach(wall, extent):
+    """The cells (flat mask over a box of ``extent`` (3,) cells) that a path of face
+    neighbours through cells not ``wall`` joins to the box's faces: raster sweeps forward and
+    back over the box, each carrying reach from the three neighbours already swept, until one
+    changes nothing (a few, for space outside a body)."""
+    e0, e1, e2 = extent
+    f1 = e1 * e2
+    reached = np.zeros(e0 * f1, dtype=np.bool_)
+    for x in range(e0):
+        for y in range(e1):
+            edge = x == 0 or y == 0 or x == e0 - 1 or y == e1 - 1
+            row = x * f1 + y * e2
+            for z in range(e2):
+                reached[row + z] = edge or z == 0 or z == e2 - 1
+    while _raster(reached, wall, extent, 1) | _raster(reached, wall, extent, -1):
+        pass
+    return reached
+
+
+@njit(cache=True)
+def _raster(reached, wall, extent, sign):
+    """One sweep of :func:`_reach` over the box's inner cells, forward (``sign`` 1) or back
+    (-1): whether it reached a cell."""
+    e0, e1, e2 = extent
+    f1 = e1 * e2
+    changed = False
+    for x in range(1, e0 - 1) if sign > 0 else range(e0 - 2, 0, -1):
+        for y in range(1, e1 - 1) if sign > 0 else range(e1 - 2, 0, -1):
+            row = x * f1 + y * e2
+            for z in range(1, e2 - 1) if sign > 0 else range(e2 - 2, 0, -1):
+                c = row + z
+                if not reached[c] and not wall[c] and (
+                        reached[c - sign] or reached[c - sign * e2] or reached[c - sign * f1]):
+                    reached[c] = True
+                    changed = True
+    return changed
+
+
+@njit(cache=True)
+def _grow(mask, extent):
+    """``mask`` (flat, over a box of ``extent`` (3,) cells) grown by one cell toward its 26
+    neighbours (the 3 x 3 x 3 cube, one axis at a time): a new array. Every face cell of the box
+    must be set already: a step along the flat array that wraps across the box's edge lands on
+    one of them."""
+    e0, e1, e2 = extent
+    n = e0 * e1 * e2
+    out = mask.copy()
+    for stride in (1, e2, e1 * e2):
+        src = out.copy()
+        for c in range(stride, n):
+            out[c] = out[c] | src[c - stride]
+        for c in range(n - stride):
+            out[c] = out[c] | src[c + stride]
+    return out
+
+
+@njit(cache=True)
+def _mark_enclosed(state, base, s1, s2, near, extent):
+    """Mark enclosed (:func:`enclose`) the unknown voxels of the box (as :func:`_walls`) that
+    are not ``near`` the outside and have no face neighbour near it and not occupied: how many."""
+    e0, e1, e2 = extent
+    f1 = e1 * e2
+    marked = 0
+    for x in range(1, e0 - 1):
+        for y in range(1, e1 - 1):
+            for z in range(1, e2 - 1):
+                local, cell = x * f1 + y * e2 + z, base + x * s1 + y * s2 + z
+                if state[cell] & (_OCC | _CROSSED | _ENCLOSED) or near[local]:
+                    continue
+                outside = False
+                for step, stride in ((f1, s1), (-f1, -s1), (e2, s2), (-e2, -s2), (1, 1), (-1, -1)):
+                    outside = outside or (near[local + step] and not state[cell + stride] & _OCC)
+                if not outside:
+                    state[cell] = (state[cell] | _ENCLOSED) & _NOT_FRONT
+                    marked += 1
+    return marked
 
 
 @njit(cache=True)

@@ -15,7 +15,8 @@ the points ``size * ((i, j, k) + [0, 1)^3)``. A voxel is
 - **unknown** otherwise.
 
 Voxel keys are the three integer indices packed into one int64. The occupied voxels are a sorted
-key array with their counts and views; the state of every voxel (occupied, crossed, frontier;
+key array with their counts and views; the state of every voxel (occupied, crossed, frontier,
+enclosed;
 in its upper bits the planner's count of walks that found the voxel hidden) is a byte in a
 dense grid over the box of the occupied voxels grown by the traversal margin,
 reallocated larger when that box grows, so that marking a beam's path or looking a voxel up is
@@ -28,8 +29,14 @@ the seen surface continues into space no beam has examined. It is kept up to dat
 struck and crossed (a struck voxel marks its unknown neighbours and adds them to a key list; a
 struck or crossed voxel leaves the frontier, and the list when it is next read). A thin plate
 seen from one side keeps the unknown voxels behind it, so it stays on the frontier until a beam
-from its other side strikes it; a solid body keeps its unknown interior, which
-:meth:`SurfaceMap.visible` predicts hidden once the surface around it is struck.
+from its other side strikes it (space behind a plate is joined to the outside around its rim).
+A solid body's unknown interior is frontier too until :meth:`SurfaceMap.enclose` finds it
+enclosed: once the space outside, filled from the faces of the occupied voxels' box through
+voxels not occupied with gaps of up to two voxels between occupied ones taken as closed (a
+surface struck voxel by voxel leaves unstruck voxels at its corners), comes nowhere near it
+(its struck shell is closed), it is marked ``ENCLOSED`` and is frontier no more, for good. An
+unknown voxel in a gap of the struck surface lies next to that outside space and stays
+frontier, as does the space behind a plate.
 
 :meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by
 walking the beam's line voxel by voxel, from where it enters the occupied voxels' box toward the
@@ -60,10 +67,10 @@ BLOCK_SLACK = 0.5
 # The six face neighbours.
 FACE_STEPS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
 # Bits of a voxel's state in the grid.
-OCCUPIED, CROSSED, FRONTIER = np.uint8(1), np.uint8(2), np.uint8(4)
-# The state's upper five bits are the planner's: how many times a walk toward the voxel found it
+OCCUPIED, CROSSED, FRONTIER, ENCLOSED = np.uint8(1), np.uint8(2), np.uint8(4), np.uint8(8)
+# The state's upper four bits are the planner's: how many times a walk toward the voxel found it
 # hidden (sim/gap_seeking.py, the set-aside candidates), in steps of HIDDEN_STEP up to HIDDEN_MAX.
-HIDDEN_STEP, HIDDEN_MAX = 8, 31
+HIDDEN_STEP, HIDDEN_MAX = 16, 15
 # When the grid must grow, it grows by this fraction of its edge on every side beyond what is
 # needed, so that a map seen piece by piece is reallocated a few times only.
 _GROW = 0.25
@@ -115,6 +122,7 @@ class SurfaceMap:
         self.cube_marks = np.zeros(0, dtype=bool)       # room for the planner's spread, all False
         self._box_version = 0                           # bumped when the index box changes
         self._carve_box = (None, None, None)            # (margin, version) -> box traversed
+        self._enclosed_at = 0                           # occupied voxels at the last enclose
 
     @property
     def occupied_centres(self) -> np.ndarray:
@@ -242,6 +250,22 @@ class SurfaceMap:
                 self._frontier, self._state.reshape(-1),
                 self._shape, self._corner)
         return self._frontier
+
+    def enclose(self) -> int:
+        """Mark the unknown voxels the occupied ones enclose (a body's interior behind its
+        struck shell; gaps of up to two voxels in the shell taken as closed, an unknown voxel
+        in such a gap kept: sim/planner_kernels.py, ``enclose``) as no frontier, for good
+        (voxels only ever become occupied, so an enclosed voxel stays enclosed; with no voxel
+        struck for the first time since the last call there is nothing new to mark). A flood
+        fill over the occupied voxels' box, compiled. Returns how many voxels were marked now."""
+        from sim import planner_kernels as kernels
+
+        if len(self.occupied) == self._enclosed_at:     # nothing struck since: nothing new
+            return 0
+        self._enclosed_at = len(self.occupied)
+        self._cover(self._index_lo - 2, self._index_hi + 2)
+        return int(kernels.enclose(self._state.reshape(-1), self._shape, self._corner,
+                                   self._index_lo, self._index_hi))
 
     def surface_frontier(self) -> np.ndarray:
         """Sorted keys (m,) of the occupied voxels sharing a face with a frontier voxel: seen

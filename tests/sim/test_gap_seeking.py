@@ -188,3 +188,31 @@ def test_candidates_found_hidden_are_set_aside_and_readmitted():
     assert np.isin(aside, law._keys).all()
     assert not kernels.hidden_counts(pool, *grid).any()
     np.testing.assert_array_equal(law._candidates(), pool)
+
+
+def test_a_plan_leaves_out_what_the_struck_voxels_enclose_and_fills_less_often_when_idle():
+    from sim.defaults import GAP_ENCLOSE_INTERVALS, GAP_ENCLOSE_MAX_INTERVALS
+    from sim.surface_map import SurfaceMap, unpack
+
+    law = GapSeeker(step=10.0, max_rate=math.radians(1), max_offset=math.radians(30),
+                    poses=None, beams=np.array([[0.0, 0.0, 1.0]]))
+    law.map = SurfaceMap(1.0)
+    # The shell of a cube of 6 x 6 x 6 voxels, struck from outside along each voxel's normal.
+    index = np.stack(np.meshgrid(*[np.arange(6)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    shell = index[((index == 0) | (index == 5)).any(axis=1)]
+    centres = shell + 0.5
+    out = centres - 3.0
+    out /= np.linalg.norm(out, axis=1)[:, None]
+    law.map.add(centres + 20.0 * out, -out, np.full(len(out), 20.0), margin=2.0)
+    inside = ((unpack(law.map.frontier()) >= 1) & (unpack(law.map.frontier()) <= 4)).all(axis=1)
+    assert inside.sum() == 4 ** 3 - 2 ** 3               # before the first fill
+    keys = law._candidates()                            # the first plan fills
+    assert len(keys) and not ((unpack(keys) >= 1) & (unpack(keys) <= 4)).all(axis=1).any()
+    assert law._enclose_wait == GAP_ENCLOSE_INTERVALS   # it enclosed some: the wait stays
+    waits = []
+    for _ in range(4):                                 # nothing new to enclose: the wait doubles
+        law._interval += law._enclose_wait
+        law._candidates()
+        waits.append(law._enclose_wait)
+    assert waits == [min(GAP_ENCLOSE_INTERVALS * 2 ** k, GAP_ENCLOSE_MAX_INTERVALS)
+                     for k in range(1, 5)]

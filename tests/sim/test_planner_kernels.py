@@ -21,6 +21,7 @@ from sim.surface_map import (
     BLOCK_RADIUS,
     BLOCK_SLACK,
     CROSSED,
+    ENCLOSED,
     FACE_STEPS,
     FRONTIER,
     HIDDEN_MAX,
@@ -445,3 +446,47 @@ def test_the_sweep_sets_aside_candidates_found_hidden_and_keeps_its_picks():
     again = hidden.copy()
     kernels.sweep(n, centres, aside, *args, again, 3)
     np.testing.assert_array_equal(again[walked_hidden], 3)
+
+
+def test_enclose_kernel_matches_an_opening_by_scipy():
+    """The kernel against scipy's morphology and connected components: the occupied voxels
+    grown by the 3 x 3 x 3 cube are walls; the components (face neighbours) of the rest that
+    touch the faces of the occupied box grown by two, grown back by the cube, are near the
+    outside; unknown voxels neither near it nor next to (a face) a voxel near it and not
+    occupied are the enclosed ones. A second call marks nothing more."""
+    from scipy import ndimage
+
+    cube = np.ones((3, 3, 3), dtype=bool)
+    rng = np.random.default_rng(3)
+    marked = []
+    for density in (0.02, 0.08, 0.15):
+        shape, corner = np.array([15, 13, 14]), np.array([-4, 7, -30])
+        state = np.zeros(tuple(shape), dtype=np.uint8)
+        inner = state[3:12, 2:11, 4:11]                     # holds the occupied box
+        inner[...] = np.where(rng.random(inner.shape) < density, OCCUPIED, 0)
+        inner |= np.where(rng.random(inner.shape) < 0.05, CROSSED | FRONTIER, 0).astype(np.uint8)
+        inner[inner & OCCUPIED > 0] &= ~FRONTIER
+        occupied = np.argwhere(state & OCCUPIED)
+        lo, hi = occupied.min(axis=0) + corner, occupied.max(axis=0) + corner
+        box = tuple(slice(a - c - 2, b - c + 3) for a, b, c in zip(lo, hi, corner, strict=True))
+        region = state[box]
+        walls = ndimage.binary_dilation(region & OCCUPIED > 0, structure=cube)
+        labels, _ = ndimage.label(~walls)
+        faces = np.unique(np.concatenate([labels[0].ravel(), labels[-1].ravel(),
+                                          labels[:, 0].ravel(), labels[:, -1].ravel(),
+                                          labels[:, :, 0].ravel(), labels[:, :, -1].ravel()]))
+        near = ndimage.binary_dilation(np.isin(labels, faces[faces > 0]), structure=cube)
+        outside = near | ndimage.binary_dilation(near & (region & OCCUPIED == 0),
+                                                 structure=ndimage.generate_binary_structure(3, 1))
+        expected = ~outside & (region & (OCCUPIED | CROSSED) == 0)
+        before = state.copy()
+        flat = state.reshape(-1)
+        marked.append(kernels.enclose(flat, shape, corner, lo, hi))
+        assert marked[-1] == expected.sum()
+        np.testing.assert_array_equal(state[box] & ENCLOSED > 0, expected)
+        want = before.copy()
+        want[box][expected] = (want[box][expected] | ENCLOSED) & ~FRONTIER
+        np.testing.assert_array_equal(state, want)
+        assert kernels.enclose(flat, shape, corner, lo, hi) == 0
+        np.testing.assert_array_equal(state, want)
+    assert marked[0] == 0 < marked[1] < marked[2]     # none (the free space percolates), pockets

@@ -154,3 +154,54 @@ def test_the_visibility_walk_agrees_with_beams_cast_against_the_voxels():
     # Predicted visible: mostly what the beams reach, and most of that (measured 0.89 and 0.93).
     assert both / (both + only_predicted) > 0.85 and both / cast > 0.85, (both, only_predicted,
                                                                            cast)
+
+
+def _shell(open_face: bool) -> SurfaceMap:
+    """A map whose struck voxels are the shell of the cube of voxels 0 .. 7 (edge 0.5 m) seen
+    from outside, without its +z face when ``open_face``: struck from 20 m out along the
+    outward normal of each shell voxel's centre, the beams' paths carved."""
+    index = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    shell = index[((index == 0) | (index == 7)).any(axis=1)]
+    if open_face:
+        shell = shell[shell[:, 2] < 7]
+    centres = (shell + 0.5) * 0.5
+    out = centres - 2.0
+    out /= np.linalg.norm(out, axis=1)[:, None]
+    surface = SurfaceMap(0.5)
+    surface.add(centres + 20.0 * out, -out, np.full(len(out), 20.0), margin=1.0)
+    return surface
+
+
+def _inside(keys: np.ndarray) -> np.ndarray:
+    """Which voxel ``keys`` lie strictly inside the cube of :func:`_shell`."""
+    index = unpack(keys)
+    return ((index >= 1) & (index <= 6)).all(axis=1)
+
+
+def test_a_closed_shell_has_no_frontier_inside_once_enclosed():
+    closed = _shell(open_face=False)
+    assert _inside(closed.frontier()).sum() == 6 ** 3 - 4 ** 3     # the layer behind the shell
+    assert closed.enclose() == 6 ** 3                              # the whole inside, now
+    assert not _inside(closed.frontier()).any()
+    outside = closed.frontier()
+    assert len(outside) and closed.enclose() == 0                  # marked once, for good
+    # A voxel struck next to the enclosed inside does not make it frontier again.
+    closed.strike(np.array([[1.75, 1.75, 30.0]]), np.array([[0.0, 0.0, -1.0]]),
+                  np.array([30.0 - 1.75]))
+    assert not _inside(closed.frontier()).any()
+
+
+def test_a_shell_with_one_face_open_keeps_its_inside_frontier():
+    open_ = _shell(open_face=True)
+    before = open_.frontier().copy()
+    assert _inside(before).any()
+    assert open_.enclose() == 0
+    np.testing.assert_array_equal(open_.frontier(), before)
+
+
+def test_the_far_side_of_a_plate_stays_frontier_when_enclosed_voxels_are_marked():
+    plate = SurfaceMap(0.25)
+    plate.add(*_plate_beams(+1), margin=2.0)
+    below = pack(unpack(plate.occupied) - np.array([0, 0, 1]))
+    assert plate.enclose() == 0
+    assert member(below, plate.frontier()).all()
