@@ -122,21 +122,26 @@ def test_closed_loop_on_a_generated_satellite_gives_the_same_bytes_for_the_same_
     assert np.degrees(np.arccos(np.clip(boresight[:, 2], -1, 1))).max() > 0.5   # off nadir
 
 
-def test_an_exhausted_frontier_turns_the_law_to_the_least_struck_surface():
+def _law_over_a_struck_plate(hits_per_voxel):
+    """A gap-seeking law whose map holds a 4 x 4 plate in layer z = 0, struck from above
+    ``hits_per_voxel(x)`` times at voxel column x (16 voxels); the space above it carved, the
+    layer below unknown (frontier)."""
     from sim.surface_map import SurfaceMap
 
     law = GapSeeker(step=10.0, max_rate=math.radians(1), max_offset=math.radians(30),
                     poses=None, beams=np.array([[0.0, 0.0, 1.0]]))
     law.map = SurfaceMap(1.0)
-    # A 4 x 4 plate in layer z = 0 struck from above: once on the left half, three times on the
-    # right; the space above it carved, the layer below unknown (frontier).
     x, y = np.meshgrid(np.arange(4) + 0.5, np.arange(4) + 0.5)
     points = np.column_stack([x.ravel(), y.ravel(), np.full(16, 0.5)])
-    again = points[points[:, 0] > 2]
-    hits = np.concatenate([points, again, again])
-    origins = hits + np.array([0.0, 0.0, 20.0])
-    law.map.add(origins, np.tile([0.0, 0.0, -1.0], (len(hits), 1)), np.full(len(hits), 19.5),
-                margin=2.0)
+    hits = np.repeat(points, hits_per_voxel(points[:, 0]), axis=0)
+    law.map.add(hits + np.array([0.0, 0.0, 20.0]), np.tile([0.0, 0.0, -1.0], (len(hits), 1)),
+                np.full(len(hits), 19.5), margin=2.0)
+    return law
+
+
+def test_an_exhausted_frontier_turns_the_law_to_the_least_struck_surface():
+    # Struck once on the left half of the plate, three times on the right.
+    law = _law_over_a_struck_plate(lambda x: np.where(x > 2, 3, 1))
     frontier = law.map.frontier()
     np.testing.assert_array_equal(law._candidates(), frontier)
     law._after_interval(False)
@@ -154,16 +159,9 @@ def test_an_exhausted_frontier_turns_the_law_to_the_least_struck_surface():
 def test_candidates_found_hidden_are_set_aside_and_readmitted():
     from sim import planner_kernels as kernels
     from sim.defaults import GAP_ASIDE_INTERVALS, GAP_ASIDE_WALKS
-    from sim.surface_map import SurfaceMap
 
-    law = GapSeeker(step=10.0, max_rate=math.radians(1), max_offset=math.radians(30),
-                    poses=None, beams=np.array([[0.0, 0.0, 1.0]]))
-    law.map = SurfaceMap(1.0)
-    # A 4 x 4 plate struck once per voxel from above; the layer below it is the frontier.
-    x, y = np.meshgrid(np.arange(4) + 0.5, np.arange(4) + 0.5)
-    points = np.column_stack([x.ravel(), y.ravel(), np.full(16, 0.5)])
-    law.map.add(points + np.array([0.0, 0.0, 20.0]), np.tile([0.0, 0.0, -1.0], (16, 1)),
-                np.full(16, 19.5), margin=2.0)
+    # The plate struck once per voxel; the layer below it is the frontier.
+    law = _law_over_a_struck_plate(lambda x: np.ones(len(x), dtype=int))
     frontier = law.map.frontier()
     grid = law.map.blockers()[:3]
     # While the frontier lasts nothing is set aside, whatever the counts.
