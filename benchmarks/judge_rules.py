@@ -172,16 +172,17 @@ def collect(args) -> None:
 
 
 # The per-strike arrays of a candidate's held-out checks (``judge.Check``) that ``collect``
-# keeps beside its cost, for the statistics that are not functions of the cost alone; and
-# ``crack``: the missed held-out beam passed a crack of the fold's surface (``crack_of``).
+# keeps beside its cost, for the statistics that are not functions of the cost alone (``crack``:
+# the missed held-out beam passed a crack of the fold's surface, ``judge.check``'s own; and
+# ``opening``, the opening's size, ``opening_of``).
 PER_STRIKE = ("distance", "tolerance", "sigma", "missed", "violated", "crack", "opening")
 
 
 @contextmanager
 def recording_checks():
     """While active, every candidate ``auto.choose`` judges gets ``held_checks``: the
-    ``judge.Check`` of each fold's tested strikes, folds in order, each with its ``crack``
-    array (``crack_of`` at the context's ``miss_reach``). ``auto.judge_candidate``
+    ``judge.Check`` of each fold's tested strikes, folds in order, each with its ``opening``
+    array (``opening_of`` at the context's ``miss_reach``). ``auto.judge_candidate``
     checks the tested strikes of every fold, then all strikes (both not ``fitted``): the calls
     before its last. ``per_strike_arrays`` keeps them only where their costs are the
     candidate's (so a change of that order is caught, not replayed wrongly)."""
@@ -205,8 +206,8 @@ def recording_checks():
     def recorded_check(*args, **kwargs):
         result = check(*args, **kwargs)
         if not kwargs.get("fitted", False):
-            crack, opening = crack_of(*args[:2], result, reach[0])
-            calls.append(Recorded(**(vars(result) | {"crack": crack}), opening=opening))
+            calls.append(Recorded(**vars(result),
+                                  opening=opening_of(*args[:2], result, reach[0])))
         return result
 
     def recorded_judge(*args, **kwargs):
@@ -221,16 +222,6 @@ def recording_checks():
         yield
     finally:
         judge.check, auto.judge_candidate, auto._context = check, judge_candidate, context
-
-
-def crack_of(strikes, caster, result, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per strike of ``result`` (``judge.check`` of ``strikes`` on ``caster``'s surface): its
-    beam missed the surface through a crack, an opening narrower than ``radius`` [m] on both
-    sides: at least ``RING_SHARE`` of ``RING_RAYS`` parallel beams offset ``radius`` around it
-    meet the surface within the strike's tolerance plus ``radius`` of its range
-    (``ring_share``). Also the opening's size (``opening_of``)."""
-    opening = opening_of(strikes, caster, result, radius)
-    return result.missed & (opening <= 1.0), opening
 
 
 # The ring radii, in miss_reach, at which ``opening_of`` sizes a missed beam's opening.

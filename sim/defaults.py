@@ -422,9 +422,9 @@ GAP_RESIDUAL_QUANTILE = 0.25
 # Once the least-struck voxels are candidates, a candidate predicted hidden this many times (each
 # time an interval's sweep reached it) is set aside: no longer walked or chosen (late in a run
 # most candidates are hidden from any one place: a body's unknown interior behind its struck
-# shell, least-struck voxels hard to see). A plan
-# re-admits every set-aside candidate of its pool once this many intervals have passed since the
-# last re-admission: the chaser's view of the target turns as it orbits and the target spins.
+# shell, least-struck voxels hard to see). A plan re-admits every set-aside candidate of its
+# pool once this many intervals have passed since the last re-admission: the chaser's view of
+# the target turns as it orbits and the target spins.
 GAP_ASIDE_WALKS = 3
 GAP_ASIDE_INTERVALS = 24
 # The unknown voxels the struck ones enclose (a body's interior behind its struck shell) leave

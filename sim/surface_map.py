@@ -16,10 +16,9 @@ the points ``size * ((i, j, k) + [0, 1)^3)``. A voxel is
 
 Voxel keys are the three integer indices packed into one int64. The occupied voxels are a sorted
 key array with their counts and views; the state of every voxel (occupied, crossed, frontier,
-enclosed;
-in its upper bits the planner's count of walks that found the voxel hidden) is a byte in a
-dense grid over the box of the occupied voxels grown by the traversal margin,
-reallocated larger when that box grows, so that marking a beam's path or looking a voxel up is
+enclosed; in its upper bits the planner's count of walks that found the voxel hidden) is a byte
+in a dense grid over the box of the occupied voxels grown by the traversal margin, reallocated
+larger when that box grows, so that marking a beam's path or looking a voxel up is
 one indexing operation. Beams are traversed by sampling every ``size / TRAVERSAL_STEP`` along
 them. The updates (strikes, carving), the frontier's reading and the visibility walk below are
 compiled kernels (sim/planner_kernels.py), one call each.

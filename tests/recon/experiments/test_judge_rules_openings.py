@@ -12,39 +12,42 @@ from recon.surfaces import judge
 RADIUS = 0.3   # the crack's limit [m] (auto.miss_reach in the harness)
 
 
-def _missed_beam(surface):
+def _missed_beam(surface, **options):
     """A beam straight down through the plate's centre, its strike 0.02 m below the plane."""
     strikes = judge.Strikes(np.array([[0.0, 0.0, -0.02]]), np.array([[0.0, 0.0, 10.0]]))
     caster = judge.Caster(*surface)
-    return strikes, caster, judge.check(strikes, caster, tau=0.1, noise=0.01)
+    return strikes, caster, judge.check(strikes, caster, tau=0.1, noise=0.01, **options)
 
 
 def test_a_beam_through_a_crack_is_told_from_a_beam_through_a_hole():
     for surface, crack, opening in ((CRACKED, True, 0.25), (HOLED, False, 4.0)):
         strikes, caster, result = _missed_beam(surface)
         assert result.missed.all()
-        found, size = judge_rules.crack_of(strikes, caster, result, RADIUS)
-        assert found.tolist() == [crack]
+        size = judge_rules.opening_of(strikes, caster, result, RADIUS)
         # The smallest ring that meets the surface on at least half its rays: 0.075 m crosses
         # the crack's 0.05 m half-width; only 1.2 m reaches past the hole's 0.7 m.
         assert size.tolist() == [opening]
+        # The product's crack test is the opening within the width.
+        _, _, product = _missed_beam(surface, crack=RADIUS)
+        assert product.crack.tolist() == [crack] == (size <= 1.0).tolist()
 
 
-def test_the_crack_statistic_forgives_a_crack_and_charges_a_hole_the_cap():
+def test_the_replayed_crack_statistic_is_the_product_s_cost():
     costs = []
     for surface in (CRACKED, HOLED):
         strikes, caster, result = _missed_beam(surface)
-        crack, opening = judge_rules.crack_of(strikes, caster, result, RADIUS)
+        assert result.cost[0] == (result.tolerance[0] / result.sigma[0]) ** 2   # the cap
         per = {"distance": result.distance, "tolerance": result.tolerance,
                "sigma": result.sigma, "missed": result.missed, "cost": result.cost,
-               "crack": crack, "opening": opening}
-        costs.append(judge_rules.STATISTICS["closest-fold-cracks"](result.cost, per)[0])
-        assert result.cost[0] == (result.tolerance[0] / result.sigma[0]) ** 2   # auto's cap
+               "opening": judge_rules.opening_of(strikes, caster, result, RADIUS)}
+        per["crack"] = per["missed"] & (per["opening"] <= 1.0)
+        replayed = judge_rules.STATISTICS["closest-fold-cracks"](result.cost, per)[0]
+        _, _, product = _missed_beam(surface, crack=RADIUS)
+        assert replayed == product.cost[0]
+        costs.append(replayed)
     crack_cost, hole_cost = costs
     # Through the crack: the strike's closest-point distance to the plate (0.05 m of the crack
     # and 0.02 m below it), in sigmas; through the hole: the cap.
     _, _, cracked = _missed_beam(CRACKED)
     assert np.isclose(crack_cost, (np.hypot(0.05, 0.02) / cracked.sigma[0]) ** 2, rtol=1e-4)
-    assert crack_cost < hole_cost
-    _, _, holed = _missed_beam(HOLED)
-    assert hole_cost == (holed.tolerance[0] / holed.sigma[0]) ** 2
+    assert crack_cost < hole_cost == (cracked.tolerance[0] / cracked.sigma[0]) ** 2
