@@ -34,8 +34,11 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    **carved**: each
    fold's surface without the faces the misses cut (``judge.carve``), judged like any other
    (held-out strikes, cuts, holes); when it is chosen, the surface refitted on all strikes is
-   carved the same way (``AutoChoice.carve``). Without a strike log (a cloud file) there are
-   no misses and no carved candidates.
+   carved the same way (``AutoChoice.carve``). **An uncarved candidate that cuts more than
+   ``MISS_REFUTES`` of the missed beams leaves the choice** when its carved twin was scored
+   (``refuted``): the sensor saw through the space it fills too often for the held-out strikes,
+   all taken where the surface is right, to outweigh it; its carved twin competes in its place.
+   Without a strike log (a cloud file) there are no misses and no carved candidates.
 3. **One paired standard error** (``paired_gaps``): every candidate tested on the same strikes
    as the best, whose chi-square exceeds the best's by at most ``BAND_SES`` standard errors
    of that difference (from the spread of the blocks' mean differences), fits the held-out
@@ -144,11 +147,18 @@ TARGET_KINDS = ("unknown", "natural")
 # candidate: most of the body is unseen. Its model, the smooth closed surface of a few numbers,
 # stands for the body when its mean held-out distance is within NATURAL_FIT tau and it reaches
 # at most NATURAL_SPAN times the strikes' extent along each of its axes (chosen on the auto
-# suite's clouds, docs/decisions.md).
+# suite's clouds, docs/decisions.md; NATURAL_SPAN 1.5 until a cratered asteroid seen along a
+# cross, 1.67, was left a patchwork 14 times the ellipsoid's Chamfer distance: 1.8 keeps out
+# a hemisphere seen alone, 2, and Itokawa under the cross, 2.17).
 NATURAL_COVERAGE = 0.5
 NATURAL_MODEL = "ellipsoid"
 NATURAL_FIT = 0.5
-NATURAL_SPAN = 1.5
+NATURAL_SPAN = 1.8
+# Step 2: the share of the missed beams near the strikes an uncarved candidate may cut before
+# free space refutes it (``refuted``; one beam in ten: fixed after rso-b-cross-clean, where the
+# visibility cut chosen cut 39 % and its carved twin was the better surface; every share from
+# 2 % to 30 % made the same choices on the suite's tuning clouds, docs/decisions.md).
+MISS_REFUTES = 0.1
 # Missed beams (``recon.registration.misses``) are drawn where their free span passes within
 # MISS_BOX of the strikes' bounding-box diagonal of the box: a membrane a candidate spans
 # beyond the strikes lies there. A missed beam's crossing of a surface counts as a cut only
@@ -208,8 +218,8 @@ class Candidate:
     span : float or None
         How far the surface reaches beyond the strikes (``span``; 1: no farther).
     eligible, holed, chosen : bool
-        Within the band (step 3); in it but left out for its holes (step 4) or for the free
-        space its carved twin in the band leaves open (step 2); chosen.
+        Within the band (step 3); left out for its holes (step 4), for the free space its
+        carved twin in the band leaves open or that the missed beams refute (step 2); chosen.
     """
 
     run: Run
@@ -396,6 +406,7 @@ class Selection:
     above the best's with its paired standard error; ``holed``: the band's candidates that
     leave too many strikes in holes (``hole_test``) and ``hole_limit`` the fraction they
     exceed; ``filled``: the band's candidates whose carved twin is in it (``fills_in_band``);
+    ``refuted``: the candidates free space refutes (``refuted``), left out before the best;
     ``prior``: the natural-body prior (``natural_prior``) made the choice."""
 
     chosen: int
@@ -406,6 +417,7 @@ class Selection:
     holed: tuple[int, ...] = ()
     hole_limit: float = 1.0
     filled: tuple[int, ...] = ()
+    refuted: tuple[int, ...] = ()
     prior: bool = False
 
 
@@ -861,10 +873,11 @@ def select(candidates: list[Candidate], block: np.ndarray, n_checked: int) -> Se
     MethodFailed
         No candidate was scored.
     """
-    scored = [i for i, c in enumerate(candidates) if c.scored]
-    if not scored:
+    if not any(c.scored for c in candidates):
         raise MethodFailed("auto: every candidate failed: " + "; ".join(
             f"{c.label}: {c.reason}" for c in candidates if c.status != "skipped"))
+    out = refuted(candidates)
+    scored = [i for i, c in enumerate(candidates) if c.scored and i not in out]
     best = min(scored, key=lambda i: (candidates[i].chi2, candidates[i].n_params))
     gaps = paired_gaps(candidates, best, block)
     eligible = tuple(i for i in scored if gaps[i][0] <= BAND_SES * gaps[i][1])
@@ -874,7 +887,17 @@ def select(candidates: list[Candidate], block: np.ndarray, n_checked: int) -> Se
     filled = fills_in_band(candidates, [i for i in eligible if i not in holed])
     chosen = min((i for i in eligible if i not in holed and i not in filled),
                  key=lambda i: (candidates[i].n_params, candidates[i].chi2))
-    return Selection(chosen, best, threshold, eligible, gaps, holed, limit, filled)
+    return Selection(chosen, best, threshold, eligible, gaps, holed, limit, filled, out)
+
+
+def refuted(candidates: list[Candidate]) -> tuple[int, ...]:
+    """Step 2 of the module docstring: the scored, uncarved candidates that cut more than
+    ``MISS_REFUTES`` of the missed beams and whose carved twin was scored; they leave the
+    choice, the twin stays."""
+    twins = {c.run.key for c in candidates if c.carved and c.scored}
+    return tuple(i for i, c in enumerate(candidates)
+                 if c.scored and not c.carved and c.run.key in twins
+                 and (c.misses_cut or 0.0) > MISS_REFUTES)
 
 
 def fills_in_band(candidates: list[Candidate], kept: list[int]) -> tuple[int, ...]:
@@ -894,7 +917,8 @@ def natural_prior(candidates: list[Candidate], selection: Selection, coverage: f
     ``NATURAL_SPAN``; else ``selection`` unchanged."""
     model = next((i for i, c in enumerate(candidates)
                   if c.scored and c.run.method == NATURAL_MODEL), None)
-    if model is None or model == selection.chosen or not coverage < NATURAL_COVERAGE:
+    if model is None or model == selection.chosen or model in selection.refuted or \
+            not coverage < NATURAL_COVERAGE:
         return selection
     c = candidates[model]
     if c.heldout_mean_m > NATURAL_FIT * tau or c.span is None or c.span > NATURAL_SPAN:
@@ -953,10 +977,17 @@ def explain(candidates: list[Candidate], selection: Selection, coverage: float) 
                  f"{kept} candidates in that band {holding}it is the smallest model")
     if selection.holed and not selection.prior:
         text += _holes_reason(candidates, selection)
+    others = [i for i in selection.refuted if candidates[i].run.key != c.run.key]
+    if others:
+        text += (f"; left out, the missed beams refute them (each cuts more than "
+                 f"{MISS_REFUTES:.0%}; their carved twins competed): " + ", ".join(
+                     f"{candidates[i].label} ({candidates[i].misses_cut:.1%})" for i in others))
     if c.carved:
         whole = next(o for o in candidates if o.run.key == c.run.key and not o.carved)
         dropped = (", and drops out of the band, where its carved twin is"
-                   if candidates.index(whole) in selection.filled else "")
+                   if candidates.index(whole) in selection.filled else
+                   f", more than {MISS_REFUTES:.0%}: the beams refute it"
+                   if candidates.index(whole) in selection.refuted else "")
         text += (f"; carved: the uncarved surface cuts {whole.misses_cut:.1%} of the missed "
                  f"beams near the strikes (free space it fills){dropped}; the faces they cross "
                  f"away from every strike are removed ({c.misses_cut:.1%} left)")
@@ -1074,7 +1105,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
         selection = natural_prior(table, selection, coverage, context.tau)
     for i, c in enumerate(table):
         c.eligible = i in selection.eligible
-        c.holed = i in selection.holed or i in selection.filled
+        c.holed = i in selection.holed or i in selection.filled or i in selection.refuted
         c.chosen = i == selection.chosen
     fitted = sum(c.status != "skipped" for c in table)
     reason = (explain(table, selection, coverage)

@@ -205,6 +205,29 @@ def test_holes_within_the_noise_of_the_band_s_fewest_do_not_decide():
     assert select(candidates, BLOCK, 7_000).holed == (0,)
 
 
+def test_an_uncarved_surface_the_missed_beams_refute_leaves_for_its_carved_twin():
+    from recon.surfaces.auto import MISS_REFUTES, explain
+
+    # A membrane 30 standard errors better on the held-out strikes than its carved twin: the
+    # held-out strikes lie where both are right. Cutting more than MISS_REFUTES of the missed
+    # beams, it leaves the choice and the twin takes its place; cutting fewer, or without a
+    # scored twin to stand in, it stays.
+    whole = _candidate("membrane", 1.00, 8_000)
+    twin = _candidate("membrane", 1.30, 8_000)
+    twin.carved, twin.misses_cut = True, 0.0
+    whole.misses_cut = MISS_REFUTES + 0.01
+    selection = select([whole, twin], BLOCK, 20_000)
+    assert selection.refuted == (0,) and selection.chosen == 1 == selection.best
+    reason = explain([whole, twin], selection, 0.5)
+    assert f"cuts {MISS_REFUTES + 0.01:.1%} of the missed beams" in reason
+    assert f"more than {MISS_REFUTES:.0%}: the beams refute it" in reason
+    whole.misses_cut = MISS_REFUTES - 0.01
+    selection = select([whole, twin], BLOCK, 20_000)
+    assert selection.refuted == () and selection.chosen == 0
+    whole.misses_cut, twin.chi2 = 0.5, None
+    assert select([whole, twin], BLOCK, 20_000).chosen == 0
+
+
 def test_select_fails_when_every_candidate_failed():
     with pytest.raises(MethodFailed, match="auto: every candidate failed: x: crashed"):
         select([_candidate("x", None, 0)], BLOCK, 20_000)

@@ -108,6 +108,19 @@ def test_the_natural_prior_acts_only_where_the_body_is_unseen_and_the_ellipsoid_
     assert prior.best == selection.best and prior.eligible == selection.eligible
 
 
+def test_the_natural_prior_does_not_take_an_ellipsoid_the_missed_beams_refute():
+    from dataclasses import replace
+
+    candidates = [_candidate("poisson", 1.0, 10_000, mean=0.05, closed=False),
+                  _candidate("ellipsoid", 5.0, 9, mean=0.3, reach=1.1, offset=1)]
+    carved = replace(candidates[1], carved=True, closed=False, misses_cut=0.0)
+    candidates[1].misses_cut = 0.5
+    candidates.append(carved)
+    selection = select(candidates, BLOCK, 20_000)
+    assert selection.refuted == (1,)
+    assert natural_prior(candidates, selection, 0.2, tau=1.0) == selection
+
+
 def test_an_unknown_target_kind_is_named():
     points, view = bumpy_body(500, width=0.12)
     with pytest.raises(ParameterError, match="target_kind must be one of unknown, natural"):
