@@ -1145,9 +1145,9 @@ def format_choice(choice: AutoChoice) -> str:
                  f"free: of {choice.n_misses} missed beams near the strikes, those the surface "
                  "cuts away from every strike (free space it fills); "
                  f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best, x "
-                 "within them but left out (strikes in holes beyond the noise, or its carved "
-                 "twin is within them); carved: without "
-                 "the faces the missed beams cut)")
+                 "left out: within them but with strikes in holes beyond the noise or its "
+                 "carved twin within them, or refuted by the missed beams (more than "
+                 f"{MISS_REFUTES:.0%} cut); carved: without the faces the missed beams cut)")
     lines.append(choice.reason)
     return "\n".join(lines)
 
