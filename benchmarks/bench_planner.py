@@ -66,7 +66,11 @@ def log_differences(a: Path, b: Path) -> list[str]:
 
     def objects(f):
         found = {"/": f}
-        f.visititems(lambda name, obj: found.setdefault("/" + name, obj))
+
+        def add(name, obj):        # returns None: visititems stops at anything else
+            found["/" + name] = obj
+
+        f.visititems(add)
         return found
 
     def same(x, y):
