@@ -570,17 +570,41 @@ def _slab(p, d, low, high, enter, leave):
 
 
 @njit(cache=True)
-def _blocked(target, position, size, state, shape, corner, lo, hi, slack, radius):
+def occupancy(occupied, lo, hi):
+    """The occupied voxels as a grid over their index box: what a walk reads (:func:`_blocked`).
+
+    Parameters
+    ----------
+    occupied : (o,) int64: keys of the occupied voxels
+    lo, hi : (3,) int64: their index box (inclusive)
+
+    Returns
+    -------
+    (g,) uint8: the flat, C-ordered grid of shape ``hi - lo + 1``, its first cell voxel ``lo``;
+    1 where occupied, 0 elsewhere. A few tens of kilobytes for a map whose state grid (which
+    also spans the traversal margin) is megabytes: the walks' reads stay in the cache.
+    """
+    e1, e2 = hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
+    solid = np.zeros((hi[0] - lo[0] + 1) * e1 * e2, dtype=np.uint8)
+    for key in occupied:
+        i, j, k = _unpack(key)
+        solid[((i - lo[0]) * e1 + (j - lo[1])) * e2 + (k - lo[2])] = 1
+    return solid
+
+
+@njit(cache=True)
+def _blocked(target, position, size, solid, lo, hi, slack, radius):
     """Whether the beam from ``position`` (3,) toward the voxel centre ``target`` (3,) [m, B]
     crosses, before the target's voxel, an occupied voxel whose centre lies within ``radius``
     [m] of the beam's line and nearer to ``position`` than ``target`` by more than ``slack``
     [m].
 
-    The occupied voxels of the flat ``state`` grid (shape and first voxel ``shape``,
-    ``corner`` (3,) int64) lie within the voxel index box ``lo`` .. ``hi`` (3,) int64
-    (inclusive), which the grid holds. The walk (voxel by voxel, Amanatides and Woo) starts
-    where the beam enters that box, so a beam stopped by the surface nearest to ``position``
-    costs a few steps whatever the map's size. Scalars only: no allocation per beam.
+    The occupied voxels lie within the voxel index box ``lo`` .. ``hi`` (3,) int64
+    (inclusive); ``solid`` is that box's occupancy grid (:func:`occupancy`). The walk (voxel
+    by voxel, Amanatides and Woo) starts where the beam enters that box, so a beam stopped by
+    the surface nearest to ``position`` costs a few steps whatever the map's size, and ends
+    where it leaves the box (nothing beyond is occupied: a walk that has left the box along
+    one axis never comes back). Scalars only: no allocation per beam.
     """
     p0, p1, p2 = position[0], position[1], position[2]
     d0, d1, d2 = target[0] - p0, target[1] - p1, target[2] - p2
@@ -602,11 +626,12 @@ def _blocked(target, position, size, state, shape, corner, lo, hi, slack, radius
     si, ti, di = _axis_walk(p0, d0, i, size)
     sj, tj, dj = _axis_walk(p1, d1, j, size)
     sk, tk, dk = _axis_walk(p2, d2, k, size)
-    s1, s2 = shape[1] * shape[2], shape[2]
-    cell = (i - corner[0]) * s1 + (j - corner[1]) * s2 + (k - corner[2])
+    s2 = hi[2] - lo[2] + 1
+    s1 = (hi[1] - lo[1] + 1) * s2
+    cell = (i - lo[0]) * s1 + (j - lo[1]) * s2 + (k - lo[2])
     limit2, radius2 = limit * limit, radius * radius
     while not (i == gi and j == gj and k == gk):
-        if state[cell] & _OCC:
+        if solid[cell]:
             c0, c1, c2 = (i + 0.5) * size - p0, (j + 0.5) * size - p1, (k + 0.5) * size - p2
             far = c0 * c0 + c1 * c1 + c2 * c2
             along = c0 * d0 + c1 * d1 + c2 * d2
@@ -616,41 +641,47 @@ def _blocked(target, position, size, state, shape, corner, lo, hi, slack, radius
             if ti >= leave:
                 return False
             i, ti, cell = i + si, ti + di, cell + si * s1
+            if i < lo[0] or i > hi[0]:
+                return False
         elif tj <= tk:
             if tj >= leave:
                 return False
             j, tj, cell = j + sj, tj + dj, cell + sj * s2
+            if j < lo[1] or j > hi[1]:
+                return False
         else:
             if tk >= leave:
                 return False
             k, tk, cell = k + sk, tk + dk, cell + sk
+            if k < lo[2] or k > hi[2]:
+                return False
     return False
 
 
 @njit(cache=True)
-def hidden(positions, targets, size, state, shape, corner, lo, hi):
+def hidden(positions, targets, size, solid, lo, hi):
     """Which beams from ``positions`` (p, 3) toward the voxel centres ``targets`` (n, 3) [m,
     B] are stopped by an occupied voxel nearer than the target by more than ``BLOCK_SLACK``
-    edges (sim/surface_map.py, :meth:`SurfaceMap.visible`): (p, n) bool. ``state``,
-    ``shape``, ``corner``, ``lo``, ``hi`` as :func:`_blocked`."""
+    edges (sim/surface_map.py, :meth:`SurfaceMap.visible`): (p, n) bool. ``solid``, ``lo``,
+    ``hi`` as :func:`_blocked`."""
     out = np.zeros((len(positions), len(targets)), dtype=np.bool_)
     for q in range(len(positions)):
         for k in range(len(targets)):
-            out[q, k] = _blocked(targets[k], positions[q], size, state, shape, corner, lo, hi,
+            out[q, k] = _blocked(targets[k], positions[q], size, solid, lo, hi,
                                  BLOCK_SLACK * size, BLOCK_RADIUS * size)
     return out
 
 
 @njit(cache=True)
-def _turn_toward(b, goal, angle):
-    """Unit vector ``b`` (3,) turned toward ``goal`` (3,) by ``angle`` [rad] in their plane
-    (``goal`` itself when within ``angle``)."""
-    cos = min(max(b[0] * goal[0] + b[1] * goal[1] + b[2] * goal[2], -1.0), 1.0)
+def _turn_toward(b0, b1, b2, g0, g1, g2, angle):
+    """The unit vector ``(b0, b1, b2)`` turned toward the unit vector ``(g0, g1, g2)`` by
+    ``angle`` [rad] in their plane (the goal itself when within ``angle``): three floats."""
+    cos = min(max(b0 * g0 + b1 * g1 + b2 * g2, -1.0), 1.0)
     if math.acos(cos) <= angle:
-        return goal.copy()
-    s = goal - cos * b
-    c, k = math.cos(angle), math.sin(angle) / math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
-    return c * b + k * s
+        return g0, g1, g2
+    s0, s1, s2 = g0 - cos * b0, g1 - cos * b1, g2 - cos * b2
+    c, k = math.cos(angle), math.sin(angle) / math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    return c * b0 + k * s0, c * b1 + k * s1, c * b2 + k * s2
 
 
 @njit(cache=True)
@@ -673,19 +704,24 @@ def _frames(position, target, nominal):
 
 
 @njit(cache=True)
+def _toward(point, origin, r):
+    """The unit vector from ``origin`` (3,) toward ``point`` (3,), turned by ``r`` (3, 3):
+    three floats."""
+    d0, d1, d2 = point[0] - origin[0], point[1] - origin[1], point[2] - origin[2]
+    a0 = r[0, 0] * d0 + r[0, 1] * d1 + r[0, 2] * d2
+    a1 = r[1, 0] * d0 + r[1, 1] * d1 + r[1, 2] * d2
+    a2 = r[2, 0] * d0 + r[2, 1] * d1 + r[2, 2] * d2
+    norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    return a0 / norm, a1 / norm, a2 / norm
+
+
+@njit(cache=True)
 def _unit(points, origin, rotation):
     """Unit vectors (c, 3) from ``origin`` (3,) toward ``points`` (c, 3), turned by
     ``rotation`` (3, 3)."""
     out = np.empty((len(points), 3))
-    r = rotation
     for k in range(len(points)):
-        d0, d1, d2 = (points[k, 0] - origin[0], points[k, 1] - origin[1],
-                      points[k, 2] - origin[2])
-        a0 = r[0, 0] * d0 + r[0, 1] * d1 + r[0, 2] * d2
-        a1 = r[1, 0] * d0 + r[1, 1] * d1 + r[1, 2] * d2
-        a2 = r[2, 0] * d0 + r[2, 1] * d1 + r[2, 2] * d2
-        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        out[k, 0], out[k, 1], out[k, 2] = a0 / norm, a1 / norm, a2 / norm
+        out[k, 0], out[k, 1], out[k, 2] = _toward(points[k], origin, rotation)
     return out
 
 
@@ -730,11 +766,11 @@ def _goals(pick, centres, chaser, to_nominal, boresight, max_offset):
         if pick[s] < 0:
             goal[s] = goal[s - 1] if s else boresight
             continue
-        g = _unit(centres[pick[s]:pick[s] + 1], chaser[s], to_nominal[s])[0]
-        if g[2] < cos_max:
-            side = math.sqrt(g[0] * g[0] + g[1] * g[1])
-            g[0], g[1], g[2] = sin_max * (g[0] / side), sin_max * (g[1] / side), cos_max
-        goal[s] = g
+        g0, g1, g2 = _toward(centres[pick[s]], chaser[s], to_nominal[s])
+        if g2 < cos_max:
+            side = math.sqrt(g0 * g0 + g1 * g1)
+            g0, g1, g2 = sin_max * (g0 / side), sin_max * (g1 / side), cos_max
+        goal[s, 0], goal[s, 1], goal[s, 2] = g0, g1, g2
     return goal
 
 
@@ -743,16 +779,16 @@ def _rate_limit(goal, boresight, reach):
     """From the first goal (n, 3) beyond ``reach`` [rad] of the one before (``boresight`` (3,)
     before the first), turn toward each goal by at most ``reach`` (in place)."""
     started = False
-    b = boresight.copy()
+    b0 = b1 = b2 = 0.0
     for s in range(len(goal)):
         if not started:
             before = goal[s - 1] if s else boresight
             dot = goal[s, 0] * before[0] + goal[s, 1] * before[1] + goal[s, 2] * before[2]
             if math.acos(min(max(dot, -1.0), 1.0)) > reach:
-                started, b = True, before.copy()
+                started, b0, b1, b2 = True, before[0], before[1], before[2]
         if started:
-            b = _turn_toward(b, goal[s], reach)
-            goal[s] = b
+            b0, b1, b2 = _turn_toward(b0, b1, b2, goal[s, 0], goal[s, 1], goal[s, 2], reach)
+            goal[s, 0], goal[s, 1], goal[s, 2] = b0, b1, b2
 
 
 @njit(cache=True)
@@ -812,8 +848,21 @@ def store_hidden(keys, hidden, state, shape, corner):
 
 
 @njit(cache=True)
-def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target, nominal,
-          boresight, max_offset, reach, block, hidden, aside):
+def _sort_run(order, start, stop, key):
+    """Sort ``order[start:stop]`` in place by ``key[order]``, stably (insertion: a sweep row
+    holds a few dozen aims)."""
+    for a in range(start + 1, stop):
+        q = order[a]
+        b = a
+        while b > start and key[order[b - 1]] > key[q]:
+            order[b] = order[b - 1]
+            b -= 1
+        order[b] = q
+
+
+@njit(cache=True)
+def sweep(n, centres, used, size, solid, lo, hi, position, target, nominal, boresight,
+          max_offset, reach, block, hidden, aside):
     """One interval's aims (sim/gap_seeking.py, :meth:`GapSeeker.command`): the open
     candidates within ``max_offset`` from the interval's middle shot, in a sweep of rows
     ``block`` voxels wide across the view from the boresight's row on, each taken when
@@ -827,8 +876,8 @@ def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target
     used : (c,) bool: candidates already aimed at or set aside; those aimed at or set aside
         now are set (in place)
     size : float, metres: the voxel edge
-    state, shape, corner, lo, hi : the map's flat state grid, its shape and first voxel, the
-        occupied voxels' index box (:func:`_blocked`)
+    solid, lo, hi : the occupied voxels' grid over their index box, and that box
+        (:func:`occupancy`, :func:`_blocked`)
     position : (n, 3) float64, metres, I: the chaser at the interval's shots
     target : (n, 3, 3) float64: matrices sending B vectors to I, at the same times
     nominal : (n, 3, 3) float64: matrices sending nominal-sensor vectors to I
@@ -868,10 +917,10 @@ def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target
     for g in range(len(start) - 1):
         if m == n:
             break
-        members = order[start[g]:start[g + 1]]
-        for q in members[np.argsort(across[members], kind="mergesort")]:
+        _sort_run(order, start[g], start[g + 1], across)
+        for q in order[start[g]:start[g + 1]]:
             k = ok_[q]
-            if _blocked(cent[k], ch, size, state, shape, corner, lo, hi, BLOCK_SLACK * size,
+            if _blocked(cent[k], ch, size, solid, lo, hi, BLOCK_SLACK * size,
                         BLOCK_RADIUS * size):
                 hidden[open_[k]] += 1
                 used[open_[k]] = hidden[open_[k]] >= aside
