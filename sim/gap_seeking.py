@@ -352,15 +352,10 @@ def _spread(keys: np.ndarray, block: int, surface: SurfaceMap
             ) -> tuple[np.ndarray, np.ndarray]:
     """The first of ``keys`` (sorted, voxels of ``surface``) in each cube of ``block`` voxels
     on a side: candidates that one strike each settles, evenly over the map; and their centres
-    (c, 3) [m, B] (compiled: sim/planner_kernels.py, with a mark per cube kept by the map from
-    plan to plan instead of allocated each time)."""
+    (c, 3) [m, B] (compiled: sim/planner_kernels.py)."""
     from sim import planner_kernels as kernels
 
-    need = kernels.cubes(block, surface._shape, surface._corner)
-    if len(surface.cube_marks) < need:
-        surface.cube_marks = np.zeros(need, dtype=bool)
-    return kernels.spread(np.asarray(keys, dtype=np.int64), block, surface.size,
-                          surface._shape, surface._corner, surface.cube_marks)
+    return kernels.spread(np.asarray(keys, dtype=np.int64), block, surface.size)
 
 
 def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:

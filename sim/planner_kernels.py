@@ -57,11 +57,11 @@ _NOT_FRONT = 0xFF ^ _FRONT          # uint8 bit masks, as plain ints
 
 
 @njit(cache=True)
-def _matrix(q):
-    """(3, 3) rotation matrix of the quaternion ``q`` (x, y, z, w), normalised first."""
+def _matrix(q, m):
+    """Write into ``m`` (3, 3) the rotation matrix of the quaternion ``q`` (x, y, z, w),
+    normalised first."""
     norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     x, y, z, w = q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm
-    m = np.empty((3, 3))
     m[0, 0] = 1.0 - 2.0 * (y * y + z * z)
     m[0, 1] = 2.0 * (x * y - z * w)
     m[0, 2] = 2.0 * (x * z + y * w)
@@ -71,7 +71,6 @@ def _matrix(q):
     m[2, 0] = 2.0 * (x * z - y * w)
     m[2, 1] = 2.0 * (y * z + x * w)
     m[2, 2] = 1.0 - 2.0 * (x * x + y * y)
-    return m
 
 
 @njit(cache=True)
@@ -112,9 +111,11 @@ def recorded_beams(row, beam, ranges, direction, position, sensor, target, beams
     to_body = np.empty((n, 3, 3))
     sensor_m = np.empty((n, 3, 3))
     origin = np.empty((n, 3))
+    to_inertial = np.empty((3, 3))
     for s in range(n):
-        to_body[s] = _matrix(target[s]).T
-        sensor_m[s] = _matrix(sensor[s])
+        _matrix(target[s], to_inertial)
+        to_body[s] = to_inertial.T
+        _matrix(sensor[s], sensor_m[s])
         for i in range(3):
             origin[s, i] = (to_body[s, i, 0] * position[s, 0] + to_body[s, i, 1] * position[s, 1]
                             + to_body[s, i, 2] * position[s, 2])
@@ -225,12 +226,12 @@ def _merge_counts(occupied, count, occupied_view, unique, u_count, u_view):
 
     When every key of ``unique`` is occupied already (most plans late in a run), they are found
     by binary search and their counts and views updated in place, without a pass over every
-    occupied voxel; otherwise the two are merged into new arrays in one pass."""
+    occupied voxel; otherwise the two are merged into new arrays (:func:`_merge_sorted`)."""
     at = np.searchsorted(occupied, unique)
     if _all_known(occupied, unique, at):
         _add_in_place(count, occupied_view, at, u_count, u_view)
         return occupied, count, occupied_view, np.empty(0, dtype=np.int64)
-    return _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view)
+    return _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view, at)
 
 
 @njit(cache=True)
@@ -254,31 +255,43 @@ def _add_in_place(count, occupied_view, at, u_count, u_view):
 
 
 @njit(cache=True)
-def _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view):
-    """``_merge_counts`` when some key is new: one pass over both sorted key arrays."""
+def _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view, at):
+    """``_merge_counts`` when some key is new (``at``: the ``searchsorted`` places of
+    ``unique`` in ``occupied``): new arrays, the occupied voxels between two keys of
+    ``unique`` copied as one block (a few new keys among thousands of occupied ones)."""
     o, u = len(occupied), len(unique)
-    merged = np.empty(o + u, dtype=np.int64)
-    m_count = np.empty(o + u, dtype=np.int64)
-    m_view = np.empty((o + u, 3))
-    new = np.empty(u, dtype=np.int64)
-    a = c = m = n_new = 0
-    while a < o or c < u:
-        old = c >= u or (a < o and occupied[a] <= unique[c])
-        both = old and c < u and occupied[a] == unique[c]
-        merged[m] = occupied[a] if old else unique[c]
-        m_count[m] = (count[a] if old else 0) + (u_count[c] if both or not old else 0)
-        for i in range(3):
-            if both:
-                m_view[m, i] = occupied_view[a, i] + u_view[c, i]
-            else:
-                m_view[m, i] = occupied_view[a, i] if old else u_view[c, i]
-        if not old:
+    n_new = 0
+    for c in range(u):
+        n_new += at[c] >= o or occupied[at[c]] != unique[c]
+    merged = np.empty(o + n_new, dtype=np.int64)
+    m_count = np.empty(o + n_new, dtype=np.int64)
+    m_view = np.empty((o + n_new, 3))
+    new = np.empty(n_new, dtype=np.int64)
+    a = m = n_new = 0                 # next occupied voxel to copy, next merged entry
+    for c in range(u):
+        b = at[c]
+        merged[m:m + b - a] = occupied[a:b]
+        m_count[m:m + b - a] = count[a:b]
+        m_view[m:m + b - a] = occupied_view[a:b]
+        m += b - a
+        if b < o and occupied[b] == unique[c]:
+            merged[m] = occupied[b]
+            m_count[m] = count[b] + u_count[c]
+            for i in range(3):
+                m_view[m, i] = occupied_view[b, i] + u_view[c, i]
+            a = b + 1
+        else:
+            merged[m] = unique[c]
+            m_count[m] = u_count[c]
+            m_view[m] = u_view[c]
             new[n_new] = unique[c]
             n_new += 1
-        a += old
-        c += both or not old
+            a = b
         m += 1
-    return merged[:m], m_count[:m], m_view[:m], new[:n_new]
+    merged[m:] = occupied[a:]
+    m_count[m:] = count[a:]
+    m_view[m:] = occupied_view[a:]
+    return merged, m_count, m_view, new
 
 
 @njit(cache=True)
@@ -952,53 +965,46 @@ def frontier_keep(frontier, state, shape, corner):
 
 
 @njit(cache=True)
-def spread(keys, block, size, shape, corner, taken):
+def spread(keys, block, size):
     """The first of ``keys`` (sorted) in each cube of ``block`` voxels on a side, and their
     centres.
 
     Parameters
     ----------
-    keys : (k,) int64, sorted voxel keys, all within the map's grid
+    keys : (k,) int64, sorted voxel keys
     block : int: the cube's edge in voxels
     size : float, metres: the voxel edge
-    shape, corner : (3,) int64: the grid's shape and the voxel index of its first cell
-    taken : (t,) bool, all False: room for a mark per cube of the grid (t at least the number
-        of cubes, :func:`cubes`); left all False again
 
     Returns
     -------
     chosen : (c,) int64: the chosen keys, in their order
     centres : (c, 3) float64, metres, B: their voxel centres
+
+    Notes
+    -----
+    A mark per cube of the keys' own index box (a few thousand cubes: it stays in the cache).
     """
-    # A grid of the cubes, from the cube holding the grid's first voxel.
-    first = np.empty(3, dtype=np.int64)
-    extent = np.empty(3, dtype=np.int64)
-    for i in range(3):
-        first[i] = corner[i] // block
-        extent[i] = (corner[i] + shape[i] - 1) // block - first[i] + 1
-    keep = np.zeros(len(keys), dtype=np.bool_)
-    cells = np.empty(len(keys), dtype=np.int64)
+    if not len(keys):
+        return keys.copy(), np.empty((0, 3))
+    index = np.empty((len(keys), 3), dtype=np.int64)
+    first = np.full(3, np.iinfo(np.int64).max)
+    last = np.full(3, np.iinfo(np.int64).min)
     for q in range(len(keys)):
-        i, j, k = _unpack(keys[q])
-        cell = (((i // block - first[0]) * extent[1] + (j // block - first[1])) * extent[2]
-                + (k // block - first[2]))
-        cells[q] = cell
+        index[q, 0], index[q, 1], index[q, 2] = _unpack(keys[q])
+        for i in range(3):
+            cube = index[q, i] // block
+            first[i] = min(first[i], cube)
+            last[i] = max(last[i], cube)
+    e1, e2 = last[1] - first[1] + 1, last[2] - first[2] + 1
+    taken = np.zeros((last[0] - first[0] + 1) * e1 * e2, dtype=np.bool_)
+    keep = np.zeros(len(keys), dtype=np.bool_)
+    for q in range(len(keys)):
+        cell = (((index[q, 0] // block - first[0]) * e1 + (index[q, 1] // block - first[1])) * e2
+                + (index[q, 2] // block - first[2]))
         if not taken[cell]:
             taken[cell] = keep[q] = True
-    for cell in cells:
-        taken[cell] = False
     chosen = keys[keep]
     return chosen, _centres(chosen, size)
-
-
-@njit(cache=True)
-def cubes(block, shape, corner):
-    """How many cubes of ``block`` voxels on a side :func:`spread` marks for a grid of
-    ``shape`` and first voxel ``corner`` (3,) int64."""
-    n = 1
-    for i in range(3):
-        n *= (corner[i] + shape[i] - 1) // block - corner[i] // block + 1
-    return n
 
 
 # Strike counts below this are ranked by a histogram (the least-struck quantile's count is a

@@ -118,7 +118,6 @@ class SurfaceMap:
         self._frontier = np.zeros(0, dtype=np.int64)    # sorted keys, each once a frontier
         self._index_lo = np.zeros(3, dtype=np.int64)    # the occupied voxels' index box
         self._index_hi = np.zeros(3, dtype=np.int64)
-        self.cube_marks = np.zeros(0, dtype=bool)       # room for the planner's spread, all False
         self._box_version = 0                           # bumped when the index box changes
         self._carve_box = (None, None, None)            # (margin, version) -> box traversed
         self._enclosed_at = 0                           # occupied voxels at the last enclose

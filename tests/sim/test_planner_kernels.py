@@ -286,14 +286,14 @@ def test_spread_kernel_matches_the_numpy_reference():
     *_, (m, _) = _maps(seed=2)
     keys = np.union1d(m.frontier(), m.occupied)
     for block in (1, 2, 3):
-        marks = np.zeros(kernels.cubes(block, m._shape, m._corner), dtype=bool)
-        chosen, centres = kernels.spread(keys, block, m.size, m._shape, m._corner, marks)
-        assert not marks.any()                                      # left as it was given
+        chosen, centres = kernels.spread(keys, block, m.size)
         cube = pack(np.floor_divide(unpack(keys), block))
         expected = keys[np.sort(np.unique(cube, return_index=True)[1])]
         np.testing.assert_array_equal(chosen, expected)
         np.testing.assert_array_equal(centres, m.centres(expected))
     assert len(expected) < len(keys)
+    chosen, centres = kernels.spread(keys[:0], 2, m.size)
+    assert chosen.shape == (0,) and centres.shape == (0, 3)
 
 
 def test_recorded_beams_kernel_matches_scipy_rotations():
