@@ -729,42 +729,25 @@ def _toward(point, origin, r):
 
 
 @njit(cache=True)
-def _unit(points, origin, rotation):
-    """Unit vectors (c, 3) from ``origin`` (3,) toward ``points`` (c, 3), turned by
-    ``rotation`` (3, 3)."""
-    out = np.empty((len(points), 3))
-    for k in range(len(points)):
-        out[k, 0], out[k, 1], out[k, 2] = _toward(points[k], origin, rotation)
-    return out
-
-
-@njit(cache=True)
-def _sweep_rows(aim, band, boresight):
-    """The sweep's rows of the aims (c, 3) (nominal sensor frame), ``band`` [rad] wide: the
-    aims grouped by row in the sweep's order (the boresight's (3,) row and those below it
-    first, then from the top) and the start of each group, (c,) int64 and (g + 1,) int64; and
-    the key along each row (c,), alternately left and right."""
-    c = len(aim)
-    now = math.floor(boresight[1] / band)
-    row = np.empty(c, dtype=np.int64)
-    across = np.empty(c)
-    for q in range(c):
-        r = math.floor(aim[q, 1] / band)
-        row[q] = np.int64(r)
-        across[q] = aim[q, 0] if np.int64(r) & 1 == 0 else -aim[q, 0]
+def _sweep_order(row, now):
+    """The aims grouped by their sweep rows ``row`` (c,) int64 in the sweep's order (the
+    boresight's row ``now`` and those below it first, then from the top): the aims' indices
+    in that order (c,) int64 (a stable counting sort) and the start of each group (g + 1,)."""
+    c = len(row)
     low = row.min() if c else 0
     span = (row.max() - low + 1) if c else 0
-    group = np.where(row >= now, row - low, row - low + span)
     start = np.zeros(2 * span + 1, dtype=np.int64)
-    for g in group:
-        start[g + 1] += 1
-    start = np.cumsum(start)
+    for q in range(c):
+        start[row[q] - low + (0 if row[q] >= now else span) + 1] += 1
+    for g in range(1, len(start)):
+        start[g] += start[g - 1]
     fill = start[:-1].copy()
     order = np.empty(c, dtype=np.int64)
-    for q in range(c):                       # a stable counting sort by group
-        order[fill[group[q]]] = q
-        fill[group[q]] += 1
-    return order, start, across
+    for q in range(c):
+        g = row[q] - low + (0 if row[q] >= now else span)
+        order[fill[g]] = q
+        fill[g] += 1
+    return order, start
 
 
 @njit(cache=True)
@@ -917,33 +900,50 @@ def sweep(n, centres, used, size, solid, lo, hi, position, target, nominal, bore
     dozen walks through the map per interval, whatever its size.
     """
     chaser, to_nominal = _frames(position, target, nominal)
-    open_ = np.flatnonzero(~used)
-    cent = centres[open_]
     middle = n // 2
     ch = chaser[middle]
-    aim = _unit(cent, ch, to_nominal[middle])
-    ok_ = np.flatnonzero(aim[:, 2] >= math.cos(max_offset))
     band = block * size / math.sqrt(ch[0] * ch[0] + ch[1] * ch[1] + ch[2] * ch[2])
-    order, start, across = _sweep_rows(aim[ok_], band, boresight)
+    now = math.floor(boresight[1] / band)
+    # The open candidates within the offset cone from the middle shot: each one's index in
+    # ``centres`` and among the open ones, its sweep row and its key along the row
+    # (alternately left and right).
+    cos_max = math.cos(max_offset)
+    cand = np.empty(len(centres), dtype=np.int64)
+    rank = np.empty(len(centres), dtype=np.int64)
+    row = np.empty(len(centres), dtype=np.int64)
+    across = np.empty(len(centres))
+    c = n_open = 0
+    for q in range(len(centres)):
+        if used[q]:
+            continue
+        a0, a1, a2 = _toward(centres[q], ch, to_nominal[middle])
+        if a2 >= cos_max:
+            r = np.int64(math.floor(a1 / band))
+            cand[c], rank[c], row[c] = q, n_open, r
+            across[c] = a0 if r & 1 == 0 else -a0
+            c += 1
+        n_open += 1
+    order, start = _sweep_order(row[:c], now)
     pick = np.full(n, -1, dtype=np.int64)
+    aimed = np.full(n, -1, dtype=np.int64)
     m = 0
     for g in range(len(start) - 1):
         if m == n:
             break
         _sort_run(order, start[g], start[g + 1], across)
         for q in order[start[g]:start[g + 1]]:
-            k = ok_[q]
-            if _blocked(cent[k], ch, size, solid, lo, hi, BLOCK_SLACK * size,
+            k = cand[q]
+            if _blocked(centres[k], ch, size, solid, lo, hi, BLOCK_SLACK * size,
                         BLOCK_RADIUS * size):
-                hidden[open_[k]] += 1
-                used[open_[k]] = hidden[open_[k]] >= aside
+                hidden[k] += 1
+                used[k] = hidden[k] >= aside
             else:
-                pick[m] = k
-                used[open_[k]] = True
+                pick[m], aimed[m] = rank[q], k
+                used[k] = True
                 m += 1
                 if m == n:
                     break
-    goal = _goals(pick, cent, chaser, to_nominal, boresight, max_offset)
+    goal = _goals(aimed, centres, chaser, to_nominal, boresight, max_offset)
     _rate_limit(goal, boresight, reach)
     return pick, goal, _turns(goal)
 
