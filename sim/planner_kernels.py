@@ -593,15 +593,18 @@ def occupancy(occupied, lo, hi):
 
     Returns
     -------
-    (g,) uint8: the flat, C-ordered grid of shape ``hi - lo + 1``, its first cell voxel ``lo``;
-    1 where occupied, 0 elsewhere. A few tens of kilobytes for a map whose state grid (which
-    also spans the traversal margin) is megabytes: the walks' reads stay in the cache.
+    (ceil(g / 8),) uint8: one bit per cell of the flat, C-ordered grid of shape
+    ``hi - lo + 1`` (g cells), its first cell voxel ``lo``: cell ``c`` is bit ``c & 7`` of
+    byte ``c >> 3``, set where occupied. A few kilobytes for a map whose state grid (a byte
+    per voxel, also spanning the traversal margin) is megabytes: the walks' reads stay in the
+    cache, however cold the simulation between two plans left it.
     """
     e1, e2 = hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
-    solid = np.zeros((hi[0] - lo[0] + 1) * e1 * e2, dtype=np.uint8)
+    solid = np.zeros(((hi[0] - lo[0] + 1) * e1 * e2 + 7) // 8, dtype=np.uint8)
     for key in occupied:
         i, j, k = _unpack(key)
-        solid[((i - lo[0]) * e1 + (j - lo[1])) * e2 + (k - lo[2])] = 1
+        cell = ((i - lo[0]) * e1 + (j - lo[1])) * e2 + (k - lo[2])
+        solid[cell >> 3] |= np.uint8(1 << (cell & 7))
     return solid
 
 
@@ -644,7 +647,7 @@ def _blocked(target, position, size, solid, lo, hi, slack, radius):
     cell = (i - lo[0]) * s1 + (j - lo[1]) * s2 + (k - lo[2])
     limit2, radius2 = limit * limit, radius * radius
     while not (i == gi and j == gj and k == gk):
-        if solid[cell]:
+        if solid[cell >> 3] & (1 << (cell & 7)):
             c0, c1, c2 = (i + 0.5) * size - p0, (j + 0.5) * size - p1, (k + 0.5) * size - p2
             far = c0 * c0 + c1 * c1 + c2 * c2
             along = c0 * d0 + c1 * d1 + c2 * d2

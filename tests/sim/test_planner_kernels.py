@@ -269,6 +269,19 @@ def test_strikes_on_known_voxels_only_match_the_numpy_reference():
     np.testing.assert_array_equal(compiled.frontier(), frontier)
 
 
+def test_occupancy_grid_matches_numpy_packbits_as_the_map_grows():
+    for m, _ in _maps(seed=4):
+        solid, lo, hi = m.occupancy()
+        dense = np.zeros(hi - lo + 1, dtype=bool)
+        dense[tuple((unpack(m.occupied) - lo).T)] = True
+        np.testing.assert_array_equal(solid, np.packbits(dense.ravel(), bitorder="little"))
+        state, shape, corner = m.grid()
+        first, last = lo - corner, hi - corner + 1
+        box = state.reshape(shape)[first[0]:last[0], first[1]:last[1], first[2]:last[2]]
+        np.testing.assert_array_equal(dense, (box & OCCUPIED).astype(bool))
+        assert m.occupancy()[0] is solid                 # kept until a voxel is new
+
+
 def test_visibility_walk_matches_the_brute_force_reference():
     rng = np.random.default_rng(1)
     *_, (m, _) = _maps(seed=1)
