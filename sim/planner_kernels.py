@@ -11,6 +11,7 @@ that a process after the first loads them from disk instead of compiling them):
 - :func:`carve`: the voxels the beams crossed before their strikes;
 - :func:`enclose`: the unknown voxels the struck voxels enclose (a flood fill from outside,
   gaps of two voxels closed);
+- :func:`occupancy`: a bit per voxel of the occupied voxels' box, what the walks read;
 - :func:`hidden`: which voxels beams from a few positions reach (a walk through the map);
 - :func:`sweep`: one interval's aims (the sweep's order, visibility tested in that order until
   the shots are used, the slew limits) and the commanded turns; it counts, per voxel, the walks
@@ -20,8 +21,11 @@ that a process after the first loads them from disk instead of compiling them):
 They do what the numpy code they replaced did, in the same order of operations where it
 matters (the same voxel keys, the same sweep order); tests/sim/test_planner_kernels.py holds
 that numpy code (for the visibility walk, a brute-force test of every beam against every
-struck voxel) and checks each kernel against it on small maps. Only the closed loop imports
-this module, so the numba import (a few tenths of a second) is paid by closed-loop runs alone.
+struck voxel) and checks each kernel against it on small maps. Changes made only to be
+cheaper keep every decision: the gap-seeking logs of the closed-loop study's scenes stay the
+same, byte for byte (benchmarks/bench_planner.py, ``--identical-to``). Only the closed loop
+imports this module, so the numba import (a few tenths of a second) is paid by closed-loop runs
+alone.
 
 Conventions as in sim/surface_map.py: voxel ``(i, j, k)`` of edge ``size`` [m] holds the points
 ``size * ((i, j, k) + [0, 1)^3)`` of the body frame B; its key packs the three indices offset by

@@ -40,7 +40,9 @@ frontier, as does the space behind a plate.
 :meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by
 walking the beam's line voxel by voxel, from where it enters the occupied voxels' box toward the
 voxel: it is hidden when the beam passes close to the centre of an occupied voxel nearer than
-itself (``BLOCK_RADIUS``, ``BLOCK_SLACK``).
+itself (``BLOCK_RADIUS``, ``BLOCK_SLACK``). The walk reads a bit per voxel of the occupied
+voxels' box (:meth:`SurfaceMap.occupancy`, made again when a voxel is struck for the first
+time), not the state grid: a few kilobytes instead of megabytes.
 """
 
 from __future__ import annotations
