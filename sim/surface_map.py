@@ -285,10 +285,11 @@ class SurfaceMap:
         return self._state.reshape(-1), self._shape, self._corner
 
     def occupancy(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """What a walk through the map reads (sim/planner_kernels.py, ``_blocked``): the
-        occupied voxels' grid over their index box (g,) uint8 (``occupancy``), and that box's
-        low and high corners (3,) int64; made again only when a voxel was struck for the
-        first time since the last call."""
+        """What a walk through the map reads (sim/planner_kernels.py, ``_blocked``): a bit
+        per voxel of the occupied voxels' index box, set where occupied ((ceil(g / 8),) uint8
+        for the box's g voxels: ``occupancy`` there), and that box's low and high corners (3,)
+        int64; made again only when a voxel was struck for the first time since the last
+        call (only then can the box or its bits change)."""
         if self._solid_at != len(self.occupied):
             from sim import planner_kernels as kernels
 
