@@ -24,8 +24,16 @@ change of the kernels' source). Those **one-time costs** are measured apart, eac
 process with a cache directory of its own (first with it empty: the compile; then again: the
 load), and the steady-state figures above come after a warm-up run in this process.
 
+A change meant to make the planner cheaper without changing a decision is checked with
+``--save-logs DIR`` (before it: every target's gap-seeking log of the last repeat, as
+``DIR/<target>-<hours>h.h5``) and ``--identical-to DIR`` (after it: each run's log against that
+one; every dataset and attribute must be equal, byte for byte, but for the file's creation
+time): the run fails on the first difference.
+
     PYTHONPATH=. .venv/bin/python benchmarks/bench_planner.py
     PYTHONPATH=. .venv/bin/python benchmarks/bench_planner.py --hours 6 --targets rso-a
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_planner.py --hours 24 --repeats 1 \
+        --skip-one-time --identical-to DIR
 """
 
 from __future__ import annotations
@@ -45,6 +53,43 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 TARGET_RATIO = 0.10          # planner time / simulation time
+# Root attributes that differ between two runs of the same scene and seed.
+_RUN_ATTRS = ("created_utc",)
+
+
+def log_differences(a: Path, b: Path) -> list[str]:
+    """Where the strike logs ``a`` and ``b`` differ: the names of the groups, datasets and
+    attributes not equal byte for byte (dtype, shape and values), but for the root's
+    ``_RUN_ATTRS``; empty when the logs record the same run."""
+    import h5py
+    import numpy as np
+
+    def objects(f):
+        found = {"/": f}
+
+        def add(name, obj):        # returns None: visititems stops at anything else
+            found["/" + name] = obj
+
+        f.visititems(add)
+        return found
+
+    def same(x, y):
+        x, y = np.asarray(x), np.asarray(y)
+        return x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes()
+
+    with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
+        oa, ob = objects(fa), objects(fb)
+        out = [f"{name}: in one log only" for name in sorted(set(oa) ^ set(ob))]
+        for name in sorted(set(oa) & set(ob)):
+            x, y = oa[name], ob[name]
+            skip = _RUN_ATTRS if name == "/" else ()
+            out += [f"{name} attribute {key}" for key in sorted(set(x.attrs) | set(y.attrs))
+                    if key not in skip and (key not in x.attrs or key not in y.attrs
+                                            or not same(x.attrs[key], y.attrs[key]))]
+            if isinstance(x, h5py.Dataset) and not (isinstance(y, h5py.Dataset)
+                                                    and same(x[()], y[()])):
+                out.append(f"{name}: values differ")
+    return out
 
 
 class _Timed:
@@ -66,7 +111,8 @@ class _Timed:
 
 
 def measure(preset: str, overrides: list[str], hours: float, tmp: Path) -> dict:
-    """Planner and simulation times of one run of one target (see the module docstring)."""
+    """Planner and simulation times of one run of one target (see the module docstring); its
+    gap-seeking log is left as ``tmp / "gaps.h5"``."""
     import sim
     from sim import gap_seeking
 
@@ -154,6 +200,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--skip-one-time", action="store_true",
                         help="measure the steady state only (the one-time costs compile every "
                              "kernel in a fresh cache)")
+    parser.add_argument("--save-logs", type=Path, metavar="DIR",
+                        help="keep each target's gap-seeking log as DIR/<target>-<hours>h.h5")
+    parser.add_argument("--identical-to", type=Path, metavar="DIR",
+                        help="check every run's gap-seeking log against DIR/<target>-<hours>h.h5 "
+                             "(as --save-logs writes them): same datasets and attributes, byte "
+                             "for byte, but the creation time")
     args = parser.parse_args(argv)
     print(f"planner = GapSeeker.command + observe; simulation = the closed-loop run without "
           f"the planner; CPU time of the run's thread (wall time beside); target planner / "
@@ -178,8 +230,19 @@ def main(argv: list[str] | None = None) -> int:
         for name in args.targets:
             preset, overrides, _ = TARGETS[name]
             load = [os.getloadavg()[0]]
-            runs = [measure(preset, list(overrides), args.hours, Path(tmp))
-                    for _ in range(args.repeats)]
+            log = f"{name}-{args.hours:g}h.h5"
+            runs = []
+            for _ in range(args.repeats):
+                runs.append(measure(preset, list(overrides), args.hours, Path(tmp)))
+                if args.identical_to is not None:
+                    differ = log_differences(args.identical_to / log, Path(tmp) / "gaps.h5")
+                    if differ:
+                        print(f"{name}: the log differs from {args.identical_to / log}: "
+                              f"{'; '.join(differ[:5])}", flush=True)
+                        return 1
+            if args.save_logs is not None:
+                args.save_logs.mkdir(parents=True, exist_ok=True)
+                os.replace(Path(tmp) / "gaps.h5", args.save_logs / log)
             load.append(os.getloadavg()[0])
             median = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
             rows[name] = {"preset": preset, "overrides": list(overrides), "hours": args.hours,
@@ -190,8 +253,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"{m['planner_cpu_s']:.3f} s, simulation {m['simulation_cpu_s']:.3f} s), "
                   f"{m['planner_ms_per_interval']:.3f} ms per interval against the "
                   f"simulation's {m['simulation_ms_per_interval']:.3f}; fixed 2 deg slew "
-                  f"{m['fixed_law_s']:.2f} s wall; load average {load[0]:.1f} -> {load[1]:.1f}",
-                  flush=True)
+                  f"{m['fixed_law_s']:.2f} s wall; load average {load[0]:.1f} -> {load[1]:.1f}"
+                  + ("; log identical" if args.identical_to is not None else ""), flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"target_ratio": TARGET_RATIO, "one_time": once,
                                     "targets": rows}, indent=1))

@@ -276,7 +276,7 @@ class GapSeeker:
             readmit = self._interval - self._readmitted >= GAP_ASIDE_INTERVALS
             if readmit:
                 self._readmitted = self._interval
-            state, shape, corner = self.map.blockers()[:3]
+            state, shape, corner = self.map.grid()
             keys = kernels.not_aside(keys, state, shape, corner, GAP_ASIDE_WALKS, readmit)
         if len(keys) > GAP_MAX_CANDIDATES:
             keys = keys[::-(-len(keys) // GAP_MAX_CANDIDATES)]
@@ -322,7 +322,7 @@ class GapSeeker:
             return turn_from_boresight(np.tile(self.boresight, (len(t), 1)))
         position, target, nominal = poses if poses is not None else self._poses(t)
         pick, goal, turn = kernels.sweep(
-            len(t), self._centres, self._used, self.map.size, *self.map.blockers(), position,
+            len(t), self._centres, self._used, self.map.size, *self.map.occupancy(), position,
             target.as_matrix(), nominal, self.boresight, self.max_offset,
             self.max_rate * self.step, GAP_BLOCK_VOXELS, self._hidden,
             GAP_ASIDE_WALKS if self.residual else _NEVER_ASIDE)
@@ -337,14 +337,14 @@ class GapSeeker:
         from sim import planner_kernels as kernels
 
         if len(self._keys):     # the last plan's hidden counts, kept in the map's grid
-            kernels.store_hidden(self._keys, self._hidden, *self.map.blockers()[:3])
+            kernels.store_hidden(self._keys, self._hidden, *self.map.grid())
         self._update()
         self._age = 0
         self._keys, self._centres = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
         self._hidden = np.zeros(0, dtype=np.int64)
         if self.map is not None:
             self._keys, self._centres = _spread(self._candidates(), GAP_BLOCK_VOXELS, self.map)
-            self._hidden = kernels.hidden_counts(self._keys, *self.map.blockers()[:3])
+            self._hidden = kernels.hidden_counts(self._keys, *self.map.grid())
         self._used = np.zeros(len(self._keys), dtype=bool)
 
 
@@ -352,15 +352,10 @@ def _spread(keys: np.ndarray, block: int, surface: SurfaceMap
             ) -> tuple[np.ndarray, np.ndarray]:
     """The first of ``keys`` (sorted, voxels of ``surface``) in each cube of ``block`` voxels
     on a side: candidates that one strike each settles, evenly over the map; and their centres
-    (c, 3) [m, B] (compiled: sim/planner_kernels.py, with a mark per cube kept by the map from
-    plan to plan instead of allocated each time)."""
+    (c, 3) [m, B] (compiled: sim/planner_kernels.py)."""
     from sim import planner_kernels as kernels
 
-    need = kernels.cubes(block, surface._shape, surface._corner)
-    if len(surface.cube_marks) < need:
-        surface.cube_marks = np.zeros(need, dtype=bool)
-    return kernels.spread(np.asarray(keys, dtype=np.int64), block, surface.size,
-                          surface._shape, surface._corner, surface.cube_marks)
+    return kernels.spread(np.asarray(keys, dtype=np.int64), block, surface.size)
 
 
 def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:

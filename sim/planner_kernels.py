@@ -11,6 +11,7 @@ that a process after the first loads them from disk instead of compiling them):
 - :func:`carve`: the voxels the beams crossed before their strikes;
 - :func:`enclose`: the unknown voxels the struck voxels enclose (a flood fill from outside,
   gaps of two voxels closed);
+- :func:`occupancy`: a bit per voxel of the occupied voxels' box, what the walks read;
 - :func:`hidden`: which voxels beams from a few positions reach (a walk through the map);
 - :func:`sweep`: one interval's aims (the sweep's order, visibility tested in that order until
   the shots are used, the slew limits) and the commanded turns; it counts, per voxel, the walks
@@ -20,8 +21,11 @@ that a process after the first loads them from disk instead of compiling them):
 They do what the numpy code they replaced did, in the same order of operations where it
 matters (the same voxel keys, the same sweep order); tests/sim/test_planner_kernels.py holds
 that numpy code (for the visibility walk, a brute-force test of every beam against every
-struck voxel) and checks each kernel against it on small maps. Only the closed loop imports
-this module, so the numba import (a few tenths of a second) is paid by closed-loop runs alone.
+struck voxel) and checks each kernel against it on small maps. Changes made only to be
+cheaper keep every decision: the gap-seeking logs of the closed-loop study's scenes stay the
+same, byte for byte (benchmarks/bench_planner.py, ``--identical-to``). Only the closed loop
+imports this module, so the numba import (a few tenths of a second) is paid by closed-loop runs
+alone.
 
 Conventions as in sim/surface_map.py: voxel ``(i, j, k)`` of edge ``size`` [m] holds the points
 ``size * ((i, j, k) + [0, 1)^3)`` of the body frame B; its key packs the three indices offset by
@@ -57,11 +61,11 @@ _NOT_FRONT = 0xFF ^ _FRONT          # uint8 bit masks, as plain ints
 
 
 @njit(cache=True)
-def _matrix(q):
-    """(3, 3) rotation matrix of the quaternion ``q`` (x, y, z, w), normalised first."""
+def _matrix(q, m):
+    """Write into ``m`` (3, 3) the rotation matrix of the quaternion ``q`` (x, y, z, w),
+    normalised first."""
     norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     x, y, z, w = q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm
-    m = np.empty((3, 3))
     m[0, 0] = 1.0 - 2.0 * (y * y + z * z)
     m[0, 1] = 2.0 * (x * y - z * w)
     m[0, 2] = 2.0 * (x * z + y * w)
@@ -71,7 +75,6 @@ def _matrix(q):
     m[2, 0] = 2.0 * (x * z - y * w)
     m[2, 1] = 2.0 * (y * z + x * w)
     m[2, 2] = 1.0 - 2.0 * (x * x + y * y)
-    return m
 
 
 @njit(cache=True)
@@ -112,9 +115,11 @@ def recorded_beams(row, beam, ranges, direction, position, sensor, target, beams
     to_body = np.empty((n, 3, 3))
     sensor_m = np.empty((n, 3, 3))
     origin = np.empty((n, 3))
+    to_inertial = np.empty((3, 3))
     for s in range(n):
-        to_body[s] = _matrix(target[s]).T
-        sensor_m[s] = _matrix(sensor[s])
+        _matrix(target[s], to_inertial)
+        to_body[s] = to_inertial.T
+        _matrix(sensor[s], sensor_m[s])
         for i in range(3):
             origin[s, i] = (to_body[s, i, 0] * position[s, 0] + to_body[s, i, 1] * position[s, 1]
                             + to_body[s, i, 2] * position[s, 2])
@@ -225,12 +230,12 @@ def _merge_counts(occupied, count, occupied_view, unique, u_count, u_view):
 
     When every key of ``unique`` is occupied already (most plans late in a run), they are found
     by binary search and their counts and views updated in place, without a pass over every
-    occupied voxel; otherwise the two are merged into new arrays in one pass."""
+    occupied voxel; otherwise the two are merged into new arrays (:func:`_merge_sorted`)."""
     at = np.searchsorted(occupied, unique)
     if _all_known(occupied, unique, at):
         _add_in_place(count, occupied_view, at, u_count, u_view)
         return occupied, count, occupied_view, np.empty(0, dtype=np.int64)
-    return _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view)
+    return _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view, at)
 
 
 @njit(cache=True)
@@ -254,31 +259,43 @@ def _add_in_place(count, occupied_view, at, u_count, u_view):
 
 
 @njit(cache=True)
-def _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view):
-    """``_merge_counts`` when some key is new: one pass over both sorted key arrays."""
+def _merge_sorted(occupied, count, occupied_view, unique, u_count, u_view, at):
+    """``_merge_counts`` when some key is new (``at``: the ``searchsorted`` places of
+    ``unique`` in ``occupied``): new arrays, the occupied voxels between two keys of
+    ``unique`` copied as one block (a few new keys among thousands of occupied ones)."""
     o, u = len(occupied), len(unique)
-    merged = np.empty(o + u, dtype=np.int64)
-    m_count = np.empty(o + u, dtype=np.int64)
-    m_view = np.empty((o + u, 3))
-    new = np.empty(u, dtype=np.int64)
-    a = c = m = n_new = 0
-    while a < o or c < u:
-        old = c >= u or (a < o and occupied[a] <= unique[c])
-        both = old and c < u and occupied[a] == unique[c]
-        merged[m] = occupied[a] if old else unique[c]
-        m_count[m] = (count[a] if old else 0) + (u_count[c] if both or not old else 0)
-        for i in range(3):
-            if both:
-                m_view[m, i] = occupied_view[a, i] + u_view[c, i]
-            else:
-                m_view[m, i] = occupied_view[a, i] if old else u_view[c, i]
-        if not old:
+    n_new = 0
+    for c in range(u):
+        n_new += at[c] >= o or occupied[at[c]] != unique[c]
+    merged = np.empty(o + n_new, dtype=np.int64)
+    m_count = np.empty(o + n_new, dtype=np.int64)
+    m_view = np.empty((o + n_new, 3))
+    new = np.empty(n_new, dtype=np.int64)
+    a = m = n_new = 0                 # next occupied voxel to copy, next merged entry
+    for c in range(u):
+        b = at[c]
+        merged[m:m + b - a] = occupied[a:b]
+        m_count[m:m + b - a] = count[a:b]
+        m_view[m:m + b - a] = occupied_view[a:b]
+        m += b - a
+        if b < o and occupied[b] == unique[c]:
+            merged[m] = occupied[b]
+            m_count[m] = count[b] + u_count[c]
+            for i in range(3):
+                m_view[m, i] = occupied_view[b, i] + u_view[c, i]
+            a = b + 1
+        else:
+            merged[m] = unique[c]
+            m_count[m] = u_count[c]
+            m_view[m] = u_view[c]
             new[n_new] = unique[c]
             n_new += 1
-        a += old
-        c += both or not old
+            a = b
         m += 1
-    return merged[:m], m_count[:m], m_view[:m], new[:n_new]
+    merged[m:] = occupied[a:]
+    m_count[m:] = count[a:]
+    m_view[m:] = occupied_view[a:]
+    return merged, m_count, m_view, new
 
 
 @njit(cache=True)
@@ -570,17 +587,44 @@ def _slab(p, d, low, high, enter, leave):
 
 
 @njit(cache=True)
-def _blocked(target, position, size, state, shape, corner, lo, hi, slack, radius):
+def occupancy(occupied, lo, hi):
+    """The occupied voxels as a grid over their index box: what a walk reads (:func:`_blocked`).
+
+    Parameters
+    ----------
+    occupied : (o,) int64: keys of the occupied voxels
+    lo, hi : (3,) int64: their index box (inclusive)
+
+    Returns
+    -------
+    (ceil(g / 8),) uint8: one bit per cell of the flat, C-ordered grid of shape
+    ``hi - lo + 1`` (g cells), its first cell voxel ``lo``: cell ``c`` is bit ``c & 7`` of
+    byte ``c >> 3``, set where occupied. A few kilobytes for a map whose state grid (a byte
+    per voxel, also spanning the traversal margin) is megabytes: the walks' reads stay in the
+    cache, however cold the simulation between two plans left it.
+    """
+    e1, e2 = hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
+    solid = np.zeros(((hi[0] - lo[0] + 1) * e1 * e2 + 7) // 8, dtype=np.uint8)
+    for key in occupied:
+        i, j, k = _unpack(key)
+        cell = ((i - lo[0]) * e1 + (j - lo[1])) * e2 + (k - lo[2])
+        solid[cell >> 3] |= np.uint8(1 << (cell & 7))
+    return solid
+
+
+@njit(cache=True)
+def _blocked(target, position, size, solid, lo, hi, slack, radius):
     """Whether the beam from ``position`` (3,) toward the voxel centre ``target`` (3,) [m, B]
     crosses, before the target's voxel, an occupied voxel whose centre lies within ``radius``
     [m] of the beam's line and nearer to ``position`` than ``target`` by more than ``slack``
     [m].
 
-    The occupied voxels of the flat ``state`` grid (shape and first voxel ``shape``,
-    ``corner`` (3,) int64) lie within the voxel index box ``lo`` .. ``hi`` (3,) int64
-    (inclusive), which the grid holds. The walk (voxel by voxel, Amanatides and Woo) starts
-    where the beam enters that box, so a beam stopped by the surface nearest to ``position``
-    costs a few steps whatever the map's size. Scalars only: no allocation per beam.
+    The occupied voxels lie within the voxel index box ``lo`` .. ``hi`` (3,) int64
+    (inclusive); ``solid`` is that box's occupancy grid (:func:`occupancy`). The walk (voxel
+    by voxel, Amanatides and Woo) starts where the beam enters that box, so a beam stopped by
+    the surface nearest to ``position`` costs a few steps whatever the map's size, and ends
+    where it leaves the box (nothing beyond is occupied: a walk that has left the box along
+    one axis never comes back). Scalars only: no allocation per beam.
     """
     p0, p1, p2 = position[0], position[1], position[2]
     d0, d1, d2 = target[0] - p0, target[1] - p1, target[2] - p2
@@ -602,11 +646,12 @@ def _blocked(target, position, size, state, shape, corner, lo, hi, slack, radius
     si, ti, di = _axis_walk(p0, d0, i, size)
     sj, tj, dj = _axis_walk(p1, d1, j, size)
     sk, tk, dk = _axis_walk(p2, d2, k, size)
-    s1, s2 = shape[1] * shape[2], shape[2]
-    cell = (i - corner[0]) * s1 + (j - corner[1]) * s2 + (k - corner[2])
+    s2 = hi[2] - lo[2] + 1
+    s1 = (hi[1] - lo[1] + 1) * s2
+    cell = (i - lo[0]) * s1 + (j - lo[1]) * s2 + (k - lo[2])
     limit2, radius2 = limit * limit, radius * radius
     while not (i == gi and j == gj and k == gk):
-        if state[cell] & _OCC:
+        if solid[cell >> 3] & (1 << (cell & 7)):
             c0, c1, c2 = (i + 0.5) * size - p0, (j + 0.5) * size - p1, (k + 0.5) * size - p2
             far = c0 * c0 + c1 * c1 + c2 * c2
             along = c0 * d0 + c1 * d1 + c2 * d2
@@ -616,41 +661,47 @@ def _blocked(target, position, size, state, shape, corner, lo, hi, slack, radius
             if ti >= leave:
                 return False
             i, ti, cell = i + si, ti + di, cell + si * s1
+            if i < lo[0] or i > hi[0]:
+                return False
         elif tj <= tk:
             if tj >= leave:
                 return False
             j, tj, cell = j + sj, tj + dj, cell + sj * s2
+            if j < lo[1] or j > hi[1]:
+                return False
         else:
             if tk >= leave:
                 return False
             k, tk, cell = k + sk, tk + dk, cell + sk
+            if k < lo[2] or k > hi[2]:
+                return False
     return False
 
 
 @njit(cache=True)
-def hidden(positions, targets, size, state, shape, corner, lo, hi):
+def hidden(positions, targets, size, solid, lo, hi):
     """Which beams from ``positions`` (p, 3) toward the voxel centres ``targets`` (n, 3) [m,
     B] are stopped by an occupied voxel nearer than the target by more than ``BLOCK_SLACK``
-    edges (sim/surface_map.py, :meth:`SurfaceMap.visible`): (p, n) bool. ``state``,
-    ``shape``, ``corner``, ``lo``, ``hi`` as :func:`_blocked`."""
+    edges (sim/surface_map.py, :meth:`SurfaceMap.visible`): (p, n) bool. ``solid``, ``lo``,
+    ``hi`` as :func:`_blocked`."""
     out = np.zeros((len(positions), len(targets)), dtype=np.bool_)
     for q in range(len(positions)):
         for k in range(len(targets)):
-            out[q, k] = _blocked(targets[k], positions[q], size, state, shape, corner, lo, hi,
+            out[q, k] = _blocked(targets[k], positions[q], size, solid, lo, hi,
                                  BLOCK_SLACK * size, BLOCK_RADIUS * size)
     return out
 
 
 @njit(cache=True)
-def _turn_toward(b, goal, angle):
-    """Unit vector ``b`` (3,) turned toward ``goal`` (3,) by ``angle`` [rad] in their plane
-    (``goal`` itself when within ``angle``)."""
-    cos = min(max(b[0] * goal[0] + b[1] * goal[1] + b[2] * goal[2], -1.0), 1.0)
+def _turn_toward(b0, b1, b2, g0, g1, g2, angle):
+    """The unit vector ``(b0, b1, b2)`` turned toward the unit vector ``(g0, g1, g2)`` by
+    ``angle`` [rad] in their plane (the goal itself when within ``angle``): three floats."""
+    cos = min(max(b0 * g0 + b1 * g1 + b2 * g2, -1.0), 1.0)
     if math.acos(cos) <= angle:
-        return goal.copy()
-    s = goal - cos * b
-    c, k = math.cos(angle), math.sin(angle) / math.sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
-    return c * b + k * s
+        return g0, g1, g2
+    s0, s1, s2 = g0 - cos * b0, g1 - cos * b1, g2 - cos * b2
+    c, k = math.cos(angle), math.sin(angle) / math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+    return c * b0 + k * s0, c * b1 + k * s1, c * b2 + k * s2
 
 
 @njit(cache=True)
@@ -673,49 +724,37 @@ def _frames(position, target, nominal):
 
 
 @njit(cache=True)
-def _unit(points, origin, rotation):
-    """Unit vectors (c, 3) from ``origin`` (3,) toward ``points`` (c, 3), turned by
-    ``rotation`` (3, 3)."""
-    out = np.empty((len(points), 3))
-    r = rotation
-    for k in range(len(points)):
-        d0, d1, d2 = (points[k, 0] - origin[0], points[k, 1] - origin[1],
-                      points[k, 2] - origin[2])
-        a0 = r[0, 0] * d0 + r[0, 1] * d1 + r[0, 2] * d2
-        a1 = r[1, 0] * d0 + r[1, 1] * d1 + r[1, 2] * d2
-        a2 = r[2, 0] * d0 + r[2, 1] * d1 + r[2, 2] * d2
-        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        out[k, 0], out[k, 1], out[k, 2] = a0 / norm, a1 / norm, a2 / norm
-    return out
+def _toward(point, origin, r):
+    """The unit vector from ``origin`` (3,) toward ``point`` (3,), turned by ``r`` (3, 3):
+    three floats."""
+    d0, d1, d2 = point[0] - origin[0], point[1] - origin[1], point[2] - origin[2]
+    a0 = r[0, 0] * d0 + r[0, 1] * d1 + r[0, 2] * d2
+    a1 = r[1, 0] * d0 + r[1, 1] * d1 + r[1, 2] * d2
+    a2 = r[2, 0] * d0 + r[2, 1] * d1 + r[2, 2] * d2
+    norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    return a0 / norm, a1 / norm, a2 / norm
 
 
 @njit(cache=True)
-def _sweep_rows(aim, band, boresight):
-    """The sweep's rows of the aims (c, 3) (nominal sensor frame), ``band`` [rad] wide: the
-    aims grouped by row in the sweep's order (the boresight's (3,) row and those below it
-    first, then from the top) and the start of each group, (c,) int64 and (g + 1,) int64; and
-    the key along each row (c,), alternately left and right."""
-    c = len(aim)
-    now = math.floor(boresight[1] / band)
-    row = np.empty(c, dtype=np.int64)
-    across = np.empty(c)
-    for q in range(c):
-        r = math.floor(aim[q, 1] / band)
-        row[q] = np.int64(r)
-        across[q] = aim[q, 0] if np.int64(r) & 1 == 0 else -aim[q, 0]
+def _sweep_order(row, now):
+    """The aims grouped by their sweep rows ``row`` (c,) int64 in the sweep's order (the
+    boresight's row ``now`` and those below it first, then from the top): the aims' indices
+    in that order (c,) int64 (a stable counting sort) and the start of each group (g + 1,)."""
+    c = len(row)
     low = row.min() if c else 0
     span = (row.max() - low + 1) if c else 0
-    group = np.where(row >= now, row - low, row - low + span)
     start = np.zeros(2 * span + 1, dtype=np.int64)
-    for g in group:
-        start[g + 1] += 1
-    start = np.cumsum(start)
+    for q in range(c):
+        start[row[q] - low + (0 if row[q] >= now else span) + 1] += 1
+    for g in range(1, len(start)):
+        start[g] += start[g - 1]
     fill = start[:-1].copy()
     order = np.empty(c, dtype=np.int64)
-    for q in range(c):                       # a stable counting sort by group
-        order[fill[group[q]]] = q
-        fill[group[q]] += 1
-    return order, start, across
+    for q in range(c):
+        g = row[q] - low + (0 if row[q] >= now else span)
+        order[fill[g]] = q
+        fill[g] += 1
+    return order, start
 
 
 @njit(cache=True)
@@ -730,11 +769,11 @@ def _goals(pick, centres, chaser, to_nominal, boresight, max_offset):
         if pick[s] < 0:
             goal[s] = goal[s - 1] if s else boresight
             continue
-        g = _unit(centres[pick[s]:pick[s] + 1], chaser[s], to_nominal[s])[0]
-        if g[2] < cos_max:
-            side = math.sqrt(g[0] * g[0] + g[1] * g[1])
-            g[0], g[1], g[2] = sin_max * (g[0] / side), sin_max * (g[1] / side), cos_max
-        goal[s] = g
+        g0, g1, g2 = _toward(centres[pick[s]], chaser[s], to_nominal[s])
+        if g2 < cos_max:
+            side = math.sqrt(g0 * g0 + g1 * g1)
+            g0, g1, g2 = sin_max * (g0 / side), sin_max * (g1 / side), cos_max
+        goal[s, 0], goal[s, 1], goal[s, 2] = g0, g1, g2
     return goal
 
 
@@ -743,16 +782,16 @@ def _rate_limit(goal, boresight, reach):
     """From the first goal (n, 3) beyond ``reach`` [rad] of the one before (``boresight`` (3,)
     before the first), turn toward each goal by at most ``reach`` (in place)."""
     started = False
-    b = boresight.copy()
+    b0 = b1 = b2 = 0.0
     for s in range(len(goal)):
         if not started:
             before = goal[s - 1] if s else boresight
             dot = goal[s, 0] * before[0] + goal[s, 1] * before[1] + goal[s, 2] * before[2]
             if math.acos(min(max(dot, -1.0), 1.0)) > reach:
-                started, b = True, before.copy()
+                started, b0, b1, b2 = True, before[0], before[1], before[2]
         if started:
-            b = _turn_toward(b, goal[s], reach)
-            goal[s] = b
+            b0, b1, b2 = _turn_toward(b0, b1, b2, goal[s, 0], goal[s, 1], goal[s, 2], reach)
+            goal[s, 0], goal[s, 1], goal[s, 2] = b0, b1, b2
 
 
 @njit(cache=True)
@@ -812,8 +851,21 @@ def store_hidden(keys, hidden, state, shape, corner):
 
 
 @njit(cache=True)
-def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target, nominal,
-          boresight, max_offset, reach, block, hidden, aside):
+def _sort_run(order, start, stop, key):
+    """Sort ``order[start:stop]`` in place by ``key[order]``, stably (insertion: a sweep row
+    holds a few dozen aims)."""
+    for a in range(start + 1, stop):
+        q = order[a]
+        b = a
+        while b > start and key[order[b - 1]] > key[q]:
+            order[b] = order[b - 1]
+            b -= 1
+        order[b] = q
+
+
+@njit(cache=True)
+def sweep(n, centres, used, size, solid, lo, hi, position, target, nominal, boresight,
+          max_offset, reach, block, hidden, aside):
     """One interval's aims (sim/gap_seeking.py, :meth:`GapSeeker.command`): the open
     candidates within ``max_offset`` from the interval's middle shot, in a sweep of rows
     ``block`` voxels wide across the view from the boresight's row on, each taken when
@@ -827,8 +879,8 @@ def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target
     used : (c,) bool: candidates already aimed at or set aside; those aimed at or set aside
         now are set (in place)
     size : float, metres: the voxel edge
-    state, shape, corner, lo, hi : the map's flat state grid, its shape and first voxel, the
-        occupied voxels' index box (:func:`_blocked`)
+    solid, lo, hi : the occupied voxels' grid over their index box, and that box
+        (:func:`occupancy`, :func:`_blocked`)
     position : (n, 3) float64, metres, I: the chaser at the interval's shots
     target : (n, 3, 3) float64: matrices sending B vectors to I, at the same times
     nominal : (n, 3, 3) float64: matrices sending nominal-sensor vectors to I
@@ -855,33 +907,50 @@ def sweep(n, centres, used, size, state, shape, corner, lo, hi, position, target
     dozen walks through the map per interval, whatever its size.
     """
     chaser, to_nominal = _frames(position, target, nominal)
-    open_ = np.flatnonzero(~used)
-    cent = centres[open_]
     middle = n // 2
     ch = chaser[middle]
-    aim = _unit(cent, ch, to_nominal[middle])
-    ok_ = np.flatnonzero(aim[:, 2] >= math.cos(max_offset))
     band = block * size / math.sqrt(ch[0] * ch[0] + ch[1] * ch[1] + ch[2] * ch[2])
-    order, start, across = _sweep_rows(aim[ok_], band, boresight)
+    now = math.floor(boresight[1] / band)
+    # The open candidates within the offset cone from the middle shot: each one's index in
+    # ``centres`` and among the open ones, its sweep row and its key along the row
+    # (alternately left and right).
+    cos_max = math.cos(max_offset)
+    cand = np.empty(len(centres), dtype=np.int64)
+    rank = np.empty(len(centres), dtype=np.int64)
+    row = np.empty(len(centres), dtype=np.int64)
+    across = np.empty(len(centres))
+    c = n_open = 0
+    for q in range(len(centres)):
+        if used[q]:
+            continue
+        a0, a1, a2 = _toward(centres[q], ch, to_nominal[middle])
+        if a2 >= cos_max:
+            r = np.int64(math.floor(a1 / band))
+            cand[c], rank[c], row[c] = q, n_open, r
+            across[c] = a0 if r & 1 == 0 else -a0
+            c += 1
+        n_open += 1
+    order, start = _sweep_order(row[:c], now)
     pick = np.full(n, -1, dtype=np.int64)
+    aimed = np.full(n, -1, dtype=np.int64)
     m = 0
     for g in range(len(start) - 1):
         if m == n:
             break
-        members = order[start[g]:start[g + 1]]
-        for q in members[np.argsort(across[members], kind="mergesort")]:
-            k = ok_[q]
-            if _blocked(cent[k], ch, size, state, shape, corner, lo, hi, BLOCK_SLACK * size,
+        _sort_run(order, start[g], start[g + 1], across)
+        for q in order[start[g]:start[g + 1]]:
+            k = cand[q]
+            if _blocked(centres[k], ch, size, solid, lo, hi, BLOCK_SLACK * size,
                         BLOCK_RADIUS * size):
-                hidden[open_[k]] += 1
-                used[open_[k]] = hidden[open_[k]] >= aside
+                hidden[k] += 1
+                used[k] = hidden[k] >= aside
             else:
-                pick[m] = k
-                used[open_[k]] = True
+                pick[m], aimed[m] = rank[q], k
+                used[k] = True
                 m += 1
                 if m == n:
                     break
-    goal = _goals(pick, cent, chaser, to_nominal, boresight, max_offset)
+    goal = _goals(aimed, centres, chaser, to_nominal, boresight, max_offset)
     _rate_limit(goal, boresight, reach)
     return pick, goal, _turns(goal)
 
@@ -903,53 +972,46 @@ def frontier_keep(frontier, state, shape, corner):
 
 
 @njit(cache=True)
-def spread(keys, block, size, shape, corner, taken):
+def spread(keys, block, size):
     """The first of ``keys`` (sorted) in each cube of ``block`` voxels on a side, and their
     centres.
 
     Parameters
     ----------
-    keys : (k,) int64, sorted voxel keys, all within the map's grid
+    keys : (k,) int64, sorted voxel keys
     block : int: the cube's edge in voxels
     size : float, metres: the voxel edge
-    shape, corner : (3,) int64: the grid's shape and the voxel index of its first cell
-    taken : (t,) bool, all False: room for a mark per cube of the grid (t at least the number
-        of cubes, :func:`cubes`); left all False again
 
     Returns
     -------
     chosen : (c,) int64: the chosen keys, in their order
     centres : (c, 3) float64, metres, B: their voxel centres
+
+    Notes
+    -----
+    A mark per cube of the keys' own index box (a few thousand cubes: it stays in the cache).
     """
-    # A grid of the cubes, from the cube holding the grid's first voxel.
-    first = np.empty(3, dtype=np.int64)
-    extent = np.empty(3, dtype=np.int64)
-    for i in range(3):
-        first[i] = corner[i] // block
-        extent[i] = (corner[i] + shape[i] - 1) // block - first[i] + 1
-    keep = np.zeros(len(keys), dtype=np.bool_)
-    cells = np.empty(len(keys), dtype=np.int64)
+    if not len(keys):
+        return keys.copy(), np.empty((0, 3))
+    index = np.empty((len(keys), 3), dtype=np.int64)
+    first = np.full(3, np.iinfo(np.int64).max)
+    last = np.full(3, np.iinfo(np.int64).min)
     for q in range(len(keys)):
-        i, j, k = _unpack(keys[q])
-        cell = (((i // block - first[0]) * extent[1] + (j // block - first[1])) * extent[2]
-                + (k // block - first[2]))
-        cells[q] = cell
+        index[q, 0], index[q, 1], index[q, 2] = _unpack(keys[q])
+        for i in range(3):
+            cube = index[q, i] // block
+            first[i] = min(first[i], cube)
+            last[i] = max(last[i], cube)
+    e1, e2 = last[1] - first[1] + 1, last[2] - first[2] + 1
+    taken = np.zeros((last[0] - first[0] + 1) * e1 * e2, dtype=np.bool_)
+    keep = np.zeros(len(keys), dtype=np.bool_)
+    for q in range(len(keys)):
+        cell = (((index[q, 0] // block - first[0]) * e1 + (index[q, 1] // block - first[1])) * e2
+                + (index[q, 2] // block - first[2]))
         if not taken[cell]:
             taken[cell] = keep[q] = True
-    for cell in cells:
-        taken[cell] = False
     chosen = keys[keep]
     return chosen, _centres(chosen, size)
-
-
-@njit(cache=True)
-def cubes(block, shape, corner):
-    """How many cubes of ``block`` voxels on a side :func:`spread` marks for a grid of
-    ``shape`` and first voxel ``corner`` (3,) int64."""
-    n = 1
-    for i in range(3):
-        n *= (corner[i] + shape[i] - 1) // block - corner[i] // block + 1
-    return n
 
 
 # Strike counts below this are ranked by a histogram (the least-struck quantile's count is a

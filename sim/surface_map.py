@@ -40,7 +40,9 @@ frontier, as does the space behind a plate.
 :meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by
 walking the beam's line voxel by voxel, from where it enters the occupied voxels' box toward the
 voxel: it is hidden when the beam passes close to the centre of an occupied voxel nearer than
-itself (``BLOCK_RADIUS``, ``BLOCK_SLACK``).
+itself (``BLOCK_RADIUS``, ``BLOCK_SLACK``). The walk reads a bit per voxel of the occupied
+voxels' box (:meth:`SurfaceMap.occupancy`, made again when a voxel is struck for the first
+time), not the state grid: a few kilobytes instead of megabytes.
 """
 
 from __future__ import annotations
@@ -118,10 +120,11 @@ class SurfaceMap:
         self._frontier = np.zeros(0, dtype=np.int64)    # sorted keys, each once a frontier
         self._index_lo = np.zeros(3, dtype=np.int64)    # the occupied voxels' index box
         self._index_hi = np.zeros(3, dtype=np.int64)
-        self.cube_marks = np.zeros(0, dtype=bool)       # room for the planner's spread, all False
         self._box_version = 0                           # bumped when the index box changes
         self._carve_box = (None, None, None)            # (margin, version) -> box traversed
         self._enclosed_at = 0                           # occupied voxels at the last enclose
+        self._solid = np.zeros(0, dtype=np.uint8)       # occupancy over the index box,
+        self._solid_at = 0                              # made when this many were occupied
 
     @property
     def occupied_centres(self) -> np.ndarray:
@@ -276,11 +279,23 @@ class SurfaceMap:
             near |= member(pack(index + step), frontier)
         return self.occupied[near]
 
-    def blockers(self) -> tuple:
-        """What a walk through the map reads (sim/planner_kernels.py, ``_blocked``): the flat
-        state grid, its shape and first voxel, the occupied voxels' index box (low, high)."""
-        return (self._state.reshape(-1), self._shape, self._corner, self._index_lo,
-                self._index_hi)
+    def grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The flat state grid (g,) uint8, its shape and the voxel index of its first cell
+        (3,) int64: what the planner's kernels index by voxel (sim/planner_kernels.py)."""
+        return self._state.reshape(-1), self._shape, self._corner
+
+    def occupancy(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What a walk through the map reads (sim/planner_kernels.py, ``_blocked``): a bit
+        per voxel of the occupied voxels' index box, set where occupied ((ceil(g / 8),) uint8
+        for the box's g voxels: ``occupancy`` there), and that box's low and high corners (3,)
+        int64; made again only when a voxel was struck for the first time since the last
+        call (only then can the box or its bits change)."""
+        if self._solid_at != len(self.occupied):
+            from sim import planner_kernels as kernels
+
+            self._solid = kernels.occupancy(self.occupied, self._index_lo, self._index_hi)
+            self._solid_at = len(self.occupied)
+        return self._solid, self._index_lo, self._index_hi
 
     def visible(self, positions: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """Predict which beams from ``positions`` reach the voxels centred at ``targets``
@@ -304,5 +319,5 @@ class SurfaceMap:
         seen = np.ones((len(positions), len(targets)), dtype=bool)
         if len(self.occupied) and len(targets):
             seen = ~kernels.hidden(positions, np.asarray(targets, dtype=np.float64), self.size,
-                                   *self.blockers())
+                                   *self.occupancy())
         return seen[0] if one else seen

@@ -163,7 +163,7 @@ def test_candidates_found_hidden_are_set_aside_and_readmitted():
     # The plate struck once per voxel; the layer below it is the frontier.
     law = _law_over_a_struck_plate(lambda x: np.ones(len(x), dtype=int))
     frontier = law.map.frontier()
-    grid = law.map.blockers()[:3]
+    grid = law.map.grid()
     # While the frontier lasts nothing is set aside, whatever the counts.
     kernels.store_hidden(frontier, np.full(len(frontier), GAP_ASIDE_WALKS), *grid)
     np.testing.assert_array_equal(law._candidates(), frontier)

@@ -269,13 +269,26 @@ def test_strikes_on_known_voxels_only_match_the_numpy_reference():
     np.testing.assert_array_equal(compiled.frontier(), frontier)
 
 
+def test_occupancy_grid_matches_numpy_packbits_as_the_map_grows():
+    for m, _ in _maps(seed=4):
+        solid, lo, hi = m.occupancy()
+        dense = np.zeros(hi - lo + 1, dtype=bool)
+        dense[tuple((unpack(m.occupied) - lo).T)] = True
+        np.testing.assert_array_equal(solid, np.packbits(dense.ravel(), bitorder="little"))
+        state, shape, corner = m.grid()
+        first, last = lo - corner, hi - corner + 1
+        box = state.reshape(shape)[first[0]:last[0], first[1]:last[1], first[2]:last[2]]
+        np.testing.assert_array_equal(dense, (box & OCCUPIED).astype(bool))
+        assert m.occupancy()[0] is solid                 # kept until a voxel is new
+
+
 def test_visibility_walk_matches_the_brute_force_reference():
     rng = np.random.default_rng(1)
     *_, (m, _) = _maps(seed=1)
     positions = rng.normal(size=(6, 3)) * 60.0
     positions[0] = m.occupied_centres.mean(axis=0) + np.array([0.0, 0.0, 0.2])   # inside
     targets = m.centres(np.concatenate([m.frontier(), m.occupied]))
-    hidden = kernels.hidden(positions, targets, m.size, *m.blockers())
+    hidden = kernels.hidden(positions, targets, m.size, *m.occupancy())
     expected = ref_hidden(positions, m.occupied_centres, targets, m.size)
     np.testing.assert_array_equal(hidden, expected)
     assert 0.1 < expected.mean() < 0.9
@@ -286,14 +299,14 @@ def test_spread_kernel_matches_the_numpy_reference():
     *_, (m, _) = _maps(seed=2)
     keys = np.union1d(m.frontier(), m.occupied)
     for block in (1, 2, 3):
-        marks = np.zeros(kernels.cubes(block, m._shape, m._corner), dtype=bool)
-        chosen, centres = kernels.spread(keys, block, m.size, m._shape, m._corner, marks)
-        assert not marks.any()                                      # left as it was given
+        chosen, centres = kernels.spread(keys, block, m.size)
         cube = pack(np.floor_divide(unpack(keys), block))
         expected = keys[np.sort(np.unique(cube, return_index=True)[1])]
         np.testing.assert_array_equal(chosen, expected)
         np.testing.assert_array_equal(centres, m.centres(expected))
     assert len(expected) < len(keys)
+    chosen, centres = kernels.spread(keys[:0], 2, m.size)
+    assert chosen.shape == (0,) and centres.shape == (0, 3)
 
 
 def test_recorded_beams_kernel_matches_scipy_rotations():
@@ -352,7 +365,7 @@ def test_sweep_kernel_matches_the_numpy_reference():
         expected = ref_sweep(n, centres, used, m.occupied_centres, m.size, position,
                              target.as_matrix(), nominal, boresight, max_offset, reach, 2)
         now = used.copy()
-        pick, goal, turn = kernels.sweep(n, centres, now, m.size, *m.blockers(), position[:n],
+        pick, goal, turn = kernels.sweep(n, centres, now, m.size, *m.occupancy(), position[:n],
                                          target.as_matrix()[:n], nominal[:n], boresight,
                                          max_offset, reach, 2,
                                          np.zeros(len(keys), dtype=np.int64), 2)
@@ -364,11 +377,10 @@ def test_sweep_kernel_matches_the_numpy_reference():
 
 
 def test_turn_toward_stays_within_the_angle():
-    b = np.array([0, 0, 1.0])
-    turned = kernels._turn_toward(b, np.array([1.0, 0, 0]), math.radians(10))
+    b = (0.0, 0.0, 1.0)
+    turned = kernels._turn_toward(*b, 1.0, 0.0, 0.0, math.radians(10))
     np.testing.assert_allclose(turned, [math.sin(math.radians(10)), 0, math.cos(math.radians(10))])
-    np.testing.assert_array_equal(kernels._turn_toward(b, np.array([0, 0.1, 0.99]), 1.0),
-                                  [0, 0.1, 0.99])
+    np.testing.assert_array_equal(kernels._turn_toward(*b, 0.0, 0.1, 0.99, 1.0), [0, 0.1, 0.99])
 
 
 def test_least_struck_kernel_matches_the_numpy_quantile():
@@ -400,16 +412,16 @@ def test_hidden_counts_live_in_the_state_s_upper_bits():
     state = m._state.reshape(-1)
     before = state.copy()
     counts = np.arange(len(keys)) % (HIDDEN_MAX + 5)             # some beyond the largest
-    kernels.store_hidden(keys, counts, *m.blockers()[:3])
-    np.testing.assert_array_equal(kernels.hidden_counts(keys, *m.blockers()[:3]),
+    kernels.store_hidden(keys, counts, *m.grid())
+    np.testing.assert_array_equal(kernels.hidden_counts(keys, *m.grid()),
                                   np.minimum(counts, HIDDEN_MAX))
     np.testing.assert_array_equal(state & (HIDDEN_STEP - 1), before & (HIDDEN_STEP - 1))
     aside = 4
-    kept = kernels.not_aside(keys, *m.blockers()[:3], aside, False)
+    kept = kernels.not_aside(keys, *m.grid(), aside, False)
     np.testing.assert_array_equal(kept, keys[np.minimum(counts, HIDDEN_MAX) < aside])
     # Re-admitted: every key back, its count cleared, the map's own bits as they were.
-    np.testing.assert_array_equal(kernels.not_aside(keys, *m.blockers()[:3], aside, True), keys)
-    assert not kernels.hidden_counts(keys, *m.blockers()[:3]).any()
+    np.testing.assert_array_equal(kernels.not_aside(keys, *m.grid(), aside, True), keys)
+    assert not kernels.hidden_counts(keys, *m.grid()).any()
     np.testing.assert_array_equal(state, before & (HIDDEN_STEP - 1))
 
 
@@ -426,7 +438,7 @@ def test_the_sweep_sets_aside_candidates_found_hidden_and_keeps_its_picks():
     x /= np.linalg.norm(x)
     nominal = np.tile(np.stack([x, np.cross(z, x), z], axis=1), (n, 1, 1))
     boresight = np.array([0.0, 0.0, 1.0])
-    args = (m.size, *m.blockers(), position, target, nominal, boresight, math.radians(30),
+    args = (m.size, *m.occupancy(), position, target, nominal, boresight, math.radians(30),
             math.radians(10), 2)
     seen = m.visible(position[n // 2], centres)
     used = rng.random(len(keys)) < 0.3
