@@ -173,9 +173,11 @@ def collect(args) -> None:
 
 # The per-strike arrays of a candidate's held-out checks (``judge.Check``) that ``collect``
 # keeps beside its cost, for the statistics that are not functions of the cost alone (``crack``:
-# the missed held-out beam passed a crack of the fold's surface, ``judge.check``'s own; and
-# ``opening``, the opening's size, ``opening_of``).
-PER_STRIKE = ("distance", "tolerance", "sigma", "missed", "violated", "crack", "opening")
+# the missed held-out beam passed a crack of the fold's surface, ``judge.check``'s own;
+# ``opening``, the opening's size, ``opening_of``; ``front``, the beam met the surface before its
+# strike, and ``cos``, the |cos| of its incidence there, ``beam_side``).
+PER_STRIKE = ("distance", "tolerance", "sigma", "missed", "violated", "crack", "opening",
+              "front", "cos")
 
 
 @contextmanager
@@ -193,6 +195,8 @@ def recording_checks():
     @dataclass(frozen=True)
     class Recorded(judge.Check):
         opening: np.ndarray | None = None
+        front: np.ndarray | None = None
+        cos: np.ndarray | None = None
 
     calls: list = []
     reach: list = []
@@ -207,7 +211,8 @@ def recording_checks():
         result = check(*args, **kwargs)
         if not kwargs.get("fitted", False):
             calls.append(Recorded(**vars(result),
-                                  opening=opening_of(*args[:2], result, reach[0])))
+                                  opening=opening_of(*args[:2], result, reach[0]),
+                                  **beam_side(*args[:2])))
         return result
 
     def recorded_judge(*args, **kwargs):
@@ -222,6 +227,16 @@ def recording_checks():
         yield
     finally:
         judge.check, auto.judge_candidate, auto._context = check, judge_candidate, context
+
+
+def beam_side(strikes, caster) -> dict[str, np.ndarray | None]:
+    """Per strike: whether its beam meets ``caster``'s surface before the strike (``front``)
+    and the |cos| of the beam's incidence there (``cos``; 1 for a miss); None without view
+    points."""
+    if strikes.view is None:
+        return {"front": None, "cos": None}
+    t_hit, beam_range, cos, _ = caster.beams(strikes.view, strikes.points)
+    return {"front": t_hit < beam_range, "cos": cos}
 
 
 # The ring radii, in miss_reach, at which ``opening_of`` sizes a missed beam's opening.
@@ -256,7 +271,7 @@ def per_strike_arrays(candidates: list) -> dict[str, np.ndarray]:
                 np.concatenate([h.cost for h in held]), c.cost):
             continue
         out |= {f"{name}/{c.key}": np.concatenate([getattr(h, name) for h in held])
-                for name in PER_STRIKE}
+                for name in PER_STRIKE if getattr(held[0], name) is not None}
     return out
 
 
@@ -278,7 +293,10 @@ def closest_cost(per: dict[str, np.ndarray], where: np.ndarray) -> np.ndarray:
 # (``closest-cut-missed``), or for every strike (``closest``: no ray in the statistic); for the
 # missed beams that passed a crack, narrower than ``auto.miss_reach``, of the compare's mesh
 # (``closest-cracks``, ``openings``) or of the fold's own surface (``closest-fold-cracks``,
-# ``collect``).
+# ``collect``); and with those, for every beam that meets the surface within tolerance
+# (``closest-hits-fold-cracks``: the closest-point distance, as the truth's Chamfer measures,
+# not the beam's residual that a grazing beam stretches) or only beyond its strike
+# (``closest-behind-fold-cracks``: a surface met before the strike stays the beam's evidence).
 STATISTICS = {"chi2": None, "chi": lambda c, p: np.sqrt(c),
               "cap9": lambda c, p: np.minimum(c, 9.0),
               "cap25": lambda c, p: np.minimum(c, 25.0),
@@ -287,7 +305,11 @@ STATISTICS = {"chi2": None, "chi": lambda c, p: np.sqrt(c),
               "closest-cut-missed": lambda c, p: closest_cost(p, p["missed"] | p["violated"]),
               "closest": lambda c, p: closest_cost(p, np.ones(len(c), dtype=bool)),
               "closest-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"]),
-              "closest-fold-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"])}
+              "closest-fold-cracks": lambda c, p: closest_cost(p, p["missed"] & p["crack"]),
+              "closest-hits-fold-cracks": lambda c, p: closest_cost(
+                  p, p["missed"] & p["crack"] | ~p["missed"] & ~p["violated"]),
+              "closest-behind-fold-cracks": lambda c, p: closest_cost(
+                  p, p["missed"] & p["crack"] | ~p["missed"] & ~p["violated"] & ~p["front"])}
 # ``rules --opening S``: with ``closest-fold-cracks``, a crack is an opening of at most S times
 # ``auto.miss_reach`` (one of ``OPENING_SCALES``; 1 as fixed before the replay).
 OPENING = 1.0
@@ -304,7 +326,7 @@ def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str,
     if cracks is not None:
         per["crack"] = cracks[f"crack/{key}"] if f"crack/{key}" in cracks else \
             np.zeros(len(cost), dtype=bool)
-    if statistic == "closest-fold-cracks":
+    if statistic.endswith("fold-cracks"):
         if "opening" not in per:
             raise SystemExit(f"{name} was collected without the opening arrays --statistic "
                              f"{statistic} needs; collect it again (--force)")

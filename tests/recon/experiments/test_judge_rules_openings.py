@@ -51,3 +51,17 @@ def test_the_replayed_crack_statistic_is_the_product_s_cost():
     _, _, cracked = _missed_beam(CRACKED)
     assert np.isclose(crack_cost, (np.hypot(0.05, 0.02) / cracked.sigma[0]) ** 2, rtol=1e-4)
     assert crack_cost < hole_cost == (cracked.tolerance[0] / cracked.sigma[0]) ** 2
+
+
+def test_beam_side_tells_a_surface_met_before_the_strike_from_one_beyond_it():
+    plate = (np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]),
+             np.array([[0, 1, 2], [0, 2, 3]]))
+    tilted = np.array([-10 * np.sqrt(3), 0.0, 10.0])     # 60 degrees off the plate's normal
+    view = np.array([[0.0, 0.0, 10.0], [0.0, 0.0, 10.0], tilted])
+    # strikes below the plate, above it, and just below it along the tilted beam
+    points = np.array([[0.0, 0.0, -0.02], [0.0, 0.0, 0.02], -0.001 * tilted])
+    side = judge_rules.beam_side(judge.Strikes(points, view), judge.Caster(*plate))
+    assert side["front"].tolist() == [True, False, True]
+    np.testing.assert_allclose(side["cos"], [1.0, 1.0, 0.5], atol=1e-6)
+    assert judge_rules.beam_side(judge.Strikes(points, None), judge.Caster(*plate)) == \
+        {"front": None, "cos": None}
