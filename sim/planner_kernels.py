@@ -651,31 +651,32 @@ def _blocked(target, position, size, solid, lo, hi, slack, radius):
     cell = (i - lo[0]) * s1 + (j - lo[1]) * s2 + (k - lo[2])
     limit2, radius2 = limit * limit, radius * radius
     while not (i == gi and j == gj and k == gk):
-        if solid[cell >> 3] & (1 << (cell & 7)):
-            c0, c1, c2 = (i + 0.5) * size - p0, (j + 0.5) * size - p1, (k + 0.5) * size - p2
-            far = c0 * c0 + c1 * c1 + c2 * c2
-            along = c0 * d0 + c1 * d1 + c2 * d2
-            if far < limit2 and far - along * along < radius2:
-                return True
+        if solid[cell >> 3] & (1 << (cell & 7)) and _occludes(
+                (i + 0.5) * size - p0, (j + 0.5) * size - p1, (k + 0.5) * size - p2,
+                d0, d1, d2, limit2, radius2):
+            return True
         if ti <= tj and ti <= tk:
-            if ti >= leave:
-                return False
+            inside = ti < leave and lo[0] <= i + si <= hi[0]
             i, ti, cell = i + si, ti + di, cell + si * s1
-            if i < lo[0] or i > hi[0]:
-                return False
         elif tj <= tk:
-            if tj >= leave:
-                return False
+            inside = tj < leave and lo[1] <= j + sj <= hi[1]
             j, tj, cell = j + sj, tj + dj, cell + sj * s2
-            if j < lo[1] or j > hi[1]:
-                return False
         else:
-            if tk >= leave:
-                return False
+            inside = tk < leave and lo[2] <= k + sk <= hi[2]
             k, tk, cell = k + sk, tk + dk, cell + sk
-            if k < lo[2] or k > hi[2]:
-                return False
+        if not inside:
+            return False
     return False
+
+
+@njit(cache=True)
+def _occludes(c0, c1, c2, d0, d1, d2, limit2, radius2):
+    """Whether an occupied voxel whose centre is (``c0``, ``c1``, ``c2``) [m] from the beam's
+    start occludes the beam along the unit direction (``d0``, ``d1``, ``d2``): its centre is
+    nearer than ``sqrt(limit2)`` and within ``sqrt(radius2)`` of the beam's line."""
+    far = c0 * c0 + c1 * c1 + c2 * c2
+    along = c0 * d0 + c1 * d1 + c2 * d2
+    return far < limit2 and far - along * along < radius2
 
 
 @njit(cache=True)

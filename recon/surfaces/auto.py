@@ -949,48 +949,64 @@ def _holes_reason(candidates: list[Candidate], selection: Selection) -> str:
             f"(at most {selection.hole_limit:.2%}): {named}")
 
 
-def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
-    """The reason in words: what was chosen, open or closed, the statistic and the band, and
-    what decided among the candidates in the band (only what the rule actually did)."""
-    c, b = candidates[selection.chosen], candidates[selection.best]
-    shape = "a closed" if c.closed else "an open"
+def _band_reason(candidates: list[Candidate], selection: Selection) -> str:
+    """What decided among the candidates in the band (steps 3 to 5)."""
+    b = candidates[selection.best]
     band = f"within {BAND_SES:g} paired standard error(s) of the best"
-    text = (f"chose {c.label}, {shape} surface ({c.n_params:,} parameters, {c.n_faces:,} "
-            f"faces, fitted on a fold's training strikes): held-out chi-square {c.chi2:.3g} "
-            f"per strike (1 = at the recorded noise), {c.violated:.1%} of beams cut before "
-            f"their strike, {c.holes:.1%} of strikes in holes")
-    # the chosen one among them
     kept = len(selection.eligible) - len(selection.holed) - len(selection.filled)
     holding = "that hold the strikes " if selection.holed else ""
-    if selection.prior:
-        text += _prior_reason(candidates, selection, coverage)
-    elif selection.chosen == selection.best:
-        text += "; the lowest held-out statistic"
-        if kept > 1:
-            text += f"; the {kept - 1} other candidate(s) {band} {holding}are larger models"
-        elif not selection.holed and not selection.filled:
-            text += f"; no other candidate is {band}"
-    else:
+    if selection.chosen != selection.best:
         gap, se = selection.gaps[selection.chosen]
-        text += (f"; {gap:.2g} +- {se:.2g} above the best, {b.label} ({b.chi2:.3g}, "
-                 f"{b.n_params:,} parameters), on the same held-out strikes: {band}; of the "
-                 f"{kept} candidates in that band {holding}it is the smallest model")
-    if selection.holed and not selection.prior:
-        text += _holes_reason(candidates, selection)
+        return (f"; {gap:.2g} +- {se:.2g} above the best, {b.label} ({b.chi2:.3g}, "
+                f"{b.n_params:,} parameters), on the same held-out strikes: {band}; of the "
+                f"{kept} candidates in that band {holding}it is the smallest model")
+    if kept > 1:
+        return (f"; the lowest held-out statistic; the {kept - 1} other candidate(s) {band} "
+                f"{holding}are larger models")
+    if not selection.holed and not selection.filled:
+        return f"; the lowest held-out statistic; no other candidate is {band}"
+    return "; the lowest held-out statistic"
+
+
+def _free_space_reason(candidates: list[Candidate], selection: Selection) -> str:
+    """What the missed beams did (step 2): the candidates they refute, and the chosen one's
+    carving."""
+    c = candidates[selection.chosen]
+    text = ""
     others = [i for i in selection.refuted if candidates[i].run.key != c.run.key]
     if others:
         text += (f"; left out, the missed beams refute them (each cuts more than "
                  f"{MISS_REFUTES:.0%}; their carved twins competed): " + ", ".join(
                      f"{candidates[i].label} ({candidates[i].misses_cut:.1%})" for i in others))
     if c.carved:
-        whole = next(o for o in candidates if o.run.key == c.run.key and not o.carved)
+        whole = next(i for i, o in enumerate(candidates)
+                     if o.run.key == c.run.key and not o.carved)
         dropped = (", and drops out of the band, where its carved twin is"
-                   if candidates.index(whole) in selection.filled else
+                   if whole in selection.filled else
                    f", more than {MISS_REFUTES:.0%}: the beams refute it"
-                   if candidates.index(whole) in selection.refuted else "")
-        text += (f"; carved: the uncarved surface cuts {whole.misses_cut:.1%} of the missed "
-                 f"beams near the strikes (free space it fills){dropped}; the faces they cross "
-                 f"away from every strike are removed ({c.misses_cut:.1%} left)")
+                   if whole in selection.refuted else "")
+        text += (f"; carved: the uncarved surface cuts {candidates[whole].misses_cut:.1%} of "
+                 f"the missed beams near the strikes (free space it fills){dropped}; the faces "
+                 f"they cross away from every strike are removed ({c.misses_cut:.1%} left)")
+    return text
+
+
+def explain(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
+    """The reason in words: what was chosen, open or closed, the statistic and the band, and
+    what decided among the candidates in the band (only what the rule actually did)."""
+    c = candidates[selection.chosen]
+    shape = "a closed" if c.closed else "an open"
+    text = (f"chose {c.label}, {shape} surface ({c.n_params:,} parameters, {c.n_faces:,} "
+            f"faces, fitted on a fold's training strikes): held-out chi-square {c.chi2:.3g} "
+            f"per strike (1 = at the recorded noise), {c.violated:.1%} of beams cut before "
+            f"their strike, {c.holes:.1%} of strikes in holes")
+    if selection.prior:
+        text += _prior_reason(candidates, selection, coverage)
+    else:
+        text += _band_reason(candidates, selection)
+    if selection.holed and not selection.prior:
+        text += _holes_reason(candidates, selection)
+    text += _free_space_reason(candidates, selection)
     if c.chi_fit is not None and c.chi_fit < 0.5 < c.chi2:
         text += (f". On its own training strikes its chi is {c.chi_fit:.2g}, well below 1: "
                  "it follows part of the noise")
