@@ -598,6 +598,21 @@ class _Race:
                 for i, (depth, runs) in enumerate(self.levels)}
 
 
+def fit_workers(n_workers: int | None = None) -> int:
+    """The fits run at once: ``n_workers``, default the usable cores."""
+    return n_workers or max(1, len(os.sched_getaffinity(0)))
+
+
+def start_workers(n_workers: int | None = None) -> None:
+    """Start the fit workers (``fit_workers``, each with ``FIT_THREADS`` threads) now, without
+    waiting for their imports: they warm up while the caller reads and prepares the cloud, so
+    the first fits do not wait for them. The choice's isolated fits and, refitted with the same
+    threads, the chosen run's fit on every strike take them from the pool."""
+    from recon.surfaces.isolation import start_workers as start
+
+    start(fit_workers(n_workers), FIT_THREADS)
+
+
 def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, limits: Limits,
                    n_workers: int | None, reference: Sequence[Candidate] = ()
                    ) -> dict[int, list[list[Candidate]]]:
@@ -616,7 +631,7 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
 
     from recon.surfaces.isolation import run_isolated
 
-    workers = n_workers or max(1, len(os.sched_getaffinity(0)))
+    workers = fit_workers(n_workers)
     folds = context.folds
     state = _Race(levels, context)
     depths = ", ".join(str(depth) for depth, _ in levels)
