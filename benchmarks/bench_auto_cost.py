@@ -16,9 +16,9 @@ alternately, each a fresh process as a user types it:
 - auto: ``recon reconstruct LOG -o MESH.ply -m auto`` (with ``--target-kind`` as the suite
   states the cloud's target), everything the command does: ingest, preparation, the choice, the
   refit on every strike, the estimate, the written mesh;
-- with ``--baseline DIR``: the same auto command run from the source tree ``DIR`` (e.g. an
+- with ``--baseline DIR``: the same two commands run from the source tree ``DIR`` (e.g. an
   export of an older commit, ``git archive COMMIT | tar -x -C DIR``), alternating with the
-  others: a change's effect measured beside the ratio.
+  others: the ratio before a change and after it, measured side by side.
 
 Each is repeated ``--repeats`` times (median quoted). CPU time is the process's user + system
 time with every child it waited for (``RUSAGE_CHILDREN``: the warm workers included). The
@@ -62,7 +62,8 @@ DEFAULT_CLOUDS = ("satellite-d-cross-noisy", "satellite-k-lidar-noisy",
                   "satellite-i-slew-noisy", "satellite-j-cross-noisy")
 # The cloud of the quick form: a generated satellite under the 5-beam cross, simulated short.
 QUICK_CLOUD = "satellite-d-cross-noisy"
-SIDES = ("compare", "auto", "baseline")
+# The commands timed per cloud: this tree's compare and auto, the baseline tree's.
+SIDES = ("compare", "auto", "baseline compare", "baseline auto")
 
 
 def timed(argv: list[str], tree: Path) -> dict:
@@ -94,16 +95,17 @@ def auto_command(log: Path, out: Path, target_kind: str) -> list[str]:
 
 def measure(name: str, log: Path, work: Path, repeats: int, baseline: Path | None, *,
             quick: bool = False) -> dict:
-    """Alternate compare, auto (and the baseline's auto) ``repeats`` times on the suite cloud
+    """Alternate compare and auto (and the baseline's) ``repeats`` times on the suite cloud
     ``name`` (its strike log ``log``; ``quick``: the quick form's); medians and ratios."""
     kind = suite.CLOUDS[name].target_kind
-    trees = {"compare": ROOT, "auto": ROOT, "baseline": baseline}
+    trees = {"compare": ROOT, "auto": ROOT, "baseline compare": baseline,
+             "baseline auto": baseline}
     runs: dict[str, list[dict]] = {side: [] for side in SIDES if trees[side] is not None}
     load = [os.getloadavg()[0]]
     for i in range(repeats):
         for side in runs:
-            out = work / f"{name}-{side}-{i}"
-            argv = (compare_command(log, out) if side == "compare"
+            out = work / f"{name}-{side.replace(' ', '-')}-{i}"
+            argv = (compare_command(log, out) if side.endswith("compare")
                     else auto_command(log, out.with_suffix(".ply"), kind))
             runs[side].append(timed(argv, trees[side]))
             shutil.rmtree(out, ignore_errors=True)   # a compare keeps its meshes: 50 MB
@@ -114,45 +116,43 @@ def measure(name: str, log: Path, work: Path, repeats: int, baseline: Path | Non
     for side, values in runs.items():
         result[side] = {k: statistics.median(v[k] for v in values) for k in ("wall_s", "cpu_s")}
         result[side]["runs"] = values
-    for side in ("auto", "baseline"):
-        if side in result:
-            result[f"{side}_ratio"] = {k: result[side][k] / result["compare"][k]
-                                       for k in ("wall_s", "cpu_s")}
+    for tree in ("", "baseline "):
+        if f"{tree}auto" in result:
+            result[f"{tree}ratio"] = {k: result[f"{tree}auto"][k] / result[f"{tree}compare"][k]
+                                      for k in ("wall_s", "cpu_s")}
     return result
+
+
+def _pair(result: dict, tree: str = "") -> str:
+    """One tree's medians and ratio, for ``line``."""
+    c, a, r = result[f"{tree}compare"], result[f"{tree}auto"], result[f"{tree}ratio"]
+    return (f"{tree}compare {c['wall_s']:5.1f} s wall {c['cpu_s']:5.1f} s CPU, auto "
+            f"{a['wall_s']:5.1f} / {a['cpu_s']:5.1f} s: ratio {r['wall_s']:.2f} wall "
+            f"{r['cpu_s']:.2f} CPU")
 
 
 def line(result: dict) -> str:
     """One cloud's medians and ratios, one line."""
-    c, a = result["compare"], result["auto"]
-    text = (f"{result['cloud']:<28} compare {c['wall_s']:6.1f} s wall {c['cpu_s']:6.1f} s CPU | "
-            f"auto {a['wall_s']:5.1f} / {a['cpu_s']:5.1f} s, ratio "
-            f"{result['auto_ratio']['wall_s']:.2f} wall {result['auto_ratio']['cpu_s']:.2f} CPU")
-    if "baseline" in result:
-        b = result["baseline"]
-        text += (f" | baseline {b['wall_s']:5.1f} / {b['cpu_s']:5.1f} s, ratio "
-                 f"{result['baseline_ratio']['wall_s']:.2f} wall "
-                 f"{result['baseline_ratio']['cpu_s']:.2f} CPU")
+    text = f"{result['cloud']:<28} {_pair(result)}"
+    if "baseline ratio" in result:
+        text += f" | {_pair(result, 'baseline ')}"
     low, high = result["load_1min"]
     return text + f" | load {low:.1f} -> {high:.1f}"
 
 
 def markdown(results: list[dict], command: str) -> str:
     """The table of ``results`` as Markdown, headed by the command that made it."""
-    baseline = any("baseline" in r for r in results)
-    head = ("| cloud | compare wall / CPU s | auto wall / CPU s | auto / compare wall | "
-            "auto / compare CPU |" + (" baseline auto wall / CPU s | baseline / compare wall | "
-                                      "baseline / compare CPU |" if baseline else "")
-            + " load (1 min) |")
+    trees = ["baseline ", ""] if any("baseline ratio" in r for r in results) else [""]
+    head = "| cloud |" + "".join(
+        f" {tree}compare wall / CPU s | {tree}auto wall / CPU s | {tree}auto / compare wall "
+        f"| {tree}auto / compare CPU |" for tree in trees) + " load (1 min) |"
     rows = [f"`{command}`", "", head, "|" + "---|" * (head.count("|") - 1)]
     for r in results:
-        c, a = r["compare"], r["auto"]
-        row = (f"| {r['cloud']} | {c['wall_s']:.1f} / {c['cpu_s']:.1f} | {a['wall_s']:.1f} / "
-               f"{a['cpu_s']:.1f} | {r['auto_ratio']['wall_s']:.2f} | "
-               f"{r['auto_ratio']['cpu_s']:.2f} |")
-        if baseline:
-            b = r.get("baseline")
-            row += (f" {b['wall_s']:.1f} / {b['cpu_s']:.1f} | {r['baseline_ratio']['wall_s']:.2f}"
-                    f" | {r['baseline_ratio']['cpu_s']:.2f} |" if b else " | | |")
+        row = f"| {r['cloud']} |"
+        for tree in trees:
+            c, a, ratio = r[f"{tree}compare"], r[f"{tree}auto"], r[f"{tree}ratio"]
+            row += (f" {c['wall_s']:.1f} / {c['cpu_s']:.1f} | {a['wall_s']:.1f} / "
+                    f"{a['cpu_s']:.1f} | {ratio['wall_s']:.2f} | {ratio['cpu_s']:.2f} |")
         low, high = r["load_1min"]
         rows.append(row + f" {low:.1f} -> {high:.1f} |")
     return "\n".join(rows) + "\n"
