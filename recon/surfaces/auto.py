@@ -69,7 +69,9 @@ planes, the convex hull), then coarse smooth and local surfaces, then the defaul
 visibility graph cut when that method is registered), then fine ones. The first
 ``ALWAYS_LEVELS`` levels always run, and are fitted together (the models of a few numbers
 first, then the finest level: the workers stay busy while the main process judges each run as
-soon as its folds are in); after that the
+soon as its folds are in; behind them the next level's racing folds, which the main process's
+last judging would otherwise leave the workers waiting for, dropped if the ladder stops); after
+that the
 search stops as soon as a level's best is not measurably better (by ``se``) than the best
 before it. **Racing**: the runs of a level are fitted on the first ``RACE_FOLDS`` folds, and a
 run whose held-out chi-square there is more than ``RACE_SES`` paired standard errors above the
