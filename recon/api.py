@@ -1067,7 +1067,15 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
     prepare, choose (``auto``), fit, predict the accuracy, write. ``preparation``: the
     arguments of ``_preparation``."""
     from formats.paths import check_destination, protecting
-    from recon.surfaces.auto import HOLDOUT_FRACTION, TARGET_KINDS, choose_for, format_choice
+    from recon.inputs import walk_early
+    from recon.surfaces.auto import (
+        FIT_THREADS,
+        HOLDOUT_FRACTION,
+        TARGET_KINDS,
+        choose_for,
+        format_choice,
+        start_workers,
+    )
     from recon.surfaces.isolation import Limits
     from recon.surfaces.methods import watertight
     from recon.surfaces.prepare import load_prepared
@@ -1089,6 +1097,9 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
     with protecting(_inputs(source)):
         if output is not None:
             check_destination(output, ParameterError)   # before the work, not after it
+        if auto:  # the fit workers import while the input loads (walked before their threads)
+            walk_early(*_inputs(source))
+            start_workers()
         cloud, prepared = load_prepared(_from_library(source), preparation)
         misses = _misses(source, cloud, preparation.seed)
         choice = None
@@ -1099,8 +1110,10 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
             run = choice.run
             if say is not None:
                 say(format_choice(choice))
+        # auto's choice refitted on a warm worker of its fits, with their threads: the fit
+        # compare makes of the same run
         surface = run_method(prepared, method=run, isolate=isolate, on_wait=on_wait,
-                             **limits.kwargs())
+                             threads=FIT_THREADS if auto else None, **limits.kwargs())
         if choice is not None and choice.carved:
             vertices, faces = choice.carve(surface.vertices, surface.faces, cloud.points)
             surface = Surface(vertices, faces, surface.method, surface.params,

@@ -70,8 +70,11 @@ which beam each strike was taken, its sensor position, and its recorded error mo
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
 planes, the convex hull), then coarse smooth and local surfaces, then the defaults (with the
 visibility graph cut when that method is registered), then fine ones. The first
-``ALWAYS_LEVELS`` levels always run, and are fitted together (the finest first: the workers
-stay busy while the main process judges each run as soon as its folds are in); after that the
+``ALWAYS_LEVELS`` levels always run, and are fitted together (the models of a few numbers
+first, then the finest level: the workers stay busy while the main process judges each run as
+soon as its folds are in; behind them the next level's racing folds, which the main process's
+last judging would otherwise leave the workers waiting for, dropped if the ladder stops); after
+that the
 search stops as soon as a level's best is not measurably better (by ``se``) than the best
 before it. **Racing**: the runs of a level are fitted on the first ``RACE_FOLDS`` folds, and a
 run whose held-out chi-square there is more than ``RACE_SES`` paired standard errors above the
@@ -610,52 +613,97 @@ class _Race:
                 for i, (depth, runs) in enumerate(self.levels)}
 
 
+def fit_workers(n_workers: int | None = None) -> int:
+    """The fits run at once: ``n_workers``, default the usable cores."""
+    return n_workers or max(1, len(os.sched_getaffinity(0)))
+
+
+def start_workers(n_workers: int | None = None) -> None:
+    """Start the fit workers (``fit_workers``, each with ``FIT_THREADS`` threads) now, without
+    waiting for their imports: they warm up while the caller reads and prepares the cloud, so
+    the first fits do not wait for them. The choice's isolated fits and, refitted with the same
+    threads, the chosen run's fit on every strike take them from the pool."""
+    from recon.surfaces.isolation import start_workers as start
+
+    start(fit_workers(n_workers), FIT_THREADS)
+
+
 def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, limits: Limits,
-                   n_workers: int | None, reference: Sequence[Candidate] = ()
+                   n_workers: int | None, reference: Sequence[Candidate] = (),
+                   ahead: tuple[list[Run], dict] | None = None,
+                   given: dict[tuple[int, int], dict] | None = None
                    ) -> dict[int, list[list[Candidate]]]:
     """Fit every run of ``levels`` ((depth, runs) pairs) on the first ``RACE_FOLDS`` folds,
     then the runs the race leaves in (``outpaced``, against each other and the ``reference``
     candidates) on the other folds (a run of a level not raced on every fold at once), each
     fit in its own limited process, a few at a time; each
     run is judged (``_judged``) as soon as its folds are fitted, while the other fits go on.
-    The finest level's fits are handed out first (they take the longest: the workers stay busy,
-    and the largest surfaces are judged while the small ones are fitted), and on the other
-    folds the runs that took longest on the first ones. Returns, per depth
-    and run in order, the run's candidate and its carved twin if any."""
+    The runs not raced are handed out first, on every fold (the models of a few numbers: quick
+    to fit, and judged, each fold's surface cast against the strikes, while the workers fit the
+    rest: the race, which waits for them, does not wait for their judging too), then the
+    finest level's fits (they take the longest: the workers stay busy, and the largest surfaces
+    are judged while the small ones are fitted), and on the other folds the runs that took
+    longest on the first ones. Returns, per depth
+    and run in order, the run's candidate and its carved twin if any.
+
+    ``ahead``: (runs, out): the runs of the next level, fitted on the racing folds once every
+    other fit is handed out, while the main process judges the last runs (the workers would
+    otherwise wait for it); their results go to ``out`` by (run, fold), the next call's
+    ``given``. ``given``: for a single level, its runs' results already fitted, by (run,
+    fold). A fit is the same fit whenever it is made: the candidates and the race are those of
+    fitting every run here."""
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
     from tqdm import tqdm
 
     from recon.surfaces.isolation import run_isolated
 
-    workers = n_workers or max(1, len(os.sched_getaffinity(0)))
+    workers = fit_workers(n_workers)
     folds = context.folds
     state = _Race(levels, context)
+    given = given or {}
     depths = ", ".join(str(depth) for depth, _ in levels)
     with ThreadPoolExecutor(max_workers=workers) as pool, \
             tqdm(total=len(state.jobs) * len(folds), desc=f"auto level {depths}", unit="fit",
                  disable=None, leave=False) as bar:
-        def submit(jobs, fold_range):
-            return {pool.submit(run_isolated, state.run(job), folds[f].prepared,
-                                threads=FIT_THREADS, **limits.kwargs()): (job, f)
-                    for job in jobs for f in fold_range}
+        def submit(run, f):
+            return pool.submit(run_isolated, run, folds[f].prepared, threads=FIT_THREADS,
+                               **limits.kwargs())
 
-        pending = submit([job for job in state.jobs if state.raced(job)], range(state.first))
-        pending |= submit([job for job in state.jobs if not state.raced(job)], range(len(folds)))
+        def hand_out(pairs):
+            return {submit(state.run(job), f): (job, f) for job, f in pairs
+                    if (job[1], f) not in given}
+
+        pending = hand_out([(job, f) for job in state.jobs if not state.raced(job)
+                            for f in range(len(folds))])
+        pending |= hand_out([(job, f) for job in state.jobs if state.raced(job)
+                             for f in range(state.first)])
+        for (j, f), result in given.items():
+            state.arrived((0, j), f, result)
+            bar.update(1)
         raced = state.first == len(folds)
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for future in done:
-                state.arrived(*pending.pop(future), future.result())
-                bar.update(1)
+        spare: dict = {}
+        while True:
             if not pending and not raced:
                 raced = True
                 going = state.race(reference)
                 left = sum(map(state.raced, state.jobs)) - len(going)
                 bar.total -= left * (len(folds) - state.first)
                 bar.refresh()
-                pending = submit(going, range(state.first, len(folds)))
+                pending = hand_out([(job, f) for job in going
+                                    for f in range(state.first, len(folds))])
+            if raced and ahead is not None and not spare:   # behind every fit of ``levels``
+                spare = {submit(run, f): (j, f) for j, run in enumerate(ahead[0])
+                         for f in range(state.first)}
             state.judge_complete()   # while the workers fit
+            if not pending:
+                break
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                state.arrived(*pending.pop(future), future.result())
+                bar.update(1)
+        if ahead is not None:
+            ahead[1].update({key: future.result() for future, key in spare.items()})
     return state.candidates()
 
 
@@ -766,14 +814,18 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
     are fitted together; each later one once the ladder has not stopped before it. Returns
     the candidates and a note on the runs the race left out and where the ladder stopped."""
     candidates: list[Candidate] = []
+    # the next level's racing folds are fitted while the last of these are judged
+    ahead: dict[tuple[int, int], dict] = {}
     fitted = _fit_and_judge(list(enumerate(levels[:ALWAYS_LEVELS])), context, limits=limits,
-                            n_workers=n_workers)
+                            n_workers=n_workers, ahead=(levels[ALWAYS_LEVELS], ahead)
+                            if len(levels) > ALWAYS_LEVELS else None)
     for depth, level in enumerate(levels):
         before = _best(candidates)
         if depth not in fitted:
             fitted |= _fit_and_judge([(depth, level)], context, limits=limits,
                                      n_workers=n_workers, reference=[
-                                         c for c in candidates if c.scored and not c.carved])
+                                         c for c in candidates if c.scored and not c.carved],
+                                     given=ahead if depth == ALWAYS_LEVELS else None)
         candidates += [c for judged in fitted[depth] for c in judged]
         rest = levels[depth + 1:]
         if depth + 1 >= ALWAYS_LEVELS and rest and _stops(candidates, before, depth):

@@ -43,6 +43,7 @@ import hashlib
 import os
 import pickle
 import resource
+import select
 import shutil
 import signal
 import subprocess
@@ -88,10 +89,11 @@ WORKER_RUNS = 50
 WARM_AHEAD = 3
 # Modules a worker imports before its first job (the methods' and scoring's heavy imports).
 WORKER_PRELOAD = ("numpy", "scipy.spatial", "open3d", "pymeshlab", "metrics.score")
-# How often the parent polls the worker, seconds (start, growing to the maximum). A finished run
-# waits half the maximum on average before its worker gets the next job: at 0.25 s that was a
-# tenth of auto's fits (about fifty runs of a second or less, docs/decisions.md); a poll reads two
-# small files, a few tens of microseconds.
+# How often the parent polls the worker, seconds (start, growing to the maximum): for the stage
+# and the limits. A finished run does not wait for the next poll: the worker wakes its parent
+# (``_Worker.wake``; polling alone left a finished run waiting half the maximum on average,
+# a twentieth of auto's fits of a second or less, docs/decisions.md); a poll reads two small
+# files, a few tens of microseconds.
 POLL_START_S, POLL_MAX_S = 0.02, 0.05
 # Lines of the worker's output kept in a failure's reason.
 OUTPUT_TAIL_LINES = 3
@@ -210,9 +212,10 @@ def _die_with_parent(parent: int) -> None:
         os._exit(1)
 
 
-def _serve(parent: int) -> int:
-    """Body of a worker (``python -m recon.surfaces.isolation PARENT_PID``): import the heavy
-    modules once, then run each job directory named on a line of stdin until stdin closes."""
+def _serve(parent: int, wake: int | None = None) -> int:
+    """Body of a worker (``python -m recon.surfaces.isolation PARENT_PID [WAKE_FD]``): import the
+    heavy modules once, then run each job directory named on a line of stdin until stdin
+    closes, writing a byte to the file descriptor ``wake`` (a pipe to the parent) after each."""
     import importlib
 
     _die_with_parent(parent)
@@ -230,6 +233,11 @@ def _serve(parent: int) -> int:
         else:
             _run_job(jobdir, truths)
         sys.stdout.flush()
+        if wake is not None:
+            try:
+                os.write(wake, b"\n")
+            except OSError:  # the parent closed its end: it no longer waits
+                pass
     return 0
 
 
@@ -380,7 +388,8 @@ def _tail(path: Path, offset: int = 0) -> str:
 # --------------------------------------------------------------------------- the worker pool
 
 class _Worker:
-    """One warm worker process: its pipe, its output log, how many runs it did."""
+    """One warm worker process: its pipe, its output log, how many runs it did, and the read end
+    of the pipe on which it wakes its parent after each job (``sleep``)."""
 
     def __init__(self, threads: int | None):
         env = dict(os.environ)
@@ -391,14 +400,19 @@ class _Worker:
         self.log = self.dir / "output.log"
         self.threads = threads
         self.runs = 0
-        with open(self.log, "wb") as out:
-            # Started from the pool's own long-lived thread: the worker's parent-death signal
-            # follows the thread that started it (see _die_with_parent).
-            self.proc = _LAUNCHER.submit(
-                subprocess.Popen,
-                [sys.executable, "-m", "recon.surfaces.isolation", str(os.getpid())],
-                stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT, env=env,
-                start_new_session=True).result()
+        self.wake, wake = os.pipe()
+        os.set_blocking(self.wake, False)
+        try:
+            with open(self.log, "wb") as out:
+                # Started from the pool's own long-lived thread: the worker's parent-death
+                # signal follows the thread that started it (see _die_with_parent).
+                self.proc = _LAUNCHER.submit(
+                    subprocess.Popen,
+                    [sys.executable, "-m", "recon.surfaces.isolation", str(os.getpid()),
+                     str(wake)], stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT,
+                    env=env, start_new_session=True, pass_fds=(wake,)).result()
+        finally:
+            os.close(wake)   # the worker holds it: a dead worker reads as end of file
 
     def submit(self, jobdir: Path) -> int:
         """Hand the worker a job; returns the byte offset of its output where the job begins."""
@@ -415,6 +429,17 @@ class _Worker:
     def alive(self) -> bool:
         return self.proc.poll() is None
 
+    def sleep(self, seconds: float) -> None:
+        """Wait ``seconds``, or less when the worker finishes a job (or dies) meanwhile."""
+        if self.wake < 0:   # stopped
+            time.sleep(seconds)
+        elif select.select([self.wake], [], [], seconds)[0]:
+            try:
+                if not os.read(self.wake, 4096):   # end of file: the worker is gone
+                    time.sleep(seconds)
+            except BlockingIOError:   # another thread read it
+                pass
+
     def stop(self) -> None:
         """End the worker (its whole process group) and remove its files."""
         _kill_group(self.proc.pid)
@@ -427,6 +452,9 @@ class _Worker:
                 stream.close()
             except OSError:
                 pass
+        if self.wake >= 0:   # once: the number may be another file's after it is closed
+            os.close(self.wake)
+            self.wake = -1
         scratch.remove(self.dir)
 
 
@@ -695,7 +723,7 @@ def _wait(worker: _Worker, jobdir: Path, timeout_s: float, score_timeout_s: floa
                 worker.proc.wait()
                 return {"stage": stage, "timed_out": True, "status": None, "peak_mb": peak,
                         "running_s": None if running_since is None else now - running_since}
-            time.sleep(delay)
+            worker.sleep(delay)
             delay = min(delay * 1.5, POLL_MAX_S)
     except BaseException:  # interrupted while waiting: never leave the worker behind
         _kill_group(pid)
@@ -731,4 +759,4 @@ def _kill_group(pid: int) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(_serve(int(sys.argv[1])))
+    sys.exit(_serve(int(sys.argv[1]), int(sys.argv[2]) if len(sys.argv) > 2 else None))

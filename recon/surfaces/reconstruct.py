@@ -59,7 +59,8 @@ class Surface(Mesh):
 
 def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: dict | None = None,
                 isolate: bool = False, timeout_s: float = DEFAULT_TIMEOUT_S,
-                memory_mb: int | None = DEFAULT_MEMORY_MB, on_wait=None) -> Surface:
+                memory_mb: int | None = DEFAULT_MEMORY_MB, on_wait=None,
+                threads: int | None = None) -> Surface:
     """Run one registered method on a prepared cloud.
 
     Parameters
@@ -78,6 +79,9 @@ def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: di
         Limits of the isolated run.
     on_wait : callable, optional
         For an isolated run, called with the child's stage while waiting (``run_isolated``).
+    threads : int, optional
+        Threads of an isolated run's worker (``run_isolated``: workers are pooled per value;
+        ``-m auto`` refits its choice with its fits' threads, on a warm worker of theirs).
 
     Returns
     -------
@@ -93,7 +97,7 @@ def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: di
     run = bind(method, params)
     if isolate:
         result = run_isolated(run, cloud, timeout_s=timeout_s, memory_mb=memory_mb,
-                              on_wait=on_wait)
+                              on_wait=on_wait, threads=threads)
         if result["status"] != "ok":
             raise MethodFailed(f"{run.method} failed ({result['failure']}): {result['reason']}")
         info = {k: result[k] for k in ("wall_time_s", "peak_memory_mb", "watertight")}

@@ -82,6 +82,32 @@ def test_workers_are_reused_and_replaced_after_a_crash(cloud):
     assert len(idle_pids()) == 1 and idle_pids() != pids
 
 
+def test_a_finished_run_wakes_its_parent_before_the_next_poll(cloud, monkeypatch):
+    """With a minute between polls, the parent still learns of a finished run at once: the
+    worker wakes it on its pipe, and each run of a reused worker is the same fit."""
+    import types
+
+    from recon.surfaces import isolation
+
+    monkeypatch.setattr(isolation, "POLL_START_S", 60.0)
+    monkeypatch.setattr(isolation, "POLL_MAX_S", 60.0)
+    woken = []
+
+    def watched(read, write, error, timeout):
+        ready = isolation_select(read, write, error, timeout)
+        woken.append(bool(ready[0]))
+        return ready
+
+    isolation_select = isolation.select.select
+    monkeypatch.setattr(isolation, "select", types.SimpleNamespace(select=watched))
+    first = run_isolated("convex-hull", cloud)
+    second = run_isolated("convex-hull", cloud)
+    assert first["status"] == second["status"] == "ok"
+    assert np.array_equal(first["faces"], second["faces"])
+    # every wait that ended before the minute ended because the worker woke it
+    assert woken.count(True) >= 2 and all(woken), woken
+
+
 def test_each_runs_peak_memory_is_its_own_in_a_reused_worker(cloud):
     big = run_isolated("test-hog", cloud, {"megabytes": 600}, memory_mb=None)
     small = run_isolated("test-hog", cloud, {"megabytes": 10}, memory_mb=None)

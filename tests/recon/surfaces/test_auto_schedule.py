@@ -1,0 +1,164 @@
+"""``-m auto``'s schedule: the order its fits are handed out in, the next level fitted ahead, the
+warm workers; none of it changes a candidate's figures or the choice."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from formats.geometry import Cloud
+from recon.surfaces import auto, isolation
+from recon.surfaces.auto import choose, format_choice
+
+# planes (level 0, fitted on every fold) is far from a sphere, the ellipsoid mesh of level 1
+# measurably better: the ladder goes on to level 2, where the planes at a wider threshold are
+# outpaced on the racing folds and the ellipsoid is fitted on every fold.
+LADDER = ((("planes", {}),), (("ellipsoid", {"subdivisions": 3}),),
+          (("ellipsoid", {}), ("planes", {"threshold": 2.0})))
+
+
+def small_sphere():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(1500, 3))
+    points /= np.linalg.norm(points, axis=1, keepdims=True)
+    points += rng.normal(0.0, 0.01, points.shape)
+    return Cloud(points, {"shot": np.arange(1500), "beam": np.zeros(1500)}), 5.0 * points
+
+
+def figures(choice) -> dict:
+    """Every candidate's outcome, without its fit time."""
+    return {c.label: (c.status, c.chi2, c.chi2_se, c.holes, c.violated, c.n_faces, c.chosen)
+            for c in choice.candidates}
+
+
+def test_fits_are_handed_out_models_first_the_next_level_ahead_and_choose_alike(monkeypatch):
+    """One worker runs the fits in the order they are handed out: the models fitted on every
+    fold first, then the raced level on its racing folds, its other folds after the race, and
+    then, before the ladder has decided to go on, the next level on the racing folds; the
+    next level's own call fits only its other folds. The candidates and the choice are those
+    of fitting each level when the ladder reaches it."""
+    cloud, view = small_sphere()
+    monkeypatch.setattr(auto, "LADDER", LADDER)
+    monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
+    options = {"view_points": view, "uncertainty": cloud.attributes, "seed": 0, "n_workers": 1}
+    fits, contexts = [], []
+    fit, context = isolation.run_isolated, auto._context
+
+    def counted(run, prepared, *args, **kwargs):
+        fits.append((run.label, prepared))
+        return fit(run, prepared, *args, **kwargs)
+
+    def kept(*args, **kwargs):
+        contexts.append(context(*args, **kwargs))
+        return contexts[-1]
+
+    monkeypatch.setattr(isolation, "run_isolated", counted)
+    monkeypatch.setattr(auto, "_context", kept)
+    ahead = choose(cloud.points, **options)
+    folds = [f.prepared for f in contexts[-1].folds]
+    order = [(label, next(f for f, p in enumerate(folds) if p is prepared))
+             for label, prepared in fits]
+    assert order == ([("planes", f) for f in range(4)]
+                     + [("ellipsoid subdivisions=3", f) for f in range(4)]
+                     + [("ellipsoid", 0), ("ellipsoid", 1), ("planes threshold=2", 0),
+                        ("planes threshold=2", 1), ("ellipsoid", 2), ("ellipsoid", 3)]), order
+    table = {c.label: c for c in ahead.candidates}
+    assert table["planes threshold=2"].status == "outpaced", format_choice(ahead)
+    assert table["ellipsoid"].scored and ahead.label.startswith("ellipsoid")
+
+    # the same ladder with each level fitted only when the ladder reaches it
+    whole = auto._fit_and_judge
+
+    def unahead(*args, ahead=None, given=None, **kwargs):
+        return whole(*args, **kwargs)
+
+    monkeypatch.setattr(auto, "_fit_and_judge", unahead)
+    fits.clear()
+    plain = choose(cloud.points, **options)
+    assert len(fits) == 14 and plain.label == ahead.label
+    assert figures(plain) == figures(ahead)
+
+
+def test_the_next_level_fitted_ahead_is_dropped_when_the_ladder_stops(monkeypatch):
+    """When the ladder stops, the next level's runs fitted ahead leave no candidate: they are
+    skipped as without the fits ahead, and the choice is the same."""
+    cloud, view = small_sphere()
+    # the ellipsoid of level 0 is exact: the coarser mesh of level 1 is not measurably better
+    monkeypatch.setattr(auto, "LADDER", ((("ellipsoid", {}),),
+                                         (("ellipsoid", {"subdivisions": 3}),),
+                                         (("planes", {}),)))
+    monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
+    fits = []
+    fit = isolation.run_isolated
+
+    def counted(run, *args, **kwargs):
+        fits.append(run.label)
+        return fit(run, *args, **kwargs)
+
+    monkeypatch.setattr(isolation, "run_isolated", counted)
+    choice = choose(cloud.points, view_points=view, uncertainty=cloud.attributes, seed=0)
+    assert fits.count("planes") == 2   # fitted ahead on the racing folds
+    table = {c.label: c for c in choice.candidates}
+    assert table["planes"].status == "skipped", format_choice(choice)
+    assert "the ladder stopped after level 1" in choice.reason
+    assert choice.label == "ellipsoid"
+
+
+def test_start_workers_warms_the_fits_pool_that_the_fits_then_take(monkeypatch):
+    """``start_workers`` starts the fit workers at once, with the fits' threads; a fit then
+    takes one of them: no other worker is started."""
+    isolation.shutdown_workers()
+    started = []
+    make = isolation._Worker.__init__
+
+    def counted(self, threads):
+        started.append(threads)
+        make(self, threads)
+
+    monkeypatch.setattr(isolation._Worker, "__init__", counted)
+    try:
+        auto.start_workers(2)
+        assert started == [auto.FIT_THREADS] * 2
+        cloud, _ = small_sphere()
+        from recon.surfaces.prepare import prepare
+
+        result = isolation.run_isolated("convex-hull", prepare(cloud.points),
+                                        threads=auto.FIT_THREADS)
+        assert result["status"] == "ok" and started == [auto.FIT_THREADS] * 2
+        assert sum(w.runs for w in isolation._IDLE[auto.FIT_THREADS]) == 1
+    finally:
+        isolation.shutdown_workers()
+
+
+def test_auto_refits_its_choice_on_a_warm_fit_worker(monkeypatch):
+    """``method="auto"`` starts its fit workers before it reads the cloud and refits the chosen
+    run on one of them, with the fits' threads: no worker beyond the fits' is started, and the
+    surface is the chosen run's fit on every point."""
+    from recon import api
+    from recon.surfaces import reconstruct
+
+    isolation.shutdown_workers()
+    cloud, view = small_sphere()
+    started, fits = [], []
+    make, fit = isolation._Worker.__init__, isolation.run_isolated
+
+    def counted(self, threads):
+        started.append(threads)
+        make(self, threads)
+
+    def watched(run, prepared, *args, **kwargs):
+        fits.append((run, len(prepared.points), kwargs.get("threads")))
+        return fit(run, prepared, *args, **kwargs)
+
+    monkeypatch.setattr(isolation._Worker, "__init__", counted)
+    monkeypatch.setattr(isolation, "run_isolated", watched)
+    monkeypatch.setattr(reconstruct, "run_isolated", watched)
+    try:
+        surface = api.reconstruct(Cloud(cloud.points, cloud.attributes | dict(zip(
+            ("view_x", "view_y", "view_z"), view.T, strict=True))), method="auto",
+            auto_methods=["ellipsoid", "convex-hull"])
+        assert started == [auto.FIT_THREADS] * auto.fit_workers()
+        assert all(threads == auto.FIT_THREADS for _, _, threads in fits)
+        run, n, _ = fits[-1]   # the refit: the chosen run on every point
+        assert n == len(cloud.points) and run.label == surface.info["auto"]["label"]
+    finally:
+        isolation.shutdown_workers()
