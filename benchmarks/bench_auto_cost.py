@@ -39,13 +39,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,6 +50,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT))
 
 import suite  # noqa: E402  (benchmarks/suite.py: the clouds, their logs and the score samples)
+from bench_user import timed  # noqa: E402  (a fresh process's wall and CPU time)
 
 PYTHON = sys.executable
 # The ``recon`` command of a source tree, run by this interpreter (the tree first on the path).
@@ -64,22 +62,6 @@ DEFAULT_CLOUDS = ("satellite-d-cross-noisy", "satellite-k-lidar-noisy",
 QUICK_CLOUD = "satellite-d-cross-noisy"
 # The commands timed per cloud: this tree's compare and auto, the baseline tree's.
 SIDES = ("compare", "auto", "baseline compare", "baseline auto")
-
-
-def timed(argv: list[str], tree: Path) -> dict:
-    """Run ``argv`` in the source tree ``tree`` (its directory first on the path) to completion;
-    its wall time and CPU time (user + system, children it waited for included) [s]."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    done = subprocess.run(argv, cwd=tree, capture_output=True,
-                          env=os.environ | {"PYTHONPATH": str(tree)})
-    wall = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if done.returncode != 0:
-        raise SystemExit(f"failed ({done.returncode}): {' '.join(argv)}\n"
-                         f"{done.stderr.decode(errors='replace')[-2000:]}")
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return {"wall_s": wall, "cpu_s": cpu}
 
 
 def compare_command(log: Path, out: Path) -> list[str]:

@@ -135,13 +135,14 @@ print([score(mesh, truth, n) for mesh in (poisson, pivot, hull)])
 """
 
 
-def timed(argv: list[str], cwd: Path = ROOT) -> dict:
-    """Run ``argv`` to completion; its wall time and CPU time (user + system, children it
-    waited for included) in seconds."""
+def timed(argv: list[str], tree: Path = ROOT) -> dict:
+    """Run ``argv`` to completion in the source tree ``tree`` (its directory first on the
+    path); its wall time and CPU time (user + system, children it waited for included) in
+    seconds."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    done = subprocess.run(argv, cwd=cwd, capture_output=True,
-                          env=os.environ | {"PYTHONPATH": str(ROOT)})
+    done = subprocess.run(argv, cwd=tree, capture_output=True,
+                          env=os.environ | {"PYTHONPATH": str(tree)})
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if done.returncode != 0:
