@@ -48,7 +48,8 @@ def small_sphere():
     return Cloud(points, {"shot": np.arange(1500), "beam": np.zeros(1500)}), 5.0 * points
 
 
-def test_racing_leaves_the_far_run_after_two_folds_and_chooses_as_the_full_ladder(monkeypatch):
+def test_racing_leaves_the_far_run_after_two_folds_and_chooses_as_the_full_ladder(
+        monkeypatch, fitted_labels):
     """On a noisy sphere the ellipsoid is exact and a polyhedron of planes far worse: raced at
     level 1, the planes leave after two folds (two fits, not four) and a coarser ellipsoid
     mesh, close to the best, stays; the choice and every remaining candidate's figures are
@@ -58,16 +59,7 @@ def test_racing_leaves_the_far_run_after_two_folds_and_chooses_as_the_full_ladde
                                          (("planes", {}), ("ellipsoid", {"subdivisions": 3}))))
     monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
     options = {"view_points": view, "uncertainty": cloud.attributes, "seed": 0}
-    from recon.surfaces import isolation
-
-    fits = []
-    fit = isolation.run_isolated
-
-    def counted(run, *args, **kwargs):
-        fits.append(run.label)
-        return fit(run, *args, **kwargs)
-
-    monkeypatch.setattr(isolation, "run_isolated", counted)
+    fits = fitted_labels
     raced = choose(cloud.points, **options)
     # each run fitted once a fold: the planes on the two racing folds only
     assert sorted(fits) == sorted(["ellipsoid"] * 4 + ["ellipsoid subdivisions=3"] * 4

@@ -78,7 +78,8 @@ def test_fits_are_handed_out_models_first_the_next_level_ahead_and_choose_alike(
     assert figures(plain) == figures(ahead)
 
 
-def test_the_next_level_fitted_ahead_is_dropped_when_the_ladder_stops(monkeypatch):
+def test_the_next_level_fitted_ahead_is_dropped_when_the_ladder_stops(monkeypatch,
+                                                                      fitted_labels):
     """When the ladder stops, the next level's runs fitted ahead leave no candidate: they are
     skipped as without the fits ahead, and the choice is the same."""
     cloud, view = small_sphere()
@@ -87,14 +88,7 @@ def test_the_next_level_fitted_ahead_is_dropped_when_the_ladder_stops(monkeypatc
                                          (("ellipsoid", {"subdivisions": 3}),),
                                          (("planes", {}),)))
     monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
-    fits = []
-    fit = isolation.run_isolated
-
-    def counted(run, *args, **kwargs):
-        fits.append(run.label)
-        return fit(run, *args, **kwargs)
-
-    monkeypatch.setattr(isolation, "run_isolated", counted)
+    fits = fitted_labels
     choice = choose(cloud.points, view_points=view, uncertainty=cloud.attributes, seed=0)
     assert fits.count("planes") == 2   # fitted ahead on the racing folds
     table = {c.label: c for c in choice.candidates}
