@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from sphere_clouds import small_sphere
 
 from recon.surfaces import auto
 from recon.surfaces.auto import choose, format_choice, outpaced
@@ -36,16 +37,6 @@ def test_outpaced_keeps_the_best_closed_run():
     best, far, farther = costs(1.0), costs(3.0, seed=2), costs(6.0, seed=3)
     leaves = outpaced([best, far, farther], block, [True] * 3, [False, True, True])
     assert leaves[1] is None and leaves[2] is not None
-
-
-def small_sphere():
-    from formats.geometry import Cloud
-
-    rng = np.random.default_rng(0)
-    points = rng.normal(size=(1500, 3))
-    points /= np.linalg.norm(points, axis=1, keepdims=True)
-    points += rng.normal(0.0, 0.01, points.shape)
-    return Cloud(points, {"shot": np.arange(1500), "beam": np.zeros(1500)}), 5.0 * points
 
 
 def test_racing_leaves_the_far_run_after_two_folds_and_chooses_as_the_full_ladder(

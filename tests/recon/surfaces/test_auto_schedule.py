@@ -3,7 +3,7 @@ warm workers; none of it changes a candidate's figures or the choice."""
 
 from __future__ import annotations
 
-import numpy as np
+from sphere_clouds import small_sphere
 
 from formats.geometry import Cloud
 from recon.surfaces import auto, isolation
@@ -14,14 +14,6 @@ from recon.surfaces.auto import choose, format_choice
 # outpaced on the racing folds and the ellipsoid is fitted on every fold.
 LADDER = ((("planes", {}),), (("ellipsoid", {"subdivisions": 3}),),
           (("ellipsoid", {}), ("planes", {"threshold": 2.0})))
-
-
-def small_sphere():
-    rng = np.random.default_rng(0)
-    points = rng.normal(size=(1500, 3))
-    points /= np.linalg.norm(points, axis=1, keepdims=True)
-    points += rng.normal(0.0, 0.01, points.shape)
-    return Cloud(points, {"shot": np.arange(1500), "beam": np.zeros(1500)}), 5.0 * points
 
 
 def figures(choice) -> dict:
