@@ -1068,30 +1068,15 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
     arguments of ``_preparation``."""
     from formats.paths import check_destination, protecting
     from recon.inputs import walk_early
-    from recon.surfaces.auto import (
-        FIT_THREADS,
-        HOLDOUT_FRACTION,
-        TARGET_KINDS,
-        choose_for,
-        format_choice,
-        start_workers,
-    )
+    from recon.surfaces.auto import FIT_THREADS, choose_for, format_choice, start_workers
     from recon.surfaces.isolation import Limits
     from recon.surfaces.methods import watertight
     from recon.surfaces.prepare import load_prepared
     from recon.surfaces.reconstruct import Surface, estimate_of
     from recon.surfaces.reconstruct import reconstruct as run_method
 
-    holdout = HOLDOUT_FRACTION if holdout is None else holdout
-    if not 0 < holdout <= 0.5:   # checked even when unused: a bad value is a mistake
-        raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}", argument="holdout")
-    if target_kind not in TARGET_KINDS:   # checked even when unused, as the hold-out
-        raise ParameterError(f"target_kind must be one of {', '.join(TARGET_KINDS)}, "
-                             f"got {target_kind!r}", argument="target_kind")
-    auto = method == "auto"
-    if auto and params:
-        raise ParameterError("params cannot be combined with method='auto'", argument="params")
-    run = None if auto else _bind(method, params)
+    holdout, run = _reconstruct_options(method, params, holdout, target_kind)
+    auto = run is None
     preparation = _preparation(*preparation)
     limits = Limits.from_options(timeout, memory_limit)
     with protecting(_inputs(source)):
@@ -1131,6 +1116,32 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
                              None if output is None else Path(output), len(prepared.points),
                              prepared.spacing, prepared.noise, cloud.view_points is not None,
                              run.label if choice is None else choice.label)
+
+
+def _reconstruct_options(method: str, params, holdout: float | None, target_kind: str):
+    """``_reconstruct``'s options checked before any work: the hold-out share (the default for
+    None) and the bound run (None for ``"auto"``).
+
+    Raises
+    ------
+    ParameterError
+        A hold-out share outside (0, 0.5] or an unknown target kind (checked even when unused:
+        a bad value is a mistake), or parameters given with ``"auto"``.
+    """
+    from recon.surfaces.auto import HOLDOUT_FRACTION, TARGET_KINDS
+
+    holdout = HOLDOUT_FRACTION if holdout is None else holdout
+    if not 0 < holdout <= 0.5:
+        raise ParameterError(f"holdout must be in (0, 0.5], got {holdout}", argument="holdout")
+    if target_kind not in TARGET_KINDS:
+        raise ParameterError(f"target_kind must be one of {', '.join(TARGET_KINDS)}, "
+                             f"got {target_kind!r}", argument="target_kind")
+    if method == "auto":
+        if params:
+            raise ParameterError("params cannot be combined with method='auto'",
+                                 argument="params")
+        return holdout, None
+    return holdout, _bind(method, params)
 
 
 def _misses(source, cloud, seed: int):

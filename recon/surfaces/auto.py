@@ -557,6 +557,13 @@ class _Race:
                 self.judged[job] = _judged(self.run(job), self.level(job), results,
                                            self.context, self.casters.pop(job))
 
+    def opening_fits(self) -> list[tuple[tuple[int, int], int]]:
+        """The (job, fold) fits handed out first: the runs not raced on every fold (the models
+        of a few numbers), then the raced ones on the racing folds, in ``jobs``' order."""
+        k = len(self.context.folds)
+        return ([(job, f) for job in self.jobs if not self.raced(job) for f in range(k)]
+                + [(job, f) for job in self.jobs if self.raced(job) for f in range(self.first)])
+
     def raced(self, job: tuple[int, int]) -> bool:
         """Whether the run may leave the race (its level is raced, ``RACE_LEVEL``); the others
         are fitted on every fold at once."""
@@ -674,10 +681,7 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
             return {submit(state.run(job), f): (job, f) for job, f in pairs
                     if (job[1], f) not in given}
 
-        pending = hand_out([(job, f) for job in state.jobs if not state.raced(job)
-                            for f in range(len(folds))])
-        pending |= hand_out([(job, f) for job in state.jobs if state.raced(job)
-                             for f in range(state.first)])
+        pending = hand_out(state.opening_fits())
         for (j, f), result in given.items():
             state.arrived((0, j), f, result)
             bar.update(1)
