@@ -51,6 +51,7 @@ sys.path.insert(0, str(ROOT))
 
 import suite  # noqa: E402  (benchmarks/suite.py: the clouds, their logs and the score samples)
 from bench_user import timed  # noqa: E402  (a fresh process's wall and CPU time)
+from tqdm import tqdm  # noqa: E402
 
 PYTHON = sys.executable
 # The ``recon`` command of a source tree, run by this interpreter (the tree first on the path).
@@ -84,14 +85,14 @@ def measure(name: str, log: Path, work: Path, repeats: int, baseline: Path | Non
              "baseline auto": baseline}
     runs: dict[str, list[dict]] = {side: [] for side in SIDES if trees[side] is not None}
     load = [os.getloadavg()[0]]
-    for i in range(repeats):
-        for side in runs:
-            out = work / f"{name}-{side.replace(' ', '-')}-{i}"
-            argv = (compare_command(log, out) if side.endswith("compare")
-                    else auto_command(log, out.with_suffix(".ply"), kind))
-            runs[side].append(timed(argv, trees[side]))
-            shutil.rmtree(out, ignore_errors=True)   # a compare keeps its meshes: 50 MB
-            out.with_suffix(".ply").unlink(missing_ok=True)
+    order = [(i, side) for i in range(repeats) for side in runs]
+    for i, side in tqdm(order, desc=name, unit="run", disable=None, leave=False):
+        out = work / f"{name}-{side.replace(' ', '-')}-{i}"
+        argv = (compare_command(log, out) if side.endswith("compare")
+                else auto_command(log, out.with_suffix(".ply"), kind))
+        runs[side].append(timed(argv, trees[side]))
+        shutil.rmtree(out, ignore_errors=True)   # a compare keeps its meshes: 50 MB
+        out.with_suffix(".ply").unlink(missing_ok=True)
     load.append(os.getloadavg()[0])
     result = {"cloud": name + (" (quick form)" if quick else ""), "repeats": repeats,
               "load_1min": load}
