@@ -64,7 +64,12 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    extrapolated beyond them: its held-out strikes lie within ``NATURAL_FIT`` tau of it on
    average, and along each of its principal axes it reaches at most ``NATURAL_SPAN`` times
    the strikes' extent (``span``). It then stands for the unseen far side, where an open
-   surface leaves the body out and a hull cuts inside it (``natural_prior``). For an
+   surface leaves the body out and a hull cuts inside it (``natural_prior``). Its completion
+   (``NATURAL_COMPLETION``, fitted on the folds only then, and only on the ladder: not among
+   candidates the caller lists) is the Poisson surface of the strikes with the ellipsoid where
+   none is: it takes the ellipsoid's place when the held-out strikes find it better by more
+   than ``BAND_SES`` paired standard errors and the missed beams do not refute it (a cratered
+   body: the strikes resolve more than the ellipsoid holds; ``complete_prior``). For an
    ``"unknown"`` target (the default) steps 1-5 alone decide.
 
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
@@ -157,6 +162,11 @@ NATURAL_COVERAGE = 0.5
 NATURAL_MODEL = "ellipsoid"
 NATURAL_FIT = 0.5
 NATURAL_SPAN = 1.8
+# The prior's second model (``complete_prior``): the Poisson surface of the strikes completed by
+# the ellipsoid where none is. It replaces the bare ellipsoid when its held-out chi-square is
+# lower by more than BAND_SES paired standard errors: the strikes resolve more of the body than
+# the ellipsoid holds, and the ellipsoid stands only for what nobody saw.
+NATURAL_COMPLETION = "completed-poisson"
 # Step 2: the share of the missed beams near the strikes an uncarved candidate may cut before
 # free space refutes it (``refuted``; one beam in ten: fixed after rso-b-cross-clean, where the
 # visibility cut chosen cut 39 % and its carved twin was the better surface; every share from
@@ -410,7 +420,10 @@ class Selection:
     leave too many strikes in holes (``hole_test``) and ``hole_limit`` the fraction they
     exceed; ``filled``: the band's candidates whose carved twin is in it (``fills_in_band``);
     ``refuted``: the candidates free space refutes (``refuted``), left out before the best;
-    ``prior``: the natural-body prior (``natural_prior``) made the choice."""
+    ``prior``: the natural-body prior (``natural_prior``) made the choice; ``completes``: the
+    prior's ellipsoid, when its completion (``complete_prior``) was chosen in its place, with
+    ``completion``, the completion's held-out chi-square above the ellipsoid's and its paired
+    standard error."""
 
     chosen: int
     best: int
@@ -422,6 +435,8 @@ class Selection:
     filled: tuple[int, ...] = ()
     refuted: tuple[int, ...] = ()
     prior: bool = False
+    completes: int | None = None
+    completion: tuple[float, float] | None = None
 
 
 def closed(faces: np.ndarray) -> bool:
@@ -464,9 +479,10 @@ def coverage_of(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, rea
     return float(np.mean(distance <= reach))
 
 
-def ladder(methods: Sequence[str] | None = None) -> list[list[Run]]:
+def ladder(methods: Sequence[str] | None = None, *, natural: bool = False) -> list[list[Run]]:
     """The levels of ``LADDER`` as runs, restricted to ``methods`` and to the registered methods
-    (each named method not on the ladder joins the last level at its defaults)."""
+    (each named method not on the ladder joins the last level at its defaults; for a
+    ``natural`` target not ``NATURAL_COMPLETION``, which the prior fits itself)."""
     from recon.surfaces.methods import available, bind
 
     known = set(available())
@@ -474,7 +490,8 @@ def ladder(methods: Sequence[str] | None = None) -> list[list[Run]]:
                if name in known and (methods is None or name in methods)] for level in LADDER]
     if methods is not None:
         listed = {name for level in LADDER for name, _ in level}
-        levels[-1] += [bind(name) for name in methods if name not in listed]
+        levels[-1] += [bind(name) for name in methods if name not in listed
+                       and not (natural and name == NATURAL_COMPLETION)]
     return [level for level in levels if level]
 
 
@@ -982,18 +999,53 @@ def natural_prior(candidates: list[Candidate], selection: Selection, coverage: f
     return replace(selection, chosen=model, prior=True)
 
 
+def complete_prior(candidates: list[Candidate], selection: Selection, context: _Context, *,
+                   limits: Limits, n_workers: int | None
+                   ) -> tuple[list[Candidate], Selection]:
+    """Step 6's completion: when the natural prior chose the ellipsoid, fit its completion
+    (``NATURAL_COMPLETION``: the Poisson surface of the strikes, the ellipsoid where none is) on
+    the folds and judge it like any candidate; it is chosen in the ellipsoid's place when its
+    held-out chi-square is lower by more than ``BAND_SES`` paired standard errors and the
+    missed beams do not refute it (``MISS_REFUTES``). Returns the candidates, the completion's
+    appended (with its carved twin when it fills free space), and the selection."""
+    from recon.surfaces.methods import available, bind
+
+    if not selection.prior or NATURAL_COMPLETION not in available():
+        return candidates, selection
+    level = len(LADDER)
+    judged = _fit_and_judge([(level, [bind(NATURAL_COMPLETION)])], context, limits=limits,
+                            n_workers=n_workers)[level][0]
+    completion, index = judged[0], len(candidates)
+    candidates = candidates + judged
+    if not completion.scored or (completion.misses_cut or 0.0) > MISS_REFUTES:
+        return candidates, selection
+    gap = judge.block_mean_se(completion.cost - candidates[selection.chosen].cost, context.block)
+    if gap[0] >= -BAND_SES * gap[1]:
+        return candidates, selection
+    return candidates, replace(selection, chosen=index, completes=selection.chosen,
+                               completion=gap)
+
+
 def _prior_reason(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
     """The reason of a choice the natural-body prior made."""
-    c, b = candidates[selection.chosen], candidates[selection.best]
-    gap, se = selection.gaps[selection.chosen]
-    return (f"; the target is a natural body and the strikes cover {coverage:.0%} of the best "
+    model = selection.chosen if selection.completes is None else selection.completes
+    c, b = candidates[model], candidates[selection.best]
+    gap, se = selection.gaps[model]
+    text = (f"; the target is a natural body and the strikes cover {coverage:.0%} of the best "
             f"closed surface: held-out passes, all where strikes are, cannot judge the rest. "
-            f"This smooth closed model holds where they are (held-out strikes "
+            f"The ellipsoid holds where they are (held-out strikes "
             f"{c.heldout_mean_m:.3g} m from it on average, within {NATURAL_FIT:g} tau) and "
             f"reaches {c.span:.2f} times their extent (at most {NATURAL_SPAN:g}), so it stands "
             f"for the unseen part; {gap:.2g} +- {se:.2g} above the best on the held-out "
             f"strikes, {b.label} ({b.chi2:.3g}, {b.n_params:,} parameters, "
             f"{'closed' if b.closed else 'open'})")
+    if selection.completion is not None:
+        gap, se = selection.completion
+        text += (f"; completed by the Poisson surface of the strikes where they are: "
+                 f"{-gap:.2g} +- {se:.2g} below the bare ellipsoid on the held-out strikes "
+                 f"(more than {BAND_SES:g} paired standard errors), so the strikes resolve "
+                 f"more of the body than the ellipsoid holds")
+    return text
 
 
 def _holes_reason(candidates: list[Candidate], selection: Selection) -> str:
@@ -1166,15 +1218,18 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
                         f"{len(cloud)} points in {folds.k} folds of {folds.n_blocks} blocks test "
                         f"{tested} in the smallest fold")
     levels = ([[bind(*r) if isinstance(r, tuple) else bind(r) for r in candidates]]
-              if candidates else ladder(methods))
+              if candidates else ladder(methods, natural=target_kind == "natural"))
     context = _context(cloud, folds, k=k, fallback=fallback, seed=seed, misses=misses)
-    table, note = climb(levels, context, limits=Limits(timeout_s=timeout_s, memory_mb=memory_mb),
-                        n_workers=n_workers)
+    limits = Limits(timeout_s=timeout_s, memory_mb=memory_mb)
+    table, note = climb(levels, context, limits=limits, n_workers=n_workers)
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
         else float("nan")
     selection = select(table, context.block, len(context.checked))
     if target_kind == "natural":
         selection = natural_prior(table, selection, coverage, context.tau)
+        if not candidates and (methods is None or NATURAL_COMPLETION in methods):
+            table, selection = complete_prior(table, selection, context, limits=limits,
+                                              n_workers=n_workers)
     for i, c in enumerate(table):
         c.eligible = i in selection.eligible
         c.holed = i in selection.holed or i in selection.filled or i in selection.refuted

@@ -42,6 +42,7 @@ BUILTIN_MODULES = (
     "recon.surfaces.methods.planes",
     "recon.surfaces.methods.plane",
     "recon.surfaces.methods.poisson",
+    "recon.surfaces.methods.completed_poisson",
     "recon.surfaces.methods.screened_poisson",
     "recon.surfaces.methods.ball_pivoting",
     "recon.surfaces.methods.ball_pivoting_meshlab",

@@ -162,3 +162,27 @@ def test_the_api_names_a_bad_target_kind_before_any_work(tmp_path):
     points, _ = bumpy_body(200, width=0.12)
     with pytest.raises(ParameterError, match="target_kind must be one of unknown, natural"):
         api.reconstruct(points, method="auto", target_kind="asteroid")
+
+
+@pytest.mark.parametrize("bumps, completed", [(0.01, True), (0.0, False)])
+def test_the_ellipsoid_is_completed_by_the_strikes_where_they_resolve_more(bumps, completed):
+    # The belts of a bumpy body: the prior takes the ellipsoid, and its completion (the
+    # Poisson surface of the strikes, the ellipsoid where none is) fits the held-out passes far
+    # better and takes its place; on a smooth ellipsoid the ellipsoid is the held-out best
+    # itself, and stays.
+    points, view = bumpy_body(2000, width=0.12, bumps=bumps)
+    natural = choose(points, view_points=view, seed=0, target_kind="natural",
+                     methods=["ellipsoid", "poisson", "completed-poisson"])
+    assert natural.method == ("completed-poisson" if completed else "ellipsoid"), \
+        format_choice(natural)
+    assert ("completed by the Poisson surface" in natural.reason) is completed
+    if completed:
+        assert "the target is a natural body" in natural.reason
+        assert natural.chosen.chi2 < natural.candidates[0].chi2
+
+
+def test_listed_candidates_are_not_completed():
+    points, view = bumpy_body(2000, width=0.12)
+    natural = choose(points, view_points=view, candidates=CANDIDATES, seed=0,
+                     target_kind="natural")
+    assert [c.run.method for c in natural.candidates] == ["ellipsoid", "poisson"]
