@@ -29,9 +29,10 @@ TARGET_KINDS = ("unknown", "natural")
 def _add_target_kind(p: argparse.ArgumentParser) -> None:
     p.add_argument("--target-kind", choices=TARGET_KINDS, default="unknown",
                    help="what -m auto may assume of the target: 'natural' (an asteroid, a "
-                        "comet) lets a smooth closed model stand for a far side the strikes "
-                        "leave unseen; 'unknown': the strikes and their rays alone decide "
-                        "(default: %(default)s)")
+                        "comet) lets the ellipsoid stand for a far side the strikes leave "
+                        "unseen, completed by the strikes' own surface where they resolve "
+                        "more (completed-poisson); 'unknown': the strikes and their rays alone "
+                        "decide (default: %(default)s)")
 
 
 def _add_input_options(p: argparse.ArgumentParser) -> None:

@@ -137,10 +137,12 @@ METHOD = register(Method(
         # depth 6: the natural bodies' best Poisson depth in the auto suite (docs/auto-suite.md).
         "depth": Param(6, int, "Poisson octree depth (grid of up to 2**depth cells)", minimum=1,
                        maximum=MAX_DEPTH),
-        # 0.4 of the mean semi-axis: from 0.2 to 0.5 on the auto suite's natural bodies, 0.4 was
-        # the best or within a few per cent of it on most (docs/decisions.md); at 0.5 the blob
-        # comes back where the body is an ellipsoid (Chamfer 1.2 to 1.5 times 0.4's there).
-        "reach": Param(0.4, float, "distance from the strikes, as a fraction of the "
+        # 0.3 of the mean semi-axis: on the auto suite's natural bodies, from 0.2 to 0.5, 0.3 was
+        # within 5 % of the best of 0.2 and 0.3 in Chamfer everywhere (0.2 presses the ellipsoid
+        # against the seen edge, where it is wrong on a cratered body; 0.5 is better on the
+        # bodies least like an ellipsoid and brings Poisson's blob back on those most like one);
+        # docs/decisions.md.
+        "reach": Param(0.3, float, "distance from the strikes, as a fraction of the "
                        "ellipsoid's mean semi-axis, beyond which the ellipsoid completes them",
                        minimum=0.0, maximum=10.0),
         # 5: 10,242 vertices, the ellipsoid method's own mesh.
