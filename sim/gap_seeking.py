@@ -257,30 +257,33 @@ class GapSeeker:
         self.map.strike(origins, directions, ranges)
         self.map.carve(origins, directions, ranges, margin=self._margin())
 
-    def _candidates(self) -> np.ndarray:
-        """Sorted keys of the voxels worth a shot: the frontier, and once it is exhausted, the
-        least-struck surface voxels too, less those set aside (all re-admitted when
-        ``GAP_ASIDE_INTERVALS`` intervals have passed since the last time); an even subset of
-        at most ``GAP_MAX_CANDIDATES``."""
-        from sim import planner_kernels as kernels
+    def _candidates(self, stored: np.ndarray, stored_hidden: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The voxels worth a shot: the frontier, and once it is exhausted, the least-struck
+        surface voxels too, less those set aside (all re-admitted when ``GAP_ASIDE_INTERVALS``
+        intervals have passed since the last time); an even subset of at most
+        ``GAP_MAX_CANDIDATES``, one per cube of ``GAP_BLOCK_VOXELS`` voxels (one compiled
+        call, :meth:`SurfaceMap.candidates`, which first keeps the hidden counts
+        ``stored_hidden`` of the last plan's candidates ``stored`` in the map's grid).
 
+        Returns
+        -------
+        keys : (c,) int64; centres : (c, 3) float64, metres, B; hidden : (c,) int64
+        """
         if self._interval - self._enclosed >= self._enclose_wait:
             marked = self.map.enclose()
             self._enclosed = self._interval
             self._enclose_wait = (GAP_ENCLOSE_INTERVALS if marked else
                                   min(2 * self._enclose_wait, GAP_ENCLOSE_MAX_INTERVALS))
-        keys = self.map.frontier()
+        rank, readmit = -1, False
         if self.residual:     # count <= np.quantile(count, GAP_RESIDUAL_QUANTILE), compiled
             rank = math.floor((len(self.map.count) - 1) * GAP_RESIDUAL_QUANTILE)
-            keys = kernels.least_struck(keys, self.map.occupied, self.map.count, rank)
             readmit = self._interval - self._readmitted >= GAP_ASIDE_INTERVALS
             if readmit:
                 self._readmitted = self._interval
-            state, shape, corner = self.map.grid()
-            keys = kernels.not_aside(keys, state, shape, corner, GAP_ASIDE_WALKS, readmit)
-        if len(keys) > GAP_MAX_CANDIDATES:
-            keys = keys[::-(-len(keys) // GAP_MAX_CANDIDATES)]
-        return keys
+        return self.map.candidates(rank=rank, aside=GAP_ASIDE_WALKS, readmit=readmit,
+                                   most=GAP_MAX_CANDIDATES, block=GAP_BLOCK_VOXELS,
+                                   stored=stored, stored_hidden=stored_hidden)
 
     def _after_interval(self, aimed: bool) -> None:
         """Count intervals with nothing to aim at; after ``GAP_IDLE_INTERVALS`` of them in a
@@ -333,29 +336,19 @@ class GapSeeker:
 
     def _plan(self) -> None:
         """Take what was observed into the map and choose the candidates of the next
-        ``GAP_PLAN_INTERVALS`` intervals: one per cube of ``GAP_BLOCK_VOXELS`` voxels."""
-        from sim import planner_kernels as kernels
-
-        if len(self._keys):     # the last plan's hidden counts, kept in the map's grid
-            kernels.store_hidden(self._keys, self._hidden, *self.map.grid())
+        ``GAP_PLAN_INTERVALS`` intervals: one per cube of ``GAP_BLOCK_VOXELS`` voxels. The
+        last plan's hidden counts are kept in the map's grid (a rebuilt map starts with
+        none)."""
+        stored, stored_hidden, before = self._keys, self._hidden, self.map
         self._update()
         self._age = 0
+        if self.map is not before:
+            stored, stored_hidden = stored[:0], stored_hidden[:0]
         self._keys, self._centres = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
         self._hidden = np.zeros(0, dtype=np.int64)
         if self.map is not None:
-            self._keys, self._centres = _spread(self._candidates(), GAP_BLOCK_VOXELS, self.map)
-            self._hidden = kernels.hidden_counts(self._keys, *self.map.grid())
+            self._keys, self._centres, self._hidden = self._candidates(stored, stored_hidden)
         self._used = np.zeros(len(self._keys), dtype=bool)
-
-
-def _spread(keys: np.ndarray, block: int, surface: SurfaceMap
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """The first of ``keys`` (sorted, voxels of ``surface``) in each cube of ``block`` voxels
-    on a side: candidates that one strike each settles, evenly over the map; and their centres
-    (c, 3) [m, B] (compiled: sim/planner_kernels.py)."""
-    from sim import planner_kernels as kernels
-
-    return kernels.spread(np.asarray(keys, dtype=np.int64), block, surface.size)
 
 
 def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:

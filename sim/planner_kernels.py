@@ -990,29 +990,75 @@ def spread(keys, block, size):
 
     Notes
     -----
-    A mark per cube of the keys' own index box (a few thousand cubes: it stays in the cache).
+    A mark per cube of the keys' own index box (a few thousand cubes: it stays in the cache);
+    two passes over the keys (the box, then the marks), nothing else allocated.
     """
     if not len(keys):
         return keys.copy(), np.empty((0, 3))
-    index = np.empty((len(keys), 3), dtype=np.int64)
-    first = np.full(3, np.iinfo(np.int64).max)
-    last = np.full(3, np.iinfo(np.int64).min)
-    for q in range(len(keys)):
-        index[q, 0], index[q, 1], index[q, 2] = _unpack(keys[q])
-        for i in range(3):
-            cube = index[q, i] // block
-            first[i] = min(first[i], cube)
-            last[i] = max(last[i], cube)
-    e1, e2 = last[1] - first[1] + 1, last[2] - first[2] + 1
-    taken = np.zeros((last[0] - first[0] + 1) * e1 * e2, dtype=np.bool_)
-    keep = np.zeros(len(keys), dtype=np.bool_)
-    for q in range(len(keys)):
-        cell = (((index[q, 0] // block - first[0]) * e1 + (index[q, 1] // block - first[1])) * e2
-                + (index[q, 2] // block - first[2]))
+    f0 = f1 = f2 = np.iinfo(np.int64).max
+    l0 = l1 = l2 = np.iinfo(np.int64).min
+    for key in keys:
+        i, j, k = _unpack(key)
+        c0, c1, c2 = i // block, j // block, k // block
+        f0, f1, f2 = min(f0, c0), min(f1, c1), min(f2, c2)
+        l0, l1, l2 = max(l0, c0), max(l1, c1), max(l2, c2)
+    e1, e2 = l1 - f1 + 1, l2 - f2 + 1
+    taken = np.zeros((l0 - f0 + 1) * e1 * e2, dtype=np.bool_)
+    chosen = np.empty(len(keys), dtype=np.int64)
+    centres = np.empty((len(keys), 3))
+    c = 0
+    for key in keys:
+        i, j, k = _unpack(key)
+        cell = ((i // block - f0) * e1 + (j // block - f1)) * e2 + (k // block - f2)
         if not taken[cell]:
-            taken[cell] = keep[q] = True
-    chosen = keys[keep]
-    return chosen, _centres(chosen, size)
+            taken[cell] = True
+            chosen[c] = key
+            centres[c, 0] = (i + 0.5) * size
+            centres[c, 1] = (j + 0.5) * size
+            centres[c, 2] = (k + 0.5) * size
+            c += 1
+    return chosen[:c].copy(), centres[:c].copy()
+
+
+@njit(cache=True)
+def candidates(stored, stored_hidden, frontier, state, shape, corner, occupied, count, rank,
+               aside, readmit, most, block, size):
+    """A plan's candidates in one call (sim/gap_seeking.py, ``GapSeeker._plan``): the last
+    plan's hidden counts stored (:func:`store_hidden`), the frontier list read
+    (:func:`frontier_keep`), with ``rank`` >= 0 the least-struck voxels joined
+    (:func:`least_struck`) and those set aside left out (:func:`not_aside`), an even subset of
+    at most ``most``, one per cube (:func:`spread`) and their hidden counts
+    (:func:`hidden_counts`).
+
+    Parameters
+    ----------
+    stored : (s,) int64; stored_hidden : (s,) int64: keys and hidden counts to store first
+    frontier : (f,) int64, sorted keys: the map's frontier list
+    state, shape, corner : the flat state grid (updated in place), its shape and first voxel
+        (sim/surface_map.py)
+    occupied : (o,) int64, sorted keys; count : (o,) int64: their strike counts
+    rank : int: the least-struck voxels' rank (:func:`least_struck`), or -1: the frontier only
+    aside : int; readmit : bool: as :func:`not_aside`
+    most : int: at most this many keys go to the spread (every ``ceil(k / most)``-th)
+    block : int: the spread's cube edge in voxels; size : float, metres: the voxel edge
+
+    Returns
+    -------
+    frontier : (f',) int64: the frontier list, voxels no longer frontier left out
+    keys : (c,) int64: the candidates; centres : (c, 3) float64, metres, B
+    hidden : (c,) int64: their hidden counts
+    """
+    store_hidden(stored, stored_hidden, state, shape, corner)
+    if len(frontier):
+        frontier = frontier_keep(frontier, state, shape, corner)
+    keys = frontier
+    if rank >= 0:
+        keys = not_aside(least_struck(frontier, occupied, count, rank), state, shape, corner,
+                         aside, readmit)
+    if len(keys) > most:
+        keys = keys[::(len(keys) + most - 1) // most].copy()
+    chosen, centres = spread(keys, block, size)
+    return frontier, chosen, centres, hidden_counts(chosen, state, shape, corner)
 
 
 # Strike counts below this are ranked by a histogram (the least-struck quantile's count is a

@@ -253,6 +253,30 @@ class SurfaceMap:
                 self._shape, self._corner)
         return self._frontier
 
+    def candidates(self, *, rank: int, aside: int, readmit: bool, most: int, block: int,
+                   stored: np.ndarray, stored_hidden: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The planner's candidates (sim/gap_seeking.py) in one compiled call: the hidden
+        counts ``stored_hidden`` (s,) of the voxels ``stored`` (s,) kept in the grid first;
+        then the frontier (:meth:`frontier`), with ``rank`` >= 0 joined by the occupied voxels
+        struck at most as often as the ``rank``-th least-struck one and less the voxels whose
+        hidden count reaches ``aside`` (with ``readmit``, none: every count cleared); an even
+        subset of at most ``most``; the first in each cube of ``block`` voxels on a side
+        (sim/planner_kernels.py, ``candidates``).
+
+        Returns
+        -------
+        keys : (c,) int64; centres : (c, 3) float64, metres, B; hidden : (c,) int64: the
+        chosen voxels, their centres and hidden counts.
+        """
+        from sim import planner_kernels as kernels
+
+        self._frontier, keys, centres, hidden = kernels.candidates(
+            stored, stored_hidden, self._frontier, self._state.reshape(-1), self._shape,
+            self._corner, self.occupied, self.count, rank, aside, readmit, most, block,
+            self.size)
+        return keys, centres, hidden
+
     def enclose(self) -> int:
         """Mark the unknown voxels the occupied ones enclose (a body's interior behind its
         struck shell; gaps of up to two voxels in the shell taken as closed, an unknown voxel
