@@ -253,9 +253,8 @@ class GapSeeker:
         self._origins = [np.concatenate(self._origins)]
         self._directions = [np.concatenate(self._directions)]
         self._ranges = [np.concatenate(self._ranges)]
-        origins, directions, ranges = self._origins[0], self._directions[0], self._ranges[0]
-        self.map.strike(origins, directions, ranges)
-        self.map.carve(origins, directions, ranges, margin=self._margin())
+        self.map.add(self._origins[0], self._directions[0], self._ranges[0],
+                     margin=self._margin())
 
     def _candidates(self, stored: np.ndarray, stored_hidden: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

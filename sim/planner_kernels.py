@@ -42,6 +42,7 @@ from numba import njit
 
 from sim.surface_map import (
     _BITS,
+    _GROW,
     _MASK,
     _OFFSET,
     BLOCK_RADIUS,
@@ -382,6 +383,94 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
                                                  u_count, u_view)
     fresh = _mark_new(new, state, shape, corner)
     return merged, m_count, m_view, _join(frontier, fresh), len(new)
+
+
+@njit(cache=True)
+def cover(state, shape, corner, lo, hi):
+    """The state grid grown to hold the voxel indices ``lo`` .. ``hi`` (3,) int64 (inclusive).
+
+    Parameters
+    ----------
+    state : (g,) uint8: the flat state grid (empty: none yet)
+    shape, corner : (3,) int64: its shape and the voxel index of its first cell
+    lo, hi : (3,) int64: the voxel index box to hold
+
+    Returns
+    -------
+    state, shape, corner : the same arrays when the grid holds the box already; otherwise a
+        grid over the box joined with the old grid's, grown by ``_GROW`` of its edge on every
+        side, the old grid's cells copied in.
+    """
+    if len(state):
+        inside = True
+        for i in range(3):
+            inside = inside and corner[i] <= lo[i] and hi[i] < corner[i] + shape[i]
+        if inside:
+            return state, shape, corner
+    low, high = lo.copy(), hi.copy()
+    if len(state):
+        for i in range(3):
+            low[i] = min(low[i], corner[i])
+            high[i] = max(high[i], corner[i] + shape[i] - 1)
+    new_corner = np.empty(3, dtype=np.int64)
+    new_shape = np.empty(3, dtype=np.int64)
+    for i in range(3):
+        pad = np.int64(math.ceil(_GROW * (high[i] - low[i] + 1)))
+        new_corner[i] = low[i] - pad
+        new_shape[i] = high[i] - low[i] + 1 + 2 * pad
+    grown = np.zeros(new_shape[0] * new_shape[1] * new_shape[2], dtype=np.uint8)
+    if len(state):
+        a0, a1, a2 = corner[0] - new_corner[0], corner[1] - new_corner[1], corner[2] - new_corner[2]
+        for x in range(shape[0]):
+            for y in range(shape[1]):
+                src = (x * shape[1] + y) * shape[2]
+                dst = ((x + a0) * new_shape[1] + y + a1) * new_shape[2] + a2
+                grown[dst:dst + shape[2]] = state[src:src + shape[2]]
+    return grown, new_shape, new_corner
+
+
+@njit(cache=True)
+def add(origins, directions, ranges, size, margin, occupied, count, occupied_view, frontier,
+        state, shape, corner, index_lo, index_hi):
+    """Add beams to the map in one call (sim/surface_map.py, :meth:`SurfaceMap.add`): the
+    strikes merged (:func:`strike_index`, :func:`strike_merge`), then the paths carved
+    (:func:`carve`) within the occupied voxels' box grown by ``margin`` [m], the grid grown as
+    needed (:func:`cover`).
+
+    Parameters
+    ----------
+    origins, directions : (m, 3) float64, metres and unit vectors, B
+    ranges : (m,) float64, metres (inf: no strike)
+    size, margin : float, metres: the voxel edge and the traversal margin
+    occupied, count, occupied_view, frontier : the map's arrays (:func:`strike_merge`)
+    state, shape, corner : the flat state grid (updated in place), its shape and first voxel
+    index_lo, index_hi : (3,) int64: the occupied voxels' index box (ignored while none is)
+
+    Returns
+    -------
+    occupied, count, occupied_view, frontier, state, shape, corner, index_lo, index_hi : the
+        map's arrays after (new arrays where they changed size)
+    n_new : int: how many voxels were struck for the first time
+    """
+    n_new = 0
+    index, view, lo, hi = strike_index(origins, directions, ranges, size)
+    if len(index):
+        state, shape, corner = cover(state, shape, corner, lo - 1, hi + 1)
+        occupied, count, occupied_view, frontier, n_new = strike_merge(
+            index, view, occupied, count, occupied_view, frontier, state, shape, corner)
+        if n_new:
+            first = len(occupied) == n_new
+            index_lo = lo if first else np.minimum(index_lo, lo)
+            index_hi = hi if first else np.maximum(index_hi, hi)
+    if len(occupied):
+        box_lo = index_lo * size - margin
+        box_hi = (index_hi + 1) * size + margin
+        state, shape, corner = cover(state, shape, corner,
+                                     np.floor(box_lo / size).astype(np.int64),
+                                     np.floor(box_hi / size).astype(np.int64))
+        carve(origins, directions, ranges, box_lo, box_hi, size, state, shape, corner)
+    return (occupied, count, occupied_view, frontier, state, shape, corner, index_lo,
+            index_hi, n_new)
 
 
 @njit(cache=True)

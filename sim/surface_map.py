@@ -120,8 +120,6 @@ class SurfaceMap:
         self._frontier = np.zeros(0, dtype=np.int64)    # sorted keys, each once a frontier
         self._index_lo = np.zeros(3, dtype=np.int64)    # the occupied voxels' index box
         self._index_hi = np.zeros(3, dtype=np.int64)
-        self._box_version = 0                           # bumped when the index box changes
-        self._carve_box = (None, None, None)            # (margin, version) -> box traversed
         self._enclosed_at = 0                           # occupied voxels at the last enclose
         self._solid = np.zeros(0, dtype=np.uint8)       # occupancy over the index box,
         self._solid_at = 0                              # made when this many were occupied
@@ -146,25 +144,20 @@ class SurfaceMap:
     # ------------------------------------------------------------------ the grid
 
     def _cover(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Grow the grid to hold the voxel indices ``lo`` .. ``hi`` (3,) (inclusive)."""
-        shape, corner = self._shape, self._corner
-        (c0, c1, c2), (s0, s1, s2) = corner.tolist(), shape.tolist()
-        (l0, l1, l2), (h0, h1, h2) = lo.tolist(), hi.tolist()
-        if (self._state.size and c0 <= l0 and c1 <= l1 and c2 <= l2 and h0 < c0 + s0
-                and h1 < c1 + s1 and h2 < c2 + s2):
-            return
-        old_hi = corner + shape - 1
-        if self._state.size:
-            lo, hi = np.minimum(lo, self._corner), np.maximum(hi, old_hi)
-        pad = np.ceil(_GROW * (hi - lo + 1)).astype(np.int64)
-        corner, new_shape = lo - pad, hi - lo + 1 + 2 * pad
-        state = np.zeros(tuple(int(n) for n in new_shape), dtype=np.uint8)
-        if self._state.size:
-            at = self._corner - corner
-            state[at[0]:at[0] + shape[0], at[1]:at[1] + shape[1],
-                  at[2]:at[2] + shape[2]] = self._state
-        self._state, self._corner = state, corner
-        self._shape = np.array(state.shape, dtype=np.int64)
+        """Grow the grid to hold the voxel indices ``lo`` .. ``hi`` (3,) (inclusive; compiled:
+        sim/planner_kernels.py, ``cover``)."""
+        from sim import planner_kernels as kernels
+
+        self._set_grid(*kernels.cover(self._state.reshape(-1), self._shape, self._corner,
+                                      np.asarray(lo, dtype=np.int64),
+                                      np.asarray(hi, dtype=np.int64)))
+
+    def _set_grid(self, state: np.ndarray, shape: np.ndarray, corner: np.ndarray) -> None:
+        """Take the flat grid ``state`` of ``shape`` whose first cell is voxel ``corner`` (a
+        grid that grew is larger: otherwise it is the grid held already)."""
+        if len(state) != self._state.size:
+            self._state = state.reshape(tuple(shape.tolist()))
+        self._shape, self._corner = shape, corner
 
     def _cells(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Flat grid positions (n,) of voxel indices (n, 3), and which of them the grid holds."""
@@ -183,7 +176,9 @@ class SurfaceMap:
     def add(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
             margin: float) -> None:
         """Add beams: each struck at ``origins + ranges * directions`` or, where ``ranges`` is
-        inf, struck nothing (:meth:`strike`, then :meth:`carve`).
+        inf, struck nothing. The strikes' voxels become occupied (their unknown face
+        neighbours frontier), then the voxels each beam crossed before its strike free
+        (compiled, one call: sim/planner_kernels.py, ``add``).
 
         Parameters
         ----------
@@ -194,47 +189,14 @@ class SurfaceMap:
             Misses and the paths of strikes are traversed within the box of the occupied voxels
             grown by this much (space far from the target holds nothing to plan for).
         """
-        self.strike(origins, directions, ranges)
-        self.carve(origins, directions, ranges, margin=margin)
-
-    def strike(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray) -> None:
-        """Mark the voxels of the strikes occupied, their unknown face neighbours frontier
-        (arguments as :meth:`add`; misses ignored; compiled: sim/planner_kernels.py)."""
         from sim import planner_kernels as kernels
 
-        index, view, lo, hi = kernels.strike_index(origins, directions, ranges, self.size)
-        if not len(index):
-            return
-        self._cover(lo - 1, hi + 1)
-        state = self._state.reshape(-1)
-        self.occupied, self.count, self.view, self._frontier, new = kernels.strike_merge(
-            index, view, self.occupied, self.count, self.view, self._frontier, state,
-            self._shape, self._corner)
-        if new:
-            first = len(self.occupied) == new
-            box_lo = lo if first else np.minimum(self._index_lo, lo)
-            box_hi = hi if first else np.maximum(self._index_hi, hi)
-            if (first or box_lo.tolist() != self._index_lo.tolist()
-                    or box_hi.tolist() != self._index_hi.tolist()):
-                self._index_lo, self._index_hi = box_lo, box_hi
-                self._box_version += 1
-
-    def carve(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
-              margin: float) -> None:
-        """Mark the voxels the beams crossed before their strikes free (arguments as
-        :meth:`add`; compiled: sim/planner_kernels.py)."""
-        from sim import planner_kernels as kernels
-
-        if not len(self.occupied):
-            return
-        key, lo, hi = self._carve_box
-        if key != (margin, self._box_version):     # the box or the margin changed: grow the grid
-            lo, hi = self.bounds(margin)           # (it never shrinks, so it still holds the box)
-            self._cover(np.floor(lo / self.size).astype(np.int64),
-                        np.floor(hi / self.size).astype(np.int64))
-            self._carve_box = ((margin, self._box_version), lo, hi)
-        kernels.carve(origins, directions, ranges, lo, hi, self.size, self._state.reshape(-1),
-                      self._shape, self._corner)
+        (self.occupied, self.count, self.view, self._frontier, state, shape, corner,
+         self._index_lo, self._index_hi, _) = kernels.add(
+            origins, directions, ranges, self.size, float(margin), self.occupied, self.count,
+            self.view, self._frontier, self._state.reshape(-1), self._shape, self._corner,
+            self._index_lo, self._index_hi)
+        self._set_grid(state, shape, corner)
 
     # ------------------------------------------------------------------ reading the map
 
