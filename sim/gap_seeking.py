@@ -182,6 +182,7 @@ class GapSeeker:
         self._centres = np.zeros((0, 3))                     # their centres [m, B]
         self._used = np.zeros(0, dtype=bool)                 # and those aimed at or set aside
         self._hidden = np.zeros(0, dtype=np.int64)           # walks that found them hidden
+        self._occupancy = None                               # the map's, as the plan left it
         self._age = 0                                        # intervals since the plan
         self._short = True                                   # the last interval held a shot
         self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
@@ -324,7 +325,7 @@ class GapSeeker:
             return turn_from_boresight(np.tile(self.boresight, (len(t), 1)))
         position, target, nominal = poses if poses is not None else self._poses(t)
         pick, goal, turn = kernels.sweep(
-            len(t), self._centres, self._used, self.map.size, *self.map.occupancy(), position,
+            len(t), self._centres, self._used, self.map.size, *self._occupancy, position,
             target.as_matrix(), nominal, self.boresight, self.max_offset,
             self.max_rate * self.step, GAP_BLOCK_VOXELS, self._hidden,
             GAP_ASIDE_WALKS if self.residual else _NEVER_ASIDE)
@@ -347,6 +348,7 @@ class GapSeeker:
         self._hidden = np.zeros(0, dtype=np.int64)
         if self.map is not None:
             self._keys, self._centres, self._hidden = self._candidates(stored, stored_hidden)
+            self._occupancy = self.map.occupancy()      # what the sweeps' walks read
         self._used = np.zeros(len(self._keys), dtype=bool)
 
 

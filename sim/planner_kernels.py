@@ -513,12 +513,17 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
         o0, o1, o2 = (origins[k, 0] / size - corner[0], origins[k, 1] / size - corner[1],
                       origins[k, 2] / size - corner[2])
         d0, d1, d2 = directions[k, 0], directions[k, 1], directions[k, 2]
+        last = -1
         for s in range(samples):
             along = start + (s + 0.5) / TRAVERSAL_STEP
             cell = (s1 * min(max(np.int64(o0 + along * d0), 0), n0)
                     + s2 * min(max(np.int64(o1 + along * d1), 0), n1)
                     + min(max(np.int64(o2 + along * d2), 0), n2))
-            state[cell] = (state[cell] | _CROSSED) & _NOT_FRONT
+            # Written only when the mark changes: a voxel takes two samples or more, and
+            # most of a path was crossed before (a store to every sample costs more).
+            if cell != last and state[cell] & (_CROSSED | _FRONT) != _CROSSED:
+                state[cell] = (state[cell] | _CROSSED) & _NOT_FRONT
+            last = cell
 
 
 @njit(cache=True)
@@ -1084,11 +1089,17 @@ def spread(keys, block, size):
     """
     if not len(keys):
         return keys.copy(), np.empty((0, 3))
+    # A cube of 2**s voxels: its index by an arithmetic shift (a floor division, as `//`,
+    # without the integer divide: three per key would cost more than the rest of the pass).
+    shift = -1
+    if block & (block - 1) == 0:
+        shift = 0
+        while (1 << shift) < block:
+            shift += 1
     f0 = f1 = f2 = np.iinfo(np.int64).max
     l0 = l1 = l2 = np.iinfo(np.int64).min
     for key in keys:
-        i, j, k = _unpack(key)
-        c0, c1, c2 = i // block, j // block, k // block
+        c0, c1, c2 = _cube(key, block, shift)
         f0, f1, f2 = min(f0, c0), min(f1, c1), min(f2, c2)
         l0, l1, l2 = max(l0, c0), max(l1, c1), max(l2, c2)
     e1, e2 = l1 - f1 + 1, l2 - f2 + 1
@@ -1097,16 +1108,27 @@ def spread(keys, block, size):
     centres = np.empty((len(keys), 3))
     c = 0
     for key in keys:
-        i, j, k = _unpack(key)
-        cell = ((i // block - f0) * e1 + (j // block - f1)) * e2 + (k // block - f2)
+        c0, c1, c2 = _cube(key, block, shift)
+        cell = ((c0 - f0) * e1 + (c1 - f1)) * e2 + (c2 - f2)
         if not taken[cell]:
             taken[cell] = True
+            i, j, k = _unpack(key)
             chosen[c] = key
             centres[c, 0] = (i + 0.5) * size
             centres[c, 1] = (j + 0.5) * size
             centres[c, 2] = (k + 0.5) * size
             c += 1
     return chosen[:c].copy(), centres[:c].copy()
+
+
+@njit(cache=True)
+def _cube(key, block, shift):
+    """The index (three ints) of the cube of ``block`` voxels on a side holding the voxel
+    ``key``: by ``>> shift`` when ``shift`` >= 0 (``block`` is ``2**shift``), else by ``//``."""
+    i, j, k = _unpack(key)
+    if shift >= 0:
+        return i >> shift, j >> shift, k >> shift
+    return i // block, j // block, k // block
 
 
 @njit(cache=True)
