@@ -513,17 +513,12 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
         o0, o1, o2 = (origins[k, 0] / size - corner[0], origins[k, 1] / size - corner[1],
                       origins[k, 2] / size - corner[2])
         d0, d1, d2 = directions[k, 0], directions[k, 1], directions[k, 2]
-        last = -1
         for s in range(samples):
             along = start + (s + 0.5) / TRAVERSAL_STEP
             cell = (s1 * min(max(np.int64(o0 + along * d0), 0), n0)
                     + s2 * min(max(np.int64(o1 + along * d1), 0), n1)
                     + min(max(np.int64(o2 + along * d2), 0), n2))
-            # Written only when the mark changes: a voxel takes two samples or more, and
-            # most of a path was crossed before (a store to every sample costs more).
-            if cell != last and state[cell] & (_CROSSED | _FRONT) != _CROSSED:
-                state[cell] = (state[cell] | _CROSSED) & _NOT_FRONT
-            last = cell
+            state[cell] = (state[cell] | _CROSSED) & _NOT_FRONT
 
 
 @njit(cache=True)
