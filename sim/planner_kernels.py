@@ -826,6 +826,24 @@ def _toward(point, origin, r):
 
 
 @njit(cache=True)
+def _aims(points, origin, r):
+    """The unit vectors from ``origin`` (3,) toward each of ``points`` (c, 3), turned by ``r``
+    (3, 3), as :func:`_toward` computes them: three (c,) arrays. One pass without branches
+    over every point (the used ones too), which the compiler vectorises: cheaper than
+    :func:`_toward` point by point over the open ones."""
+    c = len(points)
+    x, y, z = np.empty(c), np.empty(c), np.empty(c)
+    for q in range(c):
+        d0, d1, d2 = points[q, 0] - origin[0], points[q, 1] - origin[1], points[q, 2] - origin[2]
+        a0 = r[0, 0] * d0 + r[0, 1] * d1 + r[0, 2] * d2
+        a1 = r[1, 0] * d0 + r[1, 1] * d1 + r[1, 2] * d2
+        a2 = r[2, 0] * d0 + r[2, 1] * d1 + r[2, 2] * d2
+        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        x[q], y[q], z[q] = a0 / norm, a1 / norm, a2 / norm
+    return x, y, z
+
+
+@njit(cache=True)
 def _sweep_order(row, now):
     """The aims grouped by their sweep rows ``row`` (c,) int64 in the sweep's order (the
     boresight's row ``now`` and those below it first, then from the top): the aims' indices
@@ -1009,15 +1027,15 @@ def sweep(n, centres, used, size, solid, lo, hi, position, target, nominal, bore
     rank = np.empty(len(centres), dtype=np.int64)
     row = np.empty(len(centres), dtype=np.int64)
     across = np.empty(len(centres))
+    x, y, z = _aims(centres, ch, to_nominal[middle])
     c = n_open = 0
     for q in range(len(centres)):
         if used[q]:
             continue
-        a0, a1, a2 = _toward(centres[q], ch, to_nominal[middle])
-        if a2 >= cos_max:
-            r = np.int64(math.floor(a1 / band))
+        if z[q] >= cos_max:
+            r = np.int64(math.floor(y[q] / band))
             cand[c], rank[c], row[c] = q, n_open, r
-            across[c] = a0 if r & 1 == 0 else -a0
+            across[c] = x[q] if r & 1 == 0 else -x[q]
             c += 1
         n_open += 1
     order, start = _sweep_order(row[:c], now)
