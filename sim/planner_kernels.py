@@ -373,7 +373,7 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
     occupied, count, occupied_view, frontier : the merged arrays (when no voxel is struck for
         the first time, ``occupied`` and ``frontier`` themselves with ``count`` and
         ``occupied_view`` updated in place; new arrays otherwise)
-    n_new : int: how many voxels were struck for the first time
+    new : (n,) int64, sorted: the keys of the voxels struck for the first time
     """
     keys = np.empty(len(index), dtype=np.int64)
     for k in range(len(index)):
@@ -382,7 +382,7 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
     merged, m_count, m_view, new = _merge_counts(occupied, count, occupied_view, unique,
                                                  u_count, u_view)
     fresh = _mark_new(new, state, shape, corner)
-    return merged, m_count, m_view, _join(frontier, fresh), len(new)
+    return merged, m_count, m_view, _join(frontier, fresh), new
 
 
 @njit(cache=True)
@@ -431,11 +431,11 @@ def cover(state, shape, corner, lo, hi):
 
 @njit(cache=True)
 def add(origins, directions, ranges, size, margin, occupied, count, occupied_view, frontier,
-        state, shape, corner, index_lo, index_hi):
+        state, shape, corner, index_lo, index_hi, solid):
     """Add beams to the map in one call (sim/surface_map.py, :meth:`SurfaceMap.add`): the
-    strikes merged (:func:`strike_index`, :func:`strike_merge`), then the paths carved
-    (:func:`carve`) within the occupied voxels' box grown by ``margin`` [m], the grid grown as
-    needed (:func:`cover`).
+    strikes merged (:func:`strike_index`, :func:`strike_merge`) and the occupancy bits kept
+    up to date (:func:`occupancy`), then the paths carved (:func:`carve`) within the occupied
+    voxels' box grown by ``margin`` [m], the grid grown as needed (:func:`cover`).
 
     Parameters
     ----------
@@ -445,23 +445,28 @@ def add(origins, directions, ranges, size, margin, occupied, count, occupied_vie
     occupied, count, occupied_view, frontier : the map's arrays (:func:`strike_merge`)
     state, shape, corner : the flat state grid (updated in place), its shape and first voxel
     index_lo, index_hi : (3,) int64: the occupied voxels' index box (ignored while none is)
+    solid : (ceil(g / 8),) uint8: :func:`occupancy` over that box (ignored while none is)
 
     Returns
     -------
-    occupied, count, occupied_view, frontier, state, shape, corner, index_lo, index_hi : the
-        map's arrays after (new arrays where they changed size)
-    n_new : int: how many voxels were struck for the first time
+    occupied, count, occupied_view, frontier, state, shape, corner, index_lo, index_hi,
+        solid : the map's arrays after (new arrays where they changed size; ``solid`` made
+        again when the box changed, its new voxels' bits set in place otherwise)
     """
-    n_new = 0
     index, view, lo, hi = strike_index(origins, directions, ranges, size)
     if len(index):
         state, shape, corner = cover(state, shape, corner, lo - 1, hi + 1)
-        occupied, count, occupied_view, frontier, n_new = strike_merge(
+        occupied, count, occupied_view, frontier, new = strike_merge(
             index, view, occupied, count, occupied_view, frontier, state, shape, corner)
-        if n_new:
-            first = len(occupied) == n_new
-            index_lo = lo if first else np.minimum(index_lo, lo)
-            index_hi = hi if first else np.maximum(index_hi, hi)
+        if len(new):
+            first = len(occupied) == len(new)
+            box_lo = lo if first else np.minimum(index_lo, lo)
+            box_hi = hi if first else np.maximum(index_hi, hi)
+            if first or (box_lo != index_lo).any() or (box_hi != index_hi).any():
+                solid = occupancy(occupied, box_lo, box_hi)
+            else:
+                _set_occupied(solid, new, box_lo, box_hi)
+            index_lo, index_hi = box_lo, box_hi
     if len(occupied):
         box_lo = index_lo * size - margin
         box_hi = (index_hi + 1) * size + margin
@@ -470,7 +475,7 @@ def add(origins, directions, ranges, size, margin, occupied, count, occupied_vie
                                      np.floor(box_hi / size).astype(np.int64))
         carve(origins, directions, ranges, box_lo, box_hi, size, state, shape, corner)
     return (occupied, count, occupied_view, frontier, state, shape, corner, index_lo,
-            index_hi, n_new)
+            index_hi, solid)
 
 
 @njit(cache=True)
@@ -694,11 +699,19 @@ def occupancy(occupied, lo, hi):
     """
     e1, e2 = hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
     solid = np.zeros(((hi[0] - lo[0] + 1) * e1 * e2 + 7) // 8, dtype=np.uint8)
-    for key in occupied:
+    _set_occupied(solid, occupied, lo, hi)
+    return solid
+
+
+@njit(cache=True)
+def _set_occupied(solid, keys, lo, hi):
+    """Set the bits of the voxels ``keys`` (k,) int64 in ``solid``, :func:`occupancy`'s grid
+    over the box ``lo`` .. ``hi`` (3,) int64, which holds them (in place)."""
+    e1, e2 = hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
+    for key in keys:
         i, j, k = _unpack(key)
         cell = ((i - lo[0]) * e1 + (j - lo[1])) * e2 + (k - lo[2])
         solid[cell >> 3] |= np.uint8(1 << (cell & 7))
-    return solid
 
 
 @njit(cache=True)

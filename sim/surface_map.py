@@ -41,8 +41,8 @@ frontier, as does the space behind a plate.
 walking the beam's line voxel by voxel, from where it enters the occupied voxels' box toward the
 voxel: it is hidden when the beam passes close to the centre of an occupied voxel nearer than
 itself (``BLOCK_RADIUS``, ``BLOCK_SLACK``). The walk reads a bit per voxel of the occupied
-voxels' box (:meth:`SurfaceMap.occupancy`, made again when a voxel is struck for the first
-time), not the state grid: a few kilobytes instead of megabytes.
+voxels' box (:meth:`SurfaceMap.occupancy`, kept up to date as voxels are struck for the
+first time), not the state grid: a few kilobytes instead of megabytes.
 """
 
 from __future__ import annotations
@@ -121,8 +121,7 @@ class SurfaceMap:
         self._index_lo = np.zeros(3, dtype=np.int64)    # the occupied voxels' index box
         self._index_hi = np.zeros(3, dtype=np.int64)
         self._enclosed_at = 0                           # occupied voxels at the last enclose
-        self._solid = np.zeros(0, dtype=np.uint8)       # occupancy over the index box,
-        self._solid_at = 0                              # made when this many were occupied
+        self._solid = np.zeros(1, dtype=np.uint8)       # occupancy over the index box
 
     @property
     def occupied_centres(self) -> np.ndarray:
@@ -192,10 +191,10 @@ class SurfaceMap:
         from sim import planner_kernels as kernels
 
         (self.occupied, self.count, self.view, self._frontier, state, shape, corner,
-         self._index_lo, self._index_hi, _) = kernels.add(
+         self._index_lo, self._index_hi, self._solid) = kernels.add(
             origins, directions, ranges, self.size, float(margin), self.occupied, self.count,
             self.view, self._frontier, self._state.reshape(-1), self._shape, self._corner,
-            self._index_lo, self._index_hi)
+            self._index_lo, self._index_hi, self._solid)
         self._set_grid(state, shape, corner)
 
     # ------------------------------------------------------------------ reading the map
@@ -274,13 +273,8 @@ class SurfaceMap:
         """What a walk through the map reads (sim/planner_kernels.py, ``_blocked``): a bit
         per voxel of the occupied voxels' index box, set where occupied ((ceil(g / 8),) uint8
         for the box's g voxels: ``occupancy`` there), and that box's low and high corners (3,)
-        int64; made again only when a voxel was struck for the first time since the last
-        call (only then can the box or its bits change)."""
-        if self._solid_at != len(self.occupied):
-            from sim import planner_kernels as kernels
-
-            self._solid = kernels.occupancy(self.occupied, self._index_lo, self._index_hi)
-            self._solid_at = len(self.occupied)
+        int64. Kept by :meth:`add`: made again when the box grows, the bits of new voxels set
+        in place otherwise."""
         return self._solid, self._index_lo, self._index_hi
 
     def visible(self, positions: np.ndarray, targets: np.ndarray) -> np.ndarray:

@@ -303,6 +303,19 @@ def test_occupancy_grid_matches_numpy_packbits_as_the_map_grows():
         box = state.reshape(shape)[first[0]:last[0], first[1]:last[1], first[2]:last[2]]
         np.testing.assert_array_equal(dense, (box & OCCUPIED).astype(bool))
         assert m.occupancy()[0] is solid                 # kept until a voxel is new
+    # A voxel struck for the first time inside the box: its bit set in place.
+    solid, lo, hi = m.occupancy()
+    inside = pack((lo + hi)[None] // 2)
+    for key in (inside - 1, inside, inside + 1):
+        if not member(key, m.occupied)[0]:
+            break
+    assert not member(key, m.occupied)[0]
+    above = m.centres(key) + np.array([0.0, 0.0, 0.1])       # struck from 0.1 m above
+    m.add(above, np.array([[0.0, 0.0, -1.0]]), np.array([0.1]), margin=2.0)
+    assert member(key, m.occupied)[0] and m.occupancy()[0] is solid
+    dense = np.zeros(hi - lo + 1, dtype=bool)
+    dense[tuple((unpack(m.occupied) - lo).T)] = True
+    np.testing.assert_array_equal(solid, np.packbits(dense.ravel(), bitorder="little"))
 
 
 def test_visibility_walk_matches_the_brute_force_reference():
