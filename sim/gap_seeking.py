@@ -171,7 +171,10 @@ class GapSeeker:
 
     def __init__(self, *, step: float, max_rate: float, max_offset: float, poses,
                  beams: np.ndarray):
+        from sim.planner_kernels import sweep  # compiled (numba): closed loops only
+
         self.step, self.max_rate, self.max_offset = step, max_rate, max_offset
+        self._sweep, self._reach = sweep, max_rate * step    # the largest turn between shots
         self._poses = poses
         self.beams = np.asarray(beams, dtype=np.float64).reshape(-1, 3)
         self.boresight = np.array([0.0, 0.0, 1.0])           # commanded, nominal frame
@@ -185,8 +188,8 @@ class GapSeeker:
         self._occupancy = None                               # the map's, as the plan left it
         self._age = 0                                        # intervals since the plan
         self._short = True                                   # the last interval held a shot
-        self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
-        self._hi = np.full(3, -np.inf)
+        self._lo = [math.inf] * 3                            # strikes' bounding box [m, B]
+        self._hi = [-math.inf] * 3
         self._diagonal = math.nan                            # of that box [m] (nan: stale)
         self.n_strikes = 0
         self._range_sum = 0.0
@@ -210,7 +213,7 @@ class GapSeeker:
     def _box_diagonal(self) -> float:
         """The diagonal [m] of the strikes' bounding box (computed again only when it grew)."""
         if math.isnan(self._diagonal):
-            self._diagonal = float(np.linalg.norm(self._hi - self._lo))
+            self._diagonal = float(np.linalg.norm(np.subtract(self._hi, self._lo)))
         return self._diagonal
 
     def _margin(self) -> float:
@@ -232,13 +235,15 @@ class GapSeeker:
         self._origins.append(origins)
         self._directions.append(directions)
         self._ranges.append(ranges)
+        stats = stats.tolist()
         if stats[6]:
-            lo, hi = np.minimum(self._lo, stats[:3]), np.maximum(self._hi, stats[3:6])
-            if lo.tolist() != self._lo.tolist() or hi.tolist() != self._hi.tolist():
+            lo = [min(a, b) for a, b in zip(self._lo, stats[:3], strict=True)]
+            hi = [max(a, b) for a, b in zip(self._hi, stats[3:6], strict=True)]
+            if lo != self._lo or hi != self._hi:
                 self._lo, self._hi, self._diagonal = lo, hi, math.nan
             self.n_strikes += int(stats[6])
-            self._range_sum += float(stats[7])
-            self._radius = max(self._radius, float(stats[8]))
+            self._range_sum += stats[7]
+            self._radius = max(self._radius, stats[8])
         if self.n_strikes == 0:
             return
         size = self.voxel_size()
@@ -312,26 +317,26 @@ class GapSeeker:
         (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame
         (the attitude offset the pipeline applies).
         """
-        from sim import planner_kernels as kernels
-
-        t = np.asarray(t, dtype=np.float64)
         if self._short or self._age >= GAP_PLAN_INTERVALS:
             self._plan()
         self._age += 1
         self._interval += 1
-        if not (len(self._keys) and len(t)):
+        n = len(t)
+        if not (len(self._keys) and n):
             self._short = True
             self._after_interval(False)
-            return turn_from_boresight(np.tile(self.boresight, (len(t), 1)))
-        position, target, nominal = poses if poses is not None else self._poses(t)
-        pick, goal, turn = kernels.sweep(
-            len(t), self._centres, self._used, self.map.size, *self._occupancy, position,
-            target.as_matrix(), nominal, self.boresight, self.max_offset,
-            self.max_rate * self.step, GAP_BLOCK_VOXELS, self._hidden,
-            GAP_ASIDE_WALKS if self.residual else _NEVER_ASIDE)
+            return turn_from_boresight(np.tile(self.boresight, (n, 1)))
+        position, target, nominal = (poses if poses is not None else
+                                     self._poses(np.asarray(t, dtype=np.float64)))
+        solid, lo, hi = self._occupancy
+        pick, goal, turn = self._sweep(
+            n, self._centres, self._used, self.map.size, solid, lo, hi, position,
+            target.as_matrix(), nominal, self.boresight, self.max_offset, self._reach,
+            GAP_BLOCK_VOXELS, self._hidden, GAP_ASIDE_WALKS if self.residual else _NEVER_ASIDE)
         self.boresight = goal[-1]
-        self._short = bool(pick[-1] < 0)
-        self._after_interval(bool(pick[0] >= 0))
+        first, last = pick[0].item(), pick[-1].item()
+        self._short = last < 0
+        self._after_interval(first >= 0)
         return turn
 
     def _plan(self) -> None:
