@@ -262,14 +262,15 @@ class GapSeeker:
         self.map.add(self._origins[0], self._directions[0], self._ranges[0],
                      margin=self._margin())
 
-    def _candidates(self, stored: np.ndarray, stored_hidden: np.ndarray
+    def _candidates(self, stored: np.ndarray | None = None,
+                    stored_hidden: np.ndarray | None = None, *, block: int = GAP_BLOCK_VOXELS
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The voxels worth a shot: the frontier, and once it is exhausted, the least-struck
         surface voxels too, less those set aside (all re-admitted when ``GAP_ASIDE_INTERVALS``
         intervals have passed since the last time); an even subset of at most
-        ``GAP_MAX_CANDIDATES``, one per cube of ``GAP_BLOCK_VOXELS`` voxels (one compiled
-        call, :meth:`SurfaceMap.candidates`, which first keeps the hidden counts
-        ``stored_hidden`` of the last plan's candidates ``stored`` in the map's grid).
+        ``GAP_MAX_CANDIDATES``, one per cube of ``block`` voxels (one compiled call,
+        :meth:`SurfaceMap.candidates`, which first keeps the hidden counts ``stored_hidden``
+        of the last plan's candidates ``stored``, if any, in the map's grid).
 
         Returns
         -------
@@ -286,9 +287,11 @@ class GapSeeker:
             readmit = self._interval - self._readmitted >= GAP_ASIDE_INTERVALS
             if readmit:
                 self._readmitted = self._interval
+        if stored is None:
+            stored = stored_hidden = np.zeros(0, dtype=np.int64)
         return self.map.candidates(rank=rank, aside=GAP_ASIDE_WALKS, readmit=readmit,
-                                   most=GAP_MAX_CANDIDATES, block=GAP_BLOCK_VOXELS,
-                                   stored=stored, stored_hidden=stored_hidden)
+                                   most=GAP_MAX_CANDIDATES, block=block, stored=stored,
+                                   stored_hidden=stored_hidden)
 
     def _after_interval(self, aimed: bool) -> None:
         """Count intervals with nothing to aim at; after ``GAP_IDLE_INTERVALS`` of them in a
