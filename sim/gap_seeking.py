@@ -38,9 +38,10 @@ whose aim is beyond one step's reach (``max_rate * step``) turns toward it at th
 shots left over when the visible candidates run out hold the boresight, and the law plans anew
 before the next interval (its candidates are used up; the map has grown). So the map, the
 frontier and the candidates cost once per plan, the prediction and the sweep once per interval;
-each of these steps is one or a few compiled calls (sim/planner_kernels.py). The poses of an
-interval (where the chaser is, the target's attitude, the nominal sensor frame) are those the
-simulation computes for its shots anyway, handed to :meth:`GapSeeker.command`.
+a plan is three compiled calls (the recorded beams, the map's update, the candidates; a fourth
+when the enclosed voxels are due) and an interval's sweep one (sim/planner_kernels.py). The
+poses of an interval (where the chaser is, the target's attitude, the nominal sensor frame) are
+those the simulation computes for its shots anyway, handed to :meth:`GapSeeker.command`.
 
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run

@@ -6,17 +6,19 @@ call overhead alone. These kernels do each step in one compiled call (numba, ``c
 that a process after the first loads them from disk instead of compiling them):
 
 - :func:`recorded_beams`: every beam of the recorded shots, in the body frame;
-- :func:`strike_index` and :func:`strike_merge`: the strikes into the occupied voxels and the
-  frontier marks around the new ones;
-- :func:`carve`: the voxels the beams crossed before their strikes;
+- :func:`add`: a plan's beams into the map in one call: the strikes into the occupied voxels
+  and the frontier marks around the new ones (:func:`strike_index`, :func:`strike_merge`), the
+  occupancy bits the walks read (:func:`occupancy`), the voxels the beams crossed before their
+  strikes (:func:`carve`), the grid grown as needed (:func:`cover`);
 - :func:`enclose`: the unknown voxels the struck voxels enclose (a flood fill from outside,
   gaps of two voxels closed);
-- :func:`occupancy`: a bit per voxel of the occupied voxels' box, what the walks read;
+- :func:`candidates`: a plan's candidates in one call: the frontier, the least-struck voxels
+  (:func:`least_struck`), less those set aside (:func:`not_aside`: found hidden too often, or
+  all re-admitted), one per cube (:func:`spread`), with their hidden counts;
 - :func:`hidden`: which voxels beams from a few positions reach (a walk through the map);
 - :func:`sweep`: one interval's aims (the sweep's order, visibility tested in that order until
-  the shots are used, the slew limits) and the commanded turns; it counts, per voxel, the walks
-  that found a candidate hidden, and :func:`not_aside` leaves out of a plan the candidates
-  hidden too often (or re-admits them).
+  the shots are used, the slew limits) and the commanded turns; it counts, per candidate, the
+  walks that found it hidden.
 
 They do what the numpy code they replaced did, in the same order of operations where it
 matters (the same voxel keys, the same sweep order); tests/sim/test_planner_kernels.py holds

@@ -20,8 +20,9 @@ enclosed; in its upper bits the planner's count of walks that found the voxel hi
 in a dense grid over the box of the occupied voxels grown by the traversal margin, reallocated
 larger when that box grows, so that marking a beam's path or looking a voxel up is
 one indexing operation. Beams are traversed by sampling every ``size / TRAVERSAL_STEP`` along
-them. The updates (strikes, carving), the frontier's reading and the visibility walk below are
-compiled kernels (sim/planner_kernels.py), one call each.
+them. The update (strikes, carving, the grid's growth: :meth:`SurfaceMap.add`), the planner's
+reading of the map (:meth:`SurfaceMap.candidates`) and the visibility walk below are compiled
+kernels (sim/planner_kernels.py), one call each.
 
 The **frontier** is the unknown voxels next to (sharing a face with) an occupied voxel: where
 the seen surface continues into space no beam has examined. It is kept up to date as voxels are

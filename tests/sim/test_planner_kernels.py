@@ -538,3 +538,55 @@ def test_enclose_kernel_matches_an_opening_by_scipy():
         assert kernels.enclose(flat, shape, corner, lo, hi) == 0
         np.testing.assert_array_equal(state, want)
     assert marked[0] == 0 < marked[1] < marked[2]     # none (the free space percolates), pockets
+
+
+def test_candidates_kernel_matches_its_steps_done_the_numpy_way():
+    rng = np.random.default_rng(9)
+    *_, (m, _) = _maps(seed=9)
+    frontier = m._frontier.copy()
+    state = m._state.reshape(-1)
+    stored = np.union1d(frontier, m.occupied)[::2]
+    counts = rng.integers(0, 5, len(stored))
+    for rank, readmit, most in ((-1, False, 10_000), (len(m.count) // 4, False, 10_000),
+                                (len(m.count) // 4, False, 50), (len(m.count) // 2, True, 10_000)):
+        m._frontier = frontier.copy()
+        before = state.copy()
+        keys, centres, hidden = m.candidates(rank=rank, aside=3, readmit=readmit, most=most,
+                                             block=2, stored=stored, stored_hidden=counts)
+        # The numpy way: the counts stored, the frontier read, the least-struck joined (the
+        # rank-th smallest count as the threshold), the set-aside left out, every k-th kept,
+        # the first per cube of two voxels, the counts read.
+        grid = before.copy()
+        cell = m._cells(unpack(stored))[0]
+        grid[cell] = (grid[cell] & (HIDDEN_STEP - 1)) + np.minimum(counts, HIDDEN_MAX) * HIDDEN_STEP
+        pool = frontier[grid[m._cells(unpack(frontier))[0]] & FRONTIER > 0]
+        if rank >= 0:
+            least = m.occupied[m.count <= np.sort(m.count)[rank]]
+            pool = np.union1d(pool, least)
+            at = m._cells(unpack(pool))[0]
+            if readmit:
+                grid[at] &= HIDDEN_STEP - 1
+            pool = pool[grid[at] < 3 * HIDDEN_STEP]
+        if len(pool) > most:
+            pool = pool[::-(-len(pool) // most)]
+        cube = pack(np.floor_divide(unpack(pool), 2))
+        expected = pool[np.sort(np.unique(cube, return_index=True)[1])]
+        np.testing.assert_array_equal(keys, expected)
+        np.testing.assert_array_equal(centres, m.centres(expected))
+        np.testing.assert_array_equal(hidden, grid[m._cells(unpack(expected))[0]] // HIDDEN_STEP)
+        np.testing.assert_array_equal(state, grid)
+        assert len(expected) > 5
+        state[:] = before
+
+
+def test_sweep_aims_match_the_aim_point_by_point():
+    rng = np.random.default_rng(10)
+    points = rng.normal(size=(300, 3)) * 20.0
+    origin = np.array([150.0, -40.0, 30.0])
+    turn = Rotation.random(random_state=11).as_matrix()
+    x, y, z = kernels._aims(points, origin, turn)
+    for q in range(len(points)):
+        assert (x[q], y[q], z[q]) == kernels._toward(points[q], origin, turn)
+    aim = (points - origin) @ turn.T
+    np.testing.assert_allclose(np.column_stack([x, y, z]),
+                               aim / np.linalg.norm(aim, axis=1)[:, None], rtol=0, atol=1e-15)
