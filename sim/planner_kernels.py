@@ -9,7 +9,7 @@ that a process after the first loads them from disk instead of compiling them):
 - :func:`add`: a plan's beams into the map in one call: the strikes into the occupied voxels
   and the frontier marks around the new ones (:func:`strike_index`, :func:`strike_merge`), the
   occupancy bits the walks read (:func:`occupancy`), the voxels the beams crossed before their
-  strikes (:func:`carve`), the grid grown as needed (:func:`cover`);
+  strikes (:func:`carve`), handing back to numpy the grid's growth (rare);
 - :func:`enclose`: the unknown voxels the struck voxels enclose (a flood fill from outside,
   gaps of two voxels closed);
 - :func:`candidates`: a plan's candidates in one call: the frontier, the least-struck voxels
@@ -44,7 +44,6 @@ from numba import njit
 
 from sim.surface_map import (
     _BITS,
-    _GROW,
     _MASK,
     _OFFSET,
     BLOCK_RADIUS,
@@ -387,48 +386,19 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
     return merged, m_count, m_view, _join(frontier, fresh), new
 
 
+# What :func:`add` did: everything; nothing yet (the grid must first hold the strikes and
+# their neighbours); the strikes but not the carving (the grid must first hold the box).
+ADDED, STRIKE, CARVE = 0, 1, 2
+
+
 @njit(cache=True)
-def cover(state, shape, corner, lo, hi):
-    """The state grid grown to hold the voxel indices ``lo`` .. ``hi`` (3,) int64 (inclusive).
-
-    Parameters
-    ----------
-    state : (g,) uint8: the flat state grid (empty: none yet)
-    shape, corner : (3,) int64: its shape and the voxel index of its first cell
-    lo, hi : (3,) int64: the voxel index box to hold
-
-    Returns
-    -------
-    state, shape, corner : the same arrays when the grid holds the box already; otherwise a
-        grid over the box joined with the old grid's, grown by ``_GROW`` of its edge on every
-        side, the old grid's cells copied in.
-    """
-    if len(state):
-        inside = True
-        for i in range(3):
-            inside = inside and corner[i] <= lo[i] and hi[i] < corner[i] + shape[i]
-        if inside:
-            return state, shape, corner
-    low, high = lo.copy(), hi.copy()
-    if len(state):
-        for i in range(3):
-            low[i] = min(low[i], corner[i])
-            high[i] = max(high[i], corner[i] + shape[i] - 1)
-    new_corner = np.empty(3, dtype=np.int64)
-    new_shape = np.empty(3, dtype=np.int64)
+def _holds(shape, corner, lo, hi):
+    """Whether the grid of ``shape`` whose first cell is voxel ``corner`` holds the voxel
+    indices ``lo`` .. ``hi`` (3,) int64 (inclusive)."""
     for i in range(3):
-        pad = np.int64(math.ceil(_GROW * (high[i] - low[i] + 1)))
-        new_corner[i] = low[i] - pad
-        new_shape[i] = high[i] - low[i] + 1 + 2 * pad
-    grown = np.zeros(new_shape[0] * new_shape[1] * new_shape[2], dtype=np.uint8)
-    if len(state):
-        a0, a1, a2 = corner[0] - new_corner[0], corner[1] - new_corner[1], corner[2] - new_corner[2]
-        for x in range(shape[0]):
-            for y in range(shape[1]):
-                src = (x * shape[1] + y) * shape[2]
-                dst = ((x + a0) * new_shape[1] + y + a1) * new_shape[2] + a2
-                grown[dst:dst + shape[2]] = state[src:src + shape[2]]
-    return grown, new_shape, new_corner
+        if not (corner[i] <= lo[i] and hi[i] < corner[i] + shape[i]):
+            return False
+    return shape[0] * shape[1] * shape[2] > 0
 
 
 @njit(cache=True)
@@ -437,7 +407,8 @@ def add(origins, directions, ranges, size, margin, occupied, count, occupied_vie
     """Add beams to the map in one call (sim/surface_map.py, :meth:`SurfaceMap.add`): the
     strikes merged (:func:`strike_index`, :func:`strike_merge`) and the occupancy bits kept
     up to date (:func:`occupancy`), then the paths carved (:func:`carve`) within the occupied
-    voxels' box grown by ``margin`` [m], the grid grown as needed (:func:`cover`).
+    voxels' box grown by ``margin`` [m]. Where the grid must grow first (a copy numpy does
+    faster), it stops and says what the grid must hold.
 
     Parameters
     ----------
@@ -451,13 +422,18 @@ def add(origins, directions, ranges, size, margin, occupied, count, occupied_vie
 
     Returns
     -------
-    occupied, count, occupied_view, frontier, state, shape, corner, index_lo, index_hi,
-        solid : the map's arrays after (new arrays where they changed size; ``solid`` made
-        again when the box changed, its new voxels' bits set in place otherwise)
+    occupied, count, occupied_view, frontier, index_lo, index_hi, solid : the map's arrays
+        after (new arrays where they changed size; ``solid`` made again when the box changed,
+        its new voxels' bits set in place otherwise)
+    status : int: ``ADDED``; ``STRIKE``: nothing done, the grid must hold ``lo`` .. ``hi``;
+        ``CARVE``: the strikes merged, the grid must hold ``lo`` .. ``hi`` before the carving
+    lo, hi : (3,) int64: what the grid must hold (with ``ADDED``, the strikes' index box)
     """
     index, view, lo, hi = strike_index(origins, directions, ranges, size)
     if len(index):
-        state, shape, corner = cover(state, shape, corner, lo - 1, hi + 1)
+        if not _holds(shape, corner, lo - 1, hi + 1):
+            return (occupied, count, occupied_view, frontier, index_lo, index_hi, solid, STRIKE,
+                    lo - 1, hi + 1)
         occupied, count, occupied_view, frontier, new = strike_merge(
             index, view, occupied, count, occupied_view, frontier, state, shape, corner)
         if len(new):
@@ -472,12 +448,13 @@ def add(origins, directions, ranges, size, margin, occupied, count, occupied_vie
     if len(occupied):
         box_lo = index_lo * size - margin
         box_hi = (index_hi + 1) * size + margin
-        state, shape, corner = cover(state, shape, corner,
-                                     np.floor(box_lo / size).astype(np.int64),
-                                     np.floor(box_hi / size).astype(np.int64))
+        lo = np.floor(box_lo / size).astype(np.int64)
+        hi = np.floor(box_hi / size).astype(np.int64)
+        if not _holds(shape, corner, lo, hi):
+            return (occupied, count, occupied_view, frontier, index_lo, index_hi, solid, CARVE,
+                    lo, hi)
         carve(origins, directions, ranges, box_lo, box_hi, size, state, shape, corner)
-    return (occupied, count, occupied_view, frontier, state, shape, corner, index_lo,
-            index_hi, solid)
+    return occupied, count, occupied_view, frontier, index_lo, index_hi, solid, ADDED, lo, hi
 
 
 @njit(cache=True)

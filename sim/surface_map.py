@@ -144,20 +144,25 @@ class SurfaceMap:
     # ------------------------------------------------------------------ the grid
 
     def _cover(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Grow the grid to hold the voxel indices ``lo`` .. ``hi`` (3,) (inclusive; compiled:
-        sim/planner_kernels.py, ``cover``)."""
-        from sim import planner_kernels as kernels
-
-        self._set_grid(*kernels.cover(self._state.reshape(-1), self._shape, self._corner,
-                                      np.asarray(lo, dtype=np.int64),
-                                      np.asarray(hi, dtype=np.int64)))
-
-    def _set_grid(self, state: np.ndarray, shape: np.ndarray, corner: np.ndarray) -> None:
-        """Take the flat grid ``state`` of ``shape`` whose first cell is voxel ``corner`` (a
-        grid that grew is larger: otherwise it is the grid held already)."""
-        if len(state) != self._state.size:
-            self._state = state.reshape(tuple(shape.tolist()))
-        self._shape, self._corner = shape, corner
+        """Grow the grid to hold the voxel indices ``lo`` .. ``hi`` (3,) (inclusive)."""
+        shape, corner = self._shape, self._corner
+        (c0, c1, c2), (s0, s1, s2) = corner.tolist(), shape.tolist()
+        (l0, l1, l2), (h0, h1, h2) = lo.tolist(), hi.tolist()
+        if (self._state.size and c0 <= l0 and c1 <= l1 and c2 <= l2 and h0 < c0 + s0
+                and h1 < c1 + s1 and h2 < c2 + s2):
+            return
+        old_hi = corner + shape - 1
+        if self._state.size:
+            lo, hi = np.minimum(lo, self._corner), np.maximum(hi, old_hi)
+        pad = np.ceil(_GROW * (hi - lo + 1)).astype(np.int64)
+        corner, new_shape = lo - pad, hi - lo + 1 + 2 * pad
+        state = np.zeros(tuple(int(n) for n in new_shape), dtype=np.uint8)
+        if self._state.size:
+            at = self._corner - corner
+            state[at[0]:at[0] + shape[0], at[1]:at[1] + shape[1],
+                  at[2]:at[2] + shape[2]] = self._state
+        self._state, self._corner = state, corner
+        self._shape = np.array(state.shape, dtype=np.int64)
 
     def _cells(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Flat grid positions (n,) of voxel indices (n, 3), and which of them the grid holds."""
@@ -191,12 +196,21 @@ class SurfaceMap:
         """
         from sim import planner_kernels as kernels
 
-        (self.occupied, self.count, self.view, self._frontier, state, shape, corner,
-         self._index_lo, self._index_hi, self._solid) = kernels.add(
-            origins, directions, ranges, self.size, float(margin), self.occupied, self.count,
-            self.view, self._frontier, self._state.reshape(-1), self._shape, self._corner,
-            self._index_lo, self._index_hi, self._solid)
-        self._set_grid(state, shape, corner)
+        margin = float(margin)
+        while True:
+            (self.occupied, self.count, self.view, self._frontier, self._index_lo,
+             self._index_hi, self._solid, status, lo, hi) = kernels.add(
+                origins, directions, ranges, self.size, margin, self.occupied, self.count,
+                self.view, self._frontier, self._state.reshape(-1), self._shape,
+                self._corner, self._index_lo, self._index_hi, self._solid)
+            if status == kernels.ADDED:
+                return
+            self._cover(lo, hi)         # the grid grows (rarely), then the step left is done
+            if status == kernels.CARVE:
+                box_lo, box_hi = self.bounds(margin)
+                kernels.carve(origins, directions, ranges, box_lo, box_hi, self.size,
+                              self._state.reshape(-1), self._shape, self._corner)
+                return
 
     # ------------------------------------------------------------------ reading the map
 

@@ -59,28 +59,10 @@ def clip_to_box(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi:
     return np.maximum(near.max(axis=1), 0.0), far.min(axis=1)
 
 
-def ref_cover(m: SurfaceMap, lo: np.ndarray, hi: np.ndarray) -> None:
-    """The numpy grid growth: unless ``m``'s grid holds the voxel indices ``lo`` .. ``hi``, a
-    grid over that box joined with the old one, grown by a quarter of its edge on every side,
-    the old grid copied in by slicing."""
-    corner, shape = m._corner, np.array(m._state.shape)
-    if m._state.size and (corner <= lo).all() and (hi < corner + shape).all():
-        return
-    if m._state.size:
-        lo, hi = np.minimum(lo, corner), np.maximum(hi, corner + shape - 1)
-    pad = np.ceil(0.25 * (hi - lo + 1)).astype(np.int64)
-    new_corner = lo - pad
-    state = np.zeros(tuple(hi - lo + 1 + 2 * pad), dtype=np.uint8)
-    if m._state.size:
-        at = corner - new_corner
-        state[at[0]:at[0] + shape[0], at[1]:at[1] + shape[1], at[2]:at[2] + shape[2]] = m._state
-    m._state, m._corner, m._shape = state, new_corner, np.array(state.shape, dtype=np.int64)
-
-
 def ref_strike(m: SurfaceMap, origins, directions, ranges) -> None:
     """The numpy strike: unique keys, merged into the sorted occupied keys by np.insert, the
     new voxels' unknown face neighbours marked frontier. Updates ``m`` (grid grown by
-    :func:`ref_cover`) like the strikes of :meth:`SurfaceMap.add`."""
+    ``m._cover``) like the strikes of :meth:`SurfaceMap.add`."""
     hit = np.isfinite(ranges)
     end = origins[hit] + ranges[hit, None] * directions[hit]
     keys, inverse = np.unique(m.keys_of(end), return_inverse=True)
@@ -99,7 +81,7 @@ def ref_strike(m: SurfaceMap, origins, directions, ranges) -> None:
     if not len(new):
         return
     index = unpack(new)
-    ref_cover(m, index.min(axis=0) - 1, index.max(axis=0) + 1)
+    m._cover(index.min(axis=0) - 1, index.max(axis=0) + 1)
     lo, hi = unpack(m.occupied).min(axis=0), unpack(m.occupied).max(axis=0)
     m._index_lo, m._index_hi = lo, hi
     state = m._state.reshape(-1)
@@ -117,7 +99,7 @@ def ref_carve(m: SurfaceMap, origins, directions, ranges, *, margin: float) -> N
     :meth:`SurfaceMap.add`."""
     hit = np.isfinite(ranges)
     lo, hi = m.bounds(margin)
-    ref_cover(m, np.floor(lo / m.size).astype(np.int64), np.floor(hi / m.size).astype(np.int64))
+    m._cover(np.floor(lo / m.size).astype(np.int64), np.floor(hi / m.size).astype(np.int64))
     enter, leave = clip_to_box(origins, directions, lo, hi)
     leave = np.where(hit, np.minimum(leave, ranges - m.size), leave)
     samples = np.ceil(np.maximum(leave - enter, 0.0) * (TRAVERSAL_STEP / m.size)).astype(np.int64)
