@@ -38,9 +38,10 @@ whose aim is beyond one step's reach (``max_rate * step``) turns toward it at th
 shots left over when the visible candidates run out hold the boresight, and the law plans anew
 before the next interval (its candidates are used up; the map has grown). So the map, the
 frontier and the candidates cost once per plan, the prediction and the sweep once per interval;
-each of these steps is one or a few compiled calls (sim/planner_kernels.py). The poses of an
-interval (where the chaser is, the target's attitude, the nominal sensor frame) are those the
-simulation computes for its shots anyway, handed to :meth:`GapSeeker.command`.
+a plan is three compiled calls (the recorded beams, the map's update, the candidates; a fourth
+when the enclosed voxels are due) and an interval's sweep one (sim/planner_kernels.py). The
+poses of an interval (where the chaser is, the target's attitude, the nominal sensor frame) are
+those the simulation computes for its shots anyway, handed to :meth:`GapSeeker.command`.
 
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run
@@ -171,7 +172,10 @@ class GapSeeker:
 
     def __init__(self, *, step: float, max_rate: float, max_offset: float, poses,
                  beams: np.ndarray):
+        from sim.planner_kernels import sweep  # compiled (numba): closed loops only
+
         self.step, self.max_rate, self.max_offset = step, max_rate, max_offset
+        self._sweep, self._reach = sweep, max_rate * step    # the largest turn between shots
         self._poses = poses
         self.beams = np.asarray(beams, dtype=np.float64).reshape(-1, 3)
         self.boresight = np.array([0.0, 0.0, 1.0])           # commanded, nominal frame
@@ -182,10 +186,11 @@ class GapSeeker:
         self._centres = np.zeros((0, 3))                     # their centres [m, B]
         self._used = np.zeros(0, dtype=bool)                 # and those aimed at or set aside
         self._hidden = np.zeros(0, dtype=np.int64)           # walks that found them hidden
+        self._occupancy = None                               # the map's, as the plan left it
         self._age = 0                                        # intervals since the plan
         self._short = True                                   # the last interval held a shot
-        self._lo = np.full(3, np.inf)                         # strikes' bounding box [m, B]
-        self._hi = np.full(3, -np.inf)
+        self._lo = [math.inf] * 3                            # strikes' bounding box [m, B]
+        self._hi = [-math.inf] * 3
         self._diagonal = math.nan                            # of that box [m] (nan: stale)
         self.n_strikes = 0
         self._range_sum = 0.0
@@ -209,7 +214,7 @@ class GapSeeker:
     def _box_diagonal(self) -> float:
         """The diagonal [m] of the strikes' bounding box (computed again only when it grew)."""
         if math.isnan(self._diagonal):
-            self._diagonal = float(np.linalg.norm(self._hi - self._lo))
+            self._diagonal = float(np.linalg.norm(np.subtract(self._hi, self._lo)))
         return self._diagonal
 
     def _margin(self) -> float:
@@ -231,13 +236,15 @@ class GapSeeker:
         self._origins.append(origins)
         self._directions.append(directions)
         self._ranges.append(ranges)
+        stats = stats.tolist()
         if stats[6]:
-            lo, hi = np.minimum(self._lo, stats[:3]), np.maximum(self._hi, stats[3:6])
-            if lo.tolist() != self._lo.tolist() or hi.tolist() != self._hi.tolist():
+            lo = [min(a, b) for a, b in zip(self._lo, stats[:3], strict=True)]
+            hi = [max(a, b) for a, b in zip(self._hi, stats[3:6], strict=True)]
+            if lo != self._lo or hi != self._hi:
                 self._lo, self._hi, self._diagonal = lo, hi, math.nan
             self.n_strikes += int(stats[6])
-            self._range_sum += float(stats[7])
-            self._radius = max(self._radius, float(stats[8]))
+            self._range_sum += stats[7]
+            self._radius = max(self._radius, stats[8])
         if self.n_strikes == 0:
             return
         size = self.voxel_size()
@@ -253,34 +260,39 @@ class GapSeeker:
         self._origins = [np.concatenate(self._origins)]
         self._directions = [np.concatenate(self._directions)]
         self._ranges = [np.concatenate(self._ranges)]
-        origins, directions, ranges = self._origins[0], self._directions[0], self._ranges[0]
-        self.map.strike(origins, directions, ranges)
-        self.map.carve(origins, directions, ranges, margin=self._margin())
+        self.map.add(self._origins[0], self._directions[0], self._ranges[0],
+                     margin=self._margin())
 
-    def _candidates(self) -> np.ndarray:
-        """Sorted keys of the voxels worth a shot: the frontier, and once it is exhausted, the
-        least-struck surface voxels too, less those set aside (all re-admitted when
-        ``GAP_ASIDE_INTERVALS`` intervals have passed since the last time); an even subset of
-        at most ``GAP_MAX_CANDIDATES``."""
-        from sim import planner_kernels as kernels
+    def _candidates(self, stored: np.ndarray | None = None,
+                    stored_hidden: np.ndarray | None = None, *, block: int = GAP_BLOCK_VOXELS
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The voxels worth a shot: the frontier, and once it is exhausted, the least-struck
+        surface voxels too, less those set aside (all re-admitted when ``GAP_ASIDE_INTERVALS``
+        intervals have passed since the last time); an even subset of at most
+        ``GAP_MAX_CANDIDATES``, one per cube of ``block`` voxels (one compiled call,
+        :meth:`SurfaceMap.candidates`, which first keeps the hidden counts ``stored_hidden``
+        of the last plan's candidates ``stored``, if any, in the map's grid).
 
+        Returns
+        -------
+        keys : (c,) int64; centres : (c, 3) float64, metres, B; hidden : (c,) int64
+        """
         if self._interval - self._enclosed >= self._enclose_wait:
             marked = self.map.enclose()
             self._enclosed = self._interval
             self._enclose_wait = (GAP_ENCLOSE_INTERVALS if marked else
                                   min(2 * self._enclose_wait, GAP_ENCLOSE_MAX_INTERVALS))
-        keys = self.map.frontier()
+        rank, readmit = -1, False
         if self.residual:     # count <= np.quantile(count, GAP_RESIDUAL_QUANTILE), compiled
             rank = math.floor((len(self.map.count) - 1) * GAP_RESIDUAL_QUANTILE)
-            keys = kernels.least_struck(keys, self.map.occupied, self.map.count, rank)
             readmit = self._interval - self._readmitted >= GAP_ASIDE_INTERVALS
             if readmit:
                 self._readmitted = self._interval
-            state, shape, corner = self.map.grid()
-            keys = kernels.not_aside(keys, state, shape, corner, GAP_ASIDE_WALKS, readmit)
-        if len(keys) > GAP_MAX_CANDIDATES:
-            keys = keys[::-(-len(keys) // GAP_MAX_CANDIDATES)]
-        return keys
+        if stored is None:
+            stored = stored_hidden = np.zeros(0, dtype=np.int64)
+        return self.map.candidates(rank=rank, aside=GAP_ASIDE_WALKS, readmit=readmit,
+                                   most=GAP_MAX_CANDIDATES, block=block, stored=stored,
+                                   stored_hidden=stored_hidden)
 
     def _after_interval(self, aimed: bool) -> None:
         """Count intervals with nothing to aim at; after ``GAP_IDLE_INTERVALS`` of them in a
@@ -309,53 +321,44 @@ class GapSeeker:
         (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame
         (the attitude offset the pipeline applies).
         """
-        from sim import planner_kernels as kernels
-
-        t = np.asarray(t, dtype=np.float64)
         if self._short or self._age >= GAP_PLAN_INTERVALS:
             self._plan()
         self._age += 1
         self._interval += 1
-        if not (len(self._keys) and len(t)):
+        n = len(t)
+        if not (len(self._keys) and n):
             self._short = True
             self._after_interval(False)
-            return turn_from_boresight(np.tile(self.boresight, (len(t), 1)))
-        position, target, nominal = poses if poses is not None else self._poses(t)
-        pick, goal, turn = kernels.sweep(
-            len(t), self._centres, self._used, self.map.size, *self.map.occupancy(), position,
-            target.as_matrix(), nominal, self.boresight, self.max_offset,
-            self.max_rate * self.step, GAP_BLOCK_VOXELS, self._hidden,
-            GAP_ASIDE_WALKS if self.residual else _NEVER_ASIDE)
+            return turn_from_boresight(np.tile(self.boresight, (n, 1)))
+        position, target, nominal = (poses if poses is not None else
+                                     self._poses(np.asarray(t, dtype=np.float64)))
+        solid, lo, hi = self._occupancy
+        pick, goal, turn = self._sweep(
+            n, self._centres, self._used, self.map.size, solid, lo, hi, position,
+            target.as_matrix(), nominal, self.boresight, self.max_offset, self._reach,
+            GAP_BLOCK_VOXELS, self._hidden, GAP_ASIDE_WALKS if self.residual else _NEVER_ASIDE)
         self.boresight = goal[-1]
-        self._short = bool(pick[-1] < 0)
-        self._after_interval(bool(pick[0] >= 0))
+        first, last = pick[0].item(), pick[-1].item()
+        self._short = last < 0
+        self._after_interval(first >= 0)
         return turn
 
     def _plan(self) -> None:
         """Take what was observed into the map and choose the candidates of the next
-        ``GAP_PLAN_INTERVALS`` intervals: one per cube of ``GAP_BLOCK_VOXELS`` voxels."""
-        from sim import planner_kernels as kernels
-
-        if len(self._keys):     # the last plan's hidden counts, kept in the map's grid
-            kernels.store_hidden(self._keys, self._hidden, *self.map.grid())
+        ``GAP_PLAN_INTERVALS`` intervals: one per cube of ``GAP_BLOCK_VOXELS`` voxels. The
+        last plan's hidden counts are kept in the map's grid (a rebuilt map starts with
+        none)."""
+        stored, stored_hidden, before = self._keys, self._hidden, self.map
         self._update()
         self._age = 0
+        if self.map is not before:
+            stored, stored_hidden = stored[:0], stored_hidden[:0]
         self._keys, self._centres = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
         self._hidden = np.zeros(0, dtype=np.int64)
         if self.map is not None:
-            self._keys, self._centres = _spread(self._candidates(), GAP_BLOCK_VOXELS, self.map)
-            self._hidden = kernels.hidden_counts(self._keys, *self.map.grid())
+            self._keys, self._centres, self._hidden = self._candidates(stored, stored_hidden)
+            self._occupancy = self.map.occupancy()      # what the sweeps' walks read
         self._used = np.zeros(len(self._keys), dtype=bool)
-
-
-def _spread(keys: np.ndarray, block: int, surface: SurfaceMap
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """The first of ``keys`` (sorted, voxels of ``surface``) in each cube of ``block`` voxels
-    on a side: candidates that one strike each settles, evenly over the map; and their centres
-    (c, 3) [m, B] (compiled: sim/planner_kernels.py)."""
-    from sim import planner_kernels as kernels
-
-    return kernels.spread(np.asarray(keys, dtype=np.int64), block, surface.size)
 
 
 def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:

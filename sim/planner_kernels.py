@@ -6,17 +6,19 @@ call overhead alone. These kernels do each step in one compiled call (numba, ``c
 that a process after the first loads them from disk instead of compiling them):
 
 - :func:`recorded_beams`: every beam of the recorded shots, in the body frame;
-- :func:`strike_index` and :func:`strike_merge`: the strikes into the occupied voxels and the
-  frontier marks around the new ones;
-- :func:`carve`: the voxels the beams crossed before their strikes;
+- :func:`add`: a plan's beams into the map in one call: the strikes into the occupied voxels
+  and the frontier marks around the new ones (:func:`strike_index`, :func:`strike_merge`), the
+  occupancy bits the walks read (:func:`occupancy`), the voxels the beams crossed before their
+  strikes (:func:`carve`), handing back to numpy the grid's growth (rare);
 - :func:`enclose`: the unknown voxels the struck voxels enclose (a flood fill from outside,
   gaps of two voxels closed);
-- :func:`occupancy`: a bit per voxel of the occupied voxels' box, what the walks read;
+- :func:`candidates`: a plan's candidates in one call: the frontier, the least-struck voxels
+  (:func:`least_struck`), less those set aside (:func:`not_aside`: found hidden too often, or
+  all re-admitted), one per cube (:func:`spread`), with their hidden counts;
 - :func:`hidden`: which voxels beams from a few positions reach (a walk through the map);
 - :func:`sweep`: one interval's aims (the sweep's order, visibility tested in that order until
-  the shots are used, the slew limits) and the commanded turns; it counts, per voxel, the walks
-  that found a candidate hidden, and :func:`not_aside` leaves out of a plan the candidates
-  hidden too often (or re-admits them).
+  the shots are used, the slew limits) and the commanded turns; it counts, per candidate, the
+  walks that found it hidden.
 
 They do what the numpy code they replaced did, in the same order of operations where it
 matters (the same voxel keys, the same sweep order); tests/sim/test_planner_kernels.py holds
@@ -372,7 +374,7 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
     occupied, count, occupied_view, frontier : the merged arrays (when no voxel is struck for
         the first time, ``occupied`` and ``frontier`` themselves with ``count`` and
         ``occupied_view`` updated in place; new arrays otherwise)
-    n_new : int: how many voxels were struck for the first time
+    new : (n,) int64, sorted: the keys of the voxels struck for the first time
     """
     keys = np.empty(len(index), dtype=np.int64)
     for k in range(len(index)):
@@ -381,7 +383,78 @@ def strike_merge(index, view, occupied, count, occupied_view, frontier, state, s
     merged, m_count, m_view, new = _merge_counts(occupied, count, occupied_view, unique,
                                                  u_count, u_view)
     fresh = _mark_new(new, state, shape, corner)
-    return merged, m_count, m_view, _join(frontier, fresh), len(new)
+    return merged, m_count, m_view, _join(frontier, fresh), new
+
+
+# What :func:`add` did: everything; nothing yet (the grid must first hold the strikes and
+# their neighbours); the strikes but not the carving (the grid must first hold the box).
+ADDED, STRIKE, CARVE = 0, 1, 2
+
+
+@njit(cache=True)
+def _holds(shape, corner, lo, hi):
+    """Whether the grid of ``shape`` whose first cell is voxel ``corner`` holds the voxel
+    indices ``lo`` .. ``hi`` (3,) int64 (inclusive)."""
+    for i in range(3):
+        if not (corner[i] <= lo[i] and hi[i] < corner[i] + shape[i]):
+            return False
+    return shape[0] * shape[1] * shape[2] > 0
+
+
+@njit(cache=True)
+def add(origins, directions, ranges, size, margin, occupied, count, occupied_view, frontier,
+        state, shape, corner, index_lo, index_hi, solid):
+    """Add beams to the map in one call (sim/surface_map.py, :meth:`SurfaceMap.add`): the
+    strikes merged (:func:`strike_index`, :func:`strike_merge`) and the occupancy bits kept
+    up to date (:func:`occupancy`), then the paths carved (:func:`carve`) within the occupied
+    voxels' box grown by ``margin`` [m]. Where the grid must grow first (a copy numpy does
+    faster), it stops and says what the grid must hold.
+
+    Parameters
+    ----------
+    origins, directions : (m, 3) float64, metres and unit vectors, B
+    ranges : (m,) float64, metres (inf: no strike)
+    size, margin : float, metres: the voxel edge and the traversal margin
+    occupied, count, occupied_view, frontier : the map's arrays (:func:`strike_merge`)
+    state, shape, corner : the flat state grid (updated in place), its shape and first voxel
+    index_lo, index_hi : (3,) int64: the occupied voxels' index box (ignored while none is)
+    solid : (ceil(g / 8),) uint8: :func:`occupancy` over that box (ignored while none is)
+
+    Returns
+    -------
+    occupied, count, occupied_view, frontier, index_lo, index_hi, solid : the map's arrays
+        after (new arrays where they changed size; ``solid`` made again when the box changed,
+        its new voxels' bits set in place otherwise)
+    status : int: ``ADDED``; ``STRIKE``: nothing done, the grid must hold ``lo`` .. ``hi``;
+        ``CARVE``: the strikes merged, the grid must hold ``lo`` .. ``hi`` before the carving
+    lo, hi : (3,) int64: what the grid must hold (with ``ADDED``, the strikes' index box)
+    """
+    index, view, lo, hi = strike_index(origins, directions, ranges, size)
+    if len(index):
+        if not _holds(shape, corner, lo - 1, hi + 1):
+            return (occupied, count, occupied_view, frontier, index_lo, index_hi, solid, STRIKE,
+                    lo - 1, hi + 1)
+        occupied, count, occupied_view, frontier, new = strike_merge(
+            index, view, occupied, count, occupied_view, frontier, state, shape, corner)
+        if len(new):
+            first = len(occupied) == len(new)
+            box_lo = lo if first else np.minimum(index_lo, lo)
+            box_hi = hi if first else np.maximum(index_hi, hi)
+            if first or (box_lo != index_lo).any() or (box_hi != index_hi).any():
+                solid = occupancy(occupied, box_lo, box_hi)
+            else:
+                _set_occupied(solid, new, box_lo, box_hi)
+            index_lo, index_hi = box_lo, box_hi
+    if len(occupied):
+        box_lo = index_lo * size - margin
+        box_hi = (index_hi + 1) * size + margin
+        lo = np.floor(box_lo / size).astype(np.int64)
+        hi = np.floor(box_hi / size).astype(np.int64)
+        if not _holds(shape, corner, lo, hi):
+            return (occupied, count, occupied_view, frontier, index_lo, index_hi, solid, CARVE,
+                    lo, hi)
+        carve(origins, directions, ranges, box_lo, box_hi, size, state, shape, corner)
+    return occupied, count, occupied_view, frontier, index_lo, index_hi, solid, ADDED, lo, hi
 
 
 @njit(cache=True)
@@ -605,11 +678,19 @@ def occupancy(occupied, lo, hi):
     """
     e1, e2 = hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
     solid = np.zeros(((hi[0] - lo[0] + 1) * e1 * e2 + 7) // 8, dtype=np.uint8)
-    for key in occupied:
+    _set_occupied(solid, occupied, lo, hi)
+    return solid
+
+
+@njit(cache=True)
+def _set_occupied(solid, keys, lo, hi):
+    """Set the bits of the voxels ``keys`` (k,) int64 in ``solid``, :func:`occupancy`'s grid
+    over the box ``lo`` .. ``hi`` (3,) int64, which holds them (in place)."""
+    e1, e2 = hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
+    for key in keys:
         i, j, k = _unpack(key)
         cell = ((i - lo[0]) * e1 + (j - lo[1])) * e2 + (k - lo[2])
         solid[cell >> 3] |= np.uint8(1 << (cell & 7))
-    return solid
 
 
 @njit(cache=True)
@@ -734,6 +815,24 @@ def _toward(point, origin, r):
     a2 = r[2, 0] * d0 + r[2, 1] * d1 + r[2, 2] * d2
     norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
     return a0 / norm, a1 / norm, a2 / norm
+
+
+@njit(cache=True)
+def _aims(points, origin, r):
+    """The unit vectors from ``origin`` (3,) toward each of ``points`` (c, 3), turned by ``r``
+    (3, 3), as :func:`_toward` computes them: three (c,) arrays. One pass without branches
+    over every point (the used ones too), which the compiler vectorises: cheaper than
+    :func:`_toward` point by point over the open ones."""
+    c = len(points)
+    x, y, z = np.empty(c), np.empty(c), np.empty(c)
+    for q in range(c):
+        d0, d1, d2 = points[q, 0] - origin[0], points[q, 1] - origin[1], points[q, 2] - origin[2]
+        a0 = r[0, 0] * d0 + r[0, 1] * d1 + r[0, 2] * d2
+        a1 = r[1, 0] * d0 + r[1, 1] * d1 + r[1, 2] * d2
+        a2 = r[2, 0] * d0 + r[2, 1] * d1 + r[2, 2] * d2
+        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        x[q], y[q], z[q] = a0 / norm, a1 / norm, a2 / norm
+    return x, y, z
 
 
 @njit(cache=True)
@@ -920,15 +1019,15 @@ def sweep(n, centres, used, size, solid, lo, hi, position, target, nominal, bore
     rank = np.empty(len(centres), dtype=np.int64)
     row = np.empty(len(centres), dtype=np.int64)
     across = np.empty(len(centres))
+    x, y, z = _aims(centres, ch, to_nominal[middle])
     c = n_open = 0
     for q in range(len(centres)):
         if used[q]:
             continue
-        a0, a1, a2 = _toward(centres[q], ch, to_nominal[middle])
-        if a2 >= cos_max:
-            r = np.int64(math.floor(a1 / band))
+        if z[q] >= cos_max:
+            r = np.int64(math.floor(y[q] / band))
             cand[c], rank[c], row[c] = q, n_open, r
-            across[c] = a0 if r & 1 == 0 else -a0
+            across[c] = x[q] if r & 1 == 0 else -x[q]
             c += 1
         n_open += 1
     order, start = _sweep_order(row[:c], now)
@@ -990,29 +1089,92 @@ def spread(keys, block, size):
 
     Notes
     -----
-    A mark per cube of the keys' own index box (a few thousand cubes: it stays in the cache).
+    A mark per cube of the keys' own index box (a few thousand cubes: it stays in the cache);
+    two passes over the keys (the box, then the marks), nothing else allocated.
     """
     if not len(keys):
         return keys.copy(), np.empty((0, 3))
-    index = np.empty((len(keys), 3), dtype=np.int64)
-    first = np.full(3, np.iinfo(np.int64).max)
-    last = np.full(3, np.iinfo(np.int64).min)
-    for q in range(len(keys)):
-        index[q, 0], index[q, 1], index[q, 2] = _unpack(keys[q])
-        for i in range(3):
-            cube = index[q, i] // block
-            first[i] = min(first[i], cube)
-            last[i] = max(last[i], cube)
-    e1, e2 = last[1] - first[1] + 1, last[2] - first[2] + 1
-    taken = np.zeros((last[0] - first[0] + 1) * e1 * e2, dtype=np.bool_)
-    keep = np.zeros(len(keys), dtype=np.bool_)
-    for q in range(len(keys)):
-        cell = (((index[q, 0] // block - first[0]) * e1 + (index[q, 1] // block - first[1])) * e2
-                + (index[q, 2] // block - first[2]))
+    # A cube of 2**s voxels: its index by an arithmetic shift (a floor division, as `//`,
+    # without the integer divide: three per key would cost more than the rest of the pass).
+    shift = -1
+    if block & (block - 1) == 0:
+        shift = 0
+        while (1 << shift) < block:
+            shift += 1
+    f0 = f1 = f2 = np.iinfo(np.int64).max
+    l0 = l1 = l2 = np.iinfo(np.int64).min
+    for key in keys:
+        c0, c1, c2 = _cube(key, block, shift)
+        f0, f1, f2 = min(f0, c0), min(f1, c1), min(f2, c2)
+        l0, l1, l2 = max(l0, c0), max(l1, c1), max(l2, c2)
+    e1, e2 = l1 - f1 + 1, l2 - f2 + 1
+    taken = np.zeros((l0 - f0 + 1) * e1 * e2, dtype=np.bool_)
+    chosen = np.empty(len(keys), dtype=np.int64)
+    centres = np.empty((len(keys), 3))
+    c = 0
+    for key in keys:
+        c0, c1, c2 = _cube(key, block, shift)
+        cell = ((c0 - f0) * e1 + (c1 - f1)) * e2 + (c2 - f2)
         if not taken[cell]:
-            taken[cell] = keep[q] = True
-    chosen = keys[keep]
-    return chosen, _centres(chosen, size)
+            taken[cell] = True
+            i, j, k = _unpack(key)
+            chosen[c] = key
+            centres[c, 0] = (i + 0.5) * size
+            centres[c, 1] = (j + 0.5) * size
+            centres[c, 2] = (k + 0.5) * size
+            c += 1
+    return chosen[:c].copy(), centres[:c].copy()
+
+
+@njit(cache=True)
+def _cube(key, block, shift):
+    """The index (three ints) of the cube of ``block`` voxels on a side holding the voxel
+    ``key``: by ``>> shift`` when ``shift`` >= 0 (``block`` is ``2**shift``), else by ``//``."""
+    i, j, k = _unpack(key)
+    if shift >= 0:
+        return i >> shift, j >> shift, k >> shift
+    return i // block, j // block, k // block
+
+
+@njit(cache=True)
+def candidates(stored, stored_hidden, frontier, state, shape, corner, occupied, count, rank,
+               aside, readmit, most, block, size):
+    """A plan's candidates in one call (sim/gap_seeking.py, ``GapSeeker._plan``): the last
+    plan's hidden counts stored (:func:`store_hidden`), the frontier list read
+    (:func:`frontier_keep`), with ``rank`` >= 0 the least-struck voxels joined
+    (:func:`least_struck`) and those set aside left out (:func:`not_aside`), an even subset of
+    at most ``most``, one per cube (:func:`spread`) and their hidden counts
+    (:func:`hidden_counts`).
+
+    Parameters
+    ----------
+    stored : (s,) int64; stored_hidden : (s,) int64: keys and hidden counts to store first
+    frontier : (f,) int64, sorted keys: the map's frontier list
+    state, shape, corner : the flat state grid (updated in place), its shape and first voxel
+        (sim/surface_map.py)
+    occupied : (o,) int64, sorted keys; count : (o,) int64: their strike counts
+    rank : int: the least-struck voxels' rank (:func:`least_struck`), or -1: the frontier only
+    aside : int; readmit : bool: as :func:`not_aside`
+    most : int: at most this many keys go to the spread (every ``ceil(k / most)``-th)
+    block : int: the spread's cube edge in voxels; size : float, metres: the voxel edge
+
+    Returns
+    -------
+    frontier : (f',) int64: the frontier list, voxels no longer frontier left out
+    keys : (c,) int64: the candidates; centres : (c, 3) float64, metres, B
+    hidden : (c,) int64: their hidden counts
+    """
+    store_hidden(stored, stored_hidden, state, shape, corner)
+    if len(frontier):
+        frontier = frontier_keep(frontier, state, shape, corner)
+    keys = frontier
+    if rank >= 0:
+        keys = not_aside(least_struck(frontier, occupied, count, rank), state, shape, corner,
+                         aside, readmit)
+    if len(keys) > most:
+        keys = keys[::(len(keys) + most - 1) // most].copy()
+    chosen, centres = spread(keys, block, size)
+    return frontier, chosen, centres, hidden_counts(chosen, state, shape, corner)
 
 
 # Strike counts below this are ranked by a histogram (the least-struck quantile's count is a

@@ -20,8 +20,9 @@ enclosed; in its upper bits the planner's count of walks that found the voxel hi
 in a dense grid over the box of the occupied voxels grown by the traversal margin, reallocated
 larger when that box grows, so that marking a beam's path or looking a voxel up is
 one indexing operation. Beams are traversed by sampling every ``size / TRAVERSAL_STEP`` along
-them. The updates (strikes, carving), the frontier's reading and the visibility walk below are
-compiled kernels (sim/planner_kernels.py), one call each.
+them. The update (strikes, carving, the grid's growth: :meth:`SurfaceMap.add`), the planner's
+reading of the map (:meth:`SurfaceMap.candidates`) and the visibility walk below are compiled
+kernels (sim/planner_kernels.py), one call each.
 
 The **frontier** is the unknown voxels next to (sharing a face with) an occupied voxel: where
 the seen surface continues into space no beam has examined. It is kept up to date as voxels are
@@ -41,8 +42,8 @@ frontier, as does the space behind a plate.
 walking the beam's line voxel by voxel, from where it enters the occupied voxels' box toward the
 voxel: it is hidden when the beam passes close to the centre of an occupied voxel nearer than
 itself (``BLOCK_RADIUS``, ``BLOCK_SLACK``). The walk reads a bit per voxel of the occupied
-voxels' box (:meth:`SurfaceMap.occupancy`, made again when a voxel is struck for the first
-time), not the state grid: a few kilobytes instead of megabytes.
+voxels' box (:meth:`SurfaceMap.occupancy`, kept up to date as voxels are struck for the
+first time), not the state grid: a few kilobytes instead of megabytes.
 """
 
 from __future__ import annotations
@@ -120,11 +121,8 @@ class SurfaceMap:
         self._frontier = np.zeros(0, dtype=np.int64)    # sorted keys, each once a frontier
         self._index_lo = np.zeros(3, dtype=np.int64)    # the occupied voxels' index box
         self._index_hi = np.zeros(3, dtype=np.int64)
-        self._box_version = 0                           # bumped when the index box changes
-        self._carve_box = (None, None, None)            # (margin, version) -> box traversed
         self._enclosed_at = 0                           # occupied voxels at the last enclose
-        self._solid = np.zeros(0, dtype=np.uint8)       # occupancy over the index box,
-        self._solid_at = 0                              # made when this many were occupied
+        self._solid = np.zeros(1, dtype=np.uint8)       # occupancy over the index box
 
     @property
     def occupied_centres(self) -> np.ndarray:
@@ -183,7 +181,9 @@ class SurfaceMap:
     def add(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
             margin: float) -> None:
         """Add beams: each struck at ``origins + ranges * directions`` or, where ``ranges`` is
-        inf, struck nothing (:meth:`strike`, then :meth:`carve`).
+        inf, struck nothing. The strikes' voxels become occupied (their unknown face
+        neighbours frontier), then the voxels each beam crossed before its strike free
+        (compiled, one call: sim/planner_kernels.py, ``add``).
 
         Parameters
         ----------
@@ -194,47 +194,23 @@ class SurfaceMap:
             Misses and the paths of strikes are traversed within the box of the occupied voxels
             grown by this much (space far from the target holds nothing to plan for).
         """
-        self.strike(origins, directions, ranges)
-        self.carve(origins, directions, ranges, margin=margin)
-
-    def strike(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray) -> None:
-        """Mark the voxels of the strikes occupied, their unknown face neighbours frontier
-        (arguments as :meth:`add`; misses ignored; compiled: sim/planner_kernels.py)."""
         from sim import planner_kernels as kernels
 
-        index, view, lo, hi = kernels.strike_index(origins, directions, ranges, self.size)
-        if not len(index):
-            return
-        self._cover(lo - 1, hi + 1)
-        state = self._state.reshape(-1)
-        self.occupied, self.count, self.view, self._frontier, new = kernels.strike_merge(
-            index, view, self.occupied, self.count, self.view, self._frontier, state,
-            self._shape, self._corner)
-        if new:
-            first = len(self.occupied) == new
-            box_lo = lo if first else np.minimum(self._index_lo, lo)
-            box_hi = hi if first else np.maximum(self._index_hi, hi)
-            if (first or box_lo.tolist() != self._index_lo.tolist()
-                    or box_hi.tolist() != self._index_hi.tolist()):
-                self._index_lo, self._index_hi = box_lo, box_hi
-                self._box_version += 1
-
-    def carve(self, origins: np.ndarray, directions: np.ndarray, ranges: np.ndarray, *,
-              margin: float) -> None:
-        """Mark the voxels the beams crossed before their strikes free (arguments as
-        :meth:`add`; compiled: sim/planner_kernels.py)."""
-        from sim import planner_kernels as kernels
-
-        if not len(self.occupied):
-            return
-        key, lo, hi = self._carve_box
-        if key != (margin, self._box_version):     # the box or the margin changed: grow the grid
-            lo, hi = self.bounds(margin)           # (it never shrinks, so it still holds the box)
-            self._cover(np.floor(lo / self.size).astype(np.int64),
-                        np.floor(hi / self.size).astype(np.int64))
-            self._carve_box = ((margin, self._box_version), lo, hi)
-        kernels.carve(origins, directions, ranges, lo, hi, self.size, self._state.reshape(-1),
-                      self._shape, self._corner)
+        margin = float(margin)
+        while True:
+            (self.occupied, self.count, self.view, self._frontier, self._index_lo,
+             self._index_hi, self._solid, status, lo, hi) = kernels.add(
+                origins, directions, ranges, self.size, margin, self.occupied, self.count,
+                self.view, self._frontier, self._state.reshape(-1), self._shape,
+                self._corner, self._index_lo, self._index_hi, self._solid)
+            if status == kernels.ADDED:
+                return
+            self._cover(lo, hi)         # the grid grows (rarely), then the step left is done
+            if status == kernels.CARVE:
+                box_lo, box_hi = self.bounds(margin)
+                kernels.carve(origins, directions, ranges, box_lo, box_hi, self.size,
+                              self._state.reshape(-1), self._shape, self._corner)
+                return
 
     # ------------------------------------------------------------------ reading the map
 
@@ -252,6 +228,30 @@ class SurfaceMap:
                 self._frontier, self._state.reshape(-1),
                 self._shape, self._corner)
         return self._frontier
+
+    def candidates(self, *, rank: int, aside: int, readmit: bool, most: int, block: int,
+                   stored: np.ndarray, stored_hidden: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The planner's candidates (sim/gap_seeking.py) in one compiled call: the hidden
+        counts ``stored_hidden`` (s,) of the voxels ``stored`` (s,) kept in the grid first;
+        then the frontier (:meth:`frontier`), with ``rank`` >= 0 joined by the occupied voxels
+        struck at most as often as the ``rank``-th least-struck one and less the voxels whose
+        hidden count reaches ``aside`` (with ``readmit``, none: every count cleared); an even
+        subset of at most ``most``; the first in each cube of ``block`` voxels on a side
+        (sim/planner_kernels.py, ``candidates``).
+
+        Returns
+        -------
+        keys : (c,) int64; centres : (c, 3) float64, metres, B; hidden : (c,) int64: the
+        chosen voxels, their centres and hidden counts.
+        """
+        from sim import planner_kernels as kernels
+
+        self._frontier, keys, centres, hidden = kernels.candidates(
+            stored, stored_hidden, self._frontier, self._state.reshape(-1), self._shape,
+            self._corner, self.occupied, self.count, rank, aside, readmit, most, block,
+            self.size)
+        return keys, centres, hidden
 
     def enclose(self) -> int:
         """Mark the unknown voxels the occupied ones enclose (a body's interior behind its
@@ -288,13 +288,8 @@ class SurfaceMap:
         """What a walk through the map reads (sim/planner_kernels.py, ``_blocked``): a bit
         per voxel of the occupied voxels' index box, set where occupied ((ceil(g / 8),) uint8
         for the box's g voxels: ``occupancy`` there), and that box's low and high corners (3,)
-        int64; made again only when a voxel was struck for the first time since the last
-        call (only then can the box or its bits change)."""
-        if self._solid_at != len(self.occupied):
-            from sim import planner_kernels as kernels
-
-            self._solid = kernels.occupancy(self.occupied, self._index_lo, self._index_hi)
-            self._solid_at = len(self.occupied)
+        int64. Kept by :meth:`add`: made again when the box grows, the bits of new voxels set
+        in place otherwise."""
         return self._solid, self._index_lo, self._index_hi
 
     def visible(self, positions: np.ndarray, targets: np.ndarray) -> np.ndarray:

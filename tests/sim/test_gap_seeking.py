@@ -139,11 +139,16 @@ def _law_over_a_struck_plate(hits_per_voxel):
     return law
 
 
+def _pool(law: GapSeeker) -> np.ndarray:
+    """The law's candidates before the plan keeps one per cube (cubes of one voxel)."""
+    return law._candidates(block=1)[0]
+
+
 def test_an_exhausted_frontier_turns_the_law_to_the_least_struck_surface():
     # Struck once on the left half of the plate, three times on the right.
     law = _law_over_a_struck_plate(lambda x: np.where(x > 2, 3, 1))
     frontier = law.map.frontier()
-    np.testing.assert_array_equal(law._candidates(), frontier)
+    np.testing.assert_array_equal(_pool(law), frontier)
     law._after_interval(False)
     law._after_interval(True)                     # something to aim at: the count starts again
     law._after_interval(False)
@@ -151,9 +156,9 @@ def test_an_exhausted_frontier_turns_the_law_to_the_least_struck_surface():
     law._after_interval(False)                    # two intervals in a row with nothing
     assert law.residual
     once = law.map.occupied[law.map.count == 1]
-    np.testing.assert_array_equal(law._candidates(), np.union1d(frontier, once))
+    np.testing.assert_array_equal(_pool(law), np.union1d(frontier, once))
     assert len(once) == 8 and not np.isin(law.map.occupied[law.map.count == 3],
-                                          law._candidates()).any()
+                                          _pool(law)).any()
 
 
 def test_candidates_found_hidden_are_set_aside_and_readmitted():
@@ -166,7 +171,7 @@ def test_candidates_found_hidden_are_set_aside_and_readmitted():
     grid = law.map.grid()
     # While the frontier lasts nothing is set aside, whatever the counts.
     kernels.store_hidden(frontier, np.full(len(frontier), GAP_ASIDE_WALKS), *grid)
-    np.testing.assert_array_equal(law._candidates(), frontier)
+    np.testing.assert_array_equal(_pool(law), frontier)
     kernels.store_hidden(frontier, np.zeros(len(frontier), dtype=np.int64), *grid)
     # The least-struck phase: every voxel struck once, so all of them are candidates.
     law.residual = True
@@ -179,13 +184,13 @@ def test_candidates_found_hidden_are_set_aside_and_readmitted():
     aside = planned[::2]
     law._plan()
     assert len(law._keys) and not np.isin(aside, law._keys).any()
-    np.testing.assert_array_equal(law._candidates(), np.setdiff1d(pool, aside))
+    np.testing.assert_array_equal(_pool(law), np.setdiff1d(pool, aside))
     # Once GAP_ASIDE_INTERVALS intervals have passed, a plan takes them again, counts cleared.
     law._interval += GAP_ASIDE_INTERVALS
     law._plan()
     assert np.isin(aside, law._keys).all()
     assert not kernels.hidden_counts(pool, *grid).any()
-    np.testing.assert_array_equal(law._candidates(), pool)
+    np.testing.assert_array_equal(_pool(law), pool)
 
 
 def test_a_plan_leaves_out_what_the_struck_voxels_enclose_and_fills_less_often_when_idle():
@@ -204,13 +209,13 @@ def test_a_plan_leaves_out_what_the_struck_voxels_enclose_and_fills_less_often_w
     law.map.add(centres + 20.0 * out, -out, np.full(len(out), 20.0), margin=2.0)
     inside = ((unpack(law.map.frontier()) >= 1) & (unpack(law.map.frontier()) <= 4)).all(axis=1)
     assert inside.sum() == 4 ** 3 - 2 ** 3               # before the first fill
-    keys = law._candidates()                            # the first plan fills
+    keys = _pool(law)                            # the first plan fills
     assert len(keys) and not ((unpack(keys) >= 1) & (unpack(keys) <= 4)).all(axis=1).any()
     assert law._enclose_wait == GAP_ENCLOSE_INTERVALS   # it enclosed some: the wait stays
     waits = []
     for _ in range(4):                                 # nothing new to enclose: the wait doubles
         law._interval += law._enclose_wait
-        law._candidates()
+        _pool(law)
         waits.append(law._enclose_wait)
     assert waits == [min(GAP_ENCLOSE_INTERVALS * 2 ** k, GAP_ENCLOSE_MAX_INTERVALS)
                      for k in range(1, 5)]

@@ -62,7 +62,7 @@ def clip_to_box(origins: np.ndarray, directions: np.ndarray, lo: np.ndarray, hi:
 def ref_strike(m: SurfaceMap, origins, directions, ranges) -> None:
     """The numpy strike: unique keys, merged into the sorted occupied keys by np.insert, the
     new voxels' unknown face neighbours marked frontier. Updates ``m`` (grid grown by
-    ``m._cover``) like :meth:`SurfaceMap.strike`."""
+    ``m._cover``) like the strikes of :meth:`SurfaceMap.add`."""
     hit = np.isfinite(ranges)
     end = origins[hit] + ranges[hit, None] * directions[hit]
     keys, inverse = np.unique(m.keys_of(end), return_inverse=True)
@@ -95,7 +95,8 @@ def ref_strike(m: SurfaceMap, origins, directions, ranges) -> None:
 
 
 def ref_carve(m: SurfaceMap, origins, directions, ranges, *, margin: float) -> None:
-    """The numpy carve: every beam's samples at once (np.repeat), as :meth:`SurfaceMap.carve`."""
+    """The numpy carve: every beam's samples at once (np.repeat), as the paths of
+    :meth:`SurfaceMap.add`."""
     hit = np.isfinite(ranges)
     lo, hi = m.bounds(margin)
     m._cover(np.floor(lo / m.size).astype(np.int64), np.floor(hi / m.size).astype(np.int64))
@@ -261,12 +262,16 @@ def test_strikes_on_known_voxels_only_match_the_numpy_reference():
     ranges = np.full(40, 3.0)
     ranges[::9] = np.inf                                   # misses are ignored
     origins = compiled.centres(occupied[pick]) - 3.0 * directions
-    compiled.strike(origins, directions, ranges)
+    compiled.add(origins, directions, ranges, margin=2.0)
     ref_strike(reference, origins, directions, ranges)
+    ref_carve(reference, origins, directions, ranges, margin=2.0)
     np.testing.assert_array_equal(compiled.occupied, occupied)
     np.testing.assert_array_equal(compiled.count, reference.count)
     np.testing.assert_array_equal(compiled.view, reference.view)
-    np.testing.assert_array_equal(compiled.frontier(), frontier)
+    np.testing.assert_array_equal(compiled._state, reference._state)
+    state = reference._state.reshape(-1)
+    cell = reference._cells(unpack(frontier))[0]
+    np.testing.assert_array_equal(compiled.frontier(), frontier[(state[cell] & FRONTIER) > 0])
 
 
 def test_occupancy_grid_matches_numpy_packbits_as_the_map_grows():
@@ -280,6 +285,19 @@ def test_occupancy_grid_matches_numpy_packbits_as_the_map_grows():
         box = state.reshape(shape)[first[0]:last[0], first[1]:last[1], first[2]:last[2]]
         np.testing.assert_array_equal(dense, (box & OCCUPIED).astype(bool))
         assert m.occupancy()[0] is solid                 # kept until a voxel is new
+    # A voxel struck for the first time inside the box: its bit set in place.
+    solid, lo, hi = m.occupancy()
+    inside = pack((lo + hi)[None] // 2)
+    for key in (inside - 1, inside, inside + 1):
+        if not member(key, m.occupied)[0]:
+            break
+    assert not member(key, m.occupied)[0]
+    above = m.centres(key) + np.array([0.0, 0.0, 0.1])       # struck from 0.1 m above
+    m.add(above, np.array([[0.0, 0.0, -1.0]]), np.array([0.1]), margin=2.0)
+    assert member(key, m.occupied)[0] and m.occupancy()[0] is solid
+    dense = np.zeros(hi - lo + 1, dtype=bool)
+    dense[tuple((unpack(m.occupied) - lo).T)] = True
+    np.testing.assert_array_equal(solid, np.packbits(dense.ravel(), bitorder="little"))
 
 
 def test_visibility_walk_matches_the_brute_force_reference():
@@ -502,3 +520,55 @@ def test_enclose_kernel_matches_an_opening_by_scipy():
         assert kernels.enclose(flat, shape, corner, lo, hi) == 0
         np.testing.assert_array_equal(state, want)
     assert marked[0] == 0 < marked[1] < marked[2]     # none (the free space percolates), pockets
+
+
+def test_candidates_kernel_matches_its_steps_done_the_numpy_way():
+    rng = np.random.default_rng(9)
+    *_, (m, _) = _maps(seed=9)
+    frontier = m._frontier.copy()
+    state = m._state.reshape(-1)
+    stored = np.union1d(frontier, m.occupied)[::2]
+    counts = rng.integers(0, 5, len(stored))
+    for rank, readmit, most in ((-1, False, 10_000), (len(m.count) // 4, False, 10_000),
+                                (len(m.count) // 4, False, 50), (len(m.count) // 2, True, 10_000)):
+        m._frontier = frontier.copy()
+        before = state.copy()
+        keys, centres, hidden = m.candidates(rank=rank, aside=3, readmit=readmit, most=most,
+                                             block=2, stored=stored, stored_hidden=counts)
+        # The numpy way: the counts stored, the frontier read, the least-struck joined (the
+        # rank-th smallest count as the threshold), the set-aside left out, every k-th kept,
+        # the first per cube of two voxels, the counts read.
+        grid = before.copy()
+        cell = m._cells(unpack(stored))[0]
+        grid[cell] = (grid[cell] & (HIDDEN_STEP - 1)) + np.minimum(counts, HIDDEN_MAX) * HIDDEN_STEP
+        pool = frontier[grid[m._cells(unpack(frontier))[0]] & FRONTIER > 0]
+        if rank >= 0:
+            least = m.occupied[m.count <= np.sort(m.count)[rank]]
+            pool = np.union1d(pool, least)
+            at = m._cells(unpack(pool))[0]
+            if readmit:
+                grid[at] &= HIDDEN_STEP - 1
+            pool = pool[grid[at] < 3 * HIDDEN_STEP]
+        if len(pool) > most:
+            pool = pool[::-(-len(pool) // most)]
+        cube = pack(np.floor_divide(unpack(pool), 2))
+        expected = pool[np.sort(np.unique(cube, return_index=True)[1])]
+        np.testing.assert_array_equal(keys, expected)
+        np.testing.assert_array_equal(centres, m.centres(expected))
+        np.testing.assert_array_equal(hidden, grid[m._cells(unpack(expected))[0]] // HIDDEN_STEP)
+        np.testing.assert_array_equal(state, grid)
+        assert len(expected) > 5
+        state[:] = before
+
+
+def test_sweep_aims_match_the_aim_point_by_point():
+    rng = np.random.default_rng(10)
+    points = rng.normal(size=(300, 3)) * 20.0
+    origin = np.array([150.0, -40.0, 30.0])
+    turn = Rotation.random(random_state=11).as_matrix()
+    x, y, z = kernels._aims(points, origin, turn)
+    for q in range(len(points)):
+        assert (x[q], y[q], z[q]) == kernels._toward(points[q], origin, turn)
+    aim = (points - origin) @ turn.T
+    np.testing.assert_allclose(np.column_stack([x, y, z]),
+                               aim / np.linalg.norm(aim, axis=1)[:, None], rtol=0, atol=1e-15)

@@ -186,8 +186,8 @@ def test_a_closed_shell_has_no_frontier_inside_once_enclosed():
     outside = closed.frontier()
     assert len(outside) and closed.enclose() == 0                  # marked once, for good
     # A voxel struck next to the enclosed inside does not make it frontier again.
-    closed.strike(np.array([[1.75, 1.75, 30.0]]), np.array([[0.0, 0.0, -1.0]]),
-                  np.array([30.0 - 1.75]))
+    closed.add(np.array([[1.75, 1.75, 30.0]]), np.array([[0.0, 0.0, -1.0]]),
+               np.array([30.0 - 1.75]), margin=0.0)
     assert not _inside(closed.frontier()).any()
 
 
