@@ -23,10 +23,10 @@ missed beams and the held-out passes decide; ``recon.surfaces.auto``).
 
 Measured on the auto suite's natural bodies against the truth, at the defaults: the Chamfer
 distance and the F-score over the best of every other method's runs, where the strikes cover a
-fifth to a half of the body: cratered asteroids 0.38-0.93 and 0.93-1.09 (eight clouds), Psyche
-under the slew 0.60 and 1.18, Bennu under the LIDAR 0.88 and 1.03, Ryugu under the slew 0.70
-and 1.12. On a body that is an ellipsoid the bare ellipsoid stays the better model (the
-generated asteroid under the cross: 2.3 and 0.96). docs/decisions.md has the table.
+fifth to a half of the body: cratered asteroids 0.44-0.95 and 0.91-1.11 (eight clouds), Psyche
+under the slew 0.66 and 1.14, Bennu under the LIDAR 0.90 and 1.00, Ryugu under the slew 0.77
+and 1.05. On a body that is an ellipsoid the bare ellipsoid stays the better model (the
+generated asteroid under the cross: 1.95 and 0.97). docs/decisions.md has the table.
 """
 
 from __future__ import annotations
