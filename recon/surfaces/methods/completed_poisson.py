@@ -31,15 +31,12 @@ generated asteroid under the cross: 1.95 and 0.97). docs/decisions.md has the ta
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from formats.errors import MethodFailed
 from recon.surfaces.methods import Method, MethodInput, Param, register
-from recon.surfaces.methods._backends import open3d_arrays
 from recon.surfaces.methods.ellipsoid import ellipsoid_mesh, fit_quadric
-from recon.surfaces.methods.poisson import MAX_DEPTH
+from recon.surfaces.methods.poisson import MAX_DEPTH, solve
 
 # Sampson-reweighted rounds of the ellipsoid fit: ``ellipsoid``'s default (its module docstring).
 ELLIPSOID_ITERATIONS = 20
@@ -108,8 +105,6 @@ def run(cloud: MethodInput, *, depth: int, reach: float, subdivisions: int, weig
     vertices : (v, 3) float64, metres, body frame
     faces : (f, 3) int64
     """
-    import open3d as o3d
-
     try:
         centre, axes, rotation = fit_quadric(cloud.points,
                                              sigma=cloud.sigma if weighted else None,
@@ -118,13 +113,9 @@ def run(cloud: MethodInput, *, depth: int, reach: float, subdivisions: int, weig
         raise MethodFailed(f"completed-poisson: no ellipsoid to complete with: {error}") from None
     prior, prior_normals = unseen_points(cloud.points, centre, axes, rotation, reach=reach,
                                          subdivisions=subdivisions)
-    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.vstack([cloud.points, prior])))
-    pcd.normals = o3d.utility.Vector3dVector(np.vstack([cloud.normals, prior_normals]))
-    mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(
-        pcd, depth=int(depth), scale=SCALE, linear_fit=False,
-        n_threads=max(1, int(os.environ.get("OMP_NUM_THREADS", "1"))))
-    vertices, faces = open3d_arrays(mesh)
+    vertices, faces, _ = solve(np.vstack([cloud.points, prior]),
+                               np.vstack([cloud.normals, prior_normals]), depth=depth,
+                               scale=SCALE, linear_fit=False)
     if len(faces) == 0:
         raise MethodFailed("completed-poisson: Poisson produced no triangles")
     return vertices, faces

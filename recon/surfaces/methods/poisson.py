@@ -22,7 +22,7 @@ import numpy as np
 
 from formats.errors import MethodFailed
 from recon.surfaces.methods import Method, MethodInput, Param, register
-from recon.surfaces.methods._backends import open3d_arrays, open3d_cloud
+from recon.surfaces.methods._backends import open3d_arrays
 
 # Deepest octree accepted (Poisson and screened Poisson). A depth-d octree fills its finest level
 # on a surface with about 4**d samples (4**14 = 2.7e8, beyond any cloud recon makes): deeper
@@ -50,6 +50,36 @@ def trim_low_density(vertices: np.ndarray, faces: np.ndarray, density: np.ndarra
     return vertices, faces[~low[faces].any(axis=1)]
 
 
+def solve(points: np.ndarray, normals: np.ndarray, *, depth: int, scale: float,
+          linear_fit: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Open3D's Poisson surface of oriented points, untrimmed, on ``OMP_NUM_THREADS`` threads
+    (module docstring).
+
+    Parameters
+    ----------
+    points : (n, 3) float64, metres, body frame
+    normals : (n, 3) float64, unit, outward
+    depth, scale, linear_fit
+        As ``run``'s.
+
+    Returns
+    -------
+    vertices : (v, 3) float64, metres, body frame
+    faces : (f, 3) int64
+    density : (v,) float64, log2 samples per octree node
+    """
+    import open3d as o3d
+
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud.normals = o3d.utility.Vector3dVector(normals)
+    mesh, density = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(
+        cloud, depth=int(depth), scale=float(scale), linear_fit=bool(linear_fit),
+        n_threads=max(1, int(os.environ.get("OMP_NUM_THREADS", "1"))))
+    vertices, faces = open3d_arrays(mesh)
+    return vertices, faces, np.asarray(density)
+
+
 def run(cloud: MethodInput, *, depth: int, scale: float, trim: float, linear_fit: bool
         ) -> tuple[np.ndarray, np.ndarray]:
     """Poisson surface of the oriented points, trimmed where the data are sparse.
@@ -71,15 +101,11 @@ def run(cloud: MethodInput, *, depth: int, scale: float, trim: float, linear_fit
     vertices : (v, 3) float64, metres, body frame
     faces : (f, 3) int64
     """
-    import open3d as o3d
-
-    mesh, density = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(
-        open3d_cloud(cloud), depth=int(depth), scale=float(scale), linear_fit=bool(linear_fit),
-        n_threads=max(1, int(os.environ.get("OMP_NUM_THREADS", "1"))))
-    vertices, faces = open3d_arrays(mesh)
+    vertices, faces, density = solve(cloud.points, cloud.normals, depth=depth, scale=scale,
+                                     linear_fit=linear_fit)
     if len(faces) == 0:
         raise MethodFailed("poisson: produced no triangles")
-    return trim_low_density(vertices, faces, np.asarray(density), trim)
+    return trim_low_density(vertices, faces, density, trim)
 
 
 METHOD = register(Method(
