@@ -722,10 +722,11 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
         spare: dict = {}
         while True:
             if not pending and state.racing:
-                racing = sum(map(state.raced, state.jobs))
+                fitted = state.first
+                racing = {job for job in state.jobs if state.raced(job)} - set(state.judged)
                 fits = state.race(reference)
-                left = racing - len({job for job, _ in fits})
-                bar.total -= left * (len(folds) - state.first)
+                bar.total -= (len(racing) - len({job for job, _ in fits})) * (
+                    len(folds) - fitted)
                 bar.refresh()
                 pending = hand_out(fits)
                 continue   # the fits handed out may all be given: the next stage then
