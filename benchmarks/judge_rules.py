@@ -499,24 +499,37 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
     from recon.surfaces import auto
 
     fold = fold_of(block, folds, seed)
-    stages = [(n, ses) for n, ses in auto.RACE_STAGES if n < folds["k"]]
     depths = sorted({c.level for c in candidates})
     groups = [[d for d in depths if d < auto.ALWAYS_LEVELS]] + [
         [d] for d in depths if d >= auto.ALWAYS_LEVELS]
     kept, gone = [], []
     for group in groups:
         members = [c for c in candidates if c.level in group]
-        after: dict[str, int] = {}   # the runs that left, and after how many folds
-        for n, ses in stages:
-            out = race_group([c for c in kept if c.scored and not c.carved],
-                             [c for c in members if c.run.key not in after], fold < n, block,
-                             ses)
-            after |= dict.fromkeys(out, n)
+        after = race_stages([c for c in kept if c.scored and not c.carved], members, fold,
+                            block)
         gone += [c for c in members if c.run.key in after and not c.carved]
         kept += [c if c.run.key not in after else
                  auto.Candidate(c.run, c.level, "outpaced", folds=after[c.run.key])
                  for c in members if c.run.key not in after or not c.carved]
     return kept, gone
+
+
+def race_stages(before: list, members: list, fold: np.ndarray, block: np.ndarray
+                ) -> dict[str, int]:
+    """The runs among ``members`` that leave at a stage of ``auto.RACE_STAGES`` ((folds,
+    standard errors) pairs, those with fewer folds than the collection's; ``race_group`` at
+    each against the runs still in and those left ``before``; ``fold``: each tested strike's
+    fold), by key, with the folds of that stage."""
+    from recon.surfaces import auto
+
+    after: dict[str, int] = {}
+    for n, ses in auto.RACE_STAGES:
+        if n > fold.max():   # as many folds as the collection's: no stage
+            break
+        out = race_group(before, [c for c in members if c.run.key not in after], fold < n,
+                         block, ses)
+        after |= dict.fromkeys(out, n)
+    return after
 
 
 def race_group(before: list, members: list, first: np.ndarray, block: np.ndarray,

@@ -605,11 +605,7 @@ class _Race:
         folds = self.context.folds[:n]
         m = sum(len(f.block) for f in folds)
         block = np.concatenate([f.block for f in folds])
-        # the runs fitted on the stage's folds, none of their fits failed (a run fitted on
-        # every fold may have failed on a later one)
-        pool = [job for job in self.jobs if not self._left(job)
-                and all(c is not None for c in self.checks[job][:n])
-                and all(r is None or r.get("status") == "ok" for r in self.results[job])]
+        pool = self._pool(n)
         partial = [c.cost[:m] for c in reference] + [
             np.concatenate([c.cost for c in self.checks[job][:n]]) for job in pool]
         racing = [False] * len(reference) + [self.raced(job) for job in pool]
@@ -627,6 +623,14 @@ class _Race:
         going = sorted((job for job in self.jobs if self.raced(job) and job not in self.judged),
                        key=lambda job: -self._fit_s(job))
         return [(job, f) for job in going for f in range(start, self.first)]
+
+    def _pool(self, n: int) -> list[tuple[int, int]]:
+        """The runs in the race at a stage of ``n`` folds: fitted on those folds, none of their
+        fits failed (a run fitted on every fold may have failed on a later one), not left at
+        an earlier stage."""
+        return [job for job in self.jobs if not self._left(job)
+                and all(c is not None for c in self.checks[job][:n])
+                and all(r is None or r.get("status") == "ok" for r in self.results[job])]
 
     def _left(self, job: tuple[int, int]) -> bool:
         """Whether the run left the race at an earlier stage."""
@@ -780,9 +784,7 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
         return candidate
     options = {"tau": context.tau, "noise": context.noise}
     casters = casters or [judge.Caster(r["vertices"], r["faces"]) for r in results]
-    held = [made if made is not None else held_out_check(fold, caster, context)
-            for made, caster, fold in zip(held or [None] * len(casters), casters,
-                                          context.folds, strict=True)]
+    held = _held_checks(casters, context, held)
     fit = [judge.check(fold.train, caster, fitted=True, **options)
            for caster, fold in zip(casters, context.folds, strict=True)]
     cost = np.concatenate([h.cost for h in held])
@@ -808,6 +810,14 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                    heldout=judge.HeldOut(distance, np.concatenate([h.sigma_normal for h in held]),
                                          context.block),
                    cost=cost, mesh=(vertices, faces))
+
+
+def _held_checks(casters: list, context: _Context, held: list | None) -> list[judge.Check]:
+    """Each fold's ``held_out_check`` against its surface (``casters``), those ``held``
+    already made (None where not) kept."""
+    held = held or [None] * len(casters)
+    return [made if made is not None else held_out_check(fold, caster, context)
+            for made, caster, fold in zip(held, casters, context.folds, strict=True)]
 
 
 def held_out_check(fold: _Fold, caster: judge.Caster, context: _Context) -> judge.Check:
@@ -882,7 +892,8 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
 
 def _race_note(candidates: list[Candidate]) -> str:
     """The runs the race left out, for the reason (empty, or ending in "; ")."""
-    out = [f"{c.label} after {c.folds}" for c in candidates if c.status == "outpaced"]
+    out = [f"{c.label} on {c.folds} fold{'s' if c.folds > 1 else ''}" for c in candidates
+           if c.status == "outpaced"]
     return (f"{len(out)} of them fitted on the first fold(s) only, far worse than the best "
             f"there ({', '.join(out)}); ") if out else ""
 

@@ -79,4 +79,4 @@ def test_racing_leaves_the_far_run_after_its_stage_and_chooses_as_the_full_ladde
                  whole[label].n_faces)
     assert f"left after {folds} fold(s)" in format_choice(raced)
     assert "1 of them fitted on the first fold(s) only, far worse than the best there " \
-        f"(planes after {folds})" in raced.reason
+        f"(planes on {folds} fold{'s' if folds > 1 else ''})" in raced.reason
