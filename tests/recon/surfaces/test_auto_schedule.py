@@ -70,6 +70,41 @@ def test_fits_are_handed_out_models_first_the_next_level_ahead_and_choose_alike(
     assert figures(plain) == figures(ahead)
 
 
+def test_the_next_level_is_handed_out_beside_a_stage_that_leaves_a_worker_idle(monkeypatch):
+    """With two workers, the second stage of the race hands out one fit (the one raced run
+    left in): the next level's fits ahead are handed out beside it, before the race's last
+    folds, instead of after them. The choice is that of the single worker's order."""
+    import concurrent.futures
+
+    cloud, view = small_sphere()
+    monkeypatch.setattr(auto, "LADDER", LADDER)
+    monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
+    handed: list[tuple[str, int]] = []
+    contexts = []
+    context = auto._context
+
+    def kept(*args, **kwargs):
+        contexts.append(context(*args, **kwargs))
+        return contexts[-1]
+
+    class Recorded(concurrent.futures.ThreadPoolExecutor):
+        def submit(self, fn, run, prepared, *args, **kwargs):
+            fold = next(f for f, p in enumerate(contexts[-1].folds) if p.prepared is prepared)
+            handed.append((run.label, fold))
+            return super().submit(fn, run, prepared, *args, **kwargs)
+
+    monkeypatch.setattr(auto, "_context", kept)
+    monkeypatch.setattr(concurrent.futures, "ThreadPoolExecutor", Recorded)
+    options = {"view_points": view, "uncertainty": cloud.attributes, "seed": 0}
+    two = choose(cloud.points, n_workers=2, **options)
+    assert handed[:9] == ([("planes", f) for f in range(4)]
+                          + [("ellipsoid subdivisions=3", 0), ("ellipsoid subdivisions=3", 1),
+                             ("ellipsoid", 0), ("planes threshold=2", 0),
+                             ("ellipsoid subdivisions=3", 2)]), handed
+    one = choose(cloud.points, n_workers=1, **options)
+    assert figures(one) == figures(two)
+
+
 def test_the_next_level_fitted_ahead_is_dropped_when_the_ladder_stops(monkeypatch,
                                                                       fitted_labels):
     """When the ladder stops, the next level's runs fitted ahead leave no candidate: they are
