@@ -691,11 +691,11 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
 
     ``ahead``: (runs, out): the runs of the next level, fitted on the first stage's folds once
     every other fit is handed out, while the main process judges the last runs (the workers
-    would otherwise wait for it), or earlier when a stage of the race hands out fewer fits
-    than there are workers (one run left in: the other worker would wait for the next
-    stage); their results go to ``out`` by (run, fold), the next call's
-    ``given``. ``given``: for a single level, its runs' results already fitted, by (run,
-    fold). A fit is the same fit whenever it is made: the candidates and the race are those of
+    would otherwise wait for it), or earlier, as soon as fewer fits are outstanding than there
+    are workers (a stage of the race waiting for its last fit, or one run left in it: a worker
+    would wait for the next stage); their results go to ``out`` by (run, fold), the next
+    call's ``given``. ``given``: for a single level, its runs' results already fitted, by
+    (run, fold). A fit is the same fit whenever it is made: the candidates and the race are those of
     fitting every run here."""
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
@@ -735,7 +735,7 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
                 bar.refresh()
                 pending = hand_out(fits)
                 continue   # the fits handed out may all be given: the next stage then
-            # behind every fit, or beside a stage of the race that leaves a worker without one
+            # behind every fit, or beside a stage of the race that leaves a worker idle
             if ahead is not None and not spare and (not state.racing or len(pending) < workers):
                 spare = {submit(run, f): (j, f) for j, run in enumerate(ahead[0])
                          for f in range(opening)}

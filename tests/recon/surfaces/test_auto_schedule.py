@@ -71,9 +71,10 @@ def test_fits_are_handed_out_models_first_the_next_level_ahead_and_choose_alike(
 
 
 def test_the_next_level_is_handed_out_beside_a_stage_that_leaves_a_worker_idle(monkeypatch):
-    """With two workers, the second stage of the race hands out one fit (the one raced run
-    left in): the next level's fits ahead are handed out beside it, before the race's last
-    folds, instead of after them. The choice is that of the single worker's order."""
+    """With two workers, a stage of the race waits for its last fit, or hands out one (the one
+    raced run left in), while a worker is idle: the next level's fits ahead are handed out
+    then, before the race's last folds, instead of after them. The choice is that of the
+    single worker's order."""
     import concurrent.futures
 
     cloud, view = small_sphere()
@@ -97,10 +98,9 @@ def test_the_next_level_is_handed_out_beside_a_stage_that_leaves_a_worker_idle(m
     monkeypatch.setattr(concurrent.futures, "ThreadPoolExecutor", Recorded)
     options = {"view_points": view, "uncertainty": cloud.attributes, "seed": 0}
     two = choose(cloud.points, n_workers=2, **options)
-    assert handed[:9] == ([("planes", f) for f in range(4)]
-                          + [("ellipsoid subdivisions=3", 0), ("ellipsoid subdivisions=3", 1),
-                             ("ellipsoid", 0), ("planes threshold=2", 0),
-                             ("ellipsoid subdivisions=3", 2)]), handed
+    last = handed.index(("ellipsoid subdivisions=3", 2))
+    assert handed.index(("ellipsoid", 0)) < last, handed
+    assert handed.index(("planes threshold=2", 0)) < last, handed
     one = choose(cloud.points, n_workers=1, **options)
     assert figures(one) == figures(two)
 
