@@ -490,37 +490,59 @@ def fold_of(block: np.ndarray, folds: dict, seed: int) -> np.ndarray:
 
 
 def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[list, list]:
-    """``auto``'s race (``auto.outpaced``) replayed on collected candidates: the levels fitted
-    together (``auto.ALWAYS_LEVELS``) race at once, each later level against the runs left
-    before it; ``folds``: the collection's ``folds`` record, ``seed`` its seed
-    (``fold_of``). Returns the candidates left (a run that leaves takes its carved twin with
-    it; in its place the run, unscored, with the status "outpaced") and the runs that left."""
+    """``auto``'s race (``auto.outpaced``, stage by stage of ``auto.RACE_STAGES``) replayed on
+    collected candidates: the levels fitted together (``auto.ALWAYS_LEVELS``) race at once,
+    each later level against the runs left before it; ``folds``: the collection's ``folds``
+    record, ``seed`` its seed (``fold_of``). Returns the candidates left (a run that leaves
+    takes its carved twin with it; in its place the run, unscored, with the status "outpaced"
+    and the folds it was fitted on) and the runs that left."""
     from recon.surfaces import auto
 
-    first = fold_of(block, folds, seed) < auto.RACE_FOLDS
+    fold = fold_of(block, folds, seed)
     depths = sorted({c.level for c in candidates})
     groups = [[d for d in depths if d < auto.ALWAYS_LEVELS]] + [
         [d] for d in depths if d >= auto.ALWAYS_LEVELS]
     kept, gone = [], []
     for group in groups:
         members = [c for c in candidates if c.level in group]
-        out = race_group([c for c in kept if c.scored and not c.carved], members, first, block)
-        gone += [c for c in members if c.run.key in out and not c.carved]
-        kept += [c if c.run.key not in out else auto.Candidate(c.run, c.level, "outpaced")
-                 for c in members if c.run.key not in out or not c.carved]
+        after = race_stages([c for c in kept if c.scored and not c.carved], members, fold,
+                            block)
+        gone += [c for c in members if c.run.key in after and not c.carved]
+        kept += [c if c.run.key not in after else
+                 auto.Candidate(c.run, c.level, "outpaced", folds=after[c.run.key])
+                 for c in members if c.run.key not in after or not c.carved]
     return kept, gone
 
 
-def race_group(before: list, members: list, first: np.ndarray, block: np.ndarray) -> set:
+def race_stages(before: list, members: list, fold: np.ndarray, block: np.ndarray
+                ) -> dict[str, int]:
+    """The runs among ``members`` that leave at a stage of ``auto.RACE_STAGES`` ((folds,
+    standard errors) pairs, those with fewer folds than the collection's; ``race_group`` at
+    each against the runs still in and those left ``before``; ``fold``: each tested strike's
+    fold), by key, with the folds of that stage."""
+    from recon.surfaces import auto
+
+    after: dict[str, int] = {}
+    for n, ses in auto.RACE_STAGES:
+        if n > fold.max():   # as many folds as the collection's: no stage
+            break
+        out = race_group(before, [c for c in members if c.run.key not in after], fold < n,
+                         block, ses)
+        after |= dict.fromkeys(out, n)
+    return after
+
+
+def race_group(before: list, members: list, first: np.ndarray, block: np.ndarray,
+               ses: float) -> set:
     """The keys of the runs among ``members`` (one race: levels fitted together) that
-    ``auto.outpaced`` takes out against each other and the runs left ``before``; ``first``:
-    the tested strikes of the racing folds."""
+    ``auto.outpaced`` takes out at ``ses`` standard errors against each other and the runs
+    left ``before``; ``first``: the tested strikes of the stage's folds."""
     from recon.surfaces import auto
 
     pool = before + [c for c in members if not c.carved]
     racing = [False] * len(before) + [c.level >= auto.RACE_LEVEL for c in pool[len(before):]]
     leaves = auto.outpaced([c.cost[first] if c.scored else None for c in pool], block[first],
-                           racing, [bool(c.closed) for c in pool])
+                           racing, [bool(c.closed) for c in pool], ses=ses)
     return {c.run.key for c, left in zip(pool, leaves, strict=True) if left is not None}
 
 
@@ -599,9 +621,9 @@ def rules(args) -> None:
         wall = {r["key"]: r.get("wall_time_s") or 0.0 for r in rows}
         folds = json.loads((args.work / "folds" / f"{cloud}.json").read_text()
                            )["auto"]["folds"]["k"]
-        # a run raced out (``--race``) was fitted on ``auto.RACE_FOLDS`` folds
+        # a run raced out (``--race``) was fitted on the folds of the stage it left at
         modelled = sum(wall.get(c.run.key, 0.0) * (
-            auto.RACE_FOLDS / folds if c.status == "outpaced" else 1.0)
+            c.folds / folds if c.status == "outpaced" else 1.0)
             for c in fitted if not c.carved) * (folds - 1)
         seconds.append(modelled / compare_s)
         print(f"{cloud:30} {chosen.label[:26]:26} F {v.get('f_ratio', 0):.3f} "

@@ -81,13 +81,14 @@ soon as its folds are in; behind them the next level's racing folds, which the m
 last judging would otherwise leave the workers waiting for, dropped if the ladder stops); after
 that the
 search stops as soon as a level's best is not measurably better (by ``se``) than the best
-before it. **Racing**: the runs of a level are fitted on the first ``RACE_FOLDS`` folds, and a
-run whose held-out chi-square there is more than ``RACE_SES`` paired standard errors above the
-best's (of every run fitted so far; for a closed surface, also above the best closed one's) is
-not fitted on the other folds and leaves the choice (``outpaced``): far outside the band, it
-could not be chosen. The models of a few numbers are fitted on every fold. The ladder leaves
-out the methods
-that cost the most for what they add on the suite's clouds (``delaunay-balls``,
+before it. **Racing** (``RACE_STAGES``): the runs of a level are fitted on the first fold, and
+a run whose held-out chi-square there is more than three band widths (paired standard errors)
+above the best's (of every run fitted so far; for a closed surface, also above the best closed
+one's) is not fitted on the other folds and leaves the choice (``outpaced``): far outside the
+band, it could not be chosen; the others are fitted on the second fold and raced again on both
+at two band widths, and those left in are fitted on every fold. The models of a few numbers
+are fitted on every fold. The ladder leaves out the methods that cost the most for what they
+add on the suite's clouds (``delaunay-balls``,
 ``screened-poisson``: a few seconds a fit, where the visibility cut and Poisson take one;
 ``rimls``, ``ball-pivoting``: never the held-out best nor in the band there).
 
@@ -177,14 +178,19 @@ MISS_REFUTES = 0.1
 # beyond the strikes lies there. A missed beam's crossing of a surface counts as a cut only
 # farther than ``miss_reach`` from every strike (judge.cut_misses).
 MISS_BOX = 0.1
-# Racing (successive halving): every run of a level is fitted on the first RACE_FOLDS folds;
-# a run whose held-out chi-square there exceeds the best's (among every run fitted so far) by
-# more than RACE_SES paired standard errors is not fitted on the other folds and leaves the
-# choice (``outpaced``). RACE_SES: three times BAND_SES, fixed before the replay on the tuning
-# clouds (docs/decisions.md). The models of a few numbers (levels before RACE_LEVEL) are fitted
-# on every fold: they cost little, and the natural body's model is among them.
-RACE_FOLDS = 2
-RACE_SES = 3.0 * BAND_SES
+# Racing (successive halving, in stages): every run of a level is fitted on the first folds of
+# the first stage of RACE_STAGES, (folds, standard errors) pairs; a run whose held-out
+# chi-square there exceeds the best's (among every run fitted so far) by more than the stage's
+# paired standard errors is not fitted on more folds and leaves the choice (``outpaced``); the
+# others are fitted up to the next stage's folds, and so on, then on every fold. One stage,
+# two folds at three times BAND_SES, was fixed before any replay on the tuning clouds; the
+# replay of the race on the 67 tuning clouds of a collection made the same choices, and left
+# the same best closed candidate, with a first look after one fold at three times BAND_SES and
+# two folds at twice BAND_SES: Poisson depth 9 and APSS leave the satellites where they were
+# a third of auto's time, the runs far from the best leave after one fit (docs/decisions.md).
+# The models of a few numbers (levels before RACE_LEVEL) are fitted on every fold: they cost
+# little, and the natural body's model is among them.
+RACE_STAGES = ((1, 3.0 * BAND_SES), (2, 2.0 * BAND_SES))
 RACE_LEVEL = 1
 # Threads of each isolated fit: one, as ``recon compare``'s runs, so parallel fits do not
 # compete for the cores.
@@ -208,6 +214,8 @@ class Candidate:
     fit_s : float or None
         The isolated fits' job time [s]: hand-over to result in their workers, summed over
         the folds (``run_isolated``'s ``process_time_s``; elapsed, not CPU).
+    folds : int or None
+        For an outpaced run, the folds it was fitted on.
     n_faces, n_params : int or None
     closed : bool or None
         No edge borders a single face.
@@ -240,6 +248,7 @@ class Candidate:
     status: str
     reason: str = ""
     fit_s: float | None = None
+    folds: int | None = None
     n_faces: int | None = None
     n_params: int | None = None
     closed: bool | None = None
@@ -531,19 +540,25 @@ def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, se
 
 
 class _Race:
-    """The fits of ``_fit_and_judge`` and what is known of each run: its results and built
-    surfaces per fold, its held-out costs on the racing folds, and its candidates once judged.
-    A run is a job ``(i, j)``: run ``j`` of the ``i``-th (depth, runs) pair."""
+    """The fits of ``_fit_and_judge`` and what is known of each run: its results, built
+    surfaces and held-out checks per fold (a fold's check is made as its fit arrives, on the
+    folds any stage races on: the race and the judging share them), and its candidates once
+    judged. The race goes in stages (``RACE_STAGES``): ``first`` is how many folds the runs
+    still raced are fitted on. A run is a job ``(i, j)``: run ``j`` of the ``i``-th (depth,
+    runs) pair."""
 
     def __init__(self, levels: list[tuple[int, list[Run]]], context: _Context):
         self.levels, self.context = levels, context
         k = len(context.folds)
-        self.first = min(RACE_FOLDS, k)
+        self.stages = [(folds, ses) for folds, ses in RACE_STAGES if folds < k]
+        self.stage = 0
+        self.first = self.stages[0][0] if self.stages else k
         # the finest level first (module docstring)
         self.jobs = [(i, j) for i in reversed(range(len(levels))) for j in range(len(levels[i][1]))]
         self.results = {job: [None] * k for job in self.jobs}
         self.casters = {job: [None] * k for job in self.jobs}
-        self.partial: dict[tuple[int, int], np.ndarray] = {}
+        self.checks: dict[tuple[int, int], list[judge.Check | None]] = {
+            job: [None] * k for job in self.jobs}
         self.judged: dict[tuple[int, int], list[Candidate]] = {}
 
     def run(self, job: tuple[int, int]) -> Run:
@@ -552,19 +567,28 @@ class _Race:
     def level(self, job: tuple[int, int]) -> int:
         return self.levels[job[0]][0]
 
+    @property
+    def racing(self) -> bool:
+        """Whether a stage of the race is still to be run."""
+        return self.stage < len(self.stages)
+
     def arrived(self, job: tuple[int, int], f: int, result: dict) -> None:
-        """Fold ``f``'s fit of ``job`` is in: once its racing folds are, its costs there (or
-        its failure); its judging once all its folds are waits for ``judge_complete``."""
+        """Fold ``f``'s fit of ``job`` is in: on a fold the race reads, its surface is built
+        and checked; a failure on the folds fitted so far fails the run; its judging once all
+        its folds are in waits for ``judge_complete``."""
         results = self.results[job]
         results[f] = result
-        if job in self.judged or any(r is None for r in results[:self.first]):
+        if job in self.judged:
             return
-        if any(r.get("status") != "ok" for r in results[:self.first]):
+        if result.get("status") == "ok" and self.stages and f < self.stages[-1][0]:
+            self.casters[job][f] = judge.Caster(result["vertices"], result["faces"])
+            self.checks[job][f] = held_out_check(self.context.folds[f], self.casters[job][f],
+                                                 self.context)
+        if all(r is not None for r in results[:self.first]) and \
+                any(r.get("status") != "ok" for r in results[:self.first]):
             self.judged[job] = [judge_candidate(self.run(job), self.level(job),
                                                 [r for r in results if r is not None],
                                                 self.context)]
-        elif job not in self.partial:
-            self.partial[job] = self._costs(job)
 
     def judge_complete(self) -> None:
         """Judge (``_judged``) every run whose folds are all fitted and not judged yet."""
@@ -572,11 +596,13 @@ class _Race:
             results = self.results[job]
             if job not in self.judged and all(r is not None for r in results):
                 self.judged[job] = _judged(self.run(job), self.level(job), results,
-                                           self.context, self.casters.pop(job))
+                                           self.context, self.casters.pop(job),
+                                           self.checks[job])
 
     def opening_fits(self) -> list[tuple[tuple[int, int], int]]:
         """The (job, fold) fits handed out first: the runs not raced on every fold (the models
-        of a few numbers), then the raced ones on the racing folds, in ``jobs``' order."""
+        of a few numbers), then the raced ones on the first stage's folds, in ``jobs``'
+        order."""
         k = len(self.context.folds)
         return ([(job, f) for job in self.jobs if not self.raced(job) for f in range(k)]
                 + [(job, f) for job in self.jobs if self.raced(job) for f in range(self.first)])
@@ -584,52 +610,61 @@ class _Race:
     def raced(self, job: tuple[int, int]) -> bool:
         """Whether the run may leave the race (its level is raced, ``RACE_LEVEL``); the others
         are fitted on every fold at once."""
-        return self.level(job) >= RACE_LEVEL and self.first < len(self.context.folds)
+        return self.level(job) >= RACE_LEVEL and bool(self.stages)
 
-    def _costs(self, job: tuple[int, int]) -> np.ndarray:
-        """The run's held-out costs on the racing folds, its surfaces built for later."""
-        out = []
-        for f in range(self.first):
-            result = self.results[job][f]
-            self.casters[job][f] = judge.Caster(result["vertices"], result["faces"])
-            out.append(held_out_check(self.context.folds[f], self.casters[job][f],
-                                      self.context).cost)
-        return np.concatenate(out)
-
-    def race(self, reference: Sequence[Candidate]) -> list[tuple[int, int]]:
-        """``outpaced`` over the runs still in and the ``reference`` candidates (scored,
-        fitted before, uncarved): the runs that leave are judged "outpaced"; returns the runs
-        to fit on the other folds."""
-        folds = self.context.folds[:self.first]
+    def race(self, reference: Sequence[Candidate]) -> list[tuple[tuple[int, int], int]]:
+        """This stage of the race: ``outpaced`` over the runs fitted on its folds and the
+        ``reference`` candidates (scored, fitted before, uncarved), at its standard errors;
+        the runs that leave are judged "outpaced". Returns the (job, fold) fits of the runs
+        still in up to the next stage's folds (every fold after the last stage), the longest
+        runs first."""
+        n, ses = self.stages[self.stage]
+        folds = self.context.folds[:n]
         m = sum(len(f.block) for f in folds)
         block = np.concatenate([f.block for f in folds])
-        # the runs fitted on the racing folds, none of their fits failed (a run fitted on
-        # every fold may have failed on a later one)
-        pool = [job for job in self.jobs if job in self.partial and all(
-            r is None or r.get("status") == "ok" for r in self.results[job])]
-        partial = [c.cost[:m] for c in reference] + [self.partial[job] for job in pool]
+        pool = self._pool(n)
+        partial = [c.cost[:m] for c in reference] + [
+            np.concatenate([c.cost for c in self.checks[job][:n]]) for job in pool]
         racing = [False] * len(reference) + [self.raced(job) for job in pool]
         shut = [bool(c.closed) for c in reference] + [
             closed(self.results[job][0]["faces"]) for job in pool]
-        leaves = outpaced(partial, block, racing, shut)[len(reference):]
+        leaves = outpaced(partial, block, racing, shut, ses=ses)[len(reference):]
         for job, gap in zip(pool, leaves, strict=True):
             if gap is not None:
-                self.judged[job] = [self._outpaced(job, *gap)]
+                self.judged[job] = [self._outpaced(job, *gap, ses)]
                 del self.casters[job]   # its surfaces' scenes are not cast against again
-        # the longest first, by their racing folds' times: the workers finish together
-        return sorted((job for job in self.jobs if self.raced(job) and job not in self.judged),
-                      key=lambda job: -self._fit_s(job))
+        self.stage += 1
+        start, self.first = n, (self.stages[self.stage][0] if self.racing
+                                else len(self.context.folds))
+        # the longest first, by their fitted folds' times: the workers finish together
+        going = sorted((job for job in self.jobs if self.raced(job) and job not in self.judged),
+                       key=lambda job: -self._fit_s(job))
+        return [(job, f) for job in going for f in range(start, self.first)]
+
+    def _pool(self, n: int) -> list[tuple[int, int]]:
+        """The runs in the race at a stage of ``n`` folds: fitted on those folds, none of their
+        fits failed (a run fitted on every fold may have failed on a later one), not left at
+        an earlier stage."""
+        return [job for job in self.jobs if not self._left(job)
+                and all(c is not None for c in self.checks[job][:n])
+                and all(r is None or r.get("status") == "ok" for r in self.results[job])]
+
+    def _left(self, job: tuple[int, int]) -> bool:
+        """Whether the run left the race at an earlier stage."""
+        return job in self.judged and self.judged[job][0].status == "outpaced"
 
     def _fit_s(self, job: tuple[int, int]) -> float:
-        """The run's fit time on the racing folds [s, job time: hand-over to result]."""
-        return sum(r.get("process_time_s") or 0.0 for r in self.results[job][:self.first])
+        """The run's fit time on the folds it was fitted on [s, job time: hand-over to
+        result]."""
+        return sum(r.get("process_time_s") or 0.0 for r in self.results[job] if r is not None)
 
-    def _outpaced(self, job: tuple[int, int], gap: float, se: float) -> Candidate:
+    def _outpaced(self, job: tuple[int, int], gap: float, se: float, ses: float) -> Candidate:
+        n = sum(r is not None for r in self.results[job])
         return Candidate(self.run(job), self.level(job), status="outpaced",
-                         fit_s=self._fit_s(job),
-                         reason=f"on the first {self.first} folds its held-out chi-square was "
+                         fit_s=self._fit_s(job), folds=n,
+                         reason=f"on the first {n} fold(s) its held-out chi-square was "
                                 f"{gap:.3g} +- {se:.2g} above the best's (more than "
-                                f"{RACE_SES:g} standard errors): not fitted on the others")
+                                f"{ses:g} standard errors): not fitted on the others")
 
     def candidates(self) -> dict[int, list[list[Candidate]]]:
         """Per depth and run in order, the run's candidate and its carved twin if any."""
@@ -657,9 +692,10 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
                    ahead: tuple[list[Run], dict] | None = None,
                    given: dict[tuple[int, int], dict] | None = None
                    ) -> dict[int, list[list[Candidate]]]:
-    """Fit every run of ``levels`` ((depth, runs) pairs) on the first ``RACE_FOLDS`` folds,
-    then the runs the race leaves in (``outpaced``, against each other and the ``reference``
-    candidates) on the other folds (a run of a level not raced on every fold at once), each
+    """Fit every run of ``levels`` ((depth, runs) pairs) on the first stage's folds
+    (``RACE_STAGES``), then the runs the race leaves in (``outpaced``, against each other and
+    the ``reference`` candidates) on the next stage's folds, and so on, then on the other folds
+    (a run of a level not raced on every fold at once), each
     fit in its own limited process, a few at a time; each
     run is judged (``_judged``) as soon as its folds are fitted, while the other fits go on.
     The runs not raced are handed out first, on every fold (the models of a few numbers: quick
@@ -670,11 +706,13 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
     longest on the first ones. Returns, per depth
     and run in order, the run's candidate and its carved twin if any.
 
-    ``ahead``: (runs, out): the runs of the next level, fitted on the racing folds once every
-    other fit is handed out, while the main process judges the last runs (the workers would
-    otherwise wait for it); their results go to ``out`` by (run, fold), the next call's
-    ``given``. ``given``: for a single level, its runs' results already fitted, by (run,
-    fold). A fit is the same fit whenever it is made: the candidates and the race are those of
+    ``ahead``: (runs, out): the runs of the next level, fitted on the first stage's folds once
+    every other fit is handed out, while the main process judges the last runs (the workers
+    would otherwise wait for it), or earlier, as soon as fewer fits are outstanding than there
+    are workers (a stage of the race waiting for its last fit, or one run left in it: a worker
+    would wait for the next stage); their results go to ``out`` by (run, fold), the next
+    call's ``given``. ``given``: for a single level, its runs' results already fitted, by
+    (run, fold). A fit is the same fit whenever it is made: the candidates and the race are those of
     fitting every run here."""
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
@@ -702,20 +740,22 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
         for (j, f), result in given.items():
             state.arrived((0, j), f, result)
             bar.update(1)
-        raced = state.first == len(folds)
+        opening = state.first   # the first stage's folds (every fold without a race)
         spare: dict = {}
         while True:
-            if not pending and not raced:
-                raced = True
-                going = state.race(reference)
-                left = sum(map(state.raced, state.jobs)) - len(going)
-                bar.total -= left * (len(folds) - state.first)
+            if not pending and state.racing:
+                fitted = state.first
+                racing = {job for job in state.jobs if state.raced(job)} - set(state.judged)
+                fits = state.race(reference)
+                bar.total -= (len(racing) - len({job for job, _ in fits})) * (
+                    len(folds) - fitted)
                 bar.refresh()
-                pending = hand_out([(job, f) for job in going
-                                    for f in range(state.first, len(folds))])
-            if raced and ahead is not None and not spare:   # behind every fit of ``levels``
+                pending = hand_out(fits)
+                continue   # the fits handed out may all be given: the next stage then
+            # behind every fit, or beside a stage of the race that leaves a worker idle
+            if ahead is not None and not spare and (not state.racing or len(pending) < workers):
                 spare = {submit(run, f): (j, f) for j, run in enumerate(ahead[0])
-                         for f in range(state.first)}
+                         for f in range(opening)}
             state.judge_complete()   # while the workers fit
             if not pending:
                 break
@@ -729,16 +769,17 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
 
 
 def _judged(run: Run, level: int, results: list[dict], context: _Context,
-            built: list | None = None) -> list[Candidate]:
+            built: list | None = None, held: list | None = None) -> list[Candidate]:
     """A run fitted on every fold, judged (``judge_candidate``), and its carved twin when it
     fills free space (``fills_free_space``). Each fold's surface is built for the casts once
-    (``built``: the folds' surfaces already built, None where not): the twin is carved on the
-    scenes its candidate was judged on."""
+    (``built``: the folds' surfaces already built, None where not; ``held``: their held-out
+    checks already made, None where not): the twin is carved on the scenes its candidate was
+    judged on."""
     built = built or [None] * len(results)
     casters = ([b or judge.Caster(r["vertices"], r["faces"]) for r, b in zip(results, built,
                                                                           strict=True)]
                if all(r.get("status") == "ok" for r in results) else None)
-    candidate = judge_candidate(run, level, results, context, casters=casters)
+    candidate = judge_candidate(run, level, results, context, casters=casters, held=held)
     if not fills_free_space(candidate):
         return [candidate]
     return [candidate, judge_candidate(run, level, _carved(results, context, casters), context,
@@ -746,10 +787,12 @@ def _judged(run: Run, level: int, results: list[dict], context: _Context,
 
 
 def judge_candidate(run: Run, level: int, results: list[dict], context: _Context,
-                    carved: bool = False, casters: list | None = None) -> Candidate:
+                    carved: bool = False, casters: list | None = None,
+                    held: list | None = None) -> Candidate:
     """Step 2 of the module docstring for one run fitted on every fold (``run_isolated``
     results, folds in order): a fold that failed fails the candidate. ``casters``: each fold's
-    surface already built (``judge.Caster``), when the caller has them."""
+    surface already built (``judge.Caster``), when the caller has them; ``held``: the
+    ``held_out_check`` of each fold's surface already made (None where not: made here)."""
     failed = next((r for r in results if r.get("status", "failed") != "ok"), None)
     candidate = Candidate(run, level, status="ok" if failed is None else
                           failed.get("status", "failed"),
@@ -760,10 +803,9 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
         return candidate
     options = {"tau": context.tau, "noise": context.noise}
     casters = casters or [judge.Caster(r["vertices"], r["faces"]) for r in results]
-    held, fit = [], []
-    for caster, fold in zip(casters, context.folds, strict=True):
-        held.append(held_out_check(fold, caster, context))
-        fit.append(judge.check(fold.train, caster, fitted=True, **options))
+    held = _held_checks(casters, context, held)
+    fit = [judge.check(fold.train, caster, fitted=True, **options)
+           for caster, fold in zip(casters, context.folds, strict=True)]
     cost = np.concatenate([h.cost for h in held])
     distance = np.concatenate([h.distance for h in held])
     tolerance = np.concatenate([h.tolerance for h in held])
@@ -787,6 +829,14 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                    heldout=judge.HeldOut(distance, np.concatenate([h.sigma_normal for h in held]),
                                          context.block),
                    cost=cost, mesh=(vertices, faces))
+
+
+def _held_checks(casters: list, context: _Context, held: list | None) -> list[judge.Check]:
+    """Each fold's ``held_out_check`` against its surface (``casters``), those ``held``
+    already made (None where not) kept."""
+    held = held or [None] * len(casters)
+    return [made if made is not None else held_out_check(fold, caster, context)
+            for made, caster, fold in zip(held, casters, context.folds, strict=True)]
 
 
 def held_out_check(fold: _Fold, caster: judge.Caster, context: _Context) -> judge.Check:
@@ -861,15 +911,16 @@ def climb(levels: list[list[Run]], context: _Context, *, limits: Limits,
 
 def _race_note(candidates: list[Candidate]) -> str:
     """The runs the race left out, for the reason (empty, or ending in "; ")."""
-    out = [c.label for c in candidates if c.status == "outpaced"]
-    return (f"{len(out)} of them fitted on the first {RACE_FOLDS} folds only, far worse than the "
-            f"best there ({', '.join(out)}); ") if out else ""
+    out = [f"{c.label} on {c.folds} fold{'s' if c.folds > 1 else ''}" for c in candidates
+           if c.status == "outpaced"]
+    return (f"{len(out)} of them fitted on the first fold(s) only, far worse than the best "
+            f"there ({', '.join(out)}); ") if out else ""
 
 
-def _far(partial: Sequence[np.ndarray | None], block: np.ndarray, among: Sequence[bool]
-         ) -> list[tuple[float, float] | None]:
+def _far(partial: Sequence[np.ndarray | None], block: np.ndarray, among: Sequence[bool],
+         ses: float) -> list[tuple[float, float] | None]:
     """Per run of ``among`` (``outpaced``), its excess over the lowest mean cost of ``among``
-    and the paired standard error of that excess when it exceeds ``RACE_SES`` of them."""
+    and the paired standard error of that excess when it exceeds ``ses`` of them."""
     means = [float(np.mean(p)) if p is not None and a else np.inf
              for p, a in zip(partial, among, strict=True)]
     out: list[tuple[float, float] | None] = [None] * len(partial)
@@ -878,18 +929,19 @@ def _far(partial: Sequence[np.ndarray | None], block: np.ndarray, among: Sequenc
         return out
     for i in np.flatnonzero(np.isfinite(means)):
         gap, se = judge.block_mean_se(partial[i] - partial[best], block)
-        if se > 0.0 and gap > RACE_SES * se:
+        if se > 0.0 and gap > ses * se:
             out[i] = (gap, se)
     return out
 
 
 def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
-             racing: Sequence[bool], closed: Sequence[bool]
+             racing: Sequence[bool], closed: Sequence[bool], *, ses: float | None = None
              ) -> list[tuple[float, float] | None]:
-    """The race (``RACE_SES``): which runs leave the choice after the first folds.
+    """A stage of the race (``RACE_STAGES``): which runs leave the choice after the first
+    folds.
 
     A raced run leaves when its mean held-out cost exceeds the best run's by more than
-    ``RACE_SES`` paired standard errors; a closed one only when it also exceeds the best closed
+    ``ses`` paired standard errors; a closed one only when it also exceeds the best closed
     run's so (the best closed candidate measures the coverage, ``choose``).
 
     Parameters
@@ -903,6 +955,8 @@ def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
         Whether each run may leave (its level is raced, ``RACE_LEVEL``).
     closed : sequence of bool
         Whether each run's surface on the first fold is closed (``closed``).
+    ses : float, optional
+        The stage's paired standard errors (default: the last stage's).
 
     Returns
     -------
@@ -910,8 +964,9 @@ def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
         Per run that leaves, its mean cost's excess over the best's and the paired standard
         error of that excess; None for the others.
     """
-    every = _far(partial, block, [True] * len(partial))
-    enclosing = _far(partial, block, closed)
+    ses = RACE_STAGES[-1][1] if ses is None else ses
+    every = _far(partial, block, [True] * len(partial), ses)
+    enclosing = _far(partial, block, closed, ses)
     return [gap if raced and gap is not None and (not shut or enclosing[i] is not None)
             else None
             for i, (gap, raced, shut) in enumerate(zip(every, racing, closed, strict=True))]
@@ -1256,7 +1311,7 @@ def format_choice(choice: AutoChoice) -> str:
         if c.status == "skipped":
             lines.append(f"{start} not fitted (the ladder stopped before its level)")
         elif c.status == "outpaced":
-            lines.append(f"{start} left after {RACE_FOLDS} folds, far worse than the best")
+            lines.append(f"{start} left after {c.folds} fold(s), far worse than the best")
         elif not c.scored:
             lines.append(f"{start} FAILED: {c.reason[:50]}")
         else:

@@ -52,6 +52,7 @@ import tempfile
 import threading
 import time
 import traceback
+import types
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -89,6 +90,10 @@ WORKER_RUNS = 50
 WARM_AHEAD = 3
 # Modules a worker imports before its first job (the methods' and scoring's heavy imports).
 WORKER_PRELOAD = ("numpy", "scipy.spatial", "open3d", "pymeshlab", "metrics.score")
+# Modules a fit worker never uses that a preloaded one imports: Open3D's plotly drawing, which
+# imports dash, plotly, IPython and werkzeug (half of Open3D's import time, a third of a
+# worker's start-up CPU; docs/decisions.md). A worker gets stand-ins (``leave_out_unused``).
+UNUSED_MODULES = ("open3d.visualization.draw_plotly",)
 # How often the parent polls the worker, seconds (start, growing to the maximum): for the stage
 # and the limits. A finished run does not wait for the next poll: the worker wakes its parent
 # (``_Worker.wake``; polling alone left a finished run waiting half the maximum on average,
@@ -220,6 +225,7 @@ def _serve(parent: int, wake: int | None = None) -> int:
 
     _die_with_parent(parent)
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    leave_out_unused()
     for name in WORKER_PRELOAD:
         try:
             importlib.import_module(name)
@@ -239,6 +245,31 @@ def _serve(parent: int, wake: int | None = None) -> int:
             except OSError:  # the parent closed its end: it no longer waits
                 pass
     return 0
+
+
+def leave_out_unused() -> None:
+    """Put a stand-in (``_stand_in``) for each of ``UNUSED_MODULES`` not imported yet into
+    ``sys.modules``, so that importing the library that imports it skips it."""
+    for name in UNUSED_MODULES:
+        sys.modules.setdefault(name, _stand_in(name))
+
+
+def _stand_in(name: str) -> types.ModuleType:
+    """A module ``name`` whose every public attribute is a function raising ``RuntimeError``:
+    importing names from it succeeds (whatever names a library's version imports), calling
+    them says that recon left the module out."""
+    module = types.ModuleType(name, "left out of recon's fit workers (UNUSED_MODULES)")
+
+    def absent(*args, **kwargs):
+        raise RuntimeError(f"{name} is left out of recon's fit workers")
+
+    def attribute(key: str):
+        if key.startswith("__"):   # the import machinery's questions: a plain module
+            raise AttributeError(key)
+        return absent
+
+    module.__getattr__ = attribute
+    return module
 
 
 def _warm(jobdir: Path, truths: dict[str, Any]) -> None:

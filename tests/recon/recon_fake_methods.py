@@ -42,6 +42,13 @@ def _refuse(cloud: MethodInput) -> tuple[np.ndarray, np.ndarray]:
     raise MethodFailed("test-refuse: refused on purpose")
 
 
+def _modules(cloud: MethodInput) -> tuple[np.ndarray, np.ndarray]:
+    import sys
+
+    loaded = [name for name in ("open3d", "dash", "plotly") if name in sys.modules]
+    raise MethodFailed(f"test-modules: loaded {','.join(loaded)}")
+
+
 for name, run, params in [
     ("test-abort", _abort, {}),
     ("test-hang", _hang, {"seconds": Param(3600.0, float, "how long to hang", minimum=0.0,
@@ -51,6 +58,7 @@ for name, run, params in [
     ("test-empty", _empty, {}),
     ("test-flat", _flat, {}),
     ("test-refuse", _refuse, {}),
+    ("test-modules", _modules, {}),
 ]:
     register(Method(name=name, run=run, params=params, kind="test", hidden=True,
                     summary="test-only"))

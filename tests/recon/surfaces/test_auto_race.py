@@ -25,7 +25,7 @@ def test_outpaced_drops_a_run_far_worse_and_keeps_a_close_one():
     leaves = outpaced([best, close, far, None], block, [True] * 4, [False] * 4)
     assert leaves[0] is None and leaves[1] is None and leaves[3] is None
     gap, se = leaves[2]
-    assert gap == pytest.approx(2.0, abs=0.1) and gap > auto.RACE_SES * se
+    assert gap == pytest.approx(2.0, abs=0.1) and gap > auto.RACE_STAGES[-1][1] * se
     # a run of a level that is not raced stays however far it is
     assert outpaced([best, far], block, [True, False], [False, False]) == [None, None]
 
@@ -39,28 +39,36 @@ def test_outpaced_keeps_the_best_closed_run():
     assert leaves[1] is None and leaves[2] is not None
 
 
-def test_racing_leaves_the_far_run_after_two_folds_and_chooses_as_the_full_ladder(
-        monkeypatch, fitted_labels):
+@pytest.mark.parametrize("stages, folds", [
+    (None, 1),                                           # auto's stages: gone after one fold
+    (((1, float("inf")), (2, 2.0 * auto.BAND_SES)), 2),  # kept by the first, out at the second
+])
+def test_racing_leaves_the_far_run_after_its_stage_and_chooses_as_the_full_ladder(
+        monkeypatch, fitted_labels, stages, folds):
     """On a noisy sphere the ellipsoid is exact and a polyhedron of planes far worse: raced at
-    level 1, the planes leave after two folds (two fits, not four) and a coarser ellipsoid
-    mesh, close to the best, stays; the choice and every remaining candidate's figures are
-    those of the ladder without the race."""
+    level 1, the planes leave at the first stage that can tell (one fit, or two when the first
+    stage keeps every run; not four) and a coarser ellipsoid mesh, close to the best, stays;
+    the choice and every remaining candidate's figures are those of the ladder without the
+    race."""
     cloud, view = small_sphere()
     monkeypatch.setattr(auto, "LADDER", ((("ellipsoid", {}),),
                                          (("planes", {}), ("ellipsoid", {"subdivisions": 3}))))
     monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
+    if stages is not None:
+        monkeypatch.setattr(auto, "RACE_STAGES", stages)
     options = {"view_points": view, "uncertainty": cloud.attributes, "seed": 0}
     fits = fitted_labels
     raced = choose(cloud.points, **options)
-    # each run fitted once a fold: the planes on the two racing folds only
+    # each run fitted once a fold: the planes on the folds of the stage they left at
     assert sorted(fits) == sorted(["ellipsoid"] * 4 + ["ellipsoid subdivisions=3"] * 4
-                                  + ["planes"] * 2)
-    monkeypatch.setattr(auto, "RACE_SES", float("inf"))
+                                  + ["planes"] * folds)
+    monkeypatch.setattr(auto, "RACE_STAGES", ())
     full = choose(cloud.points, **options)
     table = {c.label: c for c in raced.candidates}
     whole = {c.label: c for c in full.candidates}
     assert table["planes"].status == "outpaced", format_choice(raced)
-    assert not table["planes"].scored and "first 2 folds" in table["planes"].reason
+    assert not table["planes"].scored and table["planes"].folds == folds
+    assert f"first {folds} fold(s)" in table["planes"].reason
     assert whole["planes"].scored and whole["planes"].chi2 > 5 * whole["ellipsoid"].chi2
     assert table["ellipsoid subdivisions=3"].scored
     assert raced.label == full.label == "ellipsoid"
@@ -69,6 +77,6 @@ def test_racing_leaves_the_far_run_after_two_folds_and_chooses_as_the_full_ladde
             assert (c.chi2, c.chi2_se, c.holes, c.n_faces) == \
                 (whole[label].chi2, whole[label].chi2_se, whole[label].holes,
                  whole[label].n_faces)
-    assert "left after 2 folds" in format_choice(raced)
-    assert "1 of them fitted on the first 2 folds only, far worse than the best there " \
-        "(planes)" in raced.reason
+    assert f"left after {folds} fold(s)" in format_choice(raced)
+    assert "1 of them fitted on the first fold(s) only, far worse than the best there " \
+        f"(planes on {folds} fold{'s' if folds > 1 else ''})" in raced.reason

@@ -11,7 +11,7 @@ from recon.surfaces.auto import choose, format_choice
 
 # planes (level 0, fitted on every fold) is far from a sphere, the ellipsoid mesh of level 1
 # measurably better: the ladder goes on to level 2, where the planes at a wider threshold are
-# outpaced on the racing folds and the ellipsoid is fitted on every fold.
+# outpaced on the first stage's fold and the ellipsoid is fitted on every fold.
 LADDER = ((("planes", {}),), (("ellipsoid", {"subdivisions": 3}),),
           (("ellipsoid", {}), ("planes", {"threshold": 2.0})))
 
@@ -24,10 +24,10 @@ def figures(choice) -> dict:
 
 def test_fits_are_handed_out_models_first_the_next_level_ahead_and_choose_alike(monkeypatch):
     """One worker runs the fits in the order they are handed out: the models fitted on every
-    fold first, then the raced level on its racing folds, its other folds after the race, and
-    then, before the ladder has decided to go on, the next level on the racing folds; the
-    next level's own call fits only its other folds. The candidates and the choice are those
-    of fitting each level when the ladder reaches it."""
+    fold first, then the raced level fold by fold, each stage of the race after its fold, and
+    then, before the ladder has decided to go on, the next level on the first stage's fold;
+    the next level's own call fits only its other folds (the far planes none). The candidates
+    and the choice are those of fitting each level when the ladder reaches it."""
     cloud, view = small_sphere()
     monkeypatch.setattr(auto, "LADDER", LADDER)
     monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
@@ -51,8 +51,8 @@ def test_fits_are_handed_out_models_first_the_next_level_ahead_and_choose_alike(
              for label, prepared in fits]
     assert order == ([("planes", f) for f in range(4)]
                      + [("ellipsoid subdivisions=3", f) for f in range(4)]
-                     + [("ellipsoid", 0), ("ellipsoid", 1), ("planes threshold=2", 0),
-                        ("planes threshold=2", 1), ("ellipsoid", 2), ("ellipsoid", 3)]), order
+                     + [("ellipsoid", 0), ("planes threshold=2", 0), ("ellipsoid", 1),
+                        ("ellipsoid", 2), ("ellipsoid", 3)]), order
     table = {c.label: c for c in ahead.candidates}
     assert table["planes threshold=2"].status == "outpaced", format_choice(ahead)
     assert table["ellipsoid"].scored and ahead.label.startswith("ellipsoid")
@@ -66,8 +66,43 @@ def test_fits_are_handed_out_models_first_the_next_level_ahead_and_choose_alike(
     monkeypatch.setattr(auto, "_fit_and_judge", unahead)
     fits.clear()
     plain = choose(cloud.points, **options)
-    assert len(fits) == 14 and plain.label == ahead.label
+    assert len(fits) == 13 and plain.label == ahead.label
     assert figures(plain) == figures(ahead)
+
+
+def test_the_next_level_is_handed_out_beside_a_stage_that_leaves_a_worker_idle(monkeypatch):
+    """With two workers, a stage of the race waits for its last fit, or hands out one (the one
+    raced run left in), while a worker is idle: the next level's fits ahead are handed out
+    then, before the race's last folds, instead of after them. The choice is that of the
+    single worker's order."""
+    import concurrent.futures
+
+    cloud, view = small_sphere()
+    monkeypatch.setattr(auto, "LADDER", LADDER)
+    monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
+    handed: list[tuple[str, int]] = []
+    contexts = []
+    context = auto._context
+
+    def kept(*args, **kwargs):
+        contexts.append(context(*args, **kwargs))
+        return contexts[-1]
+
+    class Recorded(concurrent.futures.ThreadPoolExecutor):
+        def submit(self, fn, run, prepared, *args, **kwargs):
+            fold = next(f for f, p in enumerate(contexts[-1].folds) if p.prepared is prepared)
+            handed.append((run.label, fold))
+            return super().submit(fn, run, prepared, *args, **kwargs)
+
+    monkeypatch.setattr(auto, "_context", kept)
+    monkeypatch.setattr(concurrent.futures, "ThreadPoolExecutor", Recorded)
+    options = {"view_points": view, "uncertainty": cloud.attributes, "seed": 0}
+    two = choose(cloud.points, n_workers=2, **options)
+    last = handed.index(("ellipsoid subdivisions=3", 2))
+    assert handed.index(("ellipsoid", 0)) < last, handed
+    assert handed.index(("planes threshold=2", 0)) < last, handed
+    one = choose(cloud.points, n_workers=1, **options)
+    assert figures(one) == figures(two)
 
 
 def test_the_next_level_fitted_ahead_is_dropped_when_the_ladder_stops(monkeypatch,
@@ -82,7 +117,7 @@ def test_the_next_level_fitted_ahead_is_dropped_when_the_ladder_stops(monkeypatc
     monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
     fits = fitted_labels
     choice = choose(cloud.points, view_points=view, uncertainty=cloud.attributes, seed=0)
-    assert fits.count("planes") == 2   # fitted ahead on the racing folds
+    assert fits.count("planes") == 1   # fitted ahead on the first stage's fold
     table = {c.label: c for c in choice.candidates}
     assert table["planes"].status == "skipped", format_choice(choice)
     assert "the ladder stopped after level 1" in choice.reason

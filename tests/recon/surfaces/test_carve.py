@@ -133,7 +133,7 @@ def test_the_ladder_fitted_at_once_judges_as_level_by_level(monkeypatch):
     """``climb`` fits the always-fitted levels together and judges each run as its folds come
     in: the same candidates, in the same order, with the same figures as one level at a
     time (without the race, which a level alone runs against fewer runs)."""
-    monkeypatch.setattr(auto, "RACE_SES", float("inf"))
+    monkeypatch.setattr(auto, "RACE_STAGES", ())
     from formats.geometry import Cloud
     from recon.surfaces.isolation import Limits
     from recon.surfaces.methods import bind

@@ -15,6 +15,7 @@ import recon_fake_methods  # noqa: F401  (registers the test-only methods)
 
 from formats.errors import MethodFailed, ParameterError
 from recon.experiments.compare import compare
+from recon.surfaces import isolation
 from recon.surfaces.isolation import run_isolated
 from recon.surfaces.methods import watertight
 from recon.surfaces.prepare import prepare
@@ -114,6 +115,18 @@ def test_each_runs_peak_memory_is_its_own_in_a_reused_worker(cloud):
     # test-hog returns a one-face mesh: rejected after the method, with its peak recorded.
     assert big["peak_memory_mb"] > big["baseline_memory_mb"] + 550
     assert small["peak_memory_mb"] < small["baseline_memory_mb"] + 100
+
+
+def test_a_worker_imports_open3d_without_its_plotly_drawing(cloud):
+    """A worker has Open3D loaded but not the plotly drawing Open3D imports (dash, plotly): its
+    stand-in imports any name and says what it is when called."""
+    result = run_isolated("test-modules", cloud)
+    assert result["reason"] == "test-modules: loaded open3d", result
+    stand_in = isolation._stand_in("some.module")
+    from_import = stand_in.draw_anything   # what ``from some.module import ...`` reads
+    with pytest.raises(RuntimeError, match=r"some\.module is left out of recon's fit workers"):
+        from_import()
+    assert not hasattr(stand_in, "__path__")   # a plain module to the import machinery
 
 
 def test_a_good_run_returns_its_mesh_time_and_memory(cloud):
