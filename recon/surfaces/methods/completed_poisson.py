@@ -34,15 +34,13 @@ from __future__ import annotations
 import numpy as np
 
 from formats.errors import MethodFailed
-from recon.surfaces.methods import Method, MethodInput, Param, register
+from recon.surfaces.methods import Method, MethodInput, Param, ellipsoid, poisson, register
 from recon.surfaces.methods.ellipsoid import ellipsoid_mesh, fit_quadric
 from recon.surfaces.methods.poisson import MAX_DEPTH, solve
 
-# Sampson-reweighted rounds of the ellipsoid fit: ``ellipsoid``'s default (its module docstring).
-ELLIPSOID_ITERATIONS = 20
-# Reconstruction cube over the points' bounding cube: Open3D's and Kazhdan's default, as
-# ``poisson``'s.
-SCALE = 1.1
+# The ellipsoid fit's rounds and Poisson's reconstruction cube are those methods' defaults.
+ELLIPSOID_ITERATIONS = ellipsoid.METHOD.params["iterations"].default
+SCALE = poisson.METHOD.params["scale"].default
 
 
 def unseen_points(points: np.ndarray, centre: np.ndarray, axes: np.ndarray,
