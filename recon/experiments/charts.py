@@ -46,9 +46,11 @@ METHOD_STYLES = {
     "ball-pivoting": (">", "#ff7f0e"), "ball-pivoting-meshlab": ("P", "#8c564b"),
     "alpha-shape": ("X", "#9467bd"), "rimls": ("*", "#e377c2"), "apss": ("h", "#393b79"),
     "delaunay-balls": ("p", "#111111"), "visibility": ("8", "#e7ba52"),
+    "completed-poisson": ("d", "#843c39"),
 }
-# Styles of methods not listed above (test methods), picked by a checksum of the name.
-EXTRA_MARKERS = ("d", "H", "1", "2", "3", "4")
+# Styles of methods not listed above (test methods), picked by a checksum of the name; filled
+# markers only, since every marker is drawn with a black edge.
+EXTRA_MARKERS = ("H",)
 EXTRA_COLOURS = ("#843c39", "#637939", "#5254a3", "#ad494a", "#8ca252", "#7b4173")
 # The missed gentle edges of an edge picture (often tens of thousands): thin, light, faint.
 GENTLE_EDGE_STYLE = {"colors": "#f5a142", "linewidths": 0.25, "alpha": 0.3, "zorder": 1}

@@ -60,6 +60,15 @@ def test_every_registered_method_has_its_own_style():
     assert charts.method_style("some-test-method") == charts.method_style("some-test-method")
 
 
+def test_every_marker_is_filled_since_it_is_drawn_with_an_edge():
+    from matplotlib.markers import MarkerStyle
+
+    from recon.surfaces.methods import available
+
+    for name in [*available(), "some-test-method", "another-test-method"]:
+        assert MarkerStyle(charts.method_style(name)["marker"]).is_filled(), name
+
+
 def test_labels_are_anchored_on_their_own_markers():
     records = _records(["plane", "delaunay-balls", "screened-poisson", "planes"], 3)
     fig = charts.speed_accuracy_figure(records)
