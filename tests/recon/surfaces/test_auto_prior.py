@@ -186,3 +186,37 @@ def test_listed_candidates_are_not_completed():
     natural = choose(points, view_points=view, candidates=CANDIDATES, seed=0,
                      target_kind="natural")
     assert [c.run.method for c in natural.candidates] == ["ellipsoid", "poisson"]
+
+
+@pytest.mark.parametrize("coverage, chi2, completed", [
+    (0.2, 0.8, True),                  # unseen over most of the body, far better held out
+    (0.2, 1.0, False),                 # no better on the held-out strikes than the choice
+    (NATURAL_COVERAGE, 0.8, False),    # half the body seen: not even fitted
+])
+def test_the_completion_competes_with_the_choice_where_the_prior_does_not_act(
+        monkeypatch, coverage, chi2, completed):
+    from types import SimpleNamespace
+
+    from recon.surfaces import auto
+
+    candidates = [_candidate("poisson", 1.0, 10_000, mean=0.05, closed=False),
+                  _candidate("ellipsoid", 5.0, 9, mean=NATURAL_FIT + 0.5, offset=1)]
+    selection = natural_prior(candidates, select(candidates, BLOCK, 20_000), coverage, tau=1.0)
+    assert not selection.prior
+    fitted = []
+
+    def fit_and_judge(levels, context, **_):
+        fitted.extend(run.method for _, runs in levels for run in runs)
+        return {level: [[_candidate(auto.NATURAL_COMPLETION, chi2, 12_000, mean=0.04, offset=2)]]
+                for level, _ in levels}
+
+    monkeypatch.setattr(auto, "_fit_and_judge", fit_and_judge)
+    table, chosen = auto.complete_prior(candidates, selection, SimpleNamespace(block=BLOCK),
+                                        coverage, limits=None, n_workers=1)
+    assert fitted == ([] if coverage >= NATURAL_COVERAGE else [auto.NATURAL_COMPLETION])
+    assert table[chosen.chosen].run.method == (auto.NATURAL_COMPLETION if completed
+                                                else "poisson")
+    reason = auto.explain(table, chosen, coverage)
+    assert ("the choice among the other candidates" in reason) is completed
+    if completed:
+        assert chosen.completes == 0 and "below poisson (1, open)" in reason
