@@ -30,9 +30,10 @@ def _add_target_kind(p: argparse.ArgumentParser) -> None:
     p.add_argument("--target-kind", choices=TARGET_KINDS, default="unknown",
                    help="what -m auto may assume of the target: 'natural' (an asteroid, a "
                         "comet) lets the ellipsoid stand for a far side the strikes leave "
-                        "unseen, completed by the strikes' own surface where they resolve "
-                        "more (completed-poisson); 'unknown': the strikes and their rays alone "
-                        "decide (default: %(default)s)")
+                        "unseen, alone or completing the strikes' own surface where they are "
+                        "(completed-poisson, taken when the held-out strikes favour it); "
+                        "'unknown': the strikes and their rays alone decide "
+                        "(default: %(default)s)")
 
 
 def _add_input_options(p: argparse.ArgumentParser) -> None:
