@@ -17,7 +17,7 @@ strike. On the Delaunay tetrahedralisation of the strikes that evidence becomes 
    ``DENOISE_K`` and at most ``DENOISE_K_MAX`` (a larger plane rounds edges and curved parts
    more). On noisy LIDAR clouds of generated satellites (noise 0.8 spacings: 60 strikes a
    plane instead of 30) this lowered the Chamfer distance of the surface carved by the missed
-   beams by 3 to 15 % on six of seven (the seventh lost 5 %); their cross LRF clouds (noise
+   beams by 3 to 13 % on six of seven (the seventh lost 5 %); their cross LRF clouds (noise
    0.45 spacings) keep about 30.
 2. **Delaunay** tetrahedralisation (qhull) of the strikes, exact copies merged and the rest
    jittered by ``JITTER`` spacings (seeded) so that coplanar and cospherical samples (a box's
@@ -86,7 +86,7 @@ DENOISE_K, DENOISE_ITERATIONS = 30, 2
 # (noise / (DENOISE_RESIDUAL x spacing))^2 strikes, from DENOISE_K to DENOISE_K_MAX. Measured on
 # the auto suite's 20 noisy generated satellites (tuning clouds; Chamfer distance of the surface
 # carved by the missed beams, against 30 strikes a plane): the LIDAR clouds (noise 0.75-0.85
-# spacings) take 60 and gain 3-15 % on six of seven (one loses 5 %), the single-beam slews
+# spacings) take 60 and gain 3-13 % on six of seven (one loses 5 %), the single-beam slews
 # (0.8-0.95) take 60 and gain 1-6 %, the cross LRF clouds (0.4-0.5) keep 30-38 and move by
 # under 2 %. A uniform 60 cost the cross clouds up to 13 % (rounded edges). Without the cap
 # (up to 128 a plane) the geometric mean gains 4 % instead of 2.6 %, but two slews lose 2 and 5 %
