@@ -35,8 +35,10 @@ next to each other; each is taken by the next shot when a beam from there is pre
 it before a struck voxel (a walk through the map, :meth:`SurfaceMap.visible`), until every shot
 has one (so a large map costs no more visibility tests than the shots need). A shot
 whose aim is beyond one step's reach (``max_rate * step``) turns toward it at the rate limit;
-shots left over when the visible candidates run out hold the boresight, and the law plans anew
-before the next interval (its candidates are used up; the map has grown). So the map, the
+shots left over when the visible candidates run out hold the boresight, and while the frontier
+lasts the law plans anew before the next interval (its candidates are used up; the map has
+grown); in the least-struck phase (below) it waits for the plan's ``GAP_PLAN_INTERVALS``
+intervals to pass. So the map, the
 frontier and the candidates cost once per plan, the prediction and the sweep once per interval;
 a plan is three compiled calls (the recorded beams, the map's update, the candidates; a fourth
 when the enclosed voxels are due) and an interval's sweep one (sim/planner_kernels.py). The
@@ -48,8 +50,12 @@ to aim at) the least-struck surface voxels join the candidates for the rest of t
 (``GAP_RESIDUAL_QUANTILE``): a voxel holding one strike can hold surface farther than the
 coverage tolerance from it, and a voxel an oblique beam crossed beside a thin panel is marked
 free although part of the panel lies in it. So the law keeps striking the surface it has seen
-least, where a fixed slew would keep sweeping, and never idles. With no candidate at all the
-boresight holds its offset (no slew).
+least, where a fixed slew would keep sweeping, and never idles. In this phase a plan comes
+every ``GAP_PLAN_INTERVALS`` intervals and no sooner: an interval that runs out of visible
+candidates holds its remaining shots (most of its candidates are hidden from any one place, so
+a plan at once finds little new, and planning after every short interval cost about half the
+planner's time on the spacecraft: docs/decisions.md). With no candidate at all the boresight
+holds its offset (no slew).
 
 **Candidates set aside** (in that least-struck phase). Late in a run most candidates are hidden
 from any one place (least-struck voxels hard to see, unknown voxels inside a shell not yet
@@ -305,8 +311,9 @@ class GapSeeker:
 
     def command(self, t: np.ndarray, poses=None) -> np.ndarray:
         """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
-        (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old or ran
-        short, then this interval's sweep of its candidates).
+        (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old, or while
+        the frontier lasts when the last interval ran short; then this interval's sweep of its
+        candidates).
 
         Parameters
         ----------
@@ -321,7 +328,7 @@ class GapSeeker:
         (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame
         (the attitude offset the pipeline applies).
         """
-        if self._short or self._age >= GAP_PLAN_INTERVALS:
+        if self._age >= GAP_PLAN_INTERVALS or (self._short and not self.residual):
             self._plan()
         self._age += 1
         self._interval += 1
