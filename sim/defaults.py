@@ -421,6 +421,15 @@ GAP_BLOCK_VOXELS = 2
 # instead was measured slower: docs/decisions.md.)
 GAP_IDLE_INTERVALS = 2
 GAP_RESIDUAL_QUANTILE = 0.25
+# Once the least-struck phase has lasted this many intervals (12 h), the law plans only every
+# GAP_SETTLED_PLAN_INTERVALS intervals (80 min): by then the coverage is within about 0.03 of the
+# target's ceiling on every target of the closed-loop study, what is left to strike is scattered
+# and mostly hidden, and a plan every 16 intervals from then on took 0.01-0.03 off the planner's
+# share of a 96 h run for coverage within 0.011 at every time the study reports (a plan every 8
+# or 16 from the phase's start cost the seed-2 satellite 0.07-0.08 of coverage at 12 h:
+# docs/decisions.md).
+GAP_SETTLED_INTERVALS = 144
+GAP_SETTLED_PLAN_INTERVALS = 16
 # Once the least-struck voxels are candidates, a candidate predicted hidden this many times (each
 # time an interval's sweep reached it) is set aside: no longer walked or chosen (late in a run
 # most candidates are hidden from any one place: a body's unknown interior behind its struck

@@ -54,8 +54,9 @@ least, where a fixed slew would keep sweeping, and never idles. In this phase a 
 every ``GAP_PLAN_INTERVALS`` intervals and no sooner: an interval that runs out of visible
 candidates holds its remaining shots (most of its candidates are hidden from any one place, so
 a plan at once finds little new, and planning after every short interval cost about half the
-planner's time on the spacecraft: docs/decisions.md). With no candidate at all the boresight
-holds its offset (no slew).
+planner's time on the spacecraft: docs/decisions.md); once the phase has lasted
+``GAP_SETTLED_INTERVALS`` intervals, every ``GAP_SETTLED_PLAN_INTERVALS``. With no candidate at
+all the boresight holds its offset (no slew).
 
 **Candidates set aside** (in that least-struck phase). Late in a run most candidates are hidden
 from any one place (least-struck voxels hard to see, unknown voxels inside a shell not yet
@@ -92,6 +93,8 @@ from sim.defaults import (
     GAP_MAX_CANDIDATES,
     GAP_PLAN_INTERVALS,
     GAP_RESIDUAL_QUANTILE,
+    GAP_SETTLED_INTERVALS,
+    GAP_SETTLED_PLAN_INTERVALS,
     GAP_VOXEL_FRACTION,
     GAP_VOXEL_MIN_DEG,
     GAP_VOXEL_REBUILD,
@@ -203,6 +206,7 @@ class GapSeeker:
         self._radius = 0.0                                   # farthest strike from the centre
         self.residual = False                                # frontier exhausted
         self._idle = 0                                       # intervals with nothing to aim at
+        self._residual_from = 0                              # interval the phase began
         self._interval = 0                                   # intervals commanded so far
         self._readmitted = 0                                 # at the last re-admission
         self._enclosed = -GAP_ENCLOSE_INTERVALS              # at the last enclose,
@@ -304,16 +308,18 @@ class GapSeeker:
         """Count intervals with nothing to aim at; after ``GAP_IDLE_INTERVALS`` of them in a
         row the frontier is taken as exhausted and the least-struck surface voxels join it."""
         self._idle = 0 if aimed else self._idle + 1
-        if self._idle >= GAP_IDLE_INTERVALS:
+        if self._idle >= GAP_IDLE_INTERVALS and not self.residual:
             self.residual = True
+            self._residual_from = self._interval
 
     # ------------------------------------------------------------------ the plan
 
     def command(self, t: np.ndarray, poses=None) -> np.ndarray:
         """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
-        (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old, or while
-        the frontier lasts when the last interval ran short; then this interval's sweep of its
-        candidates).
+        (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old
+        (``GAP_SETTLED_PLAN_INTERVALS`` once the least-struck phase has lasted
+        ``GAP_SETTLED_INTERVALS``), or while the frontier lasts when the last interval ran
+        short; then this interval's sweep of its candidates).
 
         Parameters
         ----------
@@ -328,7 +334,11 @@ class GapSeeker:
         (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame
         (the attitude offset the pipeline applies).
         """
-        if self._age >= GAP_PLAN_INTERVALS or (self._short and not self.residual):
+        wait = GAP_PLAN_INTERVALS
+        if (self.residual and
+                self._interval - self._residual_from >= GAP_SETTLED_INTERVALS):
+            wait = GAP_SETTLED_PLAN_INTERVALS
+        if self._age >= wait or (self._short and not self.residual):
             self._plan()
         self._age += 1
         self._interval += 1
