@@ -406,8 +406,8 @@ GAP_MAX_CANDIDATES = 2048
 # are chosen anew) at most this many replanning intervals apart; while the frontier lasts, sooner
 # when an interval could not aim every shot at a candidate (sim/gap_seeking.py). Planning
 # everything every interval cost 70-85 % of a closed-loop run; in the least-struck phase, planning
-# after every short interval too made 437 of RSO-A's 1,152 plans for coverage within 0.002 of
-# planning on this cadence only (docs/decisions.md).
+# after every short interval too made 437 plans in RSO-A's 984 intervals of that phase instead of
+# 246, for coverage within 0.0025 at every time the study reports (docs/decisions.md).
 GAP_PLAN_INTERVALS = 4
 # One candidate per cube of this many voxels on a side: a strike is expected to settle the
 # frontier around its aim.
@@ -422,9 +422,9 @@ GAP_BLOCK_VOXELS = 2
 GAP_IDLE_INTERVALS = 2
 GAP_RESIDUAL_QUANTILE = 0.25
 # Once the least-struck phase has lasted this many intervals (12 h), the law plans only every
-# GAP_SETTLED_PLAN_INTERVALS intervals (80 min): by then the coverage is within about 0.03 of the
+# GAP_SETTLED_PLAN_INTERVALS intervals (80 min): by then the coverage is within 0.01-0.05 of the
 # target's ceiling on every target of the closed-loop study, what is left to strike is scattered
-# and mostly hidden, and a plan every 16 intervals from then on took 0.01-0.03 off the planner's
+# and mostly hidden, and a plan every 16 intervals from then on took 0.02-0.03 off the planner's
 # share of a 96 h run for coverage within 0.011 at every time the study reports (a plan every 8
 # or 16 from the phase's start cost the seed-2 satellite 0.07-0.08 of coverage at 12 h:
 # docs/decisions.md).

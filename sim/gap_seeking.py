@@ -53,8 +53,8 @@ free although part of the panel lies in it. So the law keeps striking the surfac
 least, where a fixed slew would keep sweeping, and never idles. In this phase a plan comes
 every ``GAP_PLAN_INTERVALS`` intervals and no sooner: an interval that runs out of visible
 candidates holds its remaining shots (most of its candidates are hidden from any one place, so
-a plan at once finds little new, and planning after every short interval cost about half the
-planner's time on the spacecraft: docs/decisions.md); once the phase has lasted
+a plan at once finds little new; planning after every short interval made 1.4-2 times as many
+plans on the spacecraft: docs/decisions.md); once the phase has lasted
 ``GAP_SETTLED_INTERVALS`` intervals, every ``GAP_SETTLED_PLAN_INTERVALS``. With no candidate at
 all the boresight holds its offset (no slew).
 
