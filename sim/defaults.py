@@ -422,7 +422,7 @@ GAP_BLOCK_VOXELS = 2
 GAP_IDLE_INTERVALS = 2
 GAP_RESIDUAL_QUANTILE = 0.25
 # Once the least-struck phase has lasted this many intervals (12 h), the law plans only every
-# GAP_SETTLED_PLAN_INTERVALS intervals (80 min): by then the coverage is within 0.01-0.05 of the
+# GAP_SETTLED_PLAN_INTERVALS intervals (80 min): by then the coverage is within 0.002-0.05 of the
 # target's ceiling on every target of the closed-loop study, what is left to strike is scattered
 # and mostly hidden, and a plan every 16 intervals from then on took 0.02-0.03 off the planner's
 # share of a 96 h run for coverage within 0.011 at every time the study reports (a plan every 8
