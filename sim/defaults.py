@@ -403,11 +403,12 @@ GAP_MARGIN_FRACTION = 0.25
 # shots aims at most 120 of them.
 GAP_MAX_CANDIDATES = 2048
 # The law plans (the map takes the intervals observed since; the frontier and the candidates
-# are chosen anew) at most this many replanning intervals apart; while the frontier lasts, sooner
-# when an interval could not aim every shot at a candidate (sim/gap_seeking.py). Planning
-# everything every interval cost 70-85 % of a closed-loop run; in the least-struck phase, planning
-# after every short interval too made 437 plans in RSO-A's 984 intervals of that phase instead of
-# 246, for coverage within 0.0025 at every time the study reports (docs/decisions.md).
+# are chosen anew) at most this many replanning intervals apart (GAP_SETTLED_PLAN_INTERVALS late
+# in the least-struck phase, below); while the frontier lasts, sooner when an interval could not
+# aim every shot at a candidate (sim/gap_seeking.py). Planning everything every interval cost
+# 70-85 % of a closed-loop run; in the least-struck phase, planning after every short interval
+# too made 437 plans in RSO-A's 984 intervals of that phase instead of 246, for coverage within
+# 0.0025 at every time the study reports (docs/decisions.md).
 GAP_PLAN_INTERVALS = 4
 # One candidate per cube of this many voxels on a side: a strike is expected to settle the
 # frontier around its aim.

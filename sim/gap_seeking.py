@@ -23,27 +23,27 @@ voxels the struck ones enclose (a body's interior once its struck shell is close
 have passed since the last time (a flood fill over the map: too costly for every plan), the
 wait doubled after a fill that found nothing new, up to ``GAP_ENCLOSE_MAX_INTERVALS``.
 
-**The plan** (:meth:`GapSeeker.command`). The law plans at most every ``GAP_PLAN_INTERVALS``
-intervals: it takes the intervals observed since into the map (all at once) and chooses the
-plan's candidates, the frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side
-(a strike is expected to settle the frontier around its aim). Every interval it then predicts,
-from its orbit and the known spin, where the chaser is in B at the interval's middle shot.
-The candidates not yet aimed at and within ``attitude.max_offset_deg`` of the nominal boresight
-are taken in a sweep, rows two voxels wide across the view, alternately left and right, going
-on from the boresight's row (the rows below it, then from the top), so that consecutive aims lie
-next to each other; each is taken by the next shot when a beam from there is predicted to reach
-it before a struck voxel (a walk through the map, :meth:`SurfaceMap.visible`), until every shot
-has one (so a large map costs no more visibility tests than the shots need). A shot
-whose aim is beyond one step's reach (``max_rate * step``) turns toward it at the rate limit;
-shots left over when the visible candidates run out hold the boresight, and while the frontier
-lasts the law plans anew before the next interval (its candidates are used up; the map has
-grown); in the least-struck phase (below) it waits for the plan's ``GAP_PLAN_INTERVALS``
-intervals to pass. So the map, the
-frontier and the candidates cost once per plan, the prediction and the sweep once per interval;
-a plan is three compiled calls (the recorded beams, the map's update, the candidates; a fourth
-when the enclosed voxels are due) and an interval's sweep one (sim/planner_kernels.py). The
-poses of an interval (where the chaser is, the target's attitude, the nominal sensor frame) are
-those the simulation computes for its shots anyway, handed to :meth:`GapSeeker.command`.
+**The plan** (:meth:`GapSeeker.command`). The law plans at most ``GAP_PLAN_INTERVALS`` intervals
+apart (``GAP_SETTLED_PLAN_INTERVALS`` late in the least-struck phase, below): it takes the
+intervals observed since into the map (all at once) and chooses the plan's candidates, the
+frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side (a strike is expected to
+settle the frontier around its aim). Every interval it then predicts, from its orbit and the
+known spin, where the chaser is in B at the interval's middle shot. The candidates not yet aimed
+at and within ``attitude.max_offset_deg`` of the nominal boresight are taken in a sweep, rows
+two voxels wide across the view, alternately left and right, going on from the boresight's row
+(the rows below it, then from the top), so that consecutive aims lie next to each other; each is
+taken by the next shot when a beam from there is predicted to reach it before a struck voxel (a
+walk through the map, :meth:`SurfaceMap.visible`), until every shot has one (so a large map
+costs no more visibility tests than the shots need). A shot whose aim is beyond one step's reach
+(``max_rate * step``) turns toward it at the rate limit; shots left over when the visible
+candidates run out hold the boresight, and while the frontier lasts the law plans anew before
+the next interval (its candidates are used up; the map has grown); in the least-struck phase
+(below) it waits for the next plan on its cadence. So the map, the frontier and the candidates
+cost once per plan, the prediction and the sweep once per interval; a plan is three compiled
+calls (the recorded beams, the map's update, the candidates; a fourth when the enclosed voxels
+are due) and an interval's sweep one (sim/planner_kernels.py). The poses of an interval (where
+the chaser is, the target's attitude, the nominal sensor frame) are those the simulation
+computes for its shots anyway, handed to :meth:`GapSeeker.command`.
 
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run
@@ -53,7 +53,7 @@ free although part of the panel lies in it. So the law keeps striking the surfac
 least, where a fixed slew would keep sweeping, and never idles. In this phase a plan comes
 every ``GAP_PLAN_INTERVALS`` intervals and no sooner: an interval that runs out of visible
 candidates holds its remaining shots (most of its candidates are hidden from any one place, so
-a plan at once finds little new; planning after every short interval made 1.4-2 times as many
+a plan at once finds little new; planning after every short interval made 1.4-2.1 times as many
 plans on the spacecraft: docs/decisions.md); once the phase has lasted
 ``GAP_SETTLED_INTERVALS`` intervals, every ``GAP_SETTLED_PLAN_INTERVALS``. With no candidate at
 all the boresight holds its offset (no slew).
