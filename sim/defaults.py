@@ -403,9 +403,12 @@ GAP_MARGIN_FRACTION = 0.25
 # shots aims at most 120 of them.
 GAP_MAX_CANDIDATES = 2048
 # The law plans (the map takes the intervals observed since; the frontier and the candidates
-# are chosen anew) at most this many replanning intervals apart, sooner when an interval could
-# not aim every shot at a candidate (sim/gap_seeking.py). Planning everything every interval cost
-# 70-85 % of a closed-loop run (docs/decisions.md).
+# are chosen anew) at most this many replanning intervals apart (GAP_SETTLED_PLAN_INTERVALS late
+# in the least-struck phase, below); while the frontier lasts, sooner when an interval could not
+# aim every shot at a candidate (sim/gap_seeking.py). Planning everything every interval cost
+# 70-85 % of a closed-loop run; in the least-struck phase, planning after every short interval
+# too made 437 plans in RSO-A's 984 intervals of that phase instead of 246, for coverage within
+# 0.0025 at every time the study reports (docs/decisions.md).
 GAP_PLAN_INTERVALS = 4
 # One candidate per cube of this many voxels on a side: a strike is expected to settle the
 # frontier around its aim.
@@ -419,6 +422,15 @@ GAP_BLOCK_VOXELS = 2
 # instead was measured slower: docs/decisions.md.)
 GAP_IDLE_INTERVALS = 2
 GAP_RESIDUAL_QUANTILE = 0.25
+# Once the least-struck phase has lasted this many intervals (12 h), the law plans only every
+# GAP_SETTLED_PLAN_INTERVALS intervals (80 min): by then the coverage is within 0.002-0.05 of the
+# target's ceiling on every target of the closed-loop study, what is left to strike is scattered
+# and mostly hidden, and a plan every 16 intervals from then on took 0.02-0.03 off the planner's
+# share of a 96 h run for coverage within 0.011 at every time the study reports (a plan every 8
+# or 16 from the phase's start cost the seed-2 satellite 0.07-0.08 of coverage at 12 h:
+# docs/decisions.md).
+GAP_SETTLED_INTERVALS = 144
+GAP_SETTLED_PLAN_INTERVALS = 16
 # Once the least-struck voxels are candidates, a candidate predicted hidden this many times (each
 # time an interval's sweep reached it) is set aside: no longer walked or chosen (late in a run
 # most candidates are hidden from any one place: a body's unknown interior behind its struck
@@ -435,5 +447,8 @@ GAP_ASIDE_INTERVALS = 24
 # (with a fill every 24 intervals the 85 deg asteroid's interior, 33,000 voxels, was enclosed by
 # one fill at about 23 h and 108 more voxels by the next 35 fills; RSO-A's inside, 6,000, by one
 # fill, then none), and a fill costs about as much as two or three plans (docs/decisions.md).
+# The longest wait, 32 h, lets a map whose shell is closed skip most fills for the rest of a run
+# (with 8 h, 22 fills in the 85 deg asteroid's 96 h, most of them after its shell closed at 28 h,
+# enclosing nothing: about a tenth of its planner's time).
 GAP_ENCLOSE_INTERVALS = 24
-GAP_ENCLOSE_MAX_INTERVALS = 96
+GAP_ENCLOSE_MAX_INTERVALS = 384

@@ -23,33 +23,40 @@ voxels the struck ones enclose (a body's interior once its struck shell is close
 have passed since the last time (a flood fill over the map: too costly for every plan), the
 wait doubled after a fill that found nothing new, up to ``GAP_ENCLOSE_MAX_INTERVALS``.
 
-**The plan** (:meth:`GapSeeker.command`). The law plans at most every ``GAP_PLAN_INTERVALS``
-intervals: it takes the intervals observed since into the map (all at once) and chooses the
-plan's candidates, the frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side
-(a strike is expected to settle the frontier around its aim). Every interval it then predicts,
-from its orbit and the known spin, where the chaser is in B at the interval's middle shot.
-The candidates not yet aimed at and within ``attitude.max_offset_deg`` of the nominal boresight
-are taken in a sweep, rows two voxels wide across the view, alternately left and right, going
-on from the boresight's row (the rows below it, then from the top), so that consecutive aims lie
-next to each other; each is taken by the next shot when a beam from there is predicted to reach
-it before a struck voxel (a walk through the map, :meth:`SurfaceMap.visible`), until every shot
-has one (so a large map costs no more visibility tests than the shots need). A shot
-whose aim is beyond one step's reach (``max_rate * step``) turns toward it at the rate limit;
-shots left over when the visible candidates run out hold the boresight, and the law plans anew
-before the next interval (its candidates are used up; the map has grown). So the map, the
-frontier and the candidates cost once per plan, the prediction and the sweep once per interval;
-a plan is three compiled calls (the recorded beams, the map's update, the candidates; a fourth
-when the enclosed voxels are due) and an interval's sweep one (sim/planner_kernels.py). The
-poses of an interval (where the chaser is, the target's attitude, the nominal sensor frame) are
-those the simulation computes for its shots anyway, handed to :meth:`GapSeeker.command`.
+**The plan** (:meth:`GapSeeker.command`). The law plans at most ``GAP_PLAN_INTERVALS`` intervals
+apart (``GAP_SETTLED_PLAN_INTERVALS`` late in the least-struck phase, below): it takes the
+intervals observed since into the map (all at once) and chooses the plan's candidates, the
+frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side (a strike is expected to
+settle the frontier around its aim). Every interval it then predicts, from its orbit and the
+known spin, where the chaser is in B at the interval's middle shot. The candidates not yet aimed
+at and within ``attitude.max_offset_deg`` of the nominal boresight are taken in a sweep, rows
+two voxels wide across the view, alternately left and right, going on from the boresight's row
+(the rows below it, then from the top), so that consecutive aims lie next to each other; each is
+taken by the next shot when a beam from there is predicted to reach it before a struck voxel (a
+walk through the map, :meth:`SurfaceMap.visible`), until every shot has one (so a large map
+costs no more visibility tests than the shots need). A shot whose aim is beyond one step's reach
+(``max_rate * step``) turns toward it at the rate limit; shots left over when the visible
+candidates run out hold the boresight, and while the frontier lasts the law plans anew before
+the next interval (its candidates are used up; the map has grown); in the least-struck phase
+(below) it waits for the next plan on its cadence. So the map, the frontier and the candidates
+cost once per plan, the prediction and the sweep once per interval; a plan is three compiled
+calls (the recorded beams, the map's update, the candidates; a fourth when the enclosed voxels
+are due) and an interval's sweep one (sim/planner_kernels.py). The poses of an interval (where
+the chaser is, the target's attitude, the nominal sensor frame) are those the simulation
+computes for its shots anyway, handed to :meth:`GapSeeker.command`.
 
 **When the frontier runs out** (``GAP_IDLE_INTERVALS`` intervals in a row with nothing visible
 to aim at) the least-struck surface voxels join the candidates for the rest of the run
 (``GAP_RESIDUAL_QUANTILE``): a voxel holding one strike can hold surface farther than the
 coverage tolerance from it, and a voxel an oblique beam crossed beside a thin panel is marked
 free although part of the panel lies in it. So the law keeps striking the surface it has seen
-least, where a fixed slew would keep sweeping, and never idles. With no candidate at all the
-boresight holds its offset (no slew).
+least, where a fixed slew would keep sweeping, and never idles. In this phase a plan comes
+every ``GAP_PLAN_INTERVALS`` intervals and no sooner: an interval that runs out of visible
+candidates holds its remaining shots (most of its candidates are hidden from any one place, so
+a plan at once finds little new; planning after every short interval made 1.4-2.1 times as many
+plans on the spacecraft: docs/decisions.md); once the phase has lasted
+``GAP_SETTLED_INTERVALS`` intervals, every ``GAP_SETTLED_PLAN_INTERVALS``. With no candidate at
+all the boresight holds its offset (no slew).
 
 **Candidates set aside** (in that least-struck phase). Late in a run most candidates are hidden
 from any one place (least-struck voxels hard to see, unknown voxels inside a shell not yet
@@ -86,6 +93,8 @@ from sim.defaults import (
     GAP_MAX_CANDIDATES,
     GAP_PLAN_INTERVALS,
     GAP_RESIDUAL_QUANTILE,
+    GAP_SETTLED_INTERVALS,
+    GAP_SETTLED_PLAN_INTERVALS,
     GAP_VOXEL_FRACTION,
     GAP_VOXEL_MIN_DEG,
     GAP_VOXEL_REBUILD,
@@ -197,6 +206,7 @@ class GapSeeker:
         self._radius = 0.0                                   # farthest strike from the centre
         self.residual = False                                # frontier exhausted
         self._idle = 0                                       # intervals with nothing to aim at
+        self._residual_from = 0                              # interval the phase began
         self._interval = 0                                   # intervals commanded so far
         self._readmitted = 0                                 # at the last re-admission
         self._enclosed = -GAP_ENCLOSE_INTERVALS              # at the last enclose,
@@ -298,15 +308,18 @@ class GapSeeker:
         """Count intervals with nothing to aim at; after ``GAP_IDLE_INTERVALS`` of them in a
         row the frontier is taken as exhausted and the least-struck surface voxels join it."""
         self._idle = 0 if aimed else self._idle + 1
-        if self._idle >= GAP_IDLE_INTERVALS:
+        if self._idle >= GAP_IDLE_INTERVALS and not self.residual:
             self.residual = True
+            self._residual_from = self._interval
 
     # ------------------------------------------------------------------ the plan
 
     def command(self, t: np.ndarray, poses=None) -> np.ndarray:
         """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
-        (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old or ran
-        short, then this interval's sweep of its candidates).
+        (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old
+        (``GAP_SETTLED_PLAN_INTERVALS`` once the least-struck phase has lasted
+        ``GAP_SETTLED_INTERVALS``), or while the frontier lasts when the last interval ran
+        short; then this interval's sweep of its candidates).
 
         Parameters
         ----------
@@ -321,7 +334,11 @@ class GapSeeker:
         (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame
         (the attitude offset the pipeline applies).
         """
-        if self._short or self._age >= GAP_PLAN_INTERVALS:
+        wait = GAP_PLAN_INTERVALS
+        if (self.residual and
+                self._interval - self._residual_from >= GAP_SETTLED_INTERVALS):
+            wait = GAP_SETTLED_PLAN_INTERVALS
+        if self._age >= wait or (self._short and not self.residual):
             self._plan()
         self._age += 1
         self._interval += 1

@@ -213,9 +213,43 @@ def test_a_plan_leaves_out_what_the_struck_voxels_enclose_and_fills_less_often_w
     assert len(keys) and not ((unpack(keys) >= 1) & (unpack(keys) <= 4)).all(axis=1).any()
     assert law._enclose_wait == GAP_ENCLOSE_INTERVALS   # it enclosed some: the wait stays
     waits = []
-    for _ in range(4):                                 # nothing new to enclose: the wait doubles
+    for _ in range(6):                                 # nothing new to enclose: the wait doubles
         law._interval += law._enclose_wait
         _pool(law)
         waits.append(law._enclose_wait)
     assert waits == [min(GAP_ENCLOSE_INTERVALS * 2 ** k, GAP_ENCLOSE_MAX_INTERVALS)
-                     for k in range(1, 5)]
+                     for k in range(1, 7)]
+    assert waits[-1] == GAP_ENCLOSE_MAX_INTERVALS        # up to its longest
+
+
+def test_a_short_interval_calls_a_plan_at_once_only_while_the_frontier_lasts():
+    from sim.defaults import (
+        GAP_IDLE_INTERVALS,
+        GAP_PLAN_INTERVALS,
+        GAP_SETTLED_INTERVALS,
+        GAP_SETTLED_PLAN_INTERVALS,
+    )
+
+    law = GapSeeker(step=10.0, max_rate=math.radians(1), max_offset=math.radians(30),
+                    poses=None, beams=np.array([[0.0, 0.0, 1.0]]))
+    plans = []
+
+    def plan():                       # a plan that finds nothing to aim at: every interval
+        plans.append(law._interval)   # runs short, and after GAP_IDLE_INTERVALS of them the
+        law._age = 0                  # law is in the least-struck phase
+
+    law._plan = plan
+    settled = GAP_IDLE_INTERVALS + GAP_SETTLED_INTERVALS     # the first settled interval
+    n = settled + 3 * GAP_SETTLED_PLAN_INTERVALS
+    for _ in range(n):
+        turn = law.command(np.arange(30.0))
+        np.testing.assert_array_equal(turn, np.tile(np.eye(3), (30, 1, 1)))   # held on nadir
+    assert law.residual
+    # The frontier phase plans after every short interval, the least-struck phase every
+    # GAP_PLAN_INTERVALS, and once it has lasted GAP_SETTLED_INTERVALS, every
+    # GAP_SETTLED_PLAN_INTERVALS.
+    last = GAP_IDLE_INTERVALS - 1
+    early = list(range(last + GAP_PLAN_INTERVALS, settled, GAP_PLAN_INTERVALS))
+    late = list(range(early[-1] + GAP_SETTLED_PLAN_INTERVALS, n, GAP_SETTLED_PLAN_INTERVALS))
+    assert plans == [*range(GAP_IDLE_INTERVALS), *early, *late]
+    assert len(late) >= 2
