@@ -96,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     size_progress_bars()
     parser = build_parser()
     args = parser.parse_args(argv)   # --help and usage errors end here, before any import below
+    args.own_process = argv is None   # the recon command itself, not a caller of main(argv)
     if args.command is None:
         parser.print_help()
         return 1

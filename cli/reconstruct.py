@@ -235,7 +235,9 @@ def run_reconstruct(args) -> int:
             args.input, args.output, method=args.method, params=args.param,
             auto_methods=args.auto_methods, holdout=args.holdout,
             target_kind=args.target_kind, isolate=not args.in_process,
-            on_wait=bar, say=None if args.json else print, **_preparation(args), **_limits(args))
+            on_wait=bar, say=None if args.json else print,
+            own_process=getattr(args, "own_process", False), **_preparation(args),
+            **_limits(args))
     if args.json:
         _print_json(result.to_dict())
     else:

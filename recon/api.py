@@ -26,8 +26,10 @@ Importing this module is light (no numpy, h5py or Open3D): each verb imports wha
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -1032,7 +1034,8 @@ def reconstruct_file(input, output, *, method: str = "poisson",
                      memory_limit: int | None = None, auto_methods: Sequence[str] | None = None,
                      holdout: float | None = None, target_kind: str = "unknown",
                      on_wait: Callable[[str], None] | None = None,
-                     say: Callable[[str], None] | None = None) -> ReconstructResult:
+                     say: Callable[[str], None] | None = None,
+                     own_process: bool = False) -> ReconstructResult:
     """``reconstruct`` from a cloud file or strike log to a mesh file (``recon reconstruct``).
 
     Parameters
@@ -1045,6 +1048,10 @@ def reconstruct_file(input, output, *, method: str = "poisson",
         Called with the isolated run's stage while waiting.
     say : callable, optional
         ``method="auto"``: called with the candidates table and the reason once chosen.
+    own_process : bool
+        The caller owns its process (a program, such as the ``recon`` command, not a library's
+        caller) and calls this before numpy or Open3D is imported: the process is set up for
+        the reconstruction (``_own_process``).
     method, remove_outliers, voxel, normals_k, orient, seed, isolate, timeout, memory_limit,
     auto_methods, holdout, target_kind
         As ``reconstruct``.
@@ -1053,11 +1060,31 @@ def reconstruct_file(input, output, *, method: str = "poisson",
     -------
     ReconstructResult
     """
+    if own_process:
+        _own_process(method)
     return _reconstruct(input, output, method=method, params=params,
                         preparation=(remove_outliers, voxel, normals_k, orient, seed),
                         timeout=timeout, memory_limit=memory_limit, isolate=isolate,
                         auto_methods=auto_methods, holdout=holdout, target_kind=target_kind,
                         on_wait=on_wait, say=say)
+
+
+def _own_process(method: str) -> None:
+    """Set up a process that reconstructs and does nothing else (``reconstruct_file``'s
+    ``own_process``): Open3D's plotly drawing, which nothing in recon draws with, is left out
+    of its imports (``recon.surfaces.isolation.leave_out_unused``: a third of Open3D's import);
+    and for ``method="auto"``, whose fits run in worker processes with their own threads,
+    numpy's BLAS in this process runs on one thread (``OPENBLAS_NUM_THREADS``, unless set; the
+    library reads it as numpy is imported, so only before that): the choice's and the
+    estimate's linear algebra is on matrices of a few columns, where a second BLAS thread
+    waits for work beside the workers, spinning on a core they need (docs/decisions.md). The
+    same numbers out: a thread count does not change them here (the choice, its figures and
+    the written mesh compared on the tuning clouds)."""
+    if method == "auto" and "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    from recon.surfaces.isolation import leave_out_unused
+
+    leave_out_unused()
 
 
 def _reconstruct(source, output, *, method: str, params, preparation: tuple, timeout,
@@ -1072,7 +1099,7 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
     from recon.surfaces.isolation import Limits
     from recon.surfaces.methods import watertight
     from recon.surfaces.prepare import load_prepared
-    from recon.surfaces.reconstruct import Surface, estimate_of
+    from recon.surfaces.reconstruct import Surface, estimate_of, prepare_estimate
     from recon.surfaces.reconstruct import reconstruct as run_method
 
     holdout, run = _reconstruct_options(method, params, holdout, target_kind)
@@ -1096,9 +1123,12 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
             if say is not None:
                 say(format_choice(choice))
         # auto's choice refitted on a warm worker of its fits, with their threads: the fit
-        # compare makes of the same run
-        surface = run_method(prepared, method=run, isolate=isolate, on_wait=on_wait,
-                             threads=FIT_THREADS if auto else None, **limits.kwargs())
+        # compare makes of the same run; while a worker fits, this process makes what the
+        # estimate needs of the cloud whatever the surface (the truth's proxy)
+        with _beside(prepare_estimate if isolate else None, cloud, seed=preparation.seed,
+                     target_kind=target_kind, misses=misses):
+            surface = run_method(prepared, method=run, isolate=isolate, on_wait=on_wait,
+                                 threads=FIT_THREADS if auto else None, **limits.kwargs())
         if choice is not None and choice.carved:
             vertices, faces = choice.carve(surface.vertices, surface.faces, cloud.points)
             surface = Surface(vertices, faces, surface.method, surface.params,
@@ -1116,6 +1146,26 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
                              None if output is None else Path(output), len(prepared.points),
                              prepared.spacing, prepared.noise, cloud.view_points is not None,
                              run.label if choice is None else choice.label)
+
+
+@contextlib.contextmanager
+def _beside(function: Callable | None, *args, **kwargs):
+    """Run ``function(*args, **kwargs)`` in a thread while the body runs (None: nothing), and
+    wait for it after the body. Made ahead of the code that needs its result, which calls it
+    again: an exception it raised is dropped here and raised there, in its place; after a
+    body that raised it is not waited for."""
+    if function is None:
+        yield
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recon-beside")
+    future = pool.submit(function, *args, **kwargs)
+    try:
+        yield
+        future.exception()   # waits; the caller meets any exception where it needs the result
+    finally:
+        pool.shutdown(wait=False)
 
 
 def _reconstruct_options(method: str, params, holdout: float | None, target_kind: str):

@@ -401,6 +401,13 @@ def _context(cloud: Cloud, seed: int, target_kind: str, misses=None) -> _Context
     return context
 
 
+def prepare(cloud: Cloud, *, seed: int = 0, target_kind: str = "unknown", misses=None) -> None:
+    """Make what ``estimate`` needs of ``cloud`` whatever the surface (``_context``: the truth's
+    proxy, the KD-tree, the area weights) and keep it, so that a later ``estimate`` with the
+    same arguments finds it made: e.g. while the surface is fitted in another process."""
+    _context(cloud, seed, target_kind, misses)
+
+
 @dataclass(frozen=True)
 class _Unsupported:
     """Samples of one surface far from every strike, measured against another surface:

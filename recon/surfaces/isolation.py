@@ -92,7 +92,8 @@ WARM_AHEAD = 3
 WORKER_PRELOAD = ("numpy", "scipy.spatial", "open3d", "pymeshlab", "metrics.score")
 # Modules a fit worker never uses that a preloaded one imports: Open3D's plotly drawing, which
 # imports dash, plotly, IPython and werkzeug (half of Open3D's import time, a third of a
-# worker's start-up CPU; docs/decisions.md). A worker gets stand-ins (``leave_out_unused``).
+# worker's start-up CPU; docs/decisions.md). A worker gets stand-ins (``leave_out_unused``), and
+# so does the ``recon reconstruct`` command's own process (``recon.api``'s ``own_process``).
 UNUSED_MODULES = ("open3d.visualization.draw_plotly",)
 # How often the parent polls the worker, seconds (start, growing to the maximum): for the stage
 # and the limits. A finished run does not wait for the next poll: the worker wakes its parent
@@ -258,10 +259,10 @@ def _stand_in(name: str) -> types.ModuleType:
     """A module ``name`` whose every public attribute is a function raising ``RuntimeError``:
     importing names from it succeeds (whatever names a library's version imports), calling
     them says that recon left the module out."""
-    module = types.ModuleType(name, "left out of recon's fit workers (UNUSED_MODULES)")
+    module = types.ModuleType(name, "left out of this process by recon (UNUSED_MODULES)")
 
     def absent(*args, **kwargs):
-        raise RuntimeError(f"{name} is left out of recon's fit workers")
+        raise RuntimeError(f"{name} is left out of this process by recon")
 
     def attribute(key: str):
         if key.startswith("__"):   # the import machinery's questions: a plain module

@@ -30,6 +30,16 @@ def estimate_of(surface: Mesh, cloud: Cloud, *, heldout=None, seed: int = 0,
                     target_kind=target_kind, misses=misses)
 
 
+def prepare_estimate(cloud: Cloud, *, seed: int = 0, target_kind: str = "unknown",
+                     misses=None) -> None:
+    """What ``estimate_of`` needs of ``cloud`` whatever the surface, made now and kept
+    (``recon.surfaces.estimate.prepare``): called while the surface is fitted elsewhere, the
+    estimate that follows the fit finds it made."""
+    from recon.surfaces.estimate import prepare
+
+    prepare(cloud, seed=seed, target_kind=target_kind, misses=misses)
+
+
 class Surface(Mesh):
     """A reconstructed triangle mesh and how it was made: a ``formats.geometry.Mesh``.
 

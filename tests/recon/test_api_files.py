@@ -140,3 +140,78 @@ def test_save_writes_meshes_and_clouds_and_refuses_an_input(tmp_path):
     with pytest.raises(api.ParameterError, match=r"units apply to \.tab meshes"):
         api.save(cloud, tmp_path / "c.ply", units="km")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cloud.h5", "sphere.ply"]
+
+
+_OWN_PROCESS = ("import os, sys\n"
+                "from recon import api\n"
+                "api._own_process(sys.argv[1])\n"
+                "import numpy\n"
+                "plotly = sys.modules.get('open3d.visualization.draw_plotly')\n"
+                "print(os.environ.get('OPENBLAS_NUM_THREADS'), plotly is not None and "
+                "plotly.__doc__.startswith('left out'))\n")
+
+
+@pytest.mark.parametrize(("method", "given", "threads"),
+                         [("auto", None, "1"), ("auto", "3", "3"), ("poisson", None, None)])
+def test_a_process_of_its_own_runs_auto_on_one_blas_thread_without_plotly(method, given,
+                                                                          threads):
+    """``reconstruct_file(own_process=True)`` (the ``recon`` command): Open3D's plotly drawing
+    is left out; for auto, numpy's BLAS gets one thread unless the user set a count."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    result = subprocess.run([sys.executable, "-c", _OWN_PROCESS, method], capture_output=True,
+                            text=True, timeout=120, check=False, env=env)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == [str(threads), "True"]
+
+
+def test_only_the_recon_command_itself_owns_its_process(monkeypatch, tmp_path):
+    """``cli.main.main(argv)`` called by a program (a test) does not set up the caller's
+    process; the ``recon`` command (no argv) does."""
+    from cli.main import main
+
+    seen = []
+
+    def reconstruct_file(*args, own_process=False, **kwargs):
+        seen.append(own_process)
+        raise api.ParameterError("stop here")
+
+    monkeypatch.setattr(api, "reconstruct_file", reconstruct_file)
+    argv = ["reconstruct", str(tmp_path / "in.ply"), "-o", str(tmp_path / "out.ply")]
+    (tmp_path / "in.ply").write_bytes(b"")
+    assert main(argv) == 1
+    monkeypatch.setattr(sys, "argv", ["recon", *argv])
+    assert main() == 1
+    assert seen == [False, True]
+
+
+def test_the_estimate_is_prepared_beside_an_isolated_fit_with_the_same_numbers(tmp_path):
+    """What the estimate needs of the cloud is made while the worker fits: the result is the
+    estimate made after the fit."""
+    from formats.cloud_io import write_cloud
+    from recon.surfaces import estimate as estimate_module
+    from recon.surfaces.reconstruct import estimate_of
+
+    source = write_cloud(tmp_path / "cloud.ply", _sphere_cloud())
+    surface = api.reconstruct(source, method="convex-hull")   # isolated: prepared beside it
+    assert len(estimate_module._CONTEXTS) >= 1
+    estimate_module._CONTEXTS.clear()
+    again = estimate_of(surface, api.load(source)).to_dict()
+    assert surface.info["estimate"] == again
+
+
+def test_beside_drops_its_functions_exception_and_keeps_the_bodys():
+    def fails():
+        raise ValueError("raised again where its result is needed")
+
+    with api._beside(fails):
+        pass
+    with pytest.raises(KeyError), api._beside(fails):
+        raise KeyError("the body's")
+    ran = []
+    with api._beside(ran.append, 1), api._beside(None, 2):
+        pass
+    assert ran == [1]

@@ -124,7 +124,7 @@ def test_a_worker_imports_open3d_without_its_plotly_drawing(cloud):
     assert result["reason"] == "test-modules: loaded open3d", result
     stand_in = isolation._stand_in("some.module")
     from_import = stand_in.draw_anything   # what ``from some.module import ...`` reads
-    with pytest.raises(RuntimeError, match=r"some\.module is left out of recon's fit workers"):
+    with pytest.raises(RuntimeError, match=r"some\.module is left out of this process by recon"):
         from_import()
     assert not hasattr(stand_in, "__path__")   # a plain module to the import machinery
 
