@@ -53,10 +53,9 @@ strike. On the Delaunay tetrahedralisation of the strikes that evidence becomes 
 uncertainty of the strike along its beam (``MethodInput.sigma`` over the cosine of the
 incidence), else the cloud's noise scale; after denoising it is divided by the square root of
 the strikes each local plane averages (``denoise_neighbours``; on the 77,400-strike RSO-A LRF
-cloud, with 30 a plane, this
-took the Chamfer distance from 0.361 to 0.311 m and the F-score from 0.838 to 0.846: with the
-raw noise as its scale, the soft visibility let the rays carve away the denoised thin panels);
-it is floored at ``MIN_SIGMA`` spacings.
+cloud, with 30 a plane, this took the Chamfer distance from 0.361 to 0.311 m and the F-score
+from 0.838 to 0.846: with the raw noise as its scale, the soft visibility let the rays carve
+away the denoised thin panels); it is floored at ``MIN_SIGMA`` spacings.
 
 A cloud without view points (a plain point file) is refused with ``MethodFailed``: the method
 has no rays to use, and normals alone would only give back what the surface already says.
