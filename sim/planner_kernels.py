@@ -701,11 +701,14 @@ def _blocked(target, position, size, solid, lo, hi, slack, radius):
     [m].
 
     The occupied voxels lie within the voxel index box ``lo`` .. ``hi`` (3,) int64
-    (inclusive); ``solid`` is that box's occupancy grid (:func:`occupancy`). The walk (voxel
-    by voxel, Amanatides and Woo) starts where the beam enters that box, so a beam stopped by
-    the surface nearest to ``position`` costs a few steps whatever the map's size, and ends
-    where it leaves the box (nothing beyond is occupied: a walk that has left the box along
-    one axis never comes back). Scalars only: no allocation per beam.
+    (inclusive); ``solid`` is that box's occupancy grid (:func:`occupancy`). Only the part of
+    the beam inside that box can meet one (nothing outside it is occupied), and whether it
+    does is the same whichever end the voxels are visited from; the walk (voxel by voxel,
+    Amanatides and Woo) goes backward, from the target's voxel (or where the beam leaves the
+    box before it) toward ``position``, until it leaves the box: an occluder of a hidden
+    target mostly lies near the target (its own side of the body), where a walk from
+    ``position`` reaches it last (about 1.3-1.6 times fewer steps on the closed-loop study's
+    scenes). Scalars only: no allocation per beam.
     """
     p0, p1, p2 = position[0], position[1], position[2]
     d0, d1, d2 = target[0] - p0, target[1] - p1, target[2] - p2
@@ -719,35 +722,41 @@ def _blocked(target, position, size, solid, lo, hi, slack, radius):
     if enter >= leave:
         return False                 # the beam meets no occupied voxel's box before the target
     limit = max(length - slack, 0.0)     # an occluder's centre must be nearer than this
-    i = min(max(np.int64(math.floor((p0 + enter * d0) / size)), lo[0]), hi[0])
-    j = min(max(np.int64(math.floor((p1 + enter * d1) / size)), lo[1]), hi[1])
-    k = min(max(np.int64(math.floor((p2 + enter * d2) / size)), lo[2]), hi[2])
     gi, gj, gk = (np.int64(math.floor(target[0] / size)), np.int64(math.floor(target[1] / size)),
                   np.int64(math.floor(target[2] / size)))
-    si, ti, di = _axis_walk(p0, d0, i, size)
-    sj, tj, dj = _axis_walk(p1, d1, j, size)
-    sk, tk, dk = _axis_walk(p2, d2, k, size)
+    if lo[0] <= gi <= hi[0] and lo[1] <= gj <= hi[1] and lo[2] <= gk <= hi[2]:
+        i, j, k, own = gi, gj, gk, True
+    else:                            # the target lies outside the box: from where the beam leaves it
+        i = min(max(np.int64(math.floor((p0 + leave * d0) / size)), lo[0]), hi[0])
+        j = min(max(np.int64(math.floor((p1 + leave * d1) / size)), lo[1]), hi[1])
+        k = min(max(np.int64(math.floor((p2 + leave * d2) / size)), lo[2]), hi[2])
+        own = i == gi and j == gj and k == gk
+    # Beam parameters [m] measured back from the target.
+    si, ti, di = _axis_walk(target[0], -d0, i, size)
+    sj, tj, dj = _axis_walk(target[1], -d1, j, size)
+    sk, tk, dk = _axis_walk(target[2], -d2, k, size)
+    back = length - enter            # where the beam enters the box
     s2 = hi[2] - lo[2] + 1
     s1 = (hi[1] - lo[1] + 1) * s2
     cell = (i - lo[0]) * s1 + (j - lo[1]) * s2 + (k - lo[2])
     limit2, radius2 = limit * limit, radius * radius
-    while not (i == gi and j == gj and k == gk):
-        if solid[cell >> 3] & (1 << (cell & 7)) and _occludes(
+    while True:
+        if not own and solid[cell >> 3] & (1 << (cell & 7)) and _occludes(
                 (i + 0.5) * size - p0, (j + 0.5) * size - p1, (k + 0.5) * size - p2,
                 d0, d1, d2, limit2, radius2):
             return True
+        own = False                  # the target's own voxel never hides it
         if ti <= tj and ti <= tk:
-            inside = ti < leave and lo[0] <= i + si <= hi[0]
+            inside = ti < back and lo[0] <= i + si <= hi[0]
             i, ti, cell = i + si, ti + di, cell + si * s1
         elif tj <= tk:
-            inside = tj < leave and lo[1] <= j + sj <= hi[1]
+            inside = tj < back and lo[1] <= j + sj <= hi[1]
             j, tj, cell = j + sj, tj + dj, cell + sj * s2
         else:
-            inside = tk < leave and lo[2] <= k + sk <= hi[2]
+            inside = tk < back and lo[2] <= k + sk <= hi[2]
             k, tk, cell = k + sk, tk + dk, cell + sk
         if not inside:
             return False
-    return False
 
 
 @njit(cache=True)
