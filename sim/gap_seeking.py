@@ -81,7 +81,6 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from formats.strike_log import StrikeChunk
-from formats.strike_log.schema import Shots
 from sim.defaults import (
     GAP_ASIDE_INTERVALS,
     GAP_ASIDE_WALKS,
@@ -129,15 +128,16 @@ def body_points(chunk: StrikeChunk) -> np.ndarray:
     return Rotation.from_quat(shots.target_attitude[row]).inv().apply(inertial)
 
 
-def recorded_beams(chunk: StrikeChunk, beams: np.ndarray
+def recorded_beams(chunks: list[StrikeChunk], beams: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Every beam of every shot of ``chunk``, from what the log records, in B (compiled:
-    sim/planner_kernels.py).
+    """Every beam of every shot of consecutive ``chunks``, from what the log records, in B
+    (compiled: sim/planner_kernels.py).
 
     Parameters
     ----------
-    chunk : StrikeChunk
-        The strikes of shots ``chunk.shot_offset ..`` and those shots (``chunk.shots``).
+    chunks : list of StrikeChunk
+        Consecutive blocks, each with all its shots (the shots following on): the strikes of
+        shots ``chunks[0].shot_offset ..`` and those shots (``chunk.shots``).
     beams : (b, 3) float64, unit vectors, sensor frame: the sensor's beam directions
 
     Returns
@@ -150,14 +150,16 @@ def recorded_beams(chunk: StrikeChunk, beams: np.ndarray
     """
     from sim import planner_kernels as kernels
 
-    shots = chunk.shots
-    f64 = np.float64
+    def joined(arrays, dtype=np.float64):       # one array of the chunks', as the kernel takes
+        return np.asarray(arrays[0] if len(arrays) == 1 else np.concatenate(arrays), dtype=dtype)
+
+    shots = [c.shots for c in chunks]
     return kernels.recorded_beams(
-        np.asarray(chunk.shot - chunk.shot_offset, dtype=np.int64),
-        np.asarray(chunk.beam, dtype=np.int64), np.asarray(chunk.range, dtype=f64),
-        np.asarray(chunk.direction, dtype=f64), np.asarray(shots.sensor_position, dtype=f64),
-        np.asarray(shots.sensor_attitude, dtype=f64),
-        np.asarray(shots.target_attitude, dtype=f64), beams)
+        joined([c.shot for c in chunks], np.int64) - chunks[0].shot_offset,
+        joined([c.beam for c in chunks], np.int64), joined([c.range for c in chunks]),
+        joined([c.direction for c in chunks]), joined([s.sensor_position for s in shots]),
+        joined([s.sensor_attitude for s in shots]), joined([s.target_attitude for s in shots]),
+        beams)
 
 
 class GapSeeker:
@@ -240,8 +242,7 @@ class GapSeeker:
         """Add the intervals observed since the last plan to the map, all at once."""
         if not self._pending:
             return
-        origins, directions, ranges, stats = recorded_beams(merge_chunks(self._pending),
-                                                            self.beams)
+        origins, directions, ranges, stats = recorded_beams(self._pending, self.beams)
         self._pending = []
         self._origins.append(origins)
         self._directions.append(directions)
@@ -376,16 +377,3 @@ class GapSeeker:
             self._keys, self._centres, self._hidden = self._candidates(stored, stored_hidden)
             self._occupancy = self.map.occupancy()      # what the sweeps' walks read
         self._used = np.zeros(len(self._keys), dtype=bool)
-
-
-def merge_chunks(chunks: list[StrikeChunk]) -> StrikeChunk:
-    """One chunk of consecutive chunks (each with its shots, the shots following on)."""
-    if len(chunks) == 1:
-        return chunks[0]
-    shots = Shots(*(np.concatenate([getattr(c.shots, name) for c in chunks]) for name in
-                    ("time", "sensor_position", "sensor_attitude", "target_attitude")))
-    return StrikeChunk(start=chunks[0].start, shot=np.concatenate([c.shot for c in chunks]),
-                       beam=np.concatenate([c.beam for c in chunks]),
-                       range=np.concatenate([c.range for c in chunks]),
-                       direction=np.concatenate([c.direction for c in chunks]), shots=shots,
-                       shot_offset=chunks[0].shot_offset)

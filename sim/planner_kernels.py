@@ -474,10 +474,14 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
     Notes
     -----
     Samples every ``size / TRAVERSAL_STEP`` along each beam from where it enters the box, at
-    the middles of those steps (sim/surface_map.py).
+    the middles of those steps (sim/surface_map.py). A beam's cells are computed first, in a
+    loop free of stores to ``state`` (which the compiler vectorises), then marked: about
+    twice as fast as marking each as it is computed.
     """
     s1, s2 = shape[1] * shape[2], shape[2]
     n0, n1, n2 = shape[0] - 1, shape[1] - 1, shape[2] - 1
+    diagonal = math.sqrt((hi[0] - lo[0]) ** 2 + (hi[1] - lo[1]) ** 2 + (hi[2] - lo[2]) ** 2)
+    cells = np.empty(math.ceil(diagonal * (TRAVERSAL_STEP / size)) + 2, dtype=np.int64)
     for k in range(len(ranges)):
         enter, leave = 0.0, np.inf
         for i in range(3):
@@ -491,18 +495,27 @@ def carve(origins, directions, ranges, lo, hi, size, state, shape, corner):
         if math.isfinite(ranges[k]):
             leave = min(leave, ranges[k] - size)
         samples = math.ceil(max(leave - enter, 0.0) * (TRAVERSAL_STEP / size))
-        start = enter / size
-        # The beam's origin in grid cells and its direction, read once per beam (the compiler
-        # reloads them per sample otherwise: the writes to ``state`` might alias them).
-        o0, o1, o2 = (origins[k, 0] / size - corner[0], origins[k, 1] / size - corner[1],
-                      origins[k, 2] / size - corner[2])
-        d0, d1, d2 = directions[k, 0], directions[k, 1], directions[k, 2]
+        if samples > len(cells):     # not within the box's diagonal (rounding): room made
+            cells = np.empty(samples, dtype=np.int64)
+        _sample_cells(origins[k, 0] / size - corner[0], origins[k, 1] / size - corner[1],
+                      origins[k, 2] / size - corner[2], directions[k, 0], directions[k, 1],
+                      directions[k, 2], enter / size, samples, s1, s2, n0, n1, n2, cells)
         for s in range(samples):
-            along = start + (s + 0.5) / TRAVERSAL_STEP
-            cell = (s1 * min(max(np.int64(o0 + along * d0), 0), n0)
+            cell = cells[s]
+            state[cell] = (state[cell] | _CROSSED) & _NOT_FRONT
+
+
+@njit(cache=True)
+def _sample_cells(o0, o1, o2, d0, d1, d2, start, samples, s1, s2, n0, n1, n2, cells):
+    """The flat grid cells (written to ``cells[:samples]``) of a beam's samples (:func:`carve`):
+    from the origin ``(o0, o1, o2)`` [grid cells] along the unit direction ``(d0, d1, d2)``,
+    at ``start + (s + 0.5) / TRAVERSAL_STEP`` [voxel edges] for ``s < samples``, clamped to
+    the grid (strides ``s1``, ``s2``, last indices ``n0``, ``n1``, ``n2``)."""
+    for s in range(samples):
+        along = start + (s + 0.5) / TRAVERSAL_STEP
+        cells[s] = (s1 * min(max(np.int64(o0 + along * d0), 0), n0)
                     + s2 * min(max(np.int64(o1 + along * d1), 0), n1)
                     + min(max(np.int64(o2 + along * d2), 0), n2))
-            state[cell] = (state[cell] | _CROSSED) & _NOT_FRONT
 
 
 @njit(cache=True)
@@ -726,7 +739,7 @@ def _blocked(target, position, size, solid, lo, hi, slack, radius):
                   np.int64(math.floor(target[2] / size)))
     if lo[0] <= gi <= hi[0] and lo[1] <= gj <= hi[1] and lo[2] <= gk <= hi[2]:
         i, j, k, own = gi, gj, gk, True
-    else:                            # the target lies outside the box: from where the beam leaves it
+    else:                            # a target outside the box: from where the beam leaves it
         i = min(max(np.int64(math.floor((p0 + leave * d0) / size)), lo[0]), hi[0])
         j = min(max(np.int64(math.floor((p1 + leave * d1) / size)), lo[1]), hi[1])
         k = min(max(np.int64(math.floor((p2 + leave * d2) / size)), lo[2]), hi[2])

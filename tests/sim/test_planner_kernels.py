@@ -341,7 +341,7 @@ def test_recorded_beams_kernel_matches_scipy_rotations():
                   Rotation.random(n, random_state=5).as_quat())
     chunk = StrikeChunk(start=0, shot=row + 40, beam=beam, range=rng.uniform(50, 90, len(row)),
                         direction=direction, shots=shots, shot_offset=40)
-    origins, directions, ranges, stats = recorded_beams(chunk, beams)
+    origins, directions, ranges, stats = recorded_beams([chunk], beams)
     # scipy: strikes along their measured directions, then the misses along their beams.
     to_body, sensor = (Rotation.from_quat(shots.target_attitude).inv(),
                        Rotation.from_quat(shots.sensor_attitude))
