@@ -576,7 +576,9 @@ def _reach(wall, extent):
     """The cells (flat mask over a box of ``extent`` (3,) cells) that a path of face
     neighbours through cells not ``wall`` joins to the box's faces: raster sweeps forward and
     back over the box, each carrying reach from the three neighbours already swept, until one
-    changes nothing (a few, for space outside a body)."""
+    after the first changes nothing (a few, for space outside a body). A sweep leaves the mask
+    closed under reach from its three neighbours, so when the next (the other way) adds
+    nothing, it is closed both ways: the same mask as sweeping on until a pair adds nothing."""
     e0, e1, e2 = extent
     f1 = e1 * e2
     reached = np.zeros(e0 * f1, dtype=np.bool_)
@@ -586,8 +588,9 @@ def _reach(wall, extent):
             row = x * f1 + y * e2
             for z in range(e2):
                 reached[row + z] = edge or z == 0 or z == e2 - 1
-    while _raster(reached, wall, extent, 1) | _raster(reached, wall, extent, -1):
-        pass
+    sign, sweeps = 1, 0
+    while _raster(reached, wall, extent, sign) or sweeps == 0:
+        sign, sweeps = -sign, sweeps + 1
     return reached
 
 

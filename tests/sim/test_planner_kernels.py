@@ -522,6 +522,25 @@ def test_enclose_kernel_matches_an_opening_by_scipy():
     assert marked[0] == 0 < marked[1] < marked[2]     # none (the free space percolates), pockets
 
 
+def test_reach_matches_the_components_joined_to_the_faces():
+    """The raster sweeps of the enclose's fill stop at the first sweep after the first that
+    adds nothing: the cells they reach are, on winding open space (walls on about half the
+    cells, so reach turns back and forth), those a path of face neighbours through cells not
+    walls joins to the box's faces (scipy's connected components; face cells count as open)."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(5)
+    for seed in range(6):
+        extent = tuple(int(e) for e in rng.integers(6, 14, 3))
+        wall = rng.random(extent) < 0.45
+        face = np.ones(extent, dtype=bool)
+        face[1:-1, 1:-1, 1:-1] = False
+        labels, _ = ndimage.label(~wall | face)
+        expected = np.isin(labels, np.unique(labels[face]))
+        reached = kernels._reach(wall.ravel(), extent)
+        np.testing.assert_array_equal(reached.reshape(extent), expected, err_msg=f"case {seed}")
+
+
 def test_candidates_kernel_matches_its_steps_done_the_numpy_way():
     rng = np.random.default_rng(9)
     *_, (m, _) = _maps(seed=9)
