@@ -721,10 +721,9 @@ def _blocked(target, position, size, solid, lo, hi, slack, radius):
     the beam inside that box can meet one (nothing outside it is occupied), and whether it
     does is the same whichever end the voxels are visited from; the walk (voxel by voxel,
     Amanatides and Woo) goes backward, from the target's voxel (or where the beam leaves the
-    box before it) toward ``position``, until it leaves the box: an occluder of a hidden
-    target mostly lies near the target (its own side of the body), where a walk from
-    ``position`` reaches it last (about 1.3-1.6 times fewer steps on the closed-loop study's
-    scenes). Scalars only: no allocation per beam.
+    box before it) toward ``position``, until it leaves the box (measured a little cheaper a
+    walk than from ``position``'s side on the closed-loop study's scenes: docs/decisions.md).
+    Scalars only: no allocation per beam.
     """
     p0, p1, p2 = position[0], position[1], position[2]
     d0, d1, d2 = target[0] - p0, target[1] - p1, target[2] - p2

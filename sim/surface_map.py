@@ -40,12 +40,10 @@ frontier, as does the space behind a plate.
 
 :meth:`SurfaceMap.visible` predicts whether a planned beam from a position reaches a voxel by
 walking the beam's line voxel by voxel within the occupied voxels' box, backward from the voxel
-toward the position (an occluder mostly lies near the voxel's own side of the body, so a walk
-that finds one stops sooner than one from the position's side): it is hidden when the beam
-passes close to the centre of an occupied voxel nearer than itself (``BLOCK_RADIUS``,
-``BLOCK_SLACK``). The walk reads a bit per voxel of the occupied voxels' box
-(:meth:`SurfaceMap.occupancy`, kept up to date as voxels are struck for the first time), not
-the state grid: a few kilobytes instead of megabytes.
+toward the position: it is hidden when the beam passes close to the centre of an occupied voxel
+nearer than itself (``BLOCK_RADIUS``, ``BLOCK_SLACK``). The walk reads a bit per voxel of the
+occupied voxels' box (:meth:`SurfaceMap.occupancy`, kept up to date as voxels are struck for
+the first time), not the state grid: a few kilobytes instead of megabytes.
 """
 
 from __future__ import annotations
