@@ -36,6 +36,9 @@ from recon.surfaces.methods.plane import MAD_TO_SIGMA, TUKEY_C
 ELLIPSOID_PARAMETERS = 9
 # Fewest points for 9 coefficients with a little redundancy.
 MIN_POINTS = 12
+# A constrained fit whose semi-axis exceeds this many times the points' RMS distance from
+# their mean has run off to fit a patch by a near-plane: no body.
+MAX_AXIS = 100.0
 
 
 def _design(x: np.ndarray) -> np.ndarray:
@@ -119,6 +122,100 @@ def fit_quadric(points: np.ndarray, *, sigma: np.ndarray | None = None, iteratio
     axes = scale / np.sqrt(values)
     order = np.argsort(axes)
     return mean + scale * centre, axes[order], vectors[:, order]
+
+
+def _radial(x: np.ndarray, centre: np.ndarray, axes: np.ndarray, rotation: np.ndarray
+            ) -> np.ndarray:
+    """(n,) signed radial distance of ``x`` (n, 3) to the ellipsoid (``fit_quadric``'s
+    returns): along the ray from the centre through each point, the point's distance from the
+    centre minus the ellipsoid's, positive outside."""
+    d = x - centre
+    r = np.linalg.norm(d, axis=1)
+    q = np.linalg.norm((d @ rotation) / axes, axis=1)
+    return r * (1.0 - 1.0 / np.maximum(q, 1e-12))
+
+
+def fit_constrained(points: np.ndarray, *, sigma: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares ellipsoid by construction (module docstring): centre, three positive
+    semi-axes and a rotation by robust nonlinear least squares of the radial distance.
+
+    Parameters
+    ----------
+    points : (n, 3) float64, metres
+    sigma : (n,) float64, metres, optional
+        1-sigma uncertainty of each point along the surface normal (residuals ``/ sigma``).
+
+    Returns
+    -------
+    centre : (3,) float64, metres
+    axes : (3,) float64, metres
+        Semi-axes, ascending.
+    rotation : (3, 3) float64
+        Columns are the unit directions of ``axes`` (sends ellipsoid-frame vectors to the
+        points' frame), a proper rotation.
+
+    Raises
+    ------
+    MethodFailed
+        Too few points, or no bounded ellipsoid fits them (a semi-axis runs off beyond
+        ``MAX_AXIS`` times the points' RMS distance from their mean, or the solver fails).
+    """
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) < MIN_POINTS:
+        raise MethodFailed(f"ellipsoid: need at least {MIN_POINTS} points, got {len(points)}")
+    mean = points.mean(axis=0)
+    scale = float(np.sqrt(np.mean(np.sum((points - mean) ** 2, axis=1)))) or 1.0
+    x = (points - mean) / scale
+    weight = np.ones(len(x)) if sigma is None else 1.0 / np.maximum(
+        np.asarray(sigma, dtype=np.float64) / scale, 1e-12)
+    weight = weight / np.sqrt(np.mean(weight ** 2))
+    # The start: the points' mean and principal axes; on a sphere's surface the variance
+    # along an axis is a^2 / 3.
+    values, vectors = np.linalg.eigh(np.cov(x.T))
+    if np.linalg.det(vectors) < 0:
+        vectors[:, 0] = -vectors[:, 0]
+    start = np.concatenate([np.zeros(3), 0.5 * np.log(3.0 * np.maximum(values, 1e-6)),
+                            Rotation.from_matrix(vectors).as_rotvec()])
+
+    def residual(params: np.ndarray) -> np.ndarray:
+        rotation = Rotation.from_rotvec(params[6:]).as_matrix()
+        return weight * _radial(x, params[:3], np.exp(params[3:6]), rotation)
+
+    # Round 1 plain least squares; round 2 with a soft-L1 loss at the robust spread of
+    # round 1's residuals (1.4826 x their median absolute value), so spurious returns and
+    # lumps the ellipsoid cannot follow count linearly, not squared.
+    fit = least_squares(residual, start, x_scale="jac", method="trf")
+    spread = MAD_TO_SIGMA * float(np.median(np.abs(fit.fun)))
+    if spread > 0:
+        fit = least_squares(residual, fit.x, x_scale="jac", method="trf", loss="soft_l1",
+                            f_scale=spread)
+    axes = np.exp(fit.x[3:6])
+    if fit.status <= 0 or not np.all(np.isfinite(fit.x)) or axes.max() > MAX_AXIS:
+        raise MethodFailed("ellipsoid: no bounded ellipsoid fits the points (semi-axes "
+                           f"{np.array2string(scale * axes, precision=3)} m for points "
+                           f"{scale:.3g} m RMS from their mean); they do not enclose a body")
+    order = np.argsort(axes)
+    rotation = Rotation.from_rotvec(fit.x[6:]).as_matrix()
+    return mean + scale * fit.x[:3], scale * axes[order], rotation[:, order] * np.array(
+        [1.0, 1.0, np.linalg.det(rotation[:, order])])
+
+
+def fit_ellipsoid(points: np.ndarray, *, sigma: np.ndarray | None = None, iterations: int = 20
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The least-squares ellipsoid of points: the quadric's (``fit_quadric``) where it is an
+    ellipsoid, else the constrained fit's (``fit_constrained``). Parameters, returns and
+    raises as ``fit_quadric``'s."""
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) < MIN_POINTS:
+        raise MethodFailed(f"ellipsoid: need at least {MIN_POINTS} points, got {len(points)}")
+    try:
+        return fit_quadric(points, sigma=sigma, iterations=iterations)
+    except MethodFailed:
+        return fit_constrained(points, sigma=sigma)
 
 
 def ellipsoid_mesh(centre: np.ndarray, axes: np.ndarray, rotation: np.ndarray,
