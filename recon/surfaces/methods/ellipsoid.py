@@ -17,8 +17,26 @@ distance to it (for conditioning):
    returns drop out. ``sigma`` is each strike's uncertainty along the surface normal from the
    recorded error model (``MethodInput.sigma``, ``weighted``), else 1.
 
-The quadric must be an ellipsoid (its 3 x 3 matrix positive definite after normalisation); a
-cloud of a flat or saddle-shaped patch fails with that reason. The surface is an icosphere of
+The quadric is an ellipsoid when its 3 x 3 matrix is positive definite after normalisation.
+On a lumpy natural body seen along a few tracks (a cross or slew of a rangefinder over Bennu,
+Ryugu, a comet, Eros) it often is not: the 9 coefficients are barely constrained by points on
+a few curves, and the lumps tip the best quadric into a hyperboloid. There the ellipsoid is
+fitted by construction instead (``fit_constrained``):
+
+3. **Constrained least squares** (scipy ``least_squares``) of 9 parameters: the centre, the
+   logarithms of the three semi-axes (so they stay positive) and a rotation vector (scipy
+   ``Rotation``), on each point's radial distance to the ellipsoid,
+   ``|p - c| (1 - 1 / |A^-1 R^T (p - c)|)`` (the point's distance from the centre minus the
+   ellipsoid's along the same ray; near the geometric distance on a rounded body), divided by
+   ``sigma`` when ``weighted``. It starts at the points' mean and principal axes (semi-axis
+   ``sqrt(3 x variance)``, a sphere's surface) and is solved twice: plain, then with a soft-L1
+   loss at the robust spread of the first solve's residuals (1.4826 x median absolute value).
+   No random draw. It fails only with too few points, or when a semi-axis runs off beyond
+   ``MAX_AXIS`` times the points' RMS radius (a patch fitted as a near-plane: no body).
+
+Where the quadric is an ellipsoid, it is kept as it is (the constrained fit is not run). On a
+body seen over a small part of its surface either ellipsoid is an extrapolation of that part;
+docs/decisions.md has what it is worth against the truth. The surface is an icosphere of
 ``subdivisions`` levels mapped onto the ellipsoid (level 5: 20,480 faces, the simulator's own
 ellipsoid resolution, ~0.01% of the radius off the exact surface). Its model size is 9
 parameters whatever the face count (``Method.parameters``).
@@ -39,6 +57,10 @@ MIN_POINTS = 12
 # A constrained fit whose semi-axis exceeds this many times the points' RMS distance from
 # their mean has run off to fit a patch by a near-plane: no body.
 MAX_AXIS = 100.0
+# The constrained fit's bounds on the semi-axes in the same unit, and the fraction of MAX_AXIS
+# at which a semi-axis counts as having run to the bound.
+MIN_AXIS = 1e-3
+BOUND_REACHED = 0.99
 
 
 def _design(x: np.ndarray) -> np.ndarray:
@@ -158,8 +180,8 @@ def fit_constrained(points: np.ndarray, *, sigma: np.ndarray | None = None
     Raises
     ------
     MethodFailed
-        Too few points, or no bounded ellipsoid fits them (a semi-axis runs off beyond
-        ``MAX_AXIS`` times the points' RMS distance from their mean, or the solver fails).
+        Too few points, or no bounded ellipsoid fits them (a semi-axis runs to ``MAX_AXIS``
+        times the points' RMS distance from their mean, or the solver fails).
     """
     from scipy.optimize import least_squares
     from scipy.spatial.transform import Rotation
@@ -181,20 +203,26 @@ def fit_constrained(points: np.ndarray, *, sigma: np.ndarray | None = None
     start = np.concatenate([np.zeros(3), 0.5 * np.log(3.0 * np.maximum(values, 1e-6)),
                             Rotation.from_matrix(vectors).as_rotvec()])
 
-    def residual(params: np.ndarray) -> np.ndarray:
+    def residual(params: np.ndarray, w: np.ndarray) -> np.ndarray:
         rotation = Rotation.from_rotvec(params[6:]).as_matrix()
-        return weight * _radial(x, params[:3], np.exp(params[3:6]), rotation)
+        return w * _radial(x, params[:3], np.exp(params[3:6]), rotation)
 
-    # Round 1 plain least squares; round 2 with a soft-L1 loss at the robust spread of
-    # round 1's residuals (1.4826 x their median absolute value), so spurious returns and
-    # lumps the ellipsoid cannot follow count linearly, not squared.
-    fit = least_squares(residual, start, x_scale="jac", method="trf")
+    # Plain least squares, then a soft-L1 loss (a smooth Huber: quadratic below f_scale,
+    # linear above) at the robust spread of its residuals (1.4826 x their median absolute
+    # value), so spurious returns and lumps the ellipsoid cannot follow count linearly.
+    # The semi-axes are bounded (MIN_AXIS, MAX_AXIS) so that a patch's fit stops at the bound
+    # rather than overflowing; one at the upper bound is no body.
+    bounds = (np.r_[np.full(3, -np.inf), np.full(3, np.log(MIN_AXIS)), np.full(3, -np.inf)],
+              np.r_[np.full(3, np.inf), np.full(3, np.log(MAX_AXIS)), np.full(3, np.inf)])
+    start[3:6] = np.clip(start[3:6], np.log(MIN_AXIS) + 1e-9, np.log(MAX_AXIS) - 1e-9)
+    fit = least_squares(residual, start, x_scale="jac", method="trf", bounds=bounds,
+                        args=(weight,))
     spread = MAD_TO_SIGMA * float(np.median(np.abs(fit.fun)))
     if spread > 0:
-        fit = least_squares(residual, fit.x, x_scale="jac", method="trf", loss="soft_l1",
-                            f_scale=spread)
+        fit = least_squares(residual, fit.x, x_scale="jac", method="trf", bounds=bounds,
+                            loss="soft_l1", f_scale=spread, args=(weight,))
     axes = np.exp(fit.x[3:6])
-    if fit.status <= 0 or not np.all(np.isfinite(fit.x)) or axes.max() > MAX_AXIS:
+    if fit.status <= 0 or axes.max() > BOUND_REACHED * MAX_AXIS:
         raise MethodFailed("ellipsoid: no bounded ellipsoid fits the points (semi-axes "
                            f"{np.array2string(scale * axes, precision=3)} m for points "
                            f"{scale:.3g} m RMS from their mean); they do not enclose a body")
@@ -241,7 +269,7 @@ def run(cloud: MethodInput, *, subdivisions: int, iterations: int, weighted: boo
     subdivisions : int
         Icosphere levels of the mesh (20 * 4**n faces).
     iterations : int
-        Sampson-reweighted rounds (``fit_quadric``).
+        Sampson-reweighted rounds (``fit_quadric``; ``fit_ellipsoid``).
     weighted : bool
         Weight each point by its recorded uncertainty (``MethodInput.sigma``) when known.
 
@@ -251,7 +279,7 @@ def run(cloud: MethodInput, *, subdivisions: int, iterations: int, weighted: boo
     faces : (f, 3) int64, counter-clockwise seen from outside
     """
     sigma = cloud.sigma if weighted else None
-    centre, axes, rotation = fit_quadric(cloud.points, sigma=sigma, iterations=iterations)
+    centre, axes, rotation = fit_ellipsoid(cloud.points, sigma=sigma, iterations=iterations)
     return ellipsoid_mesh(centre, axes, rotation, subdivisions)
 
 
