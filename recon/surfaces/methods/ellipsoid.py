@@ -285,7 +285,8 @@ def run(cloud: MethodInput, *, subdivisions: int, iterations: int, weighted: boo
 
 METHOD = register(Method(
     name="ellipsoid", run=run, kind="primitive",
-    summary="least-squares ellipsoid (9-parameter quadric, Sampson-reweighted, robust)",
+    summary="least-squares ellipsoid (9-parameter quadric, Sampson-reweighted, robust; fitted "
+            "by construction where the quadric is not an ellipsoid)",
     parameters=lambda vertices, faces: ELLIPSOID_PARAMETERS,
     params={
         # 5: the simulator's ellipsoid resolution (sim/defaults.py target.subdivisions).
