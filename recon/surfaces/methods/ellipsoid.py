@@ -244,9 +244,15 @@ def fit_constrained(points: np.ndarray, *, sigma: np.ndarray | None = None
 
 def fit_ellipsoid(points: np.ndarray, *, sigma: np.ndarray | None = None, iterations: int = 20
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The least-squares ellipsoid of points: the quadric's (``fit_quadric``) where it is an
-    ellipsoid, else the constrained fit's (``fit_constrained``). Parameters, returns and
-    raises as ``fit_quadric``'s."""
+    """The least-squares ellipsoid of points: the quadric's (``fit_quadric``, unchanged) where
+    it is an ellipsoid, else the constrained fit's (``fit_constrained``). Parameters and
+    returns as ``fit_quadric``'s.
+
+    Raises
+    ------
+    MethodFailed
+        Too few points, or the constrained fit finds no bounded ellipsoid (its reasons).
+    """
     points = np.asarray(points, dtype=np.float64)
     if len(points) < MIN_POINTS:
         raise MethodFailed(f"ellipsoid: need at least {MIN_POINTS} points, got {len(points)}")
