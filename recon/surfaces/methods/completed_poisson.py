@@ -6,8 +6,9 @@ blob of its own, which follows the trend of the strikes' edge and can swell far 
 ``ellipsoid`` is the better guess of a rounded body's unseen side but smooths away the detail the
 strikes resolve (craters, ridges, a flattened pole). This method takes each where it is right:
 
-1. the least-squares ellipsoid of the strikes (``ellipsoid.fit_quadric``, weighted by the
-   recorded error model with ``weighted``);
+1. the least-squares ellipsoid of the strikes (``ellipsoid.fit_ellipsoid``: the quadric, or the
+   constrained fit where the quadric is not an ellipsoid; weighted by the recorded error model
+   with ``weighted``);
 2. the vertices of its mesh (an icosphere of ``subdivisions`` levels) farther than ``reach``
    times its mean semi-axis from every strike's radial projection onto it (the directions from
    its centre no strike covers), with the ellipsoid's outward normals: oriented points standing
@@ -16,10 +17,10 @@ strikes resolve (craters, ridges, a flattened pole). This method takes each wher
    closed surface that follows the strikes where they are and passes over the ellipsoid where
    nothing was seen, with Poisson's smooth blend between the two across the ``reach``.
 
-It fails, as ``ellipsoid`` does, where the strikes do not enclose a convex body (a flat or
-saddle-shaped patch). The completion is only as good as the ellipsoid is a guess of the unseen
-side: on a contact binary, or a satellite of plates and booms, it is not (``-m auto`` lets the
-missed beams and the held-out passes decide; ``recon.surfaces.auto``).
+It fails, as ``ellipsoid`` does, where no bounded ellipsoid fits the strikes (a flat patch).
+The completion is only as good as the ellipsoid is a guess of the unseen side: on a contact
+binary, or a satellite of plates and booms, it is not (``-m auto`` lets the missed beams and
+the held-out passes decide; ``recon.surfaces.auto``).
 
 Measured on the auto suite's natural bodies against the truth, at the defaults: the Chamfer
 distance and the F-score over the best of every other method's runs, where the strikes cover a
@@ -35,7 +36,7 @@ import numpy as np
 
 from formats.errors import MethodFailed
 from recon.surfaces.methods import Method, MethodInput, Param, ellipsoid, poisson, register
-from recon.surfaces.methods.ellipsoid import ellipsoid_mesh, fit_quadric
+from recon.surfaces.methods.ellipsoid import ellipsoid_mesh, fit_ellipsoid
 from recon.surfaces.methods.poisson import MAX_DEPTH, solve
 
 # The ellipsoid fit's rounds and Poisson's reconstruction cube are those methods' defaults.
@@ -56,7 +57,7 @@ def unseen_points(points: np.ndarray, centre: np.ndarray, axes: np.ndarray,
     points : (n, 3) float64, metres, body frame
         The strikes.
     centre : (3,) float64, metres; axes : (3,) float64, metres; rotation : (3, 3) float64
-        The ellipsoid (``ellipsoid.fit_quadric``): body = rotation @ (axes * unit) + centre.
+        The ellipsoid (``ellipsoid.fit_ellipsoid``): body = rotation @ (axes * unit) + centre.
     reach : float
         Distance from the strikes, as a fraction of the mean semi-axis, beyond which the
         ellipsoid stands for the surface.
@@ -104,9 +105,9 @@ def run(cloud: MethodInput, *, depth: int, reach: float, subdivisions: int, weig
     faces : (f, 3) int64
     """
     try:
-        centre, axes, rotation = fit_quadric(cloud.points,
-                                             sigma=cloud.sigma if weighted else None,
-                                             iterations=ELLIPSOID_ITERATIONS)
+        centre, axes, rotation = fit_ellipsoid(cloud.points,
+                                               sigma=cloud.sigma if weighted else None,
+                                               iterations=ELLIPSOID_ITERATIONS)
     except MethodFailed as error:
         raise MethodFailed(f"completed-poisson: no ellipsoid to complete with: {error}") from None
     prior, prior_normals = unseen_points(cloud.points, centre, axes, rotation, reach=reach,
