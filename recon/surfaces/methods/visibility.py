@@ -63,6 +63,7 @@ has no rays to use, and normals alone would only give back what the surface alre
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -235,8 +236,9 @@ def first_cells(tri: Cells, vertex: np.ndarray, direction: np.ndarray) -> np.nda
 
 
 def walk_rays(tri: Cells, origin: np.ndarray, direction: np.ndarray, length: np.ndarray,
-              start: np.ndarray, max_steps: int, scale: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray | None]:
+              start: np.ndarray, max_steps: int, scale: np.ndarray | None = None, *,
+              weigh: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+              | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """Advance every ray cell by cell through a Delaunay tetrahedralisation, all at once.
 
     Each step finds, for every ray still going, the facet through which it leaves its cell
@@ -259,7 +261,11 @@ def walk_rays(tri: Cells, origin: np.ndarray, direction: np.ndarray, length: np.
         Cells visited per ray at most.
     scale : (r,) float64, metres, optional
         Soft-visibility scale: a facet crossed at distance ``d`` weighs
-        ``1 - exp(-d^2 / (2 scale^2))``. None: record no crossings.
+        ``1 - exp(-d^2 / (2 scale^2))``. None (and no ``weigh``): record no crossings.
+    weigh : callable, optional
+        Instead of ``scale``: ``weigh(ray, cell, facet, d)``, all (c,) arrays (the ray's index,
+        the cell it leaves, the facet it leaves by, the distance from its origin [m]), returns
+        the (c,) free-space weight of each crossing.
 
     Returns
     -------
@@ -267,13 +273,13 @@ def walk_rays(tri: Cells, origin: np.ndarray, direction: np.ndarray, length: np.
         The cell holding each ray's end, or where it stopped after ``max_steps`` cells; -1 when
         it left the convex hull first.
     inflow : (m, 4) float64 or None
-        With ``scale``: free-space weight entering each cell through each of its facets
+        With ``scale`` or ``weigh``: free-space weight entering each cell through each of its facets
         (facet ``j`` is opposite vertex ``j``), the capacity of the edge from
         ``tri.neighbors[c, j]`` (the outside when -1) into cell ``c``.
     """
     m = len(tri.simplices)
     inverse, offset, neighbors = tri.inverse, tri.offset, tri.neighbors
-    inflow = None if scale is None else np.zeros(4 * m)
+    inflow = None if scale is None and weigh is None else np.zeros(4 * m)
     keys, weights = [], []
     buffered = 0
     end = np.full(len(origin), -1, dtype=np.int64)
@@ -300,10 +306,12 @@ def walk_rays(tri: Cells, origin: np.ndarray, direction: np.ndarray, length: np.
         done = ~np.isfinite(exit_t) | (exit_t >= length[ray])  # its end (or a flat cell)
         end[ray[done]] = cell[done]
         crossing = ~done
-        if scale is not None:
+        if inflow is not None:
             d = exit_t[crossing]
             keys.append(cell[crossing] * 4 + facet[crossing])
-            weights.append(1.0 - np.exp(-0.5 * (d / scale[ray[crossing]]) ** 2))
+            weights.append(1.0 - np.exp(-0.5 * (d / scale[ray[crossing]]) ** 2)
+                           if weigh is None else
+                           weigh(ray[crossing], cell[crossing], facet[crossing], d))
             buffered += len(d)
         nxt = neighbors[cell, facet]
         going = crossing & (nxt >= 0)
@@ -318,6 +326,110 @@ def walk_rays(tri: Cells, origin: np.ndarray, direction: np.ndarray, length: np.
     if keys:
         inflow += np.bincount(np.concatenate(keys), np.concatenate(weights), minlength=4 * m)
     return end, None if inflow is None else inflow.reshape(m, 4)
+
+
+def hull_entries(tri: Cells, origin: np.ndarray, direction: np.ndarray, near: float,
+                 far: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where rays from outside enter the convex hull of the cells, all at once.
+
+    One Embree cast (``sim.raycast.EmbreeBackend``) against the hull's facets finds the facet
+    each ray meets first; the distance is recomputed in float64 on that facet's plane. The
+    cast starts where the ray reaches the cells' bounding sphere (or at ``near``), in
+    coordinates about the cells' centre, so that float32 keeps the facets apart.
+
+    Parameters
+    ----------
+    tri : Cells
+    origin : (r, 3) float64, metres
+    direction : (r, 3) float64, unit vectors
+    near, far : float, metres
+        The span of each ray that counts (a missed beam's free span).
+
+    Returns
+    -------
+    ray : (e,) int64
+        The rays that enter the hull from outside within ``near``..``far``; a ray whose span
+        begins inside the hull (first meets a facet from within) is left out.
+    cell : (e,) int64
+        The cell each enters.
+    t : (e,) float64, metres
+        The distance along the ray of its entry.
+    """
+    from sim.raycast import EmbreeBackend
+
+    points = tri.points
+    cell, facet = np.nonzero(tri.neighbors < 0)
+    triangles = tri.simplices[cell[:, None], CELL_FACETS[facet]]
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    radius = float(np.linalg.norm(points - centre, axis=1).max())
+    closest = np.einsum("ij,ij->i", centre - origin, direction)
+    start = np.maximum(near, closest - 1.01 * radius)
+    begin = origin + start[:, None] * direction
+    caster = EmbreeBackend(points - centre, triangles)
+    first = caster.first_hit((begin - centre).astype(np.float32),
+                             direction.astype(np.float32)).astype(np.int64)
+    ray = np.flatnonzero(first >= 0)
+    hit = first[ray]
+    a, b, c = (points[triangles[hit, i]] for i in range(3))
+    normal = np.cross(b - a, c - a)
+    apex = points[tri.simplices[cell[hit], facet[hit]]]
+    normal *= np.sign(np.einsum("ij,ij->i", apex - a, normal))[:, None]   # into the hull
+    towards = np.einsum("ij,ij->i", direction[ray], normal)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = start[ray] + np.einsum("ij,ij->i", a - begin[ray], normal) / towards
+    entering = (towards > 0) & np.isfinite(t) & (t <= far)
+    return ray[entering], cell[hit[entering]], np.maximum(t[entering], start[ray[entering]])
+
+
+def miss_inflow(tri: Cells, misses, vertex_sigma: np.ndarray, max_steps: int) -> np.ndarray:
+    """Free-space weight of the missed beams on the facets they cross (module docstring).
+
+    Each missed beam enters the hull (``hull_entries``) and is walked cell by cell
+    (``walk_rays``) to the end of its free span or out of the hull. A facet it crosses at
+    distance ``r`` from the facet's nearest vertex weighs ``1 - exp(-r^2 / (2 s^2))``, ``s``
+    that vertex's soft-visibility scale: where a beam grazes a strike, the evidence is only as
+    sure as the strike's position. The weight goes on the edge from the far side (along the
+    beam) into the near side: both ends of a missed beam's free span are free space, so every
+    cell along it that the cut leaves inside costs at least the weight of one facet where the
+    beam leaves the inside.
+
+    Parameters
+    ----------
+    tri : Cells
+        Of ``m`` cells.
+    misses : recon.registration.misses.MissedBeams
+        In the body frame.
+    vertex_sigma : (n,) float64, metres
+        Soft-visibility scale of each vertex of ``tri``.
+    max_steps : int
+        Cells each beam visits at most.
+
+    Returns
+    -------
+    (m, 4) float64
+        As ``walk_rays``' ``inflow``.
+    """
+    direction = np.asarray(misses.direction, dtype=np.float64)
+    origin = np.asarray(misses.origin, dtype=np.float64)
+    ray, cell, t = hull_entries(tri, origin, direction, misses.range_min, misses.range_max)
+    entry = origin[ray] + t[:, None] * direction[ray]
+    direction = direction[ray]
+    free_from = misses.range_min - t              # where the free span begins, from ``entry``
+    points, simplices = tri.points, tri.simplices
+
+    def weigh(beam, cells, facets, d):
+        at = entry[beam] + d[:, None] * direction[beam]
+        corners = simplices[cells[:, None], CELL_FACETS[facets]]                   # (c, 3)
+        gap = np.linalg.norm(points[corners] - at[:, None, :], axis=2)
+        nearest = np.argmin(gap, axis=1)
+        rows = np.arange(len(d))
+        scale = vertex_sigma[corners[rows, nearest]]
+        weight = 1.0 - np.exp(-0.5 * (gap[rows, nearest] / scale) ** 2)
+        return np.where(d >= free_from[beam], weight, 0.0)
+
+    _, inflow = walk_rays(tri, entry, direction, misses.range_max - t, cell, max_steps,
+                          weigh=weigh)
+    return inflow
 
 
 def facet_quality(points: np.ndarray, simplices: np.ndarray, neighbors: np.ndarray
@@ -448,6 +560,7 @@ def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
     if len(points) < 5:
         raise MethodFailed(f"visibility: need at least 5 points, got {len(points)}")
     scale = ray_sigma(cloud, sigma)
+    raw_scale = scale
     noise = cloud.noise if cloud.sigma is None else float(np.median(cloud.sigma))
     if denoise is None:
         denoise = noise > DENOISE_NOISE * cloud.spacing
@@ -485,6 +598,12 @@ def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
     if not held.any():
         raise MethodFailed("visibility: no strike has a Delaunay cell behind it")
 
+    if cloud.misses is not None and len(cloud.misses):
+        # Each vertex's scale: the smallest of its strikes' before denoising (a missed beam's
+        # own position is as uncertain as a single strike's).
+        vertex_sigma = np.full(len(vertices), np.inf)
+        np.minimum.at(vertex_sigma, strike_vertex, raw_scale)
+        inflow += miss_inflow(tri, cloud.misses, vertex_sigma, max_steps)
     simplices, neighbors = tri.simplices, tri.neighbors
     weight = inflow + beta * facet_quality(jittered, simplices, neighbors)
     capacity = np.maximum(1, np.round(CAPACITY_UNITS * weight)).astype(np.int64)
