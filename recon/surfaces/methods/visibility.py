@@ -36,16 +36,29 @@ strike. On the Delaunay tetrahedralisation of the strikes that evidence becomes 
    sensor is outside and the other inside. The sensor's cell (or the last one reached) is tied
    to the outside with weight 1, and the cell ``behind`` sigmas behind the strike to the
    inside with weight 1.
-4. **Surface quality** (the paper's ``E_qual``): each facet also costs ``beta (1 - min(cos
+4. **Missed beams** (``MethodInput.misses``, a strike log's beams that struck nothing,
+   ``recon.registration.misses``; none for a cloud file): each crossed free space over its whole
+   free span, so every cell it crosses there is voted outside as the sensor-to-strike rays vote
+   (``miss_inflow``). One Embree cast against the convex hull's facets finds where each enters
+   the hull (``hull_entries``; a beam whose free span begins inside the hull is left out), and
+   ``walk_rays`` walks it from there to the end of its span or out of the hull. A facet it
+   crosses at distance ``r`` from the facet's nearest vertex weighs ``1 - exp(-r^2 / 2 s^2)``,
+   ``s`` that vertex's scale before denoising (a beam that grazed a strike says little), on the
+   edge from the far side into the near side: both ends of the span are outside, so each cell
+   along it left inside costs a facet where the beam leaves it. Without them, the cut may close
+   over space no sensor-to-strike ray crossed (a gap seen from no side, a concavity between
+   parts); the missed beams through it open it. Measured on the auto suite's tuning clouds in
+   docs/decisions.md.
+5. **Surface quality** (the paper's ``E_qual``): each facet also costs ``beta (1 - min(cos
    phi, cos psi))``, phi and psi the angles at which the circumspheres of its two cells cut
    its plane: small for the facets of a well-sampled surface, whose cells' empty spheres
    barely cross it.
-5. **Minimum s-t cut** (scipy's ``maximum_flow``, Dinic): source = outside (the infinite cells
+6. **Minimum s-t cut** (scipy's ``maximum_flow``, Dinic): source = outside (the infinite cells
    beyond the convex hull are the source itself), sink = inside. Capacities are integers: the
    weights in units of ``1 / CAPACITY_UNITS`` of one ray, rounded (a facet of weight 0 still
    costs one unit, so no edge is free), capped at the int32 limit. The outside is what the
    source reaches in the residual graph.
-6. **Surface**: the facets between inside and outside cells, oriented outwards. It is closed
+7. **Surface**: the facets between inside and outside cells, oriented outwards. It is closed
    (the boundary of a union of cells), passes through the (denoised) strikes, and may touch
    itself at an edge or a vertex where two inside cells meet only there.
 
@@ -521,7 +534,7 @@ def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
     Parameters
     ----------
     cloud : MethodInput
-        With ``view_points``.
+        With ``view_points``; its ``misses``, when given, vote the cells they cross outside.
     beta : float
         Weight of the surface-quality cost of a facet against one ray's free-space weight.
     sigma : float or None
@@ -621,8 +634,8 @@ def run(cloud: MethodInput, *, beta: float, sigma: float | None, behind: float,
 
 METHOD = register(Method(
     name="visibility", run=run, kind="interpolating",
-    summary="Delaunay cells labelled by the sensor-to-strike rays (Labatut et al. 2009, soft "
-            "visibility), a minimum cut; needs view points",
+    summary="Delaunay cells labelled by the sensor-to-strike rays and a strike log's missed "
+            "beams (Labatut et al. 2009, soft visibility), a minimum cut; needs view points",
     params={
         # 0 (the visibility terms alone, every facet costing one capacity unit) by
         # measurement: on a 2 m x 2 m x 2 cm plate of 4000 strikes with 2 mm range noise,
