@@ -435,9 +435,8 @@ def miss_inflow(tri: Cells, misses, vertex_sigma: np.ndarray, max_steps: int) ->
     direction = np.asarray(misses.direction, dtype=np.float64)
     origin = np.asarray(misses.origin, dtype=np.float64)
     ray, cell, t = hull_entries(tri, origin, direction, misses.range_min, misses.range_max)
-    entry = origin[ray] + t[:, None] * direction[ray]
+    entry = origin[ray] + t[:, None] * direction[ray]       # within the free span
     direction = direction[ray]
-    free_from = misses.range_min - t              # where the free span begins, from ``entry``
     points, simplices = tri.points, tri.simplices
 
     def weigh(beam, cells, facets, d):
@@ -447,8 +446,7 @@ def miss_inflow(tri: Cells, misses, vertex_sigma: np.ndarray, max_steps: int) ->
         nearest = np.argmin(gap, axis=1)
         rows = np.arange(len(d))
         scale = vertex_sigma[corners[rows, nearest]]
-        weight = 1.0 - np.exp(-0.5 * (gap[rows, nearest] / scale) ** 2)
-        return np.where(d >= free_from[beam], weight, 0.0)
+        return 1.0 - np.exp(-0.5 * (gap[rows, nearest] / scale) ** 2)
 
     _, inflow = walk_rays(tri, entry, direction, misses.range_max - t, cell, max_steps,
                           weigh=weigh)
