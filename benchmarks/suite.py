@@ -670,6 +670,7 @@ def load_cloud(cloud: SuiteCloud, args):
     points the compare runs on."""
     from formats import StrikeLog
     from recon.registration.ingest import ingest
+    from recon.surfaces.auto import misses_near
     from recon.surfaces.prepare import prepare
 
     log = simulate(cloud, args.out, quick=args.quick, meshes=args.meshes)
@@ -677,7 +678,7 @@ def load_cloud(cloud: SuiteCloud, args):
     with StrikeLog(log) as reader:
         truth = reader.truth_mesh()
     prepared = prepare(points.points, view_points=points.view_points, seed=0,
-                       uncertainty=points.attributes)
+                       uncertainty=points.attributes, misses=misses_near(log, points.points))
     return points, truth, prepared
 
 
@@ -860,7 +861,7 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
     out_dir = args.out / cloud.name
     log = simulate(cloud, args.out, quick=args.quick, meshes=args.meshes)
     start = time.perf_counter()
-    misses = misses_near(log, points.points)
+    misses = misses_near(log, points.points)   # as ``recon reconstruct -m auto``: timed
     choice = choose(points.points, view_points=points.view_points,
                     uncertainty=points.attributes, methods=names, seed=0,
                     timeout_s=args.timeout, n_workers=args.workers,

@@ -27,6 +27,7 @@ Importing this module is light (no numpy, h5py or Open3D): each verb imports wha
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import sys
@@ -1114,6 +1115,7 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
             start_workers()
         cloud, prepared = load_prepared(_from_library(source), preparation)
         misses = _misses(source, cloud, preparation.seed)
+        prepared = dataclasses.replace(prepared, misses=misses)
         choice = None
         if auto:
             choice = choose_for(cloud, methods=auto_methods, preparation=preparation,
@@ -1307,6 +1309,7 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
         warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
     points, prepared = load_prepared(_from_library(cloud), preparation)
     misses = _misses(cloud, points, preparation.seed)
+    prepared = dataclasses.replace(prepared, misses=misses)
     if say is not None:
         say(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "
             f"{prepared.noise:.3g} m), truth {len(truth_mesh[1])} faces -> {output}")

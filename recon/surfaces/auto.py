@@ -518,14 +518,15 @@ def _columns(attributes: dict | None) -> dict[str, np.ndarray]:
 
 
 def _fold(cloud: Cloud, strikes: judge.Strikes, folds: judge.Folds, f: int, *, k: int,
-          fallback: Fallback, seed: int) -> _Fold:
-    """Prepare fold ``f``'s training strikes and gather its tested ones (step 1)."""
+          fallback: Fallback, seed: int, misses=None) -> _Fold:
+    """Prepare fold ``f``'s training strikes (with the log's ``misses``, which the
+    ``visibility`` method uses) and gather its tested ones (step 1)."""
     from recon.surfaces.prepare import prepare
 
     rows = folds.train(f)
     train = cloud.subset(rows)
     prepared = prepare(train.points, view_points=train.view_points, k=k, fallback=fallback,
-                       seed=seed, uncertainty=train.attributes)
+                       seed=seed, uncertainty=train.attributes, misses=misses)
     test = folds.test(f)
     fit_rows = rows[judge.subsample(len(rows), judge.MAX_CHECKED // folds.k, seed)]
     return _Fold(prepared, strikes.take(test), folds.block[test], strikes.take(fit_rows))
@@ -535,7 +536,7 @@ def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, se
              misses=None) -> _Context:
     """Every fold prepared (step 1); ``misses``: the log's missed beams (``misses_near``)."""
     strikes = judge.Strikes.of(cloud)
-    every = [_fold(cloud, strikes, folds, f, k=k, fallback=fallback, seed=seed)
+    every = [_fold(cloud, strikes, folds, f, k=k, fallback=fallback, seed=seed, misses=misses)
              for f in range(folds.k)]
     all_rows = judge.subsample(len(strikes), judge.MAX_CHECKED, seed)
     tau, noise = judge.tau_of(cloud.points), every[0].prepared.noise

@@ -142,7 +142,7 @@ def preprocess(cloud: Cloud, *, remove_outliers: bool = False, outlier_k: int = 
 def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
             normals: np.ndarray | None = None, k: int = DEFAULT_K,
             fallback: Fallback = "centroid", seed: int = 0,
-            uncertainty: dict[str, np.ndarray] | None = None) -> MethodInput:
+            uncertainty: dict[str, np.ndarray] | None = None, misses=None) -> MethodInput:
     """Everything a method needs: oriented normals, spacing and noise scale.
 
     Parameters
@@ -160,6 +160,9 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
     uncertainty : dict of str to (n,) arrays, optional
         The strikes' recorded uncertainty columns (``recon.registration.uncertainty.COLUMNS``, as
         ingest writes them); with ``view_points`` they give ``MethodInput.sigma``.
+    misses : recon.registration.misses.MissedBeams, optional
+        The strike log's missed beams near the points (``recon.surfaces.auto.misses_near``),
+        passed on as ``MethodInput.misses``.
 
     Returns
     -------
@@ -203,7 +206,7 @@ def prepare(points: np.ndarray, *, view_points: np.ndarray | None = None,
             noise = float(np.median(along))
     return MethodInput(points=points, normals=normals, spacing=spacing, noise=noise,
                        seed=int(seed), neighbours=planes.neighbours, sigma=sigma,
-                       view_points=view_points)
+                       view_points=view_points, misses=misses)
 
 
 def _check_voxel(voxel: float | None, name: str) -> None:

@@ -24,12 +24,15 @@ import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from formats.errors import MethodFailed, ParameterError
 from recon.surfaces import fit_times
+
+if TYPE_CHECKING:
+    from recon.registration.misses import MissedBeams
 
 Kind = Literal["primitive", "planar", "smooth", "interpolating", "baseline", "test"]
 KINDS = ("primitive", "planar", "smooth", "interpolating", "baseline", "test")
@@ -95,6 +98,11 @@ class MethodInput:
         Sensor position each point was seen from (the cloud's ``view_x/y/z``): the segment from
         it to the point crossed empty space (the ``visibility`` method uses these rays). None
         for a cloud without view points.
+    misses : recon.registration.misses.MissedBeams, optional
+        The strike log's missed beams near the points, in the body frame: origins, unit
+        directions and the free span ``range_min``..``range_max`` of each (beams that crossed
+        free space and struck nothing; the ``visibility`` method votes the cells they cross
+        outside, other methods ignore them). None for a cloud file, which records no misses.
     """
 
     points: np.ndarray
@@ -105,6 +113,7 @@ class MethodInput:
     neighbours: np.ndarray | None = None
     sigma: np.ndarray | None = None
     view_points: np.ndarray | None = None
+    misses: MissedBeams | None = None
 
 
 @dataclass(frozen=True)

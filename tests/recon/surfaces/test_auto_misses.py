@@ -234,3 +234,36 @@ def test_the_estimate_does_not_count_free_space_the_misses_show_as_unseen_truth(
     seen = estimate(open_plates, cloud, misses=misses)
     assert seen.chamfer_m < 0.8 * blind.chamfer_m, (seen.describe(), blind.describe())
     assert seen.unseen < blind.unseen
+
+
+def test_the_missed_beams_reach_the_methods_input(tmp_path, monkeypatch):
+    """Every fold auto fits on carries the log's misses (``MethodInput.misses``, which the
+    visibility method uses), and so does the fit of ``recon.api.reconstruct`` on a strike log;
+    a cloud file's fit carries none."""
+    from formats.geometry import Cloud
+    from recon import api
+    from recon.surfaces import auto
+    from recon.surfaces import reconstruct as reconstruct_module
+
+    points, view, misses = plates()
+    cloud = Cloud(points, dict(zip(("view_x", "view_y", "view_z"), view.T, strict=True)))
+    folds = judge.pass_folds(cloud, 3, seed=0)
+    context = auto._context(cloud, folds, k=30, fallback="centroid", seed=0, misses=misses)
+    assert all(fold.prepared.misses is misses for fold in context.folds)
+
+    path = tmp_path / "spin.h5"
+    write_spinning_log(path)
+    received = []
+    fit = reconstruct_module.reconstruct
+
+    def spy(prepared, **kwargs):
+        received.append(prepared.misses)
+        return fit(prepared, **kwargs)
+
+    monkeypatch.setattr(reconstruct_module, "reconstruct", spy)
+    api.reconstruct(path, method="convex-hull", isolate=False)
+    ingest(path, output=tmp_path / "spin.ply")
+    api.reconstruct(tmp_path / "spin.ply", method="convex-hull", isolate=False)
+    # (the log's 30 misses pass 0.3 rad beside the sphere: none near the strikes is kept)
+    assert isinstance(received[0], MissedBeams) and received[0].n_missed == 30
+    assert received[1] is None

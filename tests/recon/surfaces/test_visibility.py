@@ -254,3 +254,132 @@ def test_view_points_reach_the_isolated_worker_through_the_api():
     assert closed(surface.faces)
     assert volume(surface.vertices, surface.faces) == pytest.approx(4.0 / 3.0 * np.pi,
                                                                     rel=0.05)
+
+
+def axis_scan(truth, n: int, *, noise: float = 0.0, seed: int = 0):
+    """As ``scan``, from the 6 axis sensors only, keeping the strikes one of them sees (at
+    incidences under 72 degrees): the facing sides of the two boxes are seen by none, and no
+    sensor-to-strike ray crosses the gap between them."""
+    vertices, faces = truth
+    points, face = sample_surface(Mesh(vertices, faces), n, seed=seed)
+    a, b, c = (vertices[faces[face, i]] for i in range(3))
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    sensors = 5.0 * SENSOR_DIRECTIONS[:6]
+    beam = sensors[None, :, :] - points[:, None, :]
+    facing = np.einsum("nsi,ni->ns", beam, normal) / np.linalg.norm(beam, axis=2) > 0.3
+    facing &= ~occluded(truth, points, sensors)
+    rng = np.random.default_rng(seed)
+    seen = facing.any(axis=1)
+    view = sensors[np.argmax(facing * rng.random(facing.shape), axis=1)][seen]
+    points = points[seen]
+    ray = (points - view) / np.linalg.norm(points - view, axis=1, keepdims=True)
+    points = points + ray * rng.normal(0.0, noise, (len(points), 1))
+    columns = {key: np.zeros(len(points)) for key in COLUMNS}
+    return prepare(points, view_points=view, seed=seed,
+                   uncertainty=columns | {"sigma_along": np.full(len(points), noise)})
+
+
+def gap_misses(m: int = 200, seed: int = 0):
+    """Missed beams of a sensor at +5 m on y, falling along -y through the gap between the two
+    boxes (|x| < 0.4, |z| < 0.4 m; free from 0.5 to 20 m)."""
+    from recon.registration.misses import MissedBeams
+
+    xz = np.random.default_rng(seed).uniform(-0.4, 0.4, (m, 2))
+    origin = np.column_stack([xz[:, 0], np.full(m, 5.0), xz[:, 1]])
+    return MissedBeams(origin, np.tile([0.0, -1.0, 0.0], (m, 1)), 0.5, 20.0, np.arange(m),
+                       np.zeros(m, dtype=np.int64), m)
+
+
+def fit(cloud, **params):
+    run = bind("visibility", params)
+    return run.method_spec().run(cloud, **run.params)
+
+
+@pytest.mark.parametrize("noise, beta", [(0.0, 0.0), (0.01, 0.0), (0.0, 0.1)])
+def test_missed_beams_open_a_closure_no_strike_ray_crossed(noise, beta):
+    """Two boxes seen from the 6 axes only: no ray crosses the gap, and the cut closes it
+    (volume 3 m^3 for the boxes' 2). The missed beams through the gap open it: the gap is
+    outside, the boxes inside, the volume theirs."""
+    import dataclasses
+
+    truth = shape("two boxes")
+    cloud = axis_scan(truth, 3000, noise=noise)
+    gap = np.array([[0.0, y, z] for y in (-0.3, 0.0, 0.3) for z in (-0.3, 0.0, 0.3)])
+    closed_over = fit(cloud, beta=beta)
+    assert np.all(np.abs(winding(*closed_over, gap) - 1.0) < 1e-6)     # the closure
+    vertices, faces = fit(dataclasses.replace(cloud, misses=gap_misses()), beta=beta)
+    assert closed(faces)
+    assert np.all(np.abs(winding(vertices, faces, gap)) < 1e-6)        # opened
+    centres = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    assert np.all(np.abs(winding(vertices, faces, centres) - 1.0) < 1e-6)
+    assert volume(vertices, faces) == pytest.approx(volume(*truth), rel=0.05)
+
+
+def test_missed_beams_that_cross_no_cell_change_no_byte():
+    """Misses beside the body, or whose free span ends before it, leave the cut as it is: the
+    same bytes as without misses."""
+    import dataclasses
+
+    from recon.registration.misses import MissedBeams
+
+    cloud = axis_scan(shape("two boxes"), 1500, noise=0.01)
+    beside = gap_misses()
+    beside = dataclasses.replace(beside, origin=beside.origin + np.array([0.0, 0.0, 3.0]))
+    short = dataclasses.replace(gap_misses(), range_max=4.0)     # ends 0.5 m before the boxes
+    empty = MissedBeams(np.zeros((0, 3)), np.zeros((0, 3)), 0.5, 20.0,
+                        np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), 0)
+    plain = fit(cloud)
+    for misses in (beside, short, empty):
+        vertices, faces = fit(dataclasses.replace(cloud, misses=misses))
+        assert vertices.tobytes() == plain[0].tobytes()
+        assert faces.tobytes() == plain[1].tobytes()
+
+
+def test_missed_beams_grazing_a_sphere_leave_it_whole():
+    """Missed beams along z passing 2-30 cm outside a unit sphere with 2 cm range noise (the
+    strikes' hull reaches past the truth there): the surface keeps its volume and accuracy."""
+    import dataclasses
+
+    from recon.registration.misses import MissedBeams
+
+    truth = shape("sphere")
+    points, view, columns = scan(truth, 3000, noise=0.02)
+    cloud = prepare(points, view_points=view, uncertainty=columns)
+    rng = np.random.default_rng(1)
+    m = 2000
+    angle, radius = rng.uniform(0, 2 * np.pi, m), rng.uniform(1.02, 1.3, m)
+    origin = np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.full(m, 5.0)])
+    misses = MissedBeams(origin, np.tile([0.0, 0.0, -1.0], (m, 1)), 0.5, 20.0, np.arange(m),
+                         np.zeros(m, dtype=np.int64), m)
+    plain = fit(cloud)
+    vertices, faces = fit(dataclasses.replace(cloud, misses=misses))
+    assert closed(faces)
+    assert volume(vertices, faces) == pytest.approx(volume(*plain), rel=0.01)
+    before = score(plain, truth, **FAST_SCORE).chamfer_m
+    assert score((vertices, faces), truth, **FAST_SCORE).chamfer_m < 1.1 * before
+
+
+def test_hull_entries_against_the_box_they_enter():
+    """Rays into the hull of a cube's corners and inner points enter at its face, in a cell
+    holding the entry point; rays beside it, or whose span starts inside, are left out."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(0)
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5)
+                        for z in (-0.5, 0.5)])
+    tri = visibility.Cells.of(Delaunay(np.concatenate([corners, rng.uniform(-0.4, 0.4,
+                                                                            (200, 3))])))
+    xy = rng.uniform(-0.45, 0.45, (50, 2))
+    origin = np.concatenate([np.column_stack([xy, np.full(50, 3.0)]),
+                             [[2.0, 0.0, 3.0]]])                          # the last: beside
+    direction = np.tile([0.0, 0.0, -1.0], (51, 1))
+    ray, cell, t = visibility.hull_entries(tri, origin, direction, 0.0, 10.0)
+    np.testing.assert_array_equal(ray, np.arange(50))
+    np.testing.assert_allclose(t, 2.5, atol=1e-9)
+    at = origin[ray] + t[:, None] * direction[ray]
+    bary = np.einsum("rij,rj->ri", tri.inverse[cell], at - tri.offset[cell])
+    bary = np.column_stack([bary, 1.0 - bary.sum(axis=1)])
+    assert np.all(bary > -1e-9)
+    inside, _, _ = visibility.hull_entries(tri, origin, direction, 2.7, 10.0)
+    assert len(inside) == 0                       # each span begins 0.2 m inside the cube
