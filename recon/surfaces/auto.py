@@ -103,7 +103,8 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -393,12 +394,19 @@ class AutoChoice:
 @dataclass(frozen=True)
 class _Fold:
     """One fold: the prepared training strikes, the tested strikes and their blocks, and a
-    subsample of the training strikes (for ``chi_fit``)."""
+    subsample of the training strikes (for ``chi_fit``). ``ready``: the prepared strikes as
+    a future (``_context`` prepares the folds after the first while the fits on it run);
+    ``prepared`` waits for it."""
 
-    prepared: MethodInput
+    ready: Future
     test: judge.Strikes
     block: np.ndarray
     train: judge.Strikes
+
+    @property
+    def prepared(self) -> MethodInput:
+        """The prepared training strikes (waits for their preparation; raises its error)."""
+        return self.ready.result()
 
 
 @dataclass(frozen=True)
@@ -517,26 +525,43 @@ def _columns(attributes: dict | None) -> dict[str, np.ndarray]:
     return {k: np.asarray(v) for k, v in (attributes or {}).items() if k in wanted}
 
 
-def _fold(cloud: Cloud, strikes: judge.Strikes, folds: judge.Folds, f: int, *, k: int,
-          fallback: Fallback, seed: int) -> _Fold:
-    """Prepare fold ``f``'s training strikes and gather its tested ones (step 1)."""
-    from recon.surfaces.prepare import prepare
-
+def _fold(strikes: judge.Strikes, folds: judge.Folds, f: int, *, seed: int, ready: Future
+          ) -> _Fold:
+    """Gather fold ``f``'s tested strikes and its training subsample (step 1); ``ready``: the
+    preparation of its training strikes (``_prepare_fold``), made or under way."""
     rows = folds.train(f)
-    train = cloud.subset(rows)
-    prepared = prepare(train.points, view_points=train.view_points, k=k, fallback=fallback,
-                       seed=seed, uncertainty=train.attributes)
     test = folds.test(f)
     fit_rows = rows[judge.subsample(len(rows), judge.MAX_CHECKED // folds.k, seed)]
-    return _Fold(prepared, strikes.take(test), folds.block[test], strikes.take(fit_rows))
+    return _Fold(ready, strikes.take(test), folds.block[test], strikes.take(fit_rows))
+
+
+def _prepare_fold(cloud: Cloud, folds: judge.Folds, f: int, *, k: int, fallback: Fallback,
+                  seed: int) -> MethodInput:
+    """Fold ``f``'s training strikes prepared (normals, spacing, the recorded noise)."""
+    from recon.surfaces.prepare import prepare
+
+    train = cloud.subset(folds.train(f))
+    return prepare(train.points, view_points=train.view_points, k=k, fallback=fallback,
+                   seed=seed, uncertainty=train.attributes)
 
 
 def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, seed: int,
              misses=None) -> _Context:
-    """Every fold prepared (step 1); ``misses``: the log's missed beams (``misses_near``)."""
+    """Every fold (step 1); ``misses``: the log's missed beams (``misses_near``). The first
+    fold is prepared here (its noise and spacing set the tolerances); the others in a thread,
+    one after the other, while the first fold's fits run (each fit waits for its fold): the
+    same preparation, off the path to the first fit (docs/decisions.md)."""
+    from concurrent.futures import ThreadPoolExecutor
+
     strikes = judge.Strikes.of(cloud)
-    every = [_fold(cloud, strikes, folds, f, k=k, fallback=fallback, seed=seed)
-             for f in range(folds.k)]
+    options = {"k": k, "fallback": fallback, "seed": seed}
+    first: Future = Future()
+    first.set_result(_prepare_fold(cloud, folds, 0, **options))
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recon-folds")
+    later = [pool.submit(_prepare_fold, cloud, folds, f, **options) for f in range(1, folds.k)]
+    pool.shutdown(wait=False)   # its thread ends once the folds are prepared
+    every = [_fold(strikes, folds, f, seed=seed, ready=ready)
+             for f, ready in enumerate([first, *later])]
     all_rows = judge.subsample(len(strikes), judge.MAX_CHECKED, seed)
     tau, noise = judge.tau_of(cloud.points), every[0].prepared.noise
     return _Context(folds=every, checked=strikes.take(all_rows), tau=tau, noise=noise,
@@ -546,8 +571,8 @@ def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, se
 
 class _Race:
     """The fits of ``_fit_and_judge`` and what is known of each run: its results, built
-    surfaces and held-out checks per fold (a fold's check is made as its fit arrives, on the
-    folds any stage races on: the race and the judging share them), and its candidates once
+    surfaces and held-out checks per fold (a fold's check is made as its fit arrives, while
+    the workers fit the others: the race and the judging share them), and its candidates once
     judged. The race goes in stages (``RACE_STAGES``): ``first`` is how many folds the runs
     still raced are fitted on. A run is a job ``(i, j)``: run ``j`` of the ``i``-th (depth,
     runs) pair."""
@@ -578,14 +603,14 @@ class _Race:
         return self.stage < len(self.stages)
 
     def arrived(self, job: tuple[int, int], f: int, result: dict) -> None:
-        """Fold ``f``'s fit of ``job`` is in: on a fold the race reads, its surface is built
-        and checked; a failure on the folds fitted so far fails the run; its judging once all
-        its folds are in waits for ``judge_complete``."""
+        """Fold ``f``'s fit of ``job`` is in: its surface is built and checked (the fits still
+        outstanding go on meanwhile); a failure on the folds fitted so far fails the run; its
+        judging once all its folds are in waits for ``judge_complete``."""
         results = self.results[job]
         results[f] = result
         if job in self.judged:
             return
-        if result.get("status") == "ok" and self.stages and f < self.stages[-1][0]:
+        if result.get("status") == "ok":
             self.casters[job][f] = judge.Caster(result["vertices"], result["faces"])
             self.checks[job][f] = held_out_check(self.context.folds[f], self.casters[job][f],
                                                  self.context)
@@ -605,12 +630,14 @@ class _Race:
                                            self.checks[job])
 
     def opening_fits(self) -> list[tuple[tuple[int, int], int]]:
-        """The (job, fold) fits handed out first: the runs not raced on every fold (the models
-        of a few numbers), then the raced ones on the first stage's folds, in ``jobs``'
-        order."""
+        """The (job, fold) fits handed out first, fold by fold (the later folds are still
+        being prepared, ``_context``): on each, the runs not raced (the models of a few
+        numbers, fitted on every fold), then, on the first stage's folds, the raced ones, in
+        ``jobs``' order (the finest level's long fits start early, the quick models' later
+        folds fill in beside them)."""
         k = len(self.context.folds)
-        return ([(job, f) for job in self.jobs if not self.raced(job) for f in range(k)]
-                + [(job, f) for job in self.jobs if self.raced(job) for f in range(self.first)])
+        return [(job, f) for f in range(k) for raced in (False, True) for job in self.jobs
+                if self.raced(job) == raced and (not raced or f < self.first)]
 
     def raced(self, job: tuple[int, int]) -> bool:
         """Whether the run may leave the race (its level is raced, ``RACE_LEVEL``); the others
@@ -733,8 +760,8 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
     with ThreadPoolExecutor(max_workers=workers) as pool, \
             tqdm(total=len(state.jobs) * len(folds), desc=f"auto level {depths}", unit="fit",
                  disable=None, leave=False) as bar:
-        def submit(run, f):
-            return pool.submit(run_isolated, run, folds[f].prepared, threads=FIT_THREADS,
+        def submit(run, f):   # the fit's thread waits for its fold's preparation
+            return pool.submit(_fit_fold, run_isolated, run, folds[f], threads=FIT_THREADS,
                                **limits.kwargs())
 
         def hand_out(pairs):
@@ -771,6 +798,11 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
         if ahead is not None:
             ahead[1].update({key: future.result() for future, key in spare.items()})
     return state.candidates()
+
+
+def _fit_fold(fit: Callable, run: Run, fold: _Fold, **kwargs) -> dict:
+    """``fit(run, fold.prepared, **kwargs)`` (``run_isolated``), once the fold is prepared."""
+    return fit(run, fold.prepared, **kwargs)
 
 
 def _judged(run: Run, level: int, results: list[dict], context: _Context,
