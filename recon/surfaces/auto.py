@@ -605,7 +605,7 @@ class _Race:
     def arrived(self, job: tuple[int, int], f: int, result: dict) -> None:
         """Fold ``f``'s fit of ``job`` is in: its surface is built and checked (the fits still
         outstanding go on meanwhile); a failure on the folds fitted so far fails the run; its
-        judging once all its folds are in waits for ``judge_complete``."""
+        judging once all its folds are in waits for ``judge_next``."""
         results = self.results[job]
         results[f] = result
         if job in self.judged:
@@ -620,14 +620,19 @@ class _Race:
                                                 [r for r in results if r is not None],
                                                 self.context)]
 
-    def judge_complete(self) -> None:
-        """Judge (``_judged``) every run whose folds are all fitted and not judged yet."""
+    def judge_next(self) -> bool:
+        """Judge (``_judged``) one run whose folds are all fitted and that is not judged yet;
+        whether there was one. One at a time: between two, the caller takes in the fits
+        that arrived and races when a stage is complete, so the workers do not wait for the
+        judging of runs the race does not need."""
         for job in self.jobs:
             results = self.results[job]
             if job not in self.judged and all(r is not None for r in results):
                 self.judged[job] = _judged(self.run(job), self.level(job), results,
                                            self.context, self.casters.pop(job),
                                            self.checks[job])
+                return True
+        return False
 
     def opening_fits(self) -> list[tuple[tuple[int, int], int]]:
         """The (job, fold) fits handed out first, fold by fold (the later folds are still
@@ -788,10 +793,16 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
             if ahead is not None and not spare and (not state.racing or len(pending) < workers):
                 spare = {submit(run, f): (j, f) for j, run in enumerate(ahead[0])
                          for f in range(opening)}
-            state.judge_complete()   # while the workers fit
-            if not pending:
-                break
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            done = {future for future in pending if future.done()}
+            # fits that arrived, then a race, come before the judging; and while the last
+            # fits of a stage run, the next race's moment is near: no judging then
+            if not done and not (state.racing and len(pending) <= workers):
+                if state.judge_next():   # while the workers fit
+                    continue
+            if not done:
+                if not pending:
+                    break
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
                 state.arrived(*pending.pop(future), future.result())
                 bar.update(1)
