@@ -61,7 +61,7 @@ def remove_statistical_outliers(points: np.ndarray, *, k: int = OUTLIER_K,
         raise InputError(f"outlier std_ratio must be positive, got {std_ratio}")
     if len(points) <= k:
         return np.ones(len(points), dtype=bool)
-    from scipy.spatial import cKDTree   # imported when used: ``recon.surfaces.normals``
+    from scipy.spatial import cKDTree  # imported when used: ``recon.surfaces.normals``
 
     distance, _ = cKDTree(points).query(points, k=k + 1, workers=-1)
     mean = distance[:, 1:].mean(axis=1)
