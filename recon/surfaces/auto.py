@@ -546,11 +546,12 @@ def _prepare_fold(cloud: Cloud, folds: judge.Folds, f: int, *, k: int, fallback:
 
 
 def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, seed: int,
-             misses=None) -> _Context:
+             misses=None, then: Callable[[], Any] | None = None) -> _Context:
     """Every fold (step 1); ``misses``: the log's missed beams (``misses_near``). The first
     fold is prepared here (its noise and spacing set the tolerances); the others in a thread,
     one after the other, while the first fold's fits run (each fit waits for its fold): the
-    same preparation, off the path to the first fit (docs/decisions.md)."""
+    same preparation, off the path to the first fit (docs/decisions.md). ``then``: called
+    without arguments in that thread after the folds."""
     from concurrent.futures import ThreadPoolExecutor
 
     strikes = judge.Strikes.of(cloud)
@@ -559,6 +560,8 @@ def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, se
     first.set_result(_prepare_fold(cloud, folds, 0, **options))
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recon-folds")
     later = [pool.submit(_prepare_fold, cloud, folds, f, **options) for f in range(1, folds.k)]
+    if then is not None:
+        pool.submit(then)
     pool.shutdown(wait=False)   # its thread ends once the folds are prepared
     every = [_fold(strikes, folds, f, seed=seed, ready=ready)
              for f, ready in enumerate([first, *later])]
@@ -1284,7 +1287,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
            seed: int = 0, k: int = DEFAULT_K, fallback: Fallback = "centroid",
            timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
            n_workers: int | None = None, target_kind: str = "unknown",
-           misses=None) -> AutoChoice:
+           misses=None, then: Callable[[], Any] | None = None) -> AutoChoice:
     """Choose a method and resolution by held-out passes and the sensor rays, without the truth.
 
     Parameters
@@ -1318,6 +1321,10 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
         The log's missed beams near the strikes (``misses_near``), in the body frame: each
         candidate's ``misses_cut``, and a carved candidate for each that fills free space
         (module docstring, step 2). None: neither (a cloud file records no misses).
+    then : callable, optional
+        Called without arguments in the thread that prepares the folds, once they are
+        prepared, while the fits run (``recon reconstruct`` prepares every strike there for
+        the chosen run's refit); not called when the options or the cloud are refused first.
 
     Returns
     -------
@@ -1343,7 +1350,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
                         f"{tested} in the smallest fold")
     levels = ([[bind(*r) if isinstance(r, tuple) else bind(r) for r in candidates]]
               if candidates else ladder(methods, natural=target_kind == "natural"))
-    context = _context(cloud, folds, k=k, fallback=fallback, seed=seed, misses=misses)
+    context = _context(cloud, folds, k=k, fallback=fallback, seed=seed, misses=misses,
+                       then=then)
     limits = Limits(timeout_s=timeout_s, memory_mb=memory_mb)
     table, note = climb(levels, context, limits=limits, n_workers=n_workers)
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
@@ -1406,7 +1414,7 @@ def format_choice(choice: AutoChoice) -> str:
 def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
                holdout: float = HOLDOUT_FRACTION, preparation: Preparation | None = None,
                limits: Limits | None = None, target_kind: str = "unknown",
-               misses=None) -> AutoChoice:
+               misses=None, then: Callable[[], Any] | None = None) -> AutoChoice:
     """``choose`` on a cleaned ``Cloud`` (``Preparation.apply``) with a preparation's normals
     options and a run's limits: the choice ``-m auto`` makes.
 
@@ -1424,9 +1432,12 @@ def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
         What is known of the target (``choose``).
     misses : recon.registration.misses.MissedBeams, optional
         The log's missed beams (``choose``).
+    then : callable, optional
+        As ``choose``.
     """
     preparation = preparation or Preparation()
     return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
                   methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
                   fallback=preparation.fallback, target_kind=target_kind, misses=misses,
+                  then=then,
                   **(limits or Limits()).kwargs())

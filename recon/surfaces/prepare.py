@@ -262,11 +262,17 @@ class Preparation:
             The cleaned and thinned points, with their view points when ``cloud`` had them.
         prepared : MethodInput
         """
-        cloud = preprocess(cloud, remove_outliers=self.remove_outliers, voxel=self.voxel)
-        prepared = prepare(cloud.points, view_points=cloud.view_points, k=self.k,
-                           fallback=self.fallback, seed=self.seed,
-                           uncertainty=cloud.attributes)
-        return cloud, prepared
+        cloud = self.clean(cloud)
+        return cloud, self.prepare(cloud)
+
+    def clean(self, cloud: Cloud) -> Cloud:
+        """``cloud`` cleaned and thinned (``preprocess``)."""
+        return preprocess(cloud, remove_outliers=self.remove_outliers, voxel=self.voxel)
+
+    def prepare(self, cloud: Cloud) -> MethodInput:
+        """A cleaned ``cloud`` prepared (``prepare``: normals, spacing, noise)."""
+        return prepare(cloud.points, view_points=cloud.view_points, k=self.k,
+                       fallback=self.fallback, seed=self.seed, uncertainty=cloud.attributes)
 
 
 def load_prepared(source, preparation: Preparation | None = None
@@ -287,6 +293,14 @@ def load_prepared(source, preparation: Preparation | None = None
         The cleaned and thinned points, metres, body frame (view points kept).
     prepared : MethodInput
     """
+    preparation = preparation or Preparation()
+    cloud = load_cleaned(source, preparation)
+    return cloud, preparation.prepare(cloud)
+
+
+def load_cleaned(source, preparation: Preparation | None = None) -> Cloud:
+    """Read (or take) a cloud, cleaned and thinned (``load_prepared`` without the
+    preparation: ``Preparation.prepare`` then makes it)."""
     import os
 
     if isinstance(source, str | os.PathLike):
@@ -295,4 +309,4 @@ def load_prepared(source, preparation: Preparation | None = None
         cloud = load_cloud(source)
     else:
         cloud = Cloud.of(source, "cloud")
-    return (preparation or Preparation()).apply(cloud)
+    return (preparation or Preparation()).clean(cloud)

@@ -187,3 +187,35 @@ def test_auto_refits_its_choice_on_a_warm_fit_worker(monkeypatch):
         assert n == len(cloud.points) and run.label == surface.info["auto"]["label"]
     finally:
         isolation.shutdown_workers()
+
+
+def test_the_folds_after_the_first_are_prepared_in_a_thread_then_the_callers_function():
+    """``_context`` prepares the first fold at once and the others in a thread, then calls
+    ``then`` there: each fold's preparation is the one made alone, array for array."""
+    import threading
+
+    import numpy as np
+
+    from recon.surfaces import judge
+
+    cloud, view = small_sphere()
+    attributes = dict(cloud.attributes) | dict(zip(("view_x", "view_y", "view_z"), view.T,
+                                                   strict=True))
+    cloud = Cloud(cloud.points, attributes)
+    folds = judge.pass_folds(cloud, 4, seed=0)
+    seen = []
+    context = auto._context(cloud, folds, k=16, fallback="centroid", seed=0,
+                            then=lambda: seen.append(threading.current_thread().name))
+    assert context.folds[0].ready.done()
+    prepared = [fold.prepared for fold in context.folds]
+    for f, made in enumerate(prepared):
+        alone = auto._prepare_fold(cloud, folds, f, k=16, fallback="centroid", seed=0)
+        assert np.array_equal(made.points, alone.points)
+        assert np.array_equal(made.normals, alone.normals)
+        assert (made.spacing, made.noise) == (alone.spacing, alone.noise)
+        assert np.array_equal(made.sigma, alone.sigma)
+    for _ in range(200):   # ``then`` runs after the last fold, in the same thread
+        if seen:
+            break
+        threading.Event().wait(0.05)
+    assert len(seen) == 1 and seen[0].startswith("recon-folds")
