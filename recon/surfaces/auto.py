@@ -572,13 +572,35 @@ def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, se
                     miss_reach=miss_reach(tau, noise, every[0].prepared.spacing))
 
 
+@dataclass
+class _Made:
+    """What is made of a run's fold surfaces ahead of its judging, each None until made
+    (``_Race.arrived``, ``_Race.make_next``): per fold its built surface (``casters``), its
+    ``held_out_check`` (``held``) and its check on the training strikes (``fit``); the first
+    fold's checks over all strikes and against the missed beams (``overall``,
+    ``_overall``); and for a run that fills free space, the same of its carved twin
+    (``twin``, whose ``results`` are the folds' carved surfaces). ``judge_candidate`` makes
+    what is missing: the same checks of the same surfaces, made earlier."""
+
+    casters: list
+    held: list
+    fit: list
+    overall: tuple | None = None
+    results: list | None = None
+    twin: _Made | None = None
+
+    @classmethod
+    def empty(cls, k: int) -> _Made:
+        return cls([None] * k, [None] * k, [None] * k)
+
+
 class _Race:
-    """The fits of ``_fit_and_judge`` and what is known of each run: its results, built
-    surfaces and held-out checks per fold (a fold's check is made as its fit arrives, while
-    the workers fit the others: the race and the judging share them), and its candidates once
-    judged. The race goes in stages (``RACE_STAGES``): ``first`` is how many folds the runs
-    still raced are fitted on. A run is a job ``(i, j)``: run ``j`` of the ``i``-th (depth,
-    runs) pair."""
+    """The fits of ``_fit_and_judge`` and what is known of each run: its results, what is
+    made of its folds' surfaces (``_Made``: a fold's held-out check as its fit arrives, the
+    race and the judging share them; the judging's other checks while the workers fit,
+    ``make_next``), and its candidates once judged. The race goes in stages
+    (``RACE_STAGES``): ``first`` is how many folds the runs still raced are fitted on. A run
+    is a job ``(i, j)``: run ``j`` of the ``i``-th (depth, runs) pair."""
 
     def __init__(self, levels: list[tuple[int, list[Run]]], context: _Context):
         self.levels, self.context = levels, context
@@ -589,9 +611,7 @@ class _Race:
         # the finest level first (module docstring)
         self.jobs = [(i, j) for i in reversed(range(len(levels))) for j in range(len(levels[i][1]))]
         self.results = {job: [None] * k for job in self.jobs}
-        self.casters = {job: [None] * k for job in self.jobs}
-        self.checks: dict[tuple[int, int], list[judge.Check | None]] = {
-            job: [None] * k for job in self.jobs}
+        self.made = {job: _Made.empty(k) for job in self.jobs}
         self.judged: dict[tuple[int, int], list[Candidate]] = {}
 
     def run(self, job: tuple[int, int]) -> Run:
@@ -614,9 +634,9 @@ class _Race:
         if job in self.judged:
             return
         if result.get("status") == "ok":
-            self.casters[job][f] = judge.Caster(result["vertices"], result["faces"])
-            self.checks[job][f] = held_out_check(self.context.folds[f], self.casters[job][f],
-                                                 self.context)
+            made = self.made[job]
+            made.casters[f] = judge.Caster(result["vertices"], result["faces"])
+            made.held[f] = held_out_check(self.context.folds[f], made.casters[f], self.context)
         if all(r is not None for r in results[:self.first]) and \
                 any(r.get("status") != "ok" for r in results[:self.first]):
             self.judged[job] = [judge_candidate(self.run(job), self.level(job),
@@ -631,10 +651,32 @@ class _Race:
         for job in self.jobs:
             results = self.results[job]
             if job not in self.judged and all(r is not None for r in results):
+                made = self.made[job]
                 self.judged[job] = _judged(self.run(job), self.level(job), results,
-                                           self.context, self.casters.pop(job),
-                                           self.checks[job])
+                                           self.context, made)
+                # the race reads its held-out checks; its surfaces are not cast against again
+                self.made[job] = _Made.empty(len(results))
+                self.made[job].held = made.held
                 return True
+        return False
+
+    def make_next(self) -> bool:
+        """Make one fold's checks ahead of a run's judging (``_Made``, ``_make_fold``), for a
+        run that will be judged (not raced, or the race is over) and has not failed so far;
+        whether there was one to make. The judging that follows the run's last fit then has
+        little left to do."""
+        if self.racing and any(self.raced(job) for job in self.jobs):
+            sure = [job for job in self.jobs if not self.raced(job)]
+        else:
+            sure = self.jobs
+        for job in sure:
+            results = self.results[job]
+            if job in self.judged or any(r is not None and r.get("status") != "ok"
+                                         for r in results):
+                continue
+            for f, result in enumerate(results):
+                if result is not None and _make_fold(self.made[job], f, result, self.context):
+                    return True
         return False
 
     def opening_fits(self) -> list[tuple[tuple[int, int], int]]:
@@ -664,7 +706,7 @@ class _Race:
         block = np.concatenate([f.block for f in folds])
         pool = self._pool(n)
         partial = [c.cost[:m] for c in reference] + [
-            np.concatenate([c.cost for c in self.checks[job][:n]]) for job in pool]
+            np.concatenate([c.cost for c in self.made[job].held[:n]]) for job in pool]
         racing = [False] * len(reference) + [self.raced(job) for job in pool]
         shut = [bool(c.closed) for c in reference] + [
             closed(self.results[job][0]["faces"]) for job in pool]
@@ -672,7 +714,7 @@ class _Race:
         for job, gap in zip(pool, leaves, strict=True):
             if gap is not None:
                 self.judged[job] = [self._outpaced(job, *gap, ses)]
-                del self.casters[job]   # its surfaces' scenes are not cast against again
+                del self.made[job]   # its surfaces' scenes are not cast against again
         self.stage += 1
         start, self.first = n, (self.stages[self.stage][0] if self.racing
                                 else len(self.context.folds))
@@ -686,7 +728,7 @@ class _Race:
         fits failed (a run fitted on every fold may have failed on a later one), not left at
         an earlier stage."""
         return [job for job in self.jobs if not self._left(job)
-                and all(c is not None for c in self.checks[job][:n])
+                and all(c is not None for c in self.made[job].held[:n])
                 and all(r is None or r.get("status") == "ok" for r in self.results[job])]
 
     def _left(self, job: tuple[int, int]) -> bool:
@@ -800,7 +842,7 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
             # fits that arrived, then a race, come before the judging; and while the last
             # fits of a stage run, the next race's moment is near: no judging then
             if not done and not (state.racing and len(pending) <= workers):
-                if state.judge_next():   # while the workers fit
+                if state.judge_next() or state.make_next():   # while the workers fit
                     continue
             if not done:
                 if not pending:
@@ -820,30 +862,73 @@ def _fit_fold(fit: Callable, run: Run, fold: _Fold, **kwargs) -> dict:
 
 
 def _judged(run: Run, level: int, results: list[dict], context: _Context,
-            built: list | None = None, held: list | None = None) -> list[Candidate]:
+            made: _Made | None = None) -> list[Candidate]:
     """A run fitted on every fold, judged (``judge_candidate``), and its carved twin when it
-    fills free space (``fills_free_space``). Each fold's surface is built for the casts once
-    (``built``: the folds' surfaces already built, None where not; ``held``: their held-out
-    checks already made, None where not): the twin is carved on the scenes its candidate was
-    judged on."""
-    built = built or [None] * len(results)
-    casters = ([b or judge.Caster(r["vertices"], r["faces"]) for r, b in zip(results, built,
-                                                                          strict=True)]
-               if all(r.get("status") == "ok" for r in results) else None)
-    candidate = judge_candidate(run, level, results, context, casters=casters, held=held)
+    fills free space (``fills_free_space``). ``made``: what is already made of its folds'
+    surfaces (``_Made``; the rest is made here). Each fold's surface is built for the casts
+    once: the twin is carved on the scenes its candidate was judged on."""
+    made = made or _Made.empty(len(results))
+    if all(r.get("status") == "ok" for r in results):
+        made.casters = [b or judge.Caster(r["vertices"], r["faces"])
+                        for r, b in zip(results, made.casters, strict=True)]
+    candidate = judge_candidate(run, level, results, context, made=made)
     if not fills_free_space(candidate):
         return [candidate]
-    return [candidate, judge_candidate(run, level, _carved(results, context, casters), context,
-                                       carved=True)]
+    twin = made.twin or _Made.empty(len(results))
+    twin.results = [carved or _carved(result, context, caster) for carved, result, caster
+                    in zip(twin.results or [None] * len(results), results, made.casters,
+                           strict=True)]
+    return [candidate, judge_candidate(run, level, twin.results, context, carved=True,
+                                       made=twin)]
+
+
+def _make_fold(made: _Made, f: int, result: dict, context: _Context) -> bool:
+    """Make the next missing check of fold ``f``'s surface (``result``, fitted) in ``made``:
+    its surface, its held-out check, its check on the training strikes, the first fold's
+    overall checks; then, when the first fold's surface cuts missed beams (the run fills
+    free space, ``fills_free_space``), the same of the fold's carved surface. Whether one
+    was missing."""
+    if made.casters[f] is None:
+        made.casters[f] = judge.Caster(result["vertices"], result["faces"])
+    elif made.held[f] is None:
+        made.held[f] = held_out_check(context.folds[f], made.casters[f], context)
+    elif made.fit[f] is None:
+        made.fit[f] = _fit_check(context.folds[f], made.casters[f], context)
+    elif f == 0 and made.overall is None:
+        made.overall = _overall(made.casters[0], context)
+    elif made.overall is None or not made.overall[1] or made.results is not None:
+        return False   # the twin's are made of the twin's own ``_Made``, or not at all
+    else:
+        twin = made.twin = made.twin or _Made.empty(len(made.casters))
+        twin.results = twin.results or [None] * len(made.casters)
+        if twin.results[f] is None:
+            twin.results[f] = _carved(result, context, made.casters[f])
+            return True
+        return _make_fold(twin, f, twin.results[f], context)
+    return True
+
+
+def _fit_check(fold: _Fold, caster: judge.Caster, context: _Context) -> judge.Check:
+    """A fold's training strikes (a subsample) against its surface: ``chi_fit``."""
+    return judge.check(fold.train, caster, fitted=True, tau=context.tau, noise=context.noise)
+
+
+def _overall(caster: judge.Caster, context: _Context) -> tuple[judge.Check, float | None]:
+    """The first fold's surface against all strikes (a subsample: cuts and holes) and the
+    fraction of the missed beams it cuts (None without them)."""
+    everywhere = judge.check(context.checked, caster, tau=context.tau, noise=context.noise)
+    misses_cut = None
+    if context.misses is not None and len(context.misses):
+        misses_cut = float(judge.cut_misses(context.misses, caster, context.points,
+                                            context.miss_reach).mean())
+    return everywhere, misses_cut
 
 
 def judge_candidate(run: Run, level: int, results: list[dict], context: _Context,
-                    carved: bool = False, casters: list | None = None,
-                    held: list | None = None) -> Candidate:
+                    carved: bool = False, made: _Made | None = None) -> Candidate:
     """Step 2 of the module docstring for one run fitted on every fold (``run_isolated``
-    results, folds in order): a fold that failed fails the candidate. ``casters``: each fold's
-    surface already built (``judge.Caster``), when the caller has them; ``held``: the
-    ``held_out_check`` of each fold's surface already made (None where not: made here)."""
+    results, folds in order): a fold that failed fails the candidate. ``made``: the checks
+    of its folds' surfaces already made (``_Made``; the others are made here)."""
     failed = next((r for r in results if r.get("status", "failed") != "ok"), None)
     candidate = Candidate(run, level, status="ok" if failed is None else
                           failed.get("status", "failed"),
@@ -852,22 +937,18 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                           carved=carved)
     if failed is not None:
         return candidate
-    options = {"tau": context.tau, "noise": context.noise}
-    casters = casters or [judge.Caster(r["vertices"], r["faces"]) for r in results]
-    held = _held_checks(casters, context, held)
-    fit = [judge.check(fold.train, caster, fitted=True, **options)
-           for caster, fold in zip(casters, context.folds, strict=True)]
+    made = made or _Made.empty(len(results))
+    casters = [b or judge.Caster(r["vertices"], r["faces"])
+               for r, b in zip(results, made.casters, strict=True)]
+    held = _held_checks(casters, context, made.held)
+    fit = [made_fit or _fit_check(fold, caster, context)
+           for made_fit, caster, fold in zip(made.fit, casters, context.folds, strict=True)]
     cost = np.concatenate([h.cost for h in held])
     distance = np.concatenate([h.distance for h in held])
     tolerance = np.concatenate([h.tolerance for h in held])
     chi2, se = judge.block_mean_se(cost, context.block)
     vertices, faces = results[0]["vertices"], results[0]["faces"]
-    caster = casters[0]
-    everywhere = judge.check(context.checked, caster, **options)
-    misses_cut = None
-    if context.misses is not None and len(context.misses):
-        misses_cut = float(judge.cut_misses(context.misses, caster, context.points,
-                                            context.miss_reach).mean())
+    everywhere, misses_cut = made.overall or _overall(casters[0], context)
     return replace(candidate, n_faces=len(faces),
                    n_params=run.method_spec().parameter_count(vertices, faces),
                    closed=closed(faces), chi2=chi2, chi2_se=se, chi_heldout=float(np.sqrt(chi2)),
@@ -906,16 +987,15 @@ def fills_free_space(candidate: Candidate) -> bool:
     return bool(candidate.misses_cut) and not candidate.carved
 
 
-def _carved(results: list[dict], context: _Context, casters: list) -> list[dict]:
-    """Each fold's surface carved by the missed beams (``judge.carve``) as the surface
-    refitted on all strikes will be: a crossing within reach of any strike, held out or not,
-    is no evidence (carving fits nothing to the held-out strikes; spared near them only
-    by a fold's training strikes, a silhouette a beam grazed past would be cut open where
-    the final surface is not). ``casters``: each fold's surface, built."""
-    return [result | dict(zip(("vertices", "faces"), judge.carve(
+def _carved(result: dict, context: _Context, caster: judge.Caster) -> dict:
+    """A fold's surface (``result``, built: ``caster``) carved by the missed beams
+    (``judge.carve``) as the surface refitted on all strikes will be: a crossing within reach
+    of any strike, held out or not, is no evidence (carving fits nothing to the held-out
+    strikes; spared near them only by a fold's training strikes, a silhouette a beam grazed
+    past would be cut open where the final surface is not)."""
+    return result | dict(zip(("vertices", "faces"), judge.carve(
         result["vertices"], result["faces"], context.misses, context.points,
         context.miss_reach, caster=caster), strict=True))
-        for result, caster in zip(results, casters, strict=True)]
 
 
 def _best(candidates: list[Candidate]) -> Candidate | None:
