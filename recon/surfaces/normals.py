@@ -124,8 +124,8 @@ def local_planes(points: np.ndarray, *, k: int = DEFAULT_K, adaptive: bool = Tru
     points = _check_points(points)
     k = _check_k(k, len(points))
     n = len(points)
-    # scipy's spatial package (a quarter second) is imported when a tree is made: ``recon
-    # reconstruct -m auto`` starts its fit workers before it
+    # scipy's spatial package is imported when a tree is made: ``recon reconstruct -m
+    # auto`` starts its fit workers before that import
     from scipy.spatial import cKDTree
 
     tree = cKDTree(points)
