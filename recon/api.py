@@ -1099,7 +1099,7 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
     from recon.surfaces.auto import FIT_THREADS, choose_for, format_choice, start_workers
     from recon.surfaces.isolation import Limits
     from recon.surfaces.methods import watertight
-    from recon.surfaces.prepare import load_prepared
+    from recon.surfaces.prepare import load_cleaned
     from recon.surfaces.reconstruct import Surface, estimate_of, prepare_estimate
     from recon.surfaces.reconstruct import reconstruct as run_method
 
@@ -1113,14 +1113,21 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
         if auto:  # the fit workers import while the input loads (walked before their threads)
             walk_early(*_inputs(source))
             start_workers()
-        cloud, prepared = load_prepared(_from_library(source), preparation)
-        misses = _misses(source, cloud, preparation.seed)
-        prepared = dataclasses.replace(prepared, misses=misses)
-        choice = None
-        if auto:
-            choice = choose_for(cloud, methods=auto_methods, preparation=preparation,
-                                limits=limits, holdout=holdout, target_kind=target_kind,
-                                misses=misses)
+        cloud = load_cleaned(_from_library(source), preparation)
+        choice, prepared = None, _Later(preparation.prepare, cloud)
+        if not auto:
+            prepared.result()   # here and now: a refused cloud stops before anything else
+        try:
+            misses = _misses(source, cloud, preparation.seed)
+            if auto:   # every strike prepared for the refit in the folds' thread, after them
+                choice = choose_for(cloud, methods=auto_methods, preparation=preparation,
+                                    limits=limits, holdout=holdout, target_kind=target_kind,
+                                    misses=misses, then=prepared.run)
+        except Exception:
+            prepared.result()   # a cloud the preparation refuses: its error, as made first
+            raise
+        prepared = dataclasses.replace(prepared.result(), misses=misses)
+        if choice is not None:
             run = choice.run
             if say is not None:
                 say(format_choice(choice))
@@ -1148,6 +1155,35 @@ def _reconstruct(source, output, *, method: str, params, preparation: tuple, tim
                              None if output is None else Path(output), len(prepared.points),
                              prepared.spacing, prepared.noise, cloud.view_points is not None,
                              run.label if choice is None else choice.label)
+
+
+class _Later:
+    """``function(*args)``, run once: by ``run`` (in any thread), or by ``result`` when it
+    was not run (or is not running) by then; ``result`` returns its value or raises its
+    error, waiting for a run under way."""
+
+    def __init__(self, function: Callable, *args):
+        import threading
+
+        self._call = (function, args)
+        self._lock = threading.Lock()
+        self._outcome: tuple | None = None
+
+    def run(self) -> None:
+        with self._lock:
+            if self._outcome is None:
+                function, args = self._call
+                try:
+                    self._outcome = (True, function(*args))
+                except Exception as error:   # raised again by ``result``
+                    self._outcome = (False, error)
+
+    def result(self):
+        self.run()
+        ok, value = self._outcome
+        if not ok:
+            raise value
+        return value
 
 
 @contextlib.contextmanager

@@ -103,7 +103,8 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -393,12 +394,19 @@ class AutoChoice:
 @dataclass(frozen=True)
 class _Fold:
     """One fold: the prepared training strikes, the tested strikes and their blocks, and a
-    subsample of the training strikes (for ``chi_fit``)."""
+    subsample of the training strikes (for ``chi_fit``). ``ready``: the prepared strikes as
+    a future (``_context`` prepares the folds after the first while the fits on it run);
+    ``prepared`` waits for it."""
 
-    prepared: MethodInput
+    ready: Future
     test: judge.Strikes
     block: np.ndarray
     train: judge.Strikes
+
+    @property
+    def prepared(self) -> MethodInput:
+        """The prepared training strikes (waits for their preparation; raises its error)."""
+        return self.ready.result()
 
 
 @dataclass(frozen=True)
@@ -517,27 +525,47 @@ def _columns(attributes: dict | None) -> dict[str, np.ndarray]:
     return {k: np.asarray(v) for k, v in (attributes or {}).items() if k in wanted}
 
 
-def _fold(cloud: Cloud, strikes: judge.Strikes, folds: judge.Folds, f: int, *, k: int,
-          fallback: Fallback, seed: int, misses=None) -> _Fold:
-    """Prepare fold ``f``'s training strikes (with the log's ``misses``, which the
-    ``visibility`` method uses) and gather its tested ones (step 1)."""
-    from recon.surfaces.prepare import prepare
-
+def _fold(strikes: judge.Strikes, folds: judge.Folds, f: int, *, seed: int, ready: Future
+          ) -> _Fold:
+    """Gather fold ``f``'s tested strikes and its training subsample (step 1); ``ready``: the
+    preparation of its training strikes (``_prepare_fold``), made or under way."""
     rows = folds.train(f)
-    train = cloud.subset(rows)
-    prepared = prepare(train.points, view_points=train.view_points, k=k, fallback=fallback,
-                       seed=seed, uncertainty=train.attributes, misses=misses)
     test = folds.test(f)
     fit_rows = rows[judge.subsample(len(rows), judge.MAX_CHECKED // folds.k, seed)]
-    return _Fold(prepared, strikes.take(test), folds.block[test], strikes.take(fit_rows))
+    return _Fold(ready, strikes.take(test), folds.block[test], strikes.take(fit_rows))
+
+
+def _prepare_fold(cloud: Cloud, folds: judge.Folds, f: int, *, k: int, fallback: Fallback,
+                  seed: int, misses=None) -> MethodInput:
+    """Fold ``f``'s training strikes prepared (normals, spacing, the recorded noise), with the
+    log's ``misses``, which the ``visibility`` method uses."""
+    from recon.surfaces.prepare import prepare
+
+    train = cloud.subset(folds.train(f))
+    return prepare(train.points, view_points=train.view_points, k=k, fallback=fallback,
+                   seed=seed, uncertainty=train.attributes, misses=misses)
 
 
 def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, seed: int,
-             misses=None) -> _Context:
-    """Every fold prepared (step 1); ``misses``: the log's missed beams (``misses_near``)."""
+             misses=None, then: Callable[[], Any] | None = None) -> _Context:
+    """Every fold (step 1); ``misses``: the log's missed beams (``misses_near``). The first
+    fold is prepared here (its noise and spacing set the tolerances); the others in a thread,
+    one after the other, while the first fold's fits run (each fit waits for its fold): the
+    same preparation, off the path to the first fit (docs/decisions.md). ``then``: called
+    without arguments in that thread after the folds."""
+    from concurrent.futures import ThreadPoolExecutor
+
     strikes = judge.Strikes.of(cloud)
-    every = [_fold(cloud, strikes, folds, f, k=k, fallback=fallback, seed=seed, misses=misses)
-             for f in range(folds.k)]
+    options = {"k": k, "fallback": fallback, "seed": seed, "misses": misses}
+    first: Future = Future()
+    first.set_result(_prepare_fold(cloud, folds, 0, **options))
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="recon-folds")
+    later = [pool.submit(_prepare_fold, cloud, folds, f, **options) for f in range(1, folds.k)]
+    if then is not None:
+        pool.submit(then)
+    pool.shutdown(wait=False)   # its thread ends once the folds are prepared
+    every = [_fold(strikes, folds, f, seed=seed, ready=ready)
+             for f, ready in enumerate([first, *later])]
     all_rows = judge.subsample(len(strikes), judge.MAX_CHECKED, seed)
     tau, noise = judge.tau_of(cloud.points), every[0].prepared.noise
     return _Context(folds=every, checked=strikes.take(all_rows), tau=tau, noise=noise,
@@ -545,13 +573,35 @@ def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, se
                     miss_reach=miss_reach(tau, noise, every[0].prepared.spacing))
 
 
+@dataclass
+class _Made:
+    """What is made of a run's fold surfaces ahead of its judging, each None until made
+    (``_Race.arrived``, ``_Race.make_next``): per fold its built surface (``casters``), its
+    ``held_out_check`` (``held``) and its check on the training strikes (``fit``); the first
+    fold's checks over all strikes and against the missed beams (``overall``,
+    ``_overall``); and for a run that fills free space, the same of its carved twin
+    (``twin``, whose ``results`` are the folds' carved surfaces). ``judge_candidate`` makes
+    what is missing: the same checks of the same surfaces, made earlier."""
+
+    casters: list
+    held: list
+    fit: list
+    overall: tuple | None = None
+    results: list | None = None
+    twin: _Made | None = None
+
+    @classmethod
+    def empty(cls, k: int) -> _Made:
+        return cls([None] * k, [None] * k, [None] * k)
+
+
 class _Race:
-    """The fits of ``_fit_and_judge`` and what is known of each run: its results, built
-    surfaces and held-out checks per fold (a fold's check is made as its fit arrives, on the
-    folds any stage races on: the race and the judging share them), and its candidates once
-    judged. The race goes in stages (``RACE_STAGES``): ``first`` is how many folds the runs
-    still raced are fitted on. A run is a job ``(i, j)``: run ``j`` of the ``i``-th (depth,
-    runs) pair."""
+    """The fits of ``_fit_and_judge`` and what is known of each run: its results, what is
+    made of its folds' surfaces (``_Made``: a fold's held-out check as its fit arrives, the
+    race and the judging share them; the judging's other checks while the workers fit,
+    ``make_next``), and its candidates once judged. The race goes in stages
+    (``RACE_STAGES``): ``first`` is how many folds the runs still raced are fitted on. A run
+    is a job ``(i, j)``: run ``j`` of the ``i``-th (depth, runs) pair."""
 
     def __init__(self, levels: list[tuple[int, list[Run]]], context: _Context):
         self.levels, self.context = levels, context
@@ -562,9 +612,7 @@ class _Race:
         # the finest level first (module docstring)
         self.jobs = [(i, j) for i in reversed(range(len(levels))) for j in range(len(levels[i][1]))]
         self.results = {job: [None] * k for job in self.jobs}
-        self.casters = {job: [None] * k for job in self.jobs}
-        self.checks: dict[tuple[int, int], list[judge.Check | None]] = {
-            job: [None] * k for job in self.jobs}
+        self.made = {job: _Made.empty(k) for job in self.jobs}
         self.judged: dict[tuple[int, int], list[Candidate]] = {}
 
     def run(self, job: tuple[int, int]) -> Run:
@@ -579,39 +627,68 @@ class _Race:
         return self.stage < len(self.stages)
 
     def arrived(self, job: tuple[int, int], f: int, result: dict) -> None:
-        """Fold ``f``'s fit of ``job`` is in: on a fold the race reads, its surface is built
-        and checked; a failure on the folds fitted so far fails the run; its judging once all
-        its folds are in waits for ``judge_complete``."""
+        """Fold ``f``'s fit of ``job`` is in: its surface is built and checked (the fits still
+        outstanding go on meanwhile); a failure on the folds fitted so far fails the run; its
+        judging once all its folds are in waits for ``judge_next``."""
         results = self.results[job]
         results[f] = result
         if job in self.judged:
             return
-        if result.get("status") == "ok" and self.stages and f < self.stages[-1][0]:
-            self.casters[job][f] = judge.Caster(result["vertices"], result["faces"])
-            self.checks[job][f] = held_out_check(self.context.folds[f], self.casters[job][f],
-                                                 self.context)
+        if result.get("status") == "ok":
+            made = self.made[job]
+            made.casters[f] = judge.Caster(result["vertices"], result["faces"])
+            made.held[f] = held_out_check(self.context.folds[f], made.casters[f], self.context)
         if all(r is not None for r in results[:self.first]) and \
                 any(r.get("status") != "ok" for r in results[:self.first]):
             self.judged[job] = [judge_candidate(self.run(job), self.level(job),
                                                 [r for r in results if r is not None],
                                                 self.context)]
 
-    def judge_complete(self) -> None:
-        """Judge (``_judged``) every run whose folds are all fitted and not judged yet."""
+    def judge_next(self) -> bool:
+        """Judge (``_judged``) one run whose folds are all fitted and that is not judged yet;
+        whether there was one. One at a time: between two, the caller takes in the fits
+        that arrived and races when a stage is complete, so the workers do not wait for the
+        judging of runs the race does not need."""
         for job in self.jobs:
             results = self.results[job]
             if job not in self.judged and all(r is not None for r in results):
+                made = self.made[job]
                 self.judged[job] = _judged(self.run(job), self.level(job), results,
-                                           self.context, self.casters.pop(job),
-                                           self.checks[job])
+                                           self.context, made)
+                # the race reads its held-out checks; its surfaces are not cast against again
+                self.made[job] = _Made.empty(len(results))
+                self.made[job].held = made.held
+                return True
+        return False
+
+    def make_next(self) -> bool:
+        """Make one fold's checks ahead of a run's judging (``_Made``, ``_make_fold``), for a
+        run that will be judged (not raced, or the race is over) and has not failed so far;
+        whether there was one to make. The judging that follows the run's last fit then has
+        little left to do."""
+        if self.racing and any(self.raced(job) for job in self.jobs):
+            sure = [job for job in self.jobs if not self.raced(job)]
+        else:
+            sure = self.jobs
+        for job in sure:
+            results = self.results[job]
+            if job in self.judged or any(r is not None and r.get("status") != "ok"
+                                         for r in results):
+                continue
+            for f, result in enumerate(results):
+                if result is not None and _make_fold(self.made[job], f, result, self.context):
+                    return True
+        return False
 
     def opening_fits(self) -> list[tuple[tuple[int, int], int]]:
-        """The (job, fold) fits handed out first: the runs not raced on every fold (the models
-        of a few numbers), then the raced ones on the first stage's folds, in ``jobs``'
-        order."""
+        """The (job, fold) fits handed out first, fold by fold (the later folds are still
+        being prepared, ``_context``): on each, the runs not raced (the models of a few
+        numbers, fitted on every fold), then, on the first stage's folds, the raced ones, in
+        ``jobs``' order (the finest level's long fits start early, the quick models' later
+        folds fill in beside them)."""
         k = len(self.context.folds)
-        return ([(job, f) for job in self.jobs if not self.raced(job) for f in range(k)]
-                + [(job, f) for job in self.jobs if self.raced(job) for f in range(self.first)])
+        return [(job, f) for f in range(k) for raced in (False, True) for job in self.jobs
+                if self.raced(job) == raced and (not raced or f < self.first)]
 
     def raced(self, job: tuple[int, int]) -> bool:
         """Whether the run may leave the race (its level is raced, ``RACE_LEVEL``); the others
@@ -630,7 +707,7 @@ class _Race:
         block = np.concatenate([f.block for f in folds])
         pool = self._pool(n)
         partial = [c.cost[:m] for c in reference] + [
-            np.concatenate([c.cost for c in self.checks[job][:n]]) for job in pool]
+            np.concatenate([c.cost for c in self.made[job].held[:n]]) for job in pool]
         racing = [False] * len(reference) + [self.raced(job) for job in pool]
         shut = [bool(c.closed) for c in reference] + [
             closed(self.results[job][0]["faces"]) for job in pool]
@@ -638,7 +715,7 @@ class _Race:
         for job, gap in zip(pool, leaves, strict=True):
             if gap is not None:
                 self.judged[job] = [self._outpaced(job, *gap, ses)]
-                del self.casters[job]   # its surfaces' scenes are not cast against again
+                del self.made[job]   # its surfaces' scenes are not cast against again
         self.stage += 1
         start, self.first = n, (self.stages[self.stage][0] if self.racing
                                 else len(self.context.folds))
@@ -652,7 +729,7 @@ class _Race:
         fits failed (a run fitted on every fold may have failed on a later one), not left at
         an earlier stage."""
         return [job for job in self.jobs if not self._left(job)
-                and all(c is not None for c in self.checks[job][:n])
+                and all(c is not None for c in self.made[job].held[:n])
                 and all(r is None or r.get("status") == "ok" for r in self.results[job])]
 
     def _left(self, job: tuple[int, int]) -> bool:
@@ -734,8 +811,8 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
     with ThreadPoolExecutor(max_workers=workers) as pool, \
             tqdm(total=len(state.jobs) * len(folds), desc=f"auto level {depths}", unit="fit",
                  disable=None, leave=False) as bar:
-        def submit(run, f):
-            return pool.submit(run_isolated, run, folds[f].prepared, threads=FIT_THREADS,
+        def submit(run, f):   # the fit's thread waits for its fold's preparation
+            return pool.submit(_fit_fold, run_isolated, run, folds[f], threads=FIT_THREADS,
                                **limits.kwargs())
 
         def hand_out(pairs):
@@ -743,29 +820,25 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
                     if (job[1], f) not in given}
 
         pending = hand_out(state.opening_fits())
-        for (j, f), result in given.items():
-            state.arrived((0, j), f, result)
-            bar.update(1)
+        _arrive_given(state, given, bar)
         opening = state.first   # the first stage's folds (every fold without a race)
         spare: dict = {}
         while True:
             if not pending and state.racing:
-                fitted = state.first
-                racing = {job for job in state.jobs if state.raced(job)} - set(state.judged)
-                fits = state.race(reference)
-                bar.total -= (len(racing) - len({job for job, _ in fits})) * (
-                    len(folds) - fitted)
-                bar.refresh()
-                pending = hand_out(fits)
+                pending = hand_out(_next_stage(state, reference, bar, len(folds)))
                 continue   # the fits handed out may all be given: the next stage then
             # behind every fit, or beside a stage of the race that leaves a worker idle
-            if ahead is not None and not spare and (not state.racing or len(pending) < workers):
+            if ahead is not None and not spare and _worker_spare(state, len(pending), workers):
                 spare = {submit(run, f): (j, f) for j, run in enumerate(ahead[0])
                          for f in range(opening)}
-            state.judge_complete()   # while the workers fit
-            if not pending:
-                break
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            done = {future for future in pending if future.done()}
+            # fits that arrived, then a race, come before the judging
+            if not done and _use_the_wait(state, len(pending), workers):
+                continue
+            if not done:
+                if not pending:
+                    break
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
                 state.arrived(*pending.pop(future), future.result())
                 bar.update(1)
@@ -774,31 +847,112 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
     return state.candidates()
 
 
+def _arrive_given(state: _Race, given: dict[tuple[int, int], dict], bar) -> None:
+    """The fits already made (``given``: results by (run, fold) of the first level) arrive."""
+    for (j, f), result in given.items():
+        state.arrived((0, j), f, result)
+        bar.update(1)
+
+
+def _next_stage(state: _Race, reference: Sequence[Candidate], bar, n_folds: int) -> list:
+    """The race's next stage (``_Race.race``): the (job, fold) fits it hands out; the progress
+    ``bar`` loses the fits of the runs it leaves out."""
+    fitted = state.first
+    racing = {job for job in state.jobs if state.raced(job)} - set(state.judged)
+    fits = state.race(reference)
+    bar.total -= (len(racing) - len({job for job, _ in fits})) * (n_folds - fitted)
+    bar.refresh()
+    return fits
+
+
+def _worker_spare(state: _Race, n_pending: int, workers: int) -> bool:
+    """Whether a worker would wait: every fit is handed out, or a stage of the race has fewer
+    fits outstanding than there are workers."""
+    return not state.racing or n_pending < workers
+
+
+def _use_the_wait(state: _Race, n_pending: int, workers: int) -> bool:
+    """Judge the next run or make the next check of a fold's surface while the workers fit;
+    not while the last fits of a race's stage run (the next race's moment is near). Whether
+    anything was done."""
+    if state.racing and n_pending <= workers:
+        return False
+    return state.judge_next() or state.make_next()
+
+
+def _fit_fold(fit: Callable, run: Run, fold: _Fold, **kwargs) -> dict:
+    """``fit(run, fold.prepared, **kwargs)`` (``run_isolated``), once the fold is prepared."""
+    return fit(run, fold.prepared, **kwargs)
+
+
 def _judged(run: Run, level: int, results: list[dict], context: _Context,
-            built: list | None = None, held: list | None = None) -> list[Candidate]:
+            made: _Made | None = None) -> list[Candidate]:
     """A run fitted on every fold, judged (``judge_candidate``), and its carved twin when it
-    fills free space (``fills_free_space``). Each fold's surface is built for the casts once
-    (``built``: the folds' surfaces already built, None where not; ``held``: their held-out
-    checks already made, None where not): the twin is carved on the scenes its candidate was
-    judged on."""
-    built = built or [None] * len(results)
-    casters = ([b or judge.Caster(r["vertices"], r["faces"]) for r, b in zip(results, built,
-                                                                          strict=True)]
-               if all(r.get("status") == "ok" for r in results) else None)
-    candidate = judge_candidate(run, level, results, context, casters=casters, held=held)
+    fills free space (``fills_free_space``). ``made``: what is already made of its folds'
+    surfaces (``_Made``; the rest is made here). Each fold's surface is built for the casts
+    once: the twin is carved on the scenes its candidate was judged on."""
+    made = made or _Made.empty(len(results))
+    if all(r.get("status") == "ok" for r in results):
+        made.casters = [b or judge.Caster(r["vertices"], r["faces"])
+                        for r, b in zip(results, made.casters, strict=True)]
+    candidate = judge_candidate(run, level, results, context, made=made)
     if not fills_free_space(candidate):
         return [candidate]
-    return [candidate, judge_candidate(run, level, _carved(results, context, casters), context,
-                                       carved=True)]
+    twin = made.twin or _Made.empty(len(results))
+    twin.results = [carved or _carved(result, context, caster) for carved, result, caster
+                    in zip(twin.results or [None] * len(results), results, made.casters,
+                           strict=True)]
+    return [candidate, judge_candidate(run, level, twin.results, context, carved=True,
+                                       made=twin)]
+
+
+def _make_fold(made: _Made, f: int, result: dict, context: _Context) -> bool:
+    """Make the next missing check of fold ``f``'s surface (``result``, fitted) in ``made``:
+    its surface, its held-out check, its check on the training strikes, the first fold's
+    overall checks; then, when the first fold's surface cuts missed beams (the run fills
+    free space, ``fills_free_space``), the same of the fold's carved surface. Whether one
+    was missing."""
+    if made.casters[f] is None:
+        made.casters[f] = judge.Caster(result["vertices"], result["faces"])
+    elif made.held[f] is None:
+        made.held[f] = held_out_check(context.folds[f], made.casters[f], context)
+    elif made.fit[f] is None:
+        made.fit[f] = _fit_check(context.folds[f], made.casters[f], context)
+    elif f == 0 and made.overall is None:
+        made.overall = _overall(made.casters[0], context)
+    elif made.overall is None or not made.overall[1] or made.results is not None:
+        return False   # the twin's are made of the twin's own ``_Made``, or not at all
+    else:
+        twin = made.twin = made.twin or _Made.empty(len(made.casters))
+        twin.results = twin.results or [None] * len(made.casters)
+        if twin.results[f] is None:
+            twin.results[f] = _carved(result, context, made.casters[f])
+            return True
+        return _make_fold(twin, f, twin.results[f], context)
+    return True
+
+
+def _fit_check(fold: _Fold, caster: judge.Caster, context: _Context) -> judge.Check:
+    """A fold's training strikes (a subsample) against its surface: ``chi_fit``."""
+    return judge.check(fold.train, caster, fitted=True, tau=context.tau, noise=context.noise)
+
+
+def _overall(caster: judge.Caster, context: _Context) -> tuple[judge.Check, float | None]:
+    """The first fold's surface against all strikes (a subsample: cuts and holes) and the
+    fraction of the missed beams it cuts (None without them)."""
+    everywhere = judge.check(context.checked, caster, tau=context.tau, noise=context.noise)
+    misses_cut = None
+    if context.misses is not None and len(context.misses):
+        misses_cut = float(judge.cut_misses(context.misses, caster, context.points,
+                                            context.miss_reach).mean())
+    return everywhere, misses_cut
 
 
 def judge_candidate(run: Run, level: int, results: list[dict], context: _Context,
-                    carved: bool = False, casters: list | None = None,
-                    held: list | None = None) -> Candidate:
+                    carved: bool = False, made: _Made | None = None) -> Candidate:
     """Step 2 of the module docstring for one run fitted on every fold (``run_isolated``
-    results, folds in order): a fold that failed fails the candidate. ``casters``: each fold's
-    surface already built (``judge.Caster``), when the caller has them; ``held``: the
-    ``held_out_check`` of each fold's surface already made (None where not: made here)."""
+    results, folds in order): a fold that failed fails the candidate. ``made``: the checks
+    of its folds' surfaces already made (``_Made``; the others are made here)."""
     failed = next((r for r in results if r.get("status", "failed") != "ok"), None)
     candidate = Candidate(run, level, status="ok" if failed is None else
                           failed.get("status", "failed"),
@@ -807,22 +961,17 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
                           carved=carved)
     if failed is not None:
         return candidate
-    options = {"tau": context.tau, "noise": context.noise}
-    casters = casters or [judge.Caster(r["vertices"], r["faces"]) for r in results]
-    held = _held_checks(casters, context, held)
-    fit = [judge.check(fold.train, caster, fitted=True, **options)
-           for caster, fold in zip(casters, context.folds, strict=True)]
+    made = made or _Made.empty(len(results))
+    casters = [b or judge.Caster(r["vertices"], r["faces"])
+               for r, b in zip(results, made.casters, strict=True)]
+    held = _held_checks(casters, context, made.held)
+    fit = _fit_checks(casters, context, made.fit)
     cost = np.concatenate([h.cost for h in held])
     distance = np.concatenate([h.distance for h in held])
     tolerance = np.concatenate([h.tolerance for h in held])
     chi2, se = judge.block_mean_se(cost, context.block)
     vertices, faces = results[0]["vertices"], results[0]["faces"]
-    caster = casters[0]
-    everywhere = judge.check(context.checked, caster, **options)
-    misses_cut = None
-    if context.misses is not None and len(context.misses):
-        misses_cut = float(judge.cut_misses(context.misses, caster, context.points,
-                                            context.miss_reach).mean())
+    everywhere, misses_cut = made.overall or _overall(casters[0], context)
     return replace(candidate, n_faces=len(faces),
                    n_params=run.method_spec().parameter_count(vertices, faces),
                    closed=closed(faces), chi2=chi2, chi2_se=se, chi_heldout=float(np.sqrt(chi2)),
@@ -845,6 +994,13 @@ def _held_checks(casters: list, context: _Context, held: list | None) -> list[ju
             for made, caster, fold in zip(held, casters, context.folds, strict=True)]
 
 
+def _fit_checks(casters: list, context: _Context, fit: list) -> list[judge.Check]:
+    """Each fold's ``_fit_check`` against its surface (``casters``), those in ``fit`` already
+    made (None where not) kept."""
+    return [made or _fit_check(fold, caster, context)
+            for made, caster, fold in zip(fit, casters, context.folds, strict=True)]
+
+
 def held_out_check(fold: _Fold, caster: judge.Caster, context: _Context) -> judge.Check:
     """A fold's tested strikes against the surface fitted on the others (step 2 of the module
     docstring): what every candidate's statistic, raced or judged, is made of."""
@@ -861,16 +1017,15 @@ def fills_free_space(candidate: Candidate) -> bool:
     return bool(candidate.misses_cut) and not candidate.carved
 
 
-def _carved(results: list[dict], context: _Context, casters: list) -> list[dict]:
-    """Each fold's surface carved by the missed beams (``judge.carve``) as the surface
-    refitted on all strikes will be: a crossing within reach of any strike, held out or not,
-    is no evidence (carving fits nothing to the held-out strikes; spared near them only
-    by a fold's training strikes, a silhouette a beam grazed past would be cut open where
-    the final surface is not). ``casters``: each fold's surface, built."""
-    return [result | dict(zip(("vertices", "faces"), judge.carve(
+def _carved(result: dict, context: _Context, caster: judge.Caster) -> dict:
+    """A fold's surface (``result``, built: ``caster``) carved by the missed beams
+    (``judge.carve``) as the surface refitted on all strikes will be: a crossing within reach
+    of any strike, held out or not, is no evidence (carving fits nothing to the held-out
+    strikes; spared near them only by a fold's training strikes, a silhouette a beam grazed
+    past would be cut open where the final surface is not)."""
+    return result | dict(zip(("vertices", "faces"), judge.carve(
         result["vertices"], result["faces"], context.misses, context.points,
         context.miss_reach, caster=caster), strict=True))
-        for result, caster in zip(results, casters, strict=True)]
 
 
 def _best(candidates: list[Candidate]) -> Candidate | None:
@@ -1242,7 +1397,7 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
            seed: int = 0, k: int = DEFAULT_K, fallback: Fallback = "centroid",
            timeout_s: float = DEFAULT_TIMEOUT_S, memory_mb: int | None = DEFAULT_MEMORY_MB,
            n_workers: int | None = None, target_kind: str = "unknown",
-           misses=None) -> AutoChoice:
+           misses=None, then: Callable[[], Any] | None = None) -> AutoChoice:
     """Choose a method and resolution by held-out passes and the sensor rays, without the truth.
 
     Parameters
@@ -1276,6 +1431,10 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
         The log's missed beams near the strikes (``misses_near``), in the body frame: each
         candidate's ``misses_cut``, and a carved candidate for each that fills free space
         (module docstring, step 2). None: neither (a cloud file records no misses).
+    then : callable, optional
+        Called without arguments in the thread that prepares the folds, once they are
+        prepared, while the fits run (``recon reconstruct`` prepares every strike there for
+        the chosen run's refit); not called when the options or the cloud are refused first.
 
     Returns
     -------
@@ -1301,7 +1460,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
                         f"{tested} in the smallest fold")
     levels = ([[bind(*r) if isinstance(r, tuple) else bind(r) for r in candidates]]
               if candidates else ladder(methods, natural=target_kind == "natural"))
-    context = _context(cloud, folds, k=k, fallback=fallback, seed=seed, misses=misses)
+    context = _context(cloud, folds, k=k, fallback=fallback, seed=seed, misses=misses,
+                       then=then)
     limits = Limits(timeout_s=timeout_s, memory_mb=memory_mb)
     table, note = climb(levels, context, limits=limits, n_workers=n_workers)
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
@@ -1364,7 +1524,7 @@ def format_choice(choice: AutoChoice) -> str:
 def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
                holdout: float = HOLDOUT_FRACTION, preparation: Preparation | None = None,
                limits: Limits | None = None, target_kind: str = "unknown",
-               misses=None) -> AutoChoice:
+               misses=None, then: Callable[[], Any] | None = None) -> AutoChoice:
     """``choose`` on a cleaned ``Cloud`` (``Preparation.apply``) with a preparation's normals
     options and a run's limits: the choice ``-m auto`` makes.
 
@@ -1382,9 +1542,12 @@ def choose_for(cloud: Cloud, *, methods: Sequence[str] | None = None,
         What is known of the target (``choose``).
     misses : recon.registration.misses.MissedBeams, optional
         The log's missed beams (``choose``).
+    then : callable, optional
+        As ``choose``.
     """
     preparation = preparation or Preparation()
     return choose(cloud.points, view_points=cloud.view_points, uncertainty=cloud.attributes,
                   methods=methods, holdout=holdout, seed=preparation.seed, k=preparation.k,
                   fallback=preparation.fallback, target_kind=target_kind, misses=misses,
+                  then=then,
                   **(limits or Limits()).kwargs())

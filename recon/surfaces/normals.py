@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from formats.errors import InputError
 from formats.geometry import check_extent
@@ -125,6 +124,10 @@ def local_planes(points: np.ndarray, *, k: int = DEFAULT_K, adaptive: bool = Tru
     points = _check_points(points)
     k = _check_k(k, len(points))
     n = len(points)
+    # scipy's spatial package is imported when a tree is made: ``recon reconstruct -m
+    # auto`` starts its fit workers before that import
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(points)
     planes = LocalPlanes(np.empty_like(points), np.empty_like(points), np.empty(n),
                          np.empty(n), np.full(n, k, dtype=np.int64))

@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from formats.errors import InputError, ParameterError
 from formats.geometry import Cloud
@@ -62,6 +61,8 @@ def remove_statistical_outliers(points: np.ndarray, *, k: int = OUTLIER_K,
         raise InputError(f"outlier std_ratio must be positive, got {std_ratio}")
     if len(points) <= k:
         return np.ones(len(points), dtype=bool)
+    from scipy.spatial import cKDTree  # imported when used: ``recon.surfaces.normals``
+
     distance, _ = cKDTree(points).query(points, k=k + 1, workers=-1)
     mean = distance[:, 1:].mean(axis=1)
     return mean <= mean.mean() + std_ratio * mean.std()
@@ -264,11 +265,17 @@ class Preparation:
             The cleaned and thinned points, with their view points when ``cloud`` had them.
         prepared : MethodInput
         """
-        cloud = preprocess(cloud, remove_outliers=self.remove_outliers, voxel=self.voxel)
-        prepared = prepare(cloud.points, view_points=cloud.view_points, k=self.k,
-                           fallback=self.fallback, seed=self.seed,
-                           uncertainty=cloud.attributes)
-        return cloud, prepared
+        cloud = self.clean(cloud)
+        return cloud, self.prepare(cloud)
+
+    def clean(self, cloud: Cloud) -> Cloud:
+        """``cloud`` cleaned and thinned (``preprocess``)."""
+        return preprocess(cloud, remove_outliers=self.remove_outliers, voxel=self.voxel)
+
+    def prepare(self, cloud: Cloud) -> MethodInput:
+        """A cleaned ``cloud`` prepared (``prepare``: normals, spacing, noise)."""
+        return prepare(cloud.points, view_points=cloud.view_points, k=self.k,
+                       fallback=self.fallback, seed=self.seed, uncertainty=cloud.attributes)
 
 
 def load_prepared(source, preparation: Preparation | None = None
@@ -289,6 +296,14 @@ def load_prepared(source, preparation: Preparation | None = None
         The cleaned and thinned points, metres, body frame (view points kept).
     prepared : MethodInput
     """
+    preparation = preparation or Preparation()
+    cloud = load_cleaned(source, preparation)
+    return cloud, preparation.prepare(cloud)
+
+
+def load_cleaned(source, preparation: Preparation | None = None) -> Cloud:
+    """Read (or take) a cloud, cleaned and thinned (``load_prepared`` without the
+    preparation: ``Preparation.prepare`` then makes it)."""
     import os
 
     if isinstance(source, str | os.PathLike):
@@ -297,4 +312,4 @@ def load_prepared(source, preparation: Preparation | None = None
         cloud = load_cloud(source)
     else:
         cloud = Cloud.of(source, "cloud")
-    return (preparation or Preparation()).apply(cloud)
+    return (preparation or Preparation()).clean(cloud)

@@ -11,6 +11,7 @@ import sys
 import numpy as np
 import pytest
 
+from formats.errors import InputError
 from formats.geometry import Cloud, Mesh
 from formats.paths import protecting
 from recon import api
@@ -215,3 +216,41 @@ def test_beside_drops_its_functions_exception_and_keeps_the_bodys():
     with api._beside(ran.append, 1), api._beside(None, 2):
         pass
     assert ran == [1]
+
+
+def test_auto_refuses_a_cloud_the_preparation_refuses_with_the_preparations_error(tmp_path):
+    """Under ``method="auto"`` every strike is prepared in a thread while the choice is made;
+    a cloud the preparation refuses still gets its error, not the choice's (which would
+    have said that 40 points hold too few out)."""
+    from formats.cloud_io import write_cloud
+
+    source = write_cloud(tmp_path / "cloud.ply", Cloud(np.ones((40, 3))))
+    for method in ("auto", "poisson"):
+        with pytest.raises(InputError, match="all points coincide"):
+            api.reconstruct_file(source, tmp_path / "out.ply", method=method)
+    assert not (tmp_path / "out.ply").exists()
+
+
+def test_later_runs_its_function_once_where_it_is_run_first_and_keeps_its_error():
+    import threading
+
+    calls = []
+
+    def counted(value):
+        calls.append(threading.current_thread().name)
+        return value
+
+    later = api._Later(counted, 7)
+    thread = threading.Thread(target=later.run, name="preparing")
+    thread.start()
+    thread.join()
+    assert later.result() == 7 and later.result() == 7 and calls == ["preparing"]
+    assert api._Later(counted, 8).result() == 8 and calls[-1] == "MainThread"
+
+    def fails():
+        raise ValueError("kept for the caller")
+
+    refused = api._Later(fails)
+    refused.run()   # in the thread that runs it: nothing raised there
+    with pytest.raises(ValueError, match="kept for the caller"):
+        refused.result()

@@ -22,11 +22,12 @@ def figures(choice) -> dict:
             for c in choice.candidates}
 
 
-def test_fits_are_handed_out_models_first_the_next_level_ahead_and_choose_alike(monkeypatch):
-    """One worker runs the fits in the order they are handed out: the models fitted on every
-    fold first, then the raced level fold by fold, each stage of the race after its fold, and
-    then, before the ladder has decided to go on, the next level on the first stage's fold;
-    the next level's own call fits only its other folds (the far planes none). The candidates
+def test_fits_are_handed_out_fold_by_fold_the_next_level_ahead_and_choose_alike(monkeypatch):
+    """One worker runs the fits in the order they are handed out: fold by fold, the models
+    fitted on every fold first, then on the first stage's fold the raced level; then the
+    raced level fold by fold, each stage of the race after its fold, and then, before the
+    ladder has decided to go on, the next level on the first stage's fold; the next level's
+    own call fits only its other folds (the far planes none). The candidates
     and the choice are those of fitting each level when the ladder reaches it."""
     cloud, view = small_sphere()
     monkeypatch.setattr(auto, "LADDER", LADDER)
@@ -49,8 +50,9 @@ def test_fits_are_handed_out_models_first_the_next_level_ahead_and_choose_alike(
     folds = [f.prepared for f in contexts[-1].folds]
     order = [(label, next(f for f, p in enumerate(folds) if p is prepared))
              for label, prepared in fits]
-    assert order == ([("planes", f) for f in range(4)]
-                     + [("ellipsoid subdivisions=3", f) for f in range(4)]
+    assert order == ([("planes", 0), ("ellipsoid subdivisions=3", 0)]
+                     + [("planes", f) for f in range(1, 4)]
+                     + [("ellipsoid subdivisions=3", f) for f in range(1, 4)]
                      + [("ellipsoid", 0), ("planes threshold=2", 0), ("ellipsoid", 1),
                         ("ellipsoid", 2), ("ellipsoid", 3)]), order
     table = {c.label: c for c in ahead.candidates}
@@ -89,10 +91,12 @@ def test_the_next_level_is_handed_out_beside_a_stage_that_leaves_a_worker_idle(m
         return contexts[-1]
 
     class Recorded(concurrent.futures.ThreadPoolExecutor):
-        def submit(self, fn, run, prepared, *args, **kwargs):
-            fold = next(f for f, p in enumerate(contexts[-1].folds) if p.prepared is prepared)
-            handed.append((run.label, fold))
-            return super().submit(fn, run, prepared, *args, **kwargs)
+        def submit(self, fn, *args, **kwargs):
+            if fn is auto._fit_fold:   # (fit, run, fold): not the folds' preparation
+                run, fold = args[1:3]
+                handed.append((run.label, next(f for f, known in enumerate(contexts[-1].folds)
+                                               if known is fold)))
+            return super().submit(fn, *args, **kwargs)
 
     monkeypatch.setattr(auto, "_context", kept)
     monkeypatch.setattr(concurrent.futures, "ThreadPoolExecutor", Recorded)
@@ -183,3 +187,35 @@ def test_auto_refits_its_choice_on_a_warm_fit_worker(monkeypatch):
         assert n == len(cloud.points) and run.label == surface.info["auto"]["label"]
     finally:
         isolation.shutdown_workers()
+
+
+def test_the_folds_after_the_first_are_prepared_in_a_thread_then_the_callers_function():
+    """``_context`` prepares the first fold at once and the others in a thread, then calls
+    ``then`` there: each fold's preparation is the one made alone, array for array."""
+    import threading
+
+    import numpy as np
+
+    from recon.surfaces import judge
+
+    cloud, view = small_sphere()
+    attributes = dict(cloud.attributes) | dict(zip(("view_x", "view_y", "view_z"), view.T,
+                                                   strict=True))
+    cloud = Cloud(cloud.points, attributes)
+    folds = judge.pass_folds(cloud, 4, seed=0)
+    seen = []
+    context = auto._context(cloud, folds, k=16, fallback="centroid", seed=0,
+                            then=lambda: seen.append(threading.current_thread().name))
+    assert context.folds[0].ready.done()
+    prepared = [fold.prepared for fold in context.folds]
+    for f, made in enumerate(prepared):
+        alone = auto._prepare_fold(cloud, folds, f, k=16, fallback="centroid", seed=0)
+        assert np.array_equal(made.points, alone.points)
+        assert np.array_equal(made.normals, alone.normals)
+        assert (made.spacing, made.noise) == (alone.spacing, alone.noise)
+        assert np.array_equal(made.sigma, alone.sigma)
+    for _ in range(200):   # ``then`` runs after the last fold, in the same thread
+        if seen:
+            break
+        threading.Event().wait(0.05)
+    assert len(seen) == 1 and seen[0].startswith("recon-folds")

@@ -161,3 +161,45 @@ def test_the_ladder_fitted_at_once_judges_as_level_by_level(monkeypatch):
     for a, b in zip(together, apart, strict=True):
         assert (a.chi2, a.chi2_se, a.holes, a.violated, a.misses_cut, a.n_faces) == \
             (b.chi2, b.chi2_se, b.holes, b.violated, b.misses_cut, b.n_faces)
+
+
+def test_checks_made_ahead_while_the_workers_fit_judge_as_those_made_at_the_judging():
+    """``_Race.make_next`` makes the judging's checks (training strikes, all strikes, missed
+    beams, the carved twin's) fold by fold while the workers fit: every candidate, carved
+    twins included, has the figures of the judging that makes them all itself."""
+    from formats.geometry import Cloud
+    from recon.surfaces.isolation import run_isolated
+    from recon.surfaces.methods import bind
+
+    rng = np.random.default_rng(1)   # the upper half of a sphere: its closures fill space
+    points = rng.normal(size=(3000, 3))
+    points = points[points[:, 2] > 0.0] / np.linalg.norm(points[points[:, 2] > 0.0], axis=1,
+                                                         keepdims=True)
+    points += rng.normal(0.0, 0.01, points.shape)
+    n = len(points)
+    attributes = dict(zip(("view_x", "view_y", "view_z"), (5.0 * points).T, strict=True))
+    cloud = Cloud(points, attributes | {"shot": np.arange(n), "beam": np.zeros(n)})
+    folds = judge.pass_folds(cloud, 4, seed=0)
+    context = auto._context(cloud, folds, k=10, fallback="centroid", seed=0,
+                            misses=beams(0, n=200))
+    runs = [bind("convex-hull"), bind("ellipsoid")]
+    results = [[run_isolated(run, fold.prepared) for fold in context.folds] for run in runs]
+    state = auto._Race([(0, runs)], context)
+    for j, fitted in enumerate(results):
+        for f, result in enumerate(fitted):
+            state.arrived((0, j), f, result)
+    steps = 0
+    while state.make_next():
+        steps += 1
+    assert steps > 0 and all(state.made[0, j].overall is not None for j in range(2))
+
+    def figures(judged):
+        return [(c.label, c.carved, c.chi2, c.chi2_se, c.chi_fit, c.holes, c.violated,
+                 c.misses_cut, c.n_faces, c.heldout_mean_m) for c in judged]
+
+    for j, (run, fitted) in enumerate(zip(runs, results, strict=True)):
+        ahead = auto._judged(run, 0, fitted, context, state.made[0, j])
+        at_judging = auto._judged(run, 0, fitted, context)
+        assert figures(ahead) == figures(at_judging)
+    assert any(c.carved for c in ahead + at_judging)
+    assert state.made[0, 1].twin is not None or state.made[0, 0].twin is not None
