@@ -21,7 +21,8 @@ beam has examined, including the far side of a thin plate seen from one side; le
 voxels the struck ones enclose (a body's interior once its struck shell is closed,
 :meth:`SurfaceMap.enclose`), which a plan finds again when ``GAP_ENCLOSE_INTERVALS`` intervals
 have passed since the last time (a flood fill over the map: too costly for every plan), the
-wait doubled after a fill that found nothing new, up to ``GAP_ENCLOSE_MAX_INTERVALS``.
+wait doubled after a fill that found nothing new (no more than ``GAP_ENCLOSE_MIN_FRACTION`` of
+the occupied voxels), up to ``GAP_ENCLOSE_MAX_INTERVALS``.
 
 **The plan** (:meth:`GapSeeker.command`). The law plans at most ``GAP_PLAN_INTERVALS`` intervals
 apart (``GAP_SETTLED_PLAN_INTERVALS`` late in the least-struck phase, below): it takes the
@@ -89,6 +90,7 @@ from sim.defaults import (
     GAP_BLOCK_VOXELS,
     GAP_ENCLOSE_INTERVALS,
     GAP_ENCLOSE_MAX_INTERVALS,
+    GAP_ENCLOSE_MIN_FRACTION,
     GAP_IDLE_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
@@ -301,8 +303,9 @@ class GapSeeker:
         if self._interval - self._enclosed >= self._enclose_wait:
             marked = self.map.enclose()
             self._enclosed = self._interval
-            self._enclose_wait = (GAP_ENCLOSE_INTERVALS if marked else
-                                  min(2 * self._enclose_wait, GAP_ENCLOSE_MAX_INTERVALS))
+            self._enclose_wait = (
+                GAP_ENCLOSE_INTERVALS if marked > GAP_ENCLOSE_MIN_FRACTION * len(self.map.count)
+                else min(2 * self._enclose_wait, GAP_ENCLOSE_MAX_INTERVALS))
         rank, readmit = -1, False
         if self.residual:     # count <= np.quantile(count, GAP_RESIDUAL_QUANTILE), compiled
             rank = math.floor((len(self.map.count) - 1) * GAP_RESIDUAL_QUANTILE)
