@@ -357,7 +357,7 @@ class GapSeeker:
         self._age += 1
         self._interval += 1
         n = len(t)
-        if not (len(self._keys) and n):
+        if not n or self._used.all():   # no candidate open: the sweep would hold every shot
             self._short = True
             self._after_interval(False)
             return turn_from_boresight(np.tile(self.boresight, (n, 1)))
