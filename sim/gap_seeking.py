@@ -360,7 +360,14 @@ class GapSeeker:
         if not n or self._used.all():   # no candidate open: the sweep would hold every shot
             self._short = True
             self._after_interval(False)
-            return turn_from_boresight(np.tile(self.boresight, (n, 1)))
+            # Every shot held: turn_from_boresight's matrix, in Python floats (the same
+            # operations; numpy's call overhead on one vector cost more than a sweep).
+            x, y, z = self.boresight.tolist()
+            k = 1.0 / (1.0 + z)
+            held = np.empty((n, 3, 3))
+            held[:] = ((1.0 - k * x * x, -k * x * y, x), (-k * x * y, 1.0 - k * y * y, y),
+                       (-x, -y, z))
+            return held
         position, target, nominal = (poses if poses is not None else
                                      self._poses(np.asarray(t, dtype=np.float64)))
         solid, lo, hi = self._occupancy
