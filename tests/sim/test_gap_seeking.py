@@ -303,3 +303,28 @@ def test_a_short_interval_calls_a_plan_at_once_only_while_the_frontier_lasts():
     late = list(range(early[-1] + GAP_SETTLED_PLAN_INTERVALS, n, GAP_SETTLED_PLAN_INTERVALS))
     assert plans == [*range(GAP_IDLE_INTERVALS), *early, *late]
     assert len(late) >= 2
+
+
+def test_an_interval_without_open_candidates_holds_every_shot_without_a_sweep():
+    from sim.gap_seeking import turn_from_boresight
+
+    law = _law_over_a_struck_plate(lambda x: np.ones(len(x), dtype=int))
+    law._plan()
+    assert len(law._keys)
+    law._used[:] = True                       # every candidate aimed at or set aside
+
+    def sweep(*args):
+        raise AssertionError("no sweep without an open candidate")
+
+    law._sweep, law._age = sweep, 0
+    law.residual = True                       # no plan at once after a held interval
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        boresight = rng.normal(size=3)
+        boresight[2] = abs(boresight[2]) + 0.5
+        law.boresight = boresight / np.linalg.norm(boresight)
+        turn = law.command(np.arange(30.0))
+        # The same bytes as the rotation of the boresight, shot by shot.
+        assert turn.tobytes() == turn_from_boresight(np.tile(law.boresight, (30, 1))).tobytes()
+        law._age = 0                          # no plan due
+    assert law._short
