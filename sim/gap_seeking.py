@@ -21,7 +21,8 @@ beam has examined, including the far side of a thin plate seen from one side; le
 voxels the struck ones enclose (a body's interior once its struck shell is closed,
 :meth:`SurfaceMap.enclose`), which a plan finds again when ``GAP_ENCLOSE_INTERVALS`` intervals
 have passed since the last time (a flood fill over the map: too costly for every plan), the
-wait doubled after a fill that found nothing new, up to ``GAP_ENCLOSE_MAX_INTERVALS``.
+wait doubled after a fill that found nothing new (no more than ``GAP_ENCLOSE_MIN_FRACTION`` of
+the occupied voxels), up to ``GAP_ENCLOSE_MAX_INTERVALS``.
 
 **The plan** (:meth:`GapSeeker.command`). The law plans at most ``GAP_PLAN_INTERVALS`` intervals
 apart (``GAP_SETTLED_PLAN_INTERVALS`` late in the least-struck phase, below): it takes the
@@ -55,19 +56,21 @@ every ``GAP_PLAN_INTERVALS`` intervals and no sooner: an interval that runs out 
 candidates holds its remaining shots (most of its candidates are hidden from any one place, so
 a plan at once finds little new; planning after every short interval made 1.4-2.1 times as many
 plans on the spacecraft: docs/decisions.md); once the phase has lasted
-``GAP_SETTLED_INTERVALS`` intervals, every ``GAP_SETTLED_PLAN_INTERVALS``. With no candidate at
-all the boresight holds its offset (no slew).
+``GAP_SETTLED_INTERVALS`` intervals (the settled phase), every ``GAP_SETTLED_PLAN_INTERVALS``,
+each plan weighing at most ``GAP_SETTLED_MAX_CANDIDATES`` candidates. With no candidate at all
+the boresight holds its offset (no slew).
 
 **Candidates set aside** (in that least-struck phase). Late in a run most candidates are hidden
 from any one place (least-struck voxels hard to see, unknown voxels inside a shell not yet
 closed), and an interval that finds fewer visible than it has shots walks them all. So each
 candidate keeps a count of the walks that found it hidden (in the map's grid, from plan to
-plan); one found hidden ``GAP_ASIDE_WALKS`` times is set aside: not walked again by the plan
-that holds it, not chosen by the next ones. A plan re-admits every set-aside candidate of its
-pool (their counts cleared) once ``GAP_ASIDE_INTERVALS`` intervals have passed since the last
-re-admission, as the chaser's view of the target turns with its orbit and the target's spin; a
-rebuilt map starts with none. While the frontier lasts nothing is set aside (setting aside
-there too was measured slower to 95 % coverage: docs/decisions.md).
+plan); one found hidden ``GAP_ASIDE_WALKS`` times (``GAP_SETTLED_ASIDE_WALKS`` in the settled
+phase) is set aside: not walked again by the plan that holds it, not chosen by the next ones. A
+plan re-admits every set-aside candidate of its pool (their counts cleared) once
+``GAP_ASIDE_INTERVALS`` intervals have passed since the last re-admission, as the chaser's view
+of the target turns with its orbit and the target's spin; a rebuilt map starts with none. While
+the frontier lasts nothing is set aside (setting aside there too was measured slower to 95 %
+coverage: docs/decisions.md).
 
 The commanded attitude is the nominal one (sim/motion.py) turned by the smallest rotation that
 takes the nominal boresight ``+z`` onto the commanded one, and is recorded like any other.
@@ -87,12 +90,15 @@ from sim.defaults import (
     GAP_BLOCK_VOXELS,
     GAP_ENCLOSE_INTERVALS,
     GAP_ENCLOSE_MAX_INTERVALS,
+    GAP_ENCLOSE_MIN_FRACTION,
     GAP_IDLE_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
     GAP_PLAN_INTERVALS,
     GAP_RESIDUAL_QUANTILE,
+    GAP_SETTLED_ASIDE_WALKS,
     GAP_SETTLED_INTERVALS,
+    GAP_SETTLED_MAX_CANDIDATES,
     GAP_SETTLED_PLAN_INTERVALS,
     GAP_VOXEL_FRACTION,
     GAP_VOXEL_MIN_DEG,
@@ -274,13 +280,19 @@ class GapSeeker:
         self.map.add(self._origins[0], self._directions[0], self._ranges[0],
                      margin=self._margin())
 
+    def _settled(self) -> bool:
+        """Whether the least-struck phase has lasted ``GAP_SETTLED_INTERVALS`` intervals."""
+        return (self.residual and
+                self._interval - self._residual_from >= GAP_SETTLED_INTERVALS)
+
     def _candidates(self, stored: np.ndarray | None = None,
                     stored_hidden: np.ndarray | None = None, *, block: int = GAP_BLOCK_VOXELS
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The voxels worth a shot: the frontier, and once it is exhausted, the least-struck
         surface voxels too, less those set aside (all re-admitted when ``GAP_ASIDE_INTERVALS``
         intervals have passed since the last time); an even subset of at most
-        ``GAP_MAX_CANDIDATES``, one per cube of ``block`` voxels (one compiled call,
+        ``GAP_MAX_CANDIDATES`` (``GAP_SETTLED_MAX_CANDIDATES`` in the settled phase), one per
+        cube of ``block`` voxels (one compiled call,
         :meth:`SurfaceMap.candidates`, which first keeps the hidden counts ``stored_hidden``
         of the last plan's candidates ``stored``, if any, in the map's grid).
 
@@ -291,8 +303,9 @@ class GapSeeker:
         if self._interval - self._enclosed >= self._enclose_wait:
             marked = self.map.enclose()
             self._enclosed = self._interval
-            self._enclose_wait = (GAP_ENCLOSE_INTERVALS if marked else
-                                  min(2 * self._enclose_wait, GAP_ENCLOSE_MAX_INTERVALS))
+            self._enclose_wait = (
+                GAP_ENCLOSE_INTERVALS if marked > GAP_ENCLOSE_MIN_FRACTION * len(self.map.count)
+                else min(2 * self._enclose_wait, GAP_ENCLOSE_MAX_INTERVALS))
         rank, readmit = -1, False
         if self.residual:     # count <= np.quantile(count, GAP_RESIDUAL_QUANTILE), compiled
             rank = math.floor((len(self.map.count) - 1) * GAP_RESIDUAL_QUANTILE)
@@ -301,9 +314,11 @@ class GapSeeker:
                 self._readmitted = self._interval
         if stored is None:
             stored = stored_hidden = np.zeros(0, dtype=np.int64)
-        return self.map.candidates(rank=rank, aside=GAP_ASIDE_WALKS, readmit=readmit,
-                                   most=GAP_MAX_CANDIDATES, block=block, stored=stored,
-                                   stored_hidden=stored_hidden)
+        settled = self._settled()
+        return self.map.candidates(
+            rank=rank, aside=GAP_SETTLED_ASIDE_WALKS if settled else GAP_ASIDE_WALKS,
+            readmit=readmit, most=GAP_SETTLED_MAX_CANDIDATES if settled else GAP_MAX_CANDIDATES,
+            block=block, stored=stored, stored_hidden=stored_hidden)
 
     def _after_interval(self, aimed: bool) -> None:
         """Count intervals with nothing to aim at; after ``GAP_IDLE_INTERVALS`` of them in a
@@ -335,26 +350,33 @@ class GapSeeker:
         (n, 3, 3) float64 matrices sending commanded-sensor vectors to the nominal sensor frame
         (the attitude offset the pipeline applies).
         """
-        wait = GAP_PLAN_INTERVALS
-        if (self.residual and
-                self._interval - self._residual_from >= GAP_SETTLED_INTERVALS):
-            wait = GAP_SETTLED_PLAN_INTERVALS
+        settled = self._settled()
+        wait = GAP_SETTLED_PLAN_INTERVALS if settled else GAP_PLAN_INTERVALS
         if self._age >= wait or (self._short and not self.residual):
             self._plan()
         self._age += 1
         self._interval += 1
         n = len(t)
-        if not (len(self._keys) and n):
+        if not n or self._used.all():   # no candidate open: the sweep would hold every shot
             self._short = True
             self._after_interval(False)
-            return turn_from_boresight(np.tile(self.boresight, (n, 1)))
+            # Every shot held: turn_from_boresight's matrix, in Python floats (the same
+            # operations; numpy's call overhead on one vector cost more than a sweep).
+            x, y, z = self.boresight.tolist()
+            k = 1.0 / (1.0 + z)
+            held = np.empty((n, 3, 3))
+            held[:] = ((1.0 - k * x * x, -k * x * y, x), (-k * x * y, 1.0 - k * y * y, y),
+                       (-x, -y, z))
+            return held
         position, target, nominal = (poses if poses is not None else
                                      self._poses(np.asarray(t, dtype=np.float64)))
         solid, lo, hi = self._occupancy
         pick, goal, turn = self._sweep(
             n, self._centres, self._used, self.map.size, solid, lo, hi, position,
             target.as_matrix(), nominal, self.boresight, self.max_offset, self._reach,
-            GAP_BLOCK_VOXELS, self._hidden, GAP_ASIDE_WALKS if self.residual else _NEVER_ASIDE)
+            GAP_BLOCK_VOXELS, self._hidden,
+            (_NEVER_ASIDE if not self.residual else
+             GAP_SETTLED_ASIDE_WALKS if settled else GAP_ASIDE_WALKS))
         self.boresight = goal[-1]
         first, last = pick[0].item(), pick[-1].item()
         self._short = last < 0

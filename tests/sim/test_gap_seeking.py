@@ -122,17 +122,17 @@ def test_closed_loop_on_a_generated_satellite_gives_the_same_bytes_for_the_same_
     assert np.degrees(np.arccos(np.clip(boresight[:, 2], -1, 1))).max() > 0.5   # off nadir
 
 
-def _law_over_a_struck_plate(hits_per_voxel):
-    """A gap-seeking law whose map holds a 4 x 4 plate in layer z = 0, struck from above
-    ``hits_per_voxel(x)`` times at voxel column x (16 voxels); the space above it carved, the
+def _law_over_a_struck_plate(hits_per_voxel, side=4):
+    """A gap-seeking law whose map holds a ``side`` x ``side`` plate in layer z = 0, struck
+    from above ``hits_per_voxel(x)`` times at voxel column x; the space above it carved, the
     layer below unknown (frontier)."""
     from sim.surface_map import SurfaceMap
 
     law = GapSeeker(step=10.0, max_rate=math.radians(1), max_offset=math.radians(30),
                     poses=None, beams=np.array([[0.0, 0.0, 1.0]]))
     law.map = SurfaceMap(1.0)
-    x, y = np.meshgrid(np.arange(4) + 0.5, np.arange(4) + 0.5)
-    points = np.column_stack([x.ravel(), y.ravel(), np.full(16, 0.5)])
+    x, y = np.meshgrid(np.arange(side) + 0.5, np.arange(side) + 0.5)
+    points = np.column_stack([x.ravel(), y.ravel(), np.full(side * side, 0.5)])
     hits = np.repeat(points, hits_per_voxel(points[:, 0]), axis=0)
     law.map.add(hits + np.array([0.0, 0.0, 20.0]), np.tile([0.0, 0.0, -1.0], (len(hits), 1)),
                 np.full(len(hits), 19.5), margin=2.0)
@@ -191,6 +191,56 @@ def test_candidates_found_hidden_are_set_aside_and_readmitted():
     assert np.isin(aside, law._keys).all()
     assert not kernels.hidden_counts(pool, *grid).any()
     np.testing.assert_array_equal(_pool(law), pool)
+
+
+def test_a_settled_plan_weighs_fewer_candidates_and_sets_aside_after_one_hidden_walk():
+    from sim import planner_kernels as kernels
+    from sim.defaults import (
+        GAP_ASIDE_WALKS,
+        GAP_MAX_CANDIDATES,
+        GAP_SETTLED_ASIDE_WALKS,
+        GAP_SETTLED_INTERVALS,
+        GAP_SETTLED_MAX_CANDIDATES,
+    )
+
+    # A 24 x 24 plate struck once per voxel: in the least-struck phase every struck voxel and
+    # the layer below are candidates, more than a settled plan weighs.
+    law = _law_over_a_struck_plate(lambda x: np.ones(len(x), dtype=int), side=24)
+    law.residual = True
+    pool = _pool(law)
+    assert GAP_SETTLED_MAX_CANDIDATES < len(pool) <= GAP_MAX_CANDIDATES
+    # Every other candidate found hidden by one walk: not yet set aside early in the phase.
+    assert GAP_SETTLED_ASIDE_WALKS < GAP_ASIDE_WALKS
+    once = pool[::2]
+    kernels.store_hidden(once, np.full(len(once), GAP_SETTLED_ASIDE_WALKS), *law.map.grid())
+    np.testing.assert_array_equal(_pool(law), pool)
+    # Once the phase has lasted GAP_SETTLED_INTERVALS (no re-admission due), they are set
+    # aside, and the plan weighs at most GAP_SETTLED_MAX_CANDIDATES of the rest.
+    law._interval = law._residual_from + GAP_SETTLED_INTERVALS
+    law._readmitted = law._interval
+    settled = _pool(law)
+    assert 0 < len(settled) <= GAP_SETTLED_MAX_CANDIDATES
+    assert np.isin(settled, pool).all() and not np.isin(once, settled).any()
+
+
+def test_a_fill_that_encloses_only_a_few_voxels_counts_as_enclosing_nothing():
+    from sim.defaults import GAP_ENCLOSE_INTERVALS, GAP_ENCLOSE_MIN_FRACTION
+
+    # A 24 x 24 plate (576 struck voxels) and, away from it, the shell of a cube of 3 x 3 x 3
+    # voxels struck from outside: the first fill encloses the cube's one inside voxel.
+    law = _law_over_a_struck_plate(lambda x: np.ones(len(x), dtype=int), side=24)
+    index = np.stack(np.meshgrid(*[np.arange(3)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    shell = index[(index != 1).any(axis=1)]
+    out = shell - 1.0
+    out /= np.linalg.norm(out, axis=1)[:, None]
+    centres = shell + np.array([40.5, 40.5, 5.5])
+    law.map.add(centres + 20.0 * out, -out, np.full(len(out), 20.0), margin=2.0)
+    assert 1 <= GAP_ENCLOSE_MIN_FRACTION * len(law.map.count)
+    marked, fill = [], law.map.enclose
+    law.map.enclose = lambda: marked.append(fill()) or marked[-1]
+    _pool(law)                                            # the plan's fill
+    assert marked == [1]
+    assert law._enclose_wait == 2 * GAP_ENCLOSE_INTERVALS  # one voxel: the wait doubles
 
 
 def test_a_plan_leaves_out_what_the_struck_voxels_enclose_and_fills_less_often_when_idle():
@@ -253,3 +303,28 @@ def test_a_short_interval_calls_a_plan_at_once_only_while_the_frontier_lasts():
     late = list(range(early[-1] + GAP_SETTLED_PLAN_INTERVALS, n, GAP_SETTLED_PLAN_INTERVALS))
     assert plans == [*range(GAP_IDLE_INTERVALS), *early, *late]
     assert len(late) >= 2
+
+
+def test_an_interval_without_open_candidates_holds_every_shot_without_a_sweep():
+    from sim.gap_seeking import turn_from_boresight
+
+    law = _law_over_a_struck_plate(lambda x: np.ones(len(x), dtype=int))
+    law._plan()
+    assert len(law._keys)
+    law._used[:] = True                       # every candidate aimed at or set aside
+
+    def sweep(*args):
+        raise AssertionError("no sweep without an open candidate")
+
+    law._sweep, law._age = sweep, 0
+    law.residual = True                       # no plan at once after a held interval
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        boresight = rng.normal(size=3)
+        boresight[2] = abs(boresight[2]) + 0.5
+        law.boresight = boresight / np.linalg.norm(boresight)
+        turn = law.command(np.arange(30.0))
+        # The same bytes as the rotation of the boresight, shot by shot.
+        assert turn.tobytes() == turn_from_boresight(np.tile(law.boresight, (30, 1))).tobytes()
+        law._age = 0                          # no plan due
+    assert law._short
