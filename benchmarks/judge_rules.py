@@ -184,10 +184,12 @@ PER_STRIKE = ("distance", "tolerance", "sigma", "missed", "violated", "crack", "
 def recording_checks():
     """While active, every candidate ``auto.choose`` judges gets ``held_checks``: the
     ``judge.Check`` of each fold's tested strikes, folds in order, each with its ``opening``
-    array (``opening_of`` at the context's ``miss_reach``). ``auto.judge_candidate``
-    checks the tested strikes of every fold, then all strikes (both not ``fitted``): the calls
-    before its last. ``per_strike_arrays`` keeps them only where their costs are the
-    candidate's (so a change of that order is caught, not replayed wrongly)."""
+    array (``opening_of`` at the context's ``miss_reach``) and its beam side (``beam_side``).
+    Auto makes a fold's held-out check (``auto.held_out_check``) as the fold's fit arrives or
+    when the run is judged, and ``auto.judge_candidate`` gathers them (``auto._held_checks``):
+    each check is recorded where it is made, and the candidate keeps the list its judging
+    gathered. ``per_strike_arrays`` keeps them only where their costs are the candidate's (so
+    a change of that order is caught, not replayed wrongly)."""
     from dataclasses import dataclass
 
     from recon.surfaces import auto, judge
@@ -198,35 +200,34 @@ def recording_checks():
         front: np.ndarray | None = None
         cos: np.ndarray | None = None
 
-    calls: list = []
-    reach: list = []
-    check, judge_candidate, context = judge.check, auto.judge_candidate, auto._context
+    gathered: list = []
+    held_out_check, held_checks, judge_candidate = (auto.held_out_check, auto._held_checks,
+                                                    auto.judge_candidate)
 
-    def recorded_context(*args, **kwargs):
-        result = context(*args, **kwargs)
-        reach[:] = [result.miss_reach]
-        return result
+    def recorded_held_out_check(fold, caster, context):
+        result = held_out_check(fold, caster, context)
+        return Recorded(**vars(result),
+                        opening=opening_of(fold.test, caster, result, context.miss_reach),
+                        **beam_side(fold.test, caster))
 
-    def recorded_check(*args, **kwargs):
-        result = check(*args, **kwargs)
-        if not kwargs.get("fitted", False):
-            calls.append(Recorded(**vars(result),
-                                  opening=opening_of(*args[:2], result, reach[0]),
-                                  **beam_side(*args[:2])))
+    def recorded_held_checks(*args, **kwargs):
+        result = held_checks(*args, **kwargs)
+        gathered[:] = [result]
         return result
 
     def recorded_judge(*args, **kwargs):
-        calls.clear()
+        gathered.clear()
         candidate = judge_candidate(*args, **kwargs)
-        candidate.held_checks = calls[:-1]
+        candidate.held_checks = gathered[0] if gathered else []
         return candidate
 
-    judge.check, auto.judge_candidate, auto._context = (recorded_check, recorded_judge,
-                                                        recorded_context)
+    auto.held_out_check, auto._held_checks, auto.judge_candidate = (
+        recorded_held_out_check, recorded_held_checks, recorded_judge)
     try:
         yield
     finally:
-        judge.check, auto.judge_candidate, auto._context = check, judge_candidate, context
+        auto.held_out_check, auto._held_checks, auto.judge_candidate = (
+            held_out_check, held_checks, judge_candidate)
 
 
 def beam_side(strikes, caster) -> dict[str, np.ndarray | None]:

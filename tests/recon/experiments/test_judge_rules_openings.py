@@ -65,3 +65,21 @@ def test_beam_side_tells_a_surface_met_before_the_strike_from_one_beyond_it():
     np.testing.assert_allclose(side["cos"], [1.0, 1.0, 0.5], atol=1e-6)
     assert judge_rules.beam_side(judge.Strikes(points, None), judge.Caster(*plate)) == \
         {"front": None, "cos": None}
+
+
+def test_the_recorded_checks_are_each_scored_candidate_s_own():
+    # ``collect`` keeps a candidate's per-strike arrays only where its recorded held-out checks
+    # add up to its cost: on a small box every scored candidate's must.
+    from recon.surfaces.auto import choose
+    from tests.recon.conftest import box_points
+
+    points, view, _ = box_points(2000, noise=0.004, seed=2)
+    with judge_rules.recording_checks():
+        choice = choose(points, view_points=view, candidates=[("planes", {}),
+                                                              ("convex-hull", {})], seed=0)
+    scored = [c for c in choice.candidates if c.cost is not None]
+    arrays = judge_rules.per_strike_arrays(scored)
+    assert scored and {f"opening/{c.key}" for c in scored} <= set(arrays)
+    for c in scored:
+        assert len(c.held_checks) == choice.folds.k
+        assert len(arrays[f"distance/{c.key}"]) == len(c.cost)
