@@ -253,10 +253,7 @@ def fit_ellipsoid(points: np.ndarray, *, sigma: np.ndarray | None = None, iterat
     MethodFailed
         Too few points, or the constrained fit finds no bounded ellipsoid (its reasons).
     """
-    points = np.asarray(points, dtype=np.float64)
-    if len(points) < MIN_POINTS:
-        raise MethodFailed(f"ellipsoid: need at least {MIN_POINTS} points, got {len(points)}")
-    try:
+    try:   # too few points: both raise the same error
         return fit_quadric(points, sigma=sigma, iterations=iterations)
     except MethodFailed:
         return fit_constrained(points, sigma=sigma)
