@@ -1482,7 +1482,7 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
 def _stability_clouds(source, output: Path, truth, truth_scale: float, overrides, noise,
                       seed: int):
     """The clouds a stability sweep degrades and their truth mesh: a cloud or log file as it
-    is, or a scene simulated once per noise level."""
+    is, or a scene simulated once per noise level (a log's with its missed beams)."""
     from recon.experiments import stability as sweep
     from recon.inputs import is_strike_log, load_cloud, load_truth
 
@@ -1499,7 +1499,8 @@ def _stability_clouds(source, output: Path, truth, truth_scale: float, overrides
         else:
             raise sweep.ParameterError(f"truth must be given: {path} is a cloud, not a strike "
                                        "log with truth", argument="truth")
-        return {"base": (cloud.points, cloud.view_points, False)}, truth_mesh
+        return {"base": sweep.StabilityCloud(cloud.points, cloud.view_points, False,
+                                             _misses(path, cloud, seed))}, truth_mesh
     clouds, truth_mesh = sweep.simulate_levels(str(source), noise, output, overrides=overrides,
                                                seed=seed)
     if truth is not None:

@@ -37,6 +37,9 @@ density
 outliers
     Extra points, as a fraction of the kept ones, uniform in the cloud's bounding box; each
     takes the view point of a random real point (a spurious return along a real shot).
+
+A log's missed beams (free space no degradation changes) reach every cell's methods, as they
+reach ``recon compare``'s: the visibility method's cut respects them.
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -97,6 +101,28 @@ CELL_CACHE = 4
 CHAMFER_PRECISION = 0.02
 DISTANCE_CV = 5.0
 STABILITY_SAMPLES = math.ceil(0.5 * (DISTANCE_CV / CHAMFER_PRECISION) ** 2)
+
+
+class StabilityCloud(NamedTuple):
+    """A cloud the sweep degrades: the strikes as loaded, before any cell's degradation.
+
+    Attributes
+    ----------
+    points : (n, 3) float64, metres, body frame
+    view_points : (n, 3) float64 or None
+        Each strike's sensor position.
+    noisy : bool
+        Whether the points already carry the level's range noise (a simulated level) or the
+        cell adds it (a cloud given as it is).
+    misses : recon.registration.misses.MissedBeams or None
+        The log's missed beams near the strikes (``recon.surfaces.auto.misses_near``): free
+        space that no cell's degradation changes, passed to every cell's methods.
+    """
+
+    points: np.ndarray
+    view_points: np.ndarray | None
+    noisy: bool
+    misses: object | None = None
 
 
 def _check_levels(name: str, levels: Sequence[float], low: float, high: float | None
@@ -165,7 +191,7 @@ def cell_cloud(clouds: dict, *, noise_key: str, noise_sigma3: float, density: fl
     method records for the cell (a dict with ``failure``, ``reason`` and ``n_points``)."""
     from recon.surfaces.prepare import prepare
 
-    points, view_points, noisy = clouds[noise_key]
+    points, view_points, noisy, misses = clouds[noise_key]
     sequence = np.random.SeedSequence((seed, *cell))
     points, view_points = degrade(points, view_points,
                                   noise_sigma3=0.0 if noisy else noise_sigma3,
@@ -174,7 +200,7 @@ def cell_cloud(clouds: dict, *, noise_key: str, noise_sigma3: float, density: fl
         return {"status": "failed", "failure": "empty",
                 "reason": f"only {len(points)} points left in this cell", "n_points": len(points)}
     try:
-        return prepare(points, view_points=view_points, seed=seed)
+        return prepare(points, view_points=view_points, seed=seed, misses=misses)
     except ReconError as exc:
         return {"status": "failed", "failure": "error",
                 "reason": f"preparing the cloud failed: {exc}", "n_points": len(points)}
@@ -240,13 +266,14 @@ def simulate_levels(scene: str, noise: Sequence[float], out_dir, *, overrides=()
     Returns
     -------
     clouds : dict
-        ``{noise_key: (points, view_points, True)}``.
+        ``{noise_key: StabilityCloud}``, each with its log's missed beams.
     truth : (vertices, faces)
         The scene's truth mesh, metres, body frame.
     """
     import sim
     from formats import StrikeLog
     from recon.registration.ingest import ingest
+    from recon.surfaces.auto import misses_near
 
     noise = _check_levels("noise", noise, 0.0, None)   # before simulating anything
     logs = Path(out_dir) / "logs"
@@ -258,7 +285,8 @@ def simulate_levels(scene: str, noise: Sequence[float], out_dir, *, overrides=()
         if not path.exists():
             sim.simulate(scene_obj, path, seed=seed)
         cloud = ingest(path)
-        clouds[_noise_key(level)] = (cloud.points, cloud.view_points, True)
+        clouds[_noise_key(level)] = StabilityCloud(cloud.points, cloud.view_points, True,
+                                                   misses_near(path, cloud.points, seed=seed))
         if truth is None:
             with StrikeLog(path) as log:
                 truth = log.truth_mesh()
@@ -281,8 +309,8 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
     ----------
     out_dir : str or Path
     clouds : dict
-        ``{noise_key: (points, view_points or None, already_noisy)}``: one entry ``"base"``
-        (a cloud; noise is added per level) or one per noise level (``simulate_levels``).
+        ``{noise_key: StabilityCloud}`` (or its fields as a tuple): one entry ``"base"`` (a
+        cloud; noise is added per level) or one per noise level (``simulate_levels``).
     truth : (vertices, faces)
         Truth mesh, metres, body frame.
     names : sequence of str, optional
@@ -301,6 +329,7 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
     dict
         ``records`` and the paths written.
     """
+    clouds = {name: StabilityCloud(*cloud) for name, cloud in clouds.items()}
     noise = _check_levels("noise", noise, 0.0, None)
     density = _check_levels("density", density, 1e-9, 1.0)
     outliers = _check_levels("outliers", outliers, 0.0, None)
@@ -318,7 +347,9 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
                                   "cell": (i, j, k)}
     digest = hashlib.sha1()
     for name in sorted(clouds):
-        digest.update(np.ascontiguousarray(clouds[name][0]).tobytes())
+        digest.update(np.ascontiguousarray(clouds[name].points).tobytes())
+        if clouds[name].misses is not None:
+            digest.update(np.ascontiguousarray(clouds[name].misses.direction).tobytes())
     source = digest.hexdigest()
     ident = {"points_sha1": source, "seed": seed, "timeout_s": timeout_s,
              "memory_mb": memory_mb, "score_options": score_options or {}} | dict(

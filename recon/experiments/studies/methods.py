@@ -87,7 +87,8 @@ def scene_for(target: str, scenario: str, size: str) -> tuple[str, list[str]]:
 
 
 def prepared_cloud(target: str, scenario: str, size: str, *, seed: int = 0):
-    """Simulate, ingest, thin and prepare one condition's cloud.
+    """Simulate, ingest, thin and prepare one condition's cloud, with its log's missed beams
+    (the visibility method's free space, as ``recon compare`` of the log passes them).
 
     Returns
     -------
@@ -96,10 +97,14 @@ def prepared_cloud(target: str, scenario: str, size: str, *, seed: int = 0):
     info : dict
         ``strikes`` (before thinning), ``points`` (after), ``scene``, ``overrides``.
     """
+    from recon.registration.ingest import ingest
+    from recon.surfaces.auto import misses_near
     from recon.surfaces.prepare import prepare
 
     preset, overrides = scene_for(target, scenario, size)
-    cloud, truth, summary = runner.simulate_cloud(preset, overrides, seed=seed)
+    with runner.simulated_log(preset, overrides, seed=seed) as (log, truth, summary):
+        cloud = ingest(log)
+        misses = misses_near(log, cloud.points, seed=seed)
     points, view = cloud.points, cloud.view_points
     limit = PLAN[size]["max_points"]
     if len(points) > limit:
@@ -108,7 +113,7 @@ def prepared_cloud(target: str, scenario: str, size: str, *, seed: int = 0):
         points, view = points[pick], view[pick]
     info = {"strikes": summary["strikes"], "points": len(points), "scene": preset,
             "overrides": overrides}
-    return prepare(points, view_points=view, seed=seed), truth, info
+    return prepare(points, view_points=view, seed=seed, misses=misses), truth, info
 
 
 def run(out_dir, *, size: str, scheduler: str | None = None, resume: bool = False,

@@ -24,6 +24,7 @@ import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -113,10 +114,34 @@ def scene_case(scene: str, overrides: Sequence[str] = (), *, prefixes_s: Sequenc
             "points_at": [float(t) for t in points_at], "tags": dict(tags or {})}
 
 
+@contextmanager
+def simulated_log(scene: str, overrides: Sequence[str] = (), *, seed: int = 0,
+                  sim_workers: int | None = None, progress=False):
+    """Simulate a scene into a temporary log, deleted on leaving the block (``progress``:
+    ``sim.simulate``'s, e.g. a case's ``recon.experiments.progress.within``).
+
+    Yields
+    ------
+    log : Path
+        The strike log, while the block runs.
+    truth : (vertices (v, 3) float64 metres, faces (f, 3) int64)
+    summary : dict
+        ``sim.simulate``'s summary and ``spin_period_s``.
+    """
+    import sim
+
+    the_scene = sim.load_scene(scene, list(overrides))
+    with scratch.directory("recon-study-") as tmp:
+        log = tmp / "run.h5"
+        summary = sim.simulate(the_scene, log, seed=seed, progress=progress,
+                               workers=sim_workers)
+        summary = dict(summary, spin_period_s=float(the_scene["target.spin_period"]))
+        yield log, (the_scene.vertices, the_scene.faces), summary
+
+
 def simulate_cloud(scene: str, overrides: Sequence[str] = (), *, seed: int = 0,
                    sim_workers: int | None = None, progress=False):
-    """Simulate a scene into a temporary log, ingest it and delete the log (``progress``:
-    ``sim.simulate``'s, e.g. a case's ``recon.experiments.progress.within``).
+    """Simulate a scene (``simulated_log``) and ingest its log.
 
     Returns
     -------
@@ -126,17 +151,11 @@ def simulate_cloud(scene: str, overrides: Sequence[str] = (), *, seed: int = 0,
     summary : dict
         ``sim.simulate``'s summary (its ``path`` no longer exists) and ``spin_period_s``.
     """
-    import sim
     from recon.registration.ingest import ingest
 
-    the_scene = sim.load_scene(scene, list(overrides))
-    with scratch.directory("recon-study-") as tmp:
-        log = tmp / "run.h5"
-        summary = sim.simulate(the_scene, log, seed=seed, progress=progress,
-                               workers=sim_workers)
-        cloud = ingest(log)
-    summary = dict(summary, spin_period_s=float(the_scene["target.spin_period"]))
-    return cloud, (the_scene.vertices, the_scene.faces), summary
+    with simulated_log(scene, overrides, seed=seed, sim_workers=sim_workers,
+                       progress=progress) as (log, truth, summary):
+        return ingest(log), truth, summary
 
 
 def score_row(points: np.ndarray, truth, *, seed: int, score_options: Mapping) -> tuple[dict, Any]:

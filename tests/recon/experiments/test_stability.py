@@ -102,13 +102,35 @@ def test_each_cell_is_degraded_and_prepared_once_for_all_its_methods(tmp_path, m
 def test_scene_levels_are_fresh_simulations_with_range_noise(tmp_path):
     clouds, truth = simulate_levels("asteroid-lidar", [0.0, 3.0], tmp_path,
                                     overrides=["time.duration=30"], seed=0)
-    (p0, _, noisy0), (p1, _, noisy1) = clouds["0"], clouds["3"]
+    (p0, _, noisy0, misses0), (p1, _, noisy1, misses1) = clouds["0"], clouds["3"]
     assert noisy0 and noisy1 and len(truth[1]) > 1000
+    assert len(misses0) > 0 and len(misses1) > 0   # each level's log's own free space
     assert (tmp_path / "logs" / "noise-3.h5").is_file()
     from metrics import point_mesh_distance
 
     assert point_mesh_distance(p0, truth)[0].max() < 1e-3
     assert np.std(point_mesh_distance(p1, truth)[0]) > 0.3
+
+
+def test_every_cell_of_a_log_carries_its_missed_beams(tmp_path):
+    from recon import api
+    from recon.experiments.stability import StabilityCloud, cell_cloud
+
+    clouds, _ = simulate_levels("asteroid-lidar", [0.3], tmp_path,
+                                overrides=["time.duration=30"], seed=0)
+    misses = clouds["0.3"].misses
+    for density, outliers in ((1.0, 0.0), (0.5, 0.05)):   # no degradation changes free space
+        cloud = cell_cloud(clouds, noise_key="0.3", noise_sigma3=0.3, density=density,
+                           outliers=outliers, cell=(0, 0, 0), seed=0)
+        assert cloud.misses is misses
+    # a log given as it is: its own missed beams, the same ones
+    given, _ = api._stability_clouds(tmp_path / "logs" / "noise-0.3.h5", tmp_path / "out", None,
+                                     1.0, (), (0.3,), 0)
+    assert given["base"].misses.direction.tobytes() == misses.direction.tobytes()
+    points, view, _ = sphere_points(300)
+    plain = cell_cloud({"base": StabilityCloud(points, view, False)}, noise_key="base",
+                       noise_sigma3=0.0, density=1.0, outliers=0.0, cell=(0, 0, 0), seed=0)
+    assert plain.misses is None   # a cloud file records no misses
 
 
 @pytest.mark.parametrize("kwargs, match", [

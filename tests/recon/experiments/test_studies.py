@@ -435,3 +435,15 @@ def test_a_reduced_runs_summary_reads_not_tested_where_it_did_not_reproduce(tmp_
         summary = json.loads(path.read_text())
         assert [c["verdict"] for c in summary["claims"]] == expected
     assert summary["claims"][0].get("found") is None
+
+
+def test_the_methods_study_s_clouds_carry_their_log_s_missed_beams():
+    from recon.experiments.studies import methods
+
+    cloud, _, info = methods.prepared_cloud("rso-a", "stochastic", "tiny")
+    assert len(cloud.points) == info["points"]
+    assert cloud.misses is not None and len(cloud.misses) > 0   # free space for the cut
+    # each miss starts where the sensor was: on the orbit the strikes' view points lie on
+    radius = np.linalg.norm(cloud.view_points, axis=1)
+    assert np.all(np.abs(np.linalg.norm(cloud.misses.origin, axis=1) - radius.mean())
+                  < 0.05 * radius.mean())
