@@ -125,12 +125,16 @@ def load_cloud(suite: Path, cloud: str):
     return ingest(suite / "logs" / f"{cloud}.h5")
 
 
-def candidate_runs(rows: list[dict]) -> list:
-    """The ladder's runs and ``EXTRA``, bound with the compare's parameters where it ran them."""
+def candidate_runs(rows: list[dict], natural: bool = False) -> list:
+    """The ladder's runs and ``EXTRA``, bound with the compare's parameters where it ran them;
+    for a ``natural`` cloud also the completion auto fits there (``auto.NATURAL_COMPLETION``,
+    ``auto.complete_prior``)."""
     from recon.surfaces import auto
     from recon.surfaces.methods import bind
 
     runs = [run for level in auto.ladder() for run in level]
+    if natural:
+        runs.append(bind(auto.NATURAL_COMPLETION))
     keys = {run.key for run in runs}
     for r in rows:
         if r["label"] in EXTRA and r["key"] not in keys:
@@ -153,7 +157,8 @@ def collect(args) -> None:
         beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points.points, seed=0)
         with recording_checks():
             choice = auto.choose(points.points, view_points=points.view_points,
-                                 uncertainty=points.attributes, candidates=candidate_runs(rows),
+                                 uncertainty=points.attributes,
+                                 candidates=candidate_runs(rows, cloud in NATURAL),
                                  holdout=args.holdout, seed=args.seed,
                                  n_workers=args.workers,
                                  misses=beams)
@@ -369,7 +374,9 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
     out = []
     for row in data["candidates"]:
         level = levels.get(row["key"].removesuffix(" carved"))
-        if level is None:
+        if level is None and row["method"] == auto.NATURAL_COMPLETION:
+            level = len(auto.LADDER)   # after the ladder, as auto fits it (``replay``)
+        elif level is None:
             if not extra:
                 continue
             level = method_level.get(row["method"], len(auto.LADDER) - 1)
@@ -460,10 +467,13 @@ def compare_span(suite: Path, cloud: str, key: str) -> float | None:
 def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_checked: int,
            target: str = "unknown"):
     """``auto``'s ladder and choice on collected candidates: the levels in order, stopping as
-    ``auto.climb`` does, and the natural-body prior for a ``"natural"`` target; returns the
-    chosen candidate and the fitted ones."""
+    ``auto.climb`` does, and the natural-body prior and its completion for a ``"natural"``
+    target (``auto.complete_prior``: the completion, collected after the ladder's levels, joins
+    the fitted ones where auto fits it); returns the chosen candidate and the fitted ones."""
     from recon.surfaces import auto
 
+    completion = [c for c in candidates if c.level == len(auto.LADDER)]
+    candidates = [c for c in candidates if c.level < len(auto.LADDER)]
     depth_of = sorted({c.level for c in candidates})
     fitted: list = []
     for n, depth in enumerate(depth_of):
@@ -475,6 +485,9 @@ def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_c
     selection = auto.select(fitted, block, n_checked)
     if target == "natural":
         selection = auto.natural_prior(fitted, selection, coverage, tau)
+        if completion and (selection.prior or coverage < auto.NATURAL_COVERAGE):
+            fitted = fitted + completion
+            selection = auto.completed(fitted, selection, len(fitted) - len(completion), block)
     return fitted[selection.chosen], fitted
 
 
@@ -496,11 +509,12 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
     each later level against the runs left before it; ``folds``: the collection's ``folds``
     record, ``seed`` its seed (``fold_of``). Returns the candidates left (a run that leaves
     takes its carved twin with it; in its place the run, unscored, with the status "outpaced"
-    and the folds it was fitted on) and the runs that left."""
+    and the folds it was fitted on) and the runs that left. The completion (after the ladder's
+    levels, ``replay``) is fitted alone on every fold, as auto fits it: it does not race."""
     from recon.surfaces import auto
 
     fold = fold_of(block, folds, seed)
-    depths = sorted({c.level for c in candidates})
+    depths = sorted({c.level for c in candidates if c.level < len(auto.LADDER)})
     groups = [[d for d in depths if d < auto.ALWAYS_LEVELS]] + [
         [d] for d in depths if d >= auto.ALWAYS_LEVELS]
     kept, gone = [], []
@@ -512,7 +526,7 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
         kept += [c if c.run.key not in after else
                  auto.Candidate(c.run, c.level, "outpaced", folds=after[c.run.key])
                  for c in members if c.run.key not in after or not c.carved]
-    return kept, gone
+    return kept + [c for c in candidates if c.level == len(auto.LADDER)], gone
 
 
 def race_stages(before: list, members: list, fold: np.ndarray, block: np.ndarray
