@@ -13,7 +13,8 @@ script reads them (never writes there) so that a choice rule or an estimate can 
 seconds instead of a suite run:
 
 - ``collect``: per cloud, ``recon.surfaces.auto.choose`` fits a fixed, wide candidate set
-  (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
+  (``candidate_runs``: the ladder, a few grid runs of the compare, and on a ``NATURAL`` cloud
+  the completion auto fits there, ``auto.NATURAL_COMPLETION``) on the K folds and keeps, per
   candidate, the held-out costs of every tested strike, their blocks, the per-strike arrays of
   its held-out checks (``PER_STRIKE``: ``rules --statistic`` replays other statistics from
   them; among them the size of the opening of the fold's surface each missed held-out beam
@@ -33,8 +34,9 @@ seconds instead of a suite run:
   compare runs, not below the median run;
   the modelled time counts the collection's folds (``collect --holdout 0.3333``: 3 folds);
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
-  "unknown"); ``--statistic``, ``--band``, ``--miss-rate``, ``--holes-first`` and ``--extra``
-  replay rules that are not auto's;
+  "unknown"): the natural prior, and the completion where auto fits it (``auto.completed``;
+  a collection without it replays no completion); ``--statistic``, ``--band``,
+  ``--miss-rate``, ``--holes-first`` and ``--extra`` replay rules that are not auto's;
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the

@@ -1318,7 +1318,7 @@ def _completion_reason(candidates: list[Candidate], selection: Selection,
         return text + (f"It is {-gap:.2g} +- {se:.2g} below {against} (more than "
                        f"{BAND_SES:g} paired standard errors)")
     return text + (f"It is {gap:+.2g} +- {se:.2g} from {against} (within {BAND_SES:g} paired "
-                   f"standard errors: it fits them as well), and its ellipsoid reaches at most "
+                   f"standard errors: it fits them as well), and the ellipsoid reaches at most "
                    f"{selection.bracketed:.2f} times the strikes' extent along each of its axes "
                    f"(at most {NATURAL_BRACKETED:g}): the strikes bracket the body, so the "
                    f"ellipsoid fills the unseen part between seen parts")
