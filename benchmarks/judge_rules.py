@@ -13,8 +13,8 @@ script reads them (never writes there) so that a choice rule or an estimate can 
 seconds instead of a suite run:
 
 - ``collect``: per cloud, ``recon.surfaces.auto.choose`` fits a fixed, wide candidate set
-  (``candidate_runs``: the ladder, a few grid runs of the compare, and on a ``NATURAL`` cloud
-  the completion auto fits there, ``auto.NATURAL_COMPLETION``) on the K folds and keeps, per
+  (``candidate_runs``: the ladder and a few grid runs of the compare; on a ``NATURAL`` cloud
+  also the completion auto fits there, ``auto.NATURAL_COMPLETION``) on the K folds and keeps, per
   candidate, the held-out costs of every tested strike, their blocks, the per-strike arrays of
   its held-out checks (``PER_STRIKE``: ``rules --statistic`` replays other statistics from
   them; among them the size of the opening of the fold's surface each missed held-out beam
@@ -127,16 +127,12 @@ def load_cloud(suite: Path, cloud: str):
     return ingest(suite / "logs" / f"{cloud}.h5")
 
 
-def candidate_runs(rows: list[dict], natural: bool = False) -> list:
-    """The ladder's runs and ``EXTRA``, bound with the compare's parameters where it ran them;
-    for a ``natural`` cloud also the completion auto fits there (``auto.NATURAL_COMPLETION``,
-    ``auto.complete_prior``)."""
+def candidate_runs(rows: list[dict]) -> list:
+    """The ladder's runs and ``EXTRA``, bound with the compare's parameters where it ran them."""
     from recon.surfaces import auto
     from recon.surfaces.methods import bind
 
     runs = [run for level in auto.ladder() for run in level]
-    if natural:
-        runs.append(bind(auto.NATURAL_COMPLETION))
     keys = {run.key for run in runs}
     for r in rows:
         if r["label"] in EXTRA and r["key"] not in keys:
@@ -146,7 +142,12 @@ def candidate_runs(rows: list[dict], natural: bool = False) -> list:
 
 
 def collect(args) -> None:
+    """``collect`` (module docstring): on a ``NATURAL`` cloud the completion auto fits after
+    the ladder (``auto.complete_prior``) is fitted on the same folds by a second ``choose`` and
+    joins the record, so that the coverage stays the one auto measures on the ladder's
+    candidates (a closed completion would otherwise be its best closed candidate)."""
     from recon.surfaces import auto
+    from recon.surfaces.methods import bind
 
     out = args.work / "folds"
     out.mkdir(parents=True, exist_ok=True)
@@ -157,22 +158,24 @@ def collect(args) -> None:
         points = load_cloud(args.suite, cloud)
         start = time.perf_counter()
         beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points.points, seed=0)
-        with recording_checks():
-            choice = auto.choose(points.points, view_points=points.view_points,
-                                 uncertainty=points.attributes,
-                                 candidates=candidate_runs(rows, cloud in NATURAL),
-                                 holdout=args.holdout, seed=args.seed,
-                                 n_workers=args.workers,
-                                 misses=beams)
+        choices = []
+        for runs in [candidate_runs(rows)] + [[bind(auto.NATURAL_COMPLETION)]] * (
+                cloud in NATURAL):
+            with recording_checks():
+                choices.append(auto.choose(
+                    points.points, view_points=points.view_points,
+                    uncertainty=points.attributes, candidates=runs, holdout=args.holdout,
+                    seed=args.seed, n_workers=args.workers, misses=beams))
         elapsed = time.perf_counter() - start
-        table = [c.to_dict() | {"key": c.key} for c in choice.candidates]
-        arrays = {f"cost/{c.key}": c.cost for c in choice.candidates if c.cost is not None}
-        arrays |= per_strike_arrays(choice.candidates)
-        folds = choice.folds
+        candidates = [c for choice in choices for c in choice.candidates]
+        table = [c.to_dict() | {"key": c.key} for c in candidates]
+        arrays = {f"cost/{c.key}": c.cost for c in candidates if c.cost is not None}
+        arrays |= per_strike_arrays(candidates)
+        folds = choices[0].folds
         block = np.concatenate([folds.block[folds.test(f)] for f in range(folds.k)])
         np.savez_compressed(out / f"{cloud}.npz", block=block, **arrays)
         (out / f"{cloud}.json").write_text(json.dumps(
-            {"cloud": cloud, "seconds": elapsed, "auto": choice.to_dict() | {
+            {"cloud": cloud, "seconds": elapsed, "auto": choices[0].to_dict() | {
                 "candidates": table}}, indent=1, default=str))
         print(f"{cloud}: {len(table)} candidates on {folds.k} folds in {elapsed:.0f} s",
               flush=True)
