@@ -13,7 +13,8 @@ script reads them (never writes there) so that a choice rule or an estimate can 
 seconds instead of a suite run:
 
 - ``collect``: per cloud, ``recon.surfaces.auto.choose`` fits a fixed, wide candidate set
-  (``CANDIDATES``: the ladder and a few grid runs of the compare) on the K folds and keeps, per
+  (``candidate_runs``: the ladder and a few grid runs of the compare; on a ``NATURAL`` cloud
+  also the completion auto fits there, ``auto.NATURAL_COMPLETION``) on the K folds and keeps, per
   candidate, the held-out costs of every tested strike, their blocks, the per-strike arrays of
   its held-out checks (``PER_STRIKE``: ``rules --statistic`` replays other statistics from
   them; among them the size of the opening of the fold's surface each missed held-out beam
@@ -33,8 +34,9 @@ seconds instead of a suite run:
   compare runs, not below the median run;
   the modelled time counts the collection's folds (``collect --holdout 0.3333``: 3 folds);
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
-  "unknown"); ``--statistic``, ``--band``, ``--miss-rate``, ``--holes-first`` and ``--extra``
-  replay rules that are not auto's;
+  "unknown"): the natural prior, and the completion where auto fits it (``auto.completed``;
+  a collection without it replays no completion); ``--statistic``, ``--band``,
+  ``--miss-rate``, ``--holes-first`` and ``--extra`` replay rules that are not auto's;
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
@@ -140,7 +142,12 @@ def candidate_runs(rows: list[dict]) -> list:
 
 
 def collect(args) -> None:
+    """``collect`` (module docstring): on a ``NATURAL`` cloud the completion auto fits after
+    the ladder (``auto.complete_prior``) is fitted on the same folds by a second ``choose`` and
+    joins the record, so that the coverage stays the one auto measures on the ladder's
+    candidates (a closed completion would otherwise be its best closed candidate)."""
     from recon.surfaces import auto
+    from recon.surfaces.methods import bind
 
     out = args.work / "folds"
     out.mkdir(parents=True, exist_ok=True)
@@ -151,21 +158,24 @@ def collect(args) -> None:
         points = load_cloud(args.suite, cloud)
         start = time.perf_counter()
         beams = auto.misses_near(args.suite / "logs" / f"{cloud}.h5", points.points, seed=0)
-        with recording_checks():
-            choice = auto.choose(points.points, view_points=points.view_points,
-                                 uncertainty=points.attributes, candidates=candidate_runs(rows),
-                                 holdout=args.holdout, seed=args.seed,
-                                 n_workers=args.workers,
-                                 misses=beams)
+        choices = []
+        for runs in [candidate_runs(rows)] + [[bind(auto.NATURAL_COMPLETION)]] * (
+                cloud in NATURAL):
+            with recording_checks():
+                choices.append(auto.choose(
+                    points.points, view_points=points.view_points,
+                    uncertainty=points.attributes, candidates=runs, holdout=args.holdout,
+                    seed=args.seed, n_workers=args.workers, misses=beams))
         elapsed = time.perf_counter() - start
-        table = [c.to_dict() | {"key": c.key} for c in choice.candidates]
-        arrays = {f"cost/{c.key}": c.cost for c in choice.candidates if c.cost is not None}
-        arrays |= per_strike_arrays(choice.candidates)
-        folds = choice.folds
+        candidates = [c for choice in choices for c in choice.candidates]
+        table = [c.to_dict() | {"key": c.key} for c in candidates]
+        arrays = {f"cost/{c.key}": c.cost for c in candidates if c.cost is not None}
+        arrays |= per_strike_arrays(candidates)
+        folds = choices[0].folds
         block = np.concatenate([folds.block[folds.test(f)] for f in range(folds.k)])
         np.savez_compressed(out / f"{cloud}.npz", block=block, **arrays)
         (out / f"{cloud}.json").write_text(json.dumps(
-            {"cloud": cloud, "seconds": elapsed, "auto": choice.to_dict() | {
+            {"cloud": cloud, "seconds": elapsed, "auto": choices[0].to_dict() | {
                 "candidates": table}}, indent=1, default=str))
         print(f"{cloud}: {len(table)} candidates on {folds.k} folds in {elapsed:.0f} s",
               flush=True)
@@ -369,7 +379,9 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
     out = []
     for row in data["candidates"]:
         level = levels.get(row["key"].removesuffix(" carved"))
-        if level is None:
+        if level is None and row["method"] == auto.NATURAL_COMPLETION:
+            level = len(auto.LADDER)   # after the ladder, as auto fits it (``replay``)
+        elif level is None:
             if not extra:
                 continue
             level = method_level.get(row["method"], len(auto.LADDER) - 1)
@@ -460,10 +472,13 @@ def compare_span(suite: Path, cloud: str, key: str) -> float | None:
 def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_checked: int,
            target: str = "unknown"):
     """``auto``'s ladder and choice on collected candidates: the levels in order, stopping as
-    ``auto.climb`` does, and the natural-body prior for a ``"natural"`` target; returns the
-    chosen candidate and the fitted ones."""
+    ``auto.climb`` does, and the natural-body prior and its completion for a ``"natural"``
+    target (``auto.complete_prior``: the completion, collected after the ladder's levels, joins
+    the fitted ones where auto fits it); returns the chosen candidate and the fitted ones."""
     from recon.surfaces import auto
 
+    completion = [c for c in candidates if c.level == len(auto.LADDER)]
+    candidates = [c for c in candidates if c.level < len(auto.LADDER)]
     depth_of = sorted({c.level for c in candidates})
     fitted: list = []
     for n, depth in enumerate(depth_of):
@@ -475,6 +490,9 @@ def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_c
     selection = auto.select(fitted, block, n_checked)
     if target == "natural":
         selection = auto.natural_prior(fitted, selection, coverage, tau)
+        if completion and (selection.prior or coverage < auto.NATURAL_COVERAGE):
+            fitted = fitted + completion
+            selection = auto.completed(fitted, selection, len(fitted) - len(completion), block)
     return fitted[selection.chosen], fitted
 
 
@@ -496,11 +514,12 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
     each later level against the runs left before it; ``folds``: the collection's ``folds``
     record, ``seed`` its seed (``fold_of``). Returns the candidates left (a run that leaves
     takes its carved twin with it; in its place the run, unscored, with the status "outpaced"
-    and the folds it was fitted on) and the runs that left."""
+    and the folds it was fitted on) and the runs that left. The completion (after the ladder's
+    levels, ``replay``) is fitted alone on every fold, as auto fits it: it does not race."""
     from recon.surfaces import auto
 
     fold = fold_of(block, folds, seed)
-    depths = sorted({c.level for c in candidates})
+    depths = sorted({c.level for c in candidates if c.level < len(auto.LADDER)})
     groups = [[d for d in depths if d < auto.ALWAYS_LEVELS]] + [
         [d] for d in depths if d >= auto.ALWAYS_LEVELS]
     kept, gone = [], []
@@ -512,7 +531,7 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
         kept += [c if c.run.key not in after else
                  auto.Candidate(c.run, c.level, "outpaced", folds=after[c.run.key])
                  for c in members if c.run.key not in after or not c.carved]
-    return kept, gone
+    return kept + [c for c in candidates if c.level == len(auto.LADDER)], gone
 
 
 def race_stages(before: list, members: list, fold: np.ndarray, block: np.ndarray

@@ -31,7 +31,8 @@ def _add_target_kind(p: argparse.ArgumentParser) -> None:
                    help="what -m auto may assume of the target: 'natural' (an asteroid, a "
                         "comet) lets the ellipsoid stand for a far side the strikes leave "
                         "unseen, alone or completing the strikes' own surface where they are "
-                        "(completed-poisson, taken when the held-out strikes favour it); "
+                        "(completed-poisson, taken when the held-out strikes favour it, or "
+                        "fit it as well and the strikes reach across the body); "
                         "'unknown': the strikes and their rays alone decide "
                         "(default: %(default)s)")
 

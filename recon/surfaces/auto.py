@@ -68,10 +68,14 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    (``NATURAL_COMPLETION``, fitted on the folds only then, and only on the ladder: not among
    candidates the caller lists) is the Poisson surface of the strikes with the ellipsoid where
    none is: it takes the ellipsoid's place when the held-out strikes find it better by more
-   than ``BAND_SES`` paired standard errors and the missed beams do not refute it (a cratered
-   body: the strikes resolve more than the ellipsoid holds; ``complete_prior``). Where the
-   ellipsoid does not hold, the completion is fitted all the same for a body seen over less
-   than ``NATURAL_COVERAGE``, and takes the place of steps 1-5's choice on the same terms.
+   than ``BAND_SES`` paired standard errors (a cratered body: the strikes resolve more than
+   the ellipsoid holds; ``complete_prior``); when the missed beams refute it, its carved twin
+   competes in its place, as in step 2. Where the ellipsoid does not hold, the completion is
+   fitted all the same for a body seen over less than ``NATURAL_COVERAGE``, and takes the
+   place of steps 1-5's choice on the same terms, or when it fits the held-out strikes as well
+   as that choice (within ``BAND_SES`` paired standard errors) and the strikes bracket the
+   body: the ellipsoid reaches at most ``NATURAL_BRACKETED`` times their extent along each of
+   its axes, so the unseen part lies between seen parts (``completed``).
    For an ``"unknown"`` target (the default) steps 1-5 alone decide.
 
 **Coarse to fine** (``LADDER``): models of a few numbers first (an ellipsoid, a polyhedron of
@@ -174,6 +178,15 @@ NATURAL_SPAN = 1.8
 # same terms (bennu-lidar-noisy: 2.4 paired standard errors below Poisson depth 6, true Chamfer
 # 19.0 m against 52.2 m; no other natural tuning cloud changed, docs/decisions.md).
 NATURAL_COMPLETION = "completed-poisson"
+# The completion also takes the place of steps 1-5's choice when it fits the held-out strikes as
+# well (within BAND_SES paired standard errors) and the strikes bracket the body: its ellipsoid
+# reaches at most NATURAL_BRACKETED times their extent along each of its axes, so the unseen
+# part lies between seen parts, where the ellipsoid interpolates rather than extrapolates
+# (set between the suite's natural tuning clouds, docs/decisions.md: Ryugu and Eros under the
+# slew, 1.05 and 1.16, the completion the best run; the cratered asteroid under the cross and
+# Itokawa under the LIDAR, 1.34 and 1.37, the completion F 0.91 and 0.82 of the best; every
+# value from 1.2 to 1.3 makes the same choices there).
+NATURAL_BRACKETED = 1.25
 # Step 2: the share of the missed beams near the strikes an uncarved candidate may cut before
 # free space refutes it (``refuted``; one beam in ten: fixed after rso-b-cross-clean, where the
 # visibility cut chosen cut 39 % and its carved twin was the better surface; every share from
@@ -445,7 +458,8 @@ class Selection:
     ``prior``: the natural-body prior (``natural_prior``) made the choice; ``completes``: the
     candidate (the prior's ellipsoid, or the choice of steps 1-5) in whose place the completion
     (``complete_prior``) was chosen, with ``completion``, the completion's held-out chi-square
-    above that candidate's and its paired standard error."""
+    above that candidate's and its paired standard error; ``bracketed``: the natural model's
+    ``span`` when the completion was chosen within the band of that candidate (``completed``)."""
 
     chosen: int
     best: int
@@ -459,6 +473,7 @@ class Selection:
     prior: bool = False
     completes: int | None = None
     completion: tuple[float, float] | None = None
+    bracketed: float | None = None
 
 
 def closed(faces: np.ndarray) -> bool:
@@ -1221,9 +1236,7 @@ def complete_prior(candidates: list[Candidate], selection: Selection, context: _
     """Step 6's completion: when the natural prior chose the ellipsoid, or the strikes cover
     less than ``NATURAL_COVERAGE`` of the best closed candidate (``coverage``), fit the
     completion (``NATURAL_COMPLETION``: the Poisson surface of the strikes, the ellipsoid where
-    none is) on the folds and judge it like any candidate; it is chosen in the place of the
-    selection's choice when its held-out chi-square is lower by more than ``BAND_SES`` paired
-    standard errors and the missed beams do not refute it (``MISS_REFUTES``). Returns the
+    none is) on the folds and judge it like any candidate (``completed`` decides). Returns the
     candidates, the completion's appended (with its carved twin when it fills free space), and
     the selection."""
     from recon.surfaces.methods import available, bind
@@ -1234,15 +1247,40 @@ def complete_prior(candidates: list[Candidate], selection: Selection, context: _
     level = len(LADDER)
     judged = _fit_and_judge([(level, [bind(NATURAL_COMPLETION)])], context, limits=limits,
                             n_workers=n_workers)[level][0]
-    completion, index = judged[0], len(candidates)
     candidates = candidates + judged
-    if not completion.scored or (completion.misses_cut or 0.0) > MISS_REFUTES:
-        return candidates, selection
-    gap = judge.block_mean_se(completion.cost - candidates[selection.chosen].cost, context.block)
-    if gap[0] >= -BAND_SES * gap[1]:
-        return candidates, selection
-    return candidates, replace(selection, chosen=index, completes=selection.chosen,
-                               completion=gap)
+    return candidates, completed(candidates, selection, len(candidates) - len(judged),
+                                 context.block)
+
+
+def completed(candidates: list[Candidate], selection: Selection, index: int,
+              block: np.ndarray) -> Selection:
+    """``selection`` with the completion ``candidates[index]`` (``complete_prior``; its carved
+    twin in its place when the missed beams refute it, ``MISS_REFUTES``) chosen in the place of
+    its choice when its held-out chi-square is lower by more than ``BAND_SES`` paired standard
+    errors (``block``: each tested strike's block), or, for a choice the natural prior did not
+    make, not higher by more than ``BAND_SES`` paired standard errors while the strikes bracket
+    the body: the ``NATURAL_MODEL`` candidate's ``span`` is at most ``NATURAL_BRACKETED``;
+    else ``selection`` unchanged."""
+    completion = candidates[index]
+    if completion.scored and (completion.misses_cut or 0.0) > MISS_REFUTES:
+        twin = next((i for i, c in enumerate(candidates) if c.carved and c.scored
+                     and c.run.key == completion.run.key), None)
+        if twin is None:
+            return selection
+        selection = replace(selection, refuted=(*selection.refuted, index))
+        index, completion = twin, candidates[twin]
+    if not completion.scored:
+        return selection
+    gap = judge.block_mean_se(completion.cost - candidates[selection.chosen].cost, block)
+    if gap[0] < -BAND_SES * gap[1]:
+        return replace(selection, chosen=index, completes=selection.chosen, completion=gap)
+    model = next((c for c in candidates if c.scored and not c.carved
+                  and c.run.method == NATURAL_MODEL), None)
+    if selection.prior or gap[0] > BAND_SES * gap[1] or model is None or \
+            model.span is None or model.span > NATURAL_BRACKETED:
+        return selection
+    return replace(selection, chosen=index, completes=selection.chosen, completion=gap,
+                   bracketed=model.span)
 
 
 def _prior_reason(candidates: list[Candidate], selection: Selection, coverage: float) -> str:
@@ -1273,13 +1311,21 @@ def _completion_reason(candidates: list[Candidate], selection: Selection,
     ellipsoid)."""
     replaced = candidates[selection.completes]
     gap, se = selection.completion
-    return (f"; the target is a natural body and the strikes cover {coverage:.0%} of the best "
+    text = (f"; the target is a natural body and the strikes cover {coverage:.0%} of the best "
             f"closed surface: held-out passes, all where strikes are, cannot judge the rest, "
             f"so the Poisson surface of the strikes completed by their ellipsoid where none is "
-            f"was fitted too. It is {-gap:.2g} +- {se:.2g} below {replaced.label} "
-            f"({replaced.chi2:.3g}, {'closed' if replaced.closed else 'open'}), the choice "
-            f"among the other candidates, on the same held-out strikes (more than {BAND_SES:g} "
-            f"paired standard errors)")
+            f"was fitted too. ")
+    against = (f"{replaced.label} ({replaced.chi2:.3g}, "
+               f"{'closed' if replaced.closed else 'open'}), the choice among the other "
+               f"candidates, on the same held-out strikes")
+    if selection.bracketed is None:
+        return text + (f"It is {-gap:.2g} +- {se:.2g} below {against} (more than "
+                       f"{BAND_SES:g} paired standard errors)")
+    return text + (f"It is {gap:+.2g} +- {se:.2g} from {against} (within {BAND_SES:g} paired "
+                   f"standard errors: it fits them as well), and the ellipsoid reaches at most "
+                   f"{selection.bracketed:.2f} times the strikes' extent along each of its axes "
+                   f"(at most {NATURAL_BRACKETED:g}): the strikes bracket the body, so the "
+                   f"ellipsoid fills the unseen part between seen parts")
 
 
 def _holes_reason(candidates: list[Candidate], selection: Selection) -> str:

@@ -52,3 +52,33 @@ def test_the_replayed_race_takes_out_the_far_run_with_its_carved_twin():
     assert status == {"ellipsoid": "ok", "planes": "ok", "poisson depth=6": "ok",
                       "poisson depth=9": "outpaced"}   # level 0 is not raced; no twin left
     assert not next(c for c in kept if c.status == "outpaced").scored
+
+
+def test_the_replay_fits_the_completion_of_a_natural_body_after_the_ladder_as_auto_does():
+    # A natural body seen over a fifth of it: the ellipsoid lies far from the held-out strikes
+    # (the prior does not act), Poisson depth 6 is the ladder's choice, and the completion,
+    # collected after the ladder, fits the held-out strikes as well while the ellipsoid reaches
+    # only 1.1 times the strikes' extent: auto takes it (``auto.completed``), and so does the
+    # replay. Told nothing of the target, neither fits it. It does not race.
+    block, record = collected_blocks(0)
+    rng = np.random.default_rng(2)
+
+    def candidate(method, params, level, mean, n_params, **kwargs):
+        c = auto.Candidate(bind(method, params), level, "ok", n_params=n_params, holes=0.0,
+                           **kwargs)
+        c.cost = mean + rng.normal(0.0, 0.3, len(block))
+        c.chi2, c.chi2_se = judge.block_mean_se(c.cost, block)
+        return c
+
+    table = [candidate("ellipsoid", {}, 0, 9.0, 9, closed=True, heldout_mean_m=5.0, span=1.1),
+             candidate("poisson", {"depth": 6}, 1, 1.0, 10_000, closed=False),
+             candidate("poisson", {"depth": 9}, 2, 1.1, 20_000, closed=False),
+             candidate(auto.NATURAL_COMPLETION, {}, len(auto.LADDER), 1.01, 12_000,
+                       closed=True)]
+    chosen, fitted = judge_rules.replay(table, block, 0.2, 1.0, 2000, "natural")
+    assert chosen.run.method == auto.NATURAL_COMPLETION
+    chosen, fitted = judge_rules.replay(table, block, 0.2, 1.0, 2000, "unknown")
+    assert chosen.label == "poisson depth=6"
+    assert auto.NATURAL_COMPLETION not in [c.run.method for c in fitted]
+    kept, gone = judge_rules.race(table, block, record, 0)
+    assert kept[-1] is table[-1] and table[-1] not in gone

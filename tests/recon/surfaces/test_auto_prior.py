@@ -8,6 +8,7 @@ import pytest
 
 from formats.errors import ParameterError
 from recon.surfaces.auto import (
+    NATURAL_BRACKETED,
     NATURAL_COVERAGE,
     NATURAL_FIT,
     NATURAL_SPAN,
@@ -188,19 +189,22 @@ def test_listed_candidates_are_not_completed():
     assert [c.run.method for c in natural.candidates] == ["ellipsoid", "poisson"]
 
 
-@pytest.mark.parametrize("coverage, chi2, completed", [
-    (0.2, 0.8, True),                  # unseen over most of the body, far better held out
-    (0.2, 1.0, False),                 # no better on the held-out strikes than the choice
-    (NATURAL_COVERAGE, 0.8, False),    # half the body seen: not even fitted
+@pytest.mark.parametrize("coverage, chi2, reach, completed", [
+    (0.2, 0.8, 2.0, True),             # unseen over most of the body, far better held out
+    (0.2, 1.0, 2.0, False),            # no better on the held-out strikes than the choice
+    (0.2, 1.0, 1.1, True),             # as good, and the strikes bracket the body
+    (0.2, 1.2, 1.1, False),            # bracketed, but worse on the held-out strikes
+    (NATURAL_COVERAGE, 0.8, 1.1, False),   # half the body seen: not even fitted
 ])
 def test_the_completion_competes_with_the_choice_where_the_prior_does_not_act(
-        monkeypatch, coverage, chi2, completed):
+        monkeypatch, coverage, chi2, reach, completed):
     from types import SimpleNamespace
 
     from recon.surfaces import auto
 
     candidates = [_candidate("poisson", 1.0, 10_000, mean=0.05, closed=False),
-                  _candidate("ellipsoid", 5.0, 9, mean=NATURAL_FIT + 0.5, offset=1)]
+                  _candidate("ellipsoid", 5.0, 9, mean=NATURAL_FIT + 0.5, reach=reach,
+                             offset=1)]
     selection = natural_prior(candidates, select(candidates, BLOCK, 20_000), coverage, tau=1.0)
     assert not selection.prior
     fitted = []
@@ -219,4 +223,52 @@ def test_the_completion_competes_with_the_choice_where_the_prior_does_not_act(
     reason = auto.explain(table, chosen, coverage)
     assert ("the choice among the other candidates" in reason) is completed
     if completed:
-        assert chosen.completes == 0 and "below poisson (1, open)" in reason
+        assert chosen.completes == 0
+        bracketed = reach <= auto.NATURAL_BRACKETED and chi2 >= 1.0
+        assert ("below poisson (1, open)" in reason) is not bracketed
+        assert ("the strikes bracket the body" in reason) is bracketed
+
+
+def test_a_completion_the_missed_beams_refute_competes_by_its_carved_twin():
+    # The completion of a body seen from aside cuts many missed beams where its ellipsoid
+    # bulges past the limb: it is refuted, as a ladder candidate would be, and its carved
+    # twin (without the faces those beams cross away from every strike) takes the choice when
+    # the held-out strikes find it better. Before, the refuted completion was dropped whole.
+    from dataclasses import replace
+
+    from recon.surfaces import auto
+
+    candidates = [_candidate("poisson", 1.0, 10_000, mean=0.05, closed=False),
+                  _candidate("ellipsoid", 5.0, 9, mean=NATURAL_FIT + 0.5, reach=2.0,
+                             offset=1)]
+    selection = natural_prior(candidates, select(candidates, BLOCK, 20_000), 0.3, tau=1.0)
+    completion = _candidate(auto.NATURAL_COMPLETION, 0.8, 12_000, mean=0.04, offset=2)
+    completion.misses_cut = 0.15
+    twin = replace(completion, carved=True, closed=False, misses_cut=0.0)
+    table = [*candidates, completion, twin]
+    chosen = auto.completed(table, selection, 2, BLOCK)
+    assert chosen.chosen == 3 and chosen.completes == 0
+    assert 2 in chosen.refuted
+    reason = auto.explain(table, chosen, 0.3)
+    assert "chose completed-poisson carved" in reason
+    assert "the beams refute it" in reason
+    # without a scored twin the refuted completion stays out
+    assert auto.completed(table[:3], selection, 2, BLOCK) == selection
+
+
+def test_the_completion_of_a_bracketed_body_takes_the_choice_when_it_fits_as_well():
+    # Bumps of 4.5 %: the ellipsoid lies farther than NATURAL_FIT tau from the held-out strikes,
+    # so the prior does not act, and Poisson is the choice of steps 1-5. The two belts reach
+    # across the body along each of its axes (the ellipsoid's span is about 1), and the
+    # completion fits the held-out strikes as well as Poisson (within the band): it takes the
+    # choice, closing the body between the belts. Main's rule asked it to be better by two
+    # paired standard errors and kept the open Poisson surface.
+    points, view = bumpy_body(2000, width=0.12, bumps=0.045, seed=1)
+    natural = choose(points, view_points=view, seed=0, target_kind="natural",
+                     methods=["ellipsoid", "poisson", "completed-poisson"])
+    ellipsoid = next(c for c in natural.candidates if c.run.method == "ellipsoid")
+    assert ellipsoid.heldout_mean_m > NATURAL_FIT * natural.tau_m
+    assert ellipsoid.span <= NATURAL_BRACKETED
+    assert natural.method == "completed-poisson", format_choice(natural)
+    assert "the strikes bracket the body" in natural.reason
+    assert natural.chosen.closed
