@@ -370,21 +370,13 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
         if not path.exists():
             raise SystemExit(f"{cloud}: --statistic {statistic} needs the openings command first")
         cracks = np.load(path)
-    levels = {run.key: depth for depth, level in enumerate(auto.ladder()) for run in level}
-    method_level = {}
-    for depth, level in enumerate(auto.ladder()):
-        for run in level:
-            method_level.setdefault(run.method, depth)
     names = {f.name for f in fields(auto.Candidate)} - {"run", "level", "heldout", "cost", "mesh"}
+    level_of = _levels(extra)
     out = []
     for row in data["candidates"]:
-        level = levels.get(row["key"].removesuffix(" carved"))
-        if level is None and row["method"] == auto.NATURAL_COMPLETION:
-            level = len(auto.LADDER)   # after the ladder, as auto fits it (``replay``)
-        elif level is None:
-            if not extra:
-                continue
-            level = method_level.get(row["method"], len(auto.LADDER) - 1)
+        level = level_of(row)
+        if level is None:
+            continue
         candidate = auto.Candidate(bind(row["method"], row["params"]), level,
                                    **{k: row[k] for k in names if k in row})
         candidate.cost = arrays.get(f"cost/{row['key']}")
@@ -399,6 +391,29 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
         out.append(candidate)
     return (out, arrays["block"], data["coverage"], data["tau_m"],
             data.get("n_checked") or checked_count(work, suite, cloud))
+
+
+def _levels(extra: bool):
+    """The ladder level a collected candidate's row replays on (``candidates_of``): its run's
+    (a carved twin's run's), the completion's after the ladder, an ``EXTRA`` run's method's
+    with ``extra``, else None (left out)."""
+    from recon.surfaces import auto
+
+    levels = {run.key: depth for depth, level in enumerate(auto.ladder()) for run in level}
+    method_level = {}
+    for depth, level in enumerate(auto.ladder()):
+        for run in level:
+            method_level.setdefault(run.method, depth)
+
+    def level_of(row: dict) -> int | None:
+        level = levels.get(row["key"].removesuffix(" carved"))
+        if level is not None:
+            return level
+        if row["method"] == auto.NATURAL_COMPLETION:
+            return len(auto.LADDER)   # after the ladder, as auto fits it (``replay``)
+        return method_level.get(row["method"], len(auto.LADDER) - 1) if extra else None
+
+    return level_of
 
 
 def with_misses(work: Path, cloud: str, candidates: list) -> int:
@@ -519,11 +534,8 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
     from recon.surfaces import auto
 
     fold = fold_of(block, folds, seed)
-    depths = sorted({c.level for c in candidates if c.level < len(auto.LADDER)})
-    groups = [[d for d in depths if d < auto.ALWAYS_LEVELS]] + [
-        [d] for d in depths if d >= auto.ALWAYS_LEVELS]
     kept, gone = [], []
-    for group in groups:
+    for group in race_groups(candidates):
         members = [c for c in candidates if c.level in group]
         after = race_stages([c for c in kept if c.scored and not c.carved], members, fold,
                             block)
@@ -532,6 +544,16 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
                  auto.Candidate(c.run, c.level, "outpaced", folds=after[c.run.key])
                  for c in members if c.run.key not in after or not c.carved]
     return kept + [c for c in candidates if c.level == len(auto.LADDER)], gone
+
+
+def race_groups(candidates: list) -> list[list[int]]:
+    """The ladder's levels of ``candidates`` that race together (``race``): those fitted at
+    once (``auto.ALWAYS_LEVELS``), then each later level alone."""
+    from recon.surfaces import auto
+
+    depths = sorted({c.level for c in candidates if c.level < len(auto.LADDER)})
+    return [[d for d in depths if d < auto.ALWAYS_LEVELS]] + [
+        [d] for d in depths if d >= auto.ALWAYS_LEVELS]
 
 
 def race_stages(before: list, members: list, fold: np.ndarray, block: np.ndarray
