@@ -196,12 +196,14 @@ class GapSeeker:
         self._poses = poses
         self.beams = np.asarray(beams, dtype=np.float64).reshape(-1, 3)
         self.boresight = np.array([0.0, 0.0, 1.0])           # commanded, nominal frame
+        self._held_turn, self._held_of = None, None          # its rotation, and of which
         self.map: SurfaceMap | None = None
         self._origins, self._directions, self._ranges = [], [], []
         self._pending: list[StrikeChunk] = []                # observed since the last plan
         self._keys = np.zeros(0, dtype=np.int64)             # the plan's candidates,
         self._centres = np.zeros((0, 3))                     # their centres [m, B]
         self._used = np.zeros(0, dtype=bool)                 # and those aimed at or set aside
+        self._open = 0                                       # candidates not in _used
         self._hidden = np.zeros(0, dtype=np.int64)           # walks that found them hidden
         self._occupancy = None                               # the map's, as the plan left it
         self._age = 0                                        # intervals since the plan
@@ -357,21 +359,16 @@ class GapSeeker:
         self._age += 1
         self._interval += 1
         n = len(t)
-        if not n or self._used.all():   # no candidate open: the sweep would hold every shot
+        if not n or not self._open:     # no candidate open: the sweep would hold every shot
             self._short = True
             self._after_interval(False)
-            # Every shot held: turn_from_boresight's matrix, in Python floats (the same
-            # operations; numpy's call overhead on one vector cost more than a sweep).
-            x, y, z = self.boresight.tolist()
-            k = 1.0 / (1.0 + z)
             held = np.empty((n, 3, 3))
-            held[:] = ((1.0 - k * x * x, -k * x * y, x), (-k * x * y, 1.0 - k * y * y, y),
-                       (-x, -y, z))
+            held[:] = self._held()
             return held
         position, target, nominal = (poses if poses is not None else
                                      self._poses(np.asarray(t, dtype=np.float64)))
         solid, lo, hi = self._occupancy
-        pick, goal, turn = self._sweep(
+        pick, goal, turn, self._open = self._sweep(
             n, self._centres, self._used, self.map.size, solid, lo, hi, position,
             target.as_matrix(), nominal, self.boresight, self.max_offset, self._reach,
             GAP_BLOCK_VOXELS, self._hidden,
@@ -399,3 +396,16 @@ class GapSeeker:
             self._keys, self._centres, self._hidden = self._candidates(stored, stored_hidden)
             self._occupancy = self.map.occupancy()      # what the sweeps' walks read
         self._used = np.zeros(len(self._keys), dtype=bool)
+        self._open = len(self._keys)
+
+    def _held(self) -> np.ndarray:
+        """The rotation (3, 3) of a held shot: :func:`turn_from_boresight`'s matrix of the
+        commanded boresight, in Python floats (the same operations; numpy's call overhead on
+        one vector cost more than a sweep), made again only when the boresight changed."""
+        if self._held_of is not self.boresight:
+            x, y, z = self.boresight.tolist()
+            k = 1.0 / (1.0 + z)
+            self._held_turn = np.array(((1.0 - k * x * x, -k * x * y, x),
+                                        (-k * x * y, 1.0 - k * y * y, y), (-x, -y, z)))
+            self._held_of = self.boresight
+        return self._held_turn

@@ -1024,6 +1024,8 @@ def sweep(n, centres, used, size, solid, lo, hi, position, target, nominal, bore
     goal : (n, 3) float64, unit vectors, nominal sensor frame: the commanded boresights
     turn : (n, 3, 3) float64: the smallest rotations taking ``+z`` onto each ``goal``
         (sim/gap_seeking.py, :func:`turn_from_boresight`)
+    left : int: the candidates still open after (not in ``used``): the law then knows,
+        without a pass over ``used``, when an interval has nothing left to sweep
 
     Notes
     -----
@@ -1067,7 +1069,9 @@ def sweep(n, centres, used, size, solid, lo, hi, position, target, nominal, bore
             if _blocked(centres[k], ch, size, solid, lo, hi, BLOCK_SLACK * size,
                         BLOCK_RADIUS * size):
                 hidden[k] += 1
-                used[k] = hidden[k] >= aside
+                if hidden[k] >= aside:
+                    used[k] = True
+                    n_open -= 1
             else:
                 pick[m], aimed[m] = rank[q], k
                 used[k] = True
@@ -1076,7 +1080,7 @@ def sweep(n, centres, used, size, solid, lo, hi, position, target, nominal, bore
                     break
     goal = _goals(aimed, centres, chaser, to_nominal, boresight, max_offset)
     _rate_limit(goal, boresight, reach)
-    return pick, goal, _turns(goal)
+    return pick, goal, _turns(goal), n_open - m
 
 
 @njit(cache=True)

@@ -312,6 +312,7 @@ def test_an_interval_without_open_candidates_holds_every_shot_without_a_sweep():
     law._plan()
     assert len(law._keys)
     law._used[:] = True                       # every candidate aimed at or set aside
+    law._open = 0                             # (as the sweep counts them)
 
     def sweep(*args):
         raise AssertionError("no sweep without an open candidate")
@@ -328,3 +329,21 @@ def test_an_interval_without_open_candidates_holds_every_shot_without_a_sweep():
         assert turn.tobytes() == turn_from_boresight(np.tile(law.boresight, (30, 1))).tobytes()
         law._age = 0                          # no plan due
     assert law._short
+
+
+def test_the_law_s_open_count_follows_its_used_candidates(tmp_path, monkeypatch):
+    # The sweep hands back how many candidates are left open, so that an interval need not pass
+    # over the used mask to know whether to hold: after every interval the count must be the
+    # mask's. A small closed loop, long enough to hold intervals with nothing open.
+    command, checked = GapSeeker.command, []
+
+    def checked_command(self, t, poses=None):
+        turn = command(self, t, poses)
+        checked.append((self._open, int((~self._used).sum())))
+        return turn
+
+    monkeypatch.setattr(GapSeeker, "command", checked_command)
+    scene = sim.load_scene("asteroid-lrf", [*SMALL, "time.duration=10800"])
+    sim.simulate(scene, tmp_path / "gaps.h5", seed=0, progress=False)
+    assert [count for count, _ in checked] == [mask for _, mask in checked]
+    assert any(count == 0 for count, _ in checked) and any(count > 0 for count, _ in checked)

@@ -383,10 +383,10 @@ def test_sweep_kernel_matches_the_numpy_reference():
         expected = ref_sweep(n, centres, used, m.occupied_centres, m.size, position,
                              target.as_matrix(), nominal, boresight, max_offset, reach, 2)
         now = used.copy()
-        pick, goal, turn = kernels.sweep(n, centres, now, m.size, *m.occupancy(), position[:n],
-                                         target.as_matrix()[:n], nominal[:n], boresight,
-                                         max_offset, reach, 2,
-                                         np.zeros(len(keys), dtype=np.int64), 2)
+        pick, goal, turn, left = kernels.sweep(
+            n, centres, now, m.size, *m.occupancy(), position[:n], target.as_matrix()[:n],
+            nominal[:n], boresight, max_offset, reach, 2, np.zeros(len(keys), dtype=np.int64), 2)
+        assert left == (~expected[2]).sum()
         np.testing.assert_array_equal(pick, expected[0])
         np.testing.assert_allclose(goal, expected[1], atol=1e-13)
         np.testing.assert_array_equal(now, expected[2])
@@ -466,16 +466,19 @@ def test_the_sweep_sets_aside_candidates_found_hidden_and_keeps_its_picks():
     free, aside = used.copy(), used.copy()
     pick_free = kernels.sweep(n, centres, free, *args, np.zeros(len(keys), dtype=np.int64),
                               HIDDEN_MAX + 1)[0]
-    pick = kernels.sweep(n, centres, aside, *args, hidden, 3)[0]
+    pick, _, _, left = kernels.sweep(n, centres, aside, *args, hidden, 3)
     np.testing.assert_array_equal(pick, pick_free)
+    assert left == (~aside).sum()              # the open count: the picks and those set aside
     walked_hidden = hidden == 3
     assert walked_hidden.any() and not seen[walked_hidden].any()
     np.testing.assert_array_equal(aside, free | walked_hidden)
     np.testing.assert_array_equal(hidden[~walked_hidden], 2)
     # Set aside, they are not walked again: a second sweep leaves their counts alone.
     again = hidden.copy()
-    kernels.sweep(n, centres, aside, *args, again, 3)
+    open_before = (~aside).sum()
+    *_, left = kernels.sweep(n, centres, aside, *args, again, 3)
     np.testing.assert_array_equal(again[walked_hidden], 3)
+    assert left == (~aside).sum() < open_before
 
 
 def test_enclose_kernel_matches_an_opening_by_scipy():
