@@ -480,12 +480,14 @@ def closed(faces: np.ndarray) -> bool:
     """True when no edge borders a single face: the surface encloses a volume (non-manifold
     edges of a minimum cut allowed, unlike ``recon.surfaces.checks.watertight``)."""
     faces = np.asarray(faces, dtype=np.int64)
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
-                    axis=1)
-    # one integer an edge: np.unique over rows sorts them as bytes, ten times slower
-    _, count = np.unique(edges[:, 0] * (int(faces.max(initial=0)) + 1) + edges[:, 1],
-                         return_counts=True)
-    return bool(len(faces)) and not np.any(count == 1)
+    ends = np.roll(faces, -1, axis=1)   # each face's edges (0, 1), (1, 2), (2, 0)
+    # one integer an edge, sorted (np.unique over rows sorts them as bytes, ten times slower;
+    # its counts, a few times slower than comparing neighbours)
+    key = np.sort((np.minimum(faces, ends) * (int(faces.max(initial=0)) + 1)
+                   + np.maximum(faces, ends)).ravel())
+    change = key[1:] != key[:-1]
+    once = np.concatenate([[True], change]) & np.concatenate([change, [True]])
+    return bool(len(faces)) and not np.any(once)
 
 
 def span(vertices: np.ndarray, points: np.ndarray) -> float:
@@ -629,6 +631,7 @@ class _Race:
         self.results = {job: [None] * k for job in self.jobs}
         self.made = {job: _Made.empty(k) for job in self.jobs}
         self.judged: dict[tuple[int, int], list[Candidate]] = {}
+        self.shut: dict[tuple[int, int], bool] = {}
 
     def run(self, job: tuple[int, int]) -> Run:
         return self.levels[job[0]][1][job[1]]
@@ -724,8 +727,7 @@ class _Race:
         partial = [c.cost[:m] for c in reference] + [
             np.concatenate([c.cost for c in self.made[job].held[:n]]) for job in pool]
         racing = [False] * len(reference) + [self.raced(job) for job in pool]
-        shut = [bool(c.closed) for c in reference] + [
-            closed(self.results[job][0]["faces"]) for job in pool]
+        shut = [bool(c.closed) for c in reference] + [self._closed(job) for job in pool]
         leaves = outpaced(partial, block, racing, shut, ses=ses)[len(reference):]
         for job, gap in zip(pool, leaves, strict=True):
             if gap is not None:
@@ -738,6 +740,13 @@ class _Race:
         going = sorted((job for job in self.jobs if self.raced(job) and job not in self.judged),
                        key=lambda job: -self._fit_s(job))
         return [(job, f) for job in going for f in range(start, self.first)]
+
+    def _closed(self, job: tuple[int, int]) -> bool:
+        """Whether the run's first fold's surface is ``closed`` (made once: each stage of the
+        race reads it)."""
+        if job not in self.shut:
+            self.shut[job] = closed(self.results[job][0]["faces"])
+        return self.shut[job]
 
     def _pool(self, n: int) -> list[tuple[int, int]]:
         """The runs in the race at a stage of ``n`` folds: fitted on those folds, none of their
@@ -857,6 +866,7 @@ def _fit_and_judge(levels: list[tuple[int, list[Run]]], context: _Context, *, li
             for future in done:
                 state.arrived(*pending.pop(future), future.result())
                 bar.update(1)
+            _drop_decided(state, pending, bar)
         if ahead is not None:
             ahead[1].update({key: future.result() for future, key in spare.items()})
     return state.candidates()
@@ -867,6 +877,21 @@ def _arrive_given(state: _Race, given: dict[tuple[int, int], dict], bar) -> None
     for (j, f), result in given.items():
         state.arrived((0, j), f, result)
         bar.update(1)
+
+
+def _drop_decided(state: _Race, pending: dict, bar) -> None:
+    """Cancel the fits not started yet of the runs already judged: a run that failed on the
+    folds fitted so far (``_Race.arrived``; the first failure in fold order is its status and
+    reason) is judged at once, and its other folds' fits could not change it (an ellipsoid
+    that does not converge on a satellite's strikes fails on every fold). The progress ``bar``
+    loses them."""
+    dropped = [future for future, (job, _) in pending.items()
+               if job in state.judged and future.cancel()]
+    for future in dropped:
+        del pending[future]
+    if dropped:
+        bar.total -= len(dropped)
+        bar.refresh()
 
 
 def _next_stage(state: _Race, reference: Sequence[Candidate], bar, n_folds: int) -> list:

@@ -80,3 +80,17 @@ def test_racing_leaves_the_far_run_after_its_stage_and_chooses_as_the_full_ladde
     assert f"left after {folds} fold(s)" in format_choice(raced)
     assert "1 of them fitted on the first fold(s) only, far worse than the best there " \
         f"(planes on {folds} fold{'s' if folds > 1 else ''})" in raced.reason
+
+
+def test_closed_means_no_edge_borders_a_single_face():
+    """A tetrahedron is closed; without one face it is not; two tetrahedra sharing an edge
+    (a non-manifold edge, four faces on it) are closed; no face is not closed."""
+    import numpy as np
+
+    from recon.surfaces.auto import closed
+
+    tetra = np.array([[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]])
+    assert closed(tetra) and not closed(tetra[1:])
+    other = np.array([[0, 1, 4], [0, 5, 1], [1, 5, 4], [4, 5, 0]])   # shares edge (0, 1)
+    assert closed(np.vstack([tetra, other]))
+    assert not closed(np.zeros((0, 3), dtype=np.int64))

@@ -219,3 +219,50 @@ def test_the_folds_after_the_first_are_prepared_in_a_thread_then_the_callers_fun
             break
         threading.Event().wait(0.05)
     assert len(seen) == 1 and seen[0].startswith("recon-folds")
+
+
+def test_a_run_failed_on_its_first_fold_is_not_fitted_on_the_others_and_chooses_alike(
+        monkeypatch):
+    """A model that fails on its first fold is judged failed at once; its other folds' fits,
+    still waiting for a worker, are dropped (they could not change it). Its status and
+    reason, every other candidate's figures, the reason and the choice are those of fitting
+    it on every fold."""
+    import threading
+
+    cloud, view = small_sphere()
+    monkeypatch.setattr(auto, "LADDER", ((("convex-hull", {}), ("planes", {})),
+                                         (("ellipsoid", {"subdivisions": 3}),)))
+    monkeypatch.setattr(auto, "ALWAYS_LEVELS", 2)
+    fits: list[str] = []
+    fit, drop = isolation.run_isolated, auto._drop_decided
+    decided = threading.Event()
+
+    def failing(run, prepared, *args, **kwargs):
+        fits.append(run.label)
+        if run.method == "convex-hull":
+            return {"method": run.method, "params": run.params, "status": "failed",
+                    "failure": "error", "reason": "convex-hull: qhull gave up",
+                    "process_time_s": 0.0}
+        decided.wait(60)   # the hull's first fold has been taken in first
+        return fit(run, prepared, *args, **kwargs)
+
+    def dropping(state, pending, bar):
+        drop(state, pending, bar)
+        decided.set()
+
+    monkeypatch.setattr(isolation, "run_isolated", failing)
+    monkeypatch.setattr(auto, "_drop_decided", dropping)
+    options = {"view_points": view, "uncertainty": cloud.attributes, "seed": 0, "n_workers": 1}
+    dropped = choose(cloud.points, **options)
+    assert fits.count("convex-hull") == 1, fits
+    hull = next(c for c in dropped.candidates if c.label == "convex-hull")
+    assert hull.status == "failed" and hull.reason == "convex-hull: qhull gave up"
+
+    monkeypatch.setattr(auto, "_drop_decided", lambda state, pending, bar: decided.set())
+    fits.clear()
+    every = choose(cloud.points, **options)
+    assert fits.count("convex-hull") == 4, fits
+    assert figures(every) == figures(dropped)
+    assert [(c.status, c.reason) for c in every.candidates] == \
+        [(c.status, c.reason) for c in dropped.candidates]
+    assert every.reason == dropped.reason and every.label == dropped.label
