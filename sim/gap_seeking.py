@@ -88,10 +88,13 @@ from sim.defaults import (
     GAP_ASIDE_INTERVALS,
     GAP_ASIDE_WALKS,
     GAP_BLOCK_VOXELS,
+    GAP_CLOSED_FRONTIER_FRACTION,
+    GAP_CLOSED_PLAN_INTERVALS,
     GAP_ENCLOSE_INTERVALS,
     GAP_ENCLOSE_MAX_INTERVALS,
     GAP_ENCLOSE_MIN_FRACTION,
     GAP_IDLE_INTERVALS,
+    GAP_LARGE_PLAN_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
     GAP_PLAN_INTERVALS,
@@ -215,6 +218,9 @@ class GapSeeker:
         self.residual = False                                # frontier exhausted
         self._idle = 0                                       # intervals with nothing to aim at
         self._residual_from = 0                              # interval the phase began
+        self._settle_after = GAP_SETTLED_INTERVALS           # intervals into it: settled
+        self._settled_wait = GAP_SETTLED_PLAN_INTERVALS      # then plans this far apart
+        self._large = False                                  # frontier > GAP_MAX_CANDIDATES
         self._interval = 0                                   # intervals commanded so far
         self._readmitted = 0                                 # at the last re-admission
         self._enclosed = -GAP_ENCLOSE_INTERVALS              # at the last enclose,
@@ -283,7 +289,7 @@ class GapSeeker:
     def _settled(self) -> bool:
         """Whether the least-struck phase has lasted ``GAP_SETTLED_INTERVALS`` intervals."""
         return (self.residual and
-                self._interval - self._residual_from >= GAP_SETTLED_INTERVALS)
+                self._interval - self._residual_from >= self._settle_after)
 
     def _candidates(self, stored: np.ndarray | None = None,
                     stored_hidden: np.ndarray | None = None, *, block: int = GAP_BLOCK_VOXELS
@@ -322,11 +328,16 @@ class GapSeeker:
 
     def _after_interval(self, aimed: bool) -> None:
         """Count intervals with nothing to aim at; after ``GAP_IDLE_INTERVALS`` of them in a
-        row the frontier is taken as exhausted and the least-struck surface voxels join it."""
+        row the frontier is taken as exhausted and the least-struck surface voxels join it; the
+        phase is settled from its start when at most ``GAP_CLOSED_FRONTIER_FRACTION`` frontier
+        voxels per occupied voxel are left (the struck surface closed around the frontier)."""
         self._idle = 0 if aimed else self._idle + 1
         if self._idle >= GAP_IDLE_INTERVALS and not self.residual:
             self.residual = True
             self._residual_from = self._interval
+            if self.map is not None and (len(self.map.frontier()) <= GAP_CLOSED_FRONTIER_FRACTION
+                                         * len(self.map.occupied)):
+                self._settle_after, self._settled_wait = 0, GAP_CLOSED_PLAN_INTERVALS
 
     # ------------------------------------------------------------------ the plan
 
@@ -351,7 +362,8 @@ class GapSeeker:
         (the attitude offset the pipeline applies).
         """
         settled = self._settled()
-        wait = GAP_SETTLED_PLAN_INTERVALS if settled else GAP_PLAN_INTERVALS
+        wait = (self._settled_wait if settled else GAP_LARGE_PLAN_INTERVALS if self._large
+                else GAP_PLAN_INTERVALS)
         if self._age >= wait or (self._short and not self.residual):
             self._plan()
         self._age += 1
@@ -397,5 +409,6 @@ class GapSeeker:
         self._hidden = np.zeros(0, dtype=np.int64)
         if self.map is not None:
             self._keys, self._centres, self._hidden = self._candidates(stored, stored_hidden)
+            self._large = not self.residual and self.map.frontier_count > GAP_MAX_CANDIDATES
             self._occupancy = self.map.occupancy()      # what the sweeps' walks read
         self._used = np.zeros(len(self._keys), dtype=bool)
