@@ -25,7 +25,9 @@ wait doubled after a fill that found nothing new (no more than ``GAP_ENCLOSE_MIN
 the occupied voxels), up to ``GAP_ENCLOSE_MAX_INTERVALS``.
 
 **The plan** (:meth:`GapSeeker.command`). The law plans at most ``GAP_PLAN_INTERVALS`` intervals
-apart (``GAP_SETTLED_PLAN_INTERVALS`` late in the least-struck phase, below): it takes the
+apart (``GAP_LARGE_PLAN_INTERVALS`` while the frontier holds more voxels than a plan weighs,
+``GAP_MAX_CANDIDATES``; ``GAP_SETTLED_PLAN_INTERVALS`` late in the least-struck phase, below): it
+takes the
 intervals observed since into the map (all at once) and chooses the plan's candidates, the
 frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side (a strike is expected to
 settle the frontier around its aim). Every interval it then predicts, from its orbit and the
@@ -57,8 +59,11 @@ candidates holds its remaining shots (most of its candidates are hidden from any
 a plan at once finds little new; planning after every short interval made 1.4-2.1 times as many
 plans on the spacecraft: docs/decisions.md); once the phase has lasted
 ``GAP_SETTLED_INTERVALS`` intervals (the settled phase), every ``GAP_SETTLED_PLAN_INTERVALS``,
-each plan weighing at most ``GAP_SETTLED_MAX_CANDIDATES`` candidates. With no candidate at all
-the boresight holds its offset (no slew).
+each plan weighing at most ``GAP_SETTLED_MAX_CANDIDATES`` candidates. When the frontier ran out
+because the struck surface closed around it (at most ``GAP_CLOSED_FRONTIER_FRACTION`` frontier
+voxels per occupied voxel left: a closed body's shell enclosed), the phase is settled from its
+start and plans every ``GAP_CLOSED_PLAN_INTERVALS``. With no candidate at all the boresight
+holds its offset (no slew).
 
 **Candidates set aside** (in that least-struck phase). Late in a run most candidates are hidden
 from any one place (least-struck voxels hard to see, unknown voxels inside a shell not yet
@@ -287,7 +292,8 @@ class GapSeeker:
                      margin=self._margin())
 
     def _settled(self) -> bool:
-        """Whether the least-struck phase has lasted ``GAP_SETTLED_INTERVALS`` intervals."""
+        """Whether the least-struck phase has lasted ``GAP_SETTLED_INTERVALS`` intervals (on a
+        closed map, whether it has begun: :meth:`_after_interval`)."""
         return (self.residual and
                 self._interval - self._residual_from >= self._settle_after)
 
@@ -344,9 +350,11 @@ class GapSeeker:
     def command(self, t: np.ndarray, poses=None) -> np.ndarray:
         """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
         (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old
-        (``GAP_SETTLED_PLAN_INTERVALS`` once the least-struck phase has lasted
-        ``GAP_SETTLED_INTERVALS``), or while the frontier lasts when the last interval ran
-        short; then this interval's sweep of its candidates).
+        (``GAP_LARGE_PLAN_INTERVALS`` while the frontier is larger than a plan weighs;
+        ``GAP_SETTLED_PLAN_INTERVALS`` once the least-struck phase has lasted
+        ``GAP_SETTLED_INTERVALS``, ``GAP_CLOSED_PLAN_INTERVALS`` from its start on a closed
+        map), or while the frontier lasts when the last interval ran short; then this
+        interval's sweep of its candidates).
 
         Parameters
         ----------
