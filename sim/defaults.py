@@ -436,13 +436,13 @@ GAP_RESIDUAL_QUANTILE = 0.25
 GAP_SETTLED_INTERVALS = 144
 GAP_SETTLED_PLAN_INTERVALS = 16
 # The settled phase begins with the least-struck phase, though, when the frontier ran out
-# because the struck surface closed around it: at most GAP_CLOSED_FRONTIER_FRACTION frontier voxels per occupied voxel are left when the
-# least-struck phase begins (a closed body's shell enclosed, what was left of its frontier
-# struck: 0.012-0.024 on the study's asteroid at 30-32 h, coverage 0.99 there), not because what
-# is left is hidden from where the chaser has been (0.34-0.36 on the generated satellites, 0.69
-# on RSO-A and RSO-B at 6.5-14 h, coverage 0.67-0.91: the least-struck phase's first 12 h are
-# where they gain most). The asteroid's least-struck phase had cost about a fifth of its
-# planner's time (docs/decisions.md).
+# because the struck surface closed around it: at most GAP_CLOSED_FRONTIER_FRACTION frontier
+# voxels per occupied voxel are left when the least-struck phase begins (a closed body's shell
+# enclosed, what was left of its frontier struck: 0.012-0.024 on the study's asteroid at 30-32
+# h, coverage 0.99 there), not because what is left is hidden from where the chaser has been
+# (0.34-0.36 on the generated satellites, 0.69 on RSO-A and RSO-B at 6.5-14 h, coverage
+# 0.67-0.91: the least-struck phase's first 12 h are where they gain most). The asteroid's
+# least-struck phase had cost about a fifth of its planner's time (docs/decisions.md).
 GAP_CLOSED_FRONTIER_FRACTION = 0.1
 # Such a closed map's settled phase plans every GAP_CLOSED_PLAN_INTERVALS intervals (160 min):
 # what is left to strike on it is scattered over a surface seen all round. (A plan every 32 in
