@@ -410,6 +410,13 @@ GAP_MAX_CANDIDATES = 2048
 # too made 437 plans in RSO-A's 984 intervals of that phase instead of 246, for coverage within
 # 0.0025 at every time the study reports (docs/decisions.md).
 GAP_PLAN_INTERVALS = 4
+# While the frontier holds more voxels than a plan weighs (GAP_MAX_CANDIDATES: a large body's
+# unexplored boundary, its plans each weighing an even subset of it), a plan comes every
+# GAP_LARGE_PLAN_INTERVALS intervals instead, sooner after a short interval as always. On the
+# closed-loop study's asteroid that is from about 8 h until its shell is enclosed at 28.5 h
+# (2,050-5,600 frontier voxels), 95 % coverage within an hour of a plan every 4; the spacecraft's
+# frontiers never hold more than about 1,700 voxels (RSO-A), so their plans are as before.
+GAP_LARGE_PLAN_INTERVALS = 8
 # One candidate per cube of this many voxels on a side: a strike is expected to settle the
 # frontier around its aim.
 GAP_BLOCK_VOXELS = 2
@@ -431,6 +438,19 @@ GAP_RESIDUAL_QUANTILE = 0.25
 # docs/decisions.md).
 GAP_SETTLED_INTERVALS = 144
 GAP_SETTLED_PLAN_INTERVALS = 16
+# The settled phase begins with the least-struck phase, though, when the frontier ran out
+# because the struck surface closed around it: at most GAP_CLOSED_FRONTIER_FRACTION frontier
+# voxels per occupied voxel are left when the least-struck phase begins (a closed body's shell
+# enclosed, what was left of its frontier struck: 0.012-0.026 on the study's asteroid at 30-32
+# h, coverage 0.99 there), not because what is left is hidden from where the chaser has been
+# (0.34-0.40 on the generated satellites, 0.69 on RSO-A and RSO-B at 6.2-14.3 h, coverage about
+# 0.72-0.87: the least-struck phase's first 12 h are where they gain most). The asteroid's
+# least-struck phase had cost about a fifth of its planner's time (docs/decisions.md).
+GAP_CLOSED_FRONTIER_FRACTION = 0.1
+# Such a closed map's settled phase plans every GAP_CLOSED_PLAN_INTERVALS intervals (160 min):
+# what is left to strike on it is scattered over a surface seen all round. (A plan every 32 in
+# every settled phase left RSO-B below the 2 deg slew at 96 h: docs/decisions.md.)
+GAP_CLOSED_PLAN_INTERVALS = 32
 # In that settled phase a plan weighs at most GAP_SETTLED_MAX_CANDIDATES candidates (an even
 # subset, as above) and sets a candidate aside after GAP_SETTLED_ASIDE_WALKS walk that found it
 # hidden: a sweep aims at every candidate of its plan and walks the open ones until its shots

@@ -25,7 +25,9 @@ wait doubled after a fill that found nothing new (no more than ``GAP_ENCLOSE_MIN
 the occupied voxels), up to ``GAP_ENCLOSE_MAX_INTERVALS``.
 
 **The plan** (:meth:`GapSeeker.command`). The law plans at most ``GAP_PLAN_INTERVALS`` intervals
-apart (``GAP_SETTLED_PLAN_INTERVALS`` late in the least-struck phase, below): it takes the
+apart (``GAP_LARGE_PLAN_INTERVALS`` while the frontier holds more voxels than a plan weighs,
+``GAP_MAX_CANDIDATES``; ``GAP_SETTLED_PLAN_INTERVALS`` late in the least-struck phase, below): it
+takes the
 intervals observed since into the map (all at once) and chooses the plan's candidates, the
 frontier voxels, one per cube of ``GAP_BLOCK_VOXELS`` voxels on a side (a strike is expected to
 settle the frontier around its aim). Every interval it then predicts, from its orbit and the
@@ -57,8 +59,11 @@ candidates holds its remaining shots (most of its candidates are hidden from any
 a plan at once finds little new; planning after every short interval made 1.4-2.1 times as many
 plans on the spacecraft: docs/decisions.md); once the phase has lasted
 ``GAP_SETTLED_INTERVALS`` intervals (the settled phase), every ``GAP_SETTLED_PLAN_INTERVALS``,
-each plan weighing at most ``GAP_SETTLED_MAX_CANDIDATES`` candidates. With no candidate at all
-the boresight holds its offset (no slew).
+each plan weighing at most ``GAP_SETTLED_MAX_CANDIDATES`` candidates. When the frontier ran out
+because the struck surface closed around it (at most ``GAP_CLOSED_FRONTIER_FRACTION`` frontier
+voxels per occupied voxel left: a closed body's shell enclosed), the phase is settled from its
+start and plans every ``GAP_CLOSED_PLAN_INTERVALS``. With no candidate at all the boresight
+holds its offset (no slew).
 
 **Candidates set aside** (in that least-struck phase). Late in a run most candidates are hidden
 from any one place (least-struck voxels hard to see, unknown voxels inside a shell not yet
@@ -88,10 +93,13 @@ from sim.defaults import (
     GAP_ASIDE_INTERVALS,
     GAP_ASIDE_WALKS,
     GAP_BLOCK_VOXELS,
+    GAP_CLOSED_FRONTIER_FRACTION,
+    GAP_CLOSED_PLAN_INTERVALS,
     GAP_ENCLOSE_INTERVALS,
     GAP_ENCLOSE_MAX_INTERVALS,
     GAP_ENCLOSE_MIN_FRACTION,
     GAP_IDLE_INTERVALS,
+    GAP_LARGE_PLAN_INTERVALS,
     GAP_MARGIN_FRACTION,
     GAP_MAX_CANDIDATES,
     GAP_PLAN_INTERVALS,
@@ -217,6 +225,9 @@ class GapSeeker:
         self.residual = False                                # frontier exhausted
         self._idle = 0                                       # intervals with nothing to aim at
         self._residual_from = 0                              # interval the phase began
+        self._settle_after = GAP_SETTLED_INTERVALS           # intervals into it: settled
+        self._settled_wait = GAP_SETTLED_PLAN_INTERVALS      # then plans this far apart
+        self._large = False                                  # frontier > GAP_MAX_CANDIDATES
         self._interval = 0                                   # intervals commanded so far
         self._readmitted = 0                                 # at the last re-admission
         self._enclosed = -GAP_ENCLOSE_INTERVALS              # at the last enclose,
@@ -283,9 +294,10 @@ class GapSeeker:
                      margin=self._margin())
 
     def _settled(self) -> bool:
-        """Whether the least-struck phase has lasted ``GAP_SETTLED_INTERVALS`` intervals."""
+        """Whether the least-struck phase has lasted ``GAP_SETTLED_INTERVALS`` intervals (on a
+        closed map, whether it has begun: :meth:`_after_interval`)."""
         return (self.residual and
-                self._interval - self._residual_from >= GAP_SETTLED_INTERVALS)
+                self._interval - self._residual_from >= self._settle_after)
 
     def _candidates(self, stored: np.ndarray | None = None,
                     stored_hidden: np.ndarray | None = None, *, block: int = GAP_BLOCK_VOXELS
@@ -324,20 +336,27 @@ class GapSeeker:
 
     def _after_interval(self, aimed: bool) -> None:
         """Count intervals with nothing to aim at; after ``GAP_IDLE_INTERVALS`` of them in a
-        row the frontier is taken as exhausted and the least-struck surface voxels join it."""
+        row the frontier is taken as exhausted and the least-struck surface voxels join it; the
+        phase is settled from its start when at most ``GAP_CLOSED_FRONTIER_FRACTION`` frontier
+        voxels per occupied voxel are left (the struck surface closed around the frontier)."""
         self._idle = 0 if aimed else self._idle + 1
         if self._idle >= GAP_IDLE_INTERVALS and not self.residual:
             self.residual = True
             self._residual_from = self._interval
+            if self.map is not None and (len(self.map.frontier()) <= GAP_CLOSED_FRONTIER_FRACTION
+                                         * len(self.map.occupied)):
+                self._settle_after, self._settled_wait = 0, GAP_CLOSED_PLAN_INTERVALS
 
     # ------------------------------------------------------------------ the plan
 
     def command(self, t: np.ndarray, poses=None) -> np.ndarray:
         """The commanded boresight of each shot at times ``t`` (n,) [s] of the next interval
         (module docstring: a new plan when the last is ``GAP_PLAN_INTERVALS`` old
-        (``GAP_SETTLED_PLAN_INTERVALS`` once the least-struck phase has lasted
-        ``GAP_SETTLED_INTERVALS``), or while the frontier lasts when the last interval ran
-        short; then this interval's sweep of its candidates).
+        (``GAP_LARGE_PLAN_INTERVALS`` while the frontier is larger than a plan weighs;
+        ``GAP_SETTLED_PLAN_INTERVALS`` once the least-struck phase has lasted
+        ``GAP_SETTLED_INTERVALS``, ``GAP_CLOSED_PLAN_INTERVALS`` from its start on a closed
+        map), or while the frontier lasts when the last interval ran short; then this
+        interval's sweep of its candidates).
 
         Parameters
         ----------
@@ -353,7 +372,8 @@ class GapSeeker:
         (the attitude offset the pipeline applies).
         """
         settled = self._settled()
-        wait = GAP_SETTLED_PLAN_INTERVALS if settled else GAP_PLAN_INTERVALS
+        wait = (self._settled_wait if settled else GAP_LARGE_PLAN_INTERVALS if self._large
+                else GAP_PLAN_INTERVALS)
         if self._age >= wait or (self._short and not self.residual):
             self._plan()
         self._age += 1
@@ -394,6 +414,7 @@ class GapSeeker:
         self._hidden = np.zeros(0, dtype=np.int64)
         if self.map is not None:
             self._keys, self._centres, self._hidden = self._candidates(stored, stored_hidden)
+            self._large = not self.residual and self.map.frontier_count > GAP_MAX_CANDIDATES
             self._occupancy = self.map.occupancy()      # what the sweeps' walks read
         self._used = np.zeros(len(self._keys), dtype=bool)
         self._open = len(self._keys)

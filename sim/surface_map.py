@@ -229,6 +229,12 @@ class SurfaceMap:
                 self._shape, self._corner)
         return self._frontier
 
+    @property
+    def frontier_count(self) -> int:
+        """How many keys the frontier list holds as the last :meth:`frontier` or
+        :meth:`candidates` left it (voxels struck or enclosed since then still counted)."""
+        return len(self._frontier)
+
     def candidates(self, *, rank: int, aside: int, readmit: bool, most: int, block: int,
                    stored: np.ndarray, stored_hidden: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 import sim
 from formats import StrikeLog
@@ -347,3 +348,99 @@ def test_the_law_s_open_count_follows_its_used_candidates(tmp_path, monkeypatch)
     sim.simulate(scene, tmp_path / "gaps.h5", seed=0, progress=False)
     assert [count for count, _ in checked] == [mask for _, mask in checked]
     assert any(count == 0 for count, _ in checked) and any(count > 0 for count, _ in checked)
+
+def _law_over_a_struck_cube():
+    """A gap-seeking law whose map holds the shell of a cube of 6 x 6 x 6 voxels, each voxel
+    struck from outside along every face it lies on (the space outside carved): a closed
+    surface, its inside unknown."""
+    from sim.surface_map import SurfaceMap
+
+    law = GapSeeker(step=10.0, max_rate=math.radians(1), max_offset=math.radians(30),
+                    poses=None, beams=np.array([[0.0, 0.0, 1.0]]))
+    law.map = SurfaceMap(1.0)
+    index = np.stack(np.meshgrid(*[np.arange(6)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    centres, out = [], []
+    for axis in range(3):
+        for side, normal in ((0, -1.0), (5, 1.0)):
+            face = index[index[:, axis] == side] + 0.5
+            centres.append(face)
+            out.append(np.tile(np.eye(3)[axis] * normal, (len(face), 1)))
+    centres, out = np.concatenate(centres), np.concatenate(out)
+    law.map.add(centres + 20.0 * out, -out, np.full(len(out), 20.0), margin=2.0)
+    return law
+
+
+def _plans_of_held_intervals(law: GapSeeker, n: int) -> list[int]:
+    """The intervals at which ``law`` plans over ``n`` intervals whose plans find nothing to
+    aim at (every shot held; the map kept as it is)."""
+    plans = []
+
+    def plan():
+        plans.append(law._interval)
+        law._age = 0
+
+    law._plan = plan
+    for _ in range(n):
+        law.command(np.arange(30.0))
+    return plans
+
+
+def test_a_closed_frontier_settles_the_least_struck_phase_at_once_with_rarer_plans():
+    from sim.defaults import (
+        GAP_CLOSED_FRONTIER_FRACTION,
+        GAP_CLOSED_PLAN_INTERVALS,
+        GAP_IDLE_INTERVALS,
+        GAP_PLAN_INTERVALS,
+        GAP_SETTLED_INTERVALS,
+    )
+
+    # The closed cube, its inside enclosed by a plan's fill: almost no frontier is left.
+    closed = _law_over_a_struck_cube()
+    _pool(closed)
+    assert len(closed.map.frontier()) <= GAP_CLOSED_FRONTIER_FRACTION * len(closed.map.occupied)
+    # An open plate struck from above: its underside is frontier (one voxel per struck one).
+    plate = _law_over_a_struck_plate(lambda x: np.ones(len(x), dtype=int))
+    assert len(plate.map.frontier()) > GAP_CLOSED_FRONTIER_FRACTION * len(plate.map.occupied)
+    n = 3 * GAP_CLOSED_PLAN_INTERVALS
+    assert n < GAP_SETTLED_INTERVALS
+    # Both turn to the least-struck surface after GAP_IDLE_INTERVALS short intervals; the
+    # closed map's phase is settled from its start, a plan every GAP_CLOSED_PLAN_INTERVALS;
+    # the plate's plans every GAP_PLAN_INTERVALS, not yet settled.
+    last = GAP_IDLE_INTERVALS - 1
+    assert _plans_of_held_intervals(closed, n) == [
+        *range(GAP_IDLE_INTERVALS), *range(last + GAP_CLOSED_PLAN_INTERVALS, n,
+                                           GAP_CLOSED_PLAN_INTERVALS)]
+    assert closed.residual and closed._settled()
+    assert _plans_of_held_intervals(plate, n) == [
+        *range(GAP_IDLE_INTERVALS), *range(last + GAP_PLAN_INTERVALS, n, GAP_PLAN_INTERVALS)]
+    assert plate.residual and not plate._settled()
+
+
+def test_a_frontier_larger_than_a_plan_weighs_is_planned_less_often():
+    from sim.defaults import GAP_LARGE_PLAN_INTERVALS, GAP_MAX_CANDIDATES, GAP_PLAN_INTERVALS
+
+    def plans(side: int, n: int) -> tuple[list[int], bool]:
+        """A plate of ``side`` x ``side`` voxels struck from above, its sweeps aiming every
+        shot (no interval runs short): the intervals at which the law plans."""
+        law = _law_over_a_struck_plate(lambda x: np.ones(len(x), dtype=int), side=side)
+        real, planned = law._plan, []
+
+        def plan():
+            planned.append(law._interval)
+            real()
+
+        def sweep(n, *args):
+            goal = np.tile(law.boresight, (n, 1))
+            return np.zeros(n, dtype=np.int64), goal, turn_from_boresight(goal)
+
+        law._plan, law._sweep = plan, sweep
+        pose = (np.zeros((30, 3)), Rotation.identity(30), np.tile(np.eye(3), (30, 1, 1)))
+        for _ in range(n):
+            law.command(np.arange(30.0), pose)
+        return planned, law._large
+
+    n = 3 * GAP_LARGE_PLAN_INTERVALS
+    # A 48 x 48 plate: its underside alone, 2,304 voxels, is more than a plan weighs.
+    assert 48 * 48 > GAP_MAX_CANDIDATES >= 24 * 24 * 3
+    assert plans(48, n) == (list(range(0, n, GAP_LARGE_PLAN_INTERVALS)), True)
+    assert plans(24, n) == (list(range(0, n, GAP_PLAN_INTERVALS)), False)
