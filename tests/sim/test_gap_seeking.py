@@ -431,7 +431,8 @@ def test_a_frontier_larger_than_a_plan_weighs_is_planned_less_often():
 
         def sweep(n, *args):
             goal = np.tile(law.boresight, (n, 1))
-            return np.zeros(n, dtype=np.int64), goal, turn_from_boresight(goal)
+            return (np.zeros(n, dtype=np.int64), goal, turn_from_boresight(goal),
+                    int(np.count_nonzero(~law._used)))   # and the candidates left open
 
         law._plan, law._sweep = plan, sweep
         pose = (np.zeros((30, 3)), Rotation.identity(30), np.tile(np.eye(3), (30, 1, 1)))
