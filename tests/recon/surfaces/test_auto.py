@@ -201,7 +201,7 @@ def test_holes_within_the_noise_of_the_band_s_fewest_do_not_decide():
 
 
 def test_holes_against_the_band_s_fewest_count_the_error_of_both_fractions():
-    from recon.surfaces.auto import HOLE_SES, hole_limit
+    from recon.surfaces.auto import HOLE_RATE, HOLE_SES, hole_limit
 
     # A satellite's figures: the smaller model leaves 1.00 % of 4,184 strikes in holes, the
     # larger 0.55 %, both above the noise's rate. The fewest is a count as uncertain as the
@@ -219,6 +219,9 @@ def test_holes_against_the_band_s_fewest_count_the_error_of_both_fractions():
     # twice the holes is beyond it
     candidates[0].holes = 0.0110
     assert select(candidates, BLOCK, 4_184).holed == (0,)
+    # no jump where the band's fewest crosses the noise's rate: the larger of the two limits
+    assert hole_limit([0.999 * HOLE_RATE], 4_184) == pytest.approx(
+        hole_limit([1.001 * HOLE_RATE], 4_184), rel=0.01)
     candidates[0].holes, candidates[1].holes = 0.022, 0.020
     selection = select(candidates, BLOCK, 7_000)
     assert candidates[selection.chosen].label == "small" and not selection.holed
