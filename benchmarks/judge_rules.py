@@ -36,7 +36,8 @@ seconds instead of a suite run:
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
   "unknown"): the natural prior, and the completion where auto fits it (``auto.completed``;
   a collection without it replays no completion); ``--statistic``, ``--band``,
-  ``--miss-rate``, ``--holes-first`` and ``--extra`` replay rules that are not auto's;
+  ``--miss-rate``, ``--holes-first``, ``--holes-one-count`` and ``--extra`` replay rules that
+  are not auto's;
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
@@ -456,6 +457,17 @@ def holes_first(candidates: list, n_checked: int) -> list:
     return kept if any(c.scored for c in kept) else candidates
 
 
+def one_count_hole_limit(holes, n_checked: int) -> float:
+    """The hole test's limit before it counted the error of both fractions (``rules
+    --holes-one-count``; not auto's): ``auto.HOLE_SES`` binomial standard errors of one count
+    above the larger of ``auto.HOLE_RATE`` and the band's fewest (``auto.hole_limit``'s
+    arguments)."""
+    from recon.surfaces import auto
+
+    reference = max(auto.HOLE_RATE, min(holes))
+    return reference + auto.HOLE_SES * np.sqrt(reference * (1.0 - reference) / max(n_checked, 1))
+
+
 def checked_count(work: Path, suite: Path | None, cloud: str) -> int:
     """The strikes ``auto.choose`` counts ``violated`` and ``holes`` over on ``cloud`` (a
     seeded subsample of ``judge.MAX_CHECKED``), for collections older than ``n_checked`` in
@@ -632,6 +644,8 @@ def rules(args) -> None:
     global OPENING
     if args.band is not None:
         auto.BAND_SES = args.band
+    if args.holes_one_count:
+        auto.hole_limit = one_count_hole_limit
     OPENING = args.opening
     names = collected(args)
     good = median = 0
@@ -1120,6 +1134,10 @@ def main(argv=None) -> int:
                         help="rules: leave out, before the band, the candidates leaving strikes "
                         "in holes beyond the noise or the fewest any candidate leaves "
                         "(``holes_first``; default: auto's rule, which tests only the band)")
+    parser.add_argument("--holes-one-count", action="store_true",
+                        help="rules: the hole test's limit with one count's binomial error "
+                        "above the band's fewest (``one_count_hole_limit``; default: auto's, "
+                        "the error of a difference of two counts)")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
     parser.add_argument("--race", action="store_true",

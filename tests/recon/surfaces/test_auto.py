@@ -198,6 +198,30 @@ def test_holes_within_the_noise_of_the_band_s_fewest_do_not_decide():
     candidates = [_candidate("small", 1.00, 20_000, se=0.05), _candidate("large", 1.01, 50_000)]
     candidates[0].holes, candidates[1].holes = 0.0039, 0.0029
     assert candidates[select(candidates, BLOCK, 7_000).chosen].label == "small"
+
+
+def test_holes_against_the_band_s_fewest_count_the_error_of_both_fractions():
+    from recon.surfaces.auto import HOLE_RATE, HOLE_SES, hole_limit
+
+    # A satellite's figures: the smaller model leaves 1.00 % of 4,184 strikes in holes, the
+    # larger 0.55 %, both above the noise's rate. The fewest is a count as uncertain as the
+    # other: the difference, 0.45 %, is 2.8 standard errors of a difference of two counts,
+    # within the band's chance, so the smaller model stays (one count's error: 3.9, out).
+    candidates = [_candidate("small", 1.00, 8_000, se=0.05, closed=False),
+                  _candidate("large", 0.98, 32_000, closed=False)]
+    candidates[0].holes, candidates[1].holes = 0.0100, 0.0055
+    selection = select(candidates, BLOCK, 4_184)
+    assert set(selection.eligible) == {0, 1} and selection.holed == ()
+    assert candidates[selection.chosen].label == "small"
+    assert selection.hole_limit == pytest.approx(
+        0.0055 + HOLE_SES * np.sqrt(2 * 0.0055 * (1 - 0.0055) / 4_184))
+    assert hole_limit([0.0100, 0.0055], 4_184) == pytest.approx(0.01035, abs=1e-5)
+    # twice the holes is beyond it
+    candidates[0].holes = 0.0110
+    assert select(candidates, BLOCK, 4_184).holed == (0,)
+    # no jump where the band's fewest crosses the noise's rate: the larger of the two limits
+    assert hole_limit([0.999 * HOLE_RATE], 4_184) == pytest.approx(
+        hole_limit([1.001 * HOLE_RATE], 4_184), rel=0.01)
     candidates[0].holes, candidates[1].holes = 0.022, 0.020
     selection = select(candidates, BLOCK, 7_000)
     assert candidates[selection.chosen].label == "small" and not selection.holed
