@@ -967,6 +967,10 @@ def _ranking_axis(ax, lower: bool) -> None:
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0))
 
 
+# Legend rows of the predicted-against-true chart: as many as its height holds at 7 pt.
+LEGEND_ROWS = 40
+
+
 def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path:
     """Truth-free predicted Chamfer distance against the true one, every run of every cloud
     (log-log, the line of equality dashed); auto's choices drawn with their predicted band.
@@ -979,7 +983,9 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path
         ``benchmarks/suite.py`` makes.
     """
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(12.0, 7.5), constrained_layout=True)
+    # a legend column per LEGEND_ROWS clouds, each beside the axes, so that every cloud is named
+    ncol = max(1, -(-len(summaries) // LEGEND_ROWS))
+    fig, ax = plt.subplots(figsize=(9.4 + 2.6 * ncol, 7.5), constrained_layout=True)
     palette = [*plt.get_cmap("tab20").colors, *plt.get_cmap("tab20b").colors]
 
     def colours(i):
@@ -1016,8 +1022,7 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path
     ax.set_xlabel("true Chamfer distance [m]")
     ax.set_ylabel("predicted Chamfer distance, without the truth [m]")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=1 + (len(summaries) > 20), loc="upper left",
-              bbox_to_anchor=(1.01, 1.0))
+    ax.legend(fontsize=7, ncol=ncol, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.set_title("every run (dots; triangles: held-out clouds), auto's choice (star, its "
                  "predicted band)", fontsize=9)
     _title(fig, title)
