@@ -1196,8 +1196,8 @@ def hole_limit(holes: Sequence[float], n_checked: int) -> float:
     many strikes, it is that of the difference of two such counts, ``sqrt(2)`` times larger:
     one count's error (until it was measured) took the visibility cut, the truth's best run,
     out of a satellite's band at 1.00 % of 4,184 strikes against a fewest of 0.55 %; the
-    block-paired error of such differences on held-out strikes was a median 1.8 times one
-    count's (docs/decisions.md)."""
+    block-paired error of such differences on held-out strikes was a median 2.2 times one
+    count's over 1,997 pairs of the suite's tuning clouds (docs/decisions.md)."""
     n = max(n_checked, 1)
     fewest = min(holes)
     return max(HOLE_RATE + HOLE_SES * math.sqrt(HOLE_RATE * (1.0 - HOLE_RATE) / n),
