@@ -51,7 +51,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -70,6 +70,9 @@ from recon.surfaces.isolation import (
     run_isolated,
 )
 from recon.surfaces.methods import MethodInput, Run
+
+if TYPE_CHECKING:
+    from recon.registration.misses import MissedBeams
 
 # Default grid. Noise: none, the paper's LRF (0.3 m 3-sigma) and its LIDAR (1 m 3-sigma).
 # Density: all points, 30% and 10%. Outliers: none and 2% (a few percent of spurious returns is
@@ -122,7 +125,7 @@ class StabilityCloud(NamedTuple):
     points: np.ndarray
     view_points: np.ndarray | None
     noisy: bool
-    misses: object | None = None
+    misses: MissedBeams | None = None
 
 
 def _check_levels(name: str, levels: Sequence[float], low: float, high: float | None
@@ -348,8 +351,10 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
     digest = hashlib.sha1()
     for name in sorted(clouds):
         digest.update(np.ascontiguousarray(clouds[name].points).tobytes())
-        if clouds[name].misses is not None:
-            digest.update(np.ascontiguousarray(clouds[name].misses.direction).tobytes())
+        misses = clouds[name].misses
+        if misses is not None:   # the free space each cell's methods see is part of the source
+            for array in (misses.origin, misses.direction):
+                digest.update(np.ascontiguousarray(array).tobytes())
     source = digest.hexdigest()
     ident = {"points_sha1": source, "seed": seed, "timeout_s": timeout_s,
              "memory_mb": memory_mb, "score_options": score_options or {}} | dict(
