@@ -598,9 +598,12 @@ class _Made:
     (``_Race.arrived``, ``_Race.make_next``): per fold its built surface (``casters``), its
     ``held_out_check`` (``held``) and its check on the training strikes (``fit``); the first
     fold's checks over all strikes and against the missed beams (``overall``,
-    ``_overall``); and for a run that fills free space, the same of its carved twin
-    (``twin``, whose ``results`` are the folds' carved surfaces). ``judge_candidate`` makes
-    what is missing: the same checks of the same surfaces, made earlier."""
+    ``_overall``, with that fold's cast of the missed beams, the first pass of its carving);
+    and for a run that fills free space, the same of its carved twin (``twin``, whose
+    ``results`` are the folds' carved surfaces: a fold's own result where the carving
+    removed nothing, ``_carved``, whose surface, checks included, the twin shares,
+    ``_share_uncarved``). ``judge_candidate`` makes what is missing, and keeps it here:
+    the same checks of the same surfaces, made earlier."""
 
     casters: list
     held: list
@@ -940,12 +943,27 @@ def _judged(run: Run, level: int, results: list[dict], context: _Context,
     candidate = judge_candidate(run, level, results, context, made=made)
     if not fills_free_space(candidate):
         return [candidate]
-    twin = made.twin or _Made.empty(len(results))
-    twin.results = [carved or _carved(result, context, caster) for carved, result, caster
-                    in zip(twin.results or [None] * len(results), results, made.casters,
-                           strict=True)]
+    twin = made.twin = made.twin or _Made.empty(len(results))
+    twin.results = [carved or _carved(result, context, caster, made.overall[2] if f == 0
+                                      else None)
+                    for f, (carved, result, caster) in enumerate(zip(
+                        twin.results or [None] * len(results), results, made.casters,
+                        strict=True))]
+    for f, result in enumerate(results):
+        _share_uncarved(made, f, result)
     return [candidate, judge_candidate(run, level, twin.results, context, carved=True,
                                        made=twin)]
+
+
+def _share_uncarved(made: _Made, f: int, result: dict) -> None:
+    """Where the carving removed nothing from fold ``f``'s surface (``result``: ``_carved``
+    gave it back), the twin's surface there is the uncarved one: the twin shares its built
+    surface and the checks made of it (``made``), instead of building and casting it again."""
+    twin = made.twin
+    if twin is not None and twin.results is not None and twin.results[f] is result:
+        twin.casters[f] = twin.casters[f] or made.casters[f]
+        twin.held[f] = twin.held[f] or made.held[f]
+        twin.fit[f] = twin.fit[f] or made.fit[f]
 
 
 def _make_fold(made: _Made, f: int, result: dict, context: _Context) -> bool:
@@ -968,7 +986,9 @@ def _make_fold(made: _Made, f: int, result: dict, context: _Context) -> bool:
         twin = made.twin = made.twin or _Made.empty(len(made.casters))
         twin.results = twin.results or [None] * len(made.casters)
         if twin.results[f] is None:
-            twin.results[f] = _carved(result, context, made.casters[f])
+            twin.results[f] = _carved(result, context, made.casters[f],
+                                      made.overall[2] if f == 0 else None)
+            _share_uncarved(made, f, result)
             return True
         return _make_fold(twin, f, twin.results[f], context)
     return True
@@ -979,15 +999,17 @@ def _fit_check(fold: _Fold, caster: judge.Caster, context: _Context) -> judge.Ch
     return judge.check(fold.train, caster, fitted=True, tau=context.tau, noise=context.noise)
 
 
-def _overall(caster: judge.Caster, context: _Context) -> tuple[judge.Check, float | None]:
-    """The first fold's surface against all strikes (a subsample: cuts and holes) and the
-    fraction of the missed beams it cuts (None without them)."""
+def _overall(caster: judge.Caster, context: _Context
+             ) -> tuple[judge.Check, float | None, tuple | None]:
+    """The first fold's surface against all strikes (a subsample: cuts and holes), the
+    fraction of the missed beams it cuts (None without them) and their cast
+    (``judge.cast_misses``, the first pass of the fold's carving; None without them)."""
     everywhere = judge.check(context.checked, caster, tau=context.tau, noise=context.noise)
-    misses_cut = None
+    misses_cut = cast = None
     if context.misses is not None and len(context.misses):
-        misses_cut = float(judge.cut_misses(context.misses, caster, context.points,
-                                            context.miss_reach).mean())
-    return everywhere, misses_cut
+        cast = judge.cast_misses(context.misses, caster, context.points, context.miss_reach)
+        misses_cut = float(cast[2].mean())
+    return everywhere, misses_cut, cast
 
 
 def judge_candidate(run: Run, level: int, results: list[dict], context: _Context,
@@ -1004,16 +1026,18 @@ def judge_candidate(run: Run, level: int, results: list[dict], context: _Context
     if failed is not None:
         return candidate
     made = made or _Made.empty(len(results))
-    casters = [b or judge.Caster(r["vertices"], r["faces"])
-               for r, b in zip(results, made.casters, strict=True)]
-    held = _held_checks(casters, context, made.held)
-    fit = _fit_checks(casters, context, made.fit)
+    made.casters = [b or judge.Caster(r["vertices"], r["faces"])
+                    for r, b in zip(results, made.casters, strict=True)]
+    casters = made.casters
+    held = made.held = _held_checks(casters, context, made.held)
+    fit = made.fit = _fit_checks(casters, context, made.fit)
     cost = np.concatenate([h.cost for h in held])
     distance = np.concatenate([h.distance for h in held])
     tolerance = np.concatenate([h.tolerance for h in held])
     chi2, se = judge.block_mean_se(cost, context.block)
     vertices, faces = results[0]["vertices"], results[0]["faces"]
-    everywhere, misses_cut = made.overall or _overall(casters[0], context)
+    made.overall = made.overall or _overall(casters[0], context)
+    everywhere, misses_cut, _ = made.overall
     return replace(candidate, n_faces=len(faces),
                    n_params=run.method_spec().parameter_count(vertices, faces),
                    closed=closed(faces), chi2=chi2, chi2_se=se, chi_heldout=float(np.sqrt(chi2)),
@@ -1059,15 +1083,27 @@ def fills_free_space(candidate: Candidate) -> bool:
     return bool(candidate.misses_cut) and not candidate.carved
 
 
-def _carved(result: dict, context: _Context, caster: judge.Caster) -> dict:
+def _carved(result: dict, context: _Context, caster: judge.Caster,
+            cast: tuple | None = None) -> dict:
     """A fold's surface (``result``, built: ``caster``) carved by the missed beams
-    (``judge.carve``) as the surface refitted on all strikes will be: a crossing within reach
-    of any strike, held out or not, is no evidence (carving fits nothing to the held-out
-    strikes; spared near them only by a fold's training strikes, a silhouette a beam grazed
-    past would be cut open where the final surface is not)."""
-    return result | dict(zip(("vertices", "faces"), judge.carve(
-        result["vertices"], result["faces"], context.misses, context.points,
-        context.miss_reach, caster=caster), strict=True))
+    (``judge.carve``; ``cast``: the missed beams' cast against it when made, ``_overall``)
+    as the surface refitted on all strikes will be: a crossing within reach of any strike,
+    held out or not, is no evidence (carving fits nothing to the held-out strikes; spared
+    near them only by a fold's training strikes, a silhouette a beam grazed past would be
+    cut open where the final surface is not). ``result`` itself when the carving leaves the
+    same arrays (no face removed, every vertex used): the twin's surface there is the
+    uncarved one (``_share_uncarved``)."""
+    vertices, faces = judge.carve(result["vertices"], result["faces"], context.misses,
+                                  context.points, context.miss_reach, caster=caster, cast=cast)
+    if _same_arrays((vertices, faces), (result["vertices"], result["faces"])):
+        return result
+    return result | {"vertices": vertices, "faces": faces}
+
+
+def _same_arrays(made: tuple, given: tuple) -> bool:
+    """Whether the arrays of ``made`` equal those of ``given`` in shape, type and value."""
+    return all(a.shape == np.shape(b) and a.dtype == np.asarray(b).dtype
+               and np.array_equal(a, b) for a, b in zip(made, given, strict=True))
 
 
 def _best(candidates: list[Candidate]) -> Candidate | None:

@@ -506,15 +506,25 @@ def cut_misses(misses, caster: Caster, strikes: np.ndarray, reach: float) -> np.
     -------
     (m,) bool
     """
+    return cast_misses(misses, caster, strikes, reach)[2]
+
+
+def cast_misses(misses, caster: Caster, strikes: np.ndarray, reach: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every missed beam cast against a surface (``cut_misses``, whose parameters these are):
+    the distance of each's first hit [m] (m,) float64 (inf: none), its face (m,) int64 (-1:
+    none) and whether the beam is cut there (m,) bool. ``carve`` given this answer
+    (``cast``) does not cast its first pass again."""
     from scipy.spatial import cKDTree
 
     if len(misses) == 0:
-        return np.zeros(0, dtype=bool)
-    return _cast_misses(misses, np.arange(len(misses)), caster, cKDTree(strikes), reach)[2]
+        return np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
+    return _cast_misses(misses, np.arange(len(misses)), caster, cKDTree(strikes), reach)
 
 
 def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, reach: float,
-          *, caster: Caster | None = None) -> tuple[np.ndarray, np.ndarray]:
+          *, caster: Caster | None = None, cast: tuple | None = None
+          ) -> tuple[np.ndarray, np.ndarray]:
     """A surface with the faces that missed beams cut removed (``cut_misses``): free space the
     surface filled, a membrane across a gap the beams went through.
 
@@ -527,8 +537,8 @@ def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, 
     vertices : (v', 3) float64
     faces : (f', 3) int64
     """
-    faces = np.asarray(faces, dtype=np.int64)[~carved_faces(vertices, faces, misses, strikes,
-                                                             reach, caster=caster)]
+    faces = np.asarray(faces, dtype=np.int64)[~carved_faces(
+        vertices, faces, misses, strikes, reach, caster=caster, cast=cast)]
     used = np.unique(faces)
     index = np.full(len(vertices), -1, dtype=np.int64)
     index[used] = np.arange(len(used))
@@ -536,7 +546,8 @@ def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, 
 
 
 def carved_faces(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray,
-                 reach: float, *, caster: Caster | None = None) -> np.ndarray:
+                 reach: float, *, caster: Caster | None = None, cast: tuple | None = None
+                 ) -> np.ndarray:
     """Which faces ``carve`` removes: (f,) bool, pass after pass (at most ``CARVE_PASSES``) the
     face each cut missed beam first hits among the faces left (``cut_misses``).
 
@@ -557,6 +568,9 @@ def carved_faces(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.nd
     reach : float, metres
     caster : Caster, optional
         ``Caster(vertices, faces)``, when the caller has it (its scene is not built again).
+    cast : tuple of three (m,) arrays, optional
+        ``cast_misses(misses, caster, strikes, reach)``, when the caller has it: the first
+        pass (every beam against the whole surface) is not cast again; the same answer.
     """
     from scipy.spatial import cKDTree
 
@@ -574,7 +588,8 @@ def carved_faces(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.nd
     for done in range(CARVE_PASSES):
         if done:   # the scene of the faces left, built only for a pass that is cast
             caster = Caster(vertices, faces[left])
-        t_hit, triangle, cut = _cast_misses(misses, beams, caster, tree, reach)
+        t_hit, triangle, cut = (cast if done == 0 and cast is not None
+                                else _cast_misses(misses, beams, caster, tree, reach))
         first[beams], t_first[beams] = np.where(triangle >= 0, left[triangle], -1), t_hit
         if not cut.any():
             break
@@ -604,7 +619,9 @@ def _cast_misses(misses, beams: np.ndarray, caster: Caster, tree, reach: float
     cut = np.zeros(len(beams), dtype=bool)
     if inside.any():
         crossing = origin[inside] + t_hit[inside, None] * direction[inside]
-        distance, _ = tree.query(crossing, distance_upper_bound=reach, workers=-1)
+        # one thread: a few thousand crossings, where threads started per query cost more
+        # than they save beside the busy fit workers (the same answers)
+        distance, _ = tree.query(crossing, distance_upper_bound=reach)
         cut[inside] = ~np.isfinite(distance)
     return t_hit, triangle, cut
 
@@ -622,7 +639,9 @@ def _crossings(misses, caster: Caster, tree, reach: float) -> tuple[np.ndarray, 
     if inside.any():
         crossing = misses.origin[beam[inside]] + t_hit[inside, None] * \
             misses.direction[beam[inside]]
-        distance, _ = tree.query(crossing, distance_upper_bound=reach, workers=-1)
+        # one thread: a few thousand crossings, where threads started per query cost more
+        # than they save beside the busy fit workers (the same answers)
+        distance, _ = tree.query(crossing, distance_upper_bound=reach)
         cuts[inside] = ~np.isfinite(distance)
     return beam, t_hit, cuts
 

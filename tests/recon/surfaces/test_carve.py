@@ -203,3 +203,82 @@ def test_checks_made_ahead_while_the_workers_fit_judge_as_those_made_at_the_judg
         assert figures(ahead) == figures(at_judging)
     assert any(c.carved for c in ahead + at_judging)
     assert state.made[0, 1].twin is not None or state.made[0, 0].twin is not None
+
+
+def test_carving_given_the_first_cast_casts_it_not_again_and_carves_alike(monkeypatch):
+    """``carve`` given the missed beams' cast against the whole surface (``cast_misses``, as
+    the first fold's overall check makes it) starts from it: one cast fewer, the same faces."""
+    vertices, faces, strikes = nested(0)
+    misses = beams(0)
+    caster = judge.Caster(vertices, faces)
+    cast = judge.cast_misses(misses, caster, strikes, 0.1)
+    np.testing.assert_array_equal(cast[2], judge.cut_misses(misses, caster, strikes, 0.1))
+    casts = []
+    original = judge._cast_misses
+
+    def counted(*args, **kwargs):
+        casts.append(args[1])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(judge, "_cast_misses", counted)
+    given = judge.carve(vertices, faces, misses, strikes, 0.1, caster=caster, cast=cast)
+    n_given = len(casts)
+    plain = judge.carve(vertices, faces, misses, strikes, 0.1, caster=caster)
+    assert n_given == len(casts) - n_given - 1 and n_given >= 1   # several passes: nested
+    for a, b in zip(given, plain, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_twin_fold_the_carving_left_whole_shares_the_uncarved_surface_and_its_checks(
+        monkeypatch):
+    """Where the missed beams cut nothing of a fold's surface, the carved twin's surface there
+    is the uncarved one (``auto._carved`` gives the fold's result back): the twin takes its
+    checks instead of casting the fold's strikes again, and its figures are those of the
+    carved folds judged afresh."""
+    from formats.geometry import Cloud
+    from recon.surfaces.isolation import run_isolated
+    from recon.surfaces.methods import bind
+
+    rng = np.random.default_rng(1)   # the upper half of a sphere: its hull fills space
+    points = rng.normal(size=(3000, 3))
+    points = points[points[:, 2] > 0.0] / np.linalg.norm(points[points[:, 2] > 0.0], axis=1,
+                                                         keepdims=True)
+    points += rng.normal(0.0, 0.01, points.shape)
+    n = len(points)
+    attributes = dict(zip(("view_x", "view_y", "view_z"), (5.0 * points).T, strict=True))
+    cloud = Cloud(points, attributes | {"shot": np.arange(n), "beam": np.zeros(n)})
+    context = auto._context(cloud, judge.pass_folds(cloud, 4, seed=0), k=10,
+                            fallback="centroid", seed=0, misses=beams(0, n=200))
+    run = bind("convex-hull")
+    hull = run_isolated(run, context.folds[0].prepared)
+    # the other folds' surface: a plate far above the beams, which none of them crosses
+    plate = hull | {"vertices": np.array([[-1.0, -1.0, 50.0], [1.0, -1.0, 50.0],
+                                          [1.0, 1.0, 50.0], [-1.0, 1.0, 50.0]]),
+                    "faces": np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)}
+    results = [hull] + [dict(plate) for _ in range(3)]
+    checks = []
+    original = judge.check
+
+    def counted(*args, **kwargs):
+        checks.append(args[0])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(judge, "check", counted)
+    made = auto._Made.empty(4)
+    candidate, twin = auto._judged(run, 0, results, context, made)
+    assert twin.carved and twin.n_faces < candidate.n_faces
+    # the uncarved run: 4 held-out, 4 training and 1 overall check; its twin only fold 0's 3
+    assert len(checks) == 9 + 3
+    assert all(made.twin.results[f] is results[f] for f in range(1, 4))
+    assert made.twin.results[0] is not results[0]
+    monkeypatch.setattr(judge, "check", original)
+    afresh = auto.judge_candidate(run, 0, [dict(r) for r in made.twin.results], context,
+                                  carved=True)
+
+    def figures(c):
+        return (c.chi2, c.chi2_se, c.chi_fit, c.heldout_mean_m, c.beam_misses, c.holes,
+                c.violated, c.misses_cut, c.n_faces, c.n_params, c.span)
+
+    assert figures(twin) == figures(afresh)
+    np.testing.assert_array_equal(twin.cost, afresh.cost)
+    np.testing.assert_array_equal(twin.heldout.sigma, afresh.heldout.sigma)
