@@ -57,6 +57,9 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    ``HOLE_SES`` binomial standard errors over the strikes checked, than that rate or the
    band's fewest (whichever limit is larger; above the band's fewest, the standard error of
    the difference of two counts) drops out of the band: it misses surface the strikes show.
+   The band's fewest is taken over its candidates within ``BAND_SES`` paired standard errors:
+   one step 3's floor let in may drop out, but is no reference (the held-out strikes tell it
+   from the best).
    Beams cut before their strike (``violated``) do not enter: along a grazing beam a
    surface a fraction of the tolerance off the strikes' surface cuts it (docs/decisions.md).
 5. **Model size is the penalty**: among the rest, the fewest free parameters wins
@@ -151,13 +154,13 @@ HOLE_RATE = math.erfc(judge.SIGMAS / math.sqrt(2.0))
 # below METRIC_FLOOR tau (no range noise: the chi-square's unit is then far finer than any
 # difference the truth's scores weigh), a candidate whose held-out mean squared residual
 # exceeds the best's by at most (METRIC_FLOOR tau)^2 is in the band however many paired
-# standard errors that is. Set on the suite's clean tuning clouds (docs/decisions.md): the
-# truth's best ladder run is Poisson depth 6 on comet-cross-clean and spot-cross-clean, 0.096
-# and 0.116 tau (square root of the excess) above depth 9, 8 and 12 paired standard errors;
-# at 0.164 tau depth 6 would enter eros-lidar-clean's band and take visibility's place (C 1.89
-# of the best against 1.00). The gate: the clean tuning clouds' noise lengths (the local-plane
-# scatter) are 0.014-0.023 tau, the noisy ones' 0.11 tau (asteroids) and above.
-METRIC_FLOOR = 0.14
+# standard errors that is. Set on the suite's clean tuning clouds (docs/decisions.md): Poisson
+# depth 6, the truth's best ladder run on comet-cross-clean and spot-cross-clean, is 0.096 and
+# 0.116 tau (the square root of the excess) above depth 9 there, 8 and 13 paired standard
+# errors; every floor from 0.12 to 0.25 made the same choices on the six clean tuning clouds,
+# 0.3 let spot's `plane cell=2` (0.29 tau) in. The gate: the clean tuning clouds' noise
+# lengths (the local-plane scatter) are 0.003-0.023 tau, the noisy ones' 0.11 tau and above.
+METRIC_FLOOR = 0.15
 # The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
 # level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson, the
 # visibility graph cut and a wide-kernel APSS (the truth's best on a faceted body); level 3: a
@@ -1307,7 +1310,9 @@ def select(candidates: list[Candidate], block: np.ndarray, n_checked: int, *,
     gaps = paired_gaps(candidates, best, block)
     eligible, floored = band(candidates, scored, best, gaps, scale, floor)
     threshold = max(candidates[i].chi2 for i in eligible)
-    limit = hole_limit([candidates[i].holes for i in eligible], n_checked)
+    # the floor's candidates may drop out for their holes, but do not set the band's fewest
+    limit = hole_limit([candidates[i].holes for i in eligible if i not in floored],
+                       n_checked)
     holed = tuple(i for i in eligible if candidates[i].holes > limit)
     filled = fills_in_band(candidates, [i for i in eligible if i not in holed])
     chosen = min((i for i in eligible if i not in holed and i not in filled),
@@ -1681,13 +1686,17 @@ def format_choice(choice: AutoChoice) -> str:
                          f"{c.violated:>6.1%} {c.holes:>6.1%} {free:>6} {c.n_params:>8d} "
                          f"{c.n_faces:>8d}")
     folds = choice.folds
+    floor = metric_floor(choice.tau_m, choice.noise_m)
+    floored = (f" or a mean squared residual at most ({math.sqrt(floor):.3g} m)^2 above its "
+               f"({METRIC_FLOOR:g} tau, a log without range noise)") if floor else ""
     lines.append(f"(chi2: held-out chi-square per strike over {folds.k} folds, "
                  f"{folds.n_blocks} blocks of {folds.block_shots} shots, "
                  f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "
                  "chi fit: on the training strikes; cut: beams cut before their strike; "
                  f"free: of {choice.n_misses} missed beams near the strikes, those the surface "
                  "cuts away from every strike (free space it fills); "
-                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best, x "
+                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best"
+                 f"{floored}, x "
                  "left out: within them but with strikes in holes beyond the noise or its "
                  "carved twin within them, or refuted by the missed beams (more than "
                  f"{MISS_REFUTES:.0%} cut); carved: without the faces the missed beams cut)")

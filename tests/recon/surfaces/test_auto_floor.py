@@ -88,3 +88,19 @@ def test_the_race_keeps_a_run_within_the_floor():
     assert [gap is not None for gap in outpaced(*args, ses=6.0)] == [False, True, True]
     kept = outpaced(*args, ses=6.0, scale=scale, floor=metric_floor(0.1, 0.001))
     assert [gap is not None for gap in kept] == [False, False, True]
+
+
+def test_a_candidate_the_floor_lets_in_is_no_reference_of_the_hole_test():
+    # rso-a-cross-clean's figures: the best leaves 0.47 % of 15,000 strikes in holes, a larger
+    # local-plane grid the floor lets in 0.02 %. Measured from the grid, the best would drop out
+    # for its holes and the grid be chosen; the grid is not within the held-out strikes' band,
+    # so the best's holes are measured from the band's own fewest and the best stays.
+    scale = np.full(len(BLOCK), 0.001**2)
+    candidates = [_candidate("best", 1.0, 11_000), _candidate("grid", 1.2, 37_000)]
+    candidates[0].holes, candidates[1].holes = 0.0047, 0.0002
+    selection = select(candidates, BLOCK, 15_000, scale=scale, floor=metric_floor(0.1, 0.001))
+    assert selection.floored == (1,) and selection.holed == ()
+    assert candidates[selection.chosen].label == "best"
+    candidates[1].holes = 0.02   # beyond the band's fewest: the grid drops out
+    assert select(candidates, BLOCK, 15_000, scale=scale,
+                  floor=metric_floor(0.1, 0.001)).holed == (1,)
