@@ -154,12 +154,13 @@ HOLE_RATE = math.erfc(judge.SIGMAS / math.sqrt(2.0))
 # below METRIC_FLOOR tau (no range noise: the chi-square's unit is then far finer than any
 # difference the truth's scores weigh), a candidate whose held-out mean squared residual
 # exceeds the best's by at most (METRIC_FLOOR tau)^2 is in the band however many paired
-# standard errors that is. Set on the suite's clean tuning clouds (docs/decisions.md): Poisson
-# depth 6, the truth's best ladder run on comet-cross-clean and spot-cross-clean, is 0.096 and
-# 0.116 tau (the square root of the excess) above depth 9 there, 8 and 13 paired standard
-# errors; every floor from 0.12 to 0.25 made the same choices on the six clean tuning clouds,
-# 0.3 let spot's `plane cell=2` (0.29 tau) in. The gate: the clean tuning clouds' noise
-# lengths (the local-plane scatter) are 0.003-0.023 tau, the noisy ones' 0.11 tau and above.
+# standard errors that is. Set on the suite's six clean tuning clouds (docs/decisions.md):
+# Poisson depth 6, the truth's best ladder run on comet-cross-clean and spot-cross-clean, is
+# 0.096 and 0.116 tau (the square root of the excess) above depth 9 there, 8.2 and 7.6 paired
+# standard errors; every floor from 0.12 to 0.20 made the same choices on the six, 0.21 let
+# rso-b-cross-clean's `plane cell=2` (0.209 tau, the smaller model) in. The gate: the clean
+# tuning clouds' noise lengths (their local-plane scatter) are 0.0035-0.023 tau, the noisy
+# ones' 0.108 tau and above.
 METRIC_FLOOR = 0.15
 # The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
 # level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson, the
