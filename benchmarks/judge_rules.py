@@ -789,15 +789,16 @@ def evidence(args) -> None:
         rows = records(args.suite, cloud)
         candidates, block, coverage, tau, n_checked = candidates_of(
             args.work, cloud, args.extra, suite=args.suite)
+        scale, floor = floor_of(args.work, cloud)
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
-                                target_of(cloud, not args.no_prior))
+                                target_of(cloud, not args.no_prior), scale, floor)
         data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
         points = load_cloud(args.suite, cloud).points
         spacing = float(np.median(nearest_gaps(points)))
         reach = max(data["tau_m"], SIGMAS * data["noise_m"], COVERAGE_SPACINGS * spacing)
         scored = [c for c in fitted if c.scored]
         found = mesh_evidence(args, cloud, [c.run.key for c in scored], rows, reach)
-        selection = auto.select(fitted, block, n_checked)
+        selection = auto.select(fitted, block, n_checked, scale=scale, floor=floor)
         best = fitted[selection.best]
         pool = [c for c in scored if c.chi2 <= CONSENSUS_CHI2 * best.chi2]
         for band in EVIDENCE_BANDS:
@@ -1170,7 +1171,8 @@ def main(argv=None) -> int:
     parser.add_argument("--metric-floor", type=float,
                         help="rules: step 3's floor, a fraction of tau (default: "
                         "auto.METRIC_FLOOR; 0: no floor, the band of paired standard errors "
-                        "alone)")
+                        "alone, as before the floor; the floor reads the cost as a squared "
+                        "residual in sigmas: with another --statistic, pass 0)")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
     parser.add_argument("--race", action="store_true",

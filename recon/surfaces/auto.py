@@ -1212,9 +1212,8 @@ def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
     A raced run leaves when its mean held-out cost exceeds the best run's by more than
     ``ses`` paired standard errors (and, with step 3's ``floor``, its mean squared residual
     the best's by more than the floor, by ``ses`` paired standard errors of that excess: it
-    could not be in the band); a closed one
-    only when it also exceeds the best closed run's so (the best closed candidate measures the
-    coverage, ``choose``).
+    could not be in the band); a closed one only when it also exceeds the best closed run's
+    so (the best closed candidate measures the coverage, ``choose``).
 
     Parameters
     ----------
