@@ -160,7 +160,7 @@ HOLE_RATE = math.erfc(judge.SIGMAS / math.sqrt(2.0))
 # standard errors; every floor from 0.12 to 0.20 made the same choices on the six, 0.21 let
 # rso-b-cross-clean's `plane cell=2` (0.209 tau, the smaller model) in. The gate: the clean
 # tuning clouds' noise lengths (their local-plane scatter) are 0.0035-0.023 tau, the noisy
-# ones' 0.108 tau and above.
+# ones' 0.104 tau and above.
 METRIC_FLOOR = 0.15
 # The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
 # level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson, the
