@@ -27,7 +27,8 @@ seconds instead of a suite run:
   of the compare's mesh of the run (``judge.RING_RAYS``; ``WORK/openings``), for ``rules
   --statistic closest-cracks``;
 - ``rules``: replays ``auto.select`` (the paired band, the hole test over the ``n_checked``
-  strikes, the carved twins, the smallest model) and the ladder's stop on those figures,
+  strikes, the carved twins, the smallest model, the band's floor in metres on a log without
+  range noise, ``--metric-floor``) and the ladder's stop on those figures,
   restricted to the ladder, and compares the choice with the truth (a carved choice by
   ``carved_truth``: the compare's mesh of its run carved as auto carves it, scored): within
   ``F_TOLERANCE`` of the best F-score and ``CHAMFER_TOLERANCE`` of the best Chamfer of all
@@ -497,11 +498,12 @@ def compare_span(suite: Path, cloud: str, key: str) -> float | None:
 
 
 def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_checked: int,
-           target: str = "unknown"):
+           target: str = "unknown", scale: np.ndarray | None = None, floor: float = 0.0):
     """``auto``'s ladder and choice on collected candidates: the levels in order, stopping as
     ``auto.climb`` does, and the natural-body prior and its completion for a ``"natural"``
     target (``auto.complete_prior``: the completion, collected after the ladder's levels, joins
-    the fitted ones where auto fits it); returns the chosen candidate and the fitted ones."""
+    the fitted ones where auto fits it); returns the chosen candidate and the fitted ones.
+    ``scale``, ``floor``: the band's floor in metres (``floor_of``; 0: none)."""
     from recon.surfaces import auto
 
     completion = [c for c in candidates if c.level == len(auto.LADDER)]
@@ -514,13 +516,29 @@ def replay(candidates: list, block: np.ndarray, coverage: float, tau: float, n_c
         if n + 1 >= auto.ALWAYS_LEVELS and n + 1 < len(depth_of) and \
                 auto._stops(fitted, before, depth):
             break
-    selection = auto.select(fitted, block, n_checked)
+    selection = auto.select(fitted, block, n_checked, scale=scale, floor=floor)
     if target == "natural":
         selection = auto.natural_prior(fitted, selection, coverage, tau)
         if completion and (selection.prior or coverage < auto.NATURAL_COVERAGE):
             fitted = fitted + completion
             selection = auto.completed(fitted, selection, len(fitted) - len(completion), block)
     return fitted[selection.chosen], fitted
+
+
+def floor_of(work: Path, cloud: str) -> tuple[np.ndarray | None, float]:
+    """Step 3's floor on ``cloud`` as ``auto.choose`` sets it (``auto.metric_floor`` of the
+    collection's tau and noise length, at ``auto.METRIC_FLOOR``, which ``rules --metric-floor``
+    sets) and each tested strike's squared sigma [m^2] (``judge.sigma_along``: the same for
+    every candidate, read from any candidate's collected ``sigma``; None and 0 in a collection
+    without them)."""
+    from recon.surfaces import auto
+
+    data = json.loads((work / "folds" / f"{cloud}.json").read_text())["auto"]
+    arrays = np.load(work / "folds" / f"{cloud}.npz")
+    key = next((k for k in arrays.files if k.startswith("sigma/")), None)
+    if key is None:
+        return None, 0.0
+    return arrays[key] ** 2, auto.metric_floor(data["tau_m"], data["noise_m"])
 
 
 def fold_of(block: np.ndarray, folds: dict, seed: int) -> np.ndarray:
@@ -535,11 +553,13 @@ def fold_of(block: np.ndarray, folds: dict, seed: int) -> np.ndarray:
     return fold
 
 
-def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[list, list]:
+def race(candidates: list, block: np.ndarray, folds: dict, seed: int,
+         scale: np.ndarray | None = None, floor: float = 0.0) -> tuple[list, list]:
     """``auto``'s race (``auto.outpaced``, stage by stage of ``auto.RACE_STAGES``) replayed on
     collected candidates: the levels fitted together (``auto.ALWAYS_LEVELS``) race at once,
     each later level against the runs left before it; ``folds``: the collection's ``folds``
-    record, ``seed`` its seed (``fold_of``). Returns the candidates left (a run that leaves
+    record, ``seed`` its seed (``fold_of``); ``scale``, ``floor``: step 3's floor
+    (``floor_of``). Returns the candidates left (a run that leaves
     takes its carved twin with it; in its place the run, unscored, with the status "outpaced"
     and the folds it was fitted on) and the runs that left. The completion (after the ladder's
     levels, ``replay``) is fitted alone on every fold, as auto fits it: it does not race."""
@@ -550,7 +570,7 @@ def race(candidates: list, block: np.ndarray, folds: dict, seed: int) -> tuple[l
     for group in race_groups(candidates):
         members = [c for c in candidates if c.level in group]
         after = race_stages([c for c in kept if c.scored and not c.carved], members, fold,
-                            block)
+                            block, scale, floor)
         gone += [c for c in members if c.run.key in after and not c.carved]
         kept += [c if c.run.key not in after else
                  auto.Candidate(c.run, c.level, "outpaced", folds=after[c.run.key])
@@ -568,8 +588,8 @@ def race_groups(candidates: list) -> list[list[int]]:
         [d] for d in depths if d >= auto.ALWAYS_LEVELS]
 
 
-def race_stages(before: list, members: list, fold: np.ndarray, block: np.ndarray
-                ) -> dict[str, int]:
+def race_stages(before: list, members: list, fold: np.ndarray, block: np.ndarray,
+                scale: np.ndarray | None = None, floor: float = 0.0) -> dict[str, int]:
     """The runs among ``members`` that leave at a stage of ``auto.RACE_STAGES`` ((folds,
     standard errors) pairs, those with fewer folds than the collection's; ``race_group`` at
     each against the runs still in and those left ``before``; ``fold``: each tested strike's
@@ -581,32 +601,36 @@ def race_stages(before: list, members: list, fold: np.ndarray, block: np.ndarray
         if n > fold.max():   # as many folds as the collection's: no stage
             break
         out = race_group(before, [c for c in members if c.run.key not in after], fold < n,
-                         block, ses)
+                         block, ses, None if scale is None else scale[fold < n], floor)
         after |= dict.fromkeys(out, n)
     return after
 
 
 def race_group(before: list, members: list, first: np.ndarray, block: np.ndarray,
-               ses: float) -> set:
+               ses: float, scale: np.ndarray | None = None, floor: float = 0.0) -> set:
     """The keys of the runs among ``members`` (one race: levels fitted together) that
     ``auto.outpaced`` takes out at ``ses`` standard errors against each other and the runs
-    left ``before``; ``first``: the tested strikes of the stage's folds."""
+    left ``before``; ``first``: the tested strikes of the stage's folds; ``scale`` (theirs)
+    and ``floor``: step 3's floor (``floor_of``)."""
     from recon.surfaces import auto
 
     pool = before + [c for c in members if not c.carved]
     racing = [False] * len(before) + [c.level >= auto.RACE_LEVEL for c in pool[len(before):]]
     leaves = auto.outpaced([c.cost[first] if c.scored else None for c in pool], block[first],
-                           racing, [bool(c.closed) for c in pool], ses=ses)
+                           racing, [bool(c.closed) for c in pool], ses=ses, scale=scale,
+                           floor=floor)
     return {c.run.key for c, left in zip(pool, leaves, strict=True) if left is not None}
 
 
-def raced(args, cloud: str, candidates: list, block: np.ndarray, replayed) -> list:
+def raced(args, cloud: str, candidates: list, block: np.ndarray, replayed,
+          scale: np.ndarray | None = None, floor: float = 0.0) -> list:
     """``race`` on ``cloud``'s candidates, printing the runs that left before the ladder's stop
     and whether the best closed candidate (the coverage's, not replayed) moved; ``replayed``:
     ``replay`` with the cloud's other arguments."""
     whole = best_closed(replayed(candidates)[1])
     candidates, _ = race(candidates, block, json.loads(
-        (args.work / "folds" / f"{cloud}.json").read_text())["auto"]["folds"], args.seed)
+        (args.work / "folds" / f"{cloud}.json").read_text())["auto"]["folds"], args.seed,
+        scale, floor)
     fitted = replayed(candidates)[1]
     left = ", ".join(c.label for c in fitted if c.status == "outpaced")
     moved = "" if best_closed(fitted) == whole else \
@@ -646,6 +670,8 @@ def rules(args) -> None:
         auto.BAND_SES = args.band
     if args.holes_one_count:
         auto.hole_limit = one_count_hole_limit
+    if args.metric_floor is not None:
+        auto.METRIC_FLOOR = args.metric_floor
     OPENING = args.opening
     names = collected(args)
     good = median = 0
@@ -655,6 +681,7 @@ def rules(args) -> None:
         candidates, block, coverage, tau, n_checked = candidates_of(
             args.work, cloud, args.extra, args.statistic, args.suite)
         n_misses = with_misses(args.work, cloud, candidates)
+        scale, floor = floor_of(args.work, cloud)
         if args.miss_rate is not None:
             candidates = free_space(candidates, n_misses, args.miss_rate, args.miss_ses)
         if args.holes_first:
@@ -662,9 +689,10 @@ def rules(args) -> None:
         if args.race:
             candidates = raced(args, cloud, candidates, block, partial(
                 replay, block=block, coverage=coverage, tau=tau, n_checked=n_checked,
-                target=target_of(cloud, not args.no_prior)))
+                target=target_of(cloud, not args.no_prior), scale=scale, floor=floor),
+                scale, floor)
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
-                                target_of(cloud, not args.no_prior))
+                                target_of(cloud, not args.no_prior), scale, floor)
         v = verdict(rows, chosen.key, carved_truth(args, cloud, chosen.key))
         good += v.get("ok", False)
         median += v.get("median", False)
@@ -684,7 +712,8 @@ def rules(args) -> None:
         seconds.append(modelled / compare_s)
         print(f"{cloud:30} {chosen.label[:26]:26} F {v.get('f_ratio', 0):.3f} "
               f"C {v.get('c_ratio', 0):6.3f} {'ok ' if v.get('ok') else 'NO '}"
-              f"{'' if v.get('median') else 'BELOW-MEDIAN '}fits {len(fitted)} "
+              f"{'' if v.get('median') else 'BELOW-MEDIAN '}"
+              f"{'floor ' if floor else ''}fits {len(fitted)} "
               f"fits {fit_s:.0f} s here; modelled auto/compare {modelled / compare_s:.3f}")
     print(f"agreement {good}/{len(names)} = {good / max(len(names), 1):.0%}; not below the "
           f"median {median}/{len(names)}; modelled auto/compare time: median "
@@ -760,15 +789,16 @@ def evidence(args) -> None:
         rows = records(args.suite, cloud)
         candidates, block, coverage, tau, n_checked = candidates_of(
             args.work, cloud, args.extra, suite=args.suite)
+        scale, floor = floor_of(args.work, cloud)
         chosen, fitted = replay(candidates, block, coverage, tau, n_checked,
-                                target_of(cloud, not args.no_prior))
+                                target_of(cloud, not args.no_prior), scale, floor)
         data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
         points = load_cloud(args.suite, cloud).points
         spacing = float(np.median(nearest_gaps(points)))
         reach = max(data["tau_m"], SIGMAS * data["noise_m"], COVERAGE_SPACINGS * spacing)
         scored = [c for c in fitted if c.scored]
         found = mesh_evidence(args, cloud, [c.run.key for c in scored], rows, reach)
-        selection = auto.select(fitted, block, n_checked)
+        selection = auto.select(fitted, block, n_checked, scale=scale, floor=floor)
         best = fitted[selection.best]
         pool = [c for c in scored if c.chi2 <= CONSENSUS_CHI2 * best.chi2]
         for band in EVIDENCE_BANDS:
@@ -1138,6 +1168,11 @@ def main(argv=None) -> int:
                         help="rules: the hole test's limit with one count's binomial error "
                         "above the band's fewest (``one_count_hole_limit``; default: auto's, "
                         "the error of a difference of two counts)")
+    parser.add_argument("--metric-floor", type=float,
+                        help="rules: step 3's floor, a fraction of tau (default: "
+                        "auto.METRIC_FLOOR; 0: no floor, the band of paired standard errors "
+                        "alone, as before the floor; the floor reads the cost as a squared "
+                        "residual in sigmas: with another --statistic, pass 0)")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
     parser.add_argument("--race", action="store_true",

@@ -42,7 +42,14 @@ which beam each strike was taken, its sensor position, and its recorded error mo
 3. **One paired standard error** (``paired_gaps``): every candidate tested on the same strikes
    as the best, whose chi-square exceeds the best's by at most ``BAND_SES`` standard errors
    of that difference (from the spread of the blocks' mean differences), fits the held-out
-   passes as well as the best, to within what these passes can tell apart.
+   passes as well as the best, to within what these passes can tell apart. **A floor in
+   metres** (``metric_floor``, ``beneath``) where the log has no range noise (``judge.SIGMAS``
+   noise lengths below ``METRIC_FLOOR`` tau): there the standard errors shrink with the
+   noise, and a finer surface wins by differences far below tau that the truth's scores do not
+   weigh; a candidate whose mean squared held-out residual (each strike's cost times its
+   squared sigma) exceeds the best's by at most ``(METRIC_FLOOR tau)^2`` is in the band too.
+   On a log whose three noise lengths reach ``METRIC_FLOOR`` tau the floor is 0 and the band
+   is the standard errors' alone.
 4. **Strikes the surface leaves in holes** (``hole_test``): a strike with no surface within its
    tolerance (``holes``, closest-point: the beam's angle does not enter) is what a surface at
    the truth leaves only in the noise's tail beyond ``judge.SIGMAS`` sigma (``HOLE_RATE``,
@@ -50,6 +57,9 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    ``HOLE_SES`` binomial standard errors over the strikes checked, than that rate or the
    band's fewest (whichever limit is larger; above the band's fewest, the standard error of
    the difference of two counts) drops out of the band: it misses surface the strikes show.
+   The band's fewest is taken over its candidates within ``BAND_SES`` paired standard errors:
+   one step 3's floor let in may drop out, but is no reference (the held-out strikes tell it
+   from the best).
    Beams cut before their strike (``violated``) do not enter: along a grazing beam a
    surface a fraction of the tolerance off the strikes' surface cuts it (docs/decisions.md).
 5. **Model size is the penalty**: among the rest, the fewest free parameters wins
@@ -91,11 +101,12 @@ search stops as soon as a level's best is not measurably better (by ``se``) than
 before it. **Racing** (``RACE_STAGES``): the runs of a level are fitted on the first fold, and
 a run whose held-out chi-square there is more than three band widths (paired standard errors)
 above the best's (of every run fitted so far; for a closed surface, also above the best closed
-one's) is not fitted on the other folds and leaves the choice (``outpaced``): far outside the
-band, it could not be chosen; the others are fitted on the second fold and raced again on both
-at two band widths, and those left in are fitted on every fold. The models of a few numbers
-are fitted on every fold. The ladder leaves out the methods that cost the most for what they
-add on the suite's clouds (``delaunay-balls``,
+one's), and with step 3's floor its mean squared residual more than the floor by three band
+widths of that excess, is not fitted on the other folds and leaves the choice
+(``outpaced``): far outside the band, it could not be chosen; the others are fitted on the
+second fold and raced again on both at two band widths, and those left in are fitted on
+every fold. The models of a few numbers are fitted on every fold. The ladder leaves out the
+methods that cost the most for what they add on the suite's clouds (``delaunay-balls``,
 ``screened-poisson``: a few seconds a fit, where the visibility cut and Poisson take one;
 ``rimls``, ``ball-pivoting``: never the held-out best nor in the band there).
 
@@ -139,6 +150,18 @@ BAND_SES = 2.0
 # above the band's fewest, the standard error of a difference of two counts, ``hole_limit``).
 HOLE_SES = 3.0
 HOLE_RATE = math.erfc(judge.SIGMAS / math.sqrt(2.0))
+# Step 3's floor in metres (``metric_floor``): on a log whose judge.SIGMAS noise lengths are
+# below METRIC_FLOOR tau (no range noise: the chi-square's unit is then far finer than any
+# difference the truth's scores weigh), a candidate whose held-out mean squared residual
+# exceeds the best's by at most (METRIC_FLOOR tau)^2 is in the band however many paired
+# standard errors that is. Set on the suite's six clean tuning clouds (docs/decisions.md):
+# Poisson depth 6, the truth's best ladder run on comet-cross-clean and spot-cross-clean, is
+# 0.096 and 0.116 tau (the square root of the excess) above depth 9 there, 8.2 and 7.6 paired
+# standard errors; every floor from 0.12 to 0.20 made the same choices on the six, 0.21 let
+# rso-b-cross-clean's `plane cell=2` (0.209 tau, the smaller model) in. The gate: the clean
+# tuning clouds' noise lengths (their local-plane scatter) are 0.0035-0.023 tau, the noisy
+# ones' 0.104 tau and above.
+METRIC_FLOOR = 0.15
 # The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
 # level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson, the
 # visibility graph cut and a wide-kernel APSS (the truth's best on a faceted body); level 3: a
@@ -429,7 +452,9 @@ class _Context:
     """What every candidate is fitted on and judged against: the folds, a subsample of all
     strikes (fold 0's surface against them: cuts and holes), tau and the noise length, and the
     log's missed beams near the strikes (None without a log) with the reach of a strike
-    (``miss_reach``)."""
+    (``miss_reach``); ``scale``, each tested strike's squared sigma [m^2], folds in order (a
+    cost times it is the capped squared residual), and ``floor``, step 3's floor [m^2]
+    (``metric_floor``)."""
 
     folds: list[_Fold]
     checked: judge.Strikes
@@ -438,6 +463,8 @@ class _Context:
     points: np.ndarray | None = None
     misses: Any = None
     miss_reach: float = 0.0
+    scale: np.ndarray | None = None
+    floor: float = 0.0
 
     @property
     def block(self) -> np.ndarray:
@@ -461,7 +488,9 @@ class Selection:
     candidate (the prior's ellipsoid, or the choice of steps 1-5) in whose place the completion
     (``complete_prior``) was chosen, with ``completion``, the completion's held-out chi-square
     above that candidate's and its paired standard error; ``bracketed``: the natural model's
-    ``span`` when the completion was chosen within the band of that candidate (``completed``)."""
+    ``span`` when the completion was chosen within the band of that candidate (``completed``);
+    ``floored``: the band's candidates beyond ``BAND_SES`` paired standard errors that step 3's
+    ``floor`` [m^2] let in (``metric_floor``)."""
 
     chosen: int
     best: int
@@ -476,6 +505,8 @@ class Selection:
     completes: int | None = None
     completion: tuple[float, float] | None = None
     bracketed: float | None = None
+    floored: tuple[int, ...] = ()
+    floor: float = 0.0
 
 
 def closed(faces: np.ndarray) -> bool:
@@ -587,9 +618,11 @@ def _context(cloud: Cloud, folds: judge.Folds, *, k: int, fallback: Fallback, se
              for f, ready in enumerate([first, *later])]
     all_rows = judge.subsample(len(strikes), judge.MAX_CHECKED, seed)
     tau, noise = judge.tau_of(cloud.points), every[0].prepared.noise
+    scale = np.concatenate([judge.sigma_along(f.test, tau=tau, noise=noise) for f in every])**2
     return _Context(folds=every, checked=strikes.take(all_rows), tau=tau, noise=noise,
                     points=cloud.points, misses=misses,
-                    miss_reach=miss_reach(tau, noise, every[0].prepared.spacing))
+                    miss_reach=miss_reach(tau, noise, every[0].prepared.spacing),
+                    scale=scale, floor=metric_floor(tau, noise))
 
 
 @dataclass
@@ -733,7 +766,9 @@ class _Race:
             np.concatenate([c.cost for c in self.made[job].held[:n]]) for job in pool]
         racing = [False] * len(reference) + [self.raced(job) for job in pool]
         shut = [bool(c.closed) for c in reference] + [self._closed(job) for job in pool]
-        leaves = outpaced(partial, block, racing, shut, ses=ses)[len(reference):]
+        scale = None if self.context.scale is None else self.context.scale[:m]
+        leaves = outpaced(partial, block, racing, shut, ses=ses, scale=scale,
+                          floor=self.context.floor)[len(reference):]
         for job, gap in zip(pool, leaves, strict=True):
             if gap is not None:
                 self.judged[job] = [self._outpaced(job, *gap, ses)]
@@ -1157,9 +1192,12 @@ def _race_note(candidates: list[Candidate]) -> str:
 
 
 def _far(partial: Sequence[np.ndarray | None], block: np.ndarray, among: Sequence[bool],
-         ses: float) -> list[tuple[float, float] | None]:
+         ses: float, scale: np.ndarray | None = None, floor: float = 0.0
+         ) -> list[tuple[float, float] | None]:
     """Per run of ``among`` (``outpaced``), its excess over the lowest mean cost of ``among``
-    and the paired standard error of that excess when it exceeds ``ses`` of them."""
+    and the paired standard error of that excess when it exceeds ``ses`` of them and, with a
+    ``floor`` [m^2], its mean squared residual's excess less ``ses`` of its paired standard
+    errors exceeds the floor (``beneath``; ``scale``: each strike's squared sigma [m^2])."""
     means = [float(np.mean(p)) if p is not None and a else np.inf
              for p, a in zip(partial, among, strict=True)]
     out: list[tuple[float, float] | None] = [None] * len(partial)
@@ -1168,20 +1206,50 @@ def _far(partial: Sequence[np.ndarray | None], block: np.ndarray, among: Sequenc
         return out
     for i in np.flatnonzero(np.isfinite(means)):
         gap, se = judge.block_mean_se(partial[i] - partial[best], block)
-        if se > 0.0 and gap > ses * se:
+        if se > 0.0 and gap > ses * se and not \
+                beneath(partial[i], partial[best], scale, floor, block, ses):
             out[i] = (gap, se)
     return out
 
 
+def metric_floor(tau: float, noise: float) -> float:
+    """Step 3's floor [m^2] on a cloud of tolerance floor ``tau`` and noise length ``noise``
+    [m]: ``(METRIC_FLOOR tau)^2`` when ``judge.SIGMAS`` noise lengths are below ``METRIC_FLOOR
+    tau`` (a log without range noise: its noise lies within the floor), else 0 (no floor: the
+    band is the paired standard errors alone)."""
+    reach = METRIC_FLOOR * tau
+    return reach**2 if judge.SIGMAS * noise < reach else 0.0
+
+
+def beneath(cost: np.ndarray, reference: np.ndarray, scale: np.ndarray | None,
+            floor: float, block: np.ndarray | None = None, ses: float = 0.0) -> bool:
+    """Whether the mean squared residual of ``cost`` (k,) exceeds that of ``reference`` (k,),
+    held-out costs of the same strikes, by at most ``floor`` [m^2] (> 0); with ``ses``, by at
+    most the floor plus ``ses`` paired standard errors of that excess (``block`` (k,): each
+    strike's block), as the race asks of a run it keeps. ``scale`` (k,) [m^2]: each strike's
+    squared sigma (a cost times it is the capped squared residual). Always False without a
+    floor or a scale."""
+    if floor <= 0.0 or scale is None:
+        return False
+    excess = (cost - reference) * scale
+    if not ses:
+        return float(np.mean(excess)) <= floor
+    mean, se = judge.block_mean_se(excess, block)
+    return mean - ses * se <= floor
+
+
 def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
-             racing: Sequence[bool], closed: Sequence[bool], *, ses: float | None = None
+             racing: Sequence[bool], closed: Sequence[bool], *, ses: float | None = None,
+             scale: np.ndarray | None = None, floor: float = 0.0
              ) -> list[tuple[float, float] | None]:
     """A stage of the race (``RACE_STAGES``): which runs leave the choice after the first
     folds.
 
     A raced run leaves when its mean held-out cost exceeds the best run's by more than
-    ``ses`` paired standard errors; a closed one only when it also exceeds the best closed
-    run's so (the best closed candidate measures the coverage, ``choose``).
+    ``ses`` paired standard errors (and, with step 3's ``floor``, its mean squared residual
+    the best's by more than the floor, by ``ses`` paired standard errors of that excess: it
+    could not be in the band); a closed one only when it also exceeds the best closed run's
+    so (the best closed candidate measures the coverage, ``choose``).
 
     Parameters
     ----------
@@ -1196,6 +1264,10 @@ def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
         Whether each run's surface on the first fold is closed (``closed``).
     ses : float, optional
         The stage's paired standard errors (default: the last stage's).
+    scale : (m,) float64, m^2, optional
+        Each strike's squared sigma (``_Context.scale``), with ``floor``.
+    floor : float, m^2
+        Step 3's floor (``metric_floor``; 0: none).
 
     Returns
     -------
@@ -1204,8 +1276,8 @@ def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
         error of that excess; None for the others.
     """
     ses = RACE_STAGES[-1][1] if ses is None else ses
-    every = _far(partial, block, [True] * len(partial), ses)
-    enclosing = _far(partial, block, closed, ses)
+    every = _far(partial, block, [True] * len(partial), ses, scale, floor)
+    enclosing = _far(partial, block, closed, ses, scale, floor)
     return [gap if raced and gap is not None and (not shut or enclosing[i] is not None)
             else None
             for i, (gap, raced, shut) in enumerate(zip(every, racing, closed, strict=True))]
@@ -1240,10 +1312,25 @@ def hole_limit(holes: Sequence[float], n_checked: int) -> float:
                fewest + HOLE_SES * math.sqrt(2.0 * fewest * (1.0 - fewest) / n))
 
 
-def select(candidates: list[Candidate], block: np.ndarray, n_checked: int) -> Selection:
+def band(candidates: list[Candidate], scored: list[int], best: int,
+         gaps: dict[int, tuple[float, float]], scale: np.ndarray | None, floor: float
+         ) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """Step 3 of the module docstring: the ``scored`` candidates in the band of the ``best``
+    (``gaps``: ``paired_gaps``), and those of them beyond ``BAND_SES`` paired standard errors
+    that the ``floor`` [m^2] lets in (``beneath``; ``scale`` (k,) [m^2], each tested strike's
+    squared sigma)."""
+    floored = tuple(i for i in scored if gaps[i][0] > BAND_SES * gaps[i][1] and beneath(
+        candidates[i].cost, candidates[best].cost, scale, floor))
+    return tuple(i for i in scored if gaps[i][0] <= BAND_SES * gaps[i][1] or i in floored), \
+        floored
+
+
+def select(candidates: list[Candidate], block: np.ndarray, n_checked: int, *,
+           scale: np.ndarray | None = None, floor: float = 0.0) -> Selection:
     """Steps 3 to 5 of the module docstring; ``block`` (k,) is the block of each tested
     strike, in the order of the candidates' ``cost``; ``n_checked`` the strikes the
-    candidates' ``holes`` were counted over.
+    candidates' ``holes`` were counted over; ``scale`` (k,) [m^2] each tested strike's squared
+    sigma and ``floor`` [m^2] step 3's floor (``metric_floor``; 0: none).
 
     Raises
     ------
@@ -1257,14 +1344,17 @@ def select(candidates: list[Candidate], block: np.ndarray, n_checked: int) -> Se
     scored = [i for i, c in enumerate(candidates) if c.scored and i not in out]
     best = min(scored, key=lambda i: (candidates[i].chi2, candidates[i].n_params))
     gaps = paired_gaps(candidates, best, block)
-    eligible = tuple(i for i in scored if gaps[i][0] <= BAND_SES * gaps[i][1])
+    eligible, floored = band(candidates, scored, best, gaps, scale, floor)
     threshold = max(candidates[i].chi2 for i in eligible)
-    limit = hole_limit([candidates[i].holes for i in eligible], n_checked)
+    # the floor's candidates may drop out for their holes, but do not set the band's fewest
+    limit = hole_limit([candidates[i].holes for i in eligible if i not in floored],
+                       n_checked)
     holed = tuple(i for i in eligible if candidates[i].holes > limit)
     filled = fills_in_band(candidates, [i for i in eligible if i not in holed])
     chosen = min((i for i in eligible if i not in holed and i not in filled),
                  key=lambda i: (candidates[i].n_params, candidates[i].chi2))
-    return Selection(chosen, best, threshold, eligible, gaps, holed, limit, filled, out)
+    return Selection(chosen, best, threshold, eligible, gaps, holed, limit, filled, out,
+                     floored=floored, floor=floor)
 
 
 def refuted(candidates: list[Candidate]) -> tuple[int, ...]:
@@ -1414,6 +1504,11 @@ def _band_reason(candidates: list[Candidate], selection: Selection) -> str:
     """What decided among the candidates in the band (steps 3 to 5)."""
     b = candidates[selection.best]
     band = f"within {BAND_SES:g} paired standard error(s) of the best"
+    if selection.floored:
+        band += (f" or, on a log without range noise, with a mean squared held-out residual at "
+                 f"most ({math.sqrt(selection.floor):.3g} m)^2 above the best's "
+                 f"({METRIC_FLOOR:g} tau: a difference the strikes resolve and the scores do "
+                 f"not weigh)")
     kept = len(selection.eligible) - len(selection.holed) - len(selection.filled)
     holding = "that hold the strikes " if selection.holed else ""
     if selection.chosen != selection.best:
@@ -1585,7 +1680,8 @@ def choose(points: np.ndarray, *, view_points: np.ndarray | None = None,
     table, note = climb(levels, context, limits=limits, n_workers=n_workers)
     coverage = _coverage(table, cloud.points, context, seed) if cloud.view_points is not None \
         else float("nan")
-    selection = select(table, context.block, len(context.checked))
+    selection = select(table, context.block, len(context.checked), scale=context.scale,
+                       floor=context.floor)
     if target_kind == "natural":
         selection = natural_prior(table, selection, coverage, context.tau)
         if not candidates and (methods is None or NATURAL_COMPLETION in methods):
@@ -1626,13 +1722,17 @@ def format_choice(choice: AutoChoice) -> str:
                          f"{c.violated:>6.1%} {c.holes:>6.1%} {free:>6} {c.n_params:>8d} "
                          f"{c.n_faces:>8d}")
     folds = choice.folds
+    floor = metric_floor(choice.tau_m, choice.noise_m)
+    floored = (f" or a mean squared residual at most ({math.sqrt(floor):.3g} m)^2 above its "
+               f"({METRIC_FLOOR:g} tau, a log without range noise)") if floor else ""
     lines.append(f"(chi2: held-out chi-square per strike over {folds.k} folds, "
                  f"{folds.n_blocks} blocks of {folds.block_shots} shots, "
                  f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "
                  "chi fit: on the training strikes; cut: beams cut before their strike; "
                  f"free: of {choice.n_misses} missed beams near the strikes, those the surface "
                  "cuts away from every strike (free space it fills); "
-                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best, x "
+                 f"* chosen, ~ within {BAND_SES:g} paired standard error(s) of the best"
+                 f"{floored}, x "
                  "left out: within them but with strikes in holes beyond the noise or its "
                  "carved twin within them, or refuted by the missed beams (more than "
                  f"{MISS_REFUTES:.0%} cut); carved: without the faces the missed beams cut)")

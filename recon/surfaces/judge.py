@@ -392,6 +392,16 @@ class Caster:
         return t_hit, beam_range, cos, np.where(hit, triangle, -1)
 
 
+def sigma_along(strikes: Strikes, *, tau: float, noise: float) -> np.ndarray:
+    """Each strike's recorded 1-sigma error along its beam with the floor of
+    ``FLOOR_FRACTION`` ``tau`` (module docstring; ``noise`` [m] without a recorded error
+    model): the scale of ``check``'s cost, the same for every surface. Returns (n,) float64,
+    metres."""
+    along = strikes.columns["sigma_along"] if strikes.recorded() else \
+        np.full(len(strikes), float(noise))
+    return np.hypot(along, FLOOR_FRACTION * tau)
+
+
 def check(strikes: Strikes, caster: Caster, *, tau: float, noise: float,
           fitted: bool = False, crack: float | None = None) -> Check:
     """Strikes against a surface (module docstring).
@@ -430,13 +440,10 @@ def check(strikes: Strikes, caster: Caster, *, tau: float, noise: float,
         missed = ~np.isfinite(t_hit)
         if not fitted:
             residual = np.where(missed, distance, np.abs(t_hit - beam_range))
-    if strikes.recorded():
-        along = strikes.columns["sigma_along"]
-        normal = sigma_at_incidence(strikes.columns, cos)
-    else:
-        along = normal = np.full(n, float(noise))
+    normal = sigma_at_incidence(strikes.columns, cos) if strikes.recorded() else \
+        np.full(n, float(noise))
     floor = FLOOR_FRACTION * tau
-    sigma = np.hypot(along, floor)
+    sigma = sigma_along(strikes, tau=tau, noise=noise)
     tolerance = np.maximum(tau, SIGMAS * sigma)
     if strikes.view is not None:
         violated = ~missed & (t_hit < beam_range - tolerance)
