@@ -71,6 +71,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from formats.geometry import Cloud
+from recon.surfaces._arrays import unique_sorted
 from recon.surfaces.uncertainty import COLUMNS as SIGMA_COLUMNS
 from recon.surfaces.uncertainty import sigma_at_incidence
 
@@ -546,7 +547,7 @@ def carve(vertices: np.ndarray, faces: np.ndarray, misses, strikes: np.ndarray, 
     """
     faces = np.asarray(faces, dtype=np.int64)[~carved_faces(
         vertices, faces, misses, strikes, reach, caster=caster, cast=cast)]
-    used = np.unique(faces)
+    used = unique_sorted(faces)
     index = np.full(len(vertices), -1, dtype=np.int64)
     index[used] = np.arange(len(used))
     return np.asarray(vertices, dtype=np.float64)[used], index[faces]

@@ -33,6 +33,7 @@ from scipy.spatial import cKDTree
 
 from formats.errors import MethodFailed
 from recon.surfaces import uncertainty
+from recon.surfaces._arrays import unique_sorted
 from recon.surfaces.methods import Method, MethodInput, Param, register
 from recon.surfaces.methods._backends import above_noise
 from recon.surfaces.methods._contour import node_keys, surface_nets
@@ -206,7 +207,7 @@ def signed_distance_mesh(points: np.ndarray, normals: np.ndarray, *, cell: float
     shape = tuple(int(s) for s in np.ceil((points.max(axis=0) - origin) / cell).astype(int) + 4)
     occupied = np.unique(np.floor((points - origin) / cell).astype(np.int64), axis=0)
     nodes = (occupied[:, None, :] + BAND_OFFSETS[None, :, :]).reshape(-1, 3)
-    keys = np.unique(node_keys(nodes, shape))
+    keys = unique_sorted(node_keys(nodes, shape))
     xyz = origin + cell * np.stack([keys // (shape[1] * shape[2]),
                                     (keys // shape[2]) % shape[1], keys % shape[2]], axis=1)
     tree = cKDTree(points)
