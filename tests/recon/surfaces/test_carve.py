@@ -205,6 +205,20 @@ def test_checks_made_ahead_while_the_workers_fit_judge_as_those_made_at_the_judg
     assert state.made[0, 1].twin is not None or state.made[0, 0].twin is not None
 
 
+def counting(monkeypatch, name: str) -> tuple[list, object]:
+    """Count the calls of ``judge.<name>`` for the test's duration: the list it appends each
+    call's arguments to, and the function it wraps."""
+    calls = []
+    original = getattr(judge, name)
+
+    def counted(*args, **kwargs):
+        calls.append(args)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(judge, name, counted)
+    return calls, original
+
+
 def test_carving_given_the_first_cast_casts_it_not_again_and_carves_alike(monkeypatch):
     """``carve`` given the missed beams' cast against the whole surface (``cast_misses``, as
     the first fold's overall check makes it) starts from it: one cast fewer, the same faces."""
@@ -213,14 +227,7 @@ def test_carving_given_the_first_cast_casts_it_not_again_and_carves_alike(monkey
     caster = judge.Caster(vertices, faces)
     cast = judge.cast_misses(misses, caster, strikes, 0.1)
     np.testing.assert_array_equal(cast[2], judge.cut_misses(misses, caster, strikes, 0.1))
-    casts = []
-    original = judge._cast_misses
-
-    def counted(*args, **kwargs):
-        casts.append(args[1])
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(judge, "_cast_misses", counted)
+    casts, _ = counting(monkeypatch, "_cast_misses")
     given = judge.carve(vertices, faces, misses, strikes, 0.1, caster=caster, cast=cast)
     n_given = len(casts)
     plain = judge.carve(vertices, faces, misses, strikes, 0.1, caster=caster)
@@ -256,14 +263,7 @@ def test_a_twin_fold_the_carving_left_whole_shares_the_uncarved_surface_and_its_
                                           [1.0, 1.0, 50.0], [-1.0, 1.0, 50.0]]),
                     "faces": np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)}
     results = [hull] + [dict(plate) for _ in range(3)]
-    checks = []
-    original = judge.check
-
-    def counted(*args, **kwargs):
-        checks.append(args[0])
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(judge, "check", counted)
+    checks, original = counting(monkeypatch, "check")
     made = auto._Made.empty(4)
     candidate, twin = auto._judged(run, 0, results, context, made)
     assert twin.carved and twin.n_faces < candidate.n_faces
