@@ -163,15 +163,13 @@ def test_the_ladder_fitted_at_once_judges_as_level_by_level(monkeypatch):
             (b.chi2, b.chi2_se, b.holes, b.violated, b.misses_cut, b.n_faces)
 
 
-def test_checks_made_ahead_while_the_workers_fit_judge_as_those_made_at_the_judging():
-    """``_Race.make_next`` makes the judging's checks (training strikes, all strikes, missed
-    beams, the carved twin's) fold by fold while the workers fit: every candidate, carved
-    twins included, has the figures of the judging that makes them all itself."""
+def hemisphere():
+    """The upper half of a unit sphere (1 cm of noise, seeded), each strike seen from 5 m out
+    along its normal, dealt to 4 pass folds, with 200 missed beams: its closures (a hull, an
+    ellipsoid) fill space the beams cross. Returns auto's context (its folds in context.folds)."""
     from formats.geometry import Cloud
-    from recon.surfaces.isolation import run_isolated
-    from recon.surfaces.methods import bind
 
-    rng = np.random.default_rng(1)   # the upper half of a sphere: its closures fill space
+    rng = np.random.default_rng(1)
     points = rng.normal(size=(3000, 3))
     points = points[points[:, 2] > 0.0] / np.linalg.norm(points[points[:, 2] > 0.0], axis=1,
                                                          keepdims=True)
@@ -182,6 +180,17 @@ def test_checks_made_ahead_while_the_workers_fit_judge_as_those_made_at_the_judg
     folds = judge.pass_folds(cloud, 4, seed=0)
     context = auto._context(cloud, folds, k=10, fallback="centroid", seed=0,
                             misses=beams(0, n=200))
+    return context
+
+
+def test_checks_made_ahead_while_the_workers_fit_judge_as_those_made_at_the_judging():
+    """``_Race.make_next`` makes the judging's checks (training strikes, all strikes, missed
+    beams, the carved twin's) fold by fold while the workers fit: every candidate, carved
+    twins included, has the figures of the judging that makes them all itself."""
+    from recon.surfaces.isolation import run_isolated
+    from recon.surfaces.methods import bind
+
+    context = hemisphere()
     runs = [bind("convex-hull"), bind("ellipsoid")]
     results = [[run_isolated(run, fold.prepared) for fold in context.folds] for run in runs]
     state = auto._Race([(0, runs)], context)
@@ -242,20 +251,10 @@ def test_a_twin_fold_the_carving_left_whole_shares_the_uncarved_surface_and_its_
     is the uncarved one (``auto._carved`` gives the fold's result back): the twin takes its
     checks instead of casting the fold's strikes again, and its figures are those of the
     carved folds judged afresh."""
-    from formats.geometry import Cloud
     from recon.surfaces.isolation import run_isolated
     from recon.surfaces.methods import bind
 
-    rng = np.random.default_rng(1)   # the upper half of a sphere: its hull fills space
-    points = rng.normal(size=(3000, 3))
-    points = points[points[:, 2] > 0.0] / np.linalg.norm(points[points[:, 2] > 0.0], axis=1,
-                                                         keepdims=True)
-    points += rng.normal(0.0, 0.01, points.shape)
-    n = len(points)
-    attributes = dict(zip(("view_x", "view_y", "view_z"), (5.0 * points).T, strict=True))
-    cloud = Cloud(points, attributes | {"shot": np.arange(n), "beam": np.zeros(n)})
-    context = auto._context(cloud, judge.pass_folds(cloud, 4, seed=0), k=10,
-                            fallback="centroid", seed=0, misses=beams(0, n=200))
+    context = hemisphere()
     run = bind("convex-hull")
     hull = run_isolated(run, context.folds[0].prepared)
     # the other folds' surface: a plate far above the beams, which none of them crosses
