@@ -1380,7 +1380,8 @@ def _command(args: argparse.Namespace) -> str:
     """The command line the report names."""
     return " ".join(["python benchmarks/suite.py", *(["--quick"] if args.quick else []),
                      *(["--held-out"] if args.held_out and not args.clouds else []),
-                     *(["--clouds", *args.clouds] if args.clouds else []),
+                     *(["--clouds", *args.clouds]
+                       if args.clouds and set(args.clouds) != set(CLOUDS) else []),
                      *(["--resume"] if args.resume else []),
                      *(["--doc", str(args.doc)] if args.doc is not None else [])])
 

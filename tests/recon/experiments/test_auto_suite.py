@@ -349,3 +349,13 @@ def test_targets_table_of_a_group_without_clouds_is_dashes():
     lines = suite._targets_lines(summaries, {k: suite.totals(g) for k, g in groups.items()},
                                  {k: suite.prediction_totals(g) for k, g in groups.items()})
     assert all(line.strip("| ").split(" | ")[3] == "-" for line in lines[2:-1])
+
+
+def test_the_reports_command_names_a_subset_of_clouds_but_not_all_of_them():
+    every = suite.parse_args(["--resume", "--doc", "docs/auto-suite.md",
+                              "--clouds", *reversed(suite.CLOUDS)])
+    assert suite._command(every) == ("python benchmarks/suite.py --resume "
+                                     "--doc docs/auto-suite.md")
+    some = suite.parse_args(["--clouds", "asteroid-cross-noisy", "rso-a-cross-noisy"])
+    assert suite._command(some) == ("python benchmarks/suite.py --clouds asteroid-cross-noisy "
+                                    "rso-a-cross-noisy")
