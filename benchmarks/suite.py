@@ -51,7 +51,9 @@ the bands' widths, the visibility method's wins and losses. ``docs/auto-suite.md
 and ``figures/auto-suite-estimate.png`` predicted against true Chamfer. Results stream to
 ``--out`` (default ``benchmarks/out/suite``). ``--resume`` reuses the finished compare runs
 (and simulated logs): only auto, the estimate (where the records' is stale) and the report run
-again, so a changed rule or estimate is measured in minutes.
+again, so a changed rule or estimate is measured in minutes. Every cloud's summary is kept
+beside its runs (``DIR/CLOUD/summary.json``); ``--report`` rebuilds the report from those alone,
+so that a suite run in parts (say, a rule rerun on the clouds it can move) reports as one.
 """
 
 from __future__ import annotations
@@ -68,6 +70,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 CHAMFER_KEY = "chamfer_m"
+# Each cloud's summary (``run_cloud``), kept under ``--out`` for ``--report``.
+CLOUD_SUMMARY = "summary.json"
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -1303,6 +1307,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--resume", action="store_true",
                         help="reuse finished compare runs: only auto, the estimate and the "
                              "report run again")
+    parser.add_argument("--report", action="store_true",
+                        help="no compare, no auto: rebuild the report from each cloud's "
+                             "summary kept under --out by an earlier run")
     parser.add_argument("--scheduler", default="threads")
     parser.add_argument("--workers", type=int, default=None)
     parser.add_argument("--timeout", type=float, default=300.0)
@@ -1383,6 +1390,7 @@ def _command(args: argparse.Namespace) -> str:
                      *(["--clouds", *args.clouds]
                        if args.clouds and set(args.clouds) != set(CLOUDS) else []),
                      *(["--resume"] if args.resume else []),
+                     *(["--report"] if args.report else []),
                      *(["--doc", str(args.doc)] if args.doc is not None else [])])
 
 
@@ -1417,9 +1425,24 @@ def write_report(summaries: list[dict], args: argparse.Namespace) -> dict:
     return {"totals": totals_by, "prediction": preds}
 
 
+def report_only(names: list[str], args: argparse.Namespace) -> int:
+    """``--report``: the report of ``names`` from their kept summaries (``CLOUD_SUMMARY``)."""
+    paths = {name: args.out / name / CLOUD_SUMMARY for name in names}
+    missing = [name for name, path in paths.items() if not path.is_file()]
+    if missing:
+        print(f"suite: no kept summary under {args.out} for {', '.join(missing)} (run those "
+              "clouds first)", file=sys.stderr)
+        return 1
+    write_report([json.loads(path.read_text()) for path in paths.values()], args)
+    print(f"suite: report of {len(names)} clouds from their kept summaries", flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     names = cloud_names(args)
+    if args.report:
+        return report_only(names, args)
     missing = [n for n in names if CLOUDS[n].mesh and not (args.meshes / CLOUDS[n].mesh).exists()]
     if missing:
         print(f"suite: shared meshes not found under {args.meshes} for {', '.join(missing)} "
@@ -1435,6 +1458,8 @@ def main(argv=None) -> int:
     for name in names:
         started = time.perf_counter()
         summaries.append(run_cloud(CLOUDS[name], args))
+        (args.out / name / CLOUD_SUMMARY).write_text(
+            json.dumps(summaries[-1], indent=1, default=str) + "\n")
         _say(summaries[-1], time.perf_counter() - started)
     result = write_report(summaries, args)
     print(json.dumps(result, indent=2))

@@ -281,6 +281,18 @@ def test_quick_suite_on_one_cloud(tmp_path):
     assert band["lo_m"] <= band["chamfer_m"] <= band["hi_m"] and band["source"] == "held-out"
     assert cloud["visibility"]["present"] is False    # not among the methods asked for
     assert "## The `visibility` method" in text and "Held out" in text
+    # The cloud's summary is kept: the report is rebuilt from it alone, the same but for the
+    # command it names; a cloud without one is named, and nothing is written.
+    doc.unlink()
+    (tmp_path / "out" / "summary.json").unlink()
+    assert suite.main([*common, "--report", "--doc", str(doc)]) == 0
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["clouds"] == [
+        json.loads(json.dumps(cloud))]
+    assert doc.read_text().replace(" --report", "") == text.replace(" --resume", "")
+    doc.unlink()
+    status = suite.main(["--clouds", "asteroid-cross-noisy", "rso-a-cross-noisy",
+                         "--out", str(tmp_path / "out"), "--report", "--doc", str(doc)])
+    assert status == 1 and not doc.exists()
 
 
 def _scored(name, *, held_out, within, cost, vis_ratio):
