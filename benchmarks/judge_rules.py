@@ -37,8 +37,9 @@ seconds instead of a suite run:
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
   "unknown"): the natural prior, and the completion where auto fits it (``auto.completed``;
   a collection without it replays no completion); ``--statistic``, ``--band``,
-  ``--miss-rate``, ``--holes-first``, ``--holes-one-count`` and ``--extra`` replay rules that
-  are not auto's;
+  ``--miss-rate``, ``--holes-first``, ``--holes-one-count``, ``--extra`` and ``--weights area``
+  (each held-out strike weighed by the area it stands for, ``strike_weights``) replay rules
+  that are not auto's;
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
@@ -611,13 +612,13 @@ def area_weights_of(args, cloud: str) -> np.ndarray | None:
     """``strike_weights`` of ``cloud``'s collected tested strikes at ``args.weight_cap``
     (None with ``--weights strikes``): the folds rebuilt as ``collect`` dealt them
     (``tested_order``, checked against the collected blocks); the uncapped weights are kept
-    in ``WORK/weights/CLOUD.npz``."""
+    in ``WORK/weights/CLOUD.npz`` with the seed they were dealt by."""
     from recon.surfaces.estimate import _area_weights
 
     if args.weights == "strikes":
         return None
     path = args.work / "weights" / f"{cloud}.npz"
-    if not path.exists():
+    if not path.exists() or int(np.load(path).get("seed", -1)) != args.seed:
         data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
         block = np.load(args.work / "folds" / f"{cloud}.npz")["block"]
         points, folds, order = tested_order(args.suite, cloud, 1.0 / data["folds"]["k"],
@@ -626,7 +627,7 @@ def area_weights_of(args, cloud: str) -> np.ndarray | None:
             raise SystemExit(f"{cloud}: the folds rebuilt differ from the collected ones "
                              "(wrong --seed?)")
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez_compressed(path, reach=data["miss_reach_m"],
+        np.savez_compressed(path, reach=data["miss_reach_m"], seed=args.seed,
                             weight=_area_weights(points.points, data["miss_reach_m"])[order])
     return capped(np.load(path)["weight"], args.weight_cap)
 
@@ -1281,6 +1282,8 @@ def main(argv=None) -> int:
                         help="tell auto nothing of the target (every cloud \"unknown\"; "
                         "default: the NATURAL clouds \"natural\")")
     args = parser.parse_args(argv)
+    if args.weight_cap is not None and args.weights != "area":
+        parser.error("--weight-cap needs --weights area")
     {"collect": collect, "misses": misses, "openings": openings, "rules": rules,
      "evidence": evidence, "estimate": estimate_all}[args.command](args)
     return 0

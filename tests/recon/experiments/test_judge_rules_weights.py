@@ -128,3 +128,10 @@ def test_collected_candidates_take_the_weights_into_their_chi_square(tmp_path):
         assert (c.chi2, c.chi2_se) == pytest.approx(judge.block_mean_se(cost * weight, block))
         assert c.chi2 == pytest.approx(np.sum(cost * weight) / np.sum(weight))
         assert c.chi2 > 10 * np.mean(cost) / 2
+
+
+def test_a_weight_cap_without_area_weights_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        judge_rules.main(["rules", "--suite", str(tmp_path), "--work", str(tmp_path),
+                          "--weight-cap", "4"])
+    assert "--weight-cap needs --weights area" in capsys.readouterr().err
