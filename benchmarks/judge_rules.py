@@ -37,8 +37,9 @@ seconds instead of a suite run:
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
   "unknown"): the natural prior, and the completion where auto fits it (``auto.completed``;
   a collection without it replays no completion); ``--statistic``, ``--band``,
-  ``--miss-rate``, ``--holes-first``, ``--holes-one-count`` and ``--extra`` replay rules that
-  are not auto's;
+  ``--miss-rate``, ``--holes-first``, ``--holes-one-count``, ``--extra`` and ``--weights area``
+  (each held-out strike weighed by the area it stands for, ``strike_weights``) replay rules
+  that are not auto's;
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
@@ -351,14 +352,17 @@ def replayed_cost(statistic: str, cost: np.ndarray, arrays, key: str, name: str,
 
 
 def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
-                  suite: Path | None = None
+                  suite: Path | None = None, weight: np.ndarray | None = None
                   ) -> tuple[list, np.ndarray, float, float, int]:
     """The collected candidates of ``cloud`` as ``auto.Candidate`` (on the ladder's levels; with
     ``extra``, the ``EXTRA`` runs join the level of their method's ladder run, else they are left
     out), the tested strikes' blocks, the coverage, tau [m] and the strikes their ``holes`` were
     counted over (``checked_count``). A ``span`` not collected (older collections) is measured,
     given ``suite``, on the compare's mesh of the run (fitted on all strikes, not fold 0's) for
-    the natural prior's model."""
+    the natural prior's model. ``weight`` (k,): each tested strike's weight, mean 1
+    (``strike_weights``; None: every strike 1): each candidate's cost is the statistic's times
+    it (``weighted``), so the mean, the block means, the paired standard errors, the race and
+    the floor (``beneath``) all weigh the strikes so."""
     from dataclasses import fields
 
     from recon.surfaces import auto, judge
@@ -388,6 +392,10 @@ def candidates_of(work: Path, cloud: str, extra: bool, statistic: str = "chi2",
         if STATISTICS[statistic] is not None and candidate.cost is not None:
             candidate.cost = replayed_cost(statistic, candidate.cost, arrays, row["key"],
                                            f"{cloud}: {row['label']}", cracks)
+            candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
+                                                                    arrays["block"])
+        if weight is not None and candidate.cost is not None:
+            candidate.cost = weighted(candidate.cost, weight)
             candidate.chi2, candidate.chi2_se = judge.block_mean_se(candidate.cost,
                                                                     arrays["block"])
         out.append(candidate)
@@ -541,6 +549,89 @@ def floor_of(work: Path, cloud: str) -> tuple[np.ndarray | None, float]:
     return arrays[key] ** 2, auto.metric_floor(data["tau_m"], data["noise_m"])
 
 
+# ``rules --weights area``: each held-out strike's cost weighs by the area of the surface it
+# stands for, one over the strikes within the support reach around it (the truth-free
+# estimate's ``recon.surfaces.estimate._area_weights``, over all the cloud's strikes, at the
+# collection's ``miss_reach_m``: the same max(tau, SIGMAS noise, COVERAGE_SPACINGS spacing)),
+# instead of 1 each: the truth's Chamfer and F-score are means over its area, the held-out
+# statistic a mean over strikes, which a densely struck region (a track crossing, the nadir)
+# outweighs a sparsely struck one (a grazing face, an edge) in. ``--weight-cap C``: no strike
+# weighs more than C times the tested strikes' median weight (a lone strike, or one at an
+# edge of the strikes, otherwise weighs as much as a whole patch).
+
+
+def strike_weights(points: np.ndarray, tested: np.ndarray, reach: float,
+                   cap: float | None = None) -> np.ndarray:
+    """The weight of each tested strike for ``rules --weights area``.
+
+    Parameters
+    ----------
+    points : (n, 3) float64, metres, body frame
+        All the cloud's strikes (the density is counted over all of them).
+    tested : (k,) int64
+        Indices into ``points`` of the held-out strikes, in the order of the costs.
+    reach : float, metres
+        The support reach the strikes are counted within.
+    cap : float, optional
+        The largest weight, in multiples of the tested strikes' median weight (None: no cap).
+
+    Returns
+    -------
+    (k,) float64
+        One over the strikes within ``reach`` of each tested strike (``estimate._area_weights``),
+        capped, scaled to mean 1 (a uniformly struck cloud: every weight 1).
+    """
+    from recon.surfaces.estimate import _area_weights
+
+    return capped(_area_weights(np.asarray(points, dtype=float), reach)[np.asarray(tested)],
+                  cap)
+
+
+def capped(weight: np.ndarray, cap: float | None) -> np.ndarray:
+    """``weight`` (k,) > 0 capped at ``cap`` times its median (None: not capped), scaled to
+    mean 1 (``strike_weights``)."""
+    if cap is not None and not cap >= 1.0:
+        raise ValueError(f"cap must be at least 1 (the median weight), got {cap}")
+    weight = weight / np.median(weight)
+    if cap is not None:
+        weight = np.minimum(weight, cap)
+    return weight / weight.mean()
+
+
+def weighted(cost: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Per-strike ``cost`` (k,) times ``weight`` (k,), mean 1 (``strike_weights``): its plain
+    mean is the weighted mean of ``cost``, the difference of two candidates' the weighted
+    difference, so auto's means, paired standard errors (``judge.block_mean_se``, as
+    ``estimate._error_band`` takes its weighted one) and race read it unchanged."""
+    if cost.shape != weight.shape:
+        raise ValueError(f"weight must match the costs {cost.shape}, got {weight.shape}")
+    return cost * weight
+
+
+def area_weights_of(args, cloud: str) -> np.ndarray | None:
+    """``strike_weights`` of ``cloud``'s collected tested strikes at ``args.weight_cap``
+    (None with ``--weights strikes``): the folds rebuilt as ``collect`` dealt them
+    (``tested_order``, checked against the collected blocks); the uncapped weights are kept
+    in ``WORK/weights/CLOUD.npz`` with the seed they were dealt by."""
+    from recon.surfaces.estimate import _area_weights
+
+    if args.weights == "strikes":
+        return None
+    path = args.work / "weights" / f"{cloud}.npz"
+    if not path.exists() or int(np.load(path).get("seed", -1)) != args.seed:
+        data = json.loads((args.work / "folds" / f"{cloud}.json").read_text())["auto"]
+        block = np.load(args.work / "folds" / f"{cloud}.npz")["block"]
+        points, folds, order = tested_order(args.suite, cloud, 1.0 / data["folds"]["k"],
+                                            args.seed)
+        if not np.array_equal(folds.block[order], block):
+            raise SystemExit(f"{cloud}: the folds rebuilt differ from the collected ones "
+                             "(wrong --seed?)")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(path, reach=data["miss_reach_m"], seed=args.seed,
+                            weight=_area_weights(points.points, data["miss_reach_m"])[order])
+    return capped(np.load(path)["weight"], args.weight_cap)
+
+
 def fold_of(block: np.ndarray, folds: dict, seed: int) -> np.ndarray:
     """The fold of each collected tested strike, from its ``block`` (k,), the collection's
     ``folds`` record and its seed (the blocks' deal, ``judge.pass_folds``)."""
@@ -679,7 +770,8 @@ def rules(args) -> None:
     for cloud in names:
         rows = records(args.suite, cloud)
         candidates, block, coverage, tau, n_checked = candidates_of(
-            args.work, cloud, args.extra, args.statistic, args.suite)
+            args.work, cloud, args.extra, args.statistic, args.suite,
+            area_weights_of(args, cloud))
         n_misses = with_misses(args.work, cloud, candidates)
         scale, floor = floor_of(args.work, cloud)
         if args.miss_rate is not None:
@@ -1173,6 +1265,14 @@ def main(argv=None) -> int:
                         "auto.METRIC_FLOOR; 0: no floor, the band of paired standard errors "
                         "alone, as before the floor; the floor reads the cost as a squared "
                         "residual in sigmas: with another --statistic, pass 0)")
+    parser.add_argument("--weights", choices=("strikes", "area"), default="strikes",
+                        help="rules: weigh each held-out strike's cost by 1 (strikes, auto's) "
+                        "or by the area it stands for (area: one over the strikes within the "
+                        "support reach, as the truth-free estimate weighs them) in the mean, "
+                        "the block means, the paired standard errors and the race")
+    parser.add_argument("--weight-cap", type=float,
+                        help="rules --weights area: no strike weighs more than this many times "
+                        "the median tested strike (default: no cap)")
     parser.add_argument("--extra", action="store_true",
                         help="rules: let the EXTRA runs join the ladder")
     parser.add_argument("--race", action="store_true",
@@ -1182,6 +1282,8 @@ def main(argv=None) -> int:
                         help="tell auto nothing of the target (every cloud \"unknown\"; "
                         "default: the NATURAL clouds \"natural\")")
     args = parser.parse_args(argv)
+    if args.weight_cap is not None and args.weights != "area":
+        parser.error("--weight-cap needs --weights area")
     {"collect": collect, "misses": misses, "openings": openings, "rules": rules,
      "evidence": evidence, "estimate": estimate_all}[args.command](args)
     return 0
