@@ -1,11 +1,12 @@
 """The auto suite: fixed, seeded clouds on which every method and ``-m auto`` meet the truth.
 
-    python benchmarks/suite.py                 # the whole suite (32 clouds; hours)
+    python benchmarks/suite.py                 # the whole suite (109 clouds; many hours)
     python benchmarks/suite.py --quick         # 4 small clouds, 8 methods at defaults (CI)
     python benchmarks/suite.py --clouds satellite-a-cross-noisy --out /tmp/suite
     python benchmarks/suite.py --held-out --compare-only   # the held-out compares, unseen
     python benchmarks/suite.py --plan          # what --resume would compute, per cloud
     python benchmarks/suite.py --resume --doc docs/auto-suite.md   # auto, estimate, report
+    python benchmarks/suite.py --report --doc docs/auto-suite.md   # from kept summaries only
 
 Every cloud is a short campaign of a preset scene (``sim/presets``) simulated with seed 0 and
 ingested: the paper's asteroid seen by a single-beam LRF with slew, a 5-beam cross and a
