@@ -612,9 +612,8 @@ def area_weights_of(args, cloud: str) -> np.ndarray | None:
     """``strike_weights`` of ``cloud``'s collected tested strikes at ``args.weight_cap``
     (None with ``--weights strikes``): the folds rebuilt as ``collect`` dealt them
     (``tested_order``, checked against the collected blocks); the uncapped weights are kept
-    in ``WORK/weights/CLOUD.npz`` with the seed they were dealt by."""
-    from recon.surfaces.estimate import _area_weights
-
+    in ``WORK/weights/CLOUD.npz`` with the seed they were dealt by (``capped`` divides by the
+    median first, so capping them later is capping the raw weights)."""
     if args.weights == "strikes":
         return None
     path = args.work / "weights" / f"{cloud}.npz"
@@ -628,7 +627,7 @@ def area_weights_of(args, cloud: str) -> np.ndarray | None:
                              "(wrong --seed?)")
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, reach=data["miss_reach_m"], seed=args.seed,
-                            weight=_area_weights(points.points, data["miss_reach_m"])[order])
+                            weight=strike_weights(points.points, order, data["miss_reach_m"]))
     return capped(np.load(path)["weight"], args.weight_cap)
 
 
