@@ -81,7 +81,8 @@ EXTRA = ("visibility beta=0.1", "poisson depth=7", "planes threshold=2", "apss f
 
 def records(suite: Path, cloud: str) -> list[dict]:
     """The compare's successful, scored runs of ``cloud``."""
-    rows = [json.loads(line) for line in (suite / cloud / "results.jsonl").open()]
+    rows = [json.loads(line) for line in
+            (suite / cloud / "results.jsonl").read_text().splitlines() if line.strip()]
     return [r for r in rows if r.get("status") == "ok" and r.get("chamfer_m") is not None]
 
 
@@ -149,6 +150,7 @@ def collect(args) -> None:
     the ladder (``auto.complete_prior``) is fitted on the same folds by a second ``choose`` and
     joins the record, so that the coverage stays the one auto measures on the ladder's
     candidates (a closed completion would otherwise be its best closed candidate)."""
+    from formats.errors import MethodFailed
     from recon.surfaces import auto
     from recon.surfaces.methods import bind
 
@@ -164,11 +166,18 @@ def collect(args) -> None:
         choices = []
         for runs in [candidate_runs(rows)] + [[bind(auto.NATURAL_COMPLETION)]] * (
                 cloud in NATURAL):
-            with recording_checks():
-                choices.append(auto.choose(
-                    points.points, view_points=points.view_points,
-                    uncertainty=points.attributes, candidates=runs, holdout=args.holdout,
-                    seed=args.seed, n_workers=args.workers, misses=beams))
+            try:
+                with recording_checks():
+                    choices.append(auto.choose(
+                        points.points, view_points=points.view_points,
+                        uncertainty=points.attributes, candidates=runs, holdout=args.holdout,
+                        seed=args.seed, n_workers=args.workers, misses=beams))
+            except MethodFailed as exc:
+                if not choices:   # the ladder itself: nothing to collect
+                    raise
+                # The completion failed on every fold (auto keeps it as a failed candidate):
+                # the record replays no completion.
+                print(f"{cloud}: no completion ({exc})", flush=True)
         elapsed = time.perf_counter() - start
         candidates = [c for choice in choices for c in choice.candidates]
         table = [c.to_dict() | {"key": c.key} for c in candidates]
