@@ -1461,14 +1461,19 @@ def write_report(summaries: list[dict], args: argparse.Namespace) -> dict:
 
 
 def report_only(names: list[str], args: argparse.Namespace) -> int:
-    """``--report``: the report of ``names`` from their kept summaries (``CLOUD_SUMMARY``)."""
+    """``--report``: the report of ``names`` from their kept summaries (``CLOUD_SUMMARY``),
+    grouped by the present held-out set (``HELD_OUT``)."""
     paths = {name: args.out / name / CLOUD_SUMMARY for name in names}
     missing = [name for name, path in paths.items() if not path.is_file()]
     if missing:
         print(f"suite: no kept summary under {args.out} for {', '.join(missing)} (run those "
               "clouds first)", file=sys.stderr)
         return 1
-    write_report([json.loads(path.read_text()) for path in paths.values()], args)
+    # Which clouds are held out is the suite's present set (a set looked at since its run is
+    # reported among the tuning clouds), not the flag the summary was made with.
+    summaries = [json.loads(path.read_text()) | {"held_out": CLOUDS[name].held_out}
+                 for name, path in paths.items()]
+    write_report(summaries, args)
     print(f"suite: report of {len(names)} clouds from their kept summaries", flush=True)
     return 0
 

@@ -282,9 +282,12 @@ def test_quick_suite_on_one_cloud(tmp_path):
     assert cloud["visibility"]["present"] is False    # not among the methods asked for
     assert "## The `visibility` method" in text and "Held out" in text
     # The cloud's summary is kept: the report is rebuilt from it alone, the same but for the
-    # command it names; a cloud without one is named, and nothing is written.
+    # command it names, its groups the present held-out set's (not the flag it was made
+    # with); a cloud without one is named, and nothing is written.
     doc.unlink()
     (tmp_path / "out" / "summary.json").unlink()
+    kept = tmp_path / "out" / "asteroid-cross-noisy" / "summary.json"
+    kept.write_text(json.dumps(json.loads(kept.read_text()) | {"held_out": True}))
     assert suite.main([*common, "--report", "--doc", str(doc)]) == 0
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["clouds"] == [
         json.loads(json.dumps(cloud))]
