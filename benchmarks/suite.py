@@ -1471,8 +1471,19 @@ def report_only(names: list[str], args: argparse.Namespace) -> int:
         return 1
     # Which clouds are held out is the suite's present set (a set looked at since its run is
     # reported among the tuning clouds), not the flag the summary was made with.
-    summaries = [json.loads(path.read_text()) | {"held_out": CLOUDS[name].held_out}
-                 for name, path in paths.items()]
+    summaries = []
+    for name, path in paths.items():
+        try:
+            summary = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            print(f"suite: {path}: not a readable summary ({exc}); run {name} again",
+                  file=sys.stderr)
+            return 1
+        if not isinstance(summary, dict) or summary.get("cloud") != name:
+            print(f"suite: {path}: not the summary of {name}; run {name} again",
+                  file=sys.stderr)
+            return 1
+        summaries.append(summary | {"held_out": CLOUDS[name].held_out})
     write_report(summaries, args)
     print(f"suite: report of {len(names)} clouds from their kept summaries", flush=True)
     return 0
@@ -1493,13 +1504,15 @@ def main(argv=None) -> int:
         return plan(names, args)
     if args.compare_only:
         return compare_only(names, args)
+    from formats.atomic import write_text_atomically
+
     start = time.perf_counter()
     summaries = []
     for name in names:
         started = time.perf_counter()
         summaries.append(run_cloud(CLOUDS[name], args))
-        (args.out / name / CLOUD_SUMMARY).write_text(
-            json.dumps(summaries[-1], indent=1, default=str) + "\n")
+        write_text_atomically(args.out / name / CLOUD_SUMMARY,   # Ctrl-C leaves no half
+                              json.dumps(summaries[-1], indent=1, default=str) + "\n")
         _say(summaries[-1], time.perf_counter() - started)
     result = write_report(summaries, args)
     print(json.dumps(result, indent=2))

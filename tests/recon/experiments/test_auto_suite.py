@@ -246,7 +246,7 @@ def test_records_carry_the_estimate_of_their_mesh():
     assert far["predicted_chamfer_m"] > columns["predicted_chamfer_m"] + 0.5
 
 
-def test_quick_suite_on_one_cloud(tmp_path):
+def test_quick_suite_on_one_cloud(tmp_path, capsys):
     doc = tmp_path / "docs" / "auto-suite.md"
     doc.parent.mkdir()
     common = ["--quick", "--clouds", "asteroid-cross-noisy", "--methods", "ellipsoid", "planes",
@@ -296,6 +296,13 @@ def test_quick_suite_on_one_cloud(tmp_path):
     status = suite.main(["--clouds", "asteroid-cross-noisy", "rso-a-cross-noisy",
                          "--out", str(tmp_path / "out"), "--report", "--doc", str(doc)])
     assert status == 1 and not doc.exists()
+    # A damaged kept summary, or another cloud's, is named in one line; nothing is written.
+    for damaged in ("{\"cloud\": ", json.dumps({"cloud": "rso-a-cross-noisy"})):
+        kept.write_text(damaged)
+        capsys.readouterr()
+        assert suite.main([*common, "--report", "--doc", str(doc)]) == 1
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and str(kept) in err and not doc.exists()
 
 
 def _scored(name, *, held_out, within, cost, vis_ratio):
