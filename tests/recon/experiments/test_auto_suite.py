@@ -305,34 +305,53 @@ def test_quick_suite_on_one_cloud(tmp_path, capsys):
         assert err.count("\n") == 1 and str(kept) in err and not doc.exists()
 
 
-def _scored(name, *, held_out, within, cost, vis_ratio):
+def _scored(name, *, held_out, within, cost, vis_ratio, best="plane"):
     """A cloud's summary as far as the targets table reads it: auto within both tolerances or
     not (and below the median when not), its cost ratio, the visibility method's Chamfer
-    ratio, and runs predicted in the truth's order with auto's band holding its Chamfer."""
+    ratio, runs predicted in the truth's order with auto's band holding its Chamfer, and the
+    compare's ranking: ``best`` at the best scores, the ellipsoid far behind."""
     base = _summary(name, [(0.1, 1.0), (0.2, 2.0), (0.4, 3.0)], (0.1, 0.1, 0.05, 0.2),
                     held_out=held_out)
     return base | {
-        "verdict": {"within_f": within, "within_chamfer": within, "not_below_median": within},
+        "verdict": {"within_f": within, "within_chamfer": within, "not_below_median": within,
+                    "best_f": 0.9, "best_chamfer_m": 0.1},
+        "ranking": [{"label": best, "chamfer_m": 0.1, "fscore": 0.9},
+                    {"label": "ellipsoid", "chamfer_m": 0.5, "fscore": 0.3}],
         "cost_ratio": cost, "fit_ratio": cost,
         "visibility": {"present": True, "on_chart": True, "chamfer_ratio": vis_ratio}}
 
 
+# Tuning clouds of each kind for the targets table's summaries (their names give the target's
+# kind, hence auto's candidates).
+SPACECRAFT = [name for name, c in suite.CLOUDS.items()
+              if not c.held_out and c.target_kind == "unknown"]
+NATURAL = [name for name, c in suite.CLOUDS.items()
+           if not c.held_out and c.target_kind == "natural"]
+
+
 def test_targets_table_marks_each_group_against_the_issue_targets():
-    summaries = [*(_scored(f"t{i}", held_out=False, within=True, cost=0.1, vis_ratio=1.05)
-                   for i in range(9)),
-                 _scored("t9", held_out=False, within=False, cost=0.3, vis_ratio=2.0),
-                 _scored("h0", held_out=True, within=True, cost=0.2, vis_ratio=3.0)]
+    summaries = [*(_scored(name, held_out=False, within=True, cost=0.1, vis_ratio=1.05)
+                   for name in SPACECRAFT[:8]),
+                 _scored(NATURAL[0], held_out=False, within=True, cost=0.1, vis_ratio=1.05,
+                         best="completed-poisson"),
+                 _scored(SPACECRAFT[8], held_out=False, within=False, cost=0.3, vis_ratio=2.0,
+                         best="rimls"),
+                 _scored(SPACECRAFT[9], held_out=True, within=True, cost=0.2, vis_ratio=3.0,
+                         best="completed-poisson")]
     groups = {key: [s for s in summaries if keep(s)] for key, _, keep in suite.GROUPS}
     lines = suite._targets_lines(summaries, {k: suite.totals(g) for k, g in groups.items()},
                                  {k: suite.prediction_totals(g) for k, g in groups.items()})
     assert lines[0] == "| target | All clouds | Tuning clouds | Held out |"
-    both, median, cost, spearman, band, drawn, wins = (
+    both, median, cost, spearman, band, drawn, wins, candidates, any_run = (
         line.strip("| ").split(" | ")[1:] for line in lines[2:-1])
     assert both == ["91% (10 of 11) yes", "90% (9 of 10) yes", "100% (1 of 1) yes"]
     assert median[0].endswith("**no**") and median[2].startswith("100% (1 of 1) yes")
     assert cost[0] == "worst 0.30, median 0.10 **no**" and cost[2].startswith("worst 0.20")
     assert spearman[0].startswith("1.00 (33 runs) yes") and band[0] == "100% (11 of 11) yes"
     assert drawn[1] == "10 of 10 yes" and wins == ["9 of 11", "9 of 10", "0 of 1"]
+    # the completion is a candidate on a natural body only; rimls is none of auto's
+    assert candidates == ["82% (9 of 11)", "90% (9 of 10)", "0% (0 of 1)"]
+    assert any_run == ["100% (11 of 11)", "100% (10 of 10)", "100% (1 of 1)"]
 
 
 def test_plan_counts_cached_runs_and_spots_a_compare_on_other_points(tmp_path, monkeypatch,
@@ -366,7 +385,7 @@ def test_plan_counts_cached_runs_and_spots_a_compare_on_other_points(tmp_path, m
 
 
 def test_targets_table_of_a_group_without_clouds_is_dashes():
-    summaries = [_scored("t0", held_out=False, within=True, cost=0.1, vis_ratio=1.0)]
+    summaries = [_scored(SPACECRAFT[0], held_out=False, within=True, cost=0.1, vis_ratio=1.0)]
     groups = {key: [s for s in summaries if keep(s)] for key, _, keep in suite.GROUPS}
     lines = suite._targets_lines(summaries, {k: suite.totals(g) for k, g in groups.items()},
                                  {k: suite.prediction_totals(g) for k, g in groups.items()})
