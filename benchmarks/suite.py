@@ -1332,6 +1332,8 @@ def markdown(summaries: list[dict], totals_by: dict, preds: dict, *, command: st
         + (", ".join(earlier) + (" were" if len(earlier) > 1 else " was") + " held out in "
            "earlier rounds and looked at since, so reported as tuning clouds." if earlier else
            "none of them was held out before."), "",
+        "Every earlier held-out set as first evaluated, with the rules of its day: "
+        "[benchmarks/results_held_out.md](../benchmarks/results_held_out.md).", "",
         "## The targets, per group", "",
         *_targets_lines(summaries, totals_by, preds),
         "## Agreement with the truth", "",
