@@ -73,7 +73,10 @@ def test_every_generated_scene_loads():
 # list in the same commit, where the history shows it.
 FIXED_HELD_OUT = ("satellite-ag-cross-noisy", "satellite-ah-slew-noisy",
                   "polyhedron-27m-cross-noisy", "cratered-asteroid-14-lidar-noisy",
-                  "near-slew-clean", "bennu-lidar-clean", "psyche-cross-clean")
+                  "near-slew-clean", "bennu-lidar-clean", "psyche-cross-clean",
+                  "satellite-ai-lidar-noisy", "satellite-aj-cross-noisy",
+                  "polyhedron-33m-slew-noisy", "cratered-asteroid-15-slew-noisy",
+                  "spot-lidar-clean", "hst-slew-clean", "comet-slew-clean")
 
 
 def test_held_out_set_is_the_fixed_one_and_apart_from_every_tuning_cloud():
