@@ -853,7 +853,7 @@ def compare_cloud(cloud: SuiteCloud, args):
                      scheduler=args.scheduler,
                      n_workers=args.workers, resume=args.resume, keep_meshes=True,
                      score_options=SCORE_OPTIONS, title=cloud.name,
-                     timeout_s=args.timeout, strikes=points)
+                     timeout_s=args.timeout, strikes=points, misses=prepared.misses)
     if "compare_s" not in timing:
         timing["compare_s"] = time.perf_counter() - start
         timing["compare_fit_s"] = sum(r.get("process_time_s") or 0.0
@@ -887,10 +887,11 @@ def prediction(record: dict) -> dict | None:
 def predict_runs(records: list[dict], cloud, out_dir: Path, misses=None) -> dict:
     """The truth-free predicted Chamfer (and band) of every successful run of a compare.
 
-    From the run's record when the current estimate made its columns (``predicted_by`` is
-    ``recon.experiments.compare.estimate_version()``); else (a compare older than the columns,
-    or an estimate changed since) from the estimate on the run's kept mesh (``DIR/meshes``),
-    cached in ``DIR/predicted.json`` under the estimate's version.
+    From the run's record when the current estimate made its columns with these missed beams
+    (``predicted_by`` is ``recon.experiments.compare.estimate_version()``, ``predicted_misses``
+    their number); else (a compare older than the columns, an estimate changed since, or one
+    given other missed beams) from the estimate on the run's kept mesh (``DIR/meshes``),
+    cached in ``DIR/predicted.json`` under the estimate's version and the misses' number.
 
     Returns
     -------
@@ -900,15 +901,20 @@ def predict_runs(records: list[dict], cloud, out_dir: Path, misses=None) -> dict
         ``runs``: run key -> ``prediction`` or None.
     """
     from formats.mesh_io import read_mesh
-    from recon.experiments.compare import estimate_version, predicted_columns
+    from recon.experiments.compare import estimate_version, n_misses, predicted_columns
 
-    version = estimate_version()
+    version, n = estimate_version(), n_misses(misses)
+
+    def current(r: dict) -> bool:
+        return r.get("predicted_by") == version and r.get("predicted_misses") == n
+
     cache_path = out_dir / "predicted.json"
     cache = json.loads(cache_path.read_text()) if cache_path.exists() else {}
-    cached = cache.get("runs", {}) if cache.get("version") == version else {}
+    cached = cache.get("runs", {}) if (cache.get("version"), cache.get("misses")) == (
+        version, n) else {}
     runs, fresh = {}, {}
     for r in _ok(records):
-        if r.get("predicted_by") == version:
+        if current(r):
             runs[r["key"]] = prediction(r)
         elif r["key"] in cached:
             runs[r["key"]] = cached[r["key"]]
@@ -919,9 +925,9 @@ def predict_runs(records: list[dict], cloud, out_dir: Path, misses=None) -> dict
         else:
             runs[r["key"]] = None
     if fresh:
-        cache_path.write_text(json.dumps({"version": version, "runs": cached | fresh},
-                                         indent=1) + "\n")
-    from_records = sum(r.get("predicted_by") == version for r in _ok(records))
+        cache_path.write_text(json.dumps({"version": version, "misses": n,
+                                          "runs": cached | fresh}, indent=1) + "\n")
+    from_records = sum(current(r) for r in _ok(records))
     missing = sum(p is None for p in runs.values())
     note = (f"no predicted Chamfer for {missing} of {len(runs)} runs: their records carry "
             "none from this estimate and their meshes are not kept" if missing else "")

@@ -107,19 +107,27 @@ def predicted_columns(vertices: np.ndarray, faces: np.ndarray, strikes: Cloud, m
     -------
     dict
         ``predicted_chamfer_m``, ``predicted_chamfer_low_m``, ``predicted_chamfer_high_m``
-        (metres), ``predicted_fscore`` and ``predicted_by`` (``estimate_version``); when the
-        estimate cannot judge these strikes (e.g. all in one plane), ``predicted_by`` and
-        ``prediction_failed`` (why) only: the run itself stands.
+        (metres), ``predicted_fscore``, ``predicted_by`` (``estimate_version``) and
+        ``predicted_misses`` (how many missed beams the estimate was given: its prediction
+        depends on them); when the estimate cannot judge these strikes (e.g. all in one
+        plane), ``predicted_by``, ``predicted_misses`` and ``prediction_failed`` (why) only:
+        the run itself stands.
     """
     from recon.surfaces.estimate import estimate
 
+    made_by = {"predicted_by": estimate_version(), "predicted_misses": n_misses(misses)}
     try:
         e = estimate((vertices, faces), strikes, misses=misses)
     except (ValueError, RuntimeError) as exc:   # e.g. strikes too flat for their hull
-        return {"predicted_by": estimate_version(), "prediction_failed": f"{exc}"[:200]}
+        return made_by | {"prediction_failed": f"{exc}"[:200]}
     return {"predicted_chamfer_m": e.chamfer_m, "predicted_chamfer_low_m": e.chamfer_low_m,
             "predicted_chamfer_high_m": e.chamfer_high_m, "predicted_fscore": e.fscore,
-            "predicted_by": estimate_version()}
+            **made_by}
+
+
+def n_misses(misses) -> int:
+    """How many missed beams ``misses`` holds (0 for None)."""
+    return 0 if misses is None else len(misses)
 
 
 def flatten(run: Run, result: dict, *, mesh_dir: Path | None, strikes: Cloud | None = None,

@@ -179,9 +179,12 @@ def test_visibility_on_the_front_or_not_and_against_the_best():
 
 def _fake_columns(vertices, faces, strikes, misses=None):
     """A stand-in prediction: the mesh's largest extent over 100, and a band of +-10 %."""
+    from recon.experiments.compare import n_misses
+
     size = float(np.ptp(vertices, axis=0).max()) / 100.0
     return {"predicted_chamfer_m": size, "predicted_chamfer_low_m": 0.9 * size,
-            "predicted_chamfer_high_m": 1.1 * size, "predicted_by": "v2"}
+            "predicted_chamfer_high_m": 1.1 * size, "predicted_by": "v2",
+            "predicted_misses": n_misses(misses)}
 
 
 def test_predict_runs_reads_current_records_and_falls_back_on_kept_meshes(tmp_path,
@@ -202,7 +205,8 @@ def test_predict_runs_reads_current_records_and_falls_back_on_kept_meshes(tmp_pa
     records.append({"key": "failed", "status": "failed"})
     records.append({"key": "given", "status": "ok", "chamfer_m": 1.0,
                     "predicted_chamfer_m": 0.5, "predicted_chamfer_low_m": 0.4,
-                    "predicted_chamfer_high_m": 0.6, "predicted_by": "v2"})
+                    "predicted_chamfer_high_m": 0.6, "predicted_by": "v2",
+                    "predicted_misses": 0})
     monkeypatch.setattr(compare, "estimate_version", lambda: "v2")
     monkeypatch.setattr(compare, "predicted_columns", _fake_columns)
     out = suite.predict_runs(records, None, tmp_path)
@@ -220,6 +224,49 @@ def test_predict_runs_reads_current_records_and_falls_back_on_kept_meshes(tmp_pa
     missing = suite.predict_runs(records, None, tmp_path)
     assert missing["runs"]["k0"] is None and missing["runs"]["given"] is None
     assert "no predicted Chamfer for 4 of 4 runs" in missing["note"]
+
+
+def test_a_prediction_made_with_other_missed_beams_is_made_again(tmp_path, monkeypatch):
+    from formats.mesh_io import write_mesh
+    from recon.experiments import compare
+    from sim import targets
+
+    (tmp_path / "meshes").mkdir()
+    write_mesh(tmp_path / "meshes" / "run.ply", *targets.box([0, 0, 0], [2.0, 2.0, 2.0]))
+    made = {"key": "k", "status": "ok", "chamfer_m": 0.2, "mesh": "meshes/run.ply",
+            "predicted_chamfer_m": 9.0, "predicted_chamfer_low_m": 8.0,
+            "predicted_chamfer_high_m": 10.0, "predicted_by": "v2"}
+    monkeypatch.setattr(compare, "estimate_version", lambda: "v2")
+    monkeypatch.setattr(compare, "predicted_columns", _fake_columns)
+    # Made without the log's missed beams (none given, or a record older than the count) ...
+    for record in ({**made, "predicted_misses": 0}, made):
+        out = suite.predict_runs([record], None, tmp_path,
+                                 misses=[None] * 5)
+        assert out["from_records"] == 0 and out["from_meshes"] == 1
+        assert out["runs"]["k"] == pytest.approx({"chamfer_m": 0.02, "lo_m": 0.018,
+                                                  "hi_m": 0.022})
+        (tmp_path / "predicted.json").unlink()
+    # ... against made with them: read from the record.
+    given = suite.predict_runs([{**made, "predicted_misses": 5}], None, tmp_path,
+                               misses=[None] * 5)
+    assert given["from_records"] == 1 and given["runs"]["k"]["chamfer_m"] == 9.0
+
+
+def test_the_compares_predictions_are_given_the_logs_missed_beams(tmp_path, monkeypatch):
+    """As ``recon compare`` and auto give them: the estimate's proxy is carved by them."""
+    from types import SimpleNamespace
+
+    from recon.experiments import compare
+
+    prepared = SimpleNamespace(misses=object())
+    monkeypatch.setattr(suite, "load_cloud", lambda cloud, args: ("points", "truth", prepared))
+    given = {}
+    monkeypatch.setattr(compare, "compare", lambda *a, **kw: given.update(kw) or
+                        {"records": []})
+    args = suite.parse_args(["--out", str(tmp_path), "--clouds", "asteroid-cross-noisy"])
+    (tmp_path / "asteroid-cross-noisy").mkdir()
+    suite.compare_cloud(suite.CLOUDS["asteroid-cross-noisy"], args)
+    assert given["strikes"] == "points" and given["misses"] is prepared.misses
 
 
 def test_band_width_is_the_median_high_over_low():
@@ -243,6 +290,7 @@ def test_records_carry_the_estimate_of_their_mesh():
     points[np.arange(400), rng.integers(0, 3, 400)] = rng.choice([-1.0, 1.0], 400)
     columns = predicted_columns(vertices, faces, Cloud(points))
     assert columns["predicted_by"] == estimate_version() and len(estimate_version()) == 12
+    assert columns["predicted_misses"] == 0
     assert columns["predicted_chamfer_low_m"] <= columns["predicted_chamfer_m"] \
         <= columns["predicted_chamfer_high_m"]
     far = predicted_columns(vertices * 3.0, faces, Cloud(points))
@@ -280,6 +328,7 @@ def test_quick_suite_on_one_cloud(tmp_path, capsys):
     # Every run's prediction comes from the compare's records; auto's choice has its band.
     assert cloud["predicted"]["note"] == ""
     assert cloud["predicted"]["from_records"] == len(cloud["ranking"]) == 4
+
     band = cloud["auto"]["predicted"]
     assert band["lo_m"] <= band["chamfer_m"] <= band["hi_m"] and band["source"] == "held-out"
     assert cloud["visibility"]["present"] is False    # not among the methods asked for
