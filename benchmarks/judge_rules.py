@@ -37,9 +37,10 @@ seconds instead of a suite run:
   the ``NATURAL`` clouds are told ``target_kind="natural"`` (``--no-prior``: every cloud
   "unknown"): the natural prior, and the completion where auto fits it (``auto.completed``;
   a collection without it replays no completion); ``--statistic``, ``--band``,
-  ``--miss-rate``, ``--holes-first``, ``--holes-one-count``, ``--extra`` and ``--weights area``
-  (each held-out strike weighed by the area it stands for, ``strike_weights``) replay rules
-  that are not auto's;
+  ``--miss-rate``, ``--holes-first``, ``--holes-one-count``, ``--extra``, ``--weights area``
+  (each held-out strike weighed by the area it stands for, ``strike_weights``) and
+  ``--floor-admits`` (which candidates the band's floor lets in stay there,
+  ``floor_admitting``) replay rules that are not auto's;
 - ``evidence``: truth-free evidence beside the held-out statistic, measured on the compare's
   meshes (fitted on all strikes): the beams a candidate cuts or leaves in holes (collected),
   its area beyond the strikes' reach (where no strike constrains it) and its distance to the
@@ -52,6 +53,9 @@ seconds instead of a suite run:
   coverage and width (high / low) for auto's choice in the suite, estimated as ``recon
   reconstruct -m auto`` reports it, with the chosen candidate's held-out residuals
   (``--heldout`` fits auto's ladder once per cloud to collect them, in ``WORK/heldout``).
+
+``collect``, ``misses``, ``openings``, ``rules`` and ``evidence`` read the suite's tuning
+clouds only; ``--held-out`` adds its held-out ones, for after their evaluation.
 """
 
 from __future__ import annotations
@@ -87,13 +91,16 @@ def records(suite: Path, cloud: str) -> list[dict]:
 
 
 # The clouds the rules were tuned on: the suite's tuning clouds (``suite.TUNING``). The held-out
-# ones (``suite.HELD_OUT``) are never read here.
+# ones (``suite.HELD_OUT``) are read only with ``--held-out`` (``clouds_of``), once their
+# evaluation is done and they are looked at.
 TUNING = suite_clouds.TUNING
+HELD_OUT = suite_clouds.HELD_OUT
 
 
 # The clouds whose target a user would state as a natural body (``auto.choose``'s
 # ``target_kind``): the suite's own statement of each cloud (``SuiteCloud.target_kind``).
-NATURAL = tuple(name for name in TUNING if suite_clouds.CLOUDS[name].target_kind == "natural")
+NATURAL = tuple(name for name in suite_clouds.CLOUDS
+                if suite_clouds.CLOUDS[name].target_kind == "natural")
 
 
 def target_of(cloud: str, prior: bool = True) -> str:
@@ -101,15 +108,16 @@ def target_of(cloud: str, prior: bool = True) -> str:
     return "natural" if prior and cloud in NATURAL else "unknown"
 
 
-def clouds_of(suite: Path, names) -> list[str]:
-    """The tuning clouds (``TUNING``) with results in ``suite``, restricted to ``names``."""
-    return [c for c in TUNING if (suite / c / "results.jsonl").exists()
+def clouds_of(suite: Path, names, held_out: bool = False) -> list[str]:
+    """The tuning clouds (``TUNING``; with ``held_out`` also the held-out ones, ``HELD_OUT``)
+    with results in ``suite``, restricted to ``names``."""
+    return [c for c in TUNING + HELD_OUT * held_out if (suite / c / "results.jsonl").exists()
             and (not names or c in names)]
 
 
 def collected(args) -> list[str]:
-    """The tuning clouds of ``clouds_of`` whose folds ``collect`` has kept in ``WORK/folds``."""
-    return [c for c in clouds_of(args.suite, args.clouds)
+    """The clouds of ``clouds_of`` whose folds ``collect`` has kept in ``WORK/folds``."""
+    return [c for c in clouds_of(args.suite, args.clouds, getattr(args, "held_out", False))
             if (args.work / "folds" / f"{c}.json").exists()]
 
 
@@ -156,7 +164,7 @@ def collect(args) -> None:
 
     out = args.work / "folds"
     out.mkdir(parents=True, exist_ok=True)
-    for cloud in clouds_of(args.suite, args.clouds):
+    for cloud in clouds_of(args.suite, args.clouds, getattr(args, "held_out", False)):
         if (out / f"{cloud}.json").exists() and not args.force:
             continue
         rows = records(args.suite, cloud)
@@ -486,6 +494,37 @@ def one_count_hole_limit(holes, n_checked: int) -> float:
     return reference + auto.HOLE_SES * np.sqrt(reference * (1.0 - reference) / max(n_checked, 1))
 
 
+# ``rules --floor-admits``: which of the candidates step 3's floor lets into the band
+# (``auto.band``'s ``floored``: beyond ``auto.BAND_SES`` paired standard errors of the best, their
+# mean squared held-out residual within the floor of the best's) stay in it. ``any``: every one
+# (auto's); ``method``: only those of the best's method (a coarser setting of the same
+# reconstruction, or a carved twin: the resolution the strikes cannot judge), the others leave
+# the band; ``race``: none (the floor keeps runs in the race only; its candidates never win).
+FLOOR_ADMITS = ("any", "method", "race")
+ADMITS = "any"   # rules --floor-admits (the race's share of it: ``method_kept``)
+
+
+def floor_admitting(admits: str):
+    """``auto.band`` with the floor's candidates kept as ``admits`` says (``FLOOR_ADMITS``);
+    the same arguments and returns (the band, those of it the floor let in)."""
+    from recon.surfaces import auto
+
+    if admits not in FLOOR_ADMITS:
+        raise ValueError(f"admits must be one of {FLOOR_ADMITS}, got {admits!r}")
+    band = auto.band
+
+    def admitting(candidates, scored, best, gaps, scale, floor):
+        eligible, floored = band(candidates, scored, best, gaps, scale, floor)
+        if admits == "any":
+            return eligible, floored
+        method = candidates[best].run.method
+        kept = tuple(i for i in floored
+                     if admits == "method" and candidates[i].run.method == method)
+        return tuple(i for i in eligible if i not in floored or i in kept), kept
+
+    return admitting
+
+
 def checked_count(work: Path, suite: Path | None, cloud: str) -> int:
     """The strikes ``auto.choose`` counts ``violated`` and ``holes`` over on ``cloud`` (a
     seeded subsample of ``judge.MAX_CHECKED``), for collections older than ``n_checked`` in
@@ -715,10 +754,26 @@ def race_group(before: list, members: list, first: np.ndarray, block: np.ndarray
 
     pool = before + [c for c in members if not c.carved]
     racing = [False] * len(before) + [c.level >= auto.RACE_LEVEL for c in pool[len(before):]]
-    leaves = auto.outpaced([c.cost[first] if c.scored else None for c in pool], block[first],
-                           racing, [bool(c.closed) for c in pool], ses=ses, scale=scale,
+    partial = [c.cost[first] if c.scored else None for c in pool]
+    closed = [bool(c.closed) for c in pool]
+    leaves = auto.outpaced(partial, block[first], racing, closed, ses=ses, scale=scale,
                            floor=floor)
+    if ADMITS == "method" and floor:
+        leaves = method_kept(pool, partial, leaves, auto.outpaced(
+            partial, block[first], racing, closed, ses=ses, scale=None, floor=0.0))
     return {c.run.key for c, left in zip(pool, leaves, strict=True) if left is not None}
+
+
+def method_kept(pool: list, partial: list, leaves: list, bare: list) -> list:
+    """``race_group`` under ``rules --floor-admits method``: the runs ``leaves`` (with the
+    floor) and ``bare`` (without) take out of ``pool``, where the floor keeps a run only when
+    it is of the method of the stage's best (the lowest mean cost of ``partial``, as
+    ``auto.outpaced`` takes it): the floor admits no other to the band (``floor_admitting``),
+    so the race need not keep it."""
+    means = [float(np.mean(p)) if p is not None else np.inf for p in partial]
+    method = pool[int(np.argmin(means))].run.method
+    return [gone if gone is not None or pool[i].run.method == method else bare[i]
+            for i, gone in enumerate(leaves)]
 
 
 def raced(args, cloud: str, candidates: list, block: np.ndarray, replayed,
@@ -764,13 +819,16 @@ def verdict(rows: list[dict], key: str, extra: list[dict] = ()) -> dict:
 def rules(args) -> None:
     from recon.surfaces import auto
 
-    global OPENING
+    global OPENING, ADMITS
     if args.band is not None:
         auto.BAND_SES = args.band
     if args.holes_one_count:
         auto.hole_limit = one_count_hole_limit
     if args.metric_floor is not None:
         auto.METRIC_FLOOR = args.metric_floor
+    ADMITS = getattr(args, "floor_admits", "any")
+    if ADMITS != "any":
+        auto.band = floor_admitting(ADMITS)
     OPENING = args.opening
     names = collected(args)
     good = median = 0
@@ -1230,6 +1288,9 @@ def main(argv=None) -> int:
     parser.add_argument("--suite", type=Path, required=True, help="a finished suite's --out")
     parser.add_argument("--work", type=Path, required=True, help="where this script writes")
     parser.add_argument("--clouds", nargs="*", help="only these clouds")
+    parser.add_argument("--held-out", action="store_true",
+                        help="read the suite's held-out clouds too (suite.HELD_OUT; default: "
+                        "the tuning clouds only): only once their evaluation is done")
     parser.add_argument("--holdout", type=float, default=0.25,
                         help="collect, openings: auto's held-out share of the strikes, i.e. "
                              "round(1 / holdout) folds (rules reads the folds collected)")
@@ -1273,6 +1334,10 @@ def main(argv=None) -> int:
                         "auto.METRIC_FLOOR; 0: no floor, the band of paired standard errors "
                         "alone, as before the floor; the floor reads the cost as a squared "
                         "residual in sigmas: with another --statistic, pass 0)")
+    parser.add_argument("--floor-admits", choices=FLOOR_ADMITS, default="any",
+                        help="rules: which candidates step 3's floor lets into the band stay "
+                        "there (``floor_admitting``): any (auto's), method (only the best's "
+                        "method) or race (none: the floor keeps runs in the race only)")
     parser.add_argument("--weights", choices=("strikes", "area"), default="strikes",
                         help="rules: weigh each held-out strike's cost by 1 (strikes, auto's) "
                         "or by the area it stands for (area: one over the strikes within the "
