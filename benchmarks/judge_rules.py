@@ -496,12 +496,11 @@ def one_count_hole_limit(holes, n_checked: int) -> float:
 
 # ``rules --floor-admits``: which of the candidates step 3's floor lets into the band
 # (``auto.band``'s ``floored``: beyond ``auto.BAND_SES`` paired standard errors of the best, their
-# mean squared held-out residual within the floor of the best's) stay in it. ``any``: every one
-# (auto's); ``method``: only those of the best's method (a coarser setting of the same
-# reconstruction, or a carved twin: the resolution the strikes cannot judge), the others leave
-# the band; ``race``: none (the floor keeps runs in the race only; its candidates never win).
-FLOOR_ADMITS = ("any", "method", "race")
-ADMITS = "any"   # rules --floor-admits (the race's share of it: ``method_kept``)
+# mean squared held-out residual within the floor of the best's) stay in it. ``method``: those
+# of the best's method (a coarser setting of the same reconstruction, or a carved twin: the
+# resolution the strikes cannot judge; auto's); ``race``: none (the floor keeps runs in the race
+# only; its candidates never win).
+FLOOR_ADMITS = ("method", "race")
 
 
 def floor_admitting(admits: str):
@@ -515,12 +514,9 @@ def floor_admitting(admits: str):
 
     def admitting(candidates, scored, best, gaps, scale, floor):
         eligible, floored = band(candidates, scored, best, gaps, scale, floor)
-        if admits == "any":
+        if admits == "method":
             return eligible, floored
-        method = candidates[best].run.method
-        kept = tuple(i for i in floored
-                     if admits == "method" and candidates[i].run.method == method)
-        return tuple(i for i in eligible if i not in floored or i in kept), kept
+        return tuple(i for i in eligible if i not in floored), ()
 
     return admitting
 
@@ -757,23 +753,8 @@ def race_group(before: list, members: list, first: np.ndarray, block: np.ndarray
     partial = [c.cost[first] if c.scored else None for c in pool]
     closed = [bool(c.closed) for c in pool]
     leaves = auto.outpaced(partial, block[first], racing, closed, ses=ses, scale=scale,
-                           floor=floor)
-    if ADMITS == "method" and floor:
-        leaves = method_kept(pool, partial, leaves, auto.outpaced(
-            partial, block[first], racing, closed, ses=ses, scale=None, floor=0.0))
+                           floor=floor, methods=[c.run.method for c in pool])
     return {c.run.key for c, left in zip(pool, leaves, strict=True) if left is not None}
-
-
-def method_kept(pool: list, partial: list, leaves: list, bare: list) -> list:
-    """``race_group`` under ``rules --floor-admits method``: the runs ``leaves`` (with the
-    floor) and ``bare`` (without) take out of ``pool``, where the floor keeps a run only when
-    it is of the method of the stage's best (the lowest mean cost of ``partial``, as
-    ``auto.outpaced`` takes it): the floor admits no other to the band (``floor_admitting``),
-    so the race need not keep it."""
-    means = [float(np.mean(p)) if p is not None else np.inf for p in partial]
-    method = pool[int(np.argmin(means))].run.method
-    return [gone if gone is not None or pool[i].run.method == method else bare[i]
-            for i, gone in enumerate(leaves)]
 
 
 def raced(args, cloud: str, candidates: list, block: np.ndarray, replayed,
@@ -819,16 +800,15 @@ def verdict(rows: list[dict], key: str, extra: list[dict] = ()) -> dict:
 def rules(args) -> None:
     from recon.surfaces import auto
 
-    global OPENING, ADMITS
+    global OPENING
     if args.band is not None:
         auto.BAND_SES = args.band
     if args.holes_one_count:
         auto.hole_limit = one_count_hole_limit
     if args.metric_floor is not None:
         auto.METRIC_FLOOR = args.metric_floor
-    ADMITS = getattr(args, "floor_admits", "any")
-    if ADMITS != "any":
-        auto.band = floor_admitting(ADMITS)
+    if getattr(args, "floor_admits", "method") != "method":
+        auto.band = floor_admitting(args.floor_admits)
     OPENING = args.opening
     names = collected(args)
     good = median = 0
@@ -1334,10 +1314,10 @@ def main(argv=None) -> int:
                         "auto.METRIC_FLOOR; 0: no floor, the band of paired standard errors "
                         "alone, as before the floor; the floor reads the cost as a squared "
                         "residual in sigmas: with another --statistic, pass 0)")
-    parser.add_argument("--floor-admits", choices=FLOOR_ADMITS, default="any",
+    parser.add_argument("--floor-admits", choices=FLOOR_ADMITS, default="method",
                         help="rules: which candidates step 3's floor lets into the band stay "
-                        "there (``floor_admitting``): any (auto's), method (only the best's "
-                        "method) or race (none: the floor keeps runs in the race only)")
+                        "there (``floor_admitting``): method (those of the best's method, "
+                        "auto's) or race (none: the floor keeps runs in the race only)")
     parser.add_argument("--weights", choices=("strikes", "area"), default="strikes",
                         help="rules: weigh each held-out strike's cost by 1 (strikes, auto's) "
                         "or by the area it stands for (area: one over the strikes within the "

@@ -47,9 +47,10 @@ which beam each strike was taken, its sensor position, and its recorded error mo
    noise lengths below ``METRIC_FLOOR`` tau): there the standard errors shrink with the
    noise, and a finer surface wins by differences far below tau that the truth's scores do not
    weigh; a candidate whose mean squared held-out residual (each strike's cost times its
-   squared sigma) exceeds the best's by at most ``(METRIC_FLOOR tau)^2`` is in the band too.
-   On a log whose three noise lengths reach ``METRIC_FLOOR`` tau the floor is 0 and the band
-   is the standard errors' alone.
+   squared sigma) exceeds the best's by at most ``(METRIC_FLOOR tau)^2`` is in the band too
+   when it is of the best's method (a coarser setting of it, or its carved twin). On a log
+   whose three noise lengths reach ``METRIC_FLOOR`` tau the floor is 0 and the band is the
+   standard errors' alone.
 4. **Strikes the surface leaves in holes** (``hole_test``): a strike with no surface within its
    tolerance (``holes``, closest-point: the beam's angle does not enter) is what a surface at
    the truth leaves only in the noise's tail beyond ``judge.SIGMAS`` sigma (``HOLE_RATE``,
@@ -160,7 +161,13 @@ HOLE_RATE = math.erfc(judge.SIGMAS / math.sqrt(2.0))
 # standard errors; every floor from 0.12 to 0.20 made the same choices on the six, 0.21 let
 # rso-b-cross-clean's `plane cell=2` (0.209 tau, the smaller model) in. The gate: the clean
 # tuning clouds' noise lengths (their local-plane scatter) are 0.0035-0.023 tau, the noisy
-# ones' 0.104 tau and above.
+# ones' 0.104 tau and above. The floor lets in only runs of the best candidate's method (a
+# coarser setting of the same reconstruction, or its carved twin): a difference of resolution
+# the scores do not weigh. Between methods the held-out gaps the floor bridged were real: on
+# two clean clouds held out until then it let `plane cell=2` in 22 and 9 paired standard
+# errors above `visibility`, and the smaller model won (spot under the LIDAR, Chamfer 2.46
+# times the best; the comet under the slew, F 0.48); restricted so, 9 of the 14 clean clouds
+# within both tolerances against 8, and fewer runs kept in the race (docs/decisions.md).
 METRIC_FLOOR = 0.15
 # The candidate ladder, coarse to fine (module docstring). Level 0: models of a few numbers;
 # level 1: coarse smooth and local surfaces; level 2: the defaults, a fine Poisson, the
@@ -767,8 +774,9 @@ class _Race:
         racing = [False] * len(reference) + [self.raced(job) for job in pool]
         shut = [bool(c.closed) for c in reference] + [self._closed(job) for job in pool]
         scale = None if self.context.scale is None else self.context.scale[:m]
+        methods = [c.run.method for c in reference] + [self.run(job).method for job in pool]
         leaves = outpaced(partial, block, racing, shut, ses=ses, scale=scale,
-                          floor=self.context.floor)[len(reference):]
+                          floor=self.context.floor, methods=methods)[len(reference):]
         for job, gap in zip(pool, leaves, strict=True):
             if gap is not None:
                 self.judged[job] = [self._outpaced(job, *gap, ses)]
@@ -1192,11 +1200,12 @@ def _race_note(candidates: list[Candidate]) -> str:
 
 
 def _far(partial: Sequence[np.ndarray | None], block: np.ndarray, among: Sequence[bool],
-         ses: float, scale: np.ndarray | None = None, floor: float = 0.0
-         ) -> list[tuple[float, float] | None]:
+         ses: float, scale: np.ndarray | None = None, floor: float = 0.0,
+         methods: Sequence[str] | None = None) -> list[tuple[float, float] | None]:
     """Per run of ``among`` (``outpaced``), its excess over the lowest mean cost of ``among``
     and the paired standard error of that excess when it exceeds ``ses`` of them and, with a
-    ``floor`` [m^2], its mean squared residual's excess less ``ses`` of its paired standard
+    ``floor`` [m^2] and for a run of the best's method (``methods``: each run's; None: every
+    run's the same), its mean squared residual's excess less ``ses`` of its paired standard
     errors exceeds the floor (``beneath``; ``scale``: each strike's squared sigma [m^2])."""
     means = [float(np.mean(p)) if p is not None and a else np.inf
              for p, a in zip(partial, among, strict=True)]
@@ -1206,8 +1215,9 @@ def _far(partial: Sequence[np.ndarray | None], block: np.ndarray, among: Sequenc
         return out
     for i in np.flatnonzero(np.isfinite(means)):
         gap, se = judge.block_mean_se(partial[i] - partial[best], block)
-        if se > 0.0 and gap > ses * se and not \
-                beneath(partial[i], partial[best], scale, floor, block, ses):
+        kin = methods is None or methods[i] == methods[best]
+        if se > 0.0 and gap > ses * se and not (
+                kin and beneath(partial[i], partial[best], scale, floor, block, ses)):
             out[i] = (gap, se)
     return out
 
@@ -1240,16 +1250,17 @@ def beneath(cost: np.ndarray, reference: np.ndarray, scale: np.ndarray | None,
 
 def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
              racing: Sequence[bool], closed: Sequence[bool], *, ses: float | None = None,
-             scale: np.ndarray | None = None, floor: float = 0.0
-             ) -> list[tuple[float, float] | None]:
+             scale: np.ndarray | None = None, floor: float = 0.0,
+             methods: Sequence[str] | None = None) -> list[tuple[float, float] | None]:
     """A stage of the race (``RACE_STAGES``): which runs leave the choice after the first
     folds.
 
     A raced run leaves when its mean held-out cost exceeds the best run's by more than
-    ``ses`` paired standard errors (and, with step 3's ``floor``, its mean squared residual
-    the best's by more than the floor, by ``ses`` paired standard errors of that excess: it
-    could not be in the band); a closed one only when it also exceeds the best closed run's
-    so (the best closed candidate measures the coverage, ``choose``).
+    ``ses`` paired standard errors (and, with step 3's ``floor``, when it is of the best's
+    method, its mean squared residual the best's by more than the floor, by ``ses`` paired
+    standard errors of that excess: it could not be in the band); a closed one only when it
+    also exceeds the best closed run's so (the best closed candidate measures the coverage,
+    ``choose``).
 
     Parameters
     ----------
@@ -1268,6 +1279,9 @@ def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
         Each strike's squared sigma (``_Context.scale``), with ``floor``.
     floor : float, m^2
         Step 3's floor (``metric_floor``; 0: none).
+    methods : sequence of str, optional
+        Each run's method: the floor keeps only runs of the best's (``band``); None: every
+        run is of one method.
 
     Returns
     -------
@@ -1276,8 +1290,8 @@ def outpaced(partial: Sequence[np.ndarray | None], block: np.ndarray,
         error of that excess; None for the others.
     """
     ses = RACE_STAGES[-1][1] if ses is None else ses
-    every = _far(partial, block, [True] * len(partial), ses, scale, floor)
-    enclosing = _far(partial, block, closed, ses, scale, floor)
+    every = _far(partial, block, [True] * len(partial), ses, scale, floor, methods)
+    enclosing = _far(partial, block, closed, ses, scale, floor, methods)
     return [gap if raced and gap is not None and (not shut or enclosing[i] is not None)
             else None
             for i, (gap, raced, shut) in enumerate(zip(every, racing, closed, strict=True))]
@@ -1318,9 +1332,11 @@ def band(candidates: list[Candidate], scored: list[int], best: int,
     """Step 3 of the module docstring: the ``scored`` candidates in the band of the ``best``
     (``gaps``: ``paired_gaps``), and those of them beyond ``BAND_SES`` paired standard errors
     that the ``floor`` [m^2] lets in (``beneath``; ``scale`` (k,) [m^2], each tested strike's
-    squared sigma)."""
-    floored = tuple(i for i in scored if gaps[i][0] > BAND_SES * gaps[i][1] and beneath(
-        candidates[i].cost, candidates[best].cost, scale, floor))
+    squared sigma): runs of the best's method only (``METRIC_FLOOR``)."""
+    method = candidates[best].run.method
+    floored = tuple(i for i in scored if gaps[i][0] > BAND_SES * gaps[i][1]
+                    and candidates[i].run.method == method
+                    and beneath(candidates[i].cost, candidates[best].cost, scale, floor))
     return tuple(i for i in scored if gaps[i][0] <= BAND_SES * gaps[i][1] or i in floored), \
         floored
 
@@ -1505,10 +1521,10 @@ def _band_reason(candidates: list[Candidate], selection: Selection) -> str:
     b = candidates[selection.best]
     band = f"within {BAND_SES:g} paired standard error(s) of the best"
     if selection.floored:
-        band += (f" or, on a log without range noise, with a mean squared held-out residual at "
-                 f"most ({math.sqrt(selection.floor):.3g} m)^2 above the best's "
-                 f"({METRIC_FLOOR:g} tau: a difference the strikes resolve and the scores do "
-                 f"not weigh)")
+        band += (f" or, on a log without range noise, of the best's method with a mean "
+                 f"squared held-out residual at most ({math.sqrt(selection.floor):.3g} m)^2 "
+                 f"above the best's ({METRIC_FLOOR:g} tau: a difference the strikes resolve "
+                 f"and the scores do not weigh)")
     kept = len(selection.eligible) - len(selection.holed) - len(selection.filled)
     holding = "that hold the strikes " if selection.holed else ""
     if selection.chosen != selection.best:
@@ -1723,8 +1739,9 @@ def format_choice(choice: AutoChoice) -> str:
                          f"{c.n_faces:>8d}")
     folds = choice.folds
     floor = metric_floor(choice.tau_m, choice.noise_m)
-    floored = (f" or a mean squared residual at most ({math.sqrt(floor):.3g} m)^2 above its "
-               f"({METRIC_FLOOR:g} tau, a log without range noise)") if floor else ""
+    floored = (f" or, of its method, a mean squared residual at most ({math.sqrt(floor):.3g} "
+               f"m)^2 above its ({METRIC_FLOOR:g} tau, a log without range noise)") if floor \
+        else ""
     lines.append(f"(chi2: held-out chi-square per strike over {folds.k} folds, "
                  f"{folds.n_blocks} blocks of {folds.block_shots} shots, "
                  f"{int(folds.tested.sum())} strikes tested; +-se: its block standard error; "

@@ -104,3 +104,38 @@ def test_a_candidate_the_floor_lets_in_is_no_reference_of_the_hole_test():
     candidates[1].holes = 0.02   # beyond the band's fewest: the grid drops out
     assert select(candidates, BLOCK, 15_000, scale=scale,
                   floor=metric_floor(0.1, 0.001)).holed == (1,)
+
+
+def _of_method(method, candidate):
+    """``candidate`` as a run of ``method`` (its figures unchanged)."""
+    run = candidate.run
+    candidate.run = type(run)(method, run.params, run.module, run.kind, run.label)
+    return candidate
+
+
+def test_the_floor_admits_only_the_bests_method():
+    # spot under the LIDAR without noise: a coarse local-plane grid 22 paired standard errors
+    # above the visibility cut, within the floor's squared residual, won as the smaller model
+    # (Chamfer 2.46 times the best). Of another method it stays out; a coarser setting of the
+    # best's method is let in as before.
+    scale = np.full(len(BLOCK), 0.001**2)
+    floor = metric_floor(0.1, 0.001)
+    candidates = [_of_method("visibility", _candidate("cut", 1.0, 50_000)),
+                  _of_method("plane", _candidate("grid", 1.2, 30_000))]
+    selection = select(candidates, BLOCK, 20_000, scale=scale, floor=floor)
+    assert selection.floored == () and candidates[selection.chosen].label == "cut"
+    _of_method("visibility", candidates[1])
+    selection = select(candidates, BLOCK, 20_000, scale=scale, floor=floor)
+    assert selection.floored == (1,) and candidates[selection.chosen].label == "grid"
+
+
+def test_the_race_keeps_within_the_floor_only_the_bests_method():
+    from recon.surfaces.auto import outpaced
+
+    scale = np.full(len(BLOCK), 0.001**2)
+    candidates = [_candidate("fine", 1.0, 100_000), _candidate("coarse", 1.2, 5_000),
+                  _candidate("other", 1.2, 5_000)]
+    args = ([c.cost for c in candidates], BLOCK, [True] * 3, [True] * 3)
+    kept = outpaced(*args, ses=6.0, scale=scale, floor=metric_floor(0.1, 0.001),
+                    methods=["poisson", "poisson", "plane"])
+    assert [gap is not None for gap in kept] == [False, False, True]
