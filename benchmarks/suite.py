@@ -1090,6 +1090,19 @@ def run_cloud(cloud: SuiteCloud, args) -> dict:
                          "n_params": r.get("n_params")} for r in _ok(records)]}
 
 
+def family(cloud: SuiteCloud) -> str:
+    """The kind of target a cloud images, for charts: the generated satellites, polyhedra and
+    cratered asteroids, the natural bodies' shape models (and the paper's ellipsoid), the
+    spacecraft and part models (and the paper's RSOs)."""
+    kind = dict(o.split("=", 1) for o in cloud.overrides if "=" in o).get("target.kind")
+    generated = {"satellite": "generated satellites", "polyhedron": "generated polyhedra",
+                 "cratered-asteroid": "generated cratered asteroids"}
+    if kind in generated:
+        return generated[kind]
+    return ("asteroids and comet (shape models, the ellipsoid)"
+            if cloud.target_kind == "natural" else "spacecraft and parts (models, the RSOs)")
+
+
 def candidate_labels(cloud: SuiteCloud) -> set[str]:
     """The labels of the runs ``-m auto`` fits on ``cloud`` (its ladder; on a natural target
     also the completion), as the compare labels them."""
@@ -1559,7 +1572,8 @@ def write_report(summaries: list[dict], args: argparse.Namespace) -> dict:
     if preds["all"]["n_runs"]:
         made.append(charts.predicted_vs_true(summaries, args.out / "auto-suite-estimate.png",
                                              title="Truth-free predicted Chamfer against the "
-                                                   "truth"))
+                                                   "truth",
+                                             group=lambda s: family(CLOUDS[s["cloud"]])))
     if args.doc is not None:
         figures = args.doc.parent / "figures"
         figures.mkdir(parents=True, exist_ok=True)

@@ -9,7 +9,7 @@ Log axes carry plain-number tick labels (20, not 2 x 10^1).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -971,7 +971,8 @@ def _ranking_axis(ax, lower: bool) -> None:
 LEGEND_ROWS = 40
 
 
-def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path:
+def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str,
+                      group: Callable[[Mapping], str] | None = None) -> Path:
     """Truth-free predicted Chamfer distance against the true one, every run of every cloud
     (log-log, the line of equality dashed); auto's choices drawn with their predicted band.
 
@@ -981,32 +982,43 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str) -> Path
         ``cloud``, ``held_out``, ``predicted`` (``runs``: ``truth_m``, ``predicted_m``) and
         ``auto`` (``chamfer_m``, ``predicted``: ``chamfer_m``, ``lo_m``, ``hi_m``), as
         ``benchmarks/suite.py`` makes.
+    group : callable, optional
+        A summary's group (e.g. the kind of target): a colour and a legend entry per group,
+        the held-out clouds apart. Default: one per cloud, each named.
     """
     plt = _pyplot()
-    # a legend column per LEGEND_ROWS clouds, each beside the axes, so that every cloud is named
-    ncol = max(1, -(-len(summaries) // LEGEND_ROWS))
+    name = group or (lambda s: s["cloud"])
+    entries = list(dict.fromkeys(name(s) + (" (held out)" if s.get("held_out") else "")
+                                 for s in summaries))
+    # a legend column per LEGEND_ROWS entries, each beside the axes, so that every one is named
+    ncol = max(1, -(-len(entries) // LEGEND_ROWS))
     fig, ax = plt.subplots(figsize=(9.4 + 2.6 * ncol, 7.5), constrained_layout=True)
-    palette = [*plt.get_cmap("tab20").colors, *plt.get_cmap("tab20b").colors]
+    # a few groups: distinct hues (tab20 pairs a hue with its pale twin)
+    palette = list(plt.get_cmap("tab10").colors) if group else \
+        [*plt.get_cmap("tab20").colors, *plt.get_cmap("tab20b").colors]
+    groups = list(dict.fromkeys(name(s) for s in summaries))
 
-    def colours(i):
-        return palette[i % len(palette)]
-    values = []
-    for i, s in enumerate(summaries):
+    def colours(s):
+        return palette[groups.index(name(s)) % len(palette)]
+    values, named = [], set()
+    for s in summaries:
         runs = s["predicted"]["runs"]
         if not runs:
             continue
         truth = np.array([r["truth_m"] for r in runs])
         pred = np.array([r["predicted_m"] for r in runs])
         values += [truth, pred]
-        ax.scatter(truth, pred, s=12, color=colours(i), alpha=0.6,
+        entry = name(s) + (" (held out)" if s.get("held_out") else "")
+        ax.scatter(truth, pred, s=12, color=colours(s), alpha=0.6,
                    marker="^" if s.get("held_out") else "o",
-                   label=s["cloud"] + (" (held out)" if s.get("held_out") else ""))
+                   label=None if entry in named else entry)
+        named.add(entry)
         a = s["auto"]
         if a.get("predicted") and a.get("chamfer_m") is not None:
             p = a["predicted"]
             ax.errorbar([a["chamfer_m"]], [p["chamfer_m"]],
                         yerr=[[p["chamfer_m"] - p["lo_m"]], [p["hi_m"] - p["chamfer_m"]]],
-                        fmt="*", ms=13, color=colours(i), mec="black", mew=0.6,
+                        fmt="*", ms=13, color=colours(s), mec="black", mew=0.6,
                         ecolor="black", elinewidth=0.8, capsize=3, zorder=4)
     if values:
         both = np.concatenate(values)

@@ -449,3 +449,13 @@ def test_the_reports_command_names_a_subset_of_clouds_but_not_all_of_them():
     some = suite.parse_args(["--clouds", "asteroid-cross-noisy", "rso-a-cross-noisy"])
     assert suite._command(some) == ("python benchmarks/suite.py --clouds asteroid-cross-noisy "
                                     "rso-a-cross-noisy")
+
+
+def test_each_cloud_has_its_family_for_the_charts():
+    family = {name: suite.family(c) for name, c in suite.CLOUDS.items()}
+    assert family["satellite-a-cross-noisy"] == "generated satellites"
+    assert family["polyhedron-27m-cross-noisy"] == "generated polyhedra"
+    assert family["cratered-asteroid-cross-noisy"] == "generated cratered asteroids"
+    assert family["itokawa-cross-noisy"] == family["asteroid-slew-clean"]
+    assert family["hst-cross-noisy"] == family["rso-a-cross-noisy"] != family["itokawa-cross-noisy"]
+    assert len(set(family.values())) == 5

@@ -133,3 +133,23 @@ def test_choice_vs_ranking_labels_each_mark_once(tmp_path, monkeypatch):
         assert len(labels) == len(set(labels)) == 5, labels
         assert "auto's choice" in labels    # labelled though the first cloud has none
     charts._pyplot().close(drawn[0])
+
+
+def test_predicted_vs_true_names_each_group_once(tmp_path, monkeypatch):
+    drawn = []
+    monkeypatch.setattr(charts, "_save", lambda fig, path: drawn.append(fig))
+    runs = [{"truth_m": t, "predicted_m": 1.2 * t} for t in (0.1, 0.2, 0.4)]
+    auto = {"chamfer_m": 0.1, "predicted": {"chamfer_m": 0.12, "lo_m": 0.05, "hi_m": 0.3}}
+    summaries = [{"cloud": f"{kind}-{i}", "held_out": i == 2, "predicted": {"runs": runs},
+                  "auto": auto} for kind in ("sat", "poly") for i in range(3)]
+    charts.predicted_vs_true(summaries, tmp_path / "p.png", title="estimate",
+                             group=lambda s: s["cloud"].split("-")[0])
+    (ax,) = drawn[0].axes
+    handles, labels = ax.get_legend_handles_labels()
+    assert labels == ["sat", "sat (held out)", "poly", "poly (held out)", "predicted = true"]
+    colour = [to_rgba(h.get_facecolor()[0]) for h in handles[:4]]
+    assert colour[0] == colour[1] != colour[2] == colour[3]   # a hue a group
+    charts._pyplot().close(drawn[0])
+    charts.predicted_vs_true(summaries, tmp_path / "p.png", title="estimate")
+    assert len(drawn[1].axes[0].get_legend_handles_labels()[1]) == 7   # a cloud each
+    charts._pyplot().close(drawn[1])
