@@ -511,14 +511,14 @@ def floor_admitting(admits: str):
     if admits not in FLOOR_ADMITS:
         raise ValueError(f"admits must be one of {FLOOR_ADMITS}, got {admits!r}")
     band = auto.band
+    if admits == "method":
+        return band
 
-    def admitting(candidates, scored, best, gaps, scale, floor):
+    def unfloored(candidates, scored, best, gaps, scale, floor):
         eligible, floored = band(candidates, scored, best, gaps, scale, floor)
-        if admits == "method":
-            return eligible, floored
         return tuple(i for i in eligible if i not in floored), ()
 
-    return admitting
+    return unfloored
 
 
 def checked_count(work: Path, suite: Path | None, cloud: str) -> int:
@@ -807,8 +807,7 @@ def rules(args) -> None:
         auto.hole_limit = one_count_hole_limit
     if args.metric_floor is not None:
         auto.METRIC_FLOOR = args.metric_floor
-    if getattr(args, "floor_admits", "method") != "method":
-        auto.band = floor_admitting(args.floor_admits)
+    auto.band = floor_admitting(getattr(args, "floor_admits", "method"))
     OPENING = args.opening
     names = collected(args)
     good = median = 0

@@ -988,8 +988,10 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str,
     """
     plt = _pyplot()
     name = group or (lambda s: s["cloud"])
-    entries = list(dict.fromkeys(name(s) + (" (held out)" if s.get("held_out") else "")
-                                 for s in summaries))
+
+    def entry(s):
+        return name(s) + (" (held out)" if s.get("held_out") else "")
+    entries = list(dict.fromkeys(map(entry, summaries)))
     # a legend column per LEGEND_ROWS entries, each beside the axes, so that every one is named
     ncol = max(1, -(-len(entries) // LEGEND_ROWS))
     fig, ax = plt.subplots(figsize=(9.4 + 2.6 * ncol, 7.5), constrained_layout=True)
@@ -1008,11 +1010,10 @@ def predicted_vs_true(summaries: Sequence[Mapping], path, *, title: str,
         truth = np.array([r["truth_m"] for r in runs])
         pred = np.array([r["predicted_m"] for r in runs])
         values += [truth, pred]
-        entry = name(s) + (" (held out)" if s.get("held_out") else "")
         ax.scatter(truth, pred, s=12, color=colours(s), alpha=0.6,
                    marker="^" if s.get("held_out") else "o",
-                   label=None if entry in named else entry)
-        named.add(entry)
+                   label=None if entry(s) in named else entry(s))
+        named.add(entry(s))
         a = s["auto"]
         if a.get("predicted") and a.get("chamfer_m") is not None:
             p = a["predicted"]
