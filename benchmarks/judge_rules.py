@@ -1286,7 +1286,7 @@ def main(argv=None) -> int:
                         help="estimate: only the runs named by --labels")
     parser.add_argument("--labels", nargs="*", default=[
         "ellipsoid", "planes", "convex-hull", "poisson depth=6", "plane cell=2", "plane",
-        "poisson depth=9", "visibility", "rimls", "ball-pivoting", *EXTRA, "delaunay-balls",
+        "poisson", "visibility", "rimls", "ball-pivoting", *EXTRA, "delaunay-balls",
         "screened-poisson"], help="estimate: the runs --per-cloud estimates")
     parser.add_argument("--statistic", choices=tuple(STATISTICS), default="chi2",
                         help="rules: the held-out statistic replayed (default: auto's)")
