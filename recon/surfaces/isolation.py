@@ -88,8 +88,10 @@ WORKER_RUNS = 50
 # Runs before a worker's last at which its replacement is started, so that the replacement has
 # imported its modules (3 to 8 s) by the time the worker ends instead of delaying the next run.
 WARM_AHEAD = 3
-# Modules a worker imports before its first job (the methods' and scoring's heavy imports).
-WORKER_PRELOAD = ("numpy", "scipy.spatial", "open3d", "pymeshlab", "metrics.score")
+# Modules a worker imports before its first job (the methods' and scoring's heavy imports; the
+# minimum cut's compiled kernels, loaded from numba's cache).
+WORKER_PRELOAD = ("numpy", "scipy.spatial", "open3d", "pymeshlab", "metrics.score",
+                  "recon.surfaces.methods._min_cut")
 # Modules a fit worker never uses that a preloaded one imports: Open3D's plotly drawing, which
 # imports dash, plotly, IPython and werkzeug (half of Open3D's import time, a third of a
 # worker's start-up CPU; docs/decisions.md). A worker gets stand-ins (``leave_out_unused``), and

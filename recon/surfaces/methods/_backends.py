@@ -80,7 +80,8 @@ def boundary_faces(points: np.ndarray, simplices: np.ndarray, neighbors: np.ndar
 def source_side(n_nodes: int, rows: np.ndarray, cols: np.ndarray, capacity: np.ndarray,
                 source: int, sink: int) -> np.ndarray:
     """The nodes on the source side of a minimum ``source``-``sink`` cut of a directed graph:
-    scipy's Dinic maximum flow, then a breadth-first search of the residual graph.
+    the nodes the source reaches in the residual graph of a maximum flow (the smallest such
+    side), by Boykov-Kolmogorov (``_min_cut``).
 
     Parameters
     ----------
@@ -88,7 +89,7 @@ def source_side(n_nodes: int, rows: np.ndarray, cols: np.ndarray, capacity: np.n
     rows, cols : (e,) int
         Edges ``rows[i] -> cols[i]`` (repeats add up).
     capacity : (e,) int
-        Their capacities (integers: scipy's maximum flow takes int32; larger sums are capped).
+        Their capacities (integers; a pair's summed capacity is capped at the int32 maximum).
     source, sink : int
 
     Returns
@@ -96,22 +97,14 @@ def source_side(n_nodes: int, rows: np.ndarray, cols: np.ndarray, capacity: np.n
     (n_nodes,) bool
     """
     from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
-    # maximum_flow needs every reverse edge present (zero capacity is fine) and int32 data.
-    graph = coo_matrix((np.concatenate([capacity, np.zeros_like(capacity)]).astype(np.int64),
-                        (np.concatenate([rows, cols]), np.concatenate([cols, rows]))),
+    from recon.surfaces.methods import _min_cut
+
+    graph = coo_matrix((np.asarray(capacity, dtype=np.int64), (rows, cols)),
                        shape=(n_nodes, n_nodes)).tocsr()
     graph.sum_duplicates()
-    graph.data = np.minimum(graph.data, np.iinfo(np.int32).max).astype(np.int32)
-    flow = maximum_flow(graph, source, sink, method="dinic").flow
-    residual = (graph - flow).tocsr()
-    residual.data = (residual.data > 0).astype(np.int32)
-    residual.eliminate_zeros()
-    reached = breadth_first_order(residual, source, directed=True, return_predecessors=False)
-    side = np.zeros(n_nodes, dtype=bool)
-    side[reached] = True
-    return side
+    np.minimum(graph.data, np.iinfo(np.int32).max, out=graph.data)
+    return _min_cut.source_side(n_nodes, graph.indptr, graph.indices, graph.data, source, sink)
 
 
 def open3d_cloud(cloud: MethodInput):
