@@ -9,14 +9,14 @@ and the growth goes on. On the graphs of a Delaunay tetrahedralisation cut by se
 being searched anew level by level (Dinic), which is what makes it fast there.
 
 The side returned is the set of nodes the source reaches in the residual graph of the maximum
-flow (a breadth-first search of the residual arcs once the flow is maximal): the smallest
+flow (a search along the residual arcs once the flow is maximal): the smallest
 source side of any minimum cut, the same for every maximum flow, so it does not depend on which
 maximum flow the trees found: the cut scipy's Dinic maximum flow and a breadth-first search of
 its residual graph give, which this replaced (tests/recon/surfaces/test_min_cut.py checks the
 two agree). On the visibility graph of castalia-cross-clean (7,740 noise-free strikes along a
-cross's lines, 323,786 Delaunay cells, 1.3 million arcs) Dinic took 12.3 s and this 2.9 s; on a
-noisy satellite's (satellite W, 17,495 cells on the source side) 0.14 s and 0.10 s
-(benchmarks/bench_min_cut.py, docs/decisions.md).
+cross's lines, 323,786 Delaunay cells, 1.3 million arcs) Dinic took 10.5 s and this 2.5 s; on a
+noisy satellite's (satellite W, 35,607 cells) 0.12 s and 0.09 s (benchmarks/bench_min_cut.py,
+docs/decisions.md).
 
 The kernels are compiled for their one signature when this module is imported, from numba's
 cache after the first time (``cache=True``: about 0.4 s to load, 0.2 s more for numba's own
@@ -28,7 +28,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-_NONE, _TERMINAL, _ORPHAN = -1, -2, -3
+# The kernels' graph: arcs grouped by tail (``first[i]:first[i + 1]`` leave node i), each with
+# its ``head``, its ``residual`` capacity and its ``sister`` (the reverse arc); a node's
+# ``terminal`` capacity is its residual capacity from the source (> 0) or, negated, to the sink
+# (< 0). A node's ``parent`` is the arc from it to its parent in its tree, or one of these:
+_NONE, _TERMINAL, _ORPHAN = -1, -2, -3     # free; a root (a terminal arc); lost its parent
 _INFINITE_DISTANCE = 1 << 60
 
 
@@ -59,126 +63,139 @@ def source_side(n_nodes: int, indptr: np.ndarray, indices: np.ndarray, capacity:
 
 @njit(cache=True)
 def _grow_and_augment(n, first, head, residual, sister, terminal):  # pragma: no cover
+    """Push a maximum flow: ``residual`` and ``terminal`` are left as its residual graph."""
     parent = np.full(n, _NONE, np.int64)
-    in_sink = np.zeros(n, np.bool_)
+    in_sink = terminal < 0
     stamp = np.zeros(n, np.int64)
     distance = np.zeros(n, np.int64)
     active = np.zeros(n, np.bool_)
     queue = np.empty(n + 1, np.int64)          # a ring of the active nodes
     q_head, q_tail = 0, 0
     orphans = np.empty(n, np.int64)            # a stack (each node an orphan once at a time)
-    n_orphans = 0
-    for i in range(n):
-        if terminal[i] != 0:
-            in_sink[i] = terminal[i] < 0
-            parent[i] = _TERMINAL
-            distance[i] = 1
-            active[i] = True
-            queue[q_tail] = i
-            q_tail = (q_tail + 1) % (n + 1)
+    for i in np.flatnonzero(terminal != 0):
+        parent[i] = _TERMINAL
+        distance[i] = 1
+        q_tail = _activate(i, active, queue, q_tail)
     time = 0
     current = -1
     while True:
         i = -1
-        if current >= 0:
+        if current >= 0:                       # the node a path was found from: grow it again
             active[current] = False
             if parent[current] != _NONE:
                 i = current
             current = -1
-        while i < 0 and q_head != q_tail:
-            j = queue[q_head]
-            q_head = (q_head + 1) % (n + 1)
-            active[j] = False
-            if parent[j] != _NONE:
-                i = j
         if i < 0:
-            break
-        # grow the tree of i by its free neighbours; an arc into the other tree is a path
-        middle = -1
-        for a in range(first[i], first[i + 1]):
-            j = head[a]
-            if in_sink[i]:
-                if residual[sister[a]] <= 0:
-                    continue
-            elif residual[a] <= 0:
-                continue
-            if parent[j] == _NONE:
-                in_sink[j] = in_sink[i]
-                parent[j] = sister[a]
-                stamp[j] = stamp[i]
-                distance[j] = distance[i] + 1
-                if not active[j]:
-                    active[j] = True
-                    queue[q_tail] = j
-                    q_tail = (q_tail + 1) % (n + 1)
-            elif in_sink[j] != in_sink[i]:
-                middle = sister[a] if in_sink[i] else a
-                break
-            elif stamp[j] <= stamp[i] and distance[j] > distance[i]:
-                parent[j] = sister[a]
-                stamp[j] = stamp[i]
-                distance[j] = distance[i] + 1
+            i, q_head = _next_active(active, parent, queue, q_head, q_tail)
+        if i < 0:
+            return
+        middle, q_tail = _grow(i, first, head, residual, sister, parent, in_sink, stamp,
+                               distance, active, queue, q_tail)
         time += 1
         if middle < 0:
             continue
-        active[i] = True                       # grown from again next (``current``)
+        active[i] = True
         current = i
-        n_orphans = _augment(middle, head, residual, sister, terminal, parent, orphans,
-                             n_orphans)
+        n_orphans = _augment(middle, head, residual, sister, terminal, parent, orphans)
         while n_orphans > 0:
             n_orphans -= 1
             o = orphans[n_orphans]
-            n_orphans, q_tail = _adopt(o, in_sink[o], first, head, residual, sister, parent,
-                                       in_sink, stamp, distance, time, active, queue, q_tail,
-                                       orphans, n_orphans)
+            best, d = _nearest_root(o, in_sink[o], first, head, residual, sister, parent,
+                                    in_sink, stamp, distance, time)
+            if best >= 0:
+                parent[o], stamp[o], distance[o] = best, time, d + 1
+            else:
+                n_orphans, q_tail = _free(o, in_sink[o], first, head, residual, sister,
+                                          parent, in_sink, active, queue, q_tail, orphans,
+                                          n_orphans)
 
 
 @njit(cache=True)
-def _augment(middle, head, residual, sister, terminal, parent, orphans,
-             n_orphans):  # pragma: no cover
-    # the bottleneck: the source tree's path, the middle arc, the sink tree's path
-    bottleneck = residual[middle]
-    i = head[sister[middle]]
-    while parent[i] != _TERMINAL:
-        a = parent[i]
-        bottleneck = min(bottleneck, residual[sister[a]])
-        i = head[a]
-    bottleneck = min(bottleneck, terminal[i])
-    i = head[middle]
-    while parent[i] != _TERMINAL:
-        a = parent[i]
-        bottleneck = min(bottleneck, residual[a])
-        i = head[a]
-    bottleneck = min(bottleneck, -terminal[i])
-    # push it; the nodes whose parent arc saturates become orphans
+def _activate(j, active, queue, q_tail):  # pragma: no cover
+    """Put node ``j`` at the end of the active ring unless it is in it; returns the tail."""
+    if not active[j]:
+        active[j] = True
+        queue[q_tail] = j
+        q_tail = (q_tail + 1) % len(queue)
+    return q_tail
+
+
+@njit(cache=True)
+def _next_active(active, parent, queue, q_head, q_tail):  # pragma: no cover
+    """The first active node still in a tree (-1: none left), and the ring's new head."""
+    while q_head != q_tail:
+        j = queue[q_head]
+        q_head = (q_head + 1) % len(queue)
+        active[j] = False
+        if parent[j] != _NONE:
+            return j, q_head
+    return -1, q_head
+
+
+@njit(cache=True)
+def _grow(i, first, head, residual, sister, parent, in_sink, stamp, distance, active, queue,
+          q_tail):  # pragma: no cover
+    """Grow node ``i``'s tree by its free neighbours along open arcs; the first open arc into
+    the other tree, oriented source tree to sink tree, is returned (-1: none), with the ring's
+    tail."""
+    for a in range(first[i], first[i + 1]):
+        if residual[sister[a] if in_sink[i] else a] <= 0:
+            continue
+        j = head[a]
+        if parent[j] == _NONE:
+            in_sink[j] = in_sink[i]
+            parent[j], stamp[j], distance[j] = sister[a], stamp[i], distance[i] + 1
+            q_tail = _activate(j, active, queue, q_tail)
+        elif in_sink[j] != in_sink[i]:
+            return (sister[a] if in_sink[i] else a), q_tail
+        elif stamp[j] <= stamp[i] and distance[j] > distance[i]:   # a shorter way to the root
+            parent[j], stamp[j], distance[j] = sister[a], stamp[i], distance[i] + 1
+    return -1, q_tail
+
+
+@njit(cache=True)
+def _augment(middle, head, residual, sister, terminal, parent, orphans):  # pragma: no cover
+    """Push the bottleneck along the path through arc ``middle`` (source tree to sink tree);
+    the nodes whose parent arc saturates go on the ``orphans`` stack. Returns its size."""
+    source_end, sink_end = head[sister[middle]], head[middle]
+    bottleneck = min(residual[middle],
+                     _bottleneck(source_end, head, residual, sister, terminal, parent, False),
+                     _bottleneck(sink_end, head, residual, sister, terminal, parent, True))
     residual[sister[middle]] += bottleneck
     residual[middle] -= bottleneck
-    i = head[sister[middle]]
+    n_orphans = _push(source_end, bottleneck, head, residual, sister, terminal, parent, False,
+                      orphans, 0)
+    return _push(sink_end, bottleneck, head, residual, sister, terminal, parent, True, orphans,
+                 n_orphans)
+
+
+@njit(cache=True)
+def _bottleneck(i, head, residual, sister, terminal, parent, sink_tree):  # pragma: no cover
+    """The least residual capacity from node ``i`` to its tree's root and terminal."""
+    least = _INFINITE_DISTANCE
     while parent[i] != _TERMINAL:
         a = parent[i]
-        residual[a] += bottleneck
-        residual[sister[a]] -= bottleneck
-        if residual[sister[a]] == 0:
+        least = min(least, residual[a] if sink_tree else residual[sister[a]])
+        i = head[a]
+    return min(least, -terminal[i] if sink_tree else terminal[i])
+
+
+@njit(cache=True)
+def _push(i, amount, head, residual, sister, terminal, parent, sink_tree, orphans,
+          n_orphans):  # pragma: no cover
+    """Push ``amount`` between node ``i`` and its tree's terminal; the nodes whose parent arc
+    (or terminal arc) saturates become orphans. Returns the orphans' stack size."""
+    while parent[i] != _TERMINAL:
+        a = parent[i]
+        down, up = (sister[a], a) if sink_tree else (a, sister[a])   # up: along the flow
+        residual[down] += amount
+        residual[up] -= amount
+        if residual[up] == 0:
             parent[i] = _ORPHAN
             orphans[n_orphans] = i
             n_orphans += 1
         i = head[a]
-    terminal[i] -= bottleneck
-    if terminal[i] == 0:
-        parent[i] = _ORPHAN
-        orphans[n_orphans] = i
-        n_orphans += 1
-    i = head[middle]
-    while parent[i] != _TERMINAL:
-        a = parent[i]
-        residual[sister[a]] += bottleneck
-        residual[a] -= bottleneck
-        if residual[a] == 0:
-            parent[i] = _ORPHAN
-            orphans[n_orphans] = i
-            n_orphans += 1
-        i = head[a]
-    terminal[i] += bottleneck
+    terminal[i] += amount if sink_tree else -amount
     if terminal[i] == 0:
         parent[i] = _ORPHAN
         orphans[n_orphans] = i
@@ -187,56 +204,62 @@ def _augment(middle, head, residual, sister, terminal, parent, orphans,
 
 
 @njit(cache=True)
-def _adopt(i, sink_tree, first, head, residual, sister, parent, in_sink, stamp, distance,
-           time, active, queue, q_tail, orphans, n_orphans):  # pragma: no cover
-    n = len(parent)
+def _nearest_root(i, sink_tree, first, head, residual, sister, parent, in_sink, stamp, distance,
+                  time):  # pragma: no cover
+    """The open arc from orphan ``i`` to the neighbour in its tree nearest a root by a path
+    with no orphan on it (-1: none), and that neighbour's distance; the nodes on the paths
+    checked are stamped with ``time`` and their distance."""
     best, best_distance = -1, _INFINITE_DISTANCE
     for a0 in range(first[i], first[i + 1]):
-        open_ = residual[a0] > 0 if sink_tree else residual[sister[a0]] > 0
         j = head[a0]
-        if not open_ or in_sink[j] != sink_tree or parent[j] == _NONE:
+        if residual[a0 if sink_tree else sister[a0]] <= 0 or in_sink[j] != sink_tree or \
+                parent[j] == _NONE:
             continue
-        # does j's path lead to the terminal (not through an orphan)? how far?
-        d = 0
+        d = _root_distance(j, head, parent, stamp, distance, time)
+        if d >= _INFINITE_DISTANCE:
+            continue
+        if d < best_distance:
+            best, best_distance = a0, d
         k = j
-        while True:
-            if stamp[k] == time:
-                d += distance[k]
-                break
-            a = parent[k]
-            d += 1
-            if a == _TERMINAL:
-                stamp[k] = time
-                distance[k] = 1
-                break
-            if a == _ORPHAN:
-                d = _INFINITE_DISTANCE
-                break
-            k = head[a]
-        if d < _INFINITE_DISTANCE:
-            if d < best_distance:
-                best, best_distance = a0, d
-            k = j
-            while stamp[k] != time:
-                stamp[k] = time
-                distance[k] = d
-                d -= 1
-                k = head[parent[k]]
-    if best >= 0:
-        parent[i] = best
-        stamp[i] = time
-        distance[i] = best_distance + 1
-        return n_orphans, q_tail
+        while stamp[k] != time:
+            stamp[k], distance[k] = time, d
+            d -= 1
+            k = head[parent[k]]
+    return best, best_distance
+
+
+@njit(cache=True)
+def _root_distance(j, head, parent, stamp, distance, time):  # pragma: no cover
+    """Steps from node ``j`` up to a root (or to a node stamped ``time``, plus its distance);
+    ``_INFINITE_DISTANCE`` when the path meets an orphan."""
+    d = 0
+    k = j
+    while True:
+        if stamp[k] == time:
+            return d + distance[k]
+        a = parent[k]
+        d += 1
+        if a == _TERMINAL:
+            stamp[k], distance[k] = time, 1
+            return d
+        if a == _ORPHAN:
+            return _INFINITE_DISTANCE
+        k = head[a]
+
+
+@njit(cache=True)
+def _free(i, sink_tree, first, head, residual, sister, parent, in_sink, active, queue, q_tail,
+          orphans, n_orphans):  # pragma: no cover
+    """Orphan ``i`` found no parent: it leaves its tree; its children become orphans and its
+    tree's neighbours with an open arc to it active. Returns the orphans' stack size and the
+    ring's tail."""
     parent[i] = _NONE
     for a0 in range(first[i], first[i + 1]):
         j = head[a0]
         if in_sink[j] != sink_tree or parent[j] == _NONE:
             continue
-        open_ = residual[a0] > 0 if sink_tree else residual[sister[a0]] > 0
-        if open_ and not active[j]:
-            active[j] = True
-            queue[q_tail] = j
-            q_tail = (q_tail + 1) % (n + 1)
+        if residual[a0 if sink_tree else sister[a0]] > 0:
+            q_tail = _activate(j, active, queue, q_tail)
         a = parent[j]
         if a != _TERMINAL and a != _ORPHAN and head[a] == i:
             parent[j] = _ORPHAN
@@ -247,14 +270,11 @@ def _adopt(i, sink_tree, first, head, residual, sister, parent, in_sink, stamp, 
 
 @njit(cache=True)
 def _reached(n, first, head, residual, terminal, s, t):  # pragma: no cover
-    side = np.zeros(n, np.bool_)
-    stack = np.empty(n, np.int64)
-    top = 0
-    for i in range(n):
-        if terminal[i] > 0 and i != s and i != t:
-            side[i] = True
-            stack[top] = i
-            top += 1
+    """The nodes the source reaches along residual arcs (its own, ``terminal > 0``, first)."""
+    side = terminal > 0
+    stack = np.flatnonzero(side)
+    stack = np.concatenate((stack, np.empty(n - len(stack), np.int64)))
+    top = int(side.sum())
     while top > 0:
         top -= 1
         i = stack[top]
@@ -269,43 +289,39 @@ def _reached(n, first, head, residual, terminal, s, t):  # pragma: no cover
     return side
 
 
-@njit("b1[:](i8, i8[:], i8[:], i8[:], i8, i8)", cache=True)
-def _source_side(n, tails, heads, capacity, s, t):  # pragma: no cover - compiled
-    # terminal arcs become each node's terminal capacity (positive: from the source; negative:
-    # to the sink, after routing min(from, to) straight through); the rest become arc pairs
-    from_source = np.zeros(n, np.int64)
-    to_sink = np.zeros(n, np.int64)
-    inner = 0
+@njit(cache=True)
+def _terminal_capacities(n, tails, heads, capacity, s, t):  # pragma: no cover
+    """Each node's terminal capacity (from the source minus to the sink: a path s -> i -> t
+    carries the smaller at once) and which arcs join two other nodes."""
+    terminal = np.zeros(n, np.int64)
+    inner = np.zeros(len(tails), np.bool_)
     for k in range(len(tails)):
         u, v = tails[k], heads[k]
         if u == s and v != t and v != s:
-            from_source[v] += capacity[k]
+            terminal[v] += capacity[k]
         elif v == t and u != s and u != t:
-            to_sink[u] += capacity[k]
-        elif u != s and u != t and v != s and v != t and u != v:
-            inner += 1
-    terminal = from_source - to_sink
-    # arcs 2k (u -> v, its capacity) and 2k + 1 (v -> u, none), grouped by tail
-    head = np.empty(2 * inner, np.int64)
-    residual = np.zeros(2 * inner, np.int64)
-    tail = np.empty(2 * inner, np.int64)
-    k2 = 0
-    for k in range(len(tails)):
-        u, v = tails[k], heads[k]
-        if u != s and u != t and v != s and v != t and u != v:
-            head[k2], tail[k2], residual[k2] = v, u, capacity[k]
-            head[k2 + 1], tail[k2 + 1] = u, v
-            k2 += 2
+            terminal[u] -= capacity[k]
+        else:
+            inner[k] = u != s and u != t and v != s and v != t and u != v
+    return terminal, inner
+
+
+@njit("b1[:](i8, i8[:], i8[:], i8[:], i8, i8)", cache=True)
+def _source_side(n, tails, heads, capacity, s, t):  # pragma: no cover - compiled
+    """``source_side`` on the arcs ``tails[k] -> heads[k]`` of ``capacity[k]``."""
+    terminal, inner = _terminal_capacities(n, tails, heads, capacity, s, t)
+    # arcs 2k (u -> v, its capacity) and 2k + 1 (v -> u, none), then grouped by tail
+    u, v, c = tails[inner], heads[inner], capacity[inner]
+    m = 2 * len(u)
+    tail, head = np.empty(m, np.int64), np.empty(m, np.int64)
+    residual = np.zeros(m, np.int64)
+    tail[0::2], tail[1::2], head[0::2], head[1::2], residual[0::2] = u, v, v, u, c
     order = np.argsort(tail, kind="mergesort")
-    rank = np.empty(2 * inner, np.int64)
-    rank[order] = np.arange(2 * inner)
+    rank = np.empty(m, np.int64)
+    rank[order] = np.arange(m)
     first = np.zeros(n + 1, np.int64)
-    for a in range(2 * inner):
-        first[tail[a] + 1] += 1
-    for i in range(n):
-        first[i + 1] += first[i]
-    arc_head = head[order]
-    arc_residual = residual[order]
-    sister = rank[np.arange(2 * inner) ^ 1][order]
-    _grow_and_augment(n, first, arc_head, arc_residual, sister, terminal)
-    return _reached(n, first, arc_head, arc_residual, terminal, s, t)
+    first[1:] = np.cumsum(np.bincount(tail, minlength=n))
+    head, residual = head[order], residual[order]
+    sister = rank[order ^ 1]
+    _grow_and_augment(n, first, head, residual, sister, terminal)
+    return _reached(n, first, head, residual, terminal, s, t)
