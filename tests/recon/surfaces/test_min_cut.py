@@ -4,26 +4,9 @@ of its residual graph, the cut it replaced."""
 
 import numpy as np
 import pytest
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
+from benchmarks.bench_min_cut import dinic_source_side  # the cut this replaced
 from recon.surfaces.methods._backends import source_side
-
-
-def dinic_source_side(n, rows, cols, capacity, source, sink):
-    """The nodes the source reaches in the residual graph of scipy's Dinic maximum flow."""
-    graph = coo_matrix((np.concatenate([capacity, np.zeros_like(capacity)]).astype(np.int64),
-                        (np.concatenate([rows, cols]), np.concatenate([cols, rows]))),
-                       shape=(n, n)).tocsr()
-    graph.sum_duplicates()
-    graph.data = np.minimum(graph.data, np.iinfo(np.int32).max).astype(np.int32)
-    flow = maximum_flow(graph, source, sink, method="dinic").flow
-    residual = (graph - flow).tocsr()
-    residual.data = (residual.data > 0).astype(np.int32)
-    residual.eliminate_zeros()
-    side = np.zeros(n, dtype=bool)
-    side[breadth_first_order(residual, source, directed=True, return_predecessors=False)] = True
-    return side
 
 
 def test_of_two_minimum_cuts_the_side_is_the_smallest():
