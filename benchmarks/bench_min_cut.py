@@ -76,13 +76,15 @@ def dinic_source_side(n, rows, cols, capacity, source, sink) -> np.ndarray:
     return side
 
 
-def timed(function, graph, repeats: int) -> tuple[float, np.ndarray]:
-    """Median wall time [s] of ``function(*graph)`` over ``repeats`` runs, and its result."""
+def timed(function, graph, repeats: int, bar) -> tuple[float, np.ndarray]:
+    """Median wall time [s] of ``function(*graph)`` over ``repeats`` runs, and its result; each
+    run moves the progress ``bar``."""
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
         side = function(*graph)
         times.append(time.perf_counter() - start)
+        bar.update(1)
     return statistics.median(times), side
 
 
@@ -101,18 +103,25 @@ def main(argv=None) -> int:
         if not log.is_file():
             parser.error(f"{log}: no such strike log")
 
+    from tqdm import tqdm
+
     from recon.surfaces.methods import _min_cut  # noqa: F401  (the kernels, before the clock)
     from recon.surfaces.methods._backends import source_side
 
     print("| log | cells | arcs | Dinic s | Boykov-Kolmogorov s | ratio | identical |")
     print("|---|---|---|---|---|---|---|")
+    bar = tqdm(total=len(logs) * (1 + 2 * args.repeats), desc="min cut", unit="step",
+               leave=False)
     for log in logs:
         graph = visibility_graph(log)
-        baseline_s, expected = timed(dinic_source_side, graph, args.repeats)
-        ours_s, side = timed(source_side, graph, args.repeats)
+        bar.update(1)
+        baseline_s, expected = timed(dinic_source_side, graph, args.repeats, bar)
+        ours_s, side = timed(source_side, graph, args.repeats, bar)
+        bar.clear()
         print(f"| {log.stem} | {graph[0] - 2:,} | {len(graph[1]):,} | {baseline_s:.2f} | "
               f"{ours_s:.2f} | {ours_s / baseline_s:.2f} | "
               f"{'yes' if np.array_equal(side, expected) else 'NO'} |", flush=True)
+    bar.close()
     return 0
 
 
