@@ -14,9 +14,9 @@ source side of any minimum cut, the same for every maximum flow, so it does not 
 maximum flow the trees found: the cut scipy's Dinic maximum flow and a breadth-first search of
 its residual graph give, which this replaced (tests/recon/surfaces/test_min_cut.py checks the
 two agree). On the visibility graph of castalia-cross-clean (7,740 noise-free strikes along a
-cross's lines, 323,786 Delaunay cells, 1.3 million arcs) Dinic took 10.5 s and this 2.5 s; on a
-noisy satellite's (satellite W, 35,607 cells) 0.12 s and 0.09 s (benchmarks/bench_min_cut.py,
-docs/decisions.md).
+cross's lines, 323,786 Delaunay cells, 1.3 million arcs) it takes 0.29 of Dinic's time; on a
+noisy satellite's (satellite W, 35,607 cells) 0.85 (benchmarks/bench_min_cut.py, medians of
+three; docs/decisions.md).
 
 The kernels are compiled for their one signature when this module is imported, from numba's
 cache after the first time (``cache=True``: about 0.4 s to load, 0.2 s more for numba's own
@@ -33,7 +33,7 @@ from numba import njit
 # ``terminal`` capacity is its residual capacity from the source (> 0) or, negated, to the sink
 # (< 0). A node's ``parent`` is the arc from it to its parent in its tree, or one of these:
 _NONE, _TERMINAL, _ORPHAN = -1, -2, -3     # free; a root (a terminal arc); lost its parent
-_INFINITE_DISTANCE = 1 << 60
+_INFINITE = 1 << 60                        # above any distance and any bottleneck
 
 
 def source_side(n_nodes: int, indptr: np.ndarray, indices: np.ndarray, capacity: np.ndarray,
@@ -172,7 +172,7 @@ def _augment(middle, head, residual, sister, terminal, parent, orphans):  # prag
 @njit(cache=True)
 def _bottleneck(i, head, residual, sister, terminal, parent, sink_tree):  # pragma: no cover
     """The least residual capacity from node ``i`` to its tree's root and terminal."""
-    least = _INFINITE_DISTANCE
+    least = _INFINITE
     while parent[i] != _TERMINAL:
         a = parent[i]
         least = min(least, residual[a] if sink_tree else residual[sister[a]])
@@ -209,14 +209,14 @@ def _nearest_root(i, sink_tree, first, head, residual, sister, parent, in_sink, 
     """The open arc from orphan ``i`` to the neighbour in its tree nearest a root by a path
     with no orphan on it (-1: none), and that neighbour's distance; the nodes on the paths
     checked are stamped with ``time`` and their distance."""
-    best, best_distance = -1, _INFINITE_DISTANCE
+    best, best_distance = -1, _INFINITE
     for a0 in range(first[i], first[i + 1]):
         j = head[a0]
         if residual[a0 if sink_tree else sister[a0]] <= 0 or in_sink[j] != sink_tree or \
                 parent[j] == _NONE:
             continue
         d = _root_distance(j, head, parent, stamp, distance, time)
-        if d >= _INFINITE_DISTANCE:
+        if d >= _INFINITE:
             continue
         if d < best_distance:
             best, best_distance = a0, d
@@ -231,7 +231,7 @@ def _nearest_root(i, sink_tree, first, head, residual, sister, parent, in_sink, 
 @njit(cache=True)
 def _root_distance(j, head, parent, stamp, distance, time):  # pragma: no cover
     """Steps from node ``j`` up to a root (or to a node stamped ``time``, plus its distance);
-    ``_INFINITE_DISTANCE`` when the path meets an orphan."""
+    ``_INFINITE`` when the path meets an orphan."""
     d = 0
     k = j
     while True:
@@ -243,7 +243,7 @@ def _root_distance(j, head, parent, stamp, distance, time):  # pragma: no cover
             stamp[k], distance[k] = time, 1
             return d
         if a == _ORPHAN:
-            return _INFINITE_DISTANCE
+            return _INFINITE
         k = head[a]
 
 
