@@ -31,7 +31,7 @@ Per cloud (``run_cloud``):
    plus the unweighted twin of each method that weights points by the recorded error model
    (``WEIGHTED_METHODS``, ``weighted=false``), isolated, scored against the simulator's truth;
    each successful run's record carries the truth-free prediction of its mesh
-   (``recon.surfaces.judge.estimate``: predicted Chamfer and band), and its mesh is kept
+   (``recon.surfaces.estimate.estimate``: predicted Chamfer and band), and its mesh is kept
    under ``DIR/meshes`` (about 50 MB a cloud);
 2. ``recon.surfaces.auto.choose`` picks a run without the truth (its ladder, its reason);
 3. the agreement: auto's F-score against the best (within ``F_TOLERANCE``), its Chamfer
@@ -1004,7 +1004,7 @@ def predict_runs(records: list[dict], cloud, out_dir: Path, misses=None) -> dict
 
 def auto_prediction(choice, records: list[dict], cloud, out_dir: Path) -> dict | None:
     """The predicted Chamfer band of auto's choice as ``recon reconstruct -m auto`` reports it:
-    ``recon.surfaces.judge.estimate`` on the chosen run's mesh (the compare's fit on every
+    ``recon.surfaces.estimate.estimate`` on the chosen run's mesh (the compare's fit on every
     strike, kept under ``DIR/meshes``) with the chosen candidate's held-out residuals.
 
     Returns ``{"chamfer_m", "lo_m", "hi_m", "source"}``, or None when that run failed in the
@@ -1260,7 +1260,7 @@ def _prediction_lines(summaries: list[dict], preds: dict) -> list[str]:
         return [*lines, "Not measured in this run: " + (notes[0].split(": ", 1)[1] if notes
                                                          else "no run was predicted") + ".", ""]
     from_records = sum(s["predicted"]["from_records"] for s in summaries)
-    lines += ["`recon.surfaces.judge.estimate` on the mesh of every successful run of every "
+    lines += ["`recon.surfaces.estimate.estimate` on the mesh of every successful run of every "
               "cloud, in-sample (the fit saw every strike): read from the compare's records "
               f"for {from_records:,} runs, computed on the kept meshes for the others (compare "
               "outputs older than the records' prediction columns, or made by an earlier "
