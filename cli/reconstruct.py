@@ -139,7 +139,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_command(
         sub, "stability", run_stability, help="failure maps over noise x density x outliers",
         description="Degrade a cloud (or re-simulate a scene) over range noise x point density "
-                    "x outlier fraction, run every method on every cell (isolated, on Dask) and "
+                    "x outlier fraction, run every method on every cell (each isolated in a worker "
+                    "process, or on Dask with --scheduler) and "
                     "write, per method, a failure map and an accuracy heatmap (PNG) with the "
                     "data (DIR/stability.csv, DIR/stability.json).")
     p.add_argument("source", nargs="?", metavar="SOURCE",
@@ -217,6 +218,11 @@ def _estimate_line(estimate: dict) -> str:
             f"{estimate['violated']:.1%} of beams cut before their strike")
 
 
+# The words for ``Surface.closure``.
+CLOSURE = {"watertight": "watertight", "closed": "closed, touching itself at some edges",
+           "open": "open"}
+
+
 def run_reconstruct(args) -> int:
     from recon import api
 
@@ -243,8 +249,7 @@ def run_reconstruct(args) -> int:
         _print_json(result.to_dict())
     else:
         surface = result.surface
-        print(f"{surface.method}: {surface.n_faces} faces "
-              f"({'watertight' if surface.info['watertight'] else 'open'}) in "
+        print(f"{surface.method}: {surface.n_faces} faces ({CLOSURE[surface.closure]}) in "
               f"{surface.info['wall_time_s']:.2f} s; wrote {args.output}")
         print(_estimate_line(result.estimate))
     return 0

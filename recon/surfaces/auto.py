@@ -131,7 +131,7 @@ from formats.errors import ParameterError
 from formats.geometry import Cloud
 from recon.surfaces import judge
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, Limits
-from recon.surfaces.methods import MethodFailed, MethodInput, Run
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, closed
 from recon.surfaces.normals import DEFAULT_K, Fallback
 from recon.surfaces.prepare import Preparation
 
@@ -519,20 +519,6 @@ class Selection:
     bracketed: float | None = None
     floored: tuple[int, ...] = ()
     floor: float = 0.0
-
-
-def closed(faces: np.ndarray) -> bool:
-    """True when no edge borders a single face: the surface encloses a volume (non-manifold
-    edges of a minimum cut allowed, unlike ``recon.surfaces.checks.watertight``)."""
-    faces = np.asarray(faces, dtype=np.int64)
-    ends = np.roll(faces, -1, axis=1)   # each face's edges (0, 1), (1, 2), (2, 0)
-    # one integer an edge, sorted (np.unique over rows sorts them as bytes, ten times slower;
-    # its counts, a few times slower than comparing neighbours)
-    key = np.sort((np.minimum(faces, ends) * (int(faces.max(initial=0)) + 1)
-                   + np.maximum(faces, ends)).ravel())
-    change = key[1:] != key[:-1]
-    once = np.concatenate([[True], change]) & np.concatenate([change, [True]])
-    return bool(len(faces)) and not np.any(once)
 
 
 def span(vertices: np.ndarray, points: np.ndarray) -> float:

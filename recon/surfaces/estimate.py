@@ -30,6 +30,7 @@ from recon.surfaces.judge import (
     subsample,
     tau_of,
 )
+from recon.surfaces.methods import closed as surface_closed
 
 # The truth's proxy where no strike is (``proxy``): folds of its hold-out, icosphere levels of
 # the ellipsoid (20 * 4**5 faces: 0.01% of the radius from the ellipsoid), clouds kept, and
@@ -180,18 +181,6 @@ def chamfer_band(*models) -> tuple[float, float]:
     low = min(m[1] / MEASURED_SPREAD + p[0] / PROXIED_SPREAD for m, p in models)
     high = max(m[2] * MEASURED_SPREAD + p[0] * PROXIED_SPREAD for m, p in models)
     return low, high
-
-
-def _closed(faces: np.ndarray) -> bool:
-    """True when no edge borders a single face: the surface encloses a volume (non-manifold
-    edges, as a minimum cut makes, allowed)."""
-    if not len(faces):
-        return False
-    faces = np.asarray(faces, dtype=np.int64)
-    n = int(faces.max()) + 1
-    a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
-    _, count = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_counts=True)
-    return not np.any(count == 1)
 
 
 def _hit_fraction(tau: float, rms: float) -> float:
@@ -590,7 +579,7 @@ def estimate(surface, cloud: Cloud, *, heldout: HeldOut | None = None, seed: int
 
     measured, proxied = parts(v, unseen)
     chamfer = measured[0] + proxied[0]
-    closed = _closed(faces)
+    closed = surface_closed(faces)
     alternative = parts(u, bare) if closed else None
     near = [_hit_fraction(tau, r) for r in (rms[0], rms[2], rms[1])]   # central, low, high
     precision = [(1 - u) * p + u * q for p, q in zip(near, bare.within(tau), strict=True)]

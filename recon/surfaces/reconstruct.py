@@ -16,7 +16,7 @@ from typing import Any
 from formats.geometry import Cloud, Mesh
 from recon.surfaces.checks import check_surface
 from recon.surfaces.isolation import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT_S, run_isolated
-from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, watertight
+from recon.surfaces.methods import MethodFailed, MethodInput, Run, bind, closed, watertight
 
 
 def estimate_of(surface: Mesh, cloud: Cloud, *, heldout=None, seed: int = 0,
@@ -65,6 +65,15 @@ class Surface(Mesh):
 
     def __repr__(self) -> str:
         return f"Surface({self.method}, {self.n_vertices} vertices, {self.n_faces} faces)"
+
+    @property
+    def closure(self) -> str:
+        """``"watertight"``; ``"closed"``: no border, but an edge of more than two faces (a
+        minimum cut's surface touching itself) or faces of both orientations on one; or
+        ``"open"``: it has a border."""
+        if self.info.get("watertight", watertight(self.faces)):
+            return "watertight"
+        return "closed" if closed(self.faces) else "open"
 
 
 def reconstruct(cloud: MethodInput, *, method: str | Run = "poisson", params: dict | None = None,

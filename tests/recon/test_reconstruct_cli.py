@@ -42,6 +42,20 @@ def test_reconstruct_from_a_log(rso_log, tmp_path, capsys):
     assert np.ptp(vertices, axis=0).max() == pytest.approx(20.0, rel=0.05)
 
 
+def test_the_written_surface_is_called_what_it_is():
+    """A surface touching itself at an edge (as a minimum cut's may) is closed, not open."""
+    from cli.reconstruct import CLOSURE
+    from recon.surfaces.reconstruct import Surface
+
+    vertices, faces = box_mesh()
+    fin = np.array([[faces[0, 0], faces[0, 1], len(vertices)]])
+    vertices = np.vstack([vertices, [[5.0, 5.0, 5.0]]])
+    kinds = [Surface(vertices, f, "m", {}).closure
+             for f in (faces, np.vstack([faces, fin, fin[:, ::-1]]), faces[1:])]
+    assert kinds == ["watertight", "closed", "open"]
+    assert set(CLOSURE) == set(kinds)
+
+
 def test_reconstruct_json_and_preprocessing(box_files, tmp_path, capsys):
     out = tmp_path / "box.ply"
     assert main(["reconstruct", str(box_files[0]), "-m", "planes", "--remove-outliers",

@@ -488,6 +488,27 @@ def parse_run(method: str, pairs: Sequence[str] = ()) -> Run:
     return spec.bind(spec.parse(pairs))
 
 
+def closed(faces: np.ndarray) -> bool:
+    """True when no edge borders a single face: the surface encloses a volume. Unlike
+    ``watertight``, an edge may have more than two faces (a minimum cut's surface touching
+    itself at an edge) and faces need not agree on their orientation.
+
+    Parameters
+    ----------
+    faces : (f, 3) int64, non-negative
+    """
+    if len(faces) == 0:
+        return False
+    faces = np.asarray(faces, dtype=np.int64)
+    ends = np.roll(faces, -1, axis=1)   # each face's edges (0, 1), (1, 2), (2, 0)
+    # one integer an edge, sorted: an edge of a single face differs from both neighbours
+    key = np.sort((np.minimum(faces, ends) * (int(faces.max()) + 1)
+                   + np.maximum(faces, ends)).ravel())
+    change = key[1:] != key[:-1]
+    once = np.concatenate([[True], change]) & np.concatenate([change, [True]])
+    return not np.any(once)
+
+
 def watertight(faces: np.ndarray) -> bool:
     """True when every edge has exactly two faces that traverse it in opposite directions.
 

@@ -1,12 +1,13 @@
-"""``checks.watertight`` against a reference written a different way (row-wise uniques of the
-edge array, what it replaced) on closed, opened, flipped, duplicated and non-manifold meshes."""
+"""``watertight`` and ``closed`` against references written a different way (row-wise uniques
+of the edge array, what they replaced) on closed, opened, flipped, duplicated and non-manifold
+meshes."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from recon.surfaces.methods import watertight
+from recon.surfaces.methods import closed, watertight
 from tests.recon.conftest import box_mesh, sphere_mesh
 
 
@@ -47,3 +48,24 @@ def variants():
 def test_watertight_agrees_with_the_row_wise_reference(name, faces, closed):
     faces = np.asarray(faces, dtype=np.int64)
     assert watertight(faces) == reference(faces) == closed, name
+
+
+def closed_reference(faces: np.ndarray) -> bool:
+    """No undirected edge of a single face, by ``np.unique(axis=0)``."""
+    if len(faces) == 0:
+        return False
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    _, count = np.unique(np.sort(edges, axis=1), axis=0, return_counts=True)
+    return not np.any(count == 1)
+
+
+# Closed, though not watertight: every edge has two faces or more, whatever their orientation.
+CLOSED_NOT_WATERTIGHT = {"one face flipped", "a face twice", "a face and its flip", "fin",
+                         "repeated vertex"}
+
+
+@pytest.mark.parametrize("name, faces, watertight_", list(variants()))
+def test_closed_agrees_with_the_row_wise_reference(name, faces, watertight_):
+    faces = np.asarray(faces, dtype=np.int64)
+    expected = watertight_ or name in CLOSED_NOT_WATERTIGHT
+    assert closed(faces) == closed_reference(faces) == expected, name

@@ -125,15 +125,6 @@ def test_the_band_of_a_closed_surface_spans_it_and_the_hull_as_the_unseen_truth(
     assert predicted.chamfer_low_m > 0.05
 
 
-def test_closed_is_no_edge_bordering_a_single_face():
-    from recon.surfaces.estimate import _closed
-
-    _, faces = sphere_mesh(1)
-    assert _closed(faces)
-    assert not _closed(faces[1:])
-    assert not _closed(np.zeros((0, 3), dtype=np.int64))
-
-
 def test_one_cloud_context_per_cloud_not_per_points():
     # The same points with another recorded noise are another cloud: the estimate of the
     # second is not read from the first's kept context.
