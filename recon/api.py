@@ -824,7 +824,7 @@ def trajectory(log, output, *, frame: str | None = None, epoch_et: float | None 
         Kernels: ET [s, TDB past J2000] of the log's time 0 (default: the log's own, else 0).
     """
     from formats.paths import check_destination, protecting
-    from recon.registration.trajectory import export_kernel, export_trajectory
+    from recon.registration.trajectory import export_kernel, export_trajectory, kernel_files
 
     kernel = is_kernel(output)
     if kernel and frame is not None:
@@ -833,7 +833,8 @@ def trajectory(log, output, *, frame: str | None = None, epoch_et: float | None 
     if not kernel and epoch_et is not None:
         raise ParameterError("epoch_et is for kernels (.bsp, .bc)")
     with protecting(_inputs(log)):
-        check_destination(output, ParameterError)
+        for path in kernel_files(output) if kernel else [output]:
+            check_destination(path, ParameterError)   # every file before the first is written
         if kernel:
             summary = export_kernel(log, output, epoch_et=epoch_et)
             return TrajectoryResult(summary["n_shots"], None, summary["epoch_et"],

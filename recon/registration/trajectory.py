@@ -128,6 +128,14 @@ def log_epoch(log: StrikeLog, epoch_et: float | None) -> float:
     return 0.0 if log.epoch_et is None else log.epoch_et
 
 
+def kernel_files(output) -> list[Path]:
+    """Every file ``export_kernel`` writes for ``output``: the kernel, its frames kernel
+    (``.tf``) and, for a CK, its clock kernel (``.tsc``)."""
+    output = Path(output)
+    clock = [output.with_suffix(".tsc")] if output.suffix.lower() == ".bc" else []
+    return [output, output.with_suffix(".tf"), *clock]
+
+
 def export_kernel(log, output, *, epoch_et: float | None = None) -> dict:
     """Write the recorded poses of a strike log as a SPICE kernel (see the module docstring).
 
@@ -164,7 +172,7 @@ def export_kernel(log, output, *, epoch_et: float | None = None) -> dict:
         raise ParameterError(f"{log}: shot times do not stay strictly increasing at ET "
                               f"{epoch:.17g} + t (float64 resolution); give an earlier epoch")
     comment = (f"recon {Path(log).name}: {len(et)} recorded shots, ET = {epoch!r} + time")
-    frames = output.with_suffix(".tf")
+    _, frames, *clock = kernel_files(output)
     write_text_atomically(frames, spice.frames_kernel(), error=ParameterError)
     written = [frames]
 
@@ -177,10 +185,9 @@ def export_kernel(log, output, *, epoch_et: float | None = None) -> dict:
     if suffix == ".bsp":
         kernel(lambda tmp: spice.write_spk(tmp, et, shots.sensor_position, comment=comment))
     else:
-        clock = output.with_suffix(".tsc")
-        write_text_atomically(clock, spice.clock_kernel(epoch), error=ParameterError)
-        written.append(clock)
-        with spice.loaded([clock], "SCLK"):
+        write_text_atomically(clock[0], spice.clock_kernel(epoch), error=ParameterError)
+        written.append(clock[0])
+        with spice.loaded(clock, "SCLK"):
             kernel(lambda tmp: spice.write_ck(
                 tmp, et, {spice.SENSOR_CK_ID: shots.sensor_attitude,
                           spice.TARGET_CK_ID: shots.target_attitude}, comment=comment))

@@ -123,3 +123,23 @@ def test_cli_writes_kernels_and_refuses_what_does_not_fit(noisy_log, tmp_path, c
     with pytest.raises(ParameterError, match="finite ET"):
         export_kernel(noisy_log, tmp_path / "t.bsp", epoch_et=float("nan"))
     assert not (tmp_path / "t.bsp").exists()
+
+
+@pytest.mark.parametrize("blocker", ["directory", "input"])
+def test_a_refused_companion_file_leaves_every_old_file(noisy_log, tmp_path, blocker):
+    """The frames and clock kernels beside a CK are checked before anything is written: a clock
+    kernel path that is a directory, or the log itself, leaves the old kernel and frames."""
+    import os
+
+    output = tmp_path / "k.bc"
+    output.write_text("old kernel")
+    (tmp_path / "k.tf").write_text("old frames")
+    clock = tmp_path / "k.tsc"
+    if blocker == "directory":
+        clock.mkdir()
+    else:
+        os.link(noisy_log, clock)
+    with pytest.raises(ParameterError, match=r"k\.tsc: is "):
+        api.trajectory(noisy_log, output)
+    assert output.read_text() == "old kernel"
+    assert (tmp_path / "k.tf").read_text() == "old frames"
