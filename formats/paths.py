@@ -133,8 +133,9 @@ def check_destination(path, error: type[Exception] = OSError) -> Path:
     """Refuse a destination a writer must not replace; call before any work starts.
 
     Refused: a name too long for the file system, a directory that does not exist or cannot be
-    written, a destination that is a directory, device, FIFO or socket, and one of the inputs
-    :func:`protecting` holds.
+    written, a destination that is a directory, device, FIFO or socket, one of the inputs
+    :func:`protecting` holds, and a symbolic link (the atomic rename would replace the link, not
+    write where it points).
 
     Parameters
     ----------
@@ -170,6 +171,9 @@ def check_destination(path, error: type[Exception] = OSError) -> Path:
             same = "" if source == path else f" ({source})"
             raise error(f"{path}: is an input of this run{same}; writing it would destroy the "
                         "input, give another output name")
+    if path.is_symlink():
+        raise error(f"{path}: is a symbolic link; give the name of a regular file to write "
+                    f"(or {path.resolve()} itself)")
     reason = _unwritable(parent)
     if reason is not None:
         raise error(f"{path}: cannot write in {parent} ({reason})")

@@ -99,6 +99,27 @@ def test_output_that_is_not_a_regular_file_is_refused_before_work(
     assert _partials(tmp_path) == []
 
 
+@pytest.mark.parametrize("dangling", [False, True])
+@pytest.mark.parametrize("command", ["ingest", "truth", "reconstruct"])
+def test_output_that_is_a_symbolic_link_is_refused_and_kept(command, dangling, tmp_path,
+                                                             sphere_log, capsys):
+    """The atomic rename would replace the link itself: refused, the link and its target kept."""
+    target = tmp_path / "target.ply"
+    if not dangling:
+        target.write_text("kept")
+    out = tmp_path / "link.ply"
+    out.symlink_to(target)
+    args = {"ingest": ["ingest", sphere_log, "-o", out],
+            "truth": ["truth", sphere_log, "-o", out],
+            "reconstruct": ["reconstruct", sphere_log, "-o", out, "--in-process"]}[command]
+    assert main([str(a) for a in args]) == 1
+    err = capsys.readouterr().err.strip()
+    assert f"{out}: is a symbolic link; give the name of a regular file" in err, err
+    assert err.count("\n") == 0
+    assert out.is_symlink() and (dangling or target.read_text() == "kept")
+    assert _partials(tmp_path) == []
+
+
 def test_output_gets_the_users_umask(tmp_path, sphere_log):
     out = tmp_path / "cloud.ply"
     proc = _recon("ingest", sphere_log, "-o", out, preexec_fn=lambda: os.umask(0o027))
