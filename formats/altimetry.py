@@ -226,7 +226,11 @@ def _data_file(label: Path, area: ElementTree.Element) -> Path:
     if Path(name).name != name or name in (".", ".."):
         raise InputError(f"{where}: <file_name> {name[:80]!r} must name a file beside the "
                              "label")
-    return check_source(label.parent / name, InputError)
+    data = check_source(label.parent / name, InputError)
+    if data.resolve().parent != label.parent.resolve():   # a symbolic link out of the directory
+        raise InputError(f"{where}: <file_name> {name[:80]!r} leads out of the label's "
+                         f"directory (to {data.resolve()}); copy the table beside the label")
+    return data
 
 
 def _binary_field(element: ElementTree.Element, record_length: int, where: str) -> BinaryField:

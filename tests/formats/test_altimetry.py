@@ -226,3 +226,21 @@ def test_hayabusa2_l2_refuses_bad_files_in_one_line(tmp_path, text, message):
     with pytest.raises(InputError, match=message) as caught:
         read_hayabusa2_l2(path)
     assert "\n" not in str(caught.value)
+
+
+def test_ola_l2_reads_no_table_a_symbolic_link_leads_out_of_the_label_s_directory(tmp_path):
+    values, *_ = _ola_values()
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    (outside / "t.dat").write_bytes(_records(OLA_LAYOUT, values))
+    product = tmp_path / "product"
+    product.mkdir()
+    (product / "t.dat").symlink_to(outside / "t.dat")
+    label = product / "t.xml"
+    label.write_text(_label("t.dat", len(FLAGS), OLA_LAYOUT))
+    with pytest.raises(InputError, match=r"<file_name> 't\.dat' leads out of the label's "
+                                         r"directory"):
+        read_ola_l2(label)
+    (product / "t.dat").unlink()   # the same table beside the label is read
+    (product / "t.dat").write_bytes(_records(OLA_LAYOUT, values))
+    assert len(read_ola_l2(label).points) > 0
