@@ -338,12 +338,17 @@ def read_cloud(path) -> Cloud:
     path = Path(path)
     kind = _suffix(path)
     check_source(path, InputError)
-    if kind == ".ply":
-        columns, _, metadata = read_ply(path)
-        return cloud_from_ply_columns(path, columns, metadata)
-    readers = {".h5": _read_h5, ".pcd": _read_pcd, ".e57": _read_e57}
-    readers |= dict.fromkeys(TEXT_SUFFIXES, _read_text)
-    return _within_reach(readers.get(kind, _read_las)(path), path)
+    try:
+        if kind == ".ply":
+            columns, _, metadata = read_ply(path)
+            return cloud_from_ply_columns(path, columns, metadata)
+        readers = {".h5": _read_h5, ".pcd": _read_pcd, ".e57": _read_e57}
+        readers |= dict.fromkeys(TEXT_SUFFIXES, _read_text)
+        return _within_reach(readers.get(kind, _read_las)(path), path)
+    except InputError as exc:   # the cloud's own checks do not know the file: name it
+        if str(exc).startswith(str(path)):
+            raise
+        raise InputError(f"{path}: {exc}") from None
 
 
 def _within_reach(cloud: Cloud, path) -> Cloud:
@@ -491,7 +496,7 @@ def _text_columns(path: Path) -> tuple[list[str] | None, str | None, int]:
                 if missing or len(set(names)) != len(names):
                     raise InputError(
                         f"{path}: the header row must name columns x, y and z once each "
-                        f"(found {', '.join(names)[:200]})")
+                        f"(found {', '.join(names)[:200]!r})")
             break
         else:
             raise InputError(f"{path}: holds no points (no line of numbers)")

@@ -42,8 +42,10 @@ MAX_COORDINATE_M = 1e15
 
 
 def check_extent(points: np.ndarray, where, *, error: type[Exception] = InputError) -> None:
-    """Refuse ``points`` (n, 3) [m] with a coordinate beyond ``MAX_COORDINATE_M``, naming
-    ``where`` (the file)."""
+    """Refuse ``points`` (n, 3) [m] with a coordinate that is NaN, Inf or beyond
+    ``MAX_COORDINATE_M``, naming ``where`` (the file)."""
+    if not np.isfinite(points).all():
+        raise error(f"{where}: coordinates contain NaN or Inf")
     reach = float(np.abs(points).max()) if len(points) else 0.0
     if not reach <= MAX_COORDINATE_M:
         raise error(f"{where}: coordinates reach {reach:.3g} m, beyond {MAX_COORDINATE_M:g} m "

@@ -552,7 +552,9 @@ def kind(directory: Path) -> str:
         The directory holds none of them.
     """
     if not directory.is_dir():
-        raise InputError(f"{directory}: no such directory")
+        raise InputError(f"{directory}: " + ("is a file; give the directory a study or comparison "
+                                             "wrote" if directory.exists() else
+                                             "no such directory"))
     if (directory / "summary.json").is_file():
         return "study"
     if (directory / "index.json").is_file() or _study_dirs(directory):

@@ -154,13 +154,19 @@ class Limits:
         return {"timeout_s": self.timeout_s, "memory_mb": self.memory_mb}
 
 
+# The largest memory limit [MB] the operating system's limit takes (a signed 64-bit byte count).
+MAX_MEMORY_MB = (2**63 - 1) // 2**20
+
+
 def _check_limits(timeout: float, memory: int | None, names: tuple[str, str]):
-    """Refuse a time limit that is not positive or a negative memory limit, naming the argument
-    (``names``: of the time and of the memory limit)."""
+    """Refuse a time limit that is not positive or a memory limit that is negative or beyond
+    what the operating system takes, naming the argument (``names``: of the time and of the
+    memory limit)."""
     if not timeout > 0:
         raise ParameterError(f"{names[0]} must be positive, got {timeout:g}", argument=names[0])
-    if memory is not None and memory < 0:
-        raise ParameterError(f"{names[1]} must be >= 0, got {memory}", argument=names[1])
+    if memory is not None and not 0 <= memory <= MAX_MEMORY_MB:
+        raise ParameterError(f"{names[1]} must be from 0 to {MAX_MEMORY_MB} MB, got {memory}",
+                             argument=names[1])
 
 
 class _Failure(Exception):

@@ -306,10 +306,14 @@ def load_cleaned(source, preparation: Preparation | None = None) -> Cloud:
     preparation: ``Preparation.prepare`` then makes it)."""
     import os
 
-    if isinstance(source, str | os.PathLike):
-        from recon.inputs import load_cloud
+    if not isinstance(source, str | os.PathLike):
+        return (preparation or Preparation()).clean(Cloud.of(source, "cloud"))
+    from recon.inputs import load_cloud
 
-        cloud = load_cloud(source)
-    else:
-        cloud = Cloud.of(source, "cloud")
-    return (preparation or Preparation()).clean(cloud)
+    read = load_cloud(source)
+    cloud = (preparation or Preparation()).clean(read)
+    if len(cloud) < MIN_POINTS:   # said here, where the file is known
+        kept = "" if len(cloud) == len(read) else f" ({len(read)} before cleaning)"
+        raise InputError(f"{source}: {len(cloud)} points{kept}; need at least {MIN_POINTS} to "
+                         "reconstruct")
+    return cloud

@@ -74,10 +74,10 @@ CASES = [
      lambda d: ["reconstruct", str(d / "c.ply"), "-o", str(d / "m.ply"), "--timeout", "0"],
      r"--timeout must be positive, got 0$"),
     ("memory_limit", "--memory-limit", ParameterError,
-     lambda d: api.reconstruct(d / "c.ply", memory_limit=-1),
-     r"memory_limit must be >= 0, got -1$",
+     lambda d: api.reconstruct(d / "c.ply", memory_limit=10**20),
+     r"memory_limit must be from 0 to 8796093022207 MB, got 100000000000000000000$",
      lambda d: ["reconstruct", str(d / "c.ply"), "-o", str(d / "m.ply"), "--memory-limit", "-1"],
-     r"--memory-limit must be >= 0, got -1$"),
+     r"--memory-limit must be from 0 to 8796093022207 MB, got -1$"),
     ("voxel", "--voxel", ParameterError,
      lambda d: api.reconstruct(d / "c.ply", voxel=-1.0),
      r"voxel must be a positive size in metres, got -1$",
@@ -210,5 +210,5 @@ def test_real_subprocess(files):
                            "-1"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 1 and done.stdout == ""
     assert done.stderr.strip().splitlines() == [
-        "recon reconstruct: error: --memory-limit must be >= 0, got -1"]
+        "recon reconstruct: error: --memory-limit must be from 0 to 8796093022207 MB, got -1"]
     assert not (files / "m.ply").exists()

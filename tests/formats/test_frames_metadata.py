@@ -121,9 +121,10 @@ def test_csv_clouds_with_a_header_row(tmp_path):
 
 
 @pytest.mark.parametrize(("header", "message"), [
-    ("a,b,c", r"the header row must name columns x, y and z once each \(found a, b, c\)"),
+    ("a,b,c", r"the header row must name columns x, y and z once each \(found 'a, b, c'\)"),
     ("x,y,z,x", r"must name columns x, y and z once each"),
     ("x,y,z,w", r"the header names 4 columns but the rows hold 3"),
+    ("\x1b[2Jx,\x07b,c", r"\(found '\\x1b\[2jx, \\x07b, c'\)"),   # control characters escaped
 ])
 def test_bad_csv_headers(tmp_path, header, message):
     path = tmp_path / "bad.csv"

@@ -197,6 +197,30 @@ def test_coordinates_beyond_reach_are_refused_naming_the_file(tmp_path, suffix):
         read_cloud(path)
 
 
+@pytest.mark.parametrize("suffix", [".ply", ".xyz", ".h5"])
+def test_a_nan_coordinate_is_refused_as_nan_naming_the_file(tmp_path, suffix):
+    points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, np.nan, 0.0]])
+    path = tmp_path / f"nan{suffix}"
+    if suffix == ".xyz":
+        np.savetxt(path, points)
+    else:
+        write_cloud(path, Cloud(points))
+    with pytest.raises(InputError, match=rf"nan\{suffix}: coordinates contain NaN or Inf"):
+        read_cloud(path)
+
+
+def test_a_cloud_file_s_own_inconsistency_names_the_file(tmp_path):
+    import h5py
+
+    path = tmp_path / "c.h5"
+    write_cloud(path, Cloud(np.eye(3), {"time": np.arange(3.0)}))
+    with h5py.File(path, "a") as f:
+        del f["attributes/time"]
+        f["attributes/time"] = np.arange(2.0)
+    with pytest.raises(InputError, match=r"c\.h5: attribute 'time' has 2 values for 3 points"):
+        read_cloud(path)
+
+
 def test_a_mesh_beyond_reach_is_refused(tmp_path):
     path = tmp_path / "far.ply"
     write_mesh(path, np.array([[0.0, 0, 0], [1e20, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))

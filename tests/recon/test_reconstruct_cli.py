@@ -56,6 +56,15 @@ def test_the_written_surface_is_called_what_it_is():
     assert set(CLOSURE) == set(kinds)
 
 
+def test_a_cloud_file_with_too_few_points_is_named(tmp_path, capsys):
+    path = tmp_path / "few.ply"
+    write_cloud(path, Cloud(np.random.default_rng(0).random((5, 3))))
+    assert main(["reconstruct", str(path), "-m", "convex-hull", "-o",
+                 str(tmp_path / "o.ply")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"{path}: 5 points; need at least 16 to reconstruct"), err
+
+
 def test_reconstruct_json_and_preprocessing(box_files, tmp_path, capsys):
     out = tmp_path / "box.ply"
     assert main(["reconstruct", str(box_files[0]), "-m", "planes", "--remove-outliers",

@@ -416,6 +416,10 @@ def test_report_bad_inputs(tmp_path):
         render(tmp_path)
     with pytest.raises(InputError, match="no such directory"):
         render(tmp_path / "missing")
+    (tmp_path / "log.h5").write_text("a file")
+    with pytest.raises(InputError, match=r"log\.h5: is a file; give the directory"):
+        render(tmp_path / "log.h5")
+    (tmp_path / "log.h5").unlink()
     (tmp_path / "summary.json").write_text(json.dumps({"study": "x", "claims": [],
                                                        "files": []}))
     with pytest.raises(InputError, match=r"is a directory; give an \.html file"):
