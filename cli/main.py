@@ -51,10 +51,10 @@ class _Version(argparse.Action):
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse that exits with status 1 (not 2) on a usage error, like every other user error."""
+    """argparse that says a usage error in one line (it names the argument; ``--help`` shows
+    the usage) and exits with status 1 (not 2), like every other user error."""
 
     def error(self, message: str):
-        self.print_usage(sys.stderr)
         self.exit(1, f"{self.prog}: error: {message}\n")
 
 

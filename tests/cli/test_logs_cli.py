@@ -82,7 +82,13 @@ def test_missing_log_through_a_real_process(tmp_path):
     assert result.stderr.strip() == f"recon info: error: {tmp_path / 'x.h5'}: no such file"
 
 
-def test_usage_error_exits_1(capsys):
+@pytest.mark.parametrize(("argv", "line"), [
+    (["validate"], "recon validate: error: the following arguments are required: log"),
+    (["reconstruct", "c.ply", "--seed", "abc"],
+     "recon reconstruct: error: argument --seed: invalid int value: 'abc'"),
+])
+def test_usage_error_is_one_line_and_exits_1(capsys, argv, line):
     with pytest.raises(SystemExit) as info:
-        main(["validate"])
+        main(argv)
     assert info.value.code == 1
+    assert capsys.readouterr().err == line + "\n"
