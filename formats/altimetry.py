@@ -106,6 +106,20 @@ class Altimetry:
     product: str = ""
     source: str = ""
 
+    def __post_init__(self):
+        """Refuse returns no sensor could make: a range that is not finite and positive, a
+        coordinate beyond ``MAX_COORDINATE_M`` (naming the file and the product's row)."""
+        from formats.geometry import check_extent
+
+        bad = np.flatnonzero(~(np.isfinite(self.range) & (self.range > 0)))
+        if len(bad):
+            raise InputError(f"{self.source}: row {self.record[bad[0]] + 1}: range "
+                             f"{self.range[bad[0]]:g} m is not a positive distance "
+                             f"({len(bad)} such row(s))")
+        check_extent(self.points, f"{self.source}: points")
+        if self.spacecraft is not None:
+            check_extent(self.spacecraft, f"{self.source}: spacecraft positions")
+
     def __len__(self) -> int:
         return len(self.et)
 

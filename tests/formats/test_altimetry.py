@@ -219,6 +219,10 @@ def test_hayabusa2_l2_reads_the_published_columns_in_metres(tmp_path):
     ("SHOT_TIME,RANGE\n", r"header has no column TOPO_LONGITUDE"),
     ("someday," + ",".join(["1"] * 10) + "\n", r"SHOT_TIME: .*someday|SHOT_TIME"),
     ("", r"no lines"),
+    ("2019-01-01T00:00:00,-5,0,0,0,1,2,3,100,0,0\n",
+     r"bad\.csv: row 1: range -5 m is not a positive distance \(1 such row\(s\)\)"),
+    ("2019-01-01T00:00:00,5,0,0,0,1,2,3,100,0,1e308\n",
+     r"bad\.csv: spacecraft positions: coordinates reach 1e\+308 m"),
 ])
 def test_hayabusa2_l2_refuses_bad_files_in_one_line(tmp_path, text, message):
     path = tmp_path / "bad.csv"
