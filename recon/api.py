@@ -1333,12 +1333,12 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     preparation = _preparation(remove_outliers, voxel, normals_k, orient, seed)
     limits = Limits.from_options(timeout, memory_limit)
     runs = variants(methods, grid=grid)
+    options = score_options(samples, memory_mb=limits.memory_mb)
     output = output_directory(output, ParameterError)   # before any work: a read-only parent
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
         walk_early(*_inputs(cloud, truth))  # before the pool's launcher thread starts
         start_workers(min(len(runs), n_workers or default_workers()), SWEEP_THREADS)
-    options = score_options(samples)
     truth_mesh = (load_truth(truth, scale=truth_scale) if isinstance(truth, str | os.PathLike)
                   else Mesh.of(_from_library(truth), "truth"))
     if local:  # ... and make the truth ready for scoring while the cloud is prepared
@@ -1454,7 +1454,8 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
 
     variants(methods, grid=False)  # unknown names fail before anything is simulated or read
     limits = Limits.from_options(timeout, memory_limit)
-    options = score_options(samples or sweep.STABILITY_SAMPLES)   # a cell's stated precision
+    options = score_options(samples or sweep.STABILITY_SAMPLES,   # a cell's stated precision
+                            memory_mb=limits.memory_mb)
     check_value(scheduler)
     output = output_directory(output, sweep.ParameterError)   # before any work
     local = scheduler in (None, "threads")
