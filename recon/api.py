@@ -1431,9 +1431,9 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
         Methods, each at its defaults (default: all listed).
     noise, density, outliers : sequence of float, optional
         Grid levels: range noise (3 sigma, metres), fractions of the points kept, outlier
-        fractions, 0 to 1 (default: ``recon.experiments.stability``'s). A grid whose runs would
-        take more than a week at the least is refused before any work
-        (``recon.experiments.stability.check_grid``).
+        fractions, 0 to 1 (default: ``recon.experiments.stability``'s). A grid of more than
+        200,000 runs (cells x methods), or whose runs would take more than a week at the least,
+        is refused before any work (``recon.experiments.stability.check_grid``).
     seed : int
     timeout, memory_limit : float [s], int [MiB], optional
     samples : int, optional

@@ -41,7 +41,8 @@ outliers
 
 A sweep's cost is estimated before anything is read or simulated (``check_grid``): its runs
 (cells x methods) at ``RUN_S`` plus ``SAMPLE_S`` per scoring sample each, the least a run takes,
-shared among the workers; a grid estimated at more than ``MAX_SWEEP_S`` is refused.
+shared among the workers; a grid estimated at more than ``MAX_SWEEP_S``, or of more than
+``MAX_RUNS`` runs, is refused.
 
 A log's missed beams (free space no degradation changes) reach every cell's methods, as they
 reach ``recon compare``'s: the visibility method's cut respects them.
@@ -106,6 +107,10 @@ SAMPLE_S = 3e-5
 # is 2 million runs), or a job for more workers (a Dask cluster with ``n_workers`` counting them)
 # or for a grid split into sweeps.
 MAX_SWEEP_S = 7 * 86400.0
+# Most runs a sweep may have, whatever their time: each keeps its case and its record in this
+# process, about 3 kB (docs/decisions.md, "Measurements behind the defaults"), so 200,000 runs
+# hold about 0.6 GB besides their stability.json; a 300 x 300 x 2 grid of one method fits.
+MAX_RUNS = 200_000
 # Accuracy collapse (module docstring): Chamfer above 3x the clean cell's plus the added noise.
 # 3x: a method that merely degrades with its input stays within 2x here (measured: Poisson and
 # plane at 30% density and 0.3 m noise on the asteroid), the reported plane collapse was 4.5x.
@@ -188,22 +193,24 @@ def check_grid(noise: Sequence[float], density: Sequence[float], outliers: Seque
     Raises
     ------
     ParameterError
-        A level out of range or repeated, or a grid whose runs would take more than
-        ``MAX_SWEEP_S`` at the least (``RUN_S`` and ``SAMPLE_S`` a run).
+        A level out of range or repeated, or a grid of more than ``MAX_RUNS`` runs or whose
+        runs would take more than ``MAX_SWEEP_S`` at the least (``RUN_S`` and ``SAMPLE_S`` a
+        run).
     """
     noise = _check_levels("noise", noise, 0.0, None)
     density = _check_levels("density", density, 1e-9, 1.0)
     outliers = _check_levels("outliers", outliers, 0.0, MAX_OUTLIERS)
     cells = len(noise) * len(density) * len(outliers)
+    runs = cells * n_methods
     per_run = RUN_S + SAMPLE_S * samples
-    estimate = cells * n_methods * per_run / max(1, workers)
-    if estimate > MAX_SWEEP_S:
+    estimate = runs * per_run / max(1, workers)
+    if estimate > MAX_SWEEP_S or runs > MAX_RUNS:
         raise ParameterError(
             f"noise, density and outliers make {cells:,} cells; with {n_methods} method(s) that "
-            f"is {cells * n_methods:,} runs, at least {estimate / 86400:.3g} days on {workers} "
-            f"worker(s) ({per_run:.2g} s a run scoring {samples:,} samples per side); a sweep "
-            f"may take at most {MAX_SWEEP_S / 86400:g} days: use fewer levels or methods, fewer "
-            "samples or more workers")
+            f"is {runs:,} runs, at least {estimate / 86400:.3g} days on {workers} worker(s) "
+            f"({per_run:.2g} s a run scoring {samples:,} samples per side); a sweep may have "
+            f"at most {MAX_RUNS:,} runs and take at most {MAX_SWEEP_S / 86400:g} days: use "
+            "fewer levels or methods, fewer samples or more workers")
     return noise, density, outliers
 
 

@@ -158,11 +158,16 @@ def test_a_grid_too_long_to_run_is_refused_with_its_estimate():
                                              r"cells; with 1 method\(s\) that is 2,000,000 "
                                              r"runs, at least [\d.]+ days on 2 worker\(s\)"):
         check_grid(levels, levels, (0.0, 0.02), 1, samples=31_250, workers=2)
-    # the estimate shares the runs among the workers, and its bound is what it says
-    assert check_grid(levels, levels, (0.0, 0.02), 1, samples=31_250, workers=64)[2] == (0, 0.02)
+    # 300 x 300 x 2 cells of one method: about a day on 2 workers at the least
+    assert check_grid(levels[:300], levels[:300], (0.0, 0.02), 1, samples=31_250,
+                      workers=2)[2] == (0, 0.02)
     assert check_grid((0.0,), (1.0,), (0.0,), 14, samples=31_250, workers=1) == ((0.0,), (1.0,),
                                                                                  (0.0,))
     assert MAX_SWEEP_S == 7 * 86400
+    # fast runs on many workers: the runs' count bounds the sweep still
+    with pytest.raises(ParameterError, match=r"2,000,000 runs, .* a sweep may have at most "
+                                             r"200,000 runs and take at most 7 days"):
+        check_grid(levels, levels, (0.0, 0.02), 1, samples=100, workers=64)
 
 
 def test_the_api_refuses_a_grid_before_reading_or_writing_anything(tmp_path, monkeypatch):
