@@ -153,7 +153,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_list_option(p, "--density", metavar="F", default=["1", "0.3", "0.1"],
                     help="fractions of the points kept (default: 1,0.3,0.1)")
     add_list_option(p, "--outliers", metavar="F", default=["0", "0.02"],
-                    help="outlier fractions (default: 0,0.02)")
+                    help="outlier fractions: points added uniformly in the cloud's box, as a "
+                         "fraction of the kept points, from 0 to 1 (as many as the real ones; "
+                         "default: 0,0.02)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="scene override, as for recon simulate (scenes only)")
     p.add_argument("--seed", type=int, default=0, help="seed (default: %(default)s)")

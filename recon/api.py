@@ -1334,12 +1334,12 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     preparation = _preparation(remove_outliers, voxel, normals_k, orient, seed)
     limits = Limits.from_options(timeout, memory_limit)
     runs = variants(methods, grid=grid)
+    options = score_options(samples, memory_mb=limits.memory_mb)
     output = output_directory(output, ParameterError)   # before any work: a read-only parent
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
         walk_early(*_inputs(cloud, truth))  # before the pool's launcher thread starts
         start_workers(min(len(runs), n_workers or default_workers()), SWEEP_THREADS)
-    options = score_options(samples)
     truth_mesh = (load_truth(truth, scale=truth_scale) if isinstance(truth, str | os.PathLike)
                   else Mesh.of(_from_library(truth), "truth"))
     if local:  # ... and make the truth ready for scoring while the cloud is prepared
@@ -1432,14 +1432,17 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
         Methods, each at its defaults (default: all listed).
     noise, density, outliers : sequence of float, optional
         Grid levels: range noise (3 sigma, metres), fractions of the points kept, outlier
-        fractions (default: ``recon.experiments.stability``'s).
+        fractions, 0 to 1 (default: ``recon.experiments.stability``'s). A grid of more than
+        200,000 runs (cells x methods), or whose runs would take more than a week at the least,
+        is refused before any work (``recon.experiments.stability.check_grid``).
     seed : int
     timeout, memory_limit : float [s], int [MiB], optional
     samples : int, optional
         Surface samples per side when scoring (default ``STABILITY_SAMPLES``: the count a
         cell's Chamfer needs for its stated precision).
     scheduler, n_workers, resume
-        As ``compare``.
+        As ``compare``; ``n_workers`` is also the runs at once the grid's estimate counts (on a
+        Dask cluster, give its size).
 
     Returns
     -------
@@ -1453,21 +1456,24 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
     from recon.inputs import walk_early
     from recon.surfaces.isolation import Limits, start_workers, warm_truth
 
-    variants(methods, grid=False)  # unknown names fail before anything is simulated or read
+    runs = variants(methods, grid=False)  # unknown names fail before anything is read
     limits = Limits.from_options(timeout, memory_limit)
-    options = score_options(samples or sweep.STABILITY_SAMPLES)   # a cell's stated precision
+    samples = samples or sweep.STABILITY_SAMPLES   # a cell's stated precision
+    options = score_options(samples, memory_mb=limits.memory_mb)
     check_value(scheduler)
-    output = output_directory(output, sweep.ParameterError)   # before any work
+    # the grid's levels and cost, before anything is simulated, read or written
+    noise, density, outliers = sweep.check_grid(
+        sweep.DEFAULT_NOISE if noise is None else noise,
+        sweep.DEFAULT_DENSITY if density is None else density,
+        sweep.DEFAULT_OUTLIERS if outliers is None else outliers, len(runs), samples=samples,
+        workers=n_workers or default_workers())
+    output = output_directory(output, sweep.ParameterError)
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
         walk_early(*_inputs(source, truth))  # before the pool's launcher thread starts
         start_workers(n_workers or default_workers(), SWEEP_THREADS)
-    levels = {name: tuple(default if given is None else given)
-              for name, given, default in (("noise", noise, sweep.DEFAULT_NOISE),
-                                           ("density", density, sweep.DEFAULT_DENSITY),
-                                           ("outliers", outliers, sweep.DEFAULT_OUTLIERS))}
     clouds, truth_mesh = _stability_clouds(source, output, truth, truth_scale, overrides,
-                                           levels["noise"], seed)
+                                           noise, seed)
     if local:  # the workers make the truth ready for scoring while the first cell is prepared
         warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
     report = sweep.stability(output, clouds=clouds, truth=truth_mesh, names=methods, seed=seed,
@@ -1475,7 +1481,8 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
                              score_options=options,
                              fingerprint={"source": str(source), "overrides": list(overrides),
                                           "truth": str(truth)},
-                             **levels, **limits.kwargs())
+                             noise=noise, density=density, outliers=outliers,
+                             **limits.kwargs())
     return StabilityResult(report["records"], report["csv"], report["json"], report["pngs"],
                            report["failure_rate"])
 

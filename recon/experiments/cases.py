@@ -36,6 +36,10 @@ SWEEP_THREADS = 1
 # Fewest surface samples per side a score may use (--samples): below it the Chamfer distance's
 # sampling error exceeds the differences between methods.
 MIN_SCORE_SAMPLES = 100
+# Memory of scoring one run, per surface sample per side (``metrics.score`` draws that many on
+# each side and a coverage lattice of twice as many): the least measured (docs/decisions.md,
+# "Measurements behind the defaults"), so that only a count that cannot fit is refused.
+SCORE_BYTES_PER_SAMPLE = 600
 
 
 # Grids of ``variants``: every method at its defaults (the Pareto front across methods, in
@@ -108,17 +112,41 @@ def as_runs(runs: Sequence[Run | tuple[str, dict]]) -> list[Run]:
     return [methods.bind(*r) if isinstance(r, tuple) else methods.bind(r) for r in runs]
 
 
-def score_options(samples: int | None = None) -> dict | None:
+def score_options(samples: int | None = None, *, memory_mb: int | None = None) -> dict | None:
     """Keyword arguments of ``metrics.score`` for ``samples`` points per side.
 
     None keeps metrics' defaults. The coverage is estimated on twice as many truth points as
     each side's samples, as metrics' own defaults do.
+
+    Parameters
+    ----------
+    samples : int, optional
+    memory_mb : int, optional
+        Memory limit of each scored run [MiB] (None or 0: none, this machine's memory bounds
+        the samples).
+
+    Raises
+    ------
+    ParameterError
+        Fewer than ``MIN_SCORE_SAMPLES``, or more than the memory scoring them needs
+        (``SCORE_BYTES_PER_SAMPLE`` each) fits in ``memory_mb``.
     """
     if samples is None:
         return None
     if samples < MIN_SCORE_SAMPLES:
         raise ParameterError(f"samples must be at least {MIN_SCORE_SAMPLES}, got {samples}",
                              argument="samples")
+    if memory_mb:
+        limit, within = memory_mb * 2**20, f"a run's memory limit ({memory_mb:,} MiB)"
+    else:
+        import psutil
+
+        limit, within = psutil.virtual_memory().total, "this machine's memory"
+    if samples * SCORE_BYTES_PER_SAMPLE > limit:
+        raise ParameterError(
+            f"samples must be at most {limit // SCORE_BYTES_PER_SAMPLE:,}, got {samples:,}: "
+            f"scoring them would need about {samples * SCORE_BYTES_PER_SAMPLE / 2**30:,.1f} GiB, "
+            f"more than {within}", argument="samples")
     return {"n_truth_samples": samples, "n_test_samples": samples,
             "coverage_points": 2 * samples}
 

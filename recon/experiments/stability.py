@@ -35,8 +35,14 @@ noise
 density
     The fraction of the points kept (a seeded subsample without replacement).
 outliers
-    Extra points, as a fraction of the kept ones, uniform in the cloud's bounding box; each
-    takes the view point of a random real point (a spurious return along a real shot).
+    Extra points, as a fraction of the kept ones (0 to ``MAX_OUTLIERS``, 1: as many outliers as
+    real points), uniform in the cloud's bounding box; each takes the view point of a random real
+    point (a spurious return along a real shot).
+
+A sweep's cost is estimated before anything is read or simulated (``check_grid``): its runs
+(cells x methods) at ``RUN_S`` plus ``SAMPLE_S`` per scoring sample each, the least a run takes,
+shared among the workers; a grid estimated at more than ``MAX_SWEEP_S``, or of more than
+``MAX_RUNS`` runs, is refused.
 
 A log's missed beams (free space no degradation changes) reach every cell's methods, as they
 reach ``recon compare``'s: the visibility method's cut respects them.
@@ -61,6 +67,7 @@ from formats.errors import ParameterError, ReconError
 from recon.experiments import charts
 from recon.experiments.cases import SWEEP_THREADS, variants, write_csv
 from recon.experiments.sweep import (
+    default_workers,
     run_sweep,
     to_jsonable,
 )
@@ -84,6 +91,26 @@ DEFAULT_OUTLIERS = (0.0, 0.02)
 SCENE_NOISE_KEY = "errors.range_sigma3"
 # Fewest points a degraded cell may keep.
 MIN_CELL_POINTS = 32
+# Most outliers a cell may add, as a fraction of its kept points: 1 makes half of the cell's
+# points spurious. Beyond it the outliers outnumber the surface's points (no method here is meant
+# to find a surface then; space LIDAR data in sunlight has a few percent), and every level above
+# 1 multiplies the cell's memory.
+MAX_OUTLIERS = 1.0
+# The least one run of a cell takes (``check_grid``): RUN_S to hand the cell to its isolated
+# worker and take the result back, plus SAMPLE_S per surface sample scored on each side; the
+# method's own fit comes on top. Half the fastest runs measured (convex-hull; docs/decisions.md,
+# "Measurements behind the defaults"), so the estimate stays below what a sweep takes.
+RUN_S = 0.05
+SAMPLE_S = 3e-5
+# Longest sweep accepted, by that estimate: a week. The default grid takes minutes; a grid that
+# needs a week at the least is a list of levels written where a few were meant (1000 x 1000 cells
+# is 2 million runs), or a job for more workers (a Dask cluster with ``n_workers`` counting them)
+# or for a grid split into sweeps.
+MAX_SWEEP_S = 7 * 86400.0
+# Most runs a sweep may have, whatever their time: each keeps its case and its record in this
+# process, about 3 kB (docs/decisions.md, "Measurements behind the defaults"), so 200,000 runs
+# hold about 0.6 GB besides their stability.json; a 300 x 300 x 2 grid of one method fits.
+MAX_RUNS = 200_000
 # Accuracy collapse (module docstring): Chamfer above 3x the clean cell's plus the added noise.
 # 3x: a method that merely degrades with its input stays within 2x here (measured: Poisson and
 # plane at 30% density and 0.3 m noise on the asteroid), the reported plane collapse was 4.5x.
@@ -132,14 +159,59 @@ def _check_levels(name: str, levels: Sequence[float], low: float, high: float | 
                   ) -> tuple[float, ...]:
     levels = tuple(float(v) for v in levels)
     if not levels:
-        raise ParameterError(f"{name} needs at least one level")
+        raise ParameterError(f"{name} needs at least one level", argument=name)
     for v in levels:
         if not np.isfinite(v) or v < low or (high is not None and v > high):
             limit = f"[{low:g}, {high:g}]" if high is not None else f">= {low:g}"
-            raise ParameterError(f"{name} level {v:g} is out of range (must be {limit})")
+            raise ParameterError(f"{name} level {v:g} is out of range (must be {limit})",
+                                 argument=name)
     if len(set(levels)) != len(levels):
-        raise ParameterError(f"{name} levels repeat: {levels}")
+        raise ParameterError(f"{name} levels repeat: {levels}", argument=name)
     return levels
+
+
+def check_grid(noise: Sequence[float], density: Sequence[float], outliers: Sequence[float],
+               n_methods: int, *, samples: int, workers: int
+               ) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+    """The grid's levels, checked, and its cost estimated before any work.
+
+    Parameters
+    ----------
+    noise, density, outliers : sequence of float
+        Grid levels (module docstring).
+    n_methods : int
+        Methods run on every cell.
+    samples : int
+        Surface samples scored per side in each run.
+    workers : int
+        Runs at once.
+
+    Returns
+    -------
+    noise, density, outliers : tuple of float
+
+    Raises
+    ------
+    ParameterError
+        A level out of range or repeated, or a grid of more than ``MAX_RUNS`` runs or whose
+        runs would take more than ``MAX_SWEEP_S`` at the least (``RUN_S`` and ``SAMPLE_S`` a
+        run).
+    """
+    noise = _check_levels("noise", noise, 0.0, None)
+    density = _check_levels("density", density, 1e-9, 1.0)
+    outliers = _check_levels("outliers", outliers, 0.0, MAX_OUTLIERS)
+    cells = len(noise) * len(density) * len(outliers)
+    runs = cells * n_methods
+    per_run = RUN_S + SAMPLE_S * samples
+    estimate = runs * per_run / max(1, workers)
+    if estimate > MAX_SWEEP_S or runs > MAX_RUNS:
+        raise ParameterError(
+            f"noise, density and outliers make {cells:,} cells; with {n_methods} method(s) that "
+            f"is {runs:,} runs, at least {estimate / 86400:.3g} days on {workers} worker(s) "
+            f"({per_run:.2g} s a run scoring {samples:,} samples per side); a sweep may have "
+            f"at most {MAX_RUNS:,} runs and take at most {MAX_SWEEP_S / 86400:g} days: use "
+            "fewer levels or methods, fewer samples or more workers")
+    return noise, density, outliers
 
 
 def degrade(points: np.ndarray, view_points: np.ndarray | None, *, noise_sigma3: float,
@@ -333,10 +405,11 @@ def stability(out_dir, *, clouds: dict, truth, names: Sequence[str] | None = Non
         ``records`` and the paths written.
     """
     clouds = {name: StabilityCloud(*cloud) for name, cloud in clouds.items()}
-    noise = _check_levels("noise", noise, 0.0, None)
-    density = _check_levels("density", density, 1e-9, 1.0)
-    outliers = _check_levels("outliers", outliers, 0.0, None)
     runs = variants(names, grid=False)
+    noise, density, outliers = check_grid(
+        noise, density, outliers, len(runs),
+        samples=(score_options or {}).get("n_test_samples", STABILITY_SAMPLES),
+        workers=n_workers or default_workers())
     scheduler = scheduler or "threads"
     cases = {}  # cell by cell, so that a cell's methods share its cloud (``_CellCache``)
     for i, nz in enumerate(noise):

@@ -28,6 +28,7 @@ Schedulers
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import logging
 import math
@@ -63,6 +64,11 @@ PROBE_GREETING_S = 5.0
 PROBE_MAX_BYTES = 1 << 16
 # A Dask scheduler address: ``host:port`` or ``protocol://host:port`` with one of Dask's comms.
 SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
+# Cases submitted ahead per thread of a local pool (``_execute_threads``): one running, one
+# ready to start as it ends.
+QUEUED_PER_WORKER = 2
+# Longest wait of a local pool for a case to finish before looking for a signal, in seconds.
+WAIT_S = 0.5
 # Where a local cluster listens: this machine only. Its scheduler and dashboard (HTTP, no
 # authentication) would otherwise be open on every interface on random ports.
 LOCAL_HOST = "127.0.0.1"
@@ -396,26 +402,44 @@ def iterate(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
             yield key, _call(func, shared, cases[key], (channel, key))
         return
     if scheduler == "threads":
-        from concurrent.futures import ThreadPoolExecutor, as_completed
-
-        from recon.surfaces.isolation import kill_running, resume_runs
-
-        try:
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                futures = {pool.submit(_call, func, shared, cases[key], (channel, key)): key
-                           for key in pending}
-                try:
-                    for future in as_completed(futures):
-                        yield futures[future], future.result()
-                except BaseException:  # Ctrl-C or a closed generator: stop the children
-                    for future in futures:
-                        future.cancel()
-                    kill_running()
-                    raise
-        finally:
-            resume_runs()
+        yield from _execute_threads(func, cases, pending, shared, workers, channel)
         return
     yield from _execute_dask(func, cases, pending, shared, scheduler, workers, channel)
+
+
+def _execute_threads(func, cases, pending, shared, workers, channel):
+    """``iterate`` on a local thread pool: at most ``QUEUED_PER_WORKER`` cases per thread
+    submitted at a time, the next ones as those finish, so that starting, interrupting and
+    stopping a sweep take the same time whatever its size; waits of ``WAIT_S`` at most, so a
+    signal whose exception a library swallowed is seen (``formats.interrupt.check``)."""
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    from formats import interrupt
+    from recon.surfaces.isolation import kill_running, resume_runs
+
+    keys = iter(pending)
+    running: dict = {}
+    pool = ThreadPoolExecutor(max_workers=workers)
+    try:
+        while True:
+            for key in itertools.islice(keys, workers * QUEUED_PER_WORKER - len(running)):
+                running[pool.submit(_call, func, shared, cases[key], (channel, key))] = key
+            if not running:
+                break
+            finished, _ = wait(running, timeout=WAIT_S, return_when=FIRST_COMPLETED)
+            interrupt.check()
+            for future in finished:
+                yield running.pop(future), future.result()
+    except BaseException:  # Ctrl-C or a closed generator: stop the children, start no more
+        for future in running:
+            future.cancel()
+        kill_running()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    else:
+        pool.shutdown(wait=True)
+    finally:
+        resume_runs()
 
 
 def _execute_dask(func, cases, pending, shared, scheduler, workers, channel):

@@ -368,6 +368,30 @@ def test_methods_without_names_is_a_usage_error(value, cloud, sphere_log, tmp_pa
     assert "Traceback" not in err and not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("command, args, expected", [
+    ("stability", ["--samples", "100000000000"],
+     "--samples must be at most 14,316,557, got 100,000,000,000: scoring them would need "
+     "about"),
+    ("compare", ["--samples", "1000000000"], "--samples must be at most 14,316,557, got "
+                                             "1,000,000,000"),
+    ("stability", ["--outliers", "1000000"], "--outliers level 1e+06 is out of range (must be "
+                                             "[0, 1])"),
+    ("stability", ["--outliers", "1.5"], "--outliers level 1.5 is out of range"),
+    ("stability", ["--noise", ",".join(f"{i / 1000:g}" for i in range(1000)),
+                   "--density", ",".join(f"{i / 1000:g}" for i in range(1, 1001))],
+     "noise, density and outliers make 2,000,000 cells; with 1 method(s) that is 2,000,000 "
+     "runs, at least"),
+])
+def test_sweeps_refuse_absurd_sizes_before_any_work(command, args, expected, cloud, sphere_log,
+                                                    tmp_path):
+    """Refused up front, not run to a result that blames the method (a memory failure in
+    every cell) or to a sweep of weeks."""
+    out = tmp_path / "o"
+    _refused([command, cloud, "--truth", sphere_log, "-o", out, "--methods", "convex-hull",
+              *args], expected)
+    assert not out.exists()
+
+
 def test_tiny_voxel_is_one_line_without_numpy_warning(cloud, tmp_path):
     _refused(["reconstruct", cloud, "-o", tmp_path / "m.ply", "--voxel", "1e-300",
               "--in-process"], "voxel 1e-300 m is too small for the cloud")

@@ -136,6 +136,21 @@ def test_score_options_sample_coverage_on_twice_the_samples():
         score_options(99)
 
 
+def test_score_options_refuse_samples_whose_scoring_cannot_fit_in_memory():
+    from recon.experiments.cases import SCORE_BYTES_PER_SAMPLE, score_options
+
+    most = 8192 * 2**20 // SCORE_BYTES_PER_SAMPLE
+    assert score_options(most, memory_mb=8192)["n_test_samples"] == most
+    with pytest.raises(ParameterError, match=rf"^samples must be at most {most:,}, got "
+                                             r"100,000,000,000: scoring them would need about "
+                                             r"[\d,.]+ GiB, more than a run's memory limit "
+                                             r"\(8,192 MiB\)$") as info:
+        score_options(10**11, memory_mb=8192)
+    assert info.value.argument == "samples"
+    with pytest.raises(ParameterError, match="more than this machine's memory"):
+        score_options(10**15)   # no limit: the machine's memory bounds them
+
+
 def test_compare_walks_its_hdf5_files_before_starting_workers(tmp_path, monkeypatch):
     """A strike log's structure is walked before it is read (formats.hdf5_check): in a forked
     child while recon has one thread, else in a fresh interpreter (0.6 s of CPU). compare walks

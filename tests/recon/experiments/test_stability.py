@@ -138,13 +138,48 @@ def test_every_cell_of_a_log_carries_its_missed_beams(tmp_path):
     ({"density": (0.0,)}, r"density level 0 is out of range \(must be \[1e-09, 1\]\)"),
     ({"density": (1.5,)}, "density level 1.5 is out of range"),
     ({"outliers": (-0.1,)}, "outliers level -0.1 is out of range"),
+    ({"outliers": (1.5,)}, r"outliers level 1.5 is out of range \(must be \[0, 1\]\)"),
+    ({"outliers": (1e6,)}, "outliers level 1e[+]06 is out of range"),
     ({"noise": (0.1, 0.1)}, "noise levels repeat"),
 ])
 def test_bad_levels_are_named(tmp_path, kwargs, match):
     points, view, _ = sphere_points(200)
-    with pytest.raises(ParameterError, match=match):
+    with pytest.raises(ParameterError, match=match) as info:
         stability(tmp_path, clouds={"base": (points, view, False)}, truth=sphere_mesh(2),
                   names=["convex-hull"], **kwargs)
+    assert info.value.argument == next(iter(kwargs))
+
+
+def test_a_grid_too_long_to_run_is_refused_with_its_estimate():
+    from recon.experiments.stability import MAX_SWEEP_S, check_grid
+
+    levels = [i / 1000 for i in range(1, 1001)]
+    with pytest.raises(ParameterError, match=r"^noise, density and outliers make 2,000,000 "
+                                             r"cells; with 1 method\(s\) that is 2,000,000 "
+                                             r"runs, at least [\d.]+ days on 2 worker\(s\)"):
+        check_grid(levels, levels, (0.0, 0.02), 1, samples=31_250, workers=2)
+    # 300 x 300 x 2 cells of one method: about a day on 2 workers at the least
+    assert check_grid(levels[:300], levels[:300], (0.0, 0.02), 1, samples=31_250,
+                      workers=2)[2] == (0, 0.02)
+    assert check_grid((0.0,), (1.0,), (0.0,), 14, samples=31_250, workers=1) == ((0.0,), (1.0,),
+                                                                                 (0.0,))
+    assert MAX_SWEEP_S == 7 * 86400
+    # fast runs on many workers: the runs' count bounds the sweep still
+    with pytest.raises(ParameterError, match=r"2,000,000 runs, .* a sweep may have at most "
+                                             r"200,000 runs and take at most 7 days"):
+        check_grid(levels, levels, (0.0, 0.02), 1, samples=100, workers=64)
+
+
+def test_the_api_refuses_a_grid_before_reading_or_writing_anything(tmp_path, monkeypatch):
+    from recon import api
+    from recon.surfaces import isolation
+
+    monkeypatch.setattr(isolation, "start_workers", lambda *a: pytest.fail("workers started"))
+    levels = [i / 1000 for i in range(1, 1001)]
+    with pytest.raises(ParameterError, match="2,000,000 runs"):
+        api.stability(tmp_path / "missing.ply", output=tmp_path / "out", noise=levels,
+                      density=levels, methods=["convex-hull"])
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_plain_cloud_needs_a_truth_and_takes_no_scene_overrides(tmp_path):

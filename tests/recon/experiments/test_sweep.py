@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import json
 import os
+import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
 
 from formats.errors import ParameterError
-from recon.experiments.sweep import read_results, run_sweep, to_jsonable
+from recon.experiments.sweep import QUEUED_PER_WORKER, iterate, read_results, run_sweep, to_jsonable
 
 CALLS_ENV = "RECON_TEST_SWEEP_CALLS"
 
@@ -21,6 +23,14 @@ def square(*, x: int, offset: int = 0, calls: str, stop_at: int | None = None) -
     if stop_at is not None and x == stop_at:
         raise KeyboardInterrupt  # what Ctrl-C does in the middle of a sweep
     return {"status": "ok", "value": x * x + offset}
+
+
+def timed(*, x: int, calls: str) -> dict:
+    """A short case that records when it started (in the ``calls`` file)."""
+    with open(calls, "a") as out:
+        out.write(f"{x} {time.monotonic()}\n")
+    time.sleep(0.005)
+    return {"status": "ok"}
 
 
 def broken(*, x: int) -> dict:
@@ -65,6 +75,46 @@ def test_interrupted_sweep_keeps_its_results_and_resume_skips_them(tmp_path):
     assert _ran(calls) == [0, 1, 2, 3, 3, 4, 5]  # 0-2 were not run again
     lines = (out / "results.jsonl").read_text().splitlines()
     assert len(lines) == 6 and all(json.loads(line) for line in lines)
+
+
+def _counting_submissions(monkeypatch, *, interrupt_at: int | None = None) -> list:
+    """Count the cases submitted to thread pools; raise KeyboardInterrupt from submission
+    number ``interrupt_at`` (where a Ctrl-C may land), recording when in the list."""
+    submit, submitted = ThreadPoolExecutor.submit, []
+
+    def counting(self, *args, **kwargs):
+        submitted.append(time.monotonic())
+        if len(submitted) == interrupt_at:
+            raise KeyboardInterrupt
+        return submit(self, *args, **kwargs)
+
+    monkeypatch.setattr(ThreadPoolExecutor, "submit", counting)
+    return submitted
+
+
+def test_a_thread_pool_takes_the_cases_a_few_at_a_time(tmp_path, monkeypatch):
+    submitted = _counting_submissions(monkeypatch)
+    cases = {f"x={i}": {"x": i} for i in range(5000)}
+    results = iterate(timed, cases, shared={"calls": str(tmp_path / "calls")},
+                      scheduler="threads", n_workers=2)
+    next(results)
+    assert len(submitted) <= 2 * QUEUED_PER_WORKER + 2
+    results.close()
+
+
+def test_an_interrupt_while_cases_are_submitted_starts_no_more_of_them(tmp_path, monkeypatch):
+    calls = tmp_path / "calls"
+    submitted = _counting_submissions(monkeypatch, interrupt_at=200)
+    cases = {f"x={i}": {"x": i} for i in range(5000)}
+    with pytest.raises(KeyboardInterrupt):
+        for _ in iterate(timed, cases, shared={"calls": str(calls)}, scheduler="threads",
+                         n_workers=2):
+            pass
+    interrupted = submitted[-1]
+    time.sleep(0.5)   # what still ran after the interrupt has started by now
+    starts = [float(line.split()[1]) for line in calls.read_text().splitlines()]
+    # at most the cases queued when it came (a race: one may start as it is cancelled)
+    assert sum(start > interrupted for start in starts) <= 2 * QUEUED_PER_WORKER
 
 
 def test_without_resume_a_sweep_starts_afresh(tmp_path):
