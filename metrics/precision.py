@@ -270,5 +270,6 @@ def check_precision(value) -> float:
 
     if (isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating)
             or not np.isfinite(value) or not 0 < value <= 0.5):
-        raise InputError(f"precision must be a number in (0, 0.5], got {value!r}")
+        raise InputError(f"precision must be a number in (0, 0.5], got {value!r}",
+                         argument="precision")
     return float(value)
