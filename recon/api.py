@@ -604,6 +604,7 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
     import sim
     from formats.strike_log import DEFAULT_COMPRESSION
 
+    check_seed(seed)
     summary = sim.simulate(sim.load_scene(str(scene), list(overrides)), output, seed=seed,
                            progress=progress, live=live,
                            compression=compression or DEFAULT_COMPRESSION)
@@ -611,14 +612,17 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
 
 
 def check_seed(seed: int) -> int:
-    """``seed`` if the simulator takes it (0 to ``sim.defaults.MAX_SEED``), else
-    ``ParameterError``."""
+    """``seed`` as an int when every verb that takes one does (an integer from 0 to
+    ``sim.defaults.MAX_SEED``, which a log stores), else ``ParameterError``; each verb checks
+    its seed before any work."""
+    from numbers import Integral
+
     from sim.defaults import MAX_SEED
 
-    if not 0 <= seed <= MAX_SEED:
-        raise ParameterError(f"seed must be >= 0 and at most {MAX_SEED}, got {seed}",
+    if isinstance(seed, bool) or not isinstance(seed, Integral) or not 0 <= seed <= MAX_SEED:
+        raise ParameterError(f"seed must be an integer from 0 to {MAX_SEED}, got {seed!r}",
                              argument="seed")
-    return seed
+    return int(seed)
 
 
 def presets() -> list[tuple[str, str]]:
@@ -749,6 +753,7 @@ def refine(log, *, interval: float | None = None, spin: bool = False, seed: int 
     """
     from recon.registration.refine import refine as estimate
 
+    check_seed(seed)
     return estimate(log, interval=interval, spin=spin, seed=seed, progress=progress)
 
 
@@ -871,6 +876,8 @@ def score(test, *, truth, truth_scale: float = 1.0, truth_units: str | None = No
     """
     from metrics.score import score as score_against
 
+    if seed is not None:   # None: fresh randomness
+        check_seed(seed)
     truth = truth_of(truth, scale=truth_scale, units=truth_units)
     options = {"tau": tau, "tau_fraction": tau_fraction, "edges": edges, "seed": seed,
                "progress": progress} | options
@@ -933,6 +940,7 @@ def edges(test, *, truth, output, truth_scale: float = 1.0, truth_units: str | N
     """
     from recon.edge_pictures import edge_pictures
 
+    check_seed(seed)
     truth_mesh = truth_of(truth, scale=truth_scale, units=truth_units)
     result = edge_pictures(load(test, name="test"), truth_mesh, output, seed=seed, title=title,
                            edge_options=edge_options, progress=progress)
@@ -975,6 +983,7 @@ def _preparation(remove_outliers: bool, voxel: float | None, normals_k: int | No
     from recon.surfaces.normals import DEFAULT_K
     from recon.surfaces.prepare import Preparation
 
+    check_seed(seed)
     return Preparation.from_options(remove_outliers=remove_outliers, voxel=voxel,
                                     normals_k=DEFAULT_K if normals_k is None else normals_k,
                                     orient=orient, seed=seed)
@@ -1453,6 +1462,7 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
     from recon.surfaces.isolation import Limits, start_workers, warm_truth
 
     variants(methods, grid=False)  # unknown names fail before anything is simulated or read
+    check_seed(seed)
     limits = Limits.from_options(timeout, memory_limit)
     options = score_options(samples or sweep.STABILITY_SAMPLES)   # a cell's stated precision
     check_value(scheduler)
