@@ -1333,6 +1333,7 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     from formats.paths import output_directory
     from recon.experiments import compare as comparison
     from recon.experiments.cases import SWEEP_THREADS, score_options, variants
+    from recon.experiments.sweep import check_scheduler as check_value
     from recon.experiments.sweep import default_workers
     from recon.inputs import load_truth, walk_early
     from recon.surfaces.isolation import Limits, start_workers, warm_truth
@@ -1342,6 +1343,8 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     preparation = _preparation(remove_outliers, voxel, normals_k, orient, seed)
     limits = Limits.from_options(timeout, memory_limit)
     runs = variants(methods, grid=grid)
+    check_value(scheduler)
+    _check_workers(n_workers)
     output = output_directory(output, ParameterError)   # before any work: a read-only parent
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
@@ -1466,6 +1469,7 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
     limits = Limits.from_options(timeout, memory_limit)
     options = score_options(samples or sweep.STABILITY_SAMPLES)   # a cell's stated precision
     check_value(scheduler)
+    _check_workers(n_workers)
     output = output_directory(output, sweep.ParameterError)   # before any work
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads

@@ -274,3 +274,18 @@ def test_real_subprocess(files):
     assert done.stderr.strip().splitlines() == [
         "recon reconstruct: error: --memory-limit must be >= 0, got -1"]
     assert not (files / "m.ply").exists()
+
+
+@pytest.mark.parametrize("command", ["compare", "stability"])
+def test_sweeps_check_their_workers_and_scheduler_before_making_the_directory(files, capsys,
+                                                                              command):
+    assert main([*SEEDED[command](files), "--workers", "0"]) == 1
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"recon {command}: error: --workers must be >= 1, got 0"]
+    verb = {"compare": _compare, "stability": lambda d, **options: api.stability(
+        d / "c.ply", truth=d / "t.ply", output=d / "out", **options)}[command]
+    with pytest.raises(ParameterError, match=r"^n_workers must be >= 1, got 0$"):
+        verb(files, n_workers=0)
+    with pytest.raises(ParameterError, match=r"^scheduler must be a Dask scheduler address"):
+        verb(files, scheduler="my cluster")
+    assert not (files / "out").exists()
