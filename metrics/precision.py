@@ -13,7 +13,8 @@ each side so that
 rounds at most; the counts are capped at ``defaults.MAX_SAMPLES`` per side, a cloud's sample
 at ``defaults.CLOUD_SAMPLES``). The coverage lattice (``lattice_size``) and the edge metric's
 sample of the points far from feature edges (``far_sample_fraction``) are sized beforehand for
-a standard error of ``precision / 4`` on the coverage and the edge score at their worst case.
+a standard error of ``precision / 4`` on the coverage and the edge score at their worst case (a
+precision whose lattice would take more than ``defaults.COVERAGE_MAX_BYTES`` is refused).
 The standard errors of the samples actually scored are reported, whatever the target.
 
 Formulas. A mean of n values drawn independently has the standard error ``s / sqrt(n)`` (s the

@@ -396,6 +396,9 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     ------
     InputError
         Empty or malformed inputs, NaN/Inf coordinates, a truth with no faces, bad options.
+    ParameterError
+        A ``precision`` or ``coverage_points`` whose coverage lattice would take more memory
+        than ``defaults.COVERAGE_MAX_BYTES`` (refused before any work).
 
     Warns
     -----
