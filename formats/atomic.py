@@ -24,6 +24,7 @@ import re
 import shutil
 import tempfile
 import weakref
+from collections.abc import Iterator
 from pathlib import Path
 
 from formats import interrupt
@@ -278,6 +279,34 @@ def write_atomically(path, write, *, error: type[Exception] = OSError) -> Path:
     with _WholeFile(path, suffix=Path(path).suffix, error=error) as writer:
         write(writer.temporary)
     return writer.path
+
+
+@contextlib.contextmanager
+def written_together(paths, *, error: type[Exception] = OSError) -> Iterator[list[Path]]:
+    """Write several files as one set: the block fills a temporary file beside each
+    destination, and only when it ends cleanly are they all renamed into place, one after the
+    other.
+
+    Every destination is checked (as :func:`write_atomically` checks its one) before the block
+    runs, so the work inside it starts only when all of them can be written; an exception or an
+    interrupt inside it leaves every old file as it was and no partial file.
+
+    Parameters
+    ----------
+    paths : iterable of str or Path
+        Destinations.
+    error : exception class
+        Raised, with one line naming the destination, for one that cannot be written.
+
+    Yields
+    ------
+    list of Path
+        The temporary files, in the order of ``paths``, each with its destination's suffix
+        (libraries such as matplotlib pick the format from it).
+    """
+    with contextlib.ExitStack() as writers:
+        yield [writers.enter_context(_WholeFile(path, suffix=Path(path).suffix,
+                                                error=error)).temporary for path in paths]
 
 
 def write_text_atomically(path, text: str, *, error: type[Exception] = OSError) -> Path:

@@ -233,3 +233,33 @@ def output_directory(path, error: type[ReconError] = ParameterError) -> Path:
         raise error(f"output {path}: cannot write in the directory ({reason})",
                     argument="output")
     return path
+
+
+@contextlib.contextmanager
+def writing_into(path, error: type[ReconError] = ParameterError) -> Iterator[Path]:
+    """:func:`output_directory` for the block that writes into it: when the block raises, the
+    directories this call created (``path`` and its missing parents) are removed again while
+    they are empty, so a refused or failed run leaves no empty output directory behind.
+
+    Parameters
+    ----------
+    path : str or Path
+    error : ReconError subclass
+        As :func:`output_directory`.
+
+    Yields
+    ------
+    Path
+    """
+    path = Path(path)
+    created = [directory for directory in (path, *path.parents) if not directory.exists()]
+    output_directory(path, error)
+    try:
+        yield path
+    except BaseException:
+        for directory in created:   # the innermost first
+            try:
+                directory.rmdir()
+            except OSError:   # not empty (or gone): it and its parents stay
+                break
+        raise

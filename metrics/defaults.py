@@ -36,6 +36,19 @@ TEST_MESH_SAMPLES = 200_000
 COVERAGE_POINTS = 400_000
 # Cap on s, so one face that holds most of the area cannot ask for an unbounded lattice.
 COVERAGE_MAX_SUBDIVISION = 512
+# Memory a score takes per coverage lattice point, at its peak: the point (24 B) and its face
+# (8 B), kept; their copies while the lattice is sorted by face; the points joined with the
+# truth samples in Morton order, their distances and the nearest-neighbour query's own arrays.
+# Measured 150-230 B per point (peak resident memory of ``score`` and ``score_stream`` at 2.5 to
+# 6.8 million points, to a count and to a precision); 240 B to spare.
+LATTICE_BYTES_PER_POINT = 240
+# Most memory a coverage lattice may take (LATTICE_BYTES_PER_POINT a point): a precision or a
+# count that asks more is refused before any work (``score._Setup``). 4 GiB holds about 18
+# million points, whose coverage standard error is at most 0.5 / sqrt(1.8e7) = 1.2e-4, four
+# times below recall's at MAX_SAMPLES (4.9e-4): a finer lattice would state a coverage no other
+# score matches, while its memory grows without bound (a precision of 1e-9 puts 512**2 points
+# on every face). 4 GiB leaves the rest of a score room on a machine of 8 GB.
+COVERAGE_MAX_BYTES = 4 << 30
 
 # Seed used when the caller gives none: scores are reproducible by default.
 SEED = 0

@@ -13,7 +13,8 @@ each side so that
 rounds at most; the counts are capped at ``defaults.MAX_SAMPLES`` per side, a cloud's sample
 at ``defaults.CLOUD_SAMPLES``). The coverage lattice (``lattice_size``) and the edge metric's
 sample of the points far from feature edges (``far_sample_fraction``) are sized beforehand for
-a standard error of ``precision / 4`` on the coverage and the edge score at their worst case.
+a standard error of ``precision / 4`` on the coverage and the edge score at their worst case (a
+precision whose lattice would take more than ``defaults.COVERAGE_MAX_BYTES`` is refused).
 The standard errors of the samples actually scored are reported, whatever the target.
 
 Formulas. A mean of n values drawn independently has the standard error ``s / sqrt(n)`` (s the
@@ -270,5 +271,6 @@ def check_precision(value) -> float:
 
     if (isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating)
             or not np.isfinite(value) or not 0 < value <= 0.5):
-        raise InputError(f"precision must be a number in (0, 0.5], got {value!r}")
+        raise InputError(f"precision must be a number in (0, 0.5], got {value!r}",
+                         argument="precision")
     return float(value)

@@ -56,6 +56,7 @@ memory that does not grow with its size, to the same numbers:
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
@@ -65,7 +66,7 @@ from functools import cached_property
 import numpy as np
 
 from formats import interrupt
-from formats.errors import InputError
+from formats.errors import InputError, ParameterError
 from formats.geometry import UNKNOWN
 from metrics import defaults
 from metrics.distance import MeshDistance
@@ -395,6 +396,9 @@ def score(test, truth, *, tau: float | None = None, tau_fraction: float | None =
     ------
     InputError
         Empty or malformed inputs, NaN/Inf coordinates, a truth with no faces, bad options.
+    ParameterError
+        A ``precision`` or ``coverage_points`` whose coverage lattice would take more memory
+        than ``defaults.COVERAGE_MAX_BYTES`` (refused before any work).
 
     Warns
     -----
@@ -759,6 +763,9 @@ class _Setup:
         self.n_truth_samples = _count(n_truth_samples, "n_truth_samples")
         self.n_test_samples = _count(n_test_samples, "n_test_samples")
         self.coverage_points = _count(coverage_points, "coverage_points")
+        self.lattice_size = (self.coverage_points if self.precision is None
+                             else lattice_size(self.precision))
+        self.check_lattice()
         self.diagonal = self.prepared.diagonal
         self.tau = resolve_length(tau, tau_fraction, defaults.TAU_FRACTION, self.diagonal, "tau")
         self.edge_options = dict(edge_options or {})
@@ -770,6 +777,36 @@ class _Setup:
     @property
     def distance(self) -> MeshDistance:
         return self.prepared.distance
+
+    def check_lattice(self) -> None:
+        """Refuse, before any work, a coverage lattice whose memory
+        (``defaults.LATTICE_BYTES_PER_POINT`` a point) exceeds ``defaults.COVERAGE_MAX_BYTES``,
+        naming the argument that sized it (``precision`` or ``coverage_points``) and the value
+        that fits."""
+        levels = subdivision_levels(self.mesh, self.lattice_size,
+                                    defaults.COVERAGE_MAX_SUBDIVISION)
+        points = int(np.sum(levels**2))
+        allowed = defaults.COVERAGE_MAX_BYTES // defaults.LATTICE_BYTES_PER_POINT
+        if points <= allowed:
+            return
+        faces = self.mesh.n_faces
+        # A request of s points gives at most (sqrt(s) + sqrt(faces))**2: each face's level is
+        # below sqrt(its share of s) + 1 (``sampling.subdivision_levels``).
+        fits = math.floor((math.sqrt(allowed) - math.sqrt(faces))**2) if faces < allowed else 0
+        name = "coverage_points" if self.precision is None else "precision"
+        if fits < lattice_size(0.5):   # not even the coarsest precision's lattice
+            fix = f"the truth's {faces:,} faces need more than that at any {name}"
+        elif self.precision is None:
+            fix = f"give at most {fits:,}"
+        else:   # lattice_size(p) = 4 / p**2, p rounded up to two digits
+            digit = 10.0**(math.floor(math.log10(2 / math.sqrt(fits))) - 1)
+            fix = f"give at least {math.ceil(2 / math.sqrt(fits) / digit) * digit:.2g}"
+        value = f"{self.coverage_points:,}" if self.precision is None else f"{self.precision:g}"
+        raise ParameterError(
+            f"{name} {value} asks a coverage lattice of {points:,} points on the truth's "
+            f"{faces:,} faces, about {points * defaults.LATTICE_BYTES_PER_POINT / 1e9:,.1f} GB "
+            f"of memory, more than the {defaults.COVERAGE_MAX_BYTES / 1e9:.1f} GB allowed; "
+            f"{fix}", argument=name)
 
     def check_frame(self, frame: str, name: str = "test") -> None:
         """Refuse two different known frames; when either is ``"unknown"`` (a file that
@@ -819,9 +856,7 @@ class _Setup:
     def lattice(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``Truth.lattice`` of this score: ``coverage_points``, or the size its precision
         asks (``precision.lattice_size``)."""
-        size = (self.coverage_points if self.precision is None
-                else lattice_size(self.precision))
-        return self.prepared.lattice(size)
+        return self.prepared.lattice(self.lattice_size)
 
     @cached_property
     def truth_samples(self) -> tuple[np.ndarray, np.ndarray]:

@@ -604,6 +604,7 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
     import sim
     from formats.strike_log import DEFAULT_COMPRESSION
 
+    check_seed(seed)
     summary = sim.simulate(sim.load_scene(str(scene), list(overrides)), output, seed=seed,
                            progress=progress, live=live,
                            compression=compression or DEFAULT_COMPRESSION)
@@ -611,14 +612,17 @@ def simulate(scene, output, *, seed: int = 0, overrides: Sequence[str] = (),
 
 
 def check_seed(seed: int) -> int:
-    """``seed`` if the simulator takes it (0 to ``sim.defaults.MAX_SEED``), else
-    ``ParameterError``."""
+    """``seed`` as an int when every verb that takes one does (an integer from 0 to
+    ``sim.defaults.MAX_SEED``, which a log stores), else ``ParameterError``; each verb checks
+    its seed before any work."""
+    from numbers import Integral
+
     from sim.defaults import MAX_SEED
 
-    if not 0 <= seed <= MAX_SEED:
-        raise ParameterError(f"seed must be >= 0 and at most {MAX_SEED}, got {seed}",
+    if isinstance(seed, bool) or not isinstance(seed, Integral) or not 0 <= seed <= MAX_SEED:
+        raise ParameterError(f"seed must be an integer from 0 to {MAX_SEED}, got {seed!r}",
                              argument="seed")
-    return seed
+    return int(seed)
 
 
 def presets() -> list[tuple[str, str]]:
@@ -749,6 +753,7 @@ def refine(log, *, interval: float | None = None, spin: bool = False, seed: int 
     """
     from recon.registration.refine import refine as estimate
 
+    check_seed(seed)
     return estimate(log, interval=interval, spin=spin, seed=seed, progress=progress)
 
 
@@ -872,6 +877,8 @@ def score(test, *, truth, truth_scale: float = 1.0, truth_units: str | None = No
     """
     from metrics.score import score as score_against
 
+    if seed is not None:   # None: fresh randomness
+        check_seed(seed)
     truth = truth_of(truth, scale=truth_scale, units=truth_units)
     options = {"tau": tau, "tau_fraction": tau_fraction, "edges": edges, "seed": seed,
                "progress": progress} | options
@@ -934,6 +941,7 @@ def edges(test, *, truth, output, truth_scale: float = 1.0, truth_units: str | N
     """
     from recon.edge_pictures import edge_pictures
 
+    check_seed(seed)
     truth_mesh = truth_of(truth, scale=truth_scale, units=truth_units)
     result = edge_pictures(load(test, name="test"), truth_mesh, output, seed=seed, title=title,
                            edge_options=edge_options, progress=progress)
@@ -976,6 +984,7 @@ def _preparation(remove_outliers: bool, voxel: float | None, normals_k: int | No
     from recon.surfaces.normals import DEFAULT_K
     from recon.surfaces.prepare import Preparation
 
+    check_seed(seed)
     return Preparation.from_options(remove_outliers=remove_outliers, voxel=voxel,
                                     normals_k=DEFAULT_K if normals_k is None else normals_k,
                                     orient=orient, seed=seed)
@@ -1325,6 +1334,7 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     from formats.paths import output_directory
     from recon.experiments import compare as comparison
     from recon.experiments.cases import SWEEP_THREADS, score_options, variants
+    from recon.experiments.sweep import check_scheduler as check_value
     from recon.experiments.sweep import default_workers
     from recon.inputs import load_truth, walk_early
     from recon.surfaces.isolation import Limits, start_workers, warm_truth
@@ -1335,6 +1345,8 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     limits = Limits.from_options(timeout, memory_limit)
     runs = variants(methods, grid=grid)
     options = score_options(samples, memory_mb=limits.memory_mb)
+    check_value(scheduler)
+    _check_workers(n_workers)
     output = output_directory(output, ParameterError)   # before any work: a read-only parent
     local = scheduler in (None, "threads")
     if local:  # local workers import Open3D while the input loads
@@ -1457,10 +1469,12 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
     from recon.surfaces.isolation import Limits, start_workers, warm_truth
 
     runs = variants(methods, grid=False)  # unknown names fail before anything is read
+    check_seed(seed)
     limits = Limits.from_options(timeout, memory_limit)
     samples = samples or sweep.STABILITY_SAMPLES   # a cell's stated precision
     options = score_options(samples, memory_mb=limits.memory_mb)
     check_value(scheduler)
+    _check_workers(n_workers)
     # the grid's levels and cost, before anything is simulated, read or written
     noise, density, outliers = sweep.check_grid(
         sweep.DEFAULT_NOISE if noise is None else noise,

@@ -13,8 +13,9 @@ writes into the directory ``output``:
   triangulation: blind spots) as a faint orange shade behind the points;
 - ``edges.json``: the edge report's scalars and what was written.
 
-Every file appears only once complete (written under a temporary name and renamed), so an
-interrupted run leaves the previous outputs as they were.
+The three are written under temporary names and renamed into place together once all are
+complete, every destination checked before the work starts: a refused, failed or interrupted run
+leaves the previous set as it was (and no new, empty output directory).
 """
 
 from __future__ import annotations
@@ -24,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.atomic import write_atomically, write_text_atomically
+from formats.atomic import written_together
 from formats.errors import ParameterError
 from formats.geometry import Mesh
-from formats.paths import output_directory
+from formats.paths import writing_into
 
 # File names in the output directory.
 PLY_NAME, PNG_NAME, JSON_NAME = "edges.ply", "edges.png", "edges.json"
@@ -71,46 +72,50 @@ def edge_pictures(test, truth, output, *, seed: int = 0, n_test_samples: int | N
     from metrics.inputs import as_mesh, as_test
     from recon.experiments import charts
 
-    out = output_directory(output, ParameterError)
     stage = progress or (lambda name: None)
     truth = as_mesh(truth, "truth")
     test = as_test(test, "test")
-    if isinstance(test, Mesh):
-        points = sample_surface(test, n_test_samples or defaults.TEST_MESH_SAMPLES, seed=seed)[0]
-    else:
-        points = test.points
-    report = edge_score(points, truth, **dict(edge_options or {}))
-    stage("edges")
-
-    label = np.full(len(points), SURFACE, dtype=np.uint8)
-    label[report.is_edge & report.near_edge] = TRUE_EDGE
-    label[report.is_edge & ~report.near_edge] = FALSE_EDGE
+    out = Path(output)
     files = {"ply": out / PLY_NAME, "png": out / PNG_NAME, "json": out / JSON_NAME}
-    _write_ply(files["ply"], points, label, report)
-    stage("ply")
+    # Every destination checked before the work, the three published together after it.
+    with writing_into(out, ParameterError), \
+            written_together(files.values(), error=ParameterError) as (ply, png, summary):
+        if isinstance(test, Mesh):
+            points = sample_surface(test, n_test_samples or defaults.TEST_MESH_SAMPLES,
+                                    seed=seed)[0]
+        else:
+            points = test.points
+        report = edge_score(points, truth, **dict(edge_options or {}))
+        stage("edges")
 
-    sharp = report.edge_angle_deg > report.feature_angle_deg
-    missed = report.edge_found < MISSED_BELOW
-    segments = truth.vertices[report.truth_edges]
-    counts = {"surface_points": int((label == SURFACE).sum()),
-              "true_edge_points": int((label == TRUE_EDGE).sum()),
-              "false_edge_points": int((label == FALSE_EDGE).sum()),
-              "missed_feature_edges": int((missed & sharp).sum()),
-              "missed_gentle_edges": int((missed & ~sharp).sum())}
-    note = (f"edge score {report.score:.3f} ({report.variant}): false-edge rate "
-            f"{_number(report.false_edge_rate)}, missed (weighted) "
-            f"{_number(report.missed_edge_rate)}, feature edges missed "
-            f"{_number(report.feature_missed_rate)}\nk = {report.k}, tolerance "
-            f"{report.tolerance_m:.3g} m, feature angle {report.feature_angle_deg:g} deg")
-    write_atomically(files["png"], error=ParameterError, write=lambda path: charts.edge_points(
-        points, label, path, bounds=(truth.vertices.min(axis=0), truth.vertices.max(axis=0)),
-        missed_feature=segments[missed & sharp], missed_gentle=segments[missed & ~sharp],
-        title=title or "Edge points against the truth", note=note, seed=seed))
-    stage("png")
-    summary = {"edge": report.to_dict(), "counts": counts,
-               "files": {k: str(v) for k, v in files.items()}}
-    write_text_atomically(files["json"], json.dumps(summary, indent=2) + "\n",
-                          error=ParameterError)
+        label = np.full(len(points), SURFACE, dtype=np.uint8)
+        label[report.is_edge & report.near_edge] = TRUE_EDGE
+        label[report.is_edge & ~report.near_edge] = FALSE_EDGE
+        _write_ply(ply, points, label, report)
+        stage("ply")
+
+        sharp = report.edge_angle_deg > report.feature_angle_deg
+        missed = report.edge_found < MISSED_BELOW
+        segments = truth.vertices[report.truth_edges]
+        counts = {"surface_points": int((label == SURFACE).sum()),
+                  "true_edge_points": int((label == TRUE_EDGE).sum()),
+                  "false_edge_points": int((label == FALSE_EDGE).sum()),
+                  "missed_feature_edges": int((missed & sharp).sum()),
+                  "missed_gentle_edges": int((missed & ~sharp).sum())}
+        note = (f"edge score {report.score:.3f} ({report.variant}): false-edge rate "
+                f"{_number(report.false_edge_rate)}, missed (weighted) "
+                f"{_number(report.missed_edge_rate)}, feature edges missed "
+                f"{_number(report.feature_missed_rate)}\nk = {report.k}, tolerance "
+                f"{report.tolerance_m:.3g} m, feature angle {report.feature_angle_deg:g} deg")
+        charts.edge_points(points, label, png, bounds=(truth.vertices.min(axis=0),
+                                                       truth.vertices.max(axis=0)),
+                           missed_feature=segments[missed & sharp],
+                           missed_gentle=segments[missed & ~sharp],
+                           title=title or "Edge points against the truth", note=note, seed=seed)
+        stage("png")
+        record = {"edge": report.to_dict(), "counts": counts,
+                  "files": {k: str(v) for k, v in files.items()}}
+        summary.write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
     return {"report": report, "files": files, "counts": counts}
 
 

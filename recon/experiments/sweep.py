@@ -335,11 +335,11 @@ def run_sweep(func: Callable[..., dict], cases: Mapping[str, Mapping[str, Any]],
     from tqdm import tqdm
 
     check_scheduler(scheduler)
+    if n_workers is not None and n_workers < 1:
+        raise ParameterError(f"n_workers must be >= 1, got {n_workers}", argument="n_workers")
     out_dir = output_directory(out_dir, ParameterError)
     for name in (RESULTS_NAME, FINGERPRINT_NAME, *outputs):
         check_destination(out_dir / name, ParameterError)
-    if n_workers is not None and n_workers < 1:
-        raise ParameterError(f"n_workers must be >= 1, got {n_workers}", argument="n_workers")
     _check_fingerprint(out_dir, fingerprint, resume)
     path = out_dir / RESULTS_NAME
     done = {k: v for k, v in read_results(path).items() if k in cases} if resume else {}

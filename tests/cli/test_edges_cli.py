@@ -119,6 +119,41 @@ def test_failed_run_keeps_the_previous_outputs(box_files, tmp_path, capsys):
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
+def test_a_refused_run_leaves_the_previous_set_whole(box_files, tmp_path, capsys):
+    """A bad seed, or an output that is a directory, is refused before any file is written:
+    the earlier edges.ply, edges.png and edges.json stay as a set."""
+    folder, _ = box_files
+    out = tmp_path / "keep"
+    argv = ["edges", str(folder / "box.ply"), "--truth", str(folder / "truth.ply"), "-o",
+            str(out)]
+    out.mkdir()
+    for name in ("edges.ply", "edges.png", "edges.json"):   # an earlier run's, told apart
+        (out / name).write_bytes(b"earlier " + name.encode())
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert _error(capsys, [*argv, "--seed", "-1"]) == (
+        f"recon edges: error: --seed must be an integer from 0 to {2**63 - 1}, got -1")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    png = out / "edges.png"
+    png.unlink()
+    png.mkdir()
+    assert _error(capsys, argv) == (
+        f"recon edges: error: {png}: is a directory; give the name of a file to write")
+    assert (out / "edges.ply").read_bytes() == before["edges.ply"]
+    assert (out / "edges.json").read_bytes() == before["edges.json"]
+    assert not [p for p in out.iterdir() if ".partial" in p.name]
+
+
+def test_a_refused_run_leaves_no_new_directory(box_files, tmp_path, capsys):
+    folder, _ = box_files
+    empty = tmp_path / "empty.xyz"
+    empty.write_text("")
+    for test, options in ((folder / "box.ply", ["--k", "0"]), (empty, [])):
+        assert "error" in _error(capsys, ["edges", str(test), "--truth",
+                                          str(folder / "truth.ply"), "-o",
+                                          str(tmp_path / "new" / "edges"), *options])
+        assert not (tmp_path / "new").exists()
+
+
 def test_through_a_real_subprocess(box_files, tmp_path):
     folder, _ = box_files
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))

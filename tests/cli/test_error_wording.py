@@ -158,14 +158,76 @@ def test_argparse_types_and_usage_checks_name_the_option_once(files, capsys):
     assert capsys.readouterr().err.strip().splitlines()[-1] == (
         "recon compare: error: argument --scheduler: must be a Dask scheduler address "
         "(tcp://host:port), 'threads' or 'serial', got 'my cluster'")
-    with pytest.raises(ParameterError, match=r"^seed must be >= 0") as info:
+    with pytest.raises(ParameterError, match=r"^seed must be an integer from 0 to") as info:
         api.check_seed(-4)
     assert info.value.argument == "seed"
     with pytest.raises(SystemExit) as done:
         main(["simulate", "asteroid-lrf", "-o", str(files / "x.h5"), "--seed", "-4"])
     assert done.value.code == 1
     assert capsys.readouterr().err.strip().splitlines()[-1].startswith(
-        "recon simulate: error: --seed must be >= 0")
+        "recon simulate: error: --seed must be an integer from 0 to")
+
+
+# Every command with --seed, run as it would work but for the seed (the one it is given).
+SEEDED = {
+    "simulate": lambda d: ["simulate", "asteroid-lrf", "-o", str(d / "x.h5")],
+    "score": lambda d: ["score", str(d / "c.ply"), "--truth", str(d / "t.ply")],
+    "edges": lambda d: ["edges", str(d / "c.ply"), "--truth", str(d / "t.ply"), "-o",
+                        str(d / "edges")],
+    "reconstruct": lambda d: ["reconstruct", str(d / "c.ply"), "-o", str(d / "m.ply")],
+    "compare": lambda d: _compare_argv(d, "-o", str(d / "out")),
+    "stability": lambda d: ["stability", str(d / "c.ply"), "--truth", str(d / "t.ply"),
+                            "--methods", "convex-hull", "--scheduler", "serial", "-o",
+                            str(d / "out")],
+}
+# The same verbs through the API, and refine (``recon ingest --refine`` passes no seed).
+SEEDED_API = {
+    "simulate": lambda d, seed: api.simulate("asteroid-lrf", d / "x.h5", seed=seed),
+    "refine": lambda d, seed: api.refine(d / "none.h5", seed=seed),
+    "score": lambda d, seed: api.score(d / "c.ply", truth=d / "t.ply", seed=seed),
+    "edges": lambda d, seed: api.edges(d / "c.ply", truth=d / "t.ply", output=d / "edges",
+                                       seed=seed),
+    "reconstruct": lambda d, seed: api.reconstruct(d / "c.ply", seed=seed),
+    "compare": lambda d, seed: _compare(d, seed=seed),
+    "stability": lambda d, seed: api.stability(d / "c.ply", truth=d / "t.ply",
+                                               methods=["convex-hull"], scheduler="serial",
+                                               output=d / "out", seed=seed),
+}
+
+
+def test_every_seed_option_is_checked():
+    """The commands with a --seed option (``recon --help``) are those checked below."""
+    from cli.main import build_parser
+
+    commands = next(a for a in build_parser()._actions if a.dest == "command").choices
+    assert {name for name, parser in commands.items()
+            if "--seed" in parser._option_string_actions} == set(SEEDED)
+
+
+@pytest.mark.parametrize("seed", ["-1", str(2**63)])
+@pytest.mark.parametrize("command", list(SEEDED))
+def test_every_command_refuses_a_seed_out_of_range_before_any_work(files, capsys, command,
+                                                                   seed):
+    before = sorted(files.iterdir())
+    try:
+        status = main([*SEEDED[command](files), "--seed", seed])
+    except SystemExit as done:   # simulate: a usage error, after its usage line
+        status = done.code
+    assert status == 1
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        f"recon {command}: error: --seed must be an integer from 0 to {2**63 - 1}, got {seed}")
+    assert sorted(files.iterdir()) == before
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, True])
+@pytest.mark.parametrize("verb", list(SEEDED_API))
+def test_every_verb_refuses_a_seed_that_is_not_a_count(files, verb, seed):
+    before = sorted(files.iterdir())
+    with pytest.raises(ParameterError, match=r"^seed must be an integer from 0 to "
+                                             rf"{2**63 - 1}, got {seed!r}$") as info:
+        SEEDED_API[verb](files, seed)
+    assert info.value.argument == "seed"
+    assert sorted(files.iterdir()) == before
 
 
 def test_follow_names_timeout_s_and_the_command_line_its_timeout(files):
@@ -212,3 +274,18 @@ def test_real_subprocess(files):
     assert done.stderr.strip().splitlines() == [
         "recon reconstruct: error: --memory-limit must be from 0 to 8796093022207 MB, got -1"]
     assert not (files / "m.ply").exists()
+
+
+@pytest.mark.parametrize("command", ["compare", "stability"])
+def test_sweeps_check_their_workers_and_scheduler_before_making_the_directory(files, capsys,
+                                                                              command):
+    assert main([*SEEDED[command](files), "--workers", "0"]) == 1
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"recon {command}: error: --workers must be >= 1, got 0"]
+    verb = {"compare": _compare, "stability": lambda d, **options: api.stability(
+        d / "c.ply", truth=d / "t.ply", output=d / "out", **options)}[command]
+    with pytest.raises(ParameterError, match=r"^n_workers must be >= 1, got 0$"):
+        verb(files, n_workers=0)
+    with pytest.raises(ParameterError, match=r"^scheduler must be a Dask scheduler address"):
+        verb(files, scheduler="my cluster")
+    assert not (files / "out").exists()

@@ -141,3 +141,23 @@ def test_precision_option_states_what_it_asked(rso_log, capsys):
     assert default["fscore_se"] <= 1.05 * 0.005
     assert main(["score", str(rso_log), "--precision", "-1"]) == 1
     assert "precision must be a number in (0, 0.5]" in capsys.readouterr().err
+
+
+def test_a_precision_whose_lattice_would_not_fit_is_one_line_before_any_work(
+        tmp_path, capsys, monkeypatch):
+    import importlib
+
+    from tests.conftest import icosphere
+
+    def never(*args):
+        raise AssertionError("the coverage lattice was built")
+
+    monkeypatch.setattr(importlib.import_module("metrics.score"), "coverage_lattice", never)
+    vertices, faces = icosphere(10.0, 3)
+    write_cloud(tmp_path / "c.ply", Cloud(vertices))
+    write_mesh(tmp_path / "t.ply", vertices, faces)
+    assert _error(capsys, ["score", str(tmp_path / "c.ply"), "--truth", str(tmp_path / "t.ply"),
+                           "--precision", "1e-9", "--no-edges"]) == (
+        "recon score: error: --precision 1e-09 asks a coverage lattice of 335,544,320 points on "
+        "the truth's 1,280 faces, about 80.5 GB of memory, more than the 4.3 GB allowed; give "
+        "at least 0.00048")

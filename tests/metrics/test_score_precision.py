@@ -3,12 +3,14 @@ the same sample held whole or streamed, and explicit counts keeping the fixed pa
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 import trimesh
 from metrics_reference import ellipsoid, satellite
 
-from formats.errors import InputError
+from formats.errors import InputError, ParameterError
 from metrics import defaults, sample_surface, score
 from metrics.inputs import as_mesh
 from metrics.precision import KeySample, point_keys, smallest_keys
@@ -146,6 +148,42 @@ def test_explicit_counts_keep_the_fixed_path():
         score(cloud, truth, n_truth_samples=5000, precision=0.02)
     with pytest.raises(InputError, match="precision must be"):
         score(cloud, truth, precision=0.0)
+
+
+def test_a_lattice_beyond_the_memory_budget_is_refused_before_it_is_built(monkeypatch):
+    """A precision of 1e-9 asks 512**2 coverage points on every face (20 GB on 320 faces):
+    refused at once, naming the argument, before the lattice exists."""
+    def never(*args):
+        raise AssertionError("the coverage lattice was built")
+
+    monkeypatch.setattr(importlib.import_module("metrics.score"), "coverage_lattice", never)
+    truth = ellipsoid(2)
+    cloud = sample_surface(truth, 2000, seed=0)[0]
+    with pytest.raises(ParameterError, match=r"^precision 1e-09 asks a coverage lattice of "
+                                             r"83,886,080 points on the truth's 320 faces, "
+                                             r"about 20\.1 GB of memory, more than the 4\.3 GB "
+                                             r"allowed; give at least 0\.00048$") as info:
+        score(cloud, truth, precision=1e-9, edges=False)
+    assert info.value.argument == "precision"
+    with pytest.raises(ParameterError, match=r"^coverage_points 1,000,000,000 asks") as info:
+        score_stream(lambda: [cloud], truth, coverage_points=10**9, edges=False)
+    assert info.value.argument == "coverage_points"
+
+
+def test_the_values_a_lattice_refusal_suggests_fit(monkeypatch):
+    monkeypatch.setattr(defaults, "COVERAGE_MAX_BYTES", 20_000 * defaults.LATTICE_BYTES_PER_POINT)
+    truth = Truth(ellipsoid(2))
+    cloud = sample_surface(truth.mesh, 2000, seed=0)[0]
+    with pytest.raises(ParameterError, match=r"^precision 0\.001 asks .* give at least") as info:
+        score(cloud, truth, precision=1e-3, edges=False)
+    least = float(str(info.value).rsplit(" ", 1)[1])
+    assert score(cloud, truth, precision=least, edges=False).target_precision == least
+    with pytest.raises(ParameterError, match=r"^coverage_points 100,000 asks .* give at "
+                                             r"most") as info:
+        score(cloud, truth, coverage_points=100_000, edges=False)
+    most = int(str(info.value).rsplit(" ", 1)[1].replace(",", ""))
+    assert len(score(cloud, truth, coverage_points=most, n_truth_samples=1000,
+                     edges=False).face_coverage) == 320
 
 
 def test_a_coarser_precision_takes_fewer_samples():
