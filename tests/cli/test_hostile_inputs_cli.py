@@ -423,3 +423,23 @@ def test_huge_hdf5_cloud_is_one_line(sphere_log, tmp_path):
              f"{cloud}: /points declares shape (68719476736, 3)")
     assert not (tmp_path / "m.ply").exists()
 
+
+@pytest.mark.parametrize("command", ["reconstruct", "edges"])
+def test_log_too_large_to_register_in_memory_is_refused_up_front(command, tmp_path):
+    """A log can declare more strikes than any memory holds (a compressed one of a few MB held
+    1e8): commands that register it whole refuse before reading a strike; `recon ingest`
+    streams."""
+    from tests.conftest import write_sphere_log
+
+    log = tmp_path / "big.h5"
+    write_sphere_log(log)
+    rows = 2**40
+    _declare(log, "strikes/shot", "strikes/beam", "strikes/range", "truth/point",
+             "truth/facet", "truth/range", rows=rows)
+    with h5py.File(log, "r+") as f:
+        f.attrs["n_strikes"] = rows
+    args = {"reconstruct": ["reconstruct", log, "-m", "convex-hull", "-o", tmp_path / "m.ply"],
+            "edges": ["edges", log, "-o", tmp_path / "e"]}[command]
+    _refused(args, f"{log}: registering its {rows:,} strikes in memory needs about",
+             "register it to a cloud file instead (recon ingest), which streams")
+    assert not (tmp_path / "m.ply").exists()
