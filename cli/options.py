@@ -18,8 +18,8 @@ OUTPUT_DESTS = ("output", "refine_json")
 # Options whose name is not the API parameter's with "-" for "_" (``memory_limit`` ->
 # ``--memory-limit``): library errors name the parameter (``ReconError.argument``), the command
 # line prints the option.
-FLAGS = {"n_workers": "--workers", "output": "-o", "overrides": "--set", "params": "--param",
-         "timeout_s": "--timeout"}
+FLAGS = {"interval": "--refine-interval", "n_workers": "--workers", "output": "-o",
+         "overrides": "--set", "params": "--param", "timeout_s": "--timeout"}
 
 
 class UsageError(ReconError, ValueError):
