@@ -185,3 +185,21 @@ def test_refinement_that_does_not_fit_in_memory_is_refused_up_front(tmp_path, mo
                                          r"is available; give a longer interval$"):
         refine(log, interval=1000.0)
 
+
+def test_refine_json_is_checked_before_the_refinement(sphere_log, tmp_path, capsys):
+    """Two outputs on one path, or a directory as --refine-json, are refused before anything
+    runs (this 80-strike log is too small to refine: reaching the refinement would say so)."""
+    out = tmp_path / "c.ply"
+    (tmp_path / "jdir").mkdir()
+    cases = {str(out): f"{out}: named by both -o and --refine-json; give each output its own "
+                       "file",
+             str(tmp_path / "." / "c.ply"): "named by both -o and --refine-json",
+             str(tmp_path / "jdir"): f"--refine-json {tmp_path / 'jdir'}: is a directory",
+             str(tmp_path / "no" / "r.json"): f"--refine-json {tmp_path / 'no' / 'r.json'}: "
+                                              f"directory {tmp_path / 'no'} does not exist"}
+    for json_path, expected in cases.items():
+        assert main(["ingest", str(sphere_log), "-o", str(out), "--refine", "--refine-json",
+                     json_path]) == 1
+        err = capsys.readouterr().err.strip()
+        assert expected in err and len(err.splitlines()) == 1, err
+        assert not out.exists()
