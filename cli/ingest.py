@@ -118,9 +118,13 @@ def _check_ingest_options(args) -> None:
                         (args.refine_spin, "--refine-spin")):
         if given and not args.refine:
             raise UsageError(f"{flag} needs --refine")
-    if args.refine_json is not None and not args.refine_json.parent.is_dir():
-        raise UsageError(f"--refine-json {args.refine_json}: directory "
-                         f"{args.refine_json.parent} does not exist")
+    if args.refine_json is not None:
+        from formats.paths import check_destination
+
+        try:
+            check_destination(args.refine_json, UsageError)
+        except UsageError as exc:
+            raise UsageError(f"--refine-json {exc}") from None
 
 
 def _refine(args):

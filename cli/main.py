@@ -136,11 +136,18 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _check_outputs(args) -> None:
-    """Refuse, before any work, an output that is an existing file the command reads (the
-    writers refuse it again, with the files of output directories, as they open)."""
+    """Refuse, before any work, two outputs that name one file (the second would write over
+    the first), and an output that is an existing file the command reads (the writers refuse
+    it again, with the files of output directories, as they open)."""
     from formats import paths
 
-    for output in options.outputs_of(args):
+    outputs = options.outputs_of(args)
+    named: dict[str, str] = {}
+    for dest, output in outputs.items():
+        first = named.setdefault(os.path.realpath(output), dest)
+        if first != dest:
+            raise options.UsageError(f"{output}: named by both {options.flag(first)} and "
+                                     f"{options.flag(dest)}; give each output its own file")
         if os.path.isfile(output):
             paths.check_destination(output, options.UsageError)
 

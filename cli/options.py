@@ -18,8 +18,8 @@ OUTPUT_DESTS = ("output", "refine_json")
 # Options whose name is not the API parameter's with "-" for "_" (``memory_limit`` ->
 # ``--memory-limit``): library errors name the parameter (``ReconError.argument``), the command
 # line prints the option.
-FLAGS = {"n_workers": "--workers", "output": "-o", "overrides": "--set", "params": "--param",
-         "timeout_s": "--timeout"}
+FLAGS = {"interval": "--refine-interval", "n_workers": "--workers", "output": "-o",
+         "overrides": "--set", "params": "--param", "timeout_s": "--timeout"}
 
 
 class UsageError(ReconError, ValueError):
@@ -50,9 +50,9 @@ def inputs_of(args: argparse.Namespace) -> list[str]:
     return values
 
 
-def outputs_of(args: argparse.Namespace) -> list[Path]:
-    """The output arguments (``OUTPUT_DESTS``) given in ``args``."""
-    return [Path(v) for dest in OUTPUT_DESTS if (v := getattr(args, dest, None)) is not None]
+def outputs_of(args: argparse.Namespace) -> dict[str, Path]:
+    """The output arguments (``OUTPUT_DESTS``) given in ``args``, by ``dest``."""
+    return {dest: Path(v) for dest in OUTPUT_DESTS if (v := getattr(args, dest, None)) is not None}
 
 
 def add_command(subparsers, name: str, handler, **parser_options):

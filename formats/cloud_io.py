@@ -74,7 +74,7 @@ from formats.geometry import (
     file_metadata,
     frame_of,
 )
-from formats.hdf5_check import check_hdf5, trust
+from formats.hdf5_check import check_hdf5, check_whole, trust
 from formats.paths import check_source
 from formats.ply import PlyWriter, binary_vertex_layout, read_ply
 
@@ -403,8 +403,12 @@ def _open_h5(path: Path):
 def _read_h5(path: Path) -> Cloud:
     with _open_h5(path) as (f, metadata):
         try:
+            stored = dict(f["attributes"].items())
+            check_whole(path, [f["points"], *stored.values()], InputError)
             points = np.asarray(f["points"][()], dtype=np.float64)
-            attributes = {k: np.asarray(v[()]) for k, v in f["attributes"].items()}
+            attributes = {k: np.asarray(v[()]) for k, v in stored.items()}
+        except InputError:
+            raise
         except (OSError, KeyError, ValueError, TypeError) as exc:
             raise InputError(f"{path}: unreadable HDF5 point cloud ({exc})") from None
     return Cloud(points, attributes, frame=frame_of(metadata, path))

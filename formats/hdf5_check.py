@@ -33,6 +33,10 @@ import sys
 import threading
 from pathlib import Path
 
+from formats.memory import check_memory
+
+# Bytes a value of a dataset read whole takes in memory: recon holds them as float64 or int64.
+HELD_VALUE_BYTES = 8
 # CPU seconds the structural walk may use, interpreter start included: a valid log's takes
 # milliseconds of walking (metadata only) after about 1 s of start-up in a fresh interpreter,
 # so reaching this means HDF5 is looping on damage.
@@ -209,3 +213,29 @@ def check_hdf5(path, error: type[Exception], *, cpu_s: int | None = None,
                         f"{sys.executable}: {exc.strerror or exc})") from None
     if _VERDICTS[key]:
         raise error(f"{path}: {_VERDICTS[key]}")
+
+
+def check_whole(path, datasets, error: type[Exception]) -> None:
+    """Raise ``error("PATH: /KEY declares shape ...")`` unless ``datasets`` fit in memory
+    read whole; call before reading them.
+
+    A dataset's declared shape costs nothing to write (chunks never written read as fill
+    values), so an untrusted file can ask for any amount of memory; what its datasets declare,
+    at ``HELD_VALUE_BYTES`` a value (or their own size, if larger), is compared with the
+    memory available (``formats.memory``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, named in the message.
+    datasets : sequence of h5py.Dataset
+        Datasets of ``path`` about to be read whole; the largest is named.
+    error : exception class
+        A ReconError subclass (``InputError``).
+    """
+    largest = max(datasets, key=lambda ds: ds.size)
+    n_bytes = sum(ds.size * max(ds.dtype.itemsize, HELD_VALUE_BYTES) for ds in datasets)
+    others = len(datasets) - 1
+    check_memory(f"{path}: {largest.name} declares shape {largest.shape}; reading it whole"
+                 + (f" (with {others} other dataset{'s' * (others > 1)})" if others else ""),
+                 n_bytes, error)

@@ -14,7 +14,7 @@ import numpy as np
 from formats.atomic import partial_pid, process_alive
 from formats.errors import InputError
 from formats.geometry import Mesh
-from formats.hdf5_check import check_hdf5, is_hdf5
+from formats.hdf5_check import check_hdf5, check_whole, is_hdf5
 from formats.paths import check_source
 from formats.strike_log.schema import (
     _ANGLE_FIELDS,
@@ -173,7 +173,9 @@ class StrikeLog:
         if "sensor" not in f:
             raise InputError(f"{where}: missing group /sensor")
         g = f["sensor"]
-        directions = self._dataset("sensor/beam_directions", None, (3,), "f")[()]
+        beams = self._dataset("sensor/beam_directions", None, (3,), "f")
+        check_whole(where, [beams], InputError)
+        directions = beams[()]
         if "sensor/errors" not in f:
             raise InputError(f"{where}: missing group /sensor/errors")
         errors = f["sensor/errors"]
@@ -341,8 +343,10 @@ class StrikeLog:
         """The truth mesh: vertices (n, 3) float64 [m, body frame] and faces (m, 3) int64."""
         self._require_truth()
         with _hdf5_errors(self._where):
-            vertices = np.asarray(self._file["truth/mesh/vertices"][()], dtype=np.float64)
-            faces = np.asarray(self._file["truth/mesh/faces"][()]).astype(np.int64)
+            stored = self._file["truth/mesh/vertices"], self._file["truth/mesh/faces"]
+            check_whole(self._where, stored, InputError)
+            vertices = np.asarray(stored[0][()], dtype=np.float64)
+            faces = np.asarray(stored[1][()]).astype(np.int64)
         _check_finite("truth mesh vertices", vertices, self._where)
         if len(faces) == 0:
             raise InputError(f"{self._where}: truth mesh has no faces")

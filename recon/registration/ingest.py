@@ -24,7 +24,9 @@ from scipy.spatial.transform import Rotation
 from formats import StrikeChunk, StrikeLog
 from formats.atomic import check_space
 from formats.cloud_io import open_cloud_writer
+from formats.errors import InputError
 from formats.geometry import Cloud
+from formats.memory import check_memory
 from formats.strike_log import follow
 from formats.strike_log.schema import directions_to_angles
 from recon.registration.uncertainty import COLUMNS as SIGMA_COLUMNS
@@ -41,6 +43,8 @@ ATTRIBUTE_DTYPES = {"time": np.float64, "shot": np.uint32, "beam": np.uint32,
                     "range": np.float64, "azimuth": np.float64, "elevation": np.float64,
                     "view_x": np.float64, "view_y": np.float64,
                     "view_z": np.float64} | dict.fromkeys(SIGMA_COLUMNS, np.float32)
+# Bytes of a registered strike: its point (x, y, z float64) and its attributes.
+STRIKE_BYTES = 24 + sum(np.dtype(d).itemsize for d in ATTRIBUTE_DTYPES.values())
 
 
 def register_chunk(chunk: StrikeChunk, *, frame: Frame = "body", correction=None
@@ -126,9 +130,10 @@ def _register_and_write(log_path, output, *, frame: Frame, chunk_rows: int | Non
     (if ``keep``). Returns the strike count and the kept blocks."""
     kept = []
     with StrikeLog(log_path) as log:
-        if output is not None:   # per point: xyz and the attributes, as written
-            check_space(output, log.n_strikes * (24 + sum(
-                np.dtype(d).itemsize for d in ATTRIBUTE_DTYPES.values())))
+        if keep:   # the kept blocks, then the cloud they are joined into
+            _check_memory(log, 2 * STRIKE_BYTES)
+        if output is not None:
+            check_space(output, log.n_strikes * STRIKE_BYTES)
         writer = (open_cloud_writer(output, log.n_strikes, ATTRIBUTE_DTYPES, frame=frame,
                                     source=Path(log_path).name)
                   if output is not None else contextlib.nullcontext())
@@ -140,6 +145,15 @@ def _register_and_write(log_path, output, *, frame: Frame, chunk_rows: int | Non
                 if keep:
                     kept.append(block)
         return log.n_strikes, kept
+
+
+def _check_memory(log: StrikeLog, bytes_per_strike: int) -> None:
+    """Refuse, before any strike is read, to register ``log`` in memory at
+    ``bytes_per_strike`` [bytes] when that is more than is available (a compressed log of a few
+    MB can hold 1e8 strikes)."""
+    check_memory(f"{log.path}: registering its {log.n_strikes:,} strikes in memory",
+                 log.n_strikes * bytes_per_strike, InputError,
+                 advice="register it to a cloud file instead (recon ingest), which streams")
 
 
 def ingest_to_file(log_path, out_path, *, frame: Frame = "body", chunk_rows: int | None = None,
@@ -180,6 +194,7 @@ def ingest_points(log_path, *, frame: Frame = "body", chunk_rows: int | None = N
     the 80 bytes a strike of ``ingest``'s cloud with its attributes and the blocks it joins.
     """
     with StrikeLog(log_path) as log:
+        _check_memory(log, 24)
         points = np.empty((log.n_strikes, 3))
         for chunk in (log.iter_chunks() if chunk_rows is None else
                       log.iter_chunks(chunk_rows)):

@@ -84,7 +84,8 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2, norm
 
 from formats import Shots, StrikeChunk, StrikeLog
-from formats.errors import InputError
+from formats.errors import InputError, ParameterError
+from formats.memory import check_memory
 
 # Strikes sampled for the estimate (seeded, uniform): 30,000 of the demo's 77,400 estimate a
 # misalignment to ~0.002 deg; more adds little to a handful of parameters and costs time. The
@@ -167,6 +168,11 @@ BLOCK = 4096
 MAD_TO_SIGMA = 1.4826
 # A spin slower than this many turns over the whole log is treated as no spin (no parameter).
 MIN_SPIN_TURNS = 0.05
+# Memory of a refinement, estimated before it starts (_check_size), in float64 values: per shot
+# of the log (its 12 recorded values, read whole, and the checks' and spin_of's temporaries);
+# (p, p) matrices _solve holds at once for p parameters.
+SHOT_VALUES = 36
+DENSE_MATRICES = 16
 
 
 def spin_of(shots: Shots) -> tuple[np.ndarray, float]:
@@ -553,8 +559,11 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
 
     Raises
     ------
+    ParameterError
+        Bad options, or ``interval`` too short for the strikes to estimate its knots.
     InputError
-        Bad options, or too few strikes seen twice to estimate anything.
+        Too few strikes seen twice to estimate anything, or the problem does not fit in the
+        memory available.
     """
     _check_options(interval, max_points)
     problem = _problem(log_path, interval, spin, max_points, seed)
@@ -576,9 +585,51 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
 
 def _check_options(interval: float | None, max_points: int) -> None:
     if interval is not None and not (math.isfinite(interval) and interval > 0):
-        raise InputError(f"refine interval must be a positive number of seconds, got {interval}")
+        raise ParameterError(f"interval must be a positive number of seconds, got {interval}",
+                             argument="interval")
     if max_points < 100:
-        raise InputError(f"max_points must be at least 100, got {max_points}")
+        raise ParameterError(f"max_points must be at least 100, got {max_points}",
+                             argument="max_points")
+
+
+def _check_size(log: StrikeLog, interval: float | None, max_points: int) -> None:
+    """Refuse, before the shots are read, knots too many for the sampled strikes to estimate
+    (fewer than ``MIN_ROWS`` a knot on average) and a problem that does not fit in memory.
+
+    The problem of ``k`` knots has ``p = 6 k + 1`` parameters: hat weights (n, k) and a design
+    (n, p) of the ``n`` fitted strikes (and two copies of it in a step), a block of the
+    consensus (the neighbours' hat weights, ``BLOCK`` x ``NEIGHBOURS`` x k, and two products of
+    ``BLOCK`` x k x 6), and ``DENSE_MATRICES`` (p, p) matrices of the normal equations, each
+    float64. The normal equations couple knots far apart in time (the other passes), so they are
+    dense.
+
+    Raises
+    ------
+    ParameterError
+        Too many knots: ``interval`` is too short for the log's duration.
+    InputError
+        The log's shots, or the problem, need more memory than is available.
+    """
+    n_fit = min(max_points, (log.n_strikes + 1) // 2)
+    knots = 1
+    if interval is not None:
+        span = float(log.shots(log.n_shots - 1).time[0] - log.shots(0, 1).time[0])
+        most = n_fit // MIN_ROWS
+        if max(2.0, span / interval + 1.0) > most:
+            instead = (f"give at least {span / (most - 1):.4g} s" if most >= 2
+                       else "refine constant errors only (no interval)")
+            raise ParameterError(
+                f"interval {interval:g} s makes {max(2.0, span / interval + 1.0):,.0f} knots "
+                f"over the log's {span:g} s, more than its {n_fit:,} sampled strikes can "
+                f"estimate ({most:,} knots, at least {MIN_ROWS} strikes a knot); {instead}",
+                argument="interval")
+        knots = max(2, math.ceil(span / interval) + 1)
+    p = 6 * knots + 1
+    values = (SHOT_VALUES * log.n_shots + n_fit * (knots + 3 * p)
+              + BLOCK * (NEIGHBOURS + 12) * knots + DENSE_MATRICES * p * p)
+    check_memory(f"{log.path}: refining the poses of its {log.n_shots:,} shots with {knots:,} "
+                 f"knot{'s' * (knots > 1)}", 8 * values, InputError,
+                 advice="give a longer interval" if knots > 1 else "")
 
 
 @dataclass
@@ -602,6 +653,7 @@ def _problem(log_path, interval: float | None, spin: bool, max_points: int, seed
         if log.n_strikes < 100:
             raise InputError(f"{log_path}: {log.n_strikes} strikes are too few to refine the "
                               "poses (at least 100)")
+        _check_size(log, interval, max_points)
         all_shots = log.shots()
         fit, check = _samples(log, max_points, seed)
     axis, rate = spin_of(all_shots)

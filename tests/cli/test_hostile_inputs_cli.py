@@ -403,3 +403,67 @@ def test_title_is_drawn_literally(cloud, sphere_log, tmp_path):
                           r"$\frac{a}{$")
     assert status == 0, err
     assert "Traceback" not in err and (out / "edges.png").stat().st_size > 0
+
+
+# --------------------------------------------------------------------------- declared sizes
+
+
+def _declare(path: Path, *keys: str, rows: int) -> Path:
+    """Replace the datasets ``keys`` of ``path`` by ones of ``rows`` rows, none written (a
+    declared shape costs nothing on disk)."""
+    with h5py.File(path, "r+") as f:
+        for key in keys:
+            tail, dtype = f[key].shape[1:], f[key].dtype
+            del f[key]
+            f.create_dataset(key, shape=(rows, *tail), dtype=dtype, chunks=(1024, *tail))
+    return path
+
+
+@pytest.mark.parametrize("command", [["validate"], ["info"], ["trajectory", "-o", "t.txt"],
+                                     ["ingest", "-o", "c.ply"]])
+def test_huge_beam_directions_are_one_line(command, sphere_log, tmp_path):
+    _declare(sphere_log, "sensor/beam_directions", rows=2**34)
+    args = [command[0], sphere_log, *(tmp_path / a if "." in a else a for a in command[1:])]
+    _refused(args, f"{sphere_log}: /sensor/beam_directions declares shape (17179869184, 3)",
+             "of memory but only")
+
+
+@pytest.mark.parametrize("command", ["truth", "score"])
+def test_huge_truth_mesh_is_one_line(command, cloud, sphere_log, tmp_path):
+    _declare(sphere_log, "truth/mesh/vertices", "truth/mesh/faces", rows=2**36)
+    args = {"truth": ["truth", sphere_log, "-o", tmp_path / "m.ply"],
+            "score": ["score", cloud, "--truth", sphere_log]}[command]
+    _refused(args, f"{sphere_log}: /truth/mesh/vertices declares shape (68719476736, 3)")
+
+
+def test_huge_hdf5_cloud_is_one_line(sphere_log, tmp_path):
+    from formats.cloud_io import write_cloud
+    from recon.registration.ingest import ingest
+
+    cloud = tmp_path / "c.h5"
+    write_cloud(cloud, ingest(sphere_log))
+    _declare(cloud, "points", rows=2**36)
+    _refused(["reconstruct", cloud, "-m", "convex-hull", "-o", tmp_path / "m.ply"],
+             f"{cloud}: /points declares shape (68719476736, 3)")
+    assert not (tmp_path / "m.ply").exists()
+
+
+@pytest.mark.parametrize("command", ["reconstruct", "edges"])
+def test_log_too_large_to_register_in_memory_is_refused_up_front(command, tmp_path):
+    """A log can declare more strikes than any memory holds (a compressed one of a few MB held
+    1e8): commands that register it whole refuse before reading a strike; `recon ingest`
+    streams."""
+    from tests.conftest import write_sphere_log
+
+    log = tmp_path / "big.h5"
+    write_sphere_log(log)
+    rows = 2**40
+    _declare(log, "strikes/shot", "strikes/beam", "strikes/range", "truth/point",
+             "truth/facet", "truth/range", rows=rows)
+    with h5py.File(log, "r+") as f:
+        f.attrs["n_strikes"] = rows
+    args = {"reconstruct": ["reconstruct", log, "-m", "convex-hull", "-o", tmp_path / "m.ply"],
+            "edges": ["edges", log, "-o", tmp_path / "e"]}[command]
+    _refused(args, f"{log}: registering its {rows:,} strikes in memory needs about",
+             "register it to a cloud file instead (recon ingest), which streams")
+    assert not (tmp_path / "m.ply").exists()

@@ -130,3 +130,26 @@ def test_simulated_pose_error_moves_points_by_the_configured_sigma(tmp_path):
     sigma = np.sqrt(np.mean(displacement**2, axis=0))
     np.testing.assert_allclose(sigma, 2.0 / 3.0, rtol=0.05)
     assert np.all(np.abs(displacement.mean(axis=0)) < 0.05)
+
+
+def test_a_log_that_does_not_fit_in_memory_is_refused_up_front(sphere_log, tmp_path,
+                                                               monkeypatch):
+    """Registering a whole log in memory is estimated from its strike count and refused before
+    a strike is read when the memory available is less; streaming to a file still works."""
+    from formats import memory
+    from formats.errors import InputError
+    from recon.inputs import load_geometry
+    from recon.registration.ingest import ingest_points
+
+    monkeypatch.setattr(memory, "available_bytes", lambda: 1000)   # below 24 bytes a strike
+    read = []
+    monkeypatch.setattr(StrikeLog, "iter_chunks", lambda *a, **k: read.append(1) or iter(()))
+    expected = rf"^{sphere_log}: registering its 80 strikes in memory needs about 0\.0 MB"
+    for load in (ingest, ingest_points, load_geometry,
+                 lambda path: load_geometry(path, points_only=True)):
+        with pytest.raises(InputError, match=expected):
+            load(sphere_log)
+    assert not read
+    monkeypatch.undo()
+    monkeypatch.setattr(memory, "available_bytes", lambda: 1000)
+    assert ingest_to_file(sphere_log, tmp_path / "c.ply")["n_points"] == 80

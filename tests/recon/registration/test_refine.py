@@ -13,9 +13,10 @@ import pytest
 import sim
 from cli.main import main
 from formats import StrikeLog
-from formats.errors import InputError
+from formats.errors import InputError, ParameterError
 from recon.registration.ingest import ingest
 from recon.registration.refine import PoseCorrection, refine
+from tests.conftest import write_sphere_log
 
 # The paper's asteroid and single-beam LRF (0.3 m 3-sigma range noise), its 50 rotations (fewer
 # leave too few crossings of ascending and descending passes to separate the errors).
@@ -105,8 +106,9 @@ def test_slowly_varying_errors_are_estimated_per_knot(logs):
 
 def test_bad_refine_options_are_refused(logs, tmp_path):
     _, posed = logs
-    with pytest.raises(InputError, match="refine interval must be a positive number"):
+    with pytest.raises(ParameterError, match=r"^interval must be a positive number") as error:
         refine(posed, interval=0.0)
+    assert error.value.argument == "interval"
     tiny = _simulate(tmp_path / "tiny.h5", "time.duration=300")
     with pytest.raises(InputError, match="too few to refine the poses"):
         refine(tiny)
@@ -139,3 +141,65 @@ def test_cli_refine_options_need_refine(logs, tmp_path, capsys):
                  "--refine-interval", "100"]) == 1
     assert "--refine-interval needs --refine" in capsys.readouterr().err
     assert not (tmp_path / "c.ply").exists()
+
+
+def test_knots_too_many_for_the_strikes_are_refused_up_front(tmp_path, monkeypatch, capsys):
+    """The knots follow from the log's duration and the interval: more than the sampled strikes
+    can estimate is refused before any shot is read (a 1e-6 s interval asked for 231 GiB, 0.5 s
+    for a dense 1 TiB normal matrix)."""
+    log = tmp_path / "sphere.h5"
+    write_sphere_log(log, n_shots=200)   # 400 strikes over 1990 s: 200 fitted, 4 knots at most
+    monkeypatch.setattr(StrikeLog, "shots", _never_read(StrikeLog.shots))
+    for interval in (1e-6, 0.5, 600.0, 1e-320):
+        with pytest.raises(ParameterError, match=r"^interval .* knots over the log's 1990 s, "
+                                                 r"more than its 200 sampled strikes can "
+                                                 r"estimate \(4 knots") as error:
+            refine(log, interval=interval)
+        assert error.value.argument == "interval"
+    out = tmp_path / "c.ply"
+    assert main(["ingest", str(log), "-o", str(out), "--refine", "--refine-interval",
+                 "1e-6"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("recon ingest: error: --refine-interval 1e-06 s makes "
+                          "1,990,000,001 knots") and err.endswith("give at least 663.3 s")
+    assert "\n" not in err and not out.exists()
+
+
+def _never_read(read):
+    """``StrikeLog.shots`` that fails a test when asked for more than one row."""
+    def shots(log, start=0, stop=None):
+        assert (stop is not None and stop - start <= 1) or start == log.n_shots - 1, "read"
+        return read(log, start, stop)
+    return shots
+
+
+def test_refinement_that_does_not_fit_in_memory_is_refused_up_front(tmp_path, monkeypatch):
+    from formats import memory
+
+    log = tmp_path / "sphere.h5"
+    write_sphere_log(log, n_shots=200)
+    monkeypatch.setattr(memory, "available_bytes", lambda: 10**6)
+    monkeypatch.setattr(StrikeLog, "shots", _never_read(StrikeLog.shots))
+    with pytest.raises(InputError, match=rf"^{log}: refining the poses of its 200 shots with 3 "
+                                         r"knots needs about .* MB of memory but only 1\.0 MB "
+                                         r"is available; give a longer interval$"):
+        refine(log, interval=1000.0)
+
+
+def test_refine_json_is_checked_before_the_refinement(sphere_log, tmp_path, capsys):
+    """Two outputs on one path, or a directory as --refine-json, are refused before anything
+    runs (this 80-strike log is too small to refine: reaching the refinement would say so)."""
+    out = tmp_path / "c.ply"
+    (tmp_path / "jdir").mkdir()
+    cases = {str(out): f"{out}: named by both -o and --refine-json; give each output its own "
+                       "file",
+             str(tmp_path / "." / "c.ply"): "named by both -o and --refine-json",
+             str(tmp_path / "jdir"): f"--refine-json {tmp_path / 'jdir'}: is a directory",
+             str(tmp_path / "no" / "r.json"): f"--refine-json {tmp_path / 'no' / 'r.json'}: "
+                                              f"directory {tmp_path / 'no'} does not exist"}
+    for json_path, expected in cases.items():
+        assert main(["ingest", str(sphere_log), "-o", str(out), "--refine", "--refine-json",
+                     json_path]) == 1
+        err = capsys.readouterr().err.strip()
+        assert expected in err and len(err.splitlines()) == 1, err
+        assert not out.exists()
