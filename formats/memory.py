@@ -13,8 +13,9 @@ import os
 import resource
 
 
-def _proc_kilobytes(path: str, field: str) -> int | None:
-    """The ``FIELD: N kB`` line of a /proc file in bytes; None when unreadable (not Linux)."""
+def proc_bytes(path: str, field: str) -> int | None:
+    """The ``FIELD: N kB`` line of a /proc file (``/proc/meminfo``, ``/proc/PID/status``) in
+    bytes; None when unreadable (the process is gone, or not Linux)."""
     try:
         with open(path) as lines:
             for line in lines:
@@ -34,14 +35,14 @@ def available_bytes() -> int | None:
     -------
     int or None, bytes
     """
-    available = _proc_kilobytes("/proc/meminfo", "MemAvailable")
+    available = proc_bytes("/proc/meminfo", "MemAvailable")
     if available is None and hasattr(os, "sysconf"):
         try:
             available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
         except (OSError, ValueError):
             available = None
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    size = _proc_kilobytes("/proc/self/status", "VmSize")
+    size = proc_bytes("/proc/self/status", "VmSize")
     if soft != resource.RLIM_INFINITY and size is not None:
         left = max(0, soft - size)
         available = left if available is None else min(available, left)

@@ -180,14 +180,10 @@ class _Failure(Exception):
 def _status_mb(field: str, pid: int | str = "self") -> float | None:
     """A ``/proc/PID/status`` memory line (``VmHWM``, ``VmRSS``, ``VmSize``) in MB; None when
     unreadable (the process is gone, or not Linux)."""
-    try:
-        with open(f"/proc/{pid}/status") as status:
-            for line in status:
-                if line.startswith(field + ":"):
-                    return int(line.split()[1]) / 1024.0  # kB
-    except (OSError, ValueError):
-        pass
-    return None
+    from formats.memory import proc_bytes
+
+    n_bytes = proc_bytes(f"/proc/{pid}/status", field)
+    return None if n_bytes is None else n_bytes / 2**20
 
 
 def _maxrss_mb() -> float:
