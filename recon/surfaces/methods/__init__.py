@@ -499,14 +499,19 @@ def closed(faces: np.ndarray) -> bool:
     """
     if len(faces) == 0:
         return False
-    faces = np.asarray(faces, dtype=np.int64)
-    ends = np.roll(faces, -1, axis=1)   # each face's edges (0, 1), (1, 2), (2, 0)
-    # one integer an edge, sorted: an edge of a single face differs from both neighbours
-    key = np.sort((np.minimum(faces, ends) * (int(faces.max()) + 1)
-                   + np.maximum(faces, ends)).ravel())
+    a, b, n = _directed_edges(faces)
+    # sorted undirected keys: an edge of a single face differs from both neighbours
+    key = np.sort(np.minimum(a, b) * n + np.maximum(a, b))
     change = key[1:] != key[:-1]
     once = np.concatenate([[True], change]) & np.concatenate([change, [True]])
     return not np.any(once)
+
+
+def _directed_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Every face's edges a -> b as two (3f,) int64 arrays, and ``n`` (the vertex count the
+    faces use) so that ``a * n + b`` is one integer key an edge."""
+    faces = np.asarray(faces, dtype=np.int64)
+    return faces.ravel(), faces[:, [1, 2, 0]].ravel(), int(faces.max()) + 1
 
 
 def watertight(faces: np.ndarray) -> bool:
@@ -521,9 +526,7 @@ def watertight(faces: np.ndarray) -> bool:
     """
     if len(faces) == 0:
         return False
-    faces = np.asarray(faces, dtype=np.int64)
-    n = int(faces.max()) + 1
-    a, b = faces.ravel(), faces[:, [1, 2, 0]].ravel()
+    a, b, n = _directed_edges(faces)
     directed = np.sort(a * n + b)
     if len(directed) % 2 or np.any(directed[1:] == directed[:-1]):
         return False  # an odd edge count, or an edge traversed twice the same way
