@@ -18,8 +18,9 @@ OUTPUT_DESTS = ("output", "refine_json")
 # Options whose name is not the API parameter's with "-" for "_" (``memory_limit`` ->
 # ``--memory-limit``): library errors name the parameter (``ReconError.argument``), the command
 # line prints the option.
-FLAGS = {"interval": "--refine-interval", "n_workers": "--workers", "output": "-o",
-         "overrides": "--set", "params": "--param", "timeout_s": "--timeout"}
+FLAGS = {"feature_angle_deg": "--feature-angle", "interval": "--refine-interval",
+         "n_workers": "--workers", "output": "-o", "overrides": "--set", "params": "--param",
+         "timeout_s": "--timeout"}
 
 
 class UsageError(ReconError, ValueError):

@@ -229,7 +229,7 @@ class EdgeReport:
 
 def _check_k(k, n_points: int) -> int:
     if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 4:
-        raise InputError(f"k must be an integer >= 4, got {k!r}")
+        raise InputError(f"k must be an integer >= 4, got {k!r}", argument="k")
     if n_points < k:
         raise InputError(f"points has {n_points} rows, fewer than k = {k} neighbours")
     return int(k)
@@ -503,20 +503,23 @@ def _check_rule(rule, threshold, k) -> tuple[str, float]:
         threshold = default_threshold(rule, k)
     if not (isinstance(threshold, int | float | np.integer | np.floating)
             and not isinstance(threshold, bool) and np.isfinite(threshold) and threshold >= 0):
-        raise InputError(f"threshold must be a finite number >= 0, got {threshold!r}")
+        raise InputError(f"threshold must be a finite number >= 0, got {threshold!r}",
+                         argument="threshold")
     return rule, float(threshold)
 
 
 def _check_variant(variant) -> str:
     if variant not in VARIANTS:
-        raise InputError(f"variant must be one of {VARIANTS}, got {variant!r}")
+        raise InputError(f"variant must be one of {VARIANTS}, got {variant!r}",
+                         argument="variant")
     return variant
 
 
 def _check_angle(angle_deg) -> float:
     if not (isinstance(angle_deg, int | float | np.integer | np.floating)
             and not isinstance(angle_deg, bool) and 0.0 <= angle_deg < 180.0):
-        raise InputError(f"feature_angle_deg must be in [0, 180), got {angle_deg!r}")
+        raise InputError(f"feature_angle_deg must be in [0, 180), got {angle_deg!r}",
+                         argument="feature_angle_deg")
     return float(angle_deg)
 
 

@@ -108,6 +108,20 @@ def test_bad_inputs(box_files, tmp_path, capsys):
                  str(tmp_path / "b")])
 
 
+@pytest.mark.parametrize(("option", "value", "line"), [
+    ("--k", "0", "--k must be an integer >= 4, got 0"),
+    ("--threshold", "-1", "--threshold must be a finite number >= 0, got -1.0"),
+    ("--feature-angle", "200", "--feature-angle must be in [0, 180), got 200.0"),
+])
+def test_edge_options_are_named_by_their_flag(box_files, tmp_path, capsys, option, value,
+                                              line):
+    folder, _ = box_files
+    assert main(["edges", str(folder / "box.ply"), "--truth", str(folder / "truth.ply"),
+                 "-o", str(tmp_path / "out"), option, value]) == 1
+    assert capsys.readouterr().err == f"recon edges: error: {line}\n"
+    assert not (tmp_path / "out").exists()
+
+
 def test_failed_run_keeps_the_previous_outputs(box_files, tmp_path, capsys):
     folder, _ = box_files
     out = tmp_path / "keep"
