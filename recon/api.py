@@ -1331,7 +1331,7 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
 
     from formats.atomic import write_text_atomically
     from formats.geometry import Mesh
-    from formats.paths import output_directory
+    from formats.paths import writing_into
     from recon.experiments import compare as comparison
     from recon.experiments.cases import SWEEP_THREADS, score_options, variants
     from recon.experiments.sweep import check_scheduler as check_value
@@ -1347,45 +1347,46 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
     options = score_options(samples, memory_mb=limits.memory_mb)
     check_value(scheduler)
     _check_workers(n_workers)
-    output = output_directory(output, ParameterError)   # before any work: a read-only parent
-    local = scheduler in (None, "threads")
-    if local:  # local workers import Open3D while the input loads
-        walk_early(*_inputs(cloud, truth))  # before the pool's launcher thread starts
-        start_workers(min(len(runs), n_workers or default_workers()), SWEEP_THREADS)
-    truth_mesh = (load_truth(truth, scale=truth_scale) if isinstance(truth, str | os.PathLike)
-                  else Mesh.of(_from_library(truth), "truth"))
-    if local:  # ... and make the truth ready for scoring while the cloud is prepared
-        warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
-    points, prepared = load_prepared(_from_library(cloud), preparation)
-    misses = _misses(cloud, points, preparation.seed)
-    prepared = dataclasses.replace(prepared, misses=misses)
-    if say is not None:
-        say(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "
-            f"{prepared.noise:.3g} m), truth {len(truth_mesh[1])} faces -> {output}")
-    report = comparison.compare(
-        prepared, truth_mesh, output, runs=runs, scheduler=scheduler, n_workers=n_workers,
-        resume=resume, keep_meshes=keep_meshes, title=_name(cloud, full=False),
-        score_options=options,
-        fingerprint={"input": _name(cloud), "truth": _name(truth), "voxel": preparation.voxel,
-                     "remove_outliers": preparation.remove_outliers,
-                     "normals_k": preparation.k},
-        strikes=points, misses=misses, **limits.kwargs())
-    agreement = None
-    if auto:
-        agreement = _auto_agreement(points, report["records"], methods, preparation, limits,
-                                    target_kind, misses=misses,
-                                    prepared=prepared, truth=truth_mesh, score_options=options)
-        write_text_atomically(output / "auto.json",
-                              json.dumps(_jsonable(agreement[0]), indent=2) + "\n",
-                              error=ParameterError)
-    if not any(r.get("status") == "ok" for r in report["records"]):
-        kinds = sorted({str(r.get("failure")) for r in report["records"]})
-        raise MethodFailed(f"every run failed ({len(report['records'])} runs: "
-                           f"{', '.join(kinds)}); the failures are in {report['csv']}")
-    return CompareResult(report["records"], report["table"], report["pareto_chamfer"],
-                         report["pareto_fscore"], report["full_grid"], report["csv"],
-                         report["json"], report["png"],
-                         *(agreement if agreement is not None else (None, None)))
+    # before any work (a read-only parent); removed again if a refused input leaves it empty
+    with writing_into(output, ParameterError) as output:
+        local = scheduler in (None, "threads")
+        if local:  # local workers import Open3D while the input loads
+            walk_early(*_inputs(cloud, truth))  # before the pool's launcher thread starts
+            start_workers(min(len(runs), n_workers or default_workers()), SWEEP_THREADS)
+        truth_mesh = (load_truth(truth, scale=truth_scale) if isinstance(truth, str | os.PathLike)
+                      else Mesh.of(_from_library(truth), "truth"))
+        if local:  # ... and make the truth ready for scoring while the cloud is prepared
+            warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
+        points, prepared = load_prepared(_from_library(cloud), preparation)
+        misses = _misses(cloud, points, preparation.seed)
+        prepared = dataclasses.replace(prepared, misses=misses)
+        if say is not None:
+            say(f"compare: {len(prepared.points)} points (spacing {prepared.spacing:.3g} m, noise "
+                f"{prepared.noise:.3g} m), truth {len(truth_mesh[1])} faces -> {output}")
+        report = comparison.compare(
+            prepared, truth_mesh, output, runs=runs, scheduler=scheduler, n_workers=n_workers,
+            resume=resume, keep_meshes=keep_meshes, title=_name(cloud, full=False),
+            score_options=options,
+            fingerprint={"input": _name(cloud), "truth": _name(truth), "voxel": preparation.voxel,
+                         "remove_outliers": preparation.remove_outliers,
+                         "normals_k": preparation.k},
+            strikes=points, misses=misses, **limits.kwargs())
+        agreement = None
+        if auto:
+            agreement = _auto_agreement(points, report["records"], methods, preparation, limits,
+                                        target_kind, misses=misses,
+                                        prepared=prepared, truth=truth_mesh, score_options=options)
+            write_text_atomically(output / "auto.json",
+                                  json.dumps(_jsonable(agreement[0]), indent=2) + "\n",
+                                  error=ParameterError)
+        if not any(r.get("status") == "ok" for r in report["records"]):
+            kinds = sorted({str(r.get("failure")) for r in report["records"]})
+            raise MethodFailed(f"every run failed ({len(report['records'])} runs: "
+                               f"{', '.join(kinds)}); the failures are in {report['csv']}")
+        return CompareResult(report["records"], report["table"], report["pareto_chamfer"],
+                             report["pareto_fscore"], report["full_grid"], report["csv"],
+                             report["json"], report["png"],
+                             *(agreement if agreement is not None else (None, None)))
 
 
 def _auto_agreement(cloud: Cloud, records: list, methods, preparation, limits,
@@ -1460,7 +1461,7 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
     -------
     StabilityResult
     """
-    from formats.paths import output_directory
+    from formats.paths import writing_into
     from recon.experiments import stability as sweep
     from recon.experiments.cases import SWEEP_THREADS, score_options, variants
     from recon.experiments.sweep import check_scheduler as check_value
@@ -1481,24 +1482,25 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
         sweep.DEFAULT_DENSITY if density is None else density,
         sweep.DEFAULT_OUTLIERS if outliers is None else outliers, len(runs), samples=samples,
         workers=n_workers or default_workers())
-    output = output_directory(output, sweep.ParameterError)
-    local = scheduler in (None, "threads")
-    if local:  # local workers import Open3D while the input loads
-        walk_early(*_inputs(source, truth))  # before the pool's launcher thread starts
-        start_workers(n_workers or default_workers(), SWEEP_THREADS)
-    clouds, truth_mesh = _stability_clouds(source, output, truth, truth_scale, overrides,
-                                           noise, seed)
-    if local:  # the workers make the truth ready for scoring while the first cell is prepared
-        warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
-    report = sweep.stability(output, clouds=clouds, truth=truth_mesh, names=methods, seed=seed,
-                             scheduler=scheduler, n_workers=n_workers, resume=resume,
-                             score_options=options,
-                             fingerprint={"source": str(source), "overrides": list(overrides),
-                                          "truth": str(truth)},
-                             noise=noise, density=density, outliers=outliers,
-                             **limits.kwargs())
-    return StabilityResult(report["records"], report["csv"], report["json"], report["pngs"],
-                           report["failure_rate"])
+    # removed again if a refused input leaves it empty
+    with writing_into(output, sweep.ParameterError) as output:
+        local = scheduler in (None, "threads")
+        if local:  # local workers import Open3D while the input loads
+            walk_early(*_inputs(source, truth))  # before the pool's launcher thread starts
+            start_workers(n_workers or default_workers(), SWEEP_THREADS)
+        clouds, truth_mesh = _stability_clouds(source, output, truth, truth_scale, overrides,
+                                               noise, seed)
+        if local:  # the workers make the truth ready for scoring while the first cell is prepared
+            warm_truth(tuple(truth_mesh), options, SWEEP_THREADS)
+        report = sweep.stability(output, clouds=clouds, truth=truth_mesh, names=methods, seed=seed,
+                                 scheduler=scheduler, n_workers=n_workers, resume=resume,
+                                 score_options=options,
+                                 fingerprint={"source": str(source), "overrides": list(overrides),
+                                              "truth": str(truth)},
+                                 noise=noise, density=density, outliers=outliers,
+                                 **limits.kwargs())
+        return StabilityResult(report["records"], report["csv"], report["json"], report["pngs"],
+                               report["failure_rate"])
 
 
 def _stability_clouds(source, output: Path, truth, truth_scale: float, overrides, noise,

@@ -65,6 +65,17 @@ def test_a_cloud_file_with_too_few_points_is_named(tmp_path, capsys):
     assert err.endswith(f"{path}: 5 points; need at least 16 to reconstruct"), err
 
 
+@pytest.mark.parametrize("command", ["compare", "stability"])
+def test_a_refused_input_leaves_no_new_output_directory(command, box_files, tmp_path, capsys):
+    junk = tmp_path / "junk.ply"
+    junk.write_bytes(b"ply\nformat nonsense\n")
+    out = tmp_path / "new" / "out"
+    assert main([command, str(junk), "--truth", str(box_files[1]), "-o", str(out),
+                 "--methods", "convex-hull"]) == 1
+    assert "junk.ply" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+
+
 def test_reconstruct_json_and_preprocessing(box_files, tmp_path, capsys):
     out = tmp_path / "box.ply"
     assert main(["reconstruct", str(box_files[0]), "-m", "planes", "--remove-outliers",
