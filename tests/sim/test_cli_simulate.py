@@ -68,7 +68,7 @@ def test_user_errors_are_one_line_without_traceback(recon, tmp_path):
     status, _, err = recon("simulate", "asteroid-lrf")
     assert status == 1 and "SCENE and -o LOG.h5 are required" in err
     status, _, err = recon("simulate", "asteroid-lrf", "-o", "x.h5", "--seed", "-4")
-    assert status == 1 and "--seed must be >= 0" in err
+    assert status == 1 and "--seed must be an integer from 0 to" in err
     status, _, err = recon("simulate", "nope", "-o", str(tmp_path / "x.h5"))
     assert status == 1 and "scene 'nope' is neither a preset nor a .toml file" in err
 
