@@ -100,7 +100,7 @@ def test_bad_inputs(box_files, tmp_path, capsys):
         capsys, ["edges", cloud, "--truth", truth, "-o", str(tmp_path / "file")])
     assert "k must be an integer >= 4" in _error(
         capsys, ["edges", cloud, "--truth", truth, "-o", str(tmp_path / "b"), "--k", "2"])
-    assert "feature_angle_deg must be in" in _error(
+    assert "--feature-angle must be in" in _error(
         capsys, ["edges", cloud, "--truth", truth, "-o", str(tmp_path / "b"),
                  "--feature-angle", "200"])
     assert "no such file" in _error(
