@@ -26,6 +26,17 @@ def proc_bytes(path: str, field: str) -> int | None:
     return None
 
 
+def total_bytes() -> int | None:
+    """The machine's memory (``MemTotal``) in bytes; None when unknown."""
+    total = proc_bytes("/proc/meminfo", "MemTotal")
+    if total is None and hasattr(os, "sysconf"):
+        try:
+            total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (OSError, ValueError):
+            total = None
+    return total
+
+
 def available_bytes() -> int | None:
     """Bytes this process can still allocate: the memory the system has available
     (``MemAvailable``), and no more than the address space its limit leaves (``RLIMIT_AS``,

@@ -139,10 +139,10 @@ def score_options(samples: int | None = None, *, memory_mb: int | None = None) -
     if memory_mb:
         limit, within = memory_mb * 2**20, f"a run's memory limit ({memory_mb:,} MiB)"
     else:
-        import psutil
+        from formats.memory import total_bytes
 
-        limit, within = psutil.virtual_memory().total, "this machine's memory"
-    if samples * SCORE_BYTES_PER_SAMPLE > limit:
+        limit, within = total_bytes(), "this machine's memory"
+    if limit is not None and samples * SCORE_BYTES_PER_SAMPLE > limit:
         raise ParameterError(
             f"samples must be at most {limit // SCORE_BYTES_PER_SAMPLE:,}, got {samples:,}: "
             f"scoring them would need about {samples * SCORE_BYTES_PER_SAMPLE / 2**30:,.1f} GiB, "

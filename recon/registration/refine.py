@@ -592,6 +592,13 @@ def _check_options(interval: float | None, max_points: int) -> None:
                              argument="max_points")
 
 
+def _knot_count(span: float, interval: float) -> float:
+    """Knots ``interval`` seconds apart over ``span`` seconds, ends included (at least 2); inf
+    for an interval too short to count them."""
+    steps = span / interval
+    return max(2.0, math.ceil(steps) + 1.0) if math.isfinite(steps) else math.inf
+
+
 def _check_size(log: StrikeLog, interval: float | None, max_points: int) -> None:
     """Refuse, before the shots are read, knots too many for the sampled strikes to estimate
     (fewer than ``MIN_ROWS`` a knot on average) and a problem that does not fit in memory.
@@ -615,15 +622,16 @@ def _check_size(log: StrikeLog, interval: float | None, max_points: int) -> None
     if interval is not None:
         span = float(log.shots(log.n_shots - 1).time[0] - log.shots(0, 1).time[0])
         most = n_fit // MIN_ROWS
-        if max(2.0, span / interval + 1.0) > most:
+        count = _knot_count(span, interval)
+        if count > most:
             instead = (f"give at least {span / (most - 1):.4g} s" if most >= 2
                        else "refine constant errors only (no interval)")
+            made = f"{count:,.0f}" if math.isfinite(count) else "too many"
             raise ParameterError(
-                f"interval {interval:g} s makes {max(2.0, span / interval + 1.0):,.0f} knots "
-                f"over the log's {span:g} s, more than its {n_fit:,} sampled strikes can "
-                f"estimate ({most:,} knots, at least {MIN_ROWS} strikes a knot); {instead}",
-                argument="interval")
-        knots = max(2, math.ceil(span / interval) + 1)
+                f"interval {interval:g} s makes {made} knots over the log's {span:g} s, more "
+                f"than its {n_fit:,} sampled strikes can estimate ({most:,} knots, at least "
+                f"{MIN_ROWS} strikes a knot); {instead}", argument="interval")
+        knots = int(count)
     p = 6 * knots + 1
     values = (SHOT_VALUES * log.n_shots + n_fit * (knots + 3 * p)
               + BLOCK * (NEIGHBOURS + 12) * knots + DENSE_MATRICES * p * p)
@@ -659,7 +667,7 @@ def _problem(log_path, interval: float | None, spin: bool, max_points: int, seed
     axis, rate = spin_of(all_shots)
     t0, t1 = float(all_shots.time[0]), float(all_shots.time[-1])
     knots = (np.array([t0]) if interval is None
-             else np.linspace(t0, t1, max(2, math.ceil((t1 - t0) / interval) + 1)))
+             else np.linspace(t0, t1, int(_knot_count(t1 - t0, interval))))
     k = len(knots)
     step = float(np.median(np.diff(all_shots.time))) if len(all_shots) > 1 else 1.0
     pairs = _Pairs(PAIR_GAP_STEPS * step, axis if rate > 0 and spin else None)
