@@ -20,6 +20,7 @@ from formats.strike_log.schema import (
     _ANGLE_FIELDS,
     _ROOT_ATTRS,
     _SHOT_FIELDS,
+    _STRIKE_FIELDS,
     _TRUTH_SHOT_FIELDS,
     _TRUTH_STRIKE_FIELDS,
     FORMAT_NAME,
@@ -118,7 +119,10 @@ class StrikeLog:
     # A log being written has datasets longer than its committed rows (LiveStrikeLog).
     _growing = False
 
-    def _dataset(self, path: str, n: int | None, tail: tuple, kinds: str) -> h5py.Dataset:
+    def _dataset(self, path: str, n: int | None, tail: tuple, dtype) -> h5py.Dataset:
+        """Open dataset ``/path``, refusing one missing or of another shape than ``(n, *tail)``
+        (``n`` None: any length); a dtype other than ``dtype`` (either byte order) is noted in
+        ``self._wrong_dtypes``, for ``_check_schema`` to report every one at once."""
         where = self._where
         if path not in self._file:
             raise InputError(f"{where}: missing dataset /{path}")
@@ -129,18 +133,26 @@ class StrikeLog:
         if ds.ndim != 1 + len(tail) or ds.shape[1:] != tail or short:
             want = ("n" if n is None else str(n)) + "".join(f", {k}" for k in tail)
             raise InputError(f"{where}: /{path} has shape {ds.shape}, expected ({want})")
-        if ds.dtype.kind not in kinds:
-            raise InputError(f"{where}: /{path} has dtype {ds.dtype}, expected "
-                                 + {"f": "float", "iu": "integer"}.get(kinds, kinds))
+        want = np.dtype(dtype)
+        if (ds.dtype.kind, ds.dtype.itemsize) != (want.kind, want.itemsize):
+            self._wrong_dtypes.append(f"/{path} has dtype {ds.dtype}, expected {want}")
         return ds
 
     def _check_schema(self) -> None:
         """Check the whole layout of SPEC.md (attributes, sensor, every dataset's shape and
-        kind) and open the datasets, without reading their rows."""
+        dtype) and open the datasets, without reading their rows.
+
+        A dataset of another dtype than SPEC.md's is refused, by the reader as by
+        ``validate``, and every such dataset is named at once: converting a float32 column
+        would hide that its producer rounded the values (docs/decisions.md, Strike-log
+        dtypes)."""
         self._check_root()
+        self._wrong_dtypes = []
         self.sensor = self._read_sensor()
-        _check_sensor(self.sensor, self._where)
         self._open_datasets()
+        if self._wrong_dtypes:
+            raise InputError(f"{self._where}: " + "; ".join(self._wrong_dtypes))
+        _check_sensor(self.sensor, self._where)
 
     def _check_root(self) -> None:
         """The root attributes: format and version, the others of SPEC.md, the row counts."""
@@ -173,7 +185,7 @@ class StrikeLog:
         if "sensor" not in f:
             raise InputError(f"{where}: missing group /sensor")
         g = f["sensor"]
-        beams = self._dataset("sensor/beam_directions", None, (3,), "f")
+        beams = self._dataset("sensor/beam_directions", None, (3,), np.float64)
         check_whole(where, [beams], InputError)
         directions = beams[()]
         if "sensor/errors" not in f:
@@ -194,23 +206,22 @@ class StrikeLog:
 
     def _open_datasets(self) -> None:
         """The shot, strike and (when present) truth datasets, each of its declared shape."""
-        self._shots = {k: self._dataset(f"shots/{k}", self.n_shots, tail, "f")
+        self._shots = {k: self._dataset(f"shots/{k}", self.n_shots, tail, np.float64)
                        for k, tail in _SHOT_FIELDS.items()}
-        spec = {k: ((), "iu") for k in ("shot", "beam")} | {"range": ((), "f")}
+        spec = dict(_STRIKE_FIELDS)
         if self.sensor.reports_angles:
-            spec |= {k: ((), "f") for k in _ANGLE_FIELDS}
-        self._strikes = {k: self._dataset(f"strikes/{k}", self.n_strikes, tail, kinds)
-                         for k, (tail, kinds) in spec.items()}
+            spec |= {k: ((), np.float64) for k in _ANGLE_FIELDS}
+        self._strikes = {k: self._dataset(f"strikes/{k}", self.n_strikes, tail, dtype)
+                         for k, (tail, dtype) in spec.items()}
         self.has_truth = "truth" in self._file
         if self.has_truth:
-            self._truth_shots = {k: self._dataset(f"truth/{k}", self.n_shots, tail, "f")
+            self._truth_shots = {k: self._dataset(f"truth/{k}", self.n_shots, tail,
+                                                  np.float64)
                                  for k, tail in _TRUTH_SHOT_FIELDS.items()}
-            self._truth_strikes = {
-                k: self._dataset(f"truth/{k}", self.n_strikes, tail,
-                                 "f" if dtype == np.float64 else "iu")
-                for k, (tail, dtype) in _TRUTH_STRIKE_FIELDS.items()}
-            self._dataset("truth/mesh/vertices", None, (3,), "f")
-            self._dataset("truth/mesh/faces", None, (3,), "iu")
+            self._truth_strikes = {k: self._dataset(f"truth/{k}", self.n_strikes, tail, dtype)
+                                   for k, (tail, dtype) in _TRUTH_STRIKE_FIELDS.items()}
+            self._dataset("truth/mesh/vertices", None, (3,), np.float64)
+            self._dataset("truth/mesh/faces", None, (3,), np.uint32)
 
     # ------------------------------------------------------------------ reading
 
@@ -255,10 +266,6 @@ class StrikeLog:
             shot = np.asarray(self._strikes["shot"][start:stop])
             beam = np.asarray(self._strikes["beam"][start:stop])
             rng = np.asarray(self._strikes["range"][start:stop], dtype=np.float64)
-        if shot.dtype.kind == "i" and len(shot) and shot.min() < 0:
-            raise InputError(f"{self._where}: negative shot index")
-        if beam.dtype.kind == "i" and len(beam) and beam.min() < 0:
-            raise InputError(f"{self._where}: negative beam index")
         _check_strike_rows(shot, beam, rng, n_shots=self.n_shots, n_beams=self.sensor.n_beams,
                            where=self._where, row0=start, previous_shot=previous_shot,
                            range_min=self.sensor.range_min,
@@ -484,6 +491,11 @@ class LiveStrikeLog(StrikeLog):
         try:
             if LIVE_COMMITTED not in self._file:
                 raise InputError(f"{self._where}: not a live log (no /{LIVE_COMMITTED})")
+            live = self._file[LIVE_COMMITTED]
+            if not (isinstance(live, h5py.Dataset) and live.shape == (3,)
+                    and (live.dtype.kind, live.dtype.itemsize) == ("i", 8)):
+                raise InputError(f"{self._where}: /{LIVE_COMMITTED} must be a dataset of 3 "
+                                 "int64 values")
             self.closing = False
             with _hdf5_errors(self._where):
                 self._check_schema()

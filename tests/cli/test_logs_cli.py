@@ -38,6 +38,27 @@ def test_validate_damaged_log_exits_1_with_one_line(sphere_log, capsys):
     assert err.startswith("recon validate: error:") and "time does not increase at shot 5" in err
 
 
+
+def _float32_range(path):
+    """Store ``/strikes/range`` of the log at ``path`` as float32 (the spec says float64)."""
+    with h5py.File(path, "r+") as f:
+        values, attrs = f["strikes/range"][()], dict(f["strikes/range"].attrs)
+        del f["strikes/range"]
+        f["strikes/range"] = values.astype(np.float32)
+        f["strikes/range"].attrs.update(attrs)
+
+
+@pytest.mark.parametrize("command", [["validate"], ["info"], ["ingest", "-o", "c.ply"]])
+def test_float32_range_is_refused_by_every_reader(sphere_log, tmp_path, capsys, command):
+    _float32_range(sphere_log)
+    args = [command[0], str(sphere_log), *(str(tmp_path / a) if "." in a else a
+                                           for a in command[1:])]
+    assert main(args) == 1
+    assert capsys.readouterr().err == (f"recon {command[0]}: error: {sphere_log}: "
+                                       "/strikes/range has dtype float32, expected float64\n")
+    assert not list(tmp_path.glob("c.*"))
+
+
 def test_info_json(sphere_log, capsys):
     assert main(["info", str(sphere_log), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)

@@ -187,3 +187,48 @@ def test_validate_rejects_empty_blocks(sphere_log):
     with StrikeLog(sphere_log) as log, pytest.raises(InputError,
                                                      match="chunk_rows must be positive"):
         log.validate(chunk_rows=0)
+
+
+def _retyped(name, dtype):
+    """Store dataset ``name`` as ``dtype`` (the same values, converted)."""
+    def edit(f):
+        values = f[name][()]
+        _replace(name, values.astype(dtype))(f)
+    return edit
+
+
+def test_float32_range_is_refused_on_open(sphere_log):
+    """The spec's float64 range, stored as float32: refused by the reader as by validate (a
+    float32 carries 24 bits: at 1 km its steps are 61 micrometres, at 100 km 7.8 mm)."""
+    path = _mutated(sphere_log, _retyped("strikes/range", np.float32))
+    with pytest.raises(InputError, match=rf"^{path}: /strikes/range has dtype float32, "
+                                         r"expected float64$"):
+        StrikeLog(path)
+
+
+def test_every_dataset_of_another_dtype_is_named(sphere_log):
+    """One message names each dataset whose dtype is not the spec's, whichever group."""
+    for name, dtype in [("shots/time", np.float32), ("strikes/range", np.float32),
+                        ("strikes/beam", np.int64), ("sensor/beam_directions", np.float16),
+                        ("truth/facet", np.uint64), ("truth/mesh/vertices", np.float32)]:
+        _mutated(sphere_log, _retyped(name, dtype))
+    with pytest.raises(InputError) as info:
+        _read_everything(sphere_log)
+    message = str(info.value)
+    assert message == (
+        f"{sphere_log}: /sensor/beam_directions has dtype float16, expected float64; "
+        "/shots/time has dtype float32, expected float64; "
+        "/strikes/beam has dtype int64, expected uint32; "
+        "/strikes/range has dtype float32, expected float64; "
+        "/truth/facet has dtype uint64, expected uint32; "
+        "/truth/mesh/vertices has dtype float32, expected float64")
+
+
+def test_either_byte_order_is_read(sphere_log):
+    """Byte order is HDF5's to convert, exactly: a big-endian float64 range is the spec's."""
+    with StrikeLog(sphere_log) as log:
+        want = log.strikes()[2]
+    path = _mutated(sphere_log, _retyped("strikes/range", ">f8"))
+    with StrikeLog(path) as log:
+        log.validate()
+        np.testing.assert_array_equal(log.strikes()[2], want)

@@ -115,3 +115,18 @@ def test_follow_reads_a_complete_log_whole_and_waits_only_so_long(tmp_path):
     assert total == N_BLOCKS * SHOTS_PER_BLOCK * BEAMS
     with pytest.raises(InputError, match=r"no log and no writer at work after 0\.05 s"):
         next(follow(tmp_path / "never.h5", poll_s=0.01, timeout_s=0.05))
+
+
+@pytest.mark.parametrize("committed", [np.array([40, 80, 0], dtype=np.float64),
+                                       np.array([40, 80], dtype=np.int64)])
+def test_live_counts_of_another_dtype_or_shape_are_refused(tmp_path, committed):
+    from formats.strike_log import LiveStrikeLog
+    from tests.conftest import write_sphere_log
+
+    path = tmp_path / "live.h5"
+    write_sphere_log(path)
+    with h5py.File(path, "r+", libver="latest") as f:
+        f[LIVE_COMMITTED] = committed
+    with pytest.raises(InputError, match=rf"^{path}: /{LIVE_COMMITTED} must be a dataset of 3 "
+                                         r"int64 values$"):
+        LiveStrikeLog(path)
