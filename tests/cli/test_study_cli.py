@@ -64,6 +64,23 @@ def test_bad_scheduler_address(capsys, tmp_path):
            r"'threads' or 'serial', got 'nowhere'")
 
 
+@pytest.mark.parametrize("name", ["duration", "all"])
+def test_a_study_refused_before_writing_leaves_no_directory(capsys, tmp_path, monkeypatch,
+                                                            name):
+    from formats.errors import InputError
+    from recon.experiments.studies import duration, inclination
+
+    def refused(size):
+        raise InputError("scene.toml: refused")
+
+    for study in (duration, inclination):   # 'all' starts with inclination
+        monkeypatch.setattr(study, "cases", refused)
+    out = tmp_path / "new" / "out"
+    _fails(capsys, ["study", name, "-o", str(out), "--size", "tiny", "--scheduler", "serial"],
+           r"^recon study: error: scene.toml: refused$")
+    assert not (tmp_path / "new").exists()
+
+
 def test_missing_arguments_and_bad_workers(capsys, tmp_path):
     _fails(capsys, ["study", "duration"], r"NAME and -o DIR are required")
     _fails(capsys, ["study", "duration", "-o", str(tmp_path), "--workers", "0"],

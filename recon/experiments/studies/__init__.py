@@ -31,7 +31,7 @@ from types import ModuleType
 
 from formats.atomic import write_text_atomically
 from formats.errors import ParameterError
-from formats.paths import output_directory
+from formats.paths import writing_into
 from recon.experiments.studies.runner import SIZES, check_size
 
 # Study modules, in the order of the paper (and of ``recon study --list``).
@@ -87,11 +87,6 @@ def check_scheduler(scheduler: str | None, *, connect: bool = True) -> str | Non
     return scheduler
 
 
-def check_output(out_dir) -> Path:
-    """The output directory, created; refuses a path that is a file."""
-    return output_directory(out_dir, ParameterError)
-
-
 def run(name: str, out_dir, *, size: str = "full", scheduler: str | None = None,
         resume: bool = False, n_workers: int | None = None, checked: bool = False) -> dict:
     """Run one study into ``out_dir``; return its summary (also in ``DIR/summary.json``).
@@ -101,7 +96,7 @@ def run(name: str, out_dir, *, size: str = "full", scheduler: str | None = None,
     name : str
         One of ``names()``.
     out_dir : str or Path
-        Created if needed.
+        Created if needed; removed again if the study fails before writing into it.
     size : {"full", "quick", "tiny"}
         ``full`` as in the paper, ``quick`` for CI, ``tiny`` for the tests.
     scheduler : str, optional
@@ -118,28 +113,31 @@ def run(name: str, out_dir, *, size: str = "full", scheduler: str | None = None,
 
     module = get(name)
     check_size(size)
-    out_dir = check_output(out_dir)
     if not checked:
         check_scheduler(scheduler)
     start = time.perf_counter()
-    if hasattr(module, "run"):
-        summary = module.run(out_dir, size=size, scheduler=scheduler, resume=resume,
-                             n_workers=n_workers)
-    else:
-        cases = module.cases(size)
-        records = runner.execute(name, cases, out_dir, size=size, scheduler=scheduler,
-                                 resume=resume, n_workers=n_workers,
-                                 func=getattr(module, "run_case", runner.run_case))
-        runner.write_csv(runner.rows(records), out_dir / runner.RESULTS_CSV)
-        done = module.finish(runner.ok(records), out_dir, size)
-        runner.write_summary(out_dir, study=name, title=module.TITLE, size=size,
-                             records=records, claims=done["claims"],
-                             files=[runner.RESULTS_CSV, *done["files"]],
-                             extra=done.get("extra"))
-        summary = json.loads((out_dir / runner.SUMMARY_JSON).read_text())
-    summary["wall_time_s"] = time.perf_counter() - start
-    write_text_atomically(out_dir / runner.SUMMARY_JSON, json.dumps(summary, indent=2) + "\n")
-    return summary
+    # Created here, and removed again (with the parents this made) when the study fails
+    # before writing into it.
+    with writing_into(out_dir, ParameterError) as out_dir:
+        if hasattr(module, "run"):
+            summary = module.run(out_dir, size=size, scheduler=scheduler, resume=resume,
+                                 n_workers=n_workers)
+        else:
+            cases = module.cases(size)
+            records = runner.execute(name, cases, out_dir, size=size, scheduler=scheduler,
+                                     resume=resume, n_workers=n_workers,
+                                     func=getattr(module, "run_case", runner.run_case))
+            runner.write_csv(runner.rows(records), out_dir / runner.RESULTS_CSV)
+            done = module.finish(runner.ok(records), out_dir, size)
+            runner.write_summary(out_dir, study=name, title=module.TITLE, size=size,
+                                 records=records, claims=done["claims"],
+                                 files=[runner.RESULTS_CSV, *done["files"]],
+                                 extra=done.get("extra"))
+            summary = json.loads((out_dir / runner.SUMMARY_JSON).read_text())
+        summary["wall_time_s"] = time.perf_counter() - start
+        write_text_atomically(out_dir / runner.SUMMARY_JSON,
+                              json.dumps(summary, indent=2) + "\n")
+        return summary
 
 
 def run_all(out_dir, *, size: str = "full", scheduler: str | None = None,
@@ -159,8 +157,17 @@ def run_all(out_dir, *, size: str = "full", scheduler: str | None = None,
     chosen = list(only) if only else names()
     for name in chosen:
         get(name)
-    out_dir = check_output(out_dir)
     check_scheduler(scheduler)
+    # Removed again, as each study's own directory is, when the first study fails before
+    # writing.
+    with writing_into(out_dir, ParameterError) as out_dir:
+        return _run_all(out_dir, chosen, size=size, scheduler=scheduler, resume=resume,
+                        n_workers=n_workers)
+
+
+def _run_all(out_dir: Path, chosen: list[str], *, size: str, scheduler: str | None,
+             resume: bool, n_workers: int | None) -> dict:
+    """``run_all`` once its arguments are checked and ``out_dir`` exists."""
     from tqdm import tqdm
 
     start = time.perf_counter()

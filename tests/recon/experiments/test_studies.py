@@ -370,6 +370,49 @@ def test_unreachable_scheduler(tmp_path):
         studies.run("duration", tmp_path, size="tiny", scheduler="tcp://127.0.0.1:9")
 
 
+def _refused_input(*args, **kwargs):
+    raise InputError("scene.toml: refused")
+
+
+def test_a_study_failing_before_writing_leaves_no_directory(tmp_path, monkeypatch):
+    """Every study removes the directories it made when it fails before writing into them,
+    whether its scheduler is refused, its cases are, or it is interrupted."""
+    from recon.experiments.studies import methods
+
+    out = tmp_path / "new" / "study"
+    with pytest.raises(ParameterError, match="cannot connect"):
+        studies.run("duration", out, size="tiny", scheduler="tcp://127.0.0.1:9")
+    assert not (tmp_path / "new").exists()
+    monkeypatch.setattr(duration, "cases", _refused_input)      # a scene study
+    with pytest.raises(InputError, match=r"scene\.toml: refused"):
+        studies.run("duration", out, size="tiny", scheduler="serial")
+    assert not (tmp_path / "new").exists()
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(methods, "prepared_cloud", interrupted)  # a study with its own run
+    with pytest.raises(KeyboardInterrupt):
+        studies.run("methods", out, size="tiny", scheduler="serial")
+    assert not (tmp_path / "new").exists()
+
+
+def test_all_studies_failing_in_the_first_leave_no_directory(tmp_path, monkeypatch):
+    monkeypatch.setattr(inclination, "cases", _refused_input)
+    out = tmp_path / "all"
+    with pytest.raises(InputError, match=r"scene\.toml: refused"):
+        studies.run_all(out, size="tiny", scheduler="serial")
+    assert not out.exists()
+
+
+def test_a_failing_study_keeps_a_directory_it_did_not_make(tmp_path, monkeypatch):
+    monkeypatch.setattr(duration, "cases", _refused_input)
+    (tmp_path / "kept").mkdir()
+    with pytest.raises(InputError):
+        studies.run("duration", tmp_path / "kept", size="tiny", scheduler="serial")
+    assert (tmp_path / "kept").is_dir()
+
+
 # --------------------------------------------------------------------------- report
 
 
