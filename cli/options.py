@@ -149,7 +149,7 @@ def _scheduler(text: str) -> str:
         raise argparse.ArgumentTypeError(exc.worded(lambda _: "").strip()) from None
 
 
-def add_sweep_options(parser, *, resume_help: str, default: str) -> None:
+def add_sweep_options(parser, *, resume_help: str, default: str, workers_help: str) -> None:
     """``--scheduler``, ``--workers`` and ``--resume`` (``recon.api.check_scheduler``'s values).
 
     Parameters
@@ -159,12 +159,15 @@ def add_sweep_options(parser, *, resume_help: str, default: str) -> None:
         What ``--resume`` keeps, in the command's own words.
     default : str
         What runs the work when ``--scheduler`` is not given, in the help's words.
+    workers_help : str
+        What ``--workers N`` sets under each scheduler, in the command's own words
+        (``recon.experiments.sweep.iterate``: a local pool or cluster of N; on a cluster given
+        by address, the cluster's own workers run the work).
     """
     parser.add_argument("--scheduler", metavar="ADDRESS", type=_scheduler,
                         help=f"Dask scheduler address of an existing cluster (default: {default}"
                              "); 'threads' or 'serial' run without Dask")
-    parser.add_argument("--workers", type=int, metavar="N",
-                        help="local workers (default: one per core)")
+    parser.add_argument("--workers", type=int, metavar="N", help=workers_help)
     parser.add_argument("--resume", action="store_true", help=resume_help)
 
 

@@ -53,6 +53,19 @@ def _add_input_options(p: argparse.ArgumentParser) -> None:
                                                        "(default: %(default)s)")
 
 
+# What --workers sets (recon.experiments.sweep.iterate): without --scheduler and with
+# 'threads', the runs at once, each waiting on its warm worker process; on a cluster given by
+# address, the cluster's own workers run them; 'serial' runs one at a time.
+_WORKERS_HELP = ("runs at once on this machine, each in its own worker process (default: one "
+                 "per core; 'serial' runs one at a time); ")
+WORKERS_HELP = {
+    "compare": _WORKERS_HELP + "not used with --scheduler ADDRESS, where the cluster's "
+                               "workers run them",
+    "stability": _WORKERS_HELP + "with --scheduler ADDRESS the cluster's workers run them: "
+                                 "give its size, which the grid's time estimate divides by",
+}
+
+
 def _add_run_options(p: argparse.ArgumentParser, *, sweep: bool) -> None:
     g = p.add_argument_group("runs")
     g.add_argument("--timeout", type=float, metavar="S", help=TIMEOUT_HELP)
@@ -64,7 +77,8 @@ def _add_run_options(p: argparse.ArgumentParser, *, sweep: bool) -> None:
                             "F-score's 0.005; stability takes enough for a 2%% standard error "
                             "of each cell's Chamfer distance; fewer is faster and noisier)")
         add_sweep_options(g, resume_help="keep DIR/results.jsonl and skip the runs it holds",
-                          default="threads, each method in its own worker process")
+                          default="threads, each method in its own worker process",
+                          workers_help=WORKERS_HELP[p.prog.split()[-1]])
 
 
 def _add_closing_options(p: argparse.ArgumentParser, *, preprocessing: bool, sweep: bool

@@ -37,7 +37,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="reduced version (minutes, for CI); verdicts of claims the reduced "
                         "runs cannot test say 'not tested'")
     add_sweep_options(p, resume_help="keep the finished cases in DIR and run only the others",
-                      default="a local Dask cluster")
+                      default="a local Dask cluster",
+                      workers_help="cases at once on this machine: the worker processes of the "
+                                   "local Dask cluster, or threads with --scheduler threads "
+                                   "(default: one per core; 'serial' runs one at a time); not "
+                                   "used with --scheduler ADDRESS, where the cluster's workers "
+                                   "run them")
     p.add_argument("--list", action="store_true", help="list the studies and exit")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--size", choices=("tiny",), help=argparse.SUPPRESS)  # tests only

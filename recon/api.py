@@ -1313,8 +1313,14 @@ def compare(cloud, *, truth, output, methods: Sequence[str] | None = None,
         where it ranks on the truth.
     target_kind : {"unknown", "natural"}
         What ``auto`` is told of the target, as ``reconstruct``.
-    scheduler, n_workers, resume
-        ``check_scheduler``'s values, local workers, keep the runs ``output`` already holds.
+    scheduler : str, optional
+        ``check_scheduler``'s values (default: a local pool of threads).
+    n_workers : int, optional
+        Runs at once on this machine, each in its own worker process (default: one per core);
+        not used by ``"serial"`` (one at a time) or on a cluster given by address (its own
+        workers run them).
+    resume : bool
+        Keep the runs ``output`` already holds.
     say : callable, optional
         Called with a one-line description of the inputs before the runs start.
 
@@ -1455,7 +1461,7 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
         cell's Chamfer needs for its stated precision).
     scheduler, n_workers, resume
         As ``compare``; ``n_workers`` is also the runs at once the grid's estimate counts (on a
-        Dask cluster, give its size).
+        Dask cluster given by address, give its size; ``"serial"`` counts one).
 
     Returns
     -------
@@ -1481,7 +1487,7 @@ def stability(source, *, output, truth=None, truth_scale: float = 1.0,
         sweep.DEFAULT_NOISE if noise is None else noise,
         sweep.DEFAULT_DENSITY if density is None else density,
         sweep.DEFAULT_OUTLIERS if outliers is None else outliers, len(runs), samples=samples,
-        workers=n_workers or default_workers())
+        workers=1 if scheduler == "serial" else n_workers or default_workers())
     # removed again if a refused input leaves it empty
     with writing_into(output, sweep.ParameterError) as output:
         local = scheduler in (None, "threads")
@@ -1552,7 +1558,8 @@ def study(name: str, output, *, size: str = "full", scheduler: str | None = None
     size : {"full", "quick", "tiny"}
         As in the paper, reduced for CI, or tiny for tests.
     scheduler, n_workers, resume
-        As ``compare`` (default: a local Dask cluster).
+        As ``compare``, but by default on a local Dask cluster of ``n_workers`` worker
+        processes (``"threads"``: ``n_workers`` threads of this process).
 
     Returns
     -------

@@ -87,6 +87,26 @@ def test_list_syntax_reads_as_one_item_in_usage():
     assert "[--methods METHOD[,...]]" in usage
 
 
+@pytest.mark.parametrize(("command", "says"), [
+    ("compare", ["runs at once on this machine, each in its own worker process",
+                 "not used with --scheduler ADDRESS"]),
+    ("stability", ["runs at once on this machine, each in its own worker process",
+                   "with --scheduler ADDRESS the cluster's workers run them: give its size, "
+                   "which the grid's time estimate divides by"]),
+    ("study", ["the worker processes of the local Dask cluster, or threads with --scheduler "
+               "threads", "not used with --scheduler ADDRESS"]),
+])
+def test_workers_help_says_what_n_sets_under_each_scheduler(command, says):
+    """--workers is a local count: of the runs at once (compare, stability: threads each
+    waiting on a worker process) or of a local cluster's processes (study); a cluster given by
+    address runs the work on its own workers, and 'serial' one case at a time."""
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command").choices[command]
+    text = " ".join(next(a for a in sub._actions if a.dest == "workers").help.split())
+    for words in [*says, "default: one per core", "'serial' runs one at a time"]:
+        assert words in text, text
+
+
 @pytest.mark.parametrize("package", ["recon", "cli"])
 def test_python_dash_m_runs_recon(package):
     result = subprocess.run([sys.executable, "-m", package, "--version"], capture_output=True,

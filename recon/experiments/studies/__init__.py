@@ -105,7 +105,9 @@ def run(name: str, out_dir, *, size: str = "full", scheduler: str | None = None,
     resume : bool
         Keep finished cases of an interrupted run (failed ones run again).
     n_workers : int, optional
-        Local workers (default: one per core).
+        Cases at once on this machine (default: one per core): the worker processes of the
+        local Dask cluster, or threads with ``"threads"``; not used by ``"serial"`` or on a
+        cluster given by address.
     checked : bool
         The scheduler was already checked (``run_all``).
     """

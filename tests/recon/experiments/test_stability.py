@@ -182,6 +182,18 @@ def test_the_api_refuses_a_grid_before_reading_or_writing_anything(tmp_path, mon
     assert not (tmp_path / "out").exists()
 
 
+def test_a_serial_grid_is_estimated_on_one_worker(tmp_path):
+    """'serial' runs one case at a time whatever ``n_workers`` says: its estimate counts one."""
+    from recon import api
+
+    levels = [i / 100 for i in range(1, 101)]
+    with pytest.raises(ParameterError, match=r"20,000 runs, at least [\d.]+ days on 1 "
+                                             r"worker\(s\)"):
+        api.stability(tmp_path / "missing.ply", output=tmp_path / "out", noise=levels,
+                      density=levels, methods=["convex-hull"], scheduler="serial", n_workers=8,
+                      samples=2_000_000)
+
+
 def test_a_plain_cloud_needs_a_truth_and_takes_no_scene_overrides(tmp_path):
     from formats.cloud_io import write_cloud
     from formats.geometry import Cloud
