@@ -23,6 +23,11 @@ Schedulers
     instantly.
 ``"serial"``
     One case after another in this process (debugging).
+
+Whatever the scheduler, ``QUEUED_PER_WORKER`` cases per worker (thread of the local pool, or
+worker thread of the Dask cluster) are submitted at a time and the next ones as those finish:
+starting and interrupting a sweep take the same time whatever its size, and a Ctrl-C cancels
+only the cases in flight.
 """
 
 from __future__ import annotations
@@ -64,11 +69,15 @@ PROBE_GREETING_S = 5.0
 PROBE_MAX_BYTES = 1 << 16
 # A Dask scheduler address: ``host:port`` or ``protocol://host:port`` with one of Dask's comms.
 SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss|ucx)://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$")
-# Cases submitted ahead per thread of a local pool (``_execute_threads``): one running, one
-# ready to start as it ends.
+# Cases submitted ahead per thread of a local pool (``_execute_threads``) or per worker thread
+# of a Dask cluster (``_execute_dask``): one running, one ready to start as it ends.
 QUEUED_PER_WORKER = 2
 # Longest wait of a local pool for a case to finish before looking for a signal, in seconds.
 WAIT_S = 0.5
+# Step of a Dask sweep's wait for a case to finish, between looks for a signal, in seconds: the
+# step of ``distributed.as_completed``'s own wait (a case takes seconds; a result waits at most
+# this long to be written).
+DASK_POLL_S = 0.1
 # Where a local cluster listens: this machine only. Its scheduler and dashboard (HTTP, no
 # authentication) would otherwise be open on every interface on random ports.
 LOCAL_HOST = "127.0.0.1"
@@ -443,9 +452,23 @@ def _execute_threads(func, cases, pending, shared, workers, channel):
 
 
 def _execute_dask(func, cases, pending, shared, scheduler, workers, channel):
+    """``iterate`` on Dask: a local cluster of ``workers`` processes (``scheduler`` None) or
+    the cluster at the address ``scheduler`` (whose own workers run the cases).
+
+    At most ``QUEUED_PER_WORKER`` cases per worker thread of the cluster (as its scheduler
+    counts them whenever a case finishes: a cluster may grow or shrink) are submitted at a
+    time, the next ones as those finish, so that neither the scheduler nor this process holds
+    a future per case, and an interrupt has only those to cancel; waits of ``DASK_POLL_S`` at
+    most between looks for a signal (``formats.interrupt.check``), as ``_execute_threads``.
+    """
+    import time
+
     from distributed import Client, as_completed
 
+    from formats import interrupt
+
     cluster = client = None
+    running: dict = {}   # future -> key: submitted, not yet yielded
     try:
         if scheduler is None:
             cluster = local_cluster(workers)
@@ -455,18 +478,37 @@ def _execute_dask(func, cases, pending, shared, scheduler, workers, channel):
         # A one-element list scatters the value whole (a tuple would be split).
         remote = {name: client.scatter([value], broadcast=True)[0]
                   for name, value in shared.items()}
-        futures = {client.submit(_call, func, remote, cases[key], (channel, key), pure=False):
-                   key for key in pending}
+        keys = iter(pending)
+
+        def submit() -> list:
+            """Submit the next cases, up to the bound; return their futures."""
+            bound = QUEUED_PER_WORKER * max(1, sum(client.nthreads().values()))
+            futures = []
+            for key in itertools.islice(keys, max(0, bound - len(running))):
+                future = client.submit(_call, func, remote, cases[key], (channel, key),
+                                       pure=False)
+                running[future] = key
+                futures.append(future)
+            return futures
+
+        finished = as_completed(submit())
         try:
-            for future in as_completed(futures):
-                key = futures[future]
-                try:
-                    result = future.result()
-                except Exception as exc:  # a worker lost (KilledWorker) or a task error
-                    result = _failed_task(exc)
-                yield key, result
+            while not finished.is_empty():
+                interrupt.check()
+                batch = finished.next_batch(block=False)
+                if not batch:
+                    time.sleep(DASK_POLL_S)
+                    continue
+                for future in batch:
+                    key = running.pop(future)
+                    try:
+                        result = future.result()
+                    except Exception as exc:  # a worker lost (KilledWorker) or a task error
+                        result = _failed_task(exc)
+                    finished.update(submit())   # the workers go on while the caller writes
+                    yield key, result
         except BaseException:
-            client.cancel(list(futures))
+            client.cancel(list(running))
             raise
     except KeyboardInterrupt:
         # No orderly shutdown on Ctrl-C: of a cluster still starting it fails with a traceback,

@@ -161,3 +161,130 @@ def test_workers_must_be_positive(tmp_path):
 def test_to_jsonable_handles_numpy_and_non_finite():
     value = {"a": np.float32(1.5), "b": np.arange(3), "c": (1, float("inf")), "d": np.bool_(1)}
     assert to_jsonable(value) == {"a": 1.5, "b": [0, 1, 2], "c": [1, None], "d": True}
+
+
+def seeded(*, x: int, seed: int) -> dict:
+    """A case whose value is drawn from its own seed."""
+    return {"status": "ok", "value": float(np.random.default_rng([seed, x]).normal())}
+
+
+def signalled(*, x: int, at: int) -> dict:
+    """A case; case ``at`` records a SIGINT whose exception a library swallowed (what
+    ``formats.interrupt``'s handler leaves for ``check``). The in-process cluster's worker
+    threads share this process's record."""
+    import signal
+
+    from formats import interrupt
+
+    if x == at:
+        interrupt._received.append(signal.SIGINT)
+    time.sleep(0.01)
+    return {"status": "ok", "value": x}
+
+
+@pytest.fixture
+def dask_address():
+    """The address of an in-process Dask cluster of 2 single-threaded workers."""
+    import logging
+
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp",
+                      host="127.0.0.1", dashboard_address="127.0.0.1:0",
+                      silence_logs=logging.ERROR) as cluster:
+        yield cluster.scheduler_address
+
+
+def _counting_dask_submissions(monkeypatch, consumed: list, *, interrupt_at: int | None = None
+                               ) -> tuple[list, list]:
+    """Record, at each case submitted to a Dask client, the cases submitted (this one
+    included) and not yet handed to the caller (``consumed[0]``); raise KeyboardInterrupt at
+    submission number ``interrupt_at``. Returns (those counts, the clients used)."""
+    from distributed import Client
+
+    submit, in_flight, clients = Client.submit, [], []
+
+    def counting(self, *args, **kwargs):
+        if self not in clients:
+            clients.append(self)
+        in_flight.append(len(in_flight) + 1 - consumed[0])
+        if len(in_flight) == interrupt_at:
+            raise KeyboardInterrupt
+        return submit(self, *args, **kwargs)
+
+    monkeypatch.setattr(Client, "submit", counting)
+    return in_flight, clients
+
+
+def test_a_dask_cluster_takes_the_cases_a_few_per_worker_at_a_time(tmp_path, monkeypatch,
+                                                                   dask_address):
+    """At most QUEUED_PER_WORKER cases per worker thread of the cluster are submitted and not
+    yet returned (plus the one being returned), whatever n_workers says: the cluster's workers
+    run them."""
+    consumed = [0]
+    in_flight, _ = _counting_dask_submissions(monkeypatch, consumed)
+    calls = str(tmp_path / "calls")
+    got = {}
+    for key, result in iterate(square, _cases(40), shared={"calls": calls},
+                               scheduler=dask_address, n_workers=50):
+        got[key] = result["value"]
+        consumed[0] += 1
+    assert got == {f"x={i}": i * i for i in range(40)}
+    assert len(in_flight) == 40 and sorted(_ran(calls)) == list(range(40))
+    assert max(in_flight) <= 2 * QUEUED_PER_WORKER + 1
+
+
+def test_a_dask_sweep_gives_the_serial_sweep_s_results(tmp_path, dask_address):
+    cases = {f"x={i}": {"x": i} for i in range(12)}
+    serial = run_sweep(seeded, cases, tmp_path / "serial", shared={"seed": 5},
+                       scheduler="serial")
+    dask = run_sweep(seeded, cases, tmp_path / "dask", shared={"seed": 5},
+                     scheduler=dask_address)
+    assert list(dask) == list(serial) and dask == serial
+
+
+def test_an_interrupt_during_a_dask_sweep_cancels_the_few_cases_in_flight(tmp_path,
+                                                                         monkeypatch,
+                                                                         dask_address):
+    """Ctrl-C landing as a case is submitted, mid-sweep: the cases in flight (a few per
+    worker) are cancelled, and no other is submitted."""
+    from distributed import Client
+
+    consumed = [0]
+    in_flight, clients = _counting_dask_submissions(monkeypatch, consumed, interrupt_at=20)
+    cancel, cancelled = Client.cancel, []
+
+    def counting_cancel(self, futures, *args, **kwargs):
+        cancelled.append(len(futures))
+        return cancel(self, futures, *args, **kwargs)
+
+    monkeypatch.setattr(Client, "cancel", counting_cancel)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            for _ in iterate(square, _cases(40), shared={"calls": str(tmp_path / "calls")},
+                             scheduler=dask_address):
+                consumed[0] += 1
+    finally:
+        for client in clients:   # left open on Ctrl-C, as a command ends at once
+            client.close()
+    assert len(in_flight) == 20 and consumed[0] >= 20 - 2 * QUEUED_PER_WORKER - 1
+    assert len(cancelled) == 1 and cancelled[0] <= 2 * QUEUED_PER_WORKER
+
+
+def test_a_swallowed_interrupt_stops_a_dask_sweep(monkeypatch, dask_address):
+    """A signal whose exception a library swallowed stops the sweep at the next look, with the
+    cases submitted by then at most, not at its end."""
+    from formats import interrupt
+
+    monkeypatch.setattr(interrupt, "_received", [])
+    consumed = [0]
+    in_flight, clients = _counting_dask_submissions(monkeypatch, consumed)
+    cases = {f"x={i}": {"x": i} for i in range(200)}
+    try:
+        with pytest.raises(interrupt.Interrupted, match="SIGINT"):
+            for _ in iterate(signalled, cases, shared={"at": 3}, scheduler=dask_address):
+                consumed[0] += 1
+    finally:
+        for client in clients:
+            client.close()
+    assert consumed[0] < 3 + 2 * QUEUED_PER_WORKER + 2 and len(in_flight) < 20
