@@ -9,6 +9,9 @@ from pathlib import Path
 
 from cli.options import UsageError
 
+# Seconds between two redraws of the refinement's bar while the main thread waits for it.
+REFRESH_S = 0.5
+
 
 def _add_epoch(parser, prefix: str = "") -> None:
     """``--epoch-utc`` / ``--epoch-et``: the epoch of a log's time 0 (``prefix`` says where it
@@ -45,7 +48,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "uncertainty, and register with the corrected poses")
     p.add_argument("--refine-interval", type=float, metavar="SECONDS",
                    help="with --refine: also estimate slowly varying errors, piecewise-linear "
-                        "with knots this far apart (default: constant errors only)")
+                        "with knots this far apart (default: constant errors only); the time "
+                        "this takes is estimated first, said when over half a minute and "
+                        "refused beyond a day")
     p.add_argument("--refine-spin", action="store_true",
                    help="with --refine: also estimate a correction of the target's spin rate")
     p.add_argument("--refine-json", type=Path, metavar="FILE",
@@ -128,21 +133,51 @@ def _check_ingest_options(args) -> None:
 
 
 def _refine(args):
-    """``--refine``: estimate the pose-knowledge errors, print them (and write them)."""
+    """``--refine``: estimate the pose-knowledge errors, print them (and write them).
+
+    The refinement runs in a thread while this one redraws the bar and waits: a step of a large
+    fit is one long call into LAPACK (an eigen-decomposition, a normal matrix) that a signal
+    cannot interrupt, but the wait can, and the interrupted command leaves at once
+    (``cli.main``).
+    """
     import json
+    import sys
+    import threading
 
     from tqdm import tqdm
 
     from formats.atomic import write_text_atomically
     from recon import api
 
-    with tqdm(unit="iteration", disable=None, leave=False, desc="refine") as bar:
-        def step(done: int, total: int) -> None:
+    # The bar counts the refinement's estimated seconds: a percentage, and the time left.
+    with tqdm(total=1.0, disable=None, leave=False, desc="refine",
+              bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]") as bar:
+        def step(done: float, total: float) -> None:
             bar.total = total
-            bar.update(1)
+            bar.update(done - bar.n)
 
-        refinement = api.refine(args.log, interval=args.refine_interval, spin=args.refine_spin,
-                                progress=step)
+        def say(line: str) -> None:
+            tqdm.write(line)
+            sys.stdout.flush()   # before the work, also into a pipe
+
+        outcome = {}
+
+        def work() -> None:
+            try:
+                outcome["refinement"] = api.refine(
+                    args.log, interval=args.refine_interval, spin=args.refine_spin,
+                    progress=step, announce=say)
+            except BaseException as exc:   # re-raised in the main thread
+                outcome["error"] = exc
+
+        worker = threading.Thread(target=work, name="recon-refine")
+        worker.start()
+        while worker.is_alive():
+            worker.join(REFRESH_S)
+            bar.refresh()
+    if "error" in outcome:
+        raise outcome["error"]
+    refinement = outcome["refinement"]
     for line in refinement.lines():
         print(line)
     if args.refine_json is not None:

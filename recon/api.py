@@ -730,7 +730,8 @@ def follow(log, output, *, frame: Frame = "body", timeout_s: float = 60.0,
 
 
 def refine(log, *, interval: float | None = None, spin: bool = False, seed: int = 0,
-           progress: Callable[[int, int], None] | None = None) -> Refinement:
+           progress: Callable[[float, float], None] | None = None,
+           announce: Callable[[str], None] | None = None) -> Refinement:
     """Estimate a log's pose-knowledge errors (boresight misalignment, position bias; with
     ``interval`` also slowly varying ones; with ``spin`` a spin-rate correction) from the
     agreement of its passes (``recon ingest --refine``).
@@ -743,18 +744,31 @@ def refine(log, *, interval: float | None = None, spin: bool = False, seed: int 
     spin : bool
     seed : int
     progress : callable, optional
-        Called as ``progress(iteration, max_iterations)``.
+        Called as ``progress(done, total)`` after every step of the fit, in the refinement's
+        estimated seconds.
+    announce : callable, optional
+        Called, before the work, with one line saying how long the refinement is estimated to
+        take when that is more than half a minute
+        (``recon.registration.refine.ANNOUNCE_S``).
 
     Returns
     -------
     recon.registration.refine.Refinement
         The estimates with their uncertainties (``lines()``, ``to_dict()``); pass it to
         ``ingest_file(..., refinement=)``.
+
+    Raises
+    ------
+    ParameterError
+        ``interval`` makes more knots than the sampled strikes can estimate, or a refinement
+        estimated to take more than a day (``recon.registration.refine.MAX_REFINE_S``); the
+        message names the shortest interval that would do.
     """
     from recon.registration.refine import refine as estimate
 
     check_seed(seed)
-    return estimate(log, interval=interval, spin=spin, seed=seed, progress=progress)
+    return estimate(log, interval=interval, spin=spin, seed=seed, progress=progress,
+                    announce=announce)
 
 
 def is_altimetry(path) -> bool:

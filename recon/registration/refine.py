@@ -173,6 +173,40 @@ MIN_SPIN_TURNS = 0.05
 # (p, p) matrices _solve holds at once for p parameters.
 SHOT_VALUES = 36
 DENSE_MATRICES = 16
+# Time of a refinement, estimated before it starts (``refine_seconds``). One Gauss-Newton step
+# (``_descend``) of m sampled strikes with k knots (p = 6 k + 1 parameters) takes
+#     m (STEP_POINT_S + STEP_KNOT_S k + STEP_PAIR_S p^2) + STEP_SQUARE_S p^2 + STEP_CUBE_S p^3
+# seconds: the consensus of every strike (neighbours, planes) and its design (the hat weights of
+# NEIGHBOURS neighbours per knot); the IRLS_ITERATIONS weighted normal matrices (m p^2); their
+# eigen-decompositions, solves and products (p^3, and p^2 besides). A refinement takes at most
+# MAX_ITERATIONS steps of its fitted strikes and, when the target spins, COARSE_ITERATIONS steps
+# of every COARSE_THIN-th one from each of the coarse grid's 25 starts; the estimate counts them
+# all (a fit of a few knots often stops after 3 or 4 fine steps). Measured on polyhedron-50m-lidar
+# and satellite-j-cross (suite logs; docs/decisions.md, "the refinement's time estimate"):
+# STEP_PAIR_S, STEP_SQUARE_S and STEP_CUBE_S fitted to the steps' dense algebra (``_solve``, the
+# coarse and fine samples, p = 300 to 3,600), then STEP_POINT_S and STEP_KNOT_S to whole
+# refinements at the defaults (medians of 3 runs, s; the model's in brackets):
+#     knots                                   1          5         20         50        100
+#     30,000 sampled strikes           11.6 (16)  16.3 (19)  33.6 (31)  57.2 (65)   124 (156)
+#     10,000                            5.0 (5)    7.1 (6)   15.0 (11)  30.8 (28)  79.4 (85)
+#     2,606 (satellite J)               2.0 (1)    3.4 (2)    5.7 (4)   17.1 (15)
+# The model stays within 0.5 to 1.4 times these. Of 600 knots of 30,000 strikes (the most they
+# can estimate) it makes 1.7 h, the coarse stage's solves most of it (38 s each measured at 3,600
+# parameters, 32 s by the model). With other jobs on the machine runs took up to 2.7 times as
+# long (the two BLAS threads wait for each other).
+STEP_POINT_S = 1.7e-5
+STEP_KNOT_S = 7.4e-7
+STEP_PAIR_S = 7.9e-11
+STEP_SQUARE_S = 5.3e-7
+STEP_CUBE_S = 4.8e-10
+# Estimates longer than this are said before the refinement starts (``announce``).
+ANNOUNCE_S = 30.0
+# Longest refinement accepted, by that estimate: a day. Hours are allowed: the most knots the
+# default 30,000 strikes can estimate (MIN_ROWS a knot) take 1.7 h, so at the defaults the knot
+# count is refused first. A stability sweep may take a week, but it keeps what it finished
+# (--resume); a refinement stopped keeps nothing, and a day of it is more strikes
+# (``max_points``) than a refinement needs, or an interval meant longer.
+MAX_REFINE_S = 86400.0
 
 
 def spin_of(shots: Shots) -> tuple[np.ndarray, float]:
@@ -527,7 +561,8 @@ def _robust_sigma(r: np.ndarray) -> float:
 
 
 def refine(log_path, *, interval: float | None = None, spin: bool = False,
-           max_points: int = MAX_POINTS, seed: int = 0, progress=None) -> Refinement:
+           max_points: int = MAX_POINTS, seed: int = 0, progress=None, announce=None
+           ) -> Refinement:
     """Estimate the constant and slowly varying pose-knowledge errors of a log from its strikes.
 
     Guarded: the estimate is the iterate (the zero correction, the recorded poses, among them)
@@ -550,7 +585,12 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
     seed : int
         Seed of the samples.
     progress : callable, optional
-        Called with ``(iteration, max_iterations)`` after each iteration.
+        Called as ``progress(done, total)`` after every step of the fit, ``done`` of the
+        ``total`` estimated seconds (``refine_seconds``; steps a converged fit did not need
+        count as done).
+    announce : callable, optional
+        Called with one line saying how long the refinement is estimated to take, before it
+        starts, when that is more than ``ANNOUNCE_S``.
 
     Returns
     -------
@@ -560,21 +600,24 @@ def refine(log_path, *, interval: float | None = None, spin: bool = False,
     Raises
     ------
     ParameterError
-        Bad options, or ``interval`` too short for the strikes to estimate its knots.
+        Bad options, or ``interval`` too short for the strikes to estimate its knots or for
+        the refinement to end within ``MAX_REFINE_S`` (by ``refine_seconds``).
     InputError
         Too few strikes seen twice to estimate anything, or the problem does not fit in the
         memory available.
     """
     _check_options(interval, max_points)
-    problem = _problem(log_path, interval, spin, max_points, seed)
-    start = _coarse_start(problem)
-    tried, iterations = _fine(problem, start, progress)
+    problem = _problem(log_path, interval, spin, max_points, seed, announce)
+    clock = _Progress(progress, problem.seconds)
+    start = _coarse_start(problem, clock)
+    tried, iterations = _fine(problem, start, clock)
     best, formal, robust = _best(problem, tried)
     observable, sigma, keep = _judged(problem, best, formal, robust)
     correction, significant, check_z = _checked(best, keep, problem.check, problem.pairs,
                                                 problem.log_path)
     before, _, _ = problem.pairs.residuals(problem.fit, problem.zero)
     after, _, _ = problem.pairs.residuals(problem.fit, correction)
+    clock.advance(problem.seconds)
     return Refinement(correction=correction, sigma=sigma, observable=observable,
                       significant=significant, check_z=check_z,
                       residual_before_m=_robust_sigma(before[np.isfinite(before)]),
@@ -624,8 +667,7 @@ def _check_size(log: StrikeLog, interval: float | None, max_points: int) -> None
         most = n_fit // MIN_ROWS
         count = _knot_count(span, interval)
         if count > most:
-            instead = (f"give at least {span / (most - 1):.4g} s" if most >= 2
-                       else "refine constant errors only (no interval)")
+            instead = _instead(span, most)
             made = f"{count:,.0f}" if math.isfinite(count) else "too many"
             raise ParameterError(
                 f"interval {interval:g} s makes {made} knots over the log's {span:g} s, more "
@@ -640,6 +682,108 @@ def _check_size(log: StrikeLog, interval: float | None, max_points: int) -> None
                  advice="give a longer interval" if knots > 1 else "")
 
 
+def _coarse_nodes() -> int:
+    """Starts of the coarse stage: the nodes of its grid (``_coarse_start``)."""
+    return (2 * round(COARSE_POSITION_M / COARSE_STEP_M) + 1) ** 2
+
+
+def step_seconds(n_points: int, knots: int) -> float:
+    """Estimated time [s] of one step of the fit (``_descend``) of ``n_points`` sampled
+    strikes with ``knots`` knots: the time model beside ``STEP_POINT_S``."""
+    p = 6 * knots + 1
+    return (n_points * (STEP_POINT_S + STEP_KNOT_S * knots + STEP_PAIR_S * p * p)
+            + STEP_SQUARE_S * p * p + STEP_CUBE_S * p ** 3)
+
+
+def refine_seconds(n_points: int, knots: int, *, coarse: bool = True) -> float:
+    """Estimated time [s] of a refinement of ``n_points`` fitted strikes with ``knots`` knots:
+    ``MAX_ITERATIONS`` steps of them and, with ``coarse`` (a spinning target),
+    ``COARSE_ITERATIONS`` steps of every ``COARSE_THIN``-th one from each coarse start.
+
+    At the speed measured for ``STEP_POINT_S`` and the other constants; a fit that converges
+    early takes less.
+    """
+    seconds = MAX_ITERATIONS * step_seconds(n_points, knots)
+    if coarse:
+        seconds += (_coarse_nodes() * COARSE_ITERATIONS
+                    * step_seconds(-(-n_points // COARSE_THIN), knots))
+    return seconds
+
+
+def duration_text(seconds: float) -> str:
+    """A duration in the unit a person reads it in: "40 s", "25 min", "3.2 h", "2.5 days"."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 90 * 60:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 48 * 3600:
+        return f"{seconds / 3600:.2g} h"
+    return f"{seconds / 86400:.2g} days"
+
+
+def _instead(span: float, most: int) -> str:
+    """What to ask for when at most ``most`` knots are acceptable over ``span`` seconds: the
+    shortest interval that makes no more, rounded up to 4 digits (rounded to nearest, 1990 s
+    for 4 knots read "663.3 s", which makes 5), or no interval."""
+    if most < 2:
+        return "refine constant errors only (no interval)"
+    shortest = span / (most - 1)
+    decimals = max(0, 3 - math.floor(math.log10(shortest)))
+    unit = 10.0 ** (math.floor(math.log10(shortest)) - 3)
+    units = math.ceil(shortest / unit)
+    while True:
+        text = f"{units * unit:.{decimals}f}"
+        text = text.rstrip("0").rstrip(".") if "." in text else text
+        if _knot_count(span, float(text)) <= most:
+            return f"give at least {text} s"
+        units += 1
+
+
+def _check_time(log_path, interval: float | None, span: float, knots: int, max_points: int,
+                n_points: int, *, coarse: bool) -> float:
+    """The refinement's estimated time [s] (``refine_seconds``), refused beyond
+    ``MAX_REFINE_S``.
+
+    Raises
+    ------
+    ParameterError
+        The estimate exceeds ``MAX_REFINE_S``: names ``interval`` and the shortest one whose
+        knots would be within it (``max_points`` when even constant errors would not).
+    """
+    seconds = refine_seconds(n_points, knots, coarse=coarse)
+    if seconds <= MAX_REFINE_S:
+        return seconds
+    limit = duration_text(MAX_REFINE_S)
+    estimate = (f"would take about {duration_text(seconds)}, more than the {limit} a "
+                "refinement may take")
+    if interval is None or refine_seconds(n_points, 1, coarse=coarse) > MAX_REFINE_S:
+        raise ParameterError(f"max_points {max_points:,} samples {n_points:,} strikes of "
+                             f"{log_path}; refining them {estimate}; sample fewer",
+                             argument="max_points")
+    low, high = 1, knots    # within the limit, beyond it
+    while high - low > 1:
+        middle = (low + high) // 2
+        low, high = ((middle, high) if refine_seconds(n_points, middle, coarse=coarse)
+                     <= MAX_REFINE_S else (low, middle))
+    raise ParameterError(
+        f"interval {interval:g} s makes {knots:,} knots over the log's {span:g} s; refining "
+        f"them with {n_points:,} sampled strikes {estimate} (at most {low:,} knots); "
+        f"{_instead(span, low)}", argument="interval")
+
+
+class _Progress:
+    """How far a refinement is, in its estimated seconds (``step_seconds``), for a
+    ``progress(done, total)`` callable (None: nobody listens)."""
+
+    def __init__(self, report, total: float):
+        self.report, self.total, self.done = report, total, 0.0
+
+    def advance(self, seconds: float) -> None:
+        self.done = min(self.done + seconds, self.total)
+        if self.report is not None:
+            self.report(self.done, self.total)
+
+
 @dataclass
 class _Problem:
     """What one refinement works on: the samples, how they are compared, the parameters."""
@@ -652,22 +796,30 @@ class _Problem:
     weights: np.ndarray     # (n_fit, k) hat weights of the fitted strikes' times
     prior: np.ndarray       # (p,) prior 1-sigma of every parameter, in the solver's order
     spin_inertial: np.ndarray | None  # (3,) spin axis in I, None: the target does not spin
+    seconds: float          # the estimated time (refine_seconds)
 
 
-def _problem(log_path, interval: float | None, spin: bool, max_points: int, seed: int
-             ) -> _Problem:
-    """Read the samples of a log and set up the parameters and their priors."""
+def _problem(log_path, interval: float | None, spin: bool, max_points: int, seed: int,
+             announce=None) -> _Problem:
+    """Read the samples of a log and set up the parameters and their priors, once the knots,
+    the memory (``_check_size``) and the time (``_check_time``) are found acceptable."""
     with StrikeLog(log_path) as log:
         if log.n_strikes < 100:
             raise InputError(f"{log_path}: {log.n_strikes} strikes are too few to refine the "
                               "poses (at least 100)")
         _check_size(log, interval, max_points)
         all_shots = log.shots()
+        axis, rate = spin_of(all_shots)
+        t0, t1 = float(all_shots.time[0]), float(all_shots.time[-1])
+        knots = (np.array([t0]) if interval is None
+                 else np.linspace(t0, t1, int(_knot_count(t1 - t0, interval))))
+        seconds = _check_time(log_path, interval, t1 - t0, len(knots), max_points,
+                              min(max_points, (log.n_strikes + 1) // 2), coarse=rate > 0)
+        if announce is not None and seconds > ANNOUNCE_S:
+            what = ("constant errors" if interval is None
+                    else f"{len(knots):,} knots over {t1 - t0:,.0f} s")
+            announce(f"refining {what}: about {duration_text(seconds)}")
         fit, check = _samples(log, max_points, seed)
-    axis, rate = spin_of(all_shots)
-    t0, t1 = float(all_shots.time[0]), float(all_shots.time[-1])
-    knots = (np.array([t0]) if interval is None
-             else np.linspace(t0, t1, int(_knot_count(t1 - t0, interval))))
     k = len(knots)
     step = float(np.median(np.diff(all_shots.time))) if len(all_shots) > 1 else 1.0
     pairs = _Pairs(PAIR_GAP_STEPS * step, axis if rate > 0 and spin else None)
@@ -680,10 +832,10 @@ def _problem(log_path, interval: float | None, spin: bool, max_points: int, seed
     spin_inertial = (Rotation.from_quat(all_shots.target_attitude[0]).apply(axis)
                      if rate > 0 else None)
     return _Problem(log_path, fit, check, pairs, zero, zero.weights(fit.time), prior,
-                    spin_inertial)
+                    spin_inertial, seconds)
 
 
-def _coarse_start(problem: _Problem) -> PoseCorrection:
+def _coarse_start(problem: _Problem, clock: _Progress | None = None) -> PoseCorrection:
     """Where the fine fit starts: the best of short fits of a thinned sample from a grid of
     constant position biases across the spin axis (module docstring).
 
@@ -710,7 +862,7 @@ def _coarse_start(problem: _Problem) -> PoseCorrection:
     ends = [problem.zero]
     for node in nodes:
         start = replace(problem.zero, position=np.repeat(node[None], k, axis=0))
-        tried, _ = _descend(problem, coarse, weights, start, COARSE_ITERATIONS)
+        tried, _ = _descend(problem, coarse, weights, start, COARSE_ITERATIONS, clock)
         ends += [entry[1] for entry in tried[-1:]]
     residuals = [problem.pairs.residuals(coarse, end)[0] for end in ends]
     finite = np.array([np.isfinite(r).sum() for r in residuals])
@@ -727,7 +879,7 @@ def _coarse_start(problem: _Problem) -> PoseCorrection:
 
 
 def _descend(problem: _Problem, sample: _Sample, weights: np.ndarray, start: PoseCorrection,
-             iterations: int, progress=None) -> tuple[list, int]:
+             iterations: int, clock: _Progress | None = None) -> tuple[list, int]:
     """Robust Gauss-Newton steps from ``start`` until no strike of ``sample`` moves
     ``STOP_MOVE_M`` (at most ``iterations`` steps).
 
@@ -735,6 +887,8 @@ def _descend(problem: _Problem, sample: _Sample, weights: np.ndarray, start: Pos
     ----------
     weights : (n, k) float64
         Hat weights of the sample's times.
+    clock : _Progress, optional
+        Advanced by ``step_seconds`` after every step, and by the steps not needed at the end.
 
     Returns
     -------
@@ -745,8 +899,9 @@ def _descend(problem: _Problem, sample: _Sample, weights: np.ndarray, start: Pos
     iterations : int
         Steps taken.
     """
-    pairs = problem.pairs
-    estimate, previous, cluster, tried = start, None, None, []
+    pairs, clock = problem.pairs, clock or _Progress(None, 0.0)
+    step = step_seconds(len(sample.time), len(problem.zero.knots))
+    estimate, previous, cluster, tried, taken = start, None, None, [], 0
     for iteration in range(1, iterations + 1):
         residual, points, design = pairs.residuals(sample, estimate, weights)
         moved = (0.0 if previous is None
@@ -767,20 +922,22 @@ def _descend(problem: _Problem, sample: _Sample, weights: np.ndarray, start: Pos
                                  _vector(estimate, pairs.spin_axis), cluster[rows][inlier])
         tried[-1][2:] = covariances
         estimate = _updated(estimate, x, len(problem.zero.knots), pairs.spin_axis is not None)
-        if progress:
-            progress(iteration, iterations)
+        taken = iteration
+        clock.advance(step)
     else:
         residual, _, _ = pairs.residuals(sample, estimate)
         tried.append([residual, estimate, *tried[-1][2:]])
+    clock.advance(step * (iterations - taken))
     return tried, iteration
 
 
-def _fine(problem: _Problem, start: PoseCorrection, progress) -> tuple[list, int]:
+def _fine(problem: _Problem, start: PoseCorrection, clock: _Progress | None = None
+          ) -> tuple[list, int]:
     """The fit of every sampled strike from ``start``: the iterates of ``_descend`` with the
     zero correction (the recorded poses) first, carrying the first step's covariances when the
     fit starts elsewhere."""
     tried, iterations = _descend(problem, problem.fit, problem.weights, start, MAX_ITERATIONS,
-                                 progress)
+                                 clock)
     if not tried or len(tried[0]) < 4:
         rows = 0 if not tried else int(np.isfinite(tried[0][0]).sum())
         raise InputError(f"{problem.log_path}: only {rows} strikes have neighbours from other "

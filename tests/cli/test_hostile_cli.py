@@ -220,6 +220,24 @@ def test_ingest_stops_promptly(signum, big_log, tmp_path):
     assert took < STOP_WITHIN_S
 
 
+def test_refine_stops_promptly_and_writes_nothing(big_log, tmp_path):
+    """A refinement of about 100 knots of 30,000 sampled strikes (minutes), interrupted in its fit:
+    neither the cloud nor the estimates are written, their old files kept."""
+    old, estimates = tmp_path / "cloud.ply", tmp_path / "refine.json"
+    old.write_bytes(b"previous output")
+    estimates.write_bytes(b"previous estimates")
+
+    def fitting(proc):
+        # The estimate is said once the shots are read, before the strikes are sampled.
+        return proc.stdout.readline().startswith(b"refining ")
+
+    took = _interrupt(["ingest", big_log, "-o", old, "--refine", "--refine-interval", "300",
+                       "--refine-json", estimates], signal.SIGINT, ready=fitting, settle_s=5.0,
+                      tmp_path=tmp_path, old=old)
+    assert took < STOP_WITHIN_S
+    assert estimates.read_bytes() == b"previous estimates"
+
+
 def test_score_stops_promptly(big_log, tmp_path):
     # The log is open from 0.5 s to 1.8 s of an 11 s run (idle); scoring follows the reading.
     took = _interrupt(["score", big_log], signal.SIGINT, ready=_reading(big_log), settle_s=1.0,

@@ -161,7 +161,7 @@ def test_knots_too_many_for_the_strikes_are_refused_up_front(tmp_path, monkeypat
                  "1e-6"]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("recon ingest: error: --refine-interval 1e-06 s makes "
-                          "1,990,000,001 knots") and err.endswith("give at least 663.3 s")
+                          "1,990,000,001 knots") and err.endswith("give at least 663.4 s")
     assert "\n" not in err and not out.exists()
 
 
