@@ -28,13 +28,19 @@ def proc_bytes(path: str, field: str) -> int | None:
 
 def total_bytes() -> int | None:
     """The machine's memory (``MemTotal``) in bytes; None when unknown."""
-    total = proc_bytes("/proc/meminfo", "MemTotal")
-    if total is None and hasattr(os, "sysconf"):
+    return _meminfo_bytes("MemTotal", "SC_PHYS_PAGES")
+
+
+def _meminfo_bytes(field: str, pages: str) -> int | None:
+    """``field`` of /proc/meminfo in bytes, else the ``pages`` sysconf count times the page
+    size; None when neither is known."""
+    value = proc_bytes("/proc/meminfo", field)
+    if value is None and hasattr(os, "sysconf"):
         try:
-            total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+            value = os.sysconf(pages) * os.sysconf("SC_PAGE_SIZE")
         except (OSError, ValueError):
-            total = None
-    return total
+            value = None
+    return value
 
 
 def available_bytes() -> int | None:
@@ -46,12 +52,7 @@ def available_bytes() -> int | None:
     -------
     int or None, bytes
     """
-    available = proc_bytes("/proc/meminfo", "MemAvailable")
-    if available is None and hasattr(os, "sysconf"):
-        try:
-            available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-        except (OSError, ValueError):
-            available = None
+    available = _meminfo_bytes("MemAvailable", "SC_AVPHYS_PAGES")
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     size = proc_bytes("/proc/self/status", "VmSize")
     if soft != resource.RLIM_INFINITY and size is not None:
